@@ -1,0 +1,78 @@
+"""Small helpers shared by the command modules: ranges, JSON output, bicycles."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def parse_range(text: str, name: str = "range", minimum: float | None = None) -> np.ndarray:
+    """Parse ``start:stop:step`` (stop included, MATLAB style), ``a,b,c`` or one value."""
+    text = text.strip()
+    try:
+        parts = [float(x) for x in text.split(":")] if ":" in text else None
+        values = None if parts else np.array([float(x) for x in text.split(",") if x.strip()])
+    except ValueError:
+        raise ValueError(
+            f"{name} {text!r} is not start:stop:step, a comma list or a number"
+        ) from None
+    if parts is not None:
+        if len(parts) != 3 or not all(map(math.isfinite, parts)):
+            raise ValueError(f"{name} {text!r}: use start:stop:step with three finite numbers")
+        start, stop, step = parts
+        if step <= 0 or stop < start:
+            raise ValueError(f"{name} {text!r}: need start <= stop and step > 0")
+        values = start + step * np.arange(int(math.floor((stop - start) / step + 1e-9)) + 1)
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} {text!r} holds no finite values")
+    if minimum is not None and values.min() < minimum:
+        raise ValueError(f"{name} {text!r}: values must be >= {minimum}")
+    return np.round(values, 12)
+
+
+def to_jsonable(obj: Any) -> Any:
+    """numpy arrays, complex numbers and nested containers to plain JSON types.
+
+    Complex numbers become ``{"re": x, "im": y}``; NaN/inf become ``null``.
+    """
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (complex, np.complexfloating)):
+        return {"re": to_jsonable(float(obj.real)), "im": to_jsonable(float(obj.imag))}
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def dump_json(obj: Any) -> str:
+    return json.dumps(to_jsonable(obj), indent=2)
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write a text file atomically (temporary file in the same folder, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

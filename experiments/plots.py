@@ -1,0 +1,52 @@
+"""Matplotlib figures shared by commands and reports (PNG, SI units, degrees only in labels)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+MODE_STYLE = {"weave": "tab:blue", "capsize": "tab:red", "caster": "tab:green"}
+
+
+def save(fig, path: str | Path) -> Path:
+    """Save a figure as PNG (atomic: temporary name, then rename) and close it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    fig.savefig(tmp, dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+def plot_eigenvalues(sweep, path: str | Path, title: str = "", critical: dict | None = None):
+    """Real and imaginary parts of tracked eigenvalues against speed."""
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    seen = set()
+    for j, lab in enumerate(sweep.labels):
+        color = MODE_STYLE.get(lab, "0.4")
+        name = lab if lab not in seen else None
+        seen.add(lab)
+        ax1.plot(sweep.speeds, sweep.values[:, j].real, color=color, label=name)
+        ax2.plot(sweep.speeds, np.abs(sweep.values[:, j].imag), color=color, label=name)
+    for ax in (ax1, ax2):
+        ax.axhline(0, color="k", lw=0.6)
+        ax.grid(alpha=0.3)
+        if critical:
+            for key, val in critical.items():
+                if val is not None:
+                    ax.axvline(val, color="0.5", ls="--", lw=0.8)
+                    if ax is ax1:
+                        ax.annotate(key, (val, ax1.get_ylim()[1]), fontsize=8, ha="center",
+                                    va="bottom")  # fmt: skip
+    ax1.set_ylabel("real part [1/s]")
+    ax2.set_ylabel("|imaginary part| [rad/s]")
+    ax2.set_xlabel("speed v [m/s]")
+    ax1.legend(loc="lower left")
+    ax1.set_title(title)
+    return save(fig, path)

@@ -1,0 +1,351 @@
+"""Linearized Whipple bicycle (Meijaard et al. 2007, Appendix A).
+
+Equations of motion about upright straight-ahead running at speed v:
+
+    M q'' + v C1 q' + (g K0 + v^2 K2) q = [T_phi, T_delta] + H F
+
+with q = [phi, delta] (roll positive to the right, steer positive to the right,
+z down), T_phi a roll torque on the rear frame [N m], T_delta the steer torque of
+rear frame on front frame [N m] and F a lateral force [N], positive to the right,
+on the rear frame at (x_F, z_F) (benchmark axes), entering through H.
+
+State order used everywhere in bikeid: x = [phi, delta, phidot, deltadot]
+(:data:`STATE_NAMES`); Chen & Dao's order [phi, phidot, delta, deltadot] is
+handled in :mod:`ident`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import control
+import numpy as np
+from numpy.polynomial import polynomial as P
+from scipy.optimize import brentq, linear_sum_assignment
+
+from .parameters import BicycleParameters
+
+__all__ = [
+    "INPUT_NAMES",
+    "STATE_NAMES",
+    "CanonicalMatrices",
+    "EigenSweep",
+    "canonical_matrices",
+    "critical_speeds",
+    "eigenvalues",
+    "eigenvalues_vs_speed",
+    "lateral_force_vector",
+    "state_matrices",
+    "state_space",
+    "transfer_function",
+    "yaw_rate",
+]
+
+STATE_NAMES = ("phi", "delta", "phidot", "deltadot")
+INPUT_NAMES = ("T_phi", "T_delta", "F")
+
+
+@dataclass(frozen=True)
+class CanonicalMatrices:
+    """M, C1, K0, K2 (2x2 each, rows/cols [phi, delta]) and the gravity g."""
+
+    M: np.ndarray
+    C1: np.ndarray
+    K0: np.ndarray
+    K2: np.ndarray
+    g: float
+
+    def stiffness(self, v: float) -> np.ndarray:
+        """g K0 + v^2 K2."""
+        return self.g * self.K0 + v**2 * self.K2
+
+    def damping(self, v: float) -> np.ndarray:
+        """v C1."""
+        return v * self.C1
+
+    def char_poly(self, v: float) -> np.ndarray:
+        """Coefficients (ascending powers of s) of det(M s^2 + v C1 s + g K0 + v^2 K2)."""
+        return _det_poly(self._poly_matrix(v))
+
+    def _poly_matrix(self, v: float) -> list[list[np.ndarray]]:
+        K = self.stiffness(v)
+        C = self.damping(v)
+        return [[np.array([K[i, j], C[i, j], self.M[i, j]]) for j in range(2)] for i in range(2)]
+
+
+def _det_poly(Pm: list[list[np.ndarray]]) -> np.ndarray:
+    return P.polysub(P.polymul(Pm[0][0], Pm[1][1]), P.polymul(Pm[0][1], Pm[1][0]))
+
+
+def canonical_matrices(p: BicycleParameters) -> CanonicalMatrices:
+    """M, C1, K0, K2 from the benchmark parameters (Meijaard 2007, Appendix A)."""
+    sl, cl = math.sin(p.lam), math.cos(p.lam)
+    IRzz, IFzz = p.IRxx, p.IFxx
+    mT = p.mR + p.mB + p.mH + p.mF
+    xT = (p.xB * p.mB + p.xH * p.mH + p.w * p.mF) / mT
+    zT = (-p.rR * p.mR + p.zB * p.mB + p.zH * p.mH - p.rF * p.mF) / mT
+    ITxx = (
+        p.IRxx + p.IBxx + p.IHxx + p.IFxx
+        + p.mR * p.rR**2 + p.mB * p.zB**2 + p.mH * p.zH**2 + p.mF * p.rF**2
+    )  # fmt: skip
+    ITxz = p.IBxz + p.IHxz - p.mB * p.xB * p.zB - p.mH * p.xH * p.zH + p.mF * p.w * p.rF
+    ITzz = IRzz + p.IBzz + p.IHzz + IFzz + p.mB * p.xB**2 + p.mH * p.xH**2 + p.mF * p.w**2
+    mA = p.mH + p.mF
+    xA = (p.xH * p.mH + p.w * p.mF) / mA
+    zA = (p.zH * p.mH - p.rF * p.mF) / mA
+    IAxx = p.IHxx + p.IFxx + p.mH * (p.zH - zA) ** 2 + p.mF * (p.rF + zA) ** 2
+    IAxz = p.IHxz - p.mH * (p.xH - xA) * (p.zH - zA) + p.mF * (p.w - xA) * (p.rF + zA)
+    IAzz = p.IHzz + IFzz + p.mH * (p.xH - xA) ** 2 + p.mF * (p.w - xA) ** 2
+    uA = (xA - p.w - p.c) * cl - zA * sl
+    IAll = mA * uA**2 + IAxx * sl**2 + 2 * IAxz * sl * cl + IAzz * cl**2
+    IAlx = -mA * uA * zA + IAxx * sl + IAxz * cl
+    IAlz = mA * uA * xA + IAxz * sl + IAzz * cl
+    mu = p.c / p.w * cl
+    SR = p.IRyy / p.rR
+    SF = p.IFyy / p.rF
+    ST = SR + SF
+    SA = mA * uA + mu * mT * xT
+    Mpd = IAlx + mu * ITxz
+    M = np.array([[ITxx, Mpd], [Mpd, IAll + 2 * mu * IAlz + mu**2 * ITzz]])
+    K0 = np.array([[mT * zT, -SA], [-SA, -SA * sl]])
+    K2 = np.array([[0.0, (ST - mT * zT) * cl / p.w], [0.0, (SA + SF * sl) * cl / p.w]])
+    C1 = np.array(
+        [
+            [0.0, mu * ST + SF * cl + ITxz * cl / p.w - mu * mT * zT],
+            [-(mu * ST + SF * cl), IAlz * cl / p.w + mu * (SA + ITzz * cl / p.w)],
+        ]
+    )
+    return CanonicalMatrices(M=M, C1=C1, K0=K0, K2=K2, g=p.g)
+
+
+def lateral_force_vector(p: BicycleParameters, x_F: float, z_F: float) -> np.ndarray:
+    """H for a lateral force F [N] (positive right) on the rear frame at (x_F, z_F).
+
+    The generalized force is F times the partial velocity of the application point:
+    roll lever -z_F (height above ground) and, through the yaw rate
+    psi' = (v delta + c delta') cos(lam) / w, a steer lever x_F c cos(lam) / w.
+    Units: m (N m per N).
+    """
+    return np.array([-z_F, x_F * p.c * math.cos(p.lam) / p.w])
+
+
+def yaw_rate(p: BicycleParameters, v: float, delta: np.ndarray, deltadot: np.ndarray) -> np.ndarray:
+    """Linearized rear-frame yaw rate psi' = (v delta + c delta') cos(lam) / w [rad/s]."""
+    return (v * np.asarray(delta) + p.c * np.asarray(deltadot)) * math.cos(p.lam) / p.w
+
+
+def state_matrices(
+    p: BicycleParameters | CanonicalMatrices,
+    v: float,
+    lateral_force_point: tuple[float, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A (4x4) and B for x = [phi, delta, phidot, deltadot].
+
+    B has columns [T_phi, T_delta] and, if ``lateral_force_point`` = (x_F, z_F)
+    is given, a third column for F.
+    """
+    cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
+    Minv = np.linalg.inv(cm.M)
+    A = np.zeros((4, 4))
+    A[0:2, 2:4] = np.eye(2)
+    A[2:4, 0:2] = -Minv @ cm.stiffness(v)
+    A[2:4, 2:4] = -Minv @ cm.damping(v)
+    cols = [Minv]
+    if lateral_force_point is not None:
+        if isinstance(p, CanonicalMatrices):
+            raise ValueError("lateral_force_point needs BicycleParameters, not matrices")
+        H = lateral_force_vector(p, *lateral_force_point)
+        cols.append((Minv @ H)[:, None])
+    B = np.vstack([np.zeros((2, sum(c.shape[1] for c in cols))), np.hstack(cols)])
+    return A, B
+
+
+def state_space(
+    p: BicycleParameters | CanonicalMatrices,
+    v: float,
+    inputs: tuple[str, ...] = ("T_phi", "T_delta"),
+    lateral_force_point: tuple[float, float] | None = None,
+) -> control.StateSpace:
+    """python-control ``StateSpace`` at speed v [m/s]; all four states are outputs.
+
+    ``inputs`` selects from ``("T_phi", "T_delta", "F")``; "F" needs
+    ``lateral_force_point`` = (x_F, z_F) [m].
+    """
+    unknown = [u for u in inputs if u not in INPUT_NAMES]
+    if unknown:
+        raise ValueError(f"unknown inputs {unknown}; choose from {list(INPUT_NAMES)}")
+    if "F" in inputs and lateral_force_point is None:
+        raise ValueError("input 'F' needs lateral_force_point=(x_F, z_F) in metres")
+    A, B = state_matrices(p, v, lateral_force_point)
+    idx = [INPUT_NAMES.index(u) for u in inputs]
+    return control.ss(
+        A, B[:, idx], np.eye(4), np.zeros((4, len(idx))),
+        inputs=list(inputs), outputs=list(STATE_NAMES), states=list(STATE_NAMES),
+    )  # fmt: skip
+
+
+def transfer_function(
+    p: BicycleParameters | CanonicalMatrices, v: float, output: str = "phi", input: str = "T_delta"
+) -> control.TransferFunction:
+    """Exact SISO transfer function from ``input`` (T_phi or T_delta) to ``output``.
+
+    Built from the adjugate of P(s) = M s^2 + v C1 s + g K0 + v^2 K2, so there are
+    no round-off coefficients: e.g. phi/T_delta = -P_phidelta(s) / det P(s).
+    ``output`` is "phi" or "delta"; multiply by s for the rates.
+    """
+    cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
+    outs, ins = ("phi", "delta"), ("T_phi", "T_delta")
+    if output not in outs or input not in ins:
+        raise ValueError(f"output must be one of {outs} and input one of {ins}")
+    i, j = outs.index(output), ins.index(input)
+    Pm = cm._poly_matrix(v)
+    adj = [[Pm[1][1], -Pm[0][1]], [-Pm[1][0], Pm[0][0]]]
+    num = np.trim_zeros(adj[i][j][::-1], "f")
+    den = cm.char_poly(v)[::-1]
+    return control.tf(num if num.size else [0.0], den)
+
+
+# -- eigenvalues ---------------------------------------------------------------------------
+def eigenvalues(p: BicycleParameters | CanonicalMatrices, v: float) -> np.ndarray:
+    """The four eigenvalues of A(v) [1/s], unsorted."""
+    return np.linalg.eigvals(state_matrices(p, v)[0])
+
+
+@dataclass(frozen=True)
+class EigenSweep:
+    """Eigenvalues against speed, tracked along continuous branches.
+
+    ``values[k, j]`` is branch j at ``speeds[k]``; ``labels[j]`` is one of
+    ``weave``, ``capsize``, ``caster`` (the two weave branches are the pair that is
+    complex above v_d) or ``mode<j>`` where no such structure exists.
+    """
+
+    speeds: np.ndarray
+    values: np.ndarray
+    labels: tuple[str, ...]
+
+    def mode(self, label: str) -> np.ndarray:
+        """Columns with this label (weave gives two)."""
+        idx = [j for j, lab in enumerate(self.labels) if lab == label]
+        if not idx:
+            raise ValueError(f"no mode {label!r}; modes are {sorted(set(self.labels))}")
+        return self.values[:, idx]
+
+
+def _track(values: np.ndarray) -> np.ndarray:
+    out = values.copy()
+    for k in range(1, len(out)):
+        cost = np.abs(out[k - 1][:, None] - values[k][None, :])
+        _, col = linear_sum_assignment(cost)
+        out[k] = values[k][col]
+    return out
+
+
+def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> EigenSweep:
+    """Eigenvalues over ``speeds`` [m/s], branches tracked and labelled.
+
+    Tracking uses a fine internal grid (step <= 0.01 m/s) so that labels follow
+    continuous branches through the real-to-complex transition at v_d.
+    Labelling: at the highest speed with a complex pair, that pair is the weave,
+    the most negative real root the caster and the other real root the capsize.
+    """
+    speeds = np.asarray(speeds, dtype=float)
+    if speeds.ndim != 1 or speeds.size == 0 or not np.all(np.isfinite(speeds)):
+        raise ValueError("speeds must be a non-empty 1-D array of finite values")
+    cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
+    lo, hi = float(speeds.min()), float(speeds.max())
+    fine = np.union1d(np.linspace(lo, hi, max(2, int(math.ceil((hi - lo) / 0.01)) + 1)), speeds)
+    vals = np.array([np.sort_complex(eigenvalues(cm, v)) for v in fine])
+    tracked = _track(vals)
+    labels = ["mode0", "mode1", "mode2", "mode3"]
+    cplx = np.where(np.abs(tracked.imag).max(axis=1) > 1e-9)[0]
+    if cplx.size:
+        k = cplx[-1]
+        row = tracked[k]
+        pair = [j for j in range(4) if abs(row[j].imag) > 1e-9]
+        real = [j for j in range(4) if j not in pair]
+        if len(pair) == 2 and len(real) == 2:
+            caster = min(real, key=lambda j: row[j].real)
+            capsize = max(real, key=lambda j: row[j].real)
+            labels[pair[0]] = labels[pair[1]] = "weave"
+            labels[caster] = "caster"
+            labels[capsize] = "capsize"
+    pick = np.searchsorted(fine, speeds)
+    return EigenSweep(speeds=speeds, values=tracked[pick], labels=tuple(labels))
+
+
+# -- critical speeds -----------------------------------------------------------------------
+def _quartic_coeffs(cm: CanonicalMatrices, v: float) -> tuple[float, float, float, float, float]:
+    c = cm.char_poly(v)  # ascending: e, d, c, b, a
+    return c[4], c[3], c[2], c[1], c[0]
+
+
+def _discriminant(cm: CanonicalMatrices, v: float) -> float:
+    a, b, c, d, e = _quartic_coeffs(cm, v)
+    return (
+        256 * a**3 * e**3 - 192 * a**2 * b * d * e**2 - 128 * a**2 * c**2 * e**2
+        + 144 * a**2 * c * d**2 * e - 27 * a**2 * d**4 + 144 * a * b**2 * c * e**2
+        - 6 * a * b**2 * d**2 * e - 80 * a * b * c**2 * d * e + 18 * a * b * c * d**3
+        + 16 * a * c**4 * e - 4 * a * c**3 * d**2 - 27 * b**4 * e**2 + 18 * b**3 * c * d * e
+        - 4 * b**3 * d**3 - 4 * b**2 * c**3 * e + b**2 * c**2 * d**2
+    )  # fmt: skip
+
+
+def _hurwitz3(cm: CanonicalMatrices, v: float) -> float:
+    """b c d - a d^2 - b^2 e: zero exactly when a pair of roots is +-i w."""
+    a, b, c, d, e = _quartic_coeffs(cm, v)
+    return b * c * d - a * d**2 - b**2 * e
+
+
+def _const_term(cm: CanonicalMatrices, v: float) -> float:
+    return _quartic_coeffs(cm, v)[4]
+
+
+def _roots(f, cm: CanonicalMatrices, vmax: float, step: float = 0.01) -> list[float]:
+    grid = np.arange(step, vmax + step / 2, step)
+    vals = np.array([f(cm, v) for v in grid])
+    out = []
+    for k in range(len(grid) - 1):
+        if vals[k] == 0.0:
+            out.append(float(grid[k]))
+        elif vals[k] * vals[k + 1] < 0:
+            out.append(brentq(lambda v: f(cm, v), grid[k], grid[k + 1], xtol=1e-15, rtol=1e-15))
+    return out
+
+
+def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0) -> dict:
+    """Critical speeds [m/s] by root finding on the characteristic polynomial.
+
+    - ``v_d``: the weave pair turns from two real roots into a complex pair
+      (a zero of the quartic's discriminant);
+    - ``v_w``: the weave pair crosses the imaginary axis (zero of the third
+      Hurwitz determinant b c d - a d^2 - b^2 e), with ``weave_frequency`` [rad/s];
+    - ``v_c``: the capsize root crosses zero (zero of the constant term,
+      det(g K0 + v^2 K2)).
+
+    A speed that does not exist in (0, vmax] is ``None``.  If several crossings
+    exist, the lowest is reported and all are listed under ``all``.
+    """
+    cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
+    d_roots = [
+        v for v in _roots(_discriminant, cm, vmax)
+        if np.abs(eigenvalues(cm, v + 1e-4).imag).max() > 1e-9
+        and np.abs(eigenvalues(cm, max(v - 1e-4, 0.0)).imag).max() < 1e-6
+    ]  # fmt: skip
+    w_roots = []
+    for v in _roots(_hurwitz3, cm, vmax):
+        ev = eigenvalues(cm, v)
+        if np.min(np.abs(ev.real[np.abs(ev.imag) > 1e-9]), initial=np.inf) < 1e-6:
+            w_roots.append(v)
+    c_roots = _roots(_const_term, cm, vmax)
+    out: dict = {
+        "v_d": d_roots[0] if d_roots else None,
+        "v_w": w_roots[0] if w_roots else None,
+        "v_c": c_roots[0] if c_roots else None,
+        "weave_frequency": None,
+        "all": {"v_d": d_roots, "v_w": w_roots, "v_c": c_roots},
+    }
+    if w_roots:
+        out["weave_frequency"] = float(np.max(np.abs(eigenvalues(cm, w_roots[0]).imag)))
+    return out
