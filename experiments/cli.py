@@ -13,7 +13,8 @@ import importlib
 import sys
 
 COMMAND_MODULES = (
-    "experiments.cmd_plant",  # eig, linearize, critical-speeds, simulate
+    "experiments.cmd_plant",  # eig, linearize, critical-speeds
+    "experiments.cmd_simulate",  # simulate
     "experiments.cmd_data",  # sweep, stabilization
     "experiments.cmd_ident",  # identify
     "experiments.cmd_reproduce",  # reproduce
