@@ -175,6 +175,10 @@ class BicycleParameters:
 
 # -- validation --------------------------------------------------------------------------
 def _fail(param: str, rule: str, value: Any) -> None:
+    if isinstance(value, tuple):
+        value = tuple(float(v) for v in value)
+    elif isinstance(value, (int, float, np.floating)):
+        value = float(value)
     raise ValueError(f"invalid bicycle parameter {param}={value!r}: {rule}")
 
 

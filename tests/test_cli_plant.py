@@ -1,0 +1,76 @@
+"""The plant commands as a new user runs them (subprocess, installed console script)."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BIN = Path(sys.executable).parent / "bikeid"
+
+
+def run(*args, check=True):
+    cmd = [str(BIN)] if BIN.exists() else [sys.executable, "-m", "experiments.cli"]
+    env = os.environ | {"MPLBACKEND": "Agg"}
+    res = subprocess.run(cmd + list(args), capture_output=True, text=True, env=env, timeout=300)
+    if check:
+        assert res.returncode == 0, res.stderr
+    return res
+
+
+def test_critical_speeds_text_shows_published_values():
+    """Meijaard 2007 Table 2(a): v_w = 4.2924, v_c = 6.0243 m/s (4 decimals printed)."""
+    out = run("critical-speeds", "--bicycle", "benchmark").stdout
+    assert "v_w = 4.2924 m/s" in out
+    assert "v_c = 6.0243 m/s" in out
+    assert "v_d = 0.6843 m/s" in out
+
+
+def test_critical_speeds_json():
+    """JSON keys of the issue, values to 1e-10 of the exact-arithmetic speeds."""
+    data = json.loads(run("critical-speeds", "--bicycle", "benchmark", "--json").stdout)
+    assert abs(data["v_d"] - 0.68428307889245579629) < 1e-10
+    assert abs(data["v_w"] - 4.2923825363411039587) < 1e-10
+    assert abs(data["v_c"] - 6.0242620153883588899) < 1e-10
+
+
+def test_linearize_json_eigenvalues():
+    """Eigenvalues at 5 m/s equal Meijaard Table 2 (1e-11)."""
+    data = json.loads(run("linearize", "--bicycle", "benchmark", "--speed", "5", "--json").stdout)
+    ev = sorted(complex(e["re"], e["im"]).real for e in data["eigenvalues"])
+    ref = sorted([-14.07838969279820, -0.77534188219585, -0.77534188219585, -0.32286642900409])
+    assert all(abs(a - b) < 1e-11 for a, b in zip(ev, ref, strict=True))
+    assert data["M"][0][1] == pytest.approx(2.31941332208709, abs=1e-13)
+
+
+def test_eig_json_and_plot(tmp_path):
+    png = tmp_path / "eig.png"
+    data = json.loads(
+        run(
+            "eig", "--bicycle", "benchmark", "--speeds", "0:10:0.5", "--json", "--plot", str(png)
+        ).stdout
+    )
+    assert len(data["speeds"]) == 21 and png.stat().st_size > 10_000
+    k = data["speeds"].index(5.0)
+    weave = [complex(e["re"], e["im"]) for e, lab in zip(data["eigenvalues"][k], data["labels"],
+                                                          strict=True) if lab == "weave"]  # fmt: skip
+    assert abs(weave[0].real + 0.77534188219585) < 1e-11  # Table 2, v = 5
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("critical-speeds", "--bicycle", "Penny"), "unknown bicycle 'Penny'"),
+        (("eig", "--speeds", "10:0:1"), "need start <= stop"),
+        (("eig", "--speeds", "a:b"), "is not start:stop:step"),
+        (("linearize", "--speed", "nan"), "need a finite speed"),
+        (("critical-speeds", "--bicycle", "missing.yaml"), "does not exist"),
+    ],
+)
+def test_bad_input_is_one_line_error(args, message):
+    res = run(*args, check=False)
+    assert res.returncode == 2
+    assert message in res.stderr
+    assert "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1
