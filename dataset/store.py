@@ -1,0 +1,408 @@
+"""Runs on disk: HDF5 files (one group per run) and CSV export of one run.
+
+HDF5 layout (format ``bikeid-runs``, version 1)::
+
+    /                       attrs: format="bikeid-runs", format_version=1, bikeid_version,
+                                   extra JSON attributes given by the writer (``attrs``)
+    /runs/<name>/           attrs: meta (JSON text of Run.meta), meta_crc32, n (samples)
+        t                   time [s]                          attrs: units
+        signals/<signal>    measured signals                  attrs: units
+        truth/<signal>      noise-free signals (simulated)    attrs: units
+        dither, reference   optional                          attrs: units
+
+Every dataset is float64, chunked as one chunk with the Fletcher-32 checksum filter, and
+the file uses the HDF5 1.10+ format whose object headers carry checksums; the metadata JSON
+(a variable-length string, kept in the unchecksummed global heap) carries its own CRC-32.
+So flipped bytes in data or metadata are detected on reading.  Runs keep their insertion order.
+
+Writes are atomic: a temporary file in the target folder is written, flushed and fsynced,
+then renamed over the target with :func:`os.replace` (and the folder fsynced); an
+interrupted write leaves the old file untouched.  The reader validates everything (format
+and version, required datasets, equal lengths, finite values, checksums, metadata JSON)
+and raises a :class:`ValueError` naming the file, the run group and the problem.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+import zlib
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.conventions import INPUTS, MEASURED, UNITS
+
+from .run import REQUIRED, Run
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "atomic_path",
+    "copy_runs",
+    "export_csv",
+    "file_attrs",
+    "list_runs",
+    "read_run",
+    "read_runs",
+    "write_runs",
+]
+
+FORMAT = "bikeid-runs"
+FORMAT_VERSION = 1
+
+
+def package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("bikeid")
+    except PackageNotFoundError:  # running from a source tree
+        return "unknown"
+
+
+def _units(name: str) -> str:
+    return UNITS.get(name, "")
+
+
+# -- atomic files ---------------------------------------------------------------------
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success fsync it and rename it over ``path``.
+
+    On any exception (or KeyboardInterrupt) the temporary file is removed and ``path`` is
+    left as it was.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    tmp = Path(tmp)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    with contextlib.suppress(OSError):  # make the rename durable (not possible everywhere)
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+
+
+def _h5():
+    import h5py
+
+    return h5py
+
+
+def _new_file(path: Path, attrs: Mapping[str, Any] | None):
+    h5py = _h5()
+    f = h5py.File(path, "w", libver=("v110", "latest"), track_order=True)
+    f.attrs["format"] = FORMAT
+    f.attrs["format_version"] = FORMAT_VERSION
+    f.attrs["bikeid_version"] = package_version()
+    for key, value in (attrs or {}).items():
+        if key in ("format", "format_version", "bikeid_version"):
+            raise ValueError(f"file attribute {key!r} is reserved")
+        f.attrs[key] = json.dumps(value)
+    f.create_group("runs", track_order=True)
+    return f
+
+
+def _check_name(name: str) -> str:
+    if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
+        raise ValueError(f"run name {name!r} is not valid: use a non-empty name without '/'")
+    return name
+
+
+def _put(group, name: str, data: np.ndarray, units: str) -> None:
+    data = np.ascontiguousarray(data, dtype=np.float64)
+    ds = group.create_dataset(
+        name, data=data, chunks=(max(1, data.size),), fletcher32=True, track_times=False
+    )
+    ds.attrs["units"] = units
+
+
+def _write_run(runs_group, name: str, run: Run) -> None:
+    if not isinstance(run, Run):
+        raise ValueError(f"run {name!r} is a {type(run).__name__}, not a dataset.Run")
+    g = runs_group.create_group(_check_name(name), track_order=True)
+    text = json.dumps(run.meta)
+    g.attrs["meta"] = text
+    # Variable-length strings live in the global heap, which HDF5 does not checksum.
+    g.attrs["meta_crc32"] = np.uint32(zlib.crc32(text.encode()))
+    g.attrs["n"] = run.n
+    _put(g, "t", run.t, "s")
+    sig = g.create_group("signals", track_order=True)
+    for key, arr in run.signals.items():
+        _put(sig, _check_name(key), arr, _units(key))
+    if run.truth is not None:
+        tr = g.create_group("truth", track_order=True)
+        for key, arr in run.truth.items():
+            _put(tr, _check_name(key), arr, _units(key))
+    if run.dither is not None:
+        _put(g, "dither", run.dither, "N m")
+    if run.reference is not None:
+        _put(g, "reference", run.reference, "rad")
+
+
+def _names_for(runs: Sequence[Run], names: Sequence[str] | None) -> list[str]:
+    if names is None:
+        names = [f"run_{i:04d}" for i in range(len(runs))]
+    names = [_check_name(n) for n in names]
+    if len(names) != len(runs):
+        raise ValueError(f"got {len(runs)} runs but {len(names)} names")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"duplicate run names {dup}")
+    return names
+
+
+def write_runs(
+    path: str | Path,
+    runs: Iterable[Run],
+    names: Sequence[str] | None = None,
+    attrs: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write ``runs`` to a new HDF5 file at ``path`` atomically (replacing any old file).
+
+    ``names`` are the group names (default ``run_0000``, ``run_0001``, ...); ``attrs`` are
+    extra JSON-serializable file attributes (e.g. the sweep settings).
+    """
+    runs = list(runs)
+    names = _names_for(runs, names)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with _new_file(tmp, attrs) as f:
+            for name, run in zip(names, runs, strict=True):
+                _write_run(f["runs"], name, run)
+    return path
+
+
+def copy_runs(
+    path: str | Path,
+    sources: Sequence[tuple[str | Path, str]],
+    attrs: Mapping[str, Any] | None = None,
+) -> Path:
+    """Atomically write ``path`` holding groups copied from other run files.
+
+    ``sources`` is a list of (file, run name); each source group is validated (read as a
+    :class:`Run`) before it is copied byte for byte with HDF5's object copy.
+    """
+    h5py = _h5()
+    path = Path(path)
+    seen: set[str] = set()
+    with atomic_path(path) as tmp:
+        with _new_file(tmp, attrs) as f:
+            for src, name in sources:
+                if name in seen:
+                    raise ValueError(f"duplicate run name {name!r} while copying")
+                seen.add(name)
+                read_run(src, name)  # validates
+                with h5py.File(src, "r") as s:
+                    s.copy(s["runs"][name], f["runs"], name=name)
+    return path
+
+
+# -- reading --------------------------------------------------------------------------
+def _open(path: str | Path):
+    h5py = _h5()
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such run file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise ValueError(
+            f"{path}: not a readable HDF5 file, probably truncated or corrupt "
+            f"({str(exc).splitlines()[0]}); rewrite it (a sweep rerun rebuilds it)"
+        ) from None
+    try:
+        fmt = f.attrs.get("format")
+        fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+        if fmt != FORMAT:
+            raise ValueError(
+                f"{path}: not a bikeid run file (format attribute {fmt!r}, expected {FORMAT!r})"
+            )
+        version = f.attrs.get("format_version")
+        try:
+            version = int(version)
+        except (TypeError, ValueError):
+            version = None
+        if version is None or version > FORMAT_VERSION or version < 1:
+            raise ValueError(
+                f"{path}: run file format version {version} is not supported "
+                f"(this bikeid reads versions 1..{FORMAT_VERSION}); upgrade bikeid"
+            )
+        if "runs" not in f:
+            raise ValueError(f"{path}: the group /runs is missing; the file is malformed")
+    except ValueError:
+        f.close()
+        raise
+    except (OSError, RuntimeError, KeyError, TypeError) as exc:  # damaged header objects
+        f.close()
+        raise ValueError(f"{path}: damaged file header ({exc}); the file is corrupt") from None
+    return f
+
+
+def _read_array(path, gname: str, ds, n: int | None) -> np.ndarray:
+    where = f"{path}: run {gname!r}: dataset {ds.name.split('/', 3)[-1]!r}"
+    if ds.dtype.kind != "f":
+        raise ValueError(f"{where} has dtype {ds.dtype}, expected float64")
+    try:
+        arr = ds[()]
+    except (OSError, RuntimeError) as exc:
+        raise ValueError(
+            f"{where} cannot be read ({str(exc).splitlines()[0]}): the file is corrupt; rewrite it"
+        ) from None
+    arr = np.asarray(arr, dtype=np.float64)
+    if arr.ndim != 1:
+        raise ValueError(f"{where} has shape {arr.shape}, expected 1-D")
+    if n is not None and arr.size != n:
+        raise ValueError(f"{where} has {arr.size} samples but t has {n}; the file is malformed")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where} holds non-finite values; the file is corrupt")
+    return arr
+
+
+def _read_group(path, g, gname: str) -> Run:
+    where = f"{path}: run {gname!r}"
+    try:
+        meta_text = g.attrs["meta"]
+    except (KeyError, OSError):
+        raise ValueError(f"{where} has no 'meta' attribute; the file is malformed") from None
+    raw = (
+        meta_text if isinstance(meta_text, bytes) else meta_text.encode("utf-8", "surrogateescape")
+    )
+    crc = g.attrs.get("meta_crc32")
+    if crc is None or int(crc) != zlib.crc32(raw):
+        raise ValueError(f"{where}: metadata checksum mismatch; the file is corrupt")
+    meta_text = raw.decode()
+    try:
+        meta = json.loads(meta_text)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: metadata is not valid JSON; the file is corrupt") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{where}: metadata is not a JSON object")
+    if "t" not in g:
+        raise ValueError(f"{where} has no dataset 't'; the file is malformed")
+    t = _read_array(path, gname, g["t"], None)
+    n = t.size
+    if "n" in g.attrs and int(g.attrs["n"]) != n:
+        raise ValueError(
+            f"{where}: 't' has {n} samples but the run was written with {int(g.attrs['n'])}; "
+            "the file is truncated or corrupt"
+        )
+    if "signals" not in g:
+        raise ValueError(f"{where} has no 'signals' group; the file is malformed")
+    missing = [k for k in REQUIRED if k not in g["signals"]]
+    if missing:
+        raise ValueError(
+            f"{where} is missing required signal datasets {missing} (required: {list(REQUIRED)})"
+        )
+    signals = {k: _read_array(path, gname, ds, n) for k, ds in g["signals"].items()}
+    truth = None
+    if "truth" in g:
+        truth = {k: _read_array(path, gname, ds, n) for k, ds in g["truth"].items()}
+    extra = {}
+    for k in ("dither", "reference"):
+        extra[k] = _read_array(path, gname, g[k], n) if k in g else None
+    try:
+        return Run(t=t, signals=signals, truth=truth, meta=meta, **extra)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _group(path, f, name: str):
+    try:
+        return f["runs"][name]
+    except KeyError:
+        raise KeyError(f"{path}: no run named {name!r}") from None
+    except (OSError, RuntimeError) as exc:
+        raise ValueError(
+            f"{path}: run {name!r} cannot be opened ({str(exc).splitlines()[0]}); the file is "
+            "corrupt"
+        ) from None
+
+
+def list_runs(path: str | Path) -> list[str]:
+    """Names of the runs in ``path``, in the order they were written."""
+    with _open(path) as f:
+        try:
+            return list(f["runs"].keys())
+        except (OSError, RuntimeError) as exc:
+            raise ValueError(f"{path}: run index cannot be read ({exc}); corrupt file") from None
+
+
+def file_attrs(path: str | Path) -> dict[str, Any]:
+    """The extra (JSON) file attributes given to :func:`write_runs`."""
+    with _open(path) as f:
+        out = {}
+        for key, value in f.attrs.items():
+            if key in ("format", "format_version", "bikeid_version"):
+                continue
+            try:
+                out[key] = json.loads(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{path}: file attribute {key!r} is not valid JSON") from None
+        return out
+
+
+def read_run(path: str | Path, name: str) -> Run:
+    """The run called ``name`` in ``path``, validated."""
+    with _open(path) as f:
+        return _read_group(path, _group(path, f, name), name)
+
+
+def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]:
+    """All runs in ``path`` (or those in ``names``), in file order, each validated."""
+    with _open(path) as f:
+        if names is None:
+            names = list_runs(path)
+        return [_read_group(path, _group(path, f, n), n) for n in names]
+
+
+# -- CSV ------------------------------------------------------------------------------
+def _columns(run: Run) -> list[tuple[str, np.ndarray, str]]:
+    order = list(MEASURED) + list(INPUTS)
+    keys = [k for k in order if k in run.signals] + sorted(k for k in run.signals if k not in order)
+    cols = [("t", run.t, "s")] + [(k, run.signals[k], _units(k)) for k in keys]
+    if run.truth is not None:
+        tkeys = [k for k in order if k in run.truth]
+        tkeys += sorted(k for k in run.truth if k not in order)
+        cols += [(f"true_{k}", run.truth[k], _units(k)) for k in tkeys]
+    if run.dither is not None:
+        cols.append(("dither", run.dither, "N m"))
+    if run.reference is not None:
+        cols.append(("reference", run.reference, "rad"))
+    return cols
+
+
+def export_csv(run: Run, path: str | Path) -> Path:
+    """Write one run as CSV, atomically.
+
+    Line 1: ``# bikeid run: `` followed by the metadata as one-line JSON; line 2: column
+    headers ``name [units]`` (t, measured signals in MEASURED/INPUTS order, ``true_*``
+    columns, dither, reference); then one row per sample with 17 significant digits, which
+    round-trips float64 exactly.  Read back with ``numpy.loadtxt(path, delimiter=",",
+    skiprows=2)`` or ``pandas.read_csv(path, comment="#")``.
+    """
+    cols = _columns(run)
+    header = ",".join(f"{name} [{units}]" if units else name for name, _, units in cols)
+    data = np.column_stack([c for _, c, _ in cols])
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="\n") as fh:
+            fh.write("# bikeid run: " + json.dumps(run.meta, separators=(",", ":")) + "\n")
+            fh.write(header + "\n")
+            np.savetxt(fh, data, delimiter=",", fmt="%.17g")
+    return path
