@@ -1,0 +1,308 @@
+"""Sensor models: what an instrument reports given the true signal.
+
+Each channel (a name from :data:`sim.conventions.MEASURED` or ``INPUTS``) has
+
+    measured = Q( scale * LP(true) + bias + std * w ),     w ~ N(0, 1) white, per sample,
+
+where ``LP`` is the optional anti-alias low-pass filter and ``Q`` rounds to the quantization
+step (``Q(x) = step * round(x / step)``; no rounding when ``step == 0``).  Units are the
+channel's (``sim.conventions.UNITS``): rad, rad/s, m/s, N m, N.  Signs are unchanged (a
+negative ``scale`` would flip a sensor and is refused).
+
+The anti-alias filter is a Butterworth low-pass of order 1 or 2 with cutoff ``cutoff`` [Hz],
+discretized by the bilinear transform with pre-warping at the cutoff (so its gain is exactly
+-3 dB at ``cutoff``) on the *fine* simulation grid and run there; the filtered signal is then
+sampled at the sensor rate.  The filter starts in steady state at the first sample (no
+start-up transient).  Its cutoff must lie below the Nyquist frequency ``rate / 2``.
+
+Noise is deterministic: channel ``name`` of a run with seed ``seed`` draws from
+``SeedSequence(seed, spawn_key=(crc32(name),))``, so a channel's noise does not depend on
+which other channels exist, and sample k's noise does not depend on the run length.
+
+Default figures (:meth:`Sensors.default`), stated rather than measured: white noise
+1e-3 rad on angles (roll and steer potentiometers, yaw), 1e-2 rad/s on rates (rate gyros,
+wheel generator), 1e-2 m/s on speed; no bias, unit scale, no quantization, no filter; input
+channels (T_delta, T_phi, F) are logged exactly (the commanded value).  Moore & Hubbard
+(2014) list their instruments (potentiometers, VectorNav VN-100 IMU, steer rate gyro, DC
+generator, torque sensor, load cell) sampled at 200 Hz but give no noise figures; the
+defaults are an order-of-magnitude choice, not a calibration.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sim.conventions import INPUTS, MEASURED
+
+__all__ = ["AntiAlias", "Channel", "SensorChain", "Sensors", "channel_noise"]
+
+#: Channels a sensor model knows, in the order used for vectors.
+CHANNELS = MEASURED + INPUTS
+ANGLES = ("phi", "delta", "psi")
+RATES = ("phidot", "deltadot", "psidot", "thetaRdot")
+
+
+def _finite(name: str, value: Any) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"sensor {name} must be a number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"sensor {name} must be finite, got {value}")
+    return value
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One channel's instrument model (all in the channel's units).
+
+    std: white-noise standard deviation (>= 0); bias: constant offset; scale: gain (> 0,
+    1 = exact); step: quantization step (>= 0, 0 = no quantization).
+    """
+
+    std: float = 0.0
+    bias: float = 0.0
+    scale: float = 1.0
+    step: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("std", "bias", "scale", "step"):
+            object.__setattr__(self, name, _finite(name, getattr(self, name)))
+        if self.std < 0:
+            raise ValueError(f"sensor noise std must be >= 0, got {self.std}")
+        if self.step < 0:
+            raise ValueError(f"sensor quantization step must be >= 0 (0 = none), got {self.step}")
+        if self.scale <= 0:
+            raise ValueError(
+                f"sensor scale must be > 0, got {self.scale}; flip signs in the data instead"
+            )
+
+    @property
+    def ideal(self) -> bool:
+        return self.std == 0 and self.bias == 0 and self.scale == 1 and self.step == 0
+
+    def apply(self, x: np.ndarray, w: np.ndarray | float = 0.0) -> np.ndarray:
+        """Measured value for true (filtered) value ``x`` and standard-normal draws ``w``."""
+        # Same operation order as SensorChain, so both give bit-identical values.
+        y = self.scale * np.asarray(x, dtype=float) + (np.asarray(w) * self.std + self.bias)
+        if self.step > 0:
+            y = self.step * np.round(y / self.step)
+        return y
+
+
+@dataclass(frozen=True)
+class AntiAlias:
+    """Butterworth low-pass of ``order`` 1 or 2 with -3 dB ``cutoff`` [Hz]."""
+
+    cutoff: float
+    order: int = 2
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "cutoff", _finite("anti-alias cutoff", self.cutoff))
+        if self.cutoff <= 0:
+            raise ValueError(f"anti-alias cutoff must be > 0 Hz, got {self.cutoff}")
+        if self.order not in (1, 2):
+            raise ValueError(f"anti-alias order must be 1 or 2, got {self.order!r}")
+
+    def sos(self, fs: float) -> np.ndarray:
+        """Second-order sections for sample rate ``fs`` [Hz] (bilinear, pre-warped)."""
+        from scipy.signal import butter
+
+        if self.cutoff >= fs / 2:
+            raise ValueError(
+                f"anti-alias cutoff {self.cutoff} Hz is not below the simulation grid's Nyquist "
+                f"frequency {fs / 2} Hz; use a finer simulation step"
+            )
+        return butter(self.order, self.cutoff, btype="low", fs=fs, output="sos")
+
+    def filter(self, x: np.ndarray, fs: float) -> np.ndarray:
+        """Filter ``x`` sampled at ``fs`` [Hz], starting in steady state at ``x[0]``."""
+        from scipy.signal import sosfilt, sosfilt_zi
+
+        sos = self.sos(fs)
+        x = np.asarray(x, dtype=float)
+        y, _ = sosfilt(sos, x, zi=sosfilt_zi(sos) * x[0])
+        return y
+
+
+def channel_noise(seed: int, name: str, n: int) -> np.ndarray:
+    """``n`` standard-normal draws for channel ``name`` of a run seeded ``seed``."""
+    if int(seed) != seed or seed < 0:
+        raise ValueError(f"sensor seed must be a non-negative integer, got {seed!r}")
+    ss = np.random.SeedSequence(int(seed), spawn_key=(zlib.crc32(name.encode()),))
+    return np.random.default_rng(ss).standard_normal(n)
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """The instruments of a run: per-channel models, sample rate [Hz], anti-alias filter.
+
+    Channels not listed are ideal (reported exactly).
+    """
+
+    channels: Mapping[str, Channel] = field(default_factory=dict)
+    rate: float = 100.0
+    antialias: AntiAlias | None = None
+
+    def __post_init__(self) -> None:
+        rate = _finite("rate", self.rate)
+        if rate <= 0:
+            raise ValueError(f"sensor sample rate must be > 0 Hz, got {rate}")
+        object.__setattr__(self, "rate", rate)
+        chans = {}
+        for name, ch in dict(self.channels).items():
+            if not isinstance(name, str) or not name or "/" in name:
+                raise ValueError(f"sensor channel name {name!r} is not a valid signal name")
+            if isinstance(ch, Mapping):
+                ch = Channel(**ch)
+            if not isinstance(ch, Channel):
+                raise ValueError(f"sensor channel {name!r} must be a Channel or a dict")
+            chans[name] = ch
+        object.__setattr__(self, "channels", chans)
+        if self.antialias is not None:
+            aa = self.antialias
+            if isinstance(aa, Mapping):
+                aa = AntiAlias(**aa)
+                object.__setattr__(self, "antialias", aa)
+            if aa.cutoff >= rate / 2:
+                raise ValueError(
+                    f"anti-alias cutoff {aa.cutoff} Hz must be below the sensor Nyquist "
+                    f"frequency {rate / 2} Hz (rate {rate} Hz)"
+                )
+
+    # -- constructors ---------------------------------------------------------------
+    @classmethod
+    def ideal(cls, rate: float = 100.0) -> Sensors:
+        """Exact instruments sampled at ``rate`` [Hz]."""
+        return cls({}, rate)
+
+    @classmethod
+    def default(cls, rate: float = 100.0, antialias: AntiAlias | None = None) -> Sensors:
+        """The stated default noise levels (see the module docstring)."""
+        chans = {name: Channel(std=1e-3) for name in ANGLES}
+        chans.update({name: Channel(std=1e-2) for name in RATES})
+        chans["v"] = Channel(std=1e-2)
+        return cls(chans, rate, antialias)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Sensors:
+        """Inverse of :meth:`describe`."""
+        unknown = set(d) - {"rate", "channels", "antialias"}
+        if unknown:
+            raise ValueError(f"unknown sensor settings {sorted(unknown)}")
+        aa = d.get("antialias")
+        return cls(
+            {k: Channel(**v) for k, v in dict(d.get("channels", {})).items()},
+            d.get("rate", 100.0),
+            None if aa is None else AntiAlias(**aa),
+        )
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-serializable description (goes into run metadata)."""
+        return {
+            "rate": self.rate,
+            "channels": {
+                k: {"std": c.std, "bias": c.bias, "scale": c.scale, "step": c.step}
+                for k, c in self.channels.items()
+            },
+            "antialias": None
+            if self.antialias is None
+            else {"cutoff": self.antialias.cutoff, "order": self.antialias.order},
+        }
+
+    # -- use ------------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Sample period [s]."""
+        return 1.0 / self.rate
+
+    def channel(self, name: str) -> Channel:
+        return self.channels.get(name, _IDEAL)
+
+    def decimation(self, fine_dt: float) -> int:
+        """Fine-grid steps per sensor sample; ValueError unless an integer."""
+        m = self.dt / fine_dt
+        k = round(m)
+        if k < 1 or abs(m - k) > 1e-9 * max(1.0, m):
+            raise ValueError(
+                f"sensor period {self.dt} s is not a whole multiple of the simulation step "
+                f"{fine_dt} s; choose a rate and step that divide"
+            )
+        return int(k)
+
+    def measure(
+        self, t: np.ndarray, truth: Mapping[str, np.ndarray], seed: int
+    ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Sample the true signals ``truth`` given on the uniform fine grid ``t`` [s].
+
+        Returns (t_s, measured, truth_s) at the sensor rate: the time base (every m-th fine
+        sample, m = fine steps per sensor period, starting at t[0]), the measured signals
+        (filtered, sampled, then corrupted) and the true signals sampled without filtering.
+        """
+        t = np.asarray(t, dtype=float)
+        if t.ndim != 1 or t.size < 2:
+            raise ValueError("sensor input time base must be 1-D with at least 2 samples")
+        h = float(t[1] - t[0])
+        if not np.allclose(np.diff(t), h, rtol=1e-9, atol=1e-12):
+            raise ValueError("sensor input time base must be uniform")
+        m = self.decimation(h)
+        sel = slice(None, None, m)
+        t_s = t[sel]
+        measured, truth_s = {}, {}
+        for name, x in truth.items():
+            x = np.asarray(x, dtype=float)
+            if x.shape != t.shape:
+                raise ValueError(f"true signal {name!r} has shape {x.shape}, expected {t.shape}")
+            truth_s[name] = x[sel].copy()
+            ch = self.channel(name)
+            xf = x if self.antialias is None else self.antialias.filter(x, 1.0 / h)
+            w = channel_noise(seed, name, t_s.size) if ch.std > 0 else 0.0
+            measured[name] = (
+                x[sel].copy() if ch.ideal and self.antialias is None else ch.apply(xf[sel], w)
+            )
+        return t_s, measured, truth_s
+
+    def chain(self, seed: int, n: int, names: tuple[str, ...] = MEASURED) -> SensorChain:
+        """A per-sample corrupter for use inside a control loop (see :class:`SensorChain`)."""
+        return SensorChain(self, seed, n, names)
+
+
+_IDEAL = Channel()
+
+
+class SensorChain:
+    """Corrupts measurement vectors one sample at a time, inside a control loop.
+
+    ``chain(k, y_true)`` returns the measured vector of sensor sample ``k`` (vector in
+    ``names`` order, default ``MEASURED``); the same (seed, k) always gives the same noise,
+    equal to what :meth:`Sensors.measure` adds at sample k, so the signals a run records
+    are exactly the ones the controller saw.  The anti-alias filter is not applied here
+    (the loop sees only sample instants); it needs the fine grid, see :meth:`Sensors.measure`.
+    """
+
+    def __init__(self, sensors: Sensors, seed: int, n: int, names: tuple[str, ...]) -> None:
+        self.names = tuple(names)
+        chans = [sensors.channel(k) for k in self.names]
+        self.scale = np.array([c.scale for c in chans])
+        self.bias = np.array([c.bias for c in chans])
+        self.step = np.array([c.step for c in chans])
+        std = np.array([c.std for c in chans])
+        w = np.zeros((n, len(self.names)))
+        for j, name in enumerate(self.names):
+            if std[j] > 0:
+                w[:, j] = channel_noise(seed, name, n)
+        self.offset = w * std + self.bias
+        self.quantized = bool(np.any(self.step > 0))
+
+    def __call__(self, k: int, y_true: np.ndarray) -> np.ndarray:
+        y = self.scale * np.asarray(y_true, dtype=float) + self.offset[k]
+        if self.quantized:
+            q = self.step > 0
+            y[q] = self.step[q] * np.round(y[q] / self.step[q])
+        return y
