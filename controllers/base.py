@@ -1,0 +1,227 @@
+"""The controller interface shared by every roll-angle controller.
+
+A controller is a zero-order-hold callable ``controller(t, y) -> T_delta`` [N m].
+``y`` is the *measured* signal vector in :data:`sim.conventions.MEASURED` order
+``(v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot)``: controllers never see
+the true state.  The simulator calls it once per sample (``sample_time`` [s]); a
+repeated call at the same ``t`` returns the held output without touching the
+internal state, so an integrator that evaluates the input several times per step
+cannot double-count the integral.
+
+Sign convention (Meijaard 2007): phi > 0 leans right, delta > 0 steers right,
+T_delta > 0 is a steer torque to the right.  Stabilizing roll feedback steers
+*into* the lean, so roll-angle and roll-rate gains are negative in
+``T = Kp e + Ki int(e) - Kd phidot`` with ``e = phi_ref - phi``.
+
+Every controller carries its roll reference ``reference(t)`` [rad] (default zero,
+see :mod:`controllers.excitation`) and clips its output to ``+-saturation`` [N m].
+
+Speed scheduling: ``design_speed=None`` schedules the gains on the *measured* speed
+``y[0]`` at every call; a number fixes the gains at that design speed [m/s].
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, runtime_checkable
+
+from sim.conventions import IDX, MEASURED
+
+__all__ = ["Controller", "ControllerLike", "GainSchedule", "Reference", "check_measurement"]
+
+I_V, I_PHI, I_DELTA, I_PHIDOT, I_DELTADOT = (
+    IDX["v"], IDX["phi"], IDX["delta"], IDX["phidot"], IDX["deltadot"]
+)  # fmt: skip
+
+
+@runtime_checkable
+class ControllerLike(Protocol):
+    """What a simulator needs from a controller."""
+
+    sample_time: float
+
+    def reset(self) -> None: ...
+
+    def __call__(self, t: float, y: Sequence[float]) -> float: ...
+
+
+class Reference(Protocol):
+    """A roll reference: ``ref(t)`` [rad] and optionally ``ref.rate(t)`` [rad/s]."""
+
+    def __call__(self, t: float) -> float: ...
+
+
+def _zero(t: float) -> float:
+    return 0.0
+
+
+def check_measurement(y: Sequence[float]) -> None:
+    """Raise ``ValueError`` unless ``y`` is a finite vector in ``MEASURED`` order."""
+    if len(y) != len(MEASURED):
+        raise ValueError(
+            f"measurement has {len(y)} entries; expected {len(MEASURED)} in the order {MEASURED}"
+        )
+    bad = [MEASURED[i] for i, val in enumerate(y) if not math.isfinite(float(val))]
+    if bad:
+        raise ValueError(f"measurement has non-finite entries {bad}; check the sensor model")
+
+
+def _positive(name: str, value: float, allow_inf: bool = False) -> float:
+    value = float(value)
+    if math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
+        rule = "positive (inf for none)" if allow_inf else "positive and finite"
+        raise ValueError(f"{name} must be {rule}, got {value}")
+    return value
+
+
+class GainSchedule:
+    """Gains interpolated linearly in speed, held constant beyond the grid ends.
+
+    ``speeds`` [m/s] strictly increasing; ``gains[k]`` is the gain tuple at
+    ``speeds[k]``.  Evaluation is pure Python (bisection), a few hundred ns.
+    """
+
+    def __init__(self, speeds: Sequence[float], gains: Sequence[Sequence[float]]):
+        sp = [float(s) for s in speeds]
+        gs = [tuple(float(g) for g in row) for row in gains]
+        if len(sp) == 0 or len(sp) != len(gs):
+            raise ValueError(
+                f"gain schedule needs one gain row per speed, got {len(sp)} speeds, {len(gs)} rows"
+            )
+        if any(b <= a for a, b in zip(sp, sp[1:], strict=False)):
+            raise ValueError("gain schedule speeds must be strictly increasing")
+        if len({len(r) for r in gs}) != 1:
+            raise ValueError("every gain row must have the same length")
+        if not all(math.isfinite(x) for r in gs for x in r + (sp[0], sp[-1])):
+            raise ValueError("gain schedule speeds and gains must be finite")
+        self.speeds = sp
+        self.gains = gs
+        self._n = len(sp)
+
+    def __call__(self, v: float) -> tuple[float, ...]:
+        sp = self.speeds
+        if v <= sp[0]:
+            return self.gains[0]
+        if v >= sp[-1]:
+            return self.gains[-1]
+        lo, hi = 0, self._n - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if sp[mid] <= v:
+                lo = mid
+            else:
+                hi = mid
+        w = (v - sp[lo]) / (sp[hi] - sp[lo])
+        a, b = self.gains[lo], self.gains[hi]
+        return tuple(x + w * (z - x) for x, z in zip(a, b, strict=True))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"speeds": list(self.speeds), "gains": [list(g) for g in self.gains]}
+
+
+class Controller(ABC):
+    """Base class: sample time, saturation, reference, ZOH hold and ``describe()``.
+
+    Subclasses implement :meth:`_control` (the unsaturated law, may update state)
+    and :meth:`_reset_state`, and set ``name``.
+    """
+
+    name = "controller"
+
+    def __init__(
+        self,
+        sample_time: float = 0.001,
+        saturation: float = math.inf,
+        reference: Callable[[float], float] | None = None,
+        design_speed: float | None = None,
+    ):
+        self.sample_time = _positive("sample_time", sample_time)
+        self.saturation = _positive("saturation", saturation, allow_inf=True)
+        self.design_speed = (
+            None if design_speed is None else _positive("design_speed", design_speed)
+        )
+        self.reference = reference if reference is not None else _zero
+        self.reset()
+
+    # -- public -------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget all internal state (integrators, held output, previous sample)."""
+        self._t_last: float | None = None
+        self._u_last = 0.0
+        self._reset_state()
+
+    def __call__(self, t: float, y: Sequence[float]) -> float:
+        """Steer torque [N m] for the measurement ``y`` (``MEASURED`` order) at time ``t`` [s]."""
+        t_last = self._t_last
+        if t_last is not None:
+            if t == t_last:
+                return self._u_last
+            if t < t_last:
+                raise ValueError(
+                    f"controller called at t={t} after t={t_last}; call reset() before a new run"
+                )
+            dt = t - t_last
+        else:
+            dt = self.sample_time
+        u = self._control(t, y, dt)
+        if u != u:  # NaN
+            check_measurement(y)
+            raise ValueError(f"{self.name} produced NaN torque at t={t}")
+        s = self.saturation
+        if u > s:
+            u = s
+        elif u < -s:
+            u = -s
+        self._t_last = t
+        self._u_last = u
+        return u
+
+    def speed(self, y: Sequence[float]) -> float:
+        """The speed the gains are scheduled on: ``design_speed`` or the measured ``y[0]``."""
+        return self.design_speed if self.design_speed is not None else float(y[I_V])
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-serializable summary for run metadata."""
+        ref = self.reference
+        ref_desc = (
+            ref.describe()
+            if hasattr(ref, "describe")
+            else {"name": getattr(ref, "__name__", type(ref).__name__)}
+        )
+        sat = self.saturation
+        return {
+            "name": self.name,
+            "sample_time": self.sample_time,
+            "saturation": None if math.isinf(sat) else sat,
+            "design_speed": self.design_speed,
+            "speed_source": "design" if self.design_speed is not None else "measured",
+            "reference": ref_desc if ref is not _zero else {"name": "zero"},
+            "gains": self._gains_description(),
+        }
+
+    # -- for subclasses -----------------------------------------------------------------
+    def _reference_and_rate(self, t: float, dt: float) -> tuple[float, float]:
+        """Reference [rad] and its rate [rad/s]: exact if the reference has ``rate``,
+        else a backward difference over ``dt`` (zero at the first sample)."""
+        ref = self.reference
+        r = float(ref(t))
+        rate = getattr(ref, "rate", None)
+        if rate is not None:
+            rd = float(rate(t))
+        elif self._t_last is None:
+            rd = 0.0
+        else:
+            rd = (r - self._r_last) / dt
+        self._r_last = r
+        return r, rd
+
+    @abstractmethod
+    def _control(self, t: float, y: Sequence[float], dt: float) -> float: ...
+
+    def _reset_state(self) -> None:
+        self._r_last = 0.0
+
+    def _gains_description(self) -> dict[str, Any]:
+        return {}

@@ -1,0 +1,293 @@
+"""Roll tracking by pole placement with integral action (Chen & Dao 2010, eqs. 7-17).
+
+Law (eq. 7):  T = -K x + kI xi,   xi' = phi_ref - phi   (eq. 8, C* = [1 0 0 0]),
+with x = [phi, delta, phidot, deltadot] taken from the measurement (y[1], y[2], y[4],
+y[5]).  The gains come from ``control.place`` on the fifth-order error system
+(eqs. 14-15)
+
+    Aa = [[A, 0], [-C*, 0]],   Ba = [[B], [0]],   Ka = [K, -kI],
+
+so eig(Aa - Ba Ka) are the requested poles.  After placing, the achieved eigenvalues
+are checked: ``place`` returns gains of ~1e12 without a warning where the plant is
+uncontrollable (the benchmark at v = 1.4110 m/s, controllers.md §3.3), and that
+raises :class:`ValueError` with the PBH measure
+
+    min over eigenvalues lambda of A of  sigma_min([A - lambda I, B]) / ||[A, B]||_2.
+
+Model: by default the true linearization ``sim.linear.state_space(parameters, v)``
+(T_delta column).  Alternatively a user model: a ``control.StateSpace`` with 4 states
+(one input T_delta, or an input labelled "T_delta"), or a callable ``v -> StateSpace``
+for scheduling.  State order: bikeid's [phi, delta, phidot, deltadot] is used as is.
+A Chen & Dao-ordered model [phi, phidot, delta, deltadot] (``ident``'s canonical form,
+state order ``sim.conventions.CANONICAL_STATE``) is recognized from its state labels or
+declared with ``state_order="chen_dao"``; it is permuted to bikeid order by
+x_b = P x_cd (A_b = P A P^T, B_b = P B) before placing, so the gains always act on
+the measured [phi, delta, phidot, deltadot].
+
+Scheduling: with ``design_speed`` the gains are placed once at that speed.  Without
+it (default), gains are placed on ``speed_grid`` and interpolated linearly at the
+measured speed; grid points where placement is inaccurate (near an uncontrollable
+speed) are dropped and listed in ``skipped_speeds``.  The default grid (0.8-16 m/s,
+step 0.2, none closer than 1 % to 1.411 m/s) keeps interpolated loops stable over
+1-15 m/s in the linear benchmark model (checked in the tests).
+
+Default poles: -2, -3, -4, -5, -6 [1/s] (controllers.md §4.4 lists the gains they
+give).  Poles must be distinct (``place`` refuses a pole repeated more than rank(B) = 1
+times).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import control
+import numpy as np
+
+from sim.conventions import CANONICAL_STATE, LINEAR_STATE
+from sim.linear import state_matrices
+from sim.parameters import BicycleParameters, benchmark
+
+from .base import I_DELTA, I_DELTADOT, I_PHI, I_PHIDOT, Controller, GainSchedule
+
+__all__ = [
+    "DEFAULT_POLES",
+    "PolePlacement",
+    "augmented_system",
+    "pbh_measure",
+    "place_with_integral",
+    "to_bikeid_order",
+]
+
+DEFAULT_POLES = (-2.0, -3.0, -4.0, -5.0, -6.0)
+#: Permutation from Chen & Dao order [phi, phidot, delta, deltadot] to bikeid order.
+_CD_TO_BIKEID = [CANONICAL_STATE.index(s) for s in LINEAR_STATE]  # [0, 2, 1, 3]
+
+
+def _default_grid() -> list[float]:
+    grid = [round(0.8 + 0.2 * k, 10) for k in range(77)]  # 0.8 ... 16.0
+    return grid
+
+
+def to_bikeid_order(
+    A: np.ndarray, B: np.ndarray, state_order: str = "bikeid"
+) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) in bikeid state order from a model in ``state_order`` ("bikeid"|"chen_dao")."""
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float).reshape(A.shape[0], -1)
+    if state_order == "bikeid":
+        return A, B
+    if state_order == "chen_dao":
+        p = _CD_TO_BIKEID
+        return A[np.ix_(p, p)], B[p, :]
+    raise ValueError(f"state_order must be 'bikeid' or 'chen_dao', got {state_order!r}")
+
+
+def _model_matrices(sys: control.StateSpace, state_order: str | None) -> tuple[np.ndarray, ...]:
+    if not isinstance(sys, control.StateSpace):
+        raise ValueError(f"model must be a control.StateSpace, got {type(sys).__name__}")
+    if sys.isdtime(strict=True):
+        raise ValueError("model must be continuous-time (dt=0); convert a discrete model first")
+    if sys.nstates != 4:
+        raise ValueError(f"model must have 4 states (phi, delta and rates), got {sys.nstates}")
+    labels = tuple(getattr(sys, "state_labels", ()))
+    if state_order is None:
+        if labels == LINEAR_STATE:
+            state_order = "bikeid"
+        elif labels == CANONICAL_STATE:
+            state_order = "chen_dao"
+        else:
+            raise ValueError(
+                f"cannot tell the state order from labels {labels}; pass "
+                f"state_order='bikeid' {LINEAR_STATE} or 'chen_dao' {CANONICAL_STATE}"
+            )
+    inputs = tuple(getattr(sys, "input_labels", ()))
+    if sys.ninputs == 1:
+        B = sys.B
+    elif "T_delta" in inputs:
+        B = sys.B[:, [inputs.index("T_delta")]]
+    else:
+        raise ValueError(
+            f"model has {sys.ninputs} inputs {inputs}; give one input or label one 'T_delta'"
+        )
+    return to_bikeid_order(sys.A, B, state_order)
+
+
+def augmented_system(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Chen & Dao eq. (15): Aa = [[A, 0], [-C*, 0]], Ba = [B; 0] with C* = [1, 0, 0, 0]."""
+    Aa = np.zeros((5, 5))
+    Aa[:4, :4] = A
+    Aa[4, 0] = -1.0
+    Ba = np.zeros((5, 1))
+    Ba[:4] = np.asarray(B, dtype=float).reshape(4, 1)
+    return Aa, Ba
+
+
+def pbh_measure(A: np.ndarray, B: np.ndarray) -> tuple[float, complex]:
+    """Relative PBH controllability measure and the eigenvalue where it is smallest.
+
+    min over eigenvalues lambda of A of sigma_min([A - lambda I, B]) / ||[A, B]||_2;
+    zero exactly when the mode lambda is uncontrollable.
+    """
+    n = A.shape[0]
+    scale = np.linalg.norm(np.hstack([A, B]), 2)
+    best, where = math.inf, 0j
+    for lam in np.linalg.eigvals(A):
+        s = np.linalg.svd(np.hstack([A - lam * np.eye(n), B]), compute_uv=False)[-1] / scale
+        if s < best:
+            best, where = float(s), complex(lam)
+    return best, where
+
+
+def place_with_integral(
+    A: np.ndarray, B: np.ndarray, poles: Sequence[complex] = DEFAULT_POLES, rtol: float = 1e-4
+) -> tuple[np.ndarray, float]:
+    """(K (4,), kI) placing eig(Aa - Ba [K, -kI]) at ``poles``; law T = -K x + kI xi.
+
+    Raises ``ValueError`` when the achieved poles miss the requested ones by more than
+    ``rtol`` relative (|p| + 1) scale, which is what happens at an uncontrollable speed.
+    """
+    poles = np.asarray(poles, dtype=complex)
+    if poles.shape != (5,):
+        raise ValueError(f"need 5 closed-loop poles for the augmented system, got {poles.size}")
+    if np.any(poles.real >= 0):
+        raise ValueError(f"closed-loop poles must be in the open left half plane, got {poles}")
+    if len(set(np.round(poles, 12).tolist())) != 5:
+        raise ValueError("poles must be distinct (place refuses repeated poles); space them by 1 %")
+    Aa, Ba = augmented_system(A, B)
+    try:
+        Ka = np.asarray(control.place(Aa, Ba, poles), dtype=float).reshape(5)
+    except ValueError as exc:
+        raise ValueError(f"pole placement failed: {exc}") from None
+    achieved = np.linalg.eigvals(Aa - Ba @ Ka[None, :])
+    err = _pole_mismatch(achieved, poles)
+    if not np.all(np.isfinite(Ka)) or err > rtol:
+        pbh, lam = pbh_measure(Aa, Ba)
+        raise ValueError(
+            f"pole placement is inaccurate (relative pole error {err:.1e}, |K| = "
+            f"{np.abs(Ka).max():.1e}): the plant is (nearly) uncontrollable, PBH measure "
+            f"{pbh:.1e} at mode {lam.real:.4g}{lam.imag:+.4g}j; choose another speed or model"
+        )
+    return Ka[:4].copy(), float(-Ka[4])
+
+
+def _pole_mismatch(achieved: np.ndarray, requested: np.ndarray) -> float:
+    """Largest relative distance after matching each requested pole to an achieved one."""
+    left = list(achieved)
+    worst = 0.0
+    for p in requested:
+        k = int(np.argmin([abs(a - p) for a in left]))
+        worst = max(worst, abs(left.pop(k) - p) / (abs(p) + 1.0))
+    return worst
+
+
+class PolePlacement(Controller):
+    """State feedback with integral action; see the module docstring."""
+
+    name = "pole_placement"
+
+    def __init__(
+        self,
+        poles: Sequence[complex] = DEFAULT_POLES,
+        *,
+        parameters: BicycleParameters | None = None,
+        model: control.StateSpace | Callable[[float], control.StateSpace] | None = None,
+        state_order: str | None = None,
+        design_speed: float | None = None,
+        speed_grid: Sequence[float] | None = None,
+        sample_time: float = 0.001,
+        saturation: float = math.inf,
+        reference: Callable[[float], float] | None = None,
+    ):
+        self.poles = [complex(p) for p in poles]
+        self.parameters = parameters if parameters is not None else benchmark()
+        self._user_model = model
+        if isinstance(model, control.StateSpace):
+            if design_speed is None:
+                raise ValueError(
+                    "a fixed StateSpace model holds at one speed: pass design_speed= (m/s), "
+                    "or pass a callable v -> StateSpace to schedule"
+                )
+        elif model is not None and not callable(model):
+            raise ValueError("model must be a control.StateSpace or a callable v -> StateSpace")
+        self.state_order = state_order
+        self.skipped_speeds: list[float] = []
+        # validate the basics before the (possibly long) placement
+        super().__init__(sample_time, saturation, reference, design_speed)
+        if design_speed is not None:
+            K, kI = self.design(self.design_speed)
+            self._fixed = (*K.tolist(), kI)
+            self.schedule = None
+        else:
+            grid = _default_grid() if speed_grid is None else [float(s) for s in speed_grid]
+            rows, speeds = [], []
+            for v in grid:
+                try:
+                    K, kI = self.design(v)
+                except ValueError:
+                    self.skipped_speeds.append(v)
+                    continue
+                speeds.append(v)
+                rows.append((*K.tolist(), kI))
+            if not speeds:
+                raise ValueError(f"pole placement failed at every grid speed {grid}")
+            self.schedule = GainSchedule(speeds, rows)
+            self._fixed = None
+
+    def linear_model(self, v: float) -> tuple[np.ndarray, np.ndarray]:
+        """(A, B) in bikeid order with B the T_delta column, at speed v [m/s]."""
+        model = self._user_model
+        if model is None:
+            A, B = state_matrices(self.parameters, v)
+            return A, B[:, 1:2]
+        sys = model if isinstance(model, control.StateSpace) else model(v)
+        return _model_matrices(sys, self.state_order)
+
+    def design(self, v: float) -> tuple[np.ndarray, float]:
+        """(K, kI) at speed v; raises ValueError where placement is inaccurate."""
+        A, B = self.linear_model(v)
+        try:
+            return place_with_integral(A, B, self.poles)
+        except ValueError as exc:
+            raise ValueError(f"at v = {v} m/s: {exc}") from None
+
+    def current_gains(self, v: float) -> tuple[float, ...]:
+        """(K_phi, K_delta, K_phidot, K_deltadot, kI) at speed v [m/s]."""
+        return self._fixed if self.schedule is None else self.schedule(v)
+
+    def _reset_state(self) -> None:
+        super()._reset_state()
+        self.xi = 0.0
+
+    def _control(self, t: float, y: Sequence[float], dt: float) -> float:
+        g = self._fixed if self.schedule is None else self.schedule(self.speed(y))
+        r = self.reference(t)
+        phi = y[I_PHI]
+        u = (
+            -g[0] * phi - g[1] * y[I_DELTA] - g[2] * y[I_PHIDOT] - g[3] * y[I_DELTADOT]
+            + g[4] * self.xi
+        )  # fmt: skip
+        s = self.saturation
+        e = r - phi
+        # conditional integration (anti-windup): freeze xi while saturated and winding up
+        if not ((u > s and g[4] * e > 0) or (u < -s and g[4] * e < 0)):
+            self.xi += e * dt
+        return u
+
+    def _gains_description(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "law": "T = -K [phi, delta, phidot, deltadot] + kI int(phi_ref - phi)",
+            "poles": [[p.real, p.imag] for p in self.poles],
+            "model": "true linearization" if self._user_model is None else "user model",
+            "anti_windup": "clamp",
+        }
+        if self._user_model is None:
+            out["parameters"] = getattr(self.parameters, "name", None) or "custom"
+        if self.schedule is None:
+            out["K"] = list(self._fixed[:4])
+            out["kI"] = self._fixed[4]
+        else:
+            out["schedule"] = self.schedule.as_dict()
+            out["skipped_speeds"] = self.skipped_speeds
+        return out
