@@ -1,0 +1,414 @@
+"""Moore & Hubbard direct identification: least squares on the canonical equations.
+
+Model (Moore & Hubbard eq. 1, Meijaard notation; q = [phi, delta])::
+
+    M q'' + v C1 q' + (g K0 + v^2 K2) q = [T_phi, T_delta] + H F
+
+Each row (roll ``p``, steer ``d``) is a linear regression Gamma Theta = Y
+(eqs. 2-5): Theta holds the free entries, every fixed entry is moved to the
+right-hand side.  Entry names are the matrix and the row/column letters,
+``p`` = phi, ``d`` = delta: ``Mpd`` = M[phi, delta], ``C1dp``, ``K0dd``, ``K2pd``,
+``HpF``, ``HdF``.  Regressor of entry X_rc: M -> q''_c, C1 -> v q'_c, K0 -> g q_c,
+K2 -> v^2 q_c, H_rF -> -F.  The speed v is the instantaneous per-sample speed
+(what separates K0 from K2; reference T3).
+
+Two-stage with symmetry (``symmetric=True``, the paper's procedure): solve the roll
+row, then set Mdp := Mpd and K0dp := K0pd and solve the steer row.  Parameter
+covariance sigma^2 (Gamma' Gamma)^-1 with sigma^2 = SSE / (N - d) (paper's eqs.
+``eqVariance``/``eqCovariance``); the steer row's standard errors treat the values
+taken from the roll row as exact.
+
+``method="iv"`` replaces least squares by instrumental variables (two-stage least
+squares) against the closed-loop bias of an unmeasured torque disturbance, which
+enters q'' and through the loop every regressor (reference F5, F6, T5):
+``instruments="lagged"`` uses the regressors ``lags`` samples earlier (valid when the
+equation error is white); ``instruments="dither"`` uses the logged dither and its
+lags 0..``lags``, each times 1, v and v^2 (valid for any disturbance independent of
+the dither).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+
+from dataset.run import Run
+from sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
+from sim.parameters import BicycleParameters, from_mapping
+
+from .signals import differentiate
+
+__all__ = [
+    "MOORE_ROLL",
+    "MOORE_STEER",
+    "DirectResult",
+    "identify",
+    "regressors",
+    "vaf_moore",
+    "vaf_variance",
+]
+
+#: The free sets of Moore & Hubbard (paper §5.2; ``scripts/fit_benchmark_canon.py``).
+MOORE_ROLL = ("Mpd", "C1pd", "K0pd")
+MOORE_STEER = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd", "HdF")
+
+_MATS = ("M", "C1", "K0", "K2")
+_IDX = {"p": 0, "d": 1}
+ALL_ENTRIES = tuple(m + r + c for m in _MATS for r in "pd" for c in "pd") + ("HpF", "HdF")
+
+
+def vaf_moore(measured: np.ndarray, predicted: np.ndarray) -> float:
+    """Moore's eq. 6: 1 - ||predicted - measured|| / ||measured - mean(measured)||.
+
+    A norm ratio (= MATLAB ``compare``'s NRMSE fit), *not* the variance ratio; NaN when
+    the measured signal is constant.
+    """
+    y, yp = np.asarray(measured, float), np.asarray(predicted, float)
+    den = np.linalg.norm(y - y.mean())
+    return float(1.0 - np.linalg.norm(yp - y) / den) if den > 0 else float("nan")
+
+
+def vaf_variance(measured: np.ndarray, predicted: np.ndarray) -> float:
+    """Variance accounted for, 1 - var(measured - predicted) / var(measured).
+
+    For a zero-mean error, vaf_variance = 1 - (1 - vaf_moore)^2 (reference T11).
+    """
+    y, yp = np.asarray(measured, float), np.asarray(predicted, float)
+    den = np.var(y)
+    return float(1.0 - np.var(y - yp) / den) if den > 0 else float("nan")
+
+
+def _parse(name: str) -> tuple[str, int, int | None]:
+    """Entry name -> (matrix, row, column); column None for H."""
+    if name in ("HpF", "HdF"):
+        return "H", _IDX[name[1]], None
+    for m in _MATS:
+        if name.startswith(m) and len(name) == len(m) + 2 and set(name[len(m) :]) <= set("pd"):
+            return m, _IDX[name[len(m)]], _IDX[name[len(m) + 1]]
+    raise ValueError(f"unknown matrix entry {name!r}; valid names are {list(ALL_ENTRIES)}")
+
+
+def _data(run: Run, source: str, derivative: str) -> dict[str, np.ndarray]:
+    sig = run.signals if source == "signals" else run.truth
+    if sig is None:
+        raise ValueError("this run has no noise-free signals; use source='signals'")
+    get = (lambda k: run[k]) if source == "signals" else run.true
+    d = {k: np.asarray(get(k), float) for k in ("phi", "delta", "phidot", "deltadot", "v")}
+    for k in ("T_phi", "T_delta", "F"):
+        d[k] = np.asarray(get(k), float)
+    for acc, rate in (("phiddot", "phidot"), ("deltaddot", "deltadot")):
+        d[acc] = sig[acc] if acc in sig else differentiate(d[rate], run.dt, derivative)
+    return d
+
+
+def regressors(d: dict[str, np.ndarray], g: float) -> dict[str, np.ndarray]:
+    """Regressor column of every entry name (see module docstring) from one run's data."""
+    q = (d["phi"], d["delta"])
+    qd = (d["phidot"], d["deltadot"])
+    qdd = (d["phiddot"], d["deltaddot"])
+    v = d["v"]
+    out = {}
+    for name in ALL_ENTRIES:
+        m, _, c = _parse(name)
+        out[name] = {
+            "M": lambda c=c: qdd[c],
+            "C1": lambda c=c: v * qd[c],
+            "K0": lambda c=c: g * q[c],
+            "K2": lambda c=c: v**2 * q[c],
+            "H": lambda: -d["F"],
+        }[m]()
+    return out
+
+
+@dataclass(frozen=True)
+class DirectResult:
+    """Identified canonical matrices with the statistics of the fit.
+
+    ``M, C1, K0, K2`` (2x2, rows/cols [phi, delta]), ``H`` (2,) [m], gravity ``g``:
+    free entries estimated, the others at their fixed values.  ``free`` maps each
+    estimated entry to its value, ``stderr`` to its standard error; ``covariance[row]``
+    = (names, matrix) per row.  ``condition[row]`` is the condition number of the
+    column-scaled regressor matrix; ``vaf_moore``/``vaf_variance`` are the input-side
+    (torque) fits per row (NaN when the row's measured torque T + H F is zero).
+    """
+
+    M: np.ndarray
+    C1: np.ndarray
+    K0: np.ndarray
+    K2: np.ndarray
+    H: np.ndarray
+    g: float
+    free: dict[str, float]
+    stderr: dict[str, float]
+    covariance: dict[str, tuple[tuple[str, ...], np.ndarray]]
+    condition: dict[str, float]
+    vaf_moore: dict[str, float]
+    vaf_variance: dict[str, float]
+    n_samples: int
+    method: str
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def canonical(self) -> CanonicalMatrices:
+        return CanonicalMatrices(M=self.M, C1=self.C1, K0=self.K0, K2=self.K2, g=self.g)
+
+    def state_space(
+        self, v: float, inputs: Sequence[str] = ("T_phi", "T_delta", "F")
+    ) -> control.StateSpace:
+        """python-control model at speed v; states [phi, delta, phidot, deltadot], all output."""
+        A, B = state_matrices(self.canonical(), v)
+        Bf = np.vstack([np.zeros((2, 1)), (np.linalg.inv(self.M) @ self.H)[:, None]])
+        cols = {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf[:, 0]}
+        bad = [u for u in inputs if u not in cols]
+        if bad:
+            raise ValueError(f"unknown inputs {bad}; choose from {list(cols)}")
+        Bs = np.column_stack([cols[u] for u in inputs])
+        names = ["phi", "delta", "phidot", "deltadot"]
+        return control.ss(A, Bs, np.eye(4), np.zeros((4, len(inputs))),
+                          inputs=list(inputs), outputs=names, states=names)  # fmt: skip
+
+    def eigenvalues(self, v: float) -> np.ndarray:
+        return np.linalg.eigvals(state_matrices(self.canonical(), v)[0])
+
+    def entry(self, name: str) -> float:
+        m, r, c = _parse(name)
+        return float(self.H[r] if m == "H" else getattr(self, m)[r, c])
+
+
+def _reference_values(reference, H) -> tuple[dict[str, float], float]:
+    if isinstance(reference, BicycleParameters):
+        cm = canonical_matrices(reference)
+    elif isinstance(reference, CanonicalMatrices):
+        cm = reference
+    else:
+        raise ValueError(
+            "reference must be BicycleParameters or CanonicalMatrices (the values of the fixed "
+            "entries); pass reference=... or use runs with meta['parameters']"
+        )
+    vals = {}
+    for name in ALL_ENTRIES:
+        m, r, c = _parse(name)
+        vals[name] = 0.0 if m == "H" else float(getattr(cm, m)[r, c])
+    if H is not None:
+        vals["HpF"], vals["HdF"] = (float(h) for h in H)
+    return vals, cm.g
+
+
+def _condition(G: np.ndarray) -> tuple[float, np.ndarray]:
+    norms = np.linalg.norm(G, axis=0)
+    if np.any(norms == 0):
+        null = (norms == 0).astype(float)
+        return float("inf"), null / np.linalg.norm(null)
+    R = np.linalg.qr(G / norms, mode="r")
+    _, s, Vt = np.linalg.svd(R)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    return cond, Vt[-1]
+
+
+def _solve_row(row, names, G, Y, Z, max_condition, hints) -> tuple[np.ndarray, np.ndarray, float]:
+    cond, null = _condition(G)
+    if not np.isfinite(cond) or cond > max_condition:
+        involved = [n for n, c in zip(names, null, strict=True) if abs(c) > 0.1]
+        hint = "".join(h for key, h in hints if len(set(key) & set(involved)) >= 2)
+        raise ValueError(
+            f"{row} row is unidentifiable: condition number {cond:.3g} of the column-scaled "
+            f"regressor matrix exceeds {max_condition:g}; free entries {involved} are "
+            f"(nearly) collinear.{hint} Fix one of them at a known value (reference/fixed=) "
+            "or add excitation that separates them."
+        )
+    N, d = G.shape
+    if Z is None:
+        theta, *_ = np.linalg.lstsq(G, Y, rcond=None)
+        Gh = G
+    else:
+        if Z.shape[1] < d:
+            raise ValueError(f"{Z.shape[1]} instruments for {d} free entries: need at least {d}")
+        coef, *_ = np.linalg.lstsq(Z, G, rcond=None)
+        Gh = Z @ coef
+        theta = np.linalg.solve(Gh.T @ G, Gh.T @ Y)
+    res = Y - G @ theta
+    sigma2 = float(res @ res) / max(N - d, 1)
+    cov = sigma2 * np.linalg.inv(Gh.T @ Gh)
+    return theta, cov, cond
+
+
+def identify(
+    runs: Run | Sequence[Run],
+    reference: BicycleParameters | CanonicalMatrices | None = None,
+    free_roll: Sequence[str] | None = None,
+    free_steer: Sequence[str] | None = None,
+    *,
+    fixed: dict[str, float] | None = None,
+    H: tuple[float, float] | None = None,
+    symmetric: bool = True,
+    method: str = "ls",
+    instruments: str = "lagged",
+    lags: int = 1,
+    source: str = "signals",
+    derivative: str = "central",
+    max_condition: float = 1e10,
+) -> DirectResult:
+    """Direct least-squares (or IV) identification of M, C1, K0, K2, H from runs.
+
+    runs : one or more runs, stacked row-wise.  Accelerations are taken from the
+        signals ``phiddot``/``deltaddot`` when present (e.g. ``ident.signals.prepare`` or
+        simulator truth), else from ``derivative`` differences of the rates.
+    reference : values of the fixed entries (Whipple model of the bicycle); default
+        the ``meta['parameters']`` of the first run.  ``fixed`` overrides single
+        entries, ``H`` = (HpF, HdF) [m] sets the fixed lateral-force entries (default 0).
+    free_roll, free_steer : entry names to estimate; defaults are Moore & Hubbard's
+        sets, with HdF left out when F is zero in every run.
+    symmetric : two-stage, Mdp := Mpd and K0dp := K0pd from the roll row.
+    method : "ls" or "iv"; ``instruments`` "lagged" or "dither", ``lags`` >= 1.
+    source : "signals" (measured) or "truth" (noise-free simulated signals).
+    max_condition : an unidentifiable setup (condition number of the column-scaled
+        regressor matrix above this) raises ValueError naming the collinear entries.
+    """
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    if not runs:
+        raise ValueError("no runs given")
+    if method not in ("ls", "iv"):
+        raise ValueError(f"method {method!r}: choose 'ls' or 'iv'")
+    if instruments not in ("lagged", "dither"):
+        raise ValueError(f"instruments {instruments!r}: choose 'lagged' or 'dither'")
+    if method == "iv" and lags < 1:
+        raise ValueError(f"lags={lags}: instrumental variables need lags >= 1")
+    if source not in ("signals", "truth"):
+        raise ValueError(f"source {source!r}: choose 'signals' or 'truth'")
+    if reference is None:
+        if "parameters" not in runs[0].meta:
+            raise ValueError(
+                "no reference values for the fixed entries: pass reference=BicycleParameters"
+            )
+        reference = from_mapping(runs[0].meta["parameters"], name="run meta")
+    vals, g = _reference_values(reference, H)
+    for k, val in (fixed or {}).items():
+        _parse(k)
+        vals[k] = float(val)
+
+    data = [_data(r, source, derivative) for r in runs]
+    notes = []
+    no_force = all(not np.any(d["F"]) for d in data)
+    if free_roll is None:
+        free_roll = MOORE_ROLL
+    if free_steer is None:
+        free_steer = MOORE_STEER
+        if no_force:
+            free_steer = tuple(n for n in free_steer if n != "HdF")
+            notes.append("HdF not estimated: F is zero in every run")
+    free_roll, free_steer = tuple(free_roll), tuple(free_steer)
+    for row, names in (("roll", free_roll), ("steer", free_steer)):
+        want = 0 if row == "roll" else 1
+        for n in names:
+            if _parse(n)[1] != want:
+                raise ValueError(f"entry {n!r} is not in the {row} row")
+        if len(set(names)) != len(names) or not names:
+            raise ValueError(f"{row} free set {names} must be non-empty without repeats")
+    if symmetric:
+        clash = [n for n in ("Mdp", "K0dp") if n in free_steer]
+        if clash:
+            raise ValueError(
+                f"{clash} are set by symmetry from the roll row: drop them from free_steer or "
+                "pass symmetric=False"
+            )
+    if method == "iv" and instruments == "dither" and any(r.dither is None for r in runs):
+        raise ValueError("instruments='dither' needs runs with a logged dither")
+
+    cols = [regressors(d, g) for d in data]
+    speeds = np.concatenate([d["v"] for d in data])
+    one_speed = np.ptp(speeds) <= 1e-9 * max(1.0, float(np.abs(speeds).max()))
+    cut = lags if method == "iv" else 0
+
+    def stack(f) -> np.ndarray:
+        return np.concatenate([f(i)[cut:] for i in range(len(runs))])
+
+    def instrument_matrix(names) -> np.ndarray | None:
+        if method == "ls":
+            return None
+        if instruments == "lagged":
+            return np.column_stack(
+                [np.concatenate([cols[i][n][:-cut] for i in range(len(runs))]) for n in names]
+            )
+        zs = []
+        for j in range(lags + 1):
+            for pw in (0, 1, 2):
+                zs.append(
+                    stack(lambda i, j=j, pw=pw: np.roll(runs[i].dither, j) * data[i]["v"] ** pw)
+                )
+        return np.column_stack(zs)
+
+    hints_common = []
+    for c in "pd":
+        hints_common.append(
+            (
+                (f"K0{{r}}{c}", f"K2{{r}}{c}"),
+                " A single constant speed cannot separate K0 from K2 (g q and v^2 q are "
+                "collinear): add runs at other speeds or per-sample speed variation."
+                if one_speed
+                else "",
+            )
+        )
+
+    results: dict[str, tuple] = {}
+    cond: dict[str, float] = {}
+    for row, r_idx, names in (("roll", 0, free_roll), ("steer", 1, free_steer)):
+        if row == "steer" and symmetric:
+            for a, b in (("Mdp", "Mpd"), ("K0dp", "K0pd")):
+                vals[a] = vals[b]
+        rhs_name = "T_phi" if r_idx == 0 else "T_delta"
+        row_entries = [n for n in ALL_ENTRIES if _parse(n)[1] == r_idx]
+        fixed_names = [n for n in row_entries if n not in names]
+
+        def rhs(i, fixed_names=fixed_names, rhs_name=rhs_name) -> np.ndarray:
+            y = data[i][rhs_name].copy()
+            for n in fixed_names:
+                y -= vals[n] * cols[i][n]
+            return y
+
+        Y = stack(rhs)
+        G = np.column_stack([stack(lambda i, n=n: cols[i][n]) for n in names])
+        hints = [(tuple(k.format(r="pd"[r_idx]) for k in key), h) for key, h in hints_common]
+        if row == "steer" and no_force and not any(np.any(d["T_phi"]) for d in data):
+            hints.append(
+                (("Mdp", "Mdd", "C1dp", "C1dd", "K0dp", "K0dd", "K2dd"),
+                 " With T_phi = F = 0 the roll equation is an exact linear relation among these"
+                 " steer regressors: fix Mdp and K0dp (symmetric=True) or another entry.")
+            )  # fmt: skip
+        if not np.any(Y):
+            raise ValueError(
+                f"{row} row has a zero right-hand side (T = F = 0 and no fixed nonzero entry), "
+                f"so its scale is undetermined: fix at least one {row} entry, e.g. "
+                f"{'Mpp' if r_idx == 0 else 'Mdd'}, at a known value"
+            )
+        theta, cov, cond[row] = _solve_row(
+            row, names, G, Y, instrument_matrix(names), max_condition, hints
+        )
+        for n, th in zip(names, theta, strict=True):
+            vals[n] = float(th)
+        results[row] = (names, theta, cov)
+
+    Mats = {m: np.array([[vals[f"{m}{r}{c}"] for c in "pd"] for r in "pd"]) for m in _MATS}
+    Hvec = np.array([vals["HpF"], vals["HdF"]])
+    vm, vv = {}, {}
+    for row, r_idx in (("roll", 0), ("steer", 1)):
+        rhs_name = "T_phi" if r_idx == 0 else "T_delta"
+        entries = [n for n in ALL_ENTRIES if _parse(n)[1] == r_idx and not n.startswith("H")]
+        ym = np.concatenate([d[rhs_name] + Hvec[r_idx] * d["F"] for d in data])
+        yp = np.concatenate([sum(vals[n] * c[n] for n in entries) for c in cols])
+        vm[row], vv[row] = vaf_moore(ym, yp), vaf_variance(ym, yp)
+    free = {n: vals[n] for row in results for n in results[row][0]}
+    stderr = {}
+    covs = {}
+    for row, (names, _, cov) in results.items():
+        covs[row] = (names, cov)
+        for n, s in zip(names, np.sqrt(np.diag(cov)), strict=True):
+            stderr[n] = float(s)
+    return DirectResult(
+        M=Mats["M"], C1=Mats["C1"], K0=Mats["K0"], K2=Mats["K2"], H=Hvec, g=g,
+        free=free, stderr=stderr, covariance=covs, condition=cond, vaf_moore=vm,
+        vaf_variance=vv, n_samples=int(Y.size), method=f"{method}" + (
+            f" ({instruments}, lags={lags})" if method == "iv" else ""),
+        notes=tuple(notes),
+    )  # fmt: skip
