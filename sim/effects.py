@@ -1,0 +1,200 @@
+"""Optional physical effects the Whipple model lacks, injected by the simulator.
+
+Each effect is a small frozen dataclass with named parameters in SI units.  There
+are two kinds:
+
+* **Plant-side** effects act as extra generalized forces on the dynamic equations
+  of (u4, u6, u7) = (roll rate, rear wheel rate, steer rate) of
+  :mod:`sim.nonlinear`.  They are compiled into one parameter vector
+  (:func:`plant_vector`) that the numba kernel passes to :func:`plant_forces`, so
+  they stay on the compiled fast path.
+* **Input-side** effects shape the commanded steer torque before it reaches the
+  plant: gain, pure delay (a whole number of controller samples), first-order lag.
+  Order: command -> delay -> gain -> lag -> plant.
+
+Signs follow :mod:`sim.conventions`: a damping torque opposes the rate, so a steer
+damping c gives the generalized force -c * deltadot on the steer equation.
+
+Adding an effect (kept deliberately obvious):
+1. give it a dataclass below with a ``kind`` of ``"plant"`` or ``"input"``;
+2. for a plant effect, append its slots to :data:`PLANT_SLOTS`, fill them in
+   :func:`plant_vector` and add its generalized force to :func:`plant_forces`;
+   for an input effect, handle it in :func:`input_chain` and in
+   ``sim.integrate`` (only there are commands shaped).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "PLANT_SLOTS",
+    "ActuatorLag",
+    "InputChain",
+    "InputDelay",
+    "RollDamping",
+    "SteerCoulomb",
+    "SteerDamping",
+    "TorqueGain",
+    "describe",
+    "input_chain",
+    "plant_forces",
+    "plant_vector",
+]
+
+
+def _check(name: str, value: float, unit: str, minimum: float = 0.0, strict: bool = False) -> None:
+    ok = math.isfinite(value) and (value > minimum if strict else value >= minimum)
+    if not ok:
+        rel = ">" if strict else ">="
+        raise ValueError(f"{name} must be finite and {rel} {minimum} {unit}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class SteerDamping:
+    """Viscous steer damping: torque -c * deltadot on the front frame [c: N m s/rad]."""
+
+    c: float
+    kind = "plant"
+
+    def __post_init__(self) -> None:
+        _check("SteerDamping.c", self.c, "N m s/rad")
+
+
+@dataclass(frozen=True)
+class SteerCoulomb:
+    """Steer Coulomb friction -torque * tanh(deltadot / smoothing).
+
+    torque [N m] is the sliding friction level; smoothing [rad/s] the steer rate
+    over which the tanh rises (the smaller, the closer to a sign function and the
+    stiffer the equations).
+    """
+
+    torque: float
+    smoothing: float = 0.01
+    kind = "plant"
+
+    def __post_init__(self) -> None:
+        _check("SteerCoulomb.torque", self.torque, "N m")
+        _check("SteerCoulomb.smoothing", self.smoothing, "rad/s", strict=True)
+
+
+@dataclass(frozen=True)
+class RollDamping:
+    """Viscous roll damping: torque -c * phidot on the rear frame [c: N m s/rad]."""
+
+    c: float
+    kind = "plant"
+
+    def __post_init__(self) -> None:
+        _check("RollDamping.c", self.c, "N m s/rad")
+
+
+@dataclass(frozen=True)
+class TorqueGain:
+    """Steer torque actually applied = gain * command [-] (actuator calibration error)."""
+
+    gain: float
+    kind = "input"
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.gain):
+            raise ValueError(f"TorqueGain.gain must be finite, got {self.gain!r}")
+
+
+@dataclass(frozen=True)
+class ActuatorLag:
+    """First-order steer-torque actuator lag tau T' = T_cmd - T [tau: s]."""
+
+    tau: float
+    kind = "input"
+
+    def __post_init__(self) -> None:
+        _check("ActuatorLag.tau", self.tau, "s")
+
+
+@dataclass(frozen=True)
+class InputDelay:
+    """Pure delay of the steer-torque command [s]; a whole number of controller samples."""
+
+    delay: float
+    kind = "input"
+
+    def __post_init__(self) -> None:
+        _check("InputDelay.delay", self.delay, "s")
+
+
+#: Slots of the plant-effect vector consumed by :func:`plant_forces`.
+PLANT_SLOTS = ("steer_damping", "steer_coulomb", "steer_coulomb_smoothing", "roll_damping")
+_S = {name: i for i, name in enumerate(PLANT_SLOTS)}
+
+
+def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
+    """Compile the plant-side effects into the vector read by :func:`plant_forces`.
+
+    Effects of the same type add up (two dampers in parallel); input-side effects
+    are ignored here.
+    """
+    vec = np.zeros(len(PLANT_SLOTS))
+    vec[_S["steer_coulomb_smoothing"]] = 1.0
+    for e in effects or ():
+        if isinstance(e, SteerDamping):
+            vec[_S["steer_damping"]] += e.c
+        elif isinstance(e, RollDamping):
+            vec[_S["roll_damping"]] += e.c
+        elif isinstance(e, SteerCoulomb):
+            if vec[_S["steer_coulomb"]] > 0.0:
+                raise ValueError("give at most one SteerCoulomb effect")
+            vec[_S["steer_coulomb"]] = e.torque
+            vec[_S["steer_coulomb_smoothing"]] = e.smoothing
+        elif getattr(e, "kind", None) != "input":
+            raise ValueError(f"unknown effect {e!r}; use one of the dataclasses in sim.effects")
+    return vec
+
+
+@njit(cache=True)
+def plant_forces(ev, q4, q7, u4, u6, u7, out):
+    """Extra generalized forces [N m] on the (u4, u6, u7) equations; fills ``out``."""
+    out[0] = -ev[3] * u4
+    out[1] = 0.0
+    out[2] = -ev[0] * u7 - ev[1] * math.tanh(u7 / ev[2])
+
+
+@dataclass(frozen=True)
+class InputChain:
+    """Compiled input-side effects: gain [-], lag tau [s], delay in samples."""
+
+    gain: float = 1.0
+    tau: float = 0.0
+    delay_samples: int = 0
+
+
+def input_chain(effects: Iterable[object] | None, dt: float) -> InputChain:
+    """Compile input-side effects for controller sample time ``dt`` [s]."""
+    gain, tau, delay = 1.0, 0.0, 0
+    for e in effects or ():
+        if isinstance(e, TorqueGain):
+            gain *= e.gain
+        elif isinstance(e, ActuatorLag):
+            tau += e.tau
+        elif isinstance(e, InputDelay):
+            n = e.delay / dt
+            if abs(n - round(n)) > 1e-9 * max(1.0, n):
+                raise ValueError(
+                    f"InputDelay.delay={e.delay} s is not a multiple of the controller sample "
+                    f"time {dt} s; use a whole number of samples"
+                )
+            delay += int(round(n))
+        elif getattr(e, "kind", None) != "plant":
+            raise ValueError(f"unknown effect {e!r}; use one of the dataclasses in sim.effects")
+    return InputChain(gain=gain, tau=tau, delay_samples=delay)
+
+
+def describe(effects: Iterable[object] | None) -> list[dict]:
+    """JSON-friendly description of effects for run metadata."""
+    return [{"type": type(e).__name__, **asdict(e)} for e in effects or ()]

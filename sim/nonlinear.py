@@ -1,0 +1,447 @@
+"""The nonlinear Carvallo-Whipple bicycle (Moore 2012 coordinates).
+
+Equations derived by ``scripts/derive_whipple.py`` (sympy ``KanesMethod``,
+``constraint_solver="CRAMER"``) and emitted as numba code in
+:mod:`sim._whipple_generated`; no computer algebra at run time.
+
+Coordinates (Moore 2012; frames N inertial with x forward, y right, z down):
+q1, q2 rear contact position in N [m]; q3 yaw, q4 roll, q5 rear-frame pitch
+(q5 = lam when upright), q6 rear wheel angle (relative to the rear frame),
+q7 steer (about the steer axis), q8 front wheel angle [rad]; speeds u_i = q_i'.
+Independent speeds u4, u6, u7; u3, u5, u8 follow from the nonholonomic
+constraints, q5 from the holonomic one (Newton, warm-started, to round-off).
+
+**Integration state** (:data:`STATE`): ``y = [q1, q2, q3, q4, q6, q7, q8, u4, u6, u7]``.
+
+**Mapping to the benchmark** (Meijaard 2007 signs, checked against
+:mod:`sim.linear` by the linearization tests): roll phi = q4, steer delta = q7,
+yaw psi = q3 (all positive to the right), phidot = u4, deltadot = u7,
+psidot = u3, rear wheel rate thetaRdot = u6 and forward speed v = -rR * u6
+(Meijaard's v = -rR thetaR').  The rear contact moves along the heading at
+-rR (u5 + u6), which differs from v by the pitch-rate term rR * u5 (zero when
+upright).  Pitch output theta = q5 - lam: rear-frame pitch from the upright
+reference configuration, positive nose up (about the roll frame's y axis).
+
+**Inputs** ``r = [T_delta, T_phi, F, T_R]`` (:data:`INPUTS`): steer torque of the
+rear frame on the front frame about the steer axis [N m]; roll torque on the
+rear frame about the yaw frame's x axis (the generalized force of roll) [N m];
+lateral force, horizontal and perpendicular to the rear frame's heading,
+positive right, applied at the rear-frame point (x_F, z_F) of benchmark axes [N];
+rear-wheel drive torque of the rear frame on the rear wheel about its axle
+(positive accelerates the wheel about +y, i.e. *brakes* forward motion) [N m].
+
+**Speed modes**: ``"coast"`` (rear wheel free; speed is a state; energy is
+conserved without inputs) and ``"held"`` (an ideal drive torque T_R makes
+u6' = 0 at every instant, solved together with the other accelerations from the
+same linear system; returned as the drive torque; any given T_R is ignored).
+
+Extra generalized forces (:mod:`sim.effects`) add to the dynamic rows of
+(u4, u6, u7).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from . import _whipple_generated as gen
+from .conventions import MEASURED
+from .effects import plant_forces, plant_vector
+from .parameters import BicycleParameters
+
+__all__ = [
+    "INPUTS",
+    "STATE",
+    "WhippleBicycle",
+    "parameter_vector",
+]
+
+#: Integration state order.
+STATE = ("q1", "q2", "q3", "q4", "q6", "q7", "q8", "u4", "u6", "u7")
+#: Input vector order.
+INPUTS = ("T_delta", "T_phi", "F", "T_R")
+#: Speed order of the generated mass matrix: independent, then dependent.
+SPEEDS = ("u4", "u6", "u7", "u3", "u5", "u8")
+MODES = ("coast", "held")
+
+_NEWTON_MAXIT = 40
+
+
+def parameter_vector(
+    p: BicycleParameters, lateral_force_point: tuple[float, float] | None = None
+) -> np.ndarray:
+    """Numerical parameter vector in ``gen.PARAMETERS`` order.
+
+    ``lateral_force_point`` = (x_F, z_F) in benchmark axes [m] (z down, origin at
+    the rear contact); default: the rear body mass centre (xB, zB).
+    """
+    x_F, z_F = (p.xB, p.zB) if lateral_force_point is None else lateral_force_point
+    if not (math.isfinite(x_F) and math.isfinite(z_F)):
+        raise ValueError(f"lateral_force_point {lateral_force_point!r} must be finite (x_F, z_F)")
+    mo = p.to_moore()
+    cl, sl = math.cos(p.lam), math.sin(p.lam)
+    # point relative to the rear wheel centre, in rear-frame axes C1 (forward-up), C3
+    mo["lf1"] = x_F * cl - (z_F + p.rR) * sl
+    mo["lf3"] = x_F * sl + (z_F + p.rR) * cl
+    return np.array([float(mo[name]) for name in gen.PARAMETERS])
+
+
+# -- compiled kernels ------------------------------------------------------------------------
+@njit(cache=True)
+def _solve(A, b):
+    """Solve A x = b in place (Gaussian elimination, partial pivoting); x in b."""
+    n = b.shape[0]
+    for k in range(n):
+        piv = k
+        amax = abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > amax:
+                amax = abs(A[i, k])
+                piv = i
+        if piv != k:
+            for j in range(n):
+                tmp = A[k, j]
+                A[k, j] = A[piv, j]
+                A[piv, j] = tmp
+            tmp = b[k]
+            b[k] = b[piv]
+            b[piv] = tmp
+        akk = A[k, k]
+        for i in range(k + 1, n):
+            m = A[i, k] / akk
+            if m != 0.0:
+                for j in range(k + 1, n):
+                    A[i, j] -= m * A[k, j]
+                b[i] -= m * b[k]
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for j in range(i + 1, n):
+            s -= A[i, j] * b[j]
+        b[i] = s / A[i, i]
+
+
+@njit(cache=True)
+def pitch(q4, q7, guess, p):
+    """Pitch q5 solving the holonomic constraint by Newton from ``guess``; NaN if it fails."""
+    q5 = guess
+    for _ in range(_NEWTON_MAXIT):
+        h, dh = gen.holonomic(q4, q5, q7, p)
+        step = h / dh
+        q5 -= step
+        if abs(step) < 1e-11:
+            h, dh = gen.holonomic(q4, q5, q7, p)
+            return q5 - h / dh
+    return np.nan
+
+
+@njit(cache=True)
+def speeds(q4, q5, q7, u4, u6, u7, p, u):
+    """Fill ``u`` with all speeds [u4, u6, u7, u3, u5, u8] from the independent ones."""
+    Ad = np.empty((3, 3))
+    Ai = np.empty((3, 3))
+    gen.velocity_constraint(q4, q5, q7, p, Ad, Ai)
+    b = np.empty(3)
+    for i in range(3):
+        b[i] = -(Ai[i, 0] * u4 + Ai[i, 1] * u6 + Ai[i, 2] * u7)
+    _solve(Ad, b)
+    u[0] = u4
+    u[1] = u6
+    u[2] = u7
+    u[3] = b[0]
+    u[4] = b[1]
+    u[5] = b[2]
+
+
+@njit(cache=True)
+def accelerations(q4, q5, q7, u, p, r, extra, held, udot):
+    """Fill ``udot`` (order of ``u``) and return the rear-wheel torque T_R [N m].
+
+    ``extra`` is added to the dynamic rows of (u4, u6, u7).  With ``held`` the
+    drive torque making u6' = 0 is an unknown in place of u6'; r[3] is ignored.
+    """
+    M = np.empty((6, 6))
+    f = np.empty(6)
+    if held:
+        rr = np.empty(4)
+        rr[0] = r[0]
+        rr[1] = r[1]
+        rr[2] = r[2]
+        rr[3] = 0.0
+        gen.mass_forcing(q4, q5, q7, u, p, rr, M, f)
+    else:
+        gen.mass_forcing(q4, q5, q7, u, p, r, M, f)
+    f[0] += extra[0]
+    f[1] += extra[1]
+    f[2] += extra[2]
+    if held:
+        G = np.empty((6, 4))
+        gen.input_matrix(q4, q5, q7, p, G)
+        for i in range(6):
+            M[i, 1] = -G[i, 3]
+    _solve(M, f)
+    for i in range(6):
+        udot[i] = f[i]
+    if held:
+        udot[1] = 0.0
+        return f[1]
+    return r[3]
+
+
+@njit(cache=True)
+def rhs(y, q5g, p, r, ev, held, ydot):
+    """State derivative of ``y`` (STATE order) into ``ydot``; returns T_R.
+
+    ``q5g[0]`` is the pitch warm start, updated in place.  Returns NaN (and a NaN
+    ``ydot``) if the pitch Newton iteration fails.
+    """
+    q4 = y[3]
+    q7 = y[5]
+    q5 = pitch(q4, q7, q5g[0], p)
+    if not math.isfinite(q5):
+        for i in range(10):
+            ydot[i] = np.nan
+        return np.nan
+    q5g[0] = q5
+    u = np.empty(6)
+    speeds(q4, q5, q7, y[7], y[8], y[9], p, u)
+    extra = np.empty(3)
+    plant_forces(ev, q4, q7, u[0], u[1], u[2], extra)
+    udot = np.empty(6)
+    T_R = accelerations(q4, q5, q7, u, p, r, extra, held, udot)
+    c = np.empty(4)
+    gen.contact(y[2], q4, q5, q7, u, p, c)
+    ydot[0] = c[0]
+    ydot[1] = c[1]
+    ydot[2] = u[3]
+    ydot[3] = u[0]
+    ydot[4] = u[1]
+    ydot[5] = u[2]
+    ydot[6] = u[5]
+    ydot[7] = udot[0]
+    ydot[8] = udot[1]
+    ydot[9] = udot[2]
+    return T_R
+
+
+@njit(cache=True)
+def outputs(y, q5g, p, out):
+    """Fill ``out`` with [MEASURED..., theta+lam (=q5), xR, yR, xF, yF]; returns q5."""
+    q4 = y[3]
+    q7 = y[5]
+    q5 = pitch(q4, q7, q5g[0], p)
+    q5g[0] = q5
+    u = np.empty(6)
+    speeds(q4, q5, q7, y[7], y[8], y[9], p, u)
+    c = np.empty(4)
+    gen.contact(y[2], q4, q5, q7, u, p, c)
+    out[0] = -p[1] * y[8]
+    out[1] = q4
+    out[2] = q7
+    out[3] = y[2]
+    out[4] = u[0]
+    out[5] = u[2]
+    out[6] = u[3]
+    out[7] = u[1]
+    out[8] = q5
+    out[9] = y[0]
+    out[10] = y[1]
+    out[11] = y[0] + c[2]
+    out[12] = y[1] + c[3]
+    return q5
+
+
+# -- Python object ---------------------------------------------------------------------------
+class WhippleBicycle:
+    """The nonlinear Whipple bicycle for one parameter set (see the module docstring).
+
+    Parameters
+    ----------
+    p : benchmark-notation parameters.
+    lateral_force_point : (x_F, z_F) [m], benchmark axes, where the lateral force F
+        acts on the rear frame; default (xB, zB).
+    """
+
+    def __init__(
+        self, p: BicycleParameters, lateral_force_point: tuple[float, float] | None = None
+    ) -> None:
+        if not isinstance(p, BicycleParameters):
+            raise ValueError(f"expected a sim.parameters.BicycleParameters, got {type(p).__name__}")
+        self.params = p
+        self.lateral_force_point = (
+            (p.xB, p.zB) if lateral_force_point is None else tuple(map(float, lateral_force_point))
+        )
+        self.p = parameter_vector(p, self.lateral_force_point)
+        self.rR = p.rR
+        self.lam = p.lam
+        self._q5 = np.array([self.upright_pitch()])
+
+    # -- configuration --------------------------------------------------------------------
+    def upright_pitch(self) -> float:
+        """q5 at phi = delta = 0 (equals lam for the Meijaard geometry)."""
+        q5 = pitch(0.0, 0.0, self.lam, self.p)
+        if not math.isfinite(q5):
+            raise ValueError(f"bicycle {self.params.name!r}: no upright pitch solution")
+        return float(q5)
+
+    def pitch(self, phi: float, delta: float, guess: float | None = None) -> float:
+        """Moore pitch q5 [rad] satisfying the holonomic constraint at (phi, delta)."""
+        q5 = pitch(float(phi), float(delta), self.lam if guess is None else float(guess), self.p)
+        if not math.isfinite(q5):
+            raise ValueError(
+                f"no pitch satisfies the holonomic constraint at phi={phi}, delta={delta} rad "
+                "(configuration too far from upright?)"
+            )
+        return float(q5)
+
+    def state(
+        self,
+        v: float,
+        phi: float = 0.0,
+        delta: float = 0.0,
+        phidot: float = 0.0,
+        deltadot: float = 0.0,
+        psi: float = 0.0,
+        x: float = 0.0,
+        y: float = 0.0,
+    ) -> np.ndarray:
+        """A consistent integration state from benchmark quantities (SI, radians).
+
+        v is the forward speed -rR u6 [m/s]; x, y the rear contact position [m].
+        Pitch and the dependent speeds are implied (solved at every evaluation).
+        """
+        vals = dict(v=v, phi=phi, delta=delta, phidot=phidot, deltadot=deltadot, psi=psi, x=x, y=y)
+        for k, val in vals.items():
+            if not math.isfinite(float(val)):
+                raise ValueError(f"initial {k}={val!r} must be finite")
+        self.pitch(phi, delta)  # raises if inconsistent
+        return np.array(
+            [x, y, psi, phi, 0.0, delta, 0.0, phidot, -float(v) / self.rR, deltadot], dtype=float
+        )
+
+    # -- evaluation ----------------------------------------------------------------------
+    def rhs(
+        self,
+        y: np.ndarray,
+        inputs=(0.0, 0.0, 0.0, 0.0),
+        mode: str = "coast",
+        effects=None,
+    ) -> tuple[np.ndarray, float]:
+        """(y', T_R) at state ``y`` with inputs [T_delta, T_phi, F, T_R]."""
+        held = _mode(mode)
+        ydot = np.empty(10)
+        ev = plant_vector(effects)
+        T_R = rhs(np.asarray(y, float), self._q5, self.p, _inputs(inputs), ev, held, ydot)
+        if not math.isfinite(T_R):
+            raise ValueError("pitch Newton iteration failed: state too far from upright")
+        return ydot, float(T_R)
+
+    def all_speeds(self, q4: float, q5: float, q7: float, u4: float, u6: float, u7: float):
+        """[u4, u6, u7, u3, u5, u8] from the nonholonomic constraints at pitch q5."""
+        u = np.empty(6)
+        speeds(q4, q5, q7, u4, u6, u7, self.p, u)
+        return u
+
+    def all_accelerations(
+        self,
+        q4: float,
+        q5: float,
+        q7: float,
+        u4: float,
+        u6: float,
+        u7: float,
+        inputs=(0.0, 0.0, 0.0, 0.0),
+        mode: str = "coast",
+        extra=(0.0, 0.0, 0.0),
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """(u, u', T_R) at a given pitch: u and u' in :data:`SPEEDS` order."""
+        u = self.all_speeds(q4, q5, q7, u4, u6, u7)
+        udot = np.empty(6)
+        T_R = accelerations(
+            q4, q5, q7, u, self.p, _inputs(inputs), np.asarray(extra, float), _mode(mode), udot
+        )
+        return u, udot, float(T_R)
+
+    def measurements(self, y: np.ndarray) -> np.ndarray:
+        """The :data:`sim.conventions.MEASURED` signals at state ``y``."""
+        return self.outputs(y)[: len(MEASURED)]
+
+    def outputs(self, y: np.ndarray) -> np.ndarray:
+        """[v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot, theta, xR, yR, xF, yF].
+
+        theta = q5 - lam is the pitch from upright [rad]; (xR, yR), (xF, yF) the
+        rear and front contact points in N [m].
+        """
+        out = np.empty(13)
+        outputs(np.asarray(y, float), self._q5, self.p, out)
+        out[8] -= self.lam
+        return out
+
+    def energy(self, y: np.ndarray) -> tuple[float, float]:
+        """(kinetic, potential) energy [J]; potential zero with mass centres at ground level."""
+        q5 = self.pitch(y[3], y[5], self._q5[0])
+        u = self.all_speeds(y[3], q5, y[5], y[7], y[8], y[9])
+        ke, pe = gen.energy(y[3], q5, y[5], u, self.p)
+        return float(ke), float(pe)
+
+    def constraint_residuals(self, y: np.ndarray) -> tuple[float, np.ndarray]:
+        """(holonomic residual [m], nonholonomic residuals [m/s]) at ``y``."""
+        q5 = self.pitch(y[3], y[5], self._q5[0])
+        h, _ = gen.holonomic(y[3], q5, y[5], self.p)
+        u = self.all_speeds(y[3], q5, y[5], y[7], y[8], y[9])
+        Ad = np.empty((3, 3))
+        Ai = np.empty((3, 3))
+        gen.velocity_constraint(y[3], q5, y[5], self.p, Ad, Ai)
+        return float(h), Ad @ u[3:] + Ai @ u[:3]
+
+    # -- linearization -------------------------------------------------------------------
+    def linearize(
+        self, v: float, step: float = 1e-3, lateral_force: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A, B about upright straight running at speed v, by finite differences.
+
+        State [phi, delta, phidot, deltadot] (:data:`sim.linear.STATE_NAMES`),
+        inputs [T_phi, T_delta] (+ F if ``lateral_force``), matching
+        :func:`sim.linear.state_matrices`.  Fourth-order central differences with
+        ``step`` (rad, rad/s); the model is exactly linear in the inputs.
+        """
+        y0 = self.state(v)
+        idx = (3, 5, 7, 9)  # phi, delta, phidot, deltadot in STATE
+
+        def f(y, r):
+            yd, _ = self.rhs(y, r)
+            return yd[[3, 5, 7, 9]]
+
+        zero = np.zeros(4)
+        A = np.empty((4, 4))
+        for j, k in enumerate(idx):
+            cols = []
+            for m in (-2, -1, 1, 2):
+                y = y0.copy()
+                y[k] += m * step
+                cols.append(f(y, zero))
+            A[:, j] = (cols[0] - 8 * cols[1] + 8 * cols[2] - cols[3]) / (12 * step)
+        base = f(y0, zero)
+        inputs = [1, 0] + ([2] if lateral_force else [])  # T_phi, T_delta, F in r
+        B = np.empty((4, len(inputs)))
+        for j, k in enumerate(inputs):
+            r = zero.copy()
+            r[k] = 1.0
+            B[:, j] = f(y0, r) - base
+        return A, B
+
+
+def _mode(mode: str) -> bool:
+    if mode not in MODES:
+        raise ValueError(f"speed mode {mode!r} unknown; use 'coast' or 'held'")
+    return mode == "held"
+
+
+def _inputs(inputs) -> np.ndarray:
+    r = np.asarray(inputs, dtype=float).reshape(-1)
+    if r.shape != (4,) or not np.all(np.isfinite(r)):
+        raise ValueError(
+            f"inputs must be 4 finite numbers [T_delta, T_phi, F, T_R], got {inputs!r}"
+        )
+    return r
