@@ -75,6 +75,7 @@ __all__ = [
     "despike",
     "fetch",
     "find_logs",
+    "iter_decays",
     "load_log",
     "read_segments",
     "treadmill_speed",

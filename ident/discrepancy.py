@@ -1,0 +1,529 @@
+"""Residual -> named physical effect -> augmented model -> error before/after.
+
+Workflow (identification.md section 5, approaches A/B/E):
+
+1. **Residuals.**  Output residuals of the experiment model (:mod:`ident.experiment_model`)
+   on free-decay windows (roll rate, steer angle), and equation-error residuals of the
+   roll and steer rows in Moore & Hubbard's form ``M q'' + v C1 q' + (g K0 + v^2 K2) q
+   = [0, T]`` (accelerations from zero-phase-filtered central differences).
+   Diagnostics: whiteness (fraction of autocorrelations outside the 99 % band,
+   lags 1..25), cross-correlation with the steer command, Welch spectra.
+2. **Ranking.**  Additive candidates are ranked by the orthogonal error-reduction ratio
+   (ERR, forward orthogonal least squares) on the steer- and roll-row equation errors.
+   Every candidate (additive or structural: delay, lag, ...) is then fitted by
+   output error on the decays; the structural ones by a scan of their parameter
+   followed by a local refinement.  Candidates are ordered by the fraction of the
+   output-error cost they remove.
+3. **Acceptance.**  An effect is accepted only if |value - absent| / std > 3
+   (least-squares covariance ``s^2 (J^T J)^-1`` with the sample count reduced for the
+   residual autocorrelation, N_eff = N (1 - r1)/(1 + r1)) *and* it lowers the error
+   on held-out windows (every other window is held out while selecting).  Accepted
+   effects are refitted jointly on all fit windows.
+4. **"unexplained".**  The measurement-noise floor of each window is estimated from
+   second differences (sigma^2 = mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6).  If the
+   accepted effects remove less than ``EXPLAINED_MIN`` = 70 % of the nominal cost
+   above that floor, the verdict is ``unexplained`` (listed first), with the
+   accepted effects reported as partial.
+
+Effect names (stable snake_case keys) are those of ``LIBRARY``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+from scipy.optimize import least_squares
+
+from ident.experiment_model import (
+    EFFECT_DEFAULTS,
+    EFFECT_UNITS,
+    ExperimentModel,
+    Window,
+    window_errors,
+)
+
+__all__ = [
+    "EXPLAINED_MIN",
+    "LIBRARY",
+    "Candidate",
+    "EffectEstimate",
+    "Identification",
+    "cross_correlation",
+    "decay_eigenvalue",
+    "equation_error",
+    "err_ranking",
+    "evaluate",
+    "fit_effects",
+    "identify",
+    "noise_floor",
+    "output_residuals",
+    "whiteness",
+]
+
+EXPLAINED_MIN = 0.7
+T_MIN = 3.0
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A library effect: name, unit, additive or structural, scan grid, scale."""
+
+    name: str
+    kind: str  # "additive" or "structural"
+    scale: float  # typical magnitude, for the optimizer and the scan
+    lower: float = -np.inf
+    upper: float = np.inf
+    grid: tuple[float, ...] = ()
+    doc: str = ""
+
+    @property
+    def unit(self) -> str:
+        return EFFECT_UNITS[self.name]
+
+    @property
+    def absent(self) -> float:
+        return EFFECT_DEFAULTS[self.name]
+
+
+LIBRARY: dict[str, Candidate] = {
+    c.name: c
+    for c in (
+        Candidate("steer_viscous_damping", "additive", 0.3, doc="bearing/motor viscous damping"),
+        Candidate("steer_coulomb_friction", "additive", 0.1, 0.0, doc="tanh-smoothed friction"),
+        Candidate("tire_scrub_torque", "additive", 0.5, doc="tyre scrub damping ~ 1/v"),
+        Candidate("command_gain", "additive", 0.2, 0.05, doc="motor torque constant error"),
+        Candidate("steer_torque_bias", "additive", 0.05, doc="constant steer torque"),
+        Candidate("steer_inertia", "additive", 0.02, doc="front-frame inertia about steer axis"),
+        Candidate("trail_correction", "additive", 0.01, -0.07, 0.2, doc="trail error"),
+        Candidate("roll_angle_bias", "additive", 0.01, doc="IMU roll bias"),
+        Candidate("steer_angle_bias", "additive", 0.01, doc="encoder zero offset"),
+        Candidate("roll_rate_bias", "additive", 0.01, doc="gyro bias"),
+        Candidate("roll_rate_scale", "additive", 0.05, 0.2, doc="gyro scale factor"),
+        Candidate("speed_scale", "additive", 0.05, 0.3, doc="speed calibration error"),
+        Candidate(
+            "input_delay",
+            "structural",
+            0.02,
+            0.0,
+            0.1,
+            grid=(0.005, 0.01, 0.02, 0.03, 0.045, 0.06),
+            doc="command transport delay",
+        ),
+        Candidate(
+            "actuator_lag",
+            "structural",
+            0.02,
+            0.0,
+            0.2,
+            grid=(0.005, 0.01, 0.02, 0.035, 0.05, 0.08),
+            doc="motor current/torque lag",
+        ),
+    )  # fmt: skip
+}
+
+
+# -- output residuals ----------------------------------------------------------------------
+def _norms(windows, channels=("phidot", "delta")):
+    return [
+        [max(np.linalg.norm(getattr(w, c) - getattr(w, c).mean()), 1e-12) for c in channels]
+        for w in windows
+    ]
+
+
+def output_residuals(model: ExperimentModel, windows: list[Window], norms=None) -> np.ndarray:
+    """Stacked residuals (sim - measured) of roll rate and steer angle, each window and
+    channel divided by ||y - mean y|| so the sum of squares is a sum of NRMSE^2."""
+    norms = norms or _norms(windows)
+    sims = model.simulate(windows)
+    parts = []
+    for w, s, nr in zip(windows, sims, norms, strict=True):
+        parts.append((s["phidot"] - w.phidot) / nr[0])
+        parts.append((s["delta"] - w.delta) / nr[1])
+    return np.concatenate(parts)
+
+
+def noise_floor(windows: list[Window]) -> float:
+    """Expected normalized cost of a perfect model: sum n sigma^2 / ||y - ybar||^2."""
+    tot = 0.0
+    for w, nr in zip(windows, _norms(windows), strict=True):
+        for y, ni in ((w.phidot, nr[0]), (w.delta, nr[1])):
+            s2 = np.mean(np.diff(y, 2) ** 2) / 6.0
+            tot += y.size * s2 / ni**2
+    return float(tot)
+
+
+@dataclass
+class EffectEstimate:
+    name: str
+    value: float
+    std: float
+    unit: str
+    t: float
+    explained: float = 0.0  # fraction of the nominal cost removed when added
+    accepted: bool = False
+
+    def as_dict(self) -> dict:
+        return {
+            "name": self.name, "value": self.value, "std": self.std, "unit": self.unit,
+            "t": self.t, "explained": self.explained, "accepted": self.accepted,
+        }  # fmt: skip
+
+
+@dataclass
+class FitResult:
+    model: ExperimentModel
+    values: dict[str, float]
+    std: dict[str, float]
+    cost: float
+
+
+def fit_effects(
+    model: ExperimentModel, windows: list[Window], names: list[str], start: dict | None = None
+) -> FitResult:
+    """Output-error least squares of the named effects (others kept as in ``model``)."""
+    if not names:
+        r = output_residuals(model, windows)
+        return FitResult(model, {}, {}, float(r @ r))
+    norms = _norms(windows)
+    cands = [LIBRARY[n] if n in LIBRARY else Candidate(n, "additive", 0.1) for n in names]
+    start = start or {}
+    x0 = np.array([(start.get(c.name, model.e(c.name)) - c.absent) / c.scale for c in cands])
+    lo = np.array([(c.lower - c.absent) / c.scale if c.lower > -np.inf else -np.inf for c in cands])
+    hi = np.array([(c.upper - c.absent) / c.scale if c.upper < np.inf else np.inf for c in cands])
+    lo = np.where(np.isfinite(lo), lo, -np.inf)
+    x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+
+    def mk(x):
+        return model.with_effects(
+            **{c.name: c.absent + c.scale * xi for c, xi in zip(cands, x, strict=True)}
+        )
+
+    def fun(x):
+        r = output_residuals(mk(x), windows, norms)
+        return np.where(np.isfinite(r), r, 1e3)
+
+    sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
+    r = sol.fun
+    n, p = r.size, len(cands)
+    r1 = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if n > 3 else 0.0
+    neff = max(n * (1 - r1) / (1 + r1), p + 1)
+    s2 = float(r @ r) / (neff - p)
+    try:
+        cov = s2 * np.linalg.pinv(sol.jac.T @ sol.jac)
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        std = np.full(p, np.inf)
+    vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x, strict=True)}
+    stds = {c.name: c.scale * si for c, si in zip(cands, std, strict=True)}
+    return FitResult(mk(sol.x), vals, stds, float(r @ r))
+
+
+def _scan_start(model, windows, cand: Candidate, base: list[str], start: dict) -> float:
+    best, arg = np.inf, cand.grid[0]
+    for g in cand.grid:
+        m = model.with_effects(**start, **{cand.name: g})
+        r = output_residuals(m, windows)
+        if r @ r < best:
+            best, arg = float(r @ r), g
+    return arg
+
+
+@dataclass
+class Identification:
+    """Outcome of :func:`identify`."""
+
+    model: ExperimentModel
+    effects: list[EffectEstimate]
+    ranking: list[EffectEstimate]
+    verdict: list[str]
+    cost_nominal: float
+    cost_final: float
+    cost_floor: float
+    explained: float
+    eq_ranking: list[dict] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "effects": [e.as_dict() for e in self.effects],
+            "ranking": [e.as_dict() for e in self.ranking],
+            "equation_error_ranking": self.eq_ranking,
+            "cost_nominal": self.cost_nominal,
+            "cost_final": self.cost_final,
+            "cost_noise_floor": self.cost_floor,
+            "explained_fraction": self.explained,
+        }
+
+
+def identify(
+    model: ExperimentModel,
+    windows: list[Window],
+    candidates: list[str] | None = None,
+    max_effects: int = 3,
+    min_gain: float = 0.02,
+) -> Identification:
+    """Greedy forward selection of library effects by output error (module docstring)."""
+    names = list(candidates or LIBRARY)
+    bad = [n for n in names if n not in LIBRARY]
+    if bad:
+        raise ValueError(f"unknown candidate effects {bad}; the library has {sorted(LIBRARY)}")
+    if len(windows) < 2:
+        raise ValueError("identification needs at least 2 windows (one is held out)")
+    fit_w, val_w = windows[0::2], windows[1::2]
+    cost0 = fit_effects(model, windows, []).cost
+    floor = noise_floor(windows)
+    accepted: list[str] = []
+    cur = model
+    cur_val = fit_effects(cur, val_w, []).cost
+    ranking: list[EffectEstimate] = []
+    for _round in range(max_effects):
+        trials = []
+        base_cost = fit_effects(cur, fit_w, []).cost
+        for n in names:
+            if n in accepted:
+                continue
+            cand = LIBRARY[n]
+            start = {}
+            if cand.kind == "structural":
+                start[n] = _scan_start(cur, fit_w, cand, accepted, {})
+            res = fit_effects(cur, fit_w, accepted + [n], start)
+            v, sd = res.values[n], res.std[n]
+            t = abs(v - cand.absent) / sd if sd > 0 else np.inf
+            gain = (base_cost - res.cost) / max(base_cost, 1e-300)
+            trials.append((gain, n, res, EffectEstimate(n, v, sd, cand.unit, t, gain)))
+        trials.sort(key=lambda z: -z[0])
+        if _round == 0:
+            ranking = [z[3] for z in trials]
+        took = False
+        for gain, n, res, est in trials[:3]:
+            if est.t <= T_MIN or gain < min_gain:
+                continue
+            val = fit_effects(res.model, val_w, []).cost
+            if val < cur_val * (1 - min_gain):
+                accepted.append(n)
+                cur, cur_val, took = res.model, val, True
+                break
+        if not took:
+            break
+    final = fit_effects(model, windows, accepted, {n: cur.e(n) for n in accepted})
+    effects = []
+    for n in accepted:
+        cand = LIBRARY[n]
+        v, sd = final.values[n], final.std[n]
+        t = abs(v - cand.absent) / sd if sd > 0 else np.inf
+        effects.append(EffectEstimate(n, v, sd, cand.unit, t, accepted=True))
+    explained = (cost0 - final.cost) / max(cost0 - floor, 1e-12 * cost0)
+    verdict = [e.name for e in effects]
+    if explained < EXPLAINED_MIN or not effects:
+        verdict = ["unexplained"] + verdict
+    for e in effects:
+        e.explained = float(explained)
+    return Identification(
+        model=final.model, effects=effects, ranking=ranking, verdict=verdict,
+        cost_nominal=cost0, cost_final=final.cost, cost_floor=floor, explained=float(explained),
+        eq_ranking=err_ranking(model, windows),
+    )  # fmt: skip
+
+
+# -- equation error -------------------------------------------------------------------------
+def _deriv(y: np.ndarray, dt: float = 0.01, fc: float = 15.0) -> np.ndarray:
+    b, a = signal.butter(2, fc / (0.5 / dt))
+    pad = min(3 * max(len(a), len(b)), y.size - 1)
+    return np.gradient(signal.filtfilt(b, a, y, padlen=pad), dt)
+
+
+def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, np.ndarray]:
+    """Roll- and steer-row equation errors and additive candidate regressors.
+
+    r = [0, T] - (M q'' + v C1 q' + (g K0 + v^2 K2) q), with q'' from filtered central
+    differences of the measured rates (2nd-order 15 Hz Butterworth, zero phase) and T the
+    logged command.  Regressors (per unit of effect) for the steer row:
+    steer_viscous_damping -deltadot, steer_coulomb_friction -tanh(deltadot/0.1),
+    tire_scrub_torque -deltadot/v, command_gain T, steer_torque_bias 1,
+    steer_inertia -deltaddot; for the roll row: roll_viscous_damping -phidot
+    (outside the library, used only to show the residual pattern).
+    """
+    cm = model.canonical()
+    rows = {k: [] for k in ("roll", "steer", "T", "v")}
+    reg = {k: [] for k in ("steer_viscous_damping", "steer_coulomb_friction",
+                           "tire_scrub_torque", "command_gain", "steer_torque_bias",
+                           "steer_inertia", "roll_viscous_damping")}  # fmt: skip
+    sims = model.simulate(windows)
+    for w, s in zip(windows, sims, strict=True):
+        v = model.true_speed(float(np.mean(w.v_sensor)))
+        q = np.vstack([w.phi, w.delta])
+        qd = np.vstack([w.phidot, w.deltadot])
+        qdd = np.vstack([_deriv(w.phidot), _deriv(w.deltadot)])
+        T = s["T"]  # the applied command the model reconstructs (= logged law)
+        lhs = cm.M @ qdd + v * cm.C1 @ qd + cm.stiffness(v) @ q
+        rows["roll"].append(-lhs[0])
+        rows["steer"].append(T - lhs[1])
+        rows["T"].append(T)
+        rows["v"].append(np.full(w.n, v))
+        reg["steer_viscous_damping"].append(-w.deltadot)
+        reg["steer_coulomb_friction"].append(-np.tanh(w.deltadot / 0.1))
+        reg["tire_scrub_torque"].append(-w.deltadot / v)
+        reg["command_gain"].append(T)
+        reg["steer_torque_bias"].append(np.ones(w.n))
+        reg["steer_inertia"].append(-qdd[1])
+        reg["roll_viscous_damping"].append(-w.phidot)
+    out = {k: np.concatenate(v) for k, v in rows.items()}
+    out.update({f"reg:{k}": np.concatenate(v) for k, v in reg.items()})
+    return out
+
+
+def err_ranking(model: ExperimentModel, windows: list[Window], steps: int = 4) -> list[dict]:
+    """Forward orthogonal least squares (FROLS) on the steer-row equation error.
+
+    ERR_i = (w_i . r)^2 / ((w_i . w_i)(r . r)) with w_i the candidate orthogonalised
+    against those already chosen.  Also reports, for comparison, the share of the
+    roll-row residual a roll damping term would explain (an effect outside the library:
+    a large value there points to "unexplained").
+    """
+    ee = equation_error(model, windows)
+    r = ee["steer"]
+    names = [k[4:] for k in ee if k.startswith("reg:") and k != "reg:roll_viscous_damping"]
+    P = {n: ee[f"reg:{n}"].astype(float) for n in names}
+    chosen, basis, out = [], [], []
+    rr = float(r @ r)
+    for _ in range(min(steps, len(names))):
+        best = None
+        for n in names:
+            if n in chosen:
+                continue
+            wv = P[n].copy()
+            for b in basis:
+                wv -= (b @ wv) / (b @ b) * b
+            den = float(wv @ wv)
+            if den < 1e-12 * max(float(P[n] @ P[n]), 1e-300):
+                continue
+            err = float((wv @ r) ** 2 / (den * rr))
+            if best is None or err > best[0]:
+                best = (err, n, wv)
+        if best is None:
+            break
+        chosen.append(best[1])
+        basis.append(best[2])
+        out.append({"name": best[1], "err": best[0], "row": "steer"})
+    rl = ee["roll"]
+    wv = ee["reg:roll_viscous_damping"]
+    out.append(
+        {"name": "roll_row:roll_damping_pattern", "row": "roll",
+         "err": float((wv @ rl) ** 2 / ((wv @ wv) * (rl @ rl)))}
+    )  # fmt: skip
+    return out
+
+
+# -- residual diagnostics ----------------------------------------------------------------
+def whiteness(e: np.ndarray, maxlag: int = 25) -> dict:
+    """Fraction of normalized autocorrelations r(1..maxlag) outside +-2.58/sqrt(N)."""
+    e = np.asarray(e, float) - np.mean(e)
+    n = e.size
+    r0 = float(e @ e)
+    r = np.array([float(e[:-k] @ e[k:]) / r0 for k in range(1, maxlag + 1)])
+    band = 2.58 / math.sqrt(n)
+    return {"acf": r, "band": band, "fraction_outside": float(np.mean(np.abs(r) > band))}
+
+
+def cross_correlation(e: np.ndarray, u: np.ndarray, maxlag: int = 25) -> dict:
+    """Normalized cross-correlation r_eu(tau), tau = -maxlag..maxlag, and the 99 % band."""
+    e = np.asarray(e, float) - np.mean(e)
+    u = np.asarray(u, float) - np.mean(u)
+    n = e.size
+    den = math.sqrt(float(e @ e) * float(u @ u))
+    lags = np.arange(-maxlag, maxlag + 1)
+    r = np.array(
+        [float(e[k:] @ u[: n - k]) if k >= 0 else float(e[: n + k] @ u[-k:]) for k in lags]
+    ) / max(den, 1e-300)
+    band = 2.58 / math.sqrt(n)
+    return {
+        "lags": lags,
+        "ccf": r,
+        "band": band,
+        "fraction_outside": float(np.mean(np.abs(r) > band)),
+    }
+
+
+def spectrum(e: np.ndarray, dt: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """Welch power spectral density (Hz, unit^2/Hz)."""
+    return signal.welch(np.asarray(e, float), fs=1 / dt, nperseg=min(256, len(e)))
+
+
+# -- eigenvalues from decays ---------------------------------------------------------------
+def decay_eigenvalue(w: Window) -> complex:
+    """Weave eigenvalue sigma + i omega fitted to one free decay.
+
+    Model (both channels share sigma, omega): y_c(t) = e^{sigma t}(a_c cos wt + b_c sin wt)
+    + d_c e^{-p t} + o_c; sigma, omega, p by nonlinear LS, the rest linear (variable
+    projection).  Start: omega from the steer-angle zero crossings.
+    """
+    t = np.arange(w.n) * 0.01
+    ys = [w.delta / np.std(w.delta), w.phidot / np.std(w.phidot)]
+
+    def resid(th):
+        sg, om, pp = th
+        basis = np.column_stack(
+            [np.exp(sg * t) * np.cos(om * t), np.exp(sg * t) * np.sin(om * t),
+             np.exp(-pp * t), np.ones_like(t)]
+        )  # fmt: skip
+        out = []
+        for y in ys:
+            c, *_ = np.linalg.lstsq(basis, y, rcond=None)
+            out.append(basis @ c - y)
+        return np.concatenate(out)
+
+    best = None
+    for om0 in (5.0, 7.5, 10.0, 12.5):
+        sol = least_squares(resid, [-2.0, om0, 1.0], bounds=([-30, 1.0, 0.0], [10, 40, 60]))
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return complex(best.x[0], best.x[1])
+
+
+# -- before/after ------------------------------------------------------------------------------
+def evaluate(nominal: ExperimentModel, augmented: ExperimentModel, windows: list[Window]) -> dict:
+    """Error before (nominal) and after (augmented), per file and overall.
+
+    Metric: mean over windows and the two channels (roll rate, steer angle) of the
+    NRMSE ||y_sim - y|| / ||y - mean y|| of the free-decay simulation from the measured
+    initial state; weave eigenvalue error |lambda_model - lambda_fit| / |lambda_fit|,
+    with lambda_fit the median of the per-decay fits (``decay_eigenvalue``).
+    """
+    e0 = window_errors(windows, nominal.simulate(windows))
+    e1 = window_errors(windows, augmented.simulate(windows))
+    files = []
+    for f in sorted({w.file for w in windows}):
+        idx = [i for i, w in enumerate(windows) if w.file == f]
+        ws = [windows[i] for i in idx]
+        vs = float(np.mean([np.mean(w.v_sensor) for w in ws]))
+        lam = [decay_eigenvalue(w) for w in ws]
+        lam_data = complex(np.median(np.real(lam)), np.median(np.imag(lam)))
+        l0, l1 = nominal.weave(vs, lam_data), augmented.weave(vs, lam_data)
+        files.append(
+            {
+                "file": f,
+                "speed": float(np.mean([w.speed for w in ws])),
+                "windows": len(ws),
+                "error_before": float(e0[idx].mean()),
+                "error_after": float(e1[idx].mean()),
+                "error_before_channels": {"phidot": float(e0[idx, 0].mean()),
+                                          "delta": float(e0[idx, 1].mean())},
+                "error_after_channels": {"phidot": float(e1[idx, 0].mean()),
+                                         "delta": float(e1[idx, 1].mean())},
+                "weave_data": lam_data,
+                "weave_before": l0,
+                "weave_after": l1,
+                "weave_error_before": abs(l0 - lam_data) / abs(lam_data),
+                "weave_error_after": abs(l1 - lam_data) / abs(lam_data),
+            }
+        )  # fmt: skip
+    summ = {
+        k: float(np.mean([f[k] for f in files]))
+        for k in ("error_before", "error_after", "weave_error_before", "weave_error_after")
+    }
+    summ["ratio"] = summ["error_after"] / summ["error_before"]
+    summ["weave_ratio"] = summ["weave_error_after"] / max(summ["weave_error_before"], 1e-12)
+    return {"files": files, "summary": summ}

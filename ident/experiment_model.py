@@ -1,0 +1,432 @@
+"""Nominal (and augmented) model of the steer-by-wire treadmill experiment.
+
+Plant: the linear Carvallo-Whipple model of the steer-by-wire bicycle (Meijaard 2007,
+``sim.linear``) about upright running at the treadmill speed v.  The free decays are
+small (|phi| < 0.15 rad, |delta| < 0.3 rad), so the linear model is used; the
+nonlinear plant (``sim/integrate.py``) had not landed when this was written.
+
+Controller: the logged steer-into-lean law ``T_cmd = K (V - v_s) phidot_m + T_ext``
+(K = 2 N s^2/rad, V = 6.5 m/s), evaluated once per 10 ms loop on the *sensor* speed
+v_s and the measured roll rate and held over the loop (zero-order hold, exactly as the
+firmware does).  ``T_ext`` is the relayed handlebar torque of the Bode runs (zero in the
+free decays).  Sign: with roll/steer positive to the right, +K stabilizes (see
+``dataset.measured``).
+
+Effects (all default to "absent"; each is one named physical term):
+
+==========================  ==========  ================================================
+name                        unit        term
+==========================  ==========  ================================================
+steer_viscous_damping       N m s/rad   steer torque -c * deltadot
+steer_coulomb_friction      N m         steer torque -T_c * tanh(deltadot / 0.1 rad/s)
+tire_scrub_torque           N m s^2/... steer torque -(k / v) * deltadot  (k in N m s/rad * m/s)
+command_gain                -           applied torque = gain * command (default 1)
+steer_torque_bias           N m         constant steer torque
+input_delay                 s           command applied tau later (fractional samples)
+actuator_lag                s           first-order lag of the applied torque
+roll_angle_bias             rad         phi_m = phi + b
+steer_angle_bias            rad         delta_m = delta + b
+roll_rate_bias              rad/s       phidot_m = s phidot + b (controller sees it)
+roll_rate_scale             -           s above (default 1)
+speed_scale                 -           true speed = s * calibrated treadmill speed
+steer_inertia               kg m^2      added to M_dd (front-frame inertia correction)
+trail_correction            m           trail c -> c + dc (all matrices recomputed)
+roll_viscous_damping        N m s/rad   roll torque -c * phidot (NOT in the ident library)
+==========================  ==========  ================================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.linalg import expm
+
+from dataset.measured import treadmill_speed
+from dataset.run import Run
+from sim.linear import CanonicalMatrices, canonical_matrices
+from sim.parameters import BicycleParameters, steer_by_wire
+
+__all__ = [
+    "EFFECT_DEFAULTS",
+    "EFFECT_UNITS",
+    "ExperimentModel",
+    "Window",
+    "bode_window",
+    "decay_windows",
+    "window_errors",
+]
+
+DT = 0.01
+COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
+EFFECT_UNITS = {
+    "steer_viscous_damping": "N m s/rad",
+    "steer_coulomb_friction": "N m",
+    "tire_scrub_torque": "N m s/rad * m/s",
+    "command_gain": "-",
+    "steer_torque_bias": "N m",
+    "input_delay": "s",
+    "actuator_lag": "s",
+    "roll_angle_bias": "rad",
+    "steer_angle_bias": "rad",
+    "roll_rate_bias": "rad/s",
+    "roll_rate_scale": "-",
+    "speed_scale": "-",
+    "steer_inertia": "kg m^2",
+    "trail_correction": "m",
+    "roll_viscous_damping": "N m s/rad",
+}
+EFFECT_DEFAULTS = {k: 0.0 for k in EFFECT_UNITS} | {
+    "command_gain": 1.0,
+    "roll_rate_scale": 1.0,
+    "speed_scale": 1.0,
+}
+
+
+@dataclass
+class Window:
+    """One stretch of an experiment to simulate: a free decay or a Bode record.
+
+    Measured arrays (length n, sample time 0.01 s): phi, delta, phidot, deltadot,
+    v_sensor, T_ext (external steer torque relayed to the motor), T_phi (roll torque,
+    simulation only).  ``hist`` holds the logged steer commands before the window
+    start (oldest first) for the delay buffer.  ``speed`` is the treadmill speed [m/s].
+    """
+
+    file: str
+    speed: float
+    start: int
+    phi: np.ndarray
+    delta: np.ndarray
+    phidot: np.ndarray
+    deltadot: np.ndarray
+    v_sensor: np.ndarray
+    T_ext: np.ndarray
+    hist: np.ndarray
+    kind: str = "decay"
+    freq: float | None = None
+    T_phi: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.phi.size
+
+    def state0(self) -> np.ndarray:
+        """Measured state at the start: quadratic fit over the first 5 samples at t=0."""
+        k = min(5, self.n)
+        tt = np.arange(k) * DT
+        out = []
+        for y in (self.phi, self.delta, self.phidot, self.deltadot):
+            c = np.polyfit(tt, y[:k], 2 if k >= 4 else 0)
+            out.append(np.polyval(c, 0.0))
+        return np.array(out)
+
+
+def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20) -> Window:
+    first = int(run.meta.get("first_index", 0))
+    a, b = i0 - first, i1 - first
+    if a < 0 or b > run.n or b - a < 10:
+        raise ValueError(
+            f"{run.meta.get('file', 'run')}: window rows {i0}..{i1} outside the file "
+            f"(rows {first}..{first + run.n})"
+        )
+    sl = slice(a, b)
+    h = run["T_delta"][max(0, a - hist_len) : a]
+    h = np.concatenate([np.full(hist_len - h.size, h[0] if h.size else 0.0), h])
+    ext = run.signals.get("T_ext", np.zeros(run.n))
+    return Window(
+        file=str(run.meta.get("file", "run")),
+        speed=float(treadmill_speed(np.mean(run["v"][sl]))),
+        start=i0,
+        phi=run["phi"][sl].copy(),
+        delta=run["delta"][sl].copy(),
+        phidot=run["phidot"][sl].copy(),
+        deltadot=run["deltadot"][sl].copy(),
+        v_sensor=run["v"][sl].copy(),
+        T_ext=ext[sl].copy(),
+        hist=h,
+        kind=kind,
+        freq=freq,
+    )
+
+
+def decay_windows(run: Run, segments) -> list[Window]:
+    """Free-decay windows of a run from ``dataset.measured.Segment`` rows."""
+    return [_window(run, s.start, s.end, "decay") for s in segments]
+
+
+def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> Window:
+    """The settled-speed stretch of a Bode run (at most ``max_len`` s, skipping 1 s)."""
+    first = int(run.meta.get("first_index", 0))
+    i0 = int(run.meta.get("ramp_end_index", first)) + 100
+    i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))
+    if freq is None:
+        import re
+
+        m = re.search(r"_([0-9.]+)Hz", str(run.meta.get("file", "")))
+        if not m:
+            raise ValueError(f"cannot read the excitation frequency from {run.meta.get('file')}")
+        freq = float(m.group(1))
+    return _window(run, i0, i1, "bode", freq=freq)
+
+
+@dataclass(frozen=True)
+class ExperimentModel:
+    """The treadmill experiment: Whipple plant + steer-into-lean loop + effects."""
+
+    params: BicycleParameters = field(default_factory=steer_by_wire)
+    effects: dict = field(default_factory=dict)
+    K: float = 2.0
+    V: float = 6.5
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.effects) - set(EFFECT_UNITS))
+        if unknown:
+            raise ValueError(f"unknown effects {unknown}; known are {sorted(EFFECT_UNITS)}")
+        for k, v in self.effects.items():
+            if not math.isfinite(float(v)):
+                raise ValueError(f"effect {k!r} must be finite, got {v}")
+        if self.e("input_delay") < 0 or self.e("actuator_lag") < 0:
+            raise ValueError("input_delay and actuator_lag must be >= 0 s")
+
+    def e(self, name: str) -> float:
+        return float(self.effects.get(name, EFFECT_DEFAULTS[name]))
+
+    def with_effects(self, **values: float) -> ExperimentModel:
+        return replace(self, effects={**self.effects, **values})
+
+    # -- matrices ---------------------------------------------------------------------
+    def canonical(self) -> CanonicalMatrices:
+        p = self.params
+        dc = self.e("trail_correction")
+        if dc:
+            p = p.replace(c=p.c + dc)
+        cm = canonical_matrices(p)
+        M = cm.M.copy()
+        M[1, 1] += self.e("steer_inertia")
+        return CanonicalMatrices(M=M, C1=cm.C1, K0=cm.K0, K2=cm.K2, g=cm.g)
+
+    def continuous(self, v: float, cm: CanonicalMatrices | None = None):
+        """(A, B) of [phi, delta, phidot, deltadot(, Ta)] with inputs [u, w, T_phi].
+
+        u: commanded torque into the actuator (lag); w: torque straight on the steer
+        (friction, bias); T_phi: roll torque.
+        """
+        cm = cm or self.canonical()
+        Minv = np.linalg.inv(cm.M)
+        C = v * cm.C1 + np.diag(
+            [
+                self.e("roll_viscous_damping"),
+                self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, 0.1),
+            ]
+        )
+        lag = self.e("actuator_lag")
+        nx = 5 if lag > 0 else 4
+        A = np.zeros((nx, nx))
+        A[0:2, 2:4] = np.eye(2)
+        A[2:4, 0:2] = -Minv @ cm.stiffness(v)
+        A[2:4, 2:4] = -Minv @ C
+        B = np.zeros((nx, 3))
+        B[2:4, 1] = Minv[:, 1]
+        B[2:4, 2] = Minv[:, 0]
+        if lag > 0:
+            A[2:4, 4] = Minv[:, 1]
+            A[4, 4] = -1.0 / lag
+            B[4, 0] = 1.0 / lag
+        else:
+            B[2:4, 0] = Minv[:, 1]
+        return A, B
+
+    def discrete(self, v: float, h: float = DT, cm=None):
+        """ZOH discretization over step h: (Ad, Bd)."""
+        A, B = self.continuous(v, cm)
+        n, m = B.shape
+        big = np.zeros((n + m, n + m))
+        big[:n, :n] = A
+        big[:n, n:] = B
+        E = expm(big * h)
+        return E[:n, :n], E[:n, n:]
+
+    def true_speed(self, v_sensor: float) -> float:
+        return float(self.e("speed_scale") * treadmill_speed(v_sensor))
+
+    def _delay(self) -> tuple[int, float]:
+        d = self.e("input_delay") / DT
+        m = int(math.floor(d + 1e-12))
+        return m, d - m
+
+    def closed_loop(self, v_sensor: float):
+        """Augmented discrete closed loop z+ = Phi z + G_ext T_ext + c (no Coulomb term).
+
+        z = [x(4), (Ta), command buffer (m+1)].  Returns (Phi, G_ext, c, n_plant).
+        """
+        v = self.true_speed(v_sensor)
+        Ad, Bd = self.discrete(v)
+        npl = Ad.shape[0]
+        m, f = self._delay()
+        L = m + 1
+        nz = npl + L
+        s, brr = self.e("roll_rate_scale"), self.e("roll_rate_bias")
+        Kc = self.K * (self.V - v_sensor)
+        h = np.zeros(nz)
+        h[2] = Kc * s  # Tc = h z + c0 + T_ext
+        c0 = Kc * brr
+
+        def sel(j):  # row vector giving Tc_{k-j} in terms of z (and whether c0/T_ext enter)
+            r = np.zeros(nz)
+            if j == 0:
+                return h.copy(), 1.0
+            r[npl + j - 1] = 1.0
+            return r, 0.0
+
+        r1, a1 = sel(m)
+        r2, a2 = sel(m + 1)
+        g = self.e("command_gain")
+        urow = g * ((1 - f) * r1 + f * r2)
+        uext = g * ((1 - f) * a1 + f * a2)
+        Phi = np.zeros((nz, nz))
+        Phi[:npl, :npl] = Ad
+        Phi[:npl, :] += np.outer(Bd[:, 0], urow)
+        Phi[npl, :] = h
+        for j in range(1, L):
+            Phi[npl + j, npl + j - 1] = 1.0
+        G = np.zeros(nz)
+        G[:npl] = Bd[:, 0] * uext
+        G[npl] = 1.0
+        c = np.zeros(nz)
+        c[:npl] = Bd[:, 0] * uext * c0 + Bd[:, 1] * self.e("steer_torque_bias")
+        c[npl] = c0
+        return Phi, G, c, npl
+
+    # -- analyses ---------------------------------------------------------------------
+    def eigenvalues(self, v_sensor: float) -> np.ndarray:
+        """Closed-loop eigenvalues [1/s] at a sensor speed: log(z)/dt of the sampled loop.
+
+        Includes the zero-order hold and any delay; delay-buffer roots near z = 0 are
+        dropped.  Sorted by decreasing real part.
+        """
+        Phi = self.closed_loop(v_sensor)[0]
+        z = np.linalg.eigvals(Phi)
+        z = z[np.abs(z) > 1e-6]
+        lam = np.log(z.astype(complex)) / DT
+        return lam[np.argsort(-lam.real)]
+
+    def weave(self, v_sensor: float, near: complex | None = None) -> complex:
+        """An oscillatory closed-loop root (Im > 0, below 0.8 Nyquist).
+
+        Without ``near``: the least damped one; with ``near``: the one closest to it
+        (mode matching against a root fitted to data; at 1.5 m/s the loop has two
+        oscillatory pairs).
+        """
+        lam = self.eigenvalues(v_sensor)
+        osc = lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
+        if osc.size == 0:
+            return complex(np.nan, np.nan)
+        if near is not None:
+            return complex(osc[np.argmin(np.abs(osc - near))])
+        return complex(osc[np.argmax(osc.real)])
+
+    def frequency_response(self, v_sensor: float, freqs) -> np.ndarray:
+        """Complex response (len(freqs), 2) from T_ext to [phidot_m, delta_m]."""
+        Phi, G, _, _ = self.closed_loop(v_sensor)
+        s = self.e("roll_rate_scale")
+        out = []
+        for fr in np.atleast_1d(freqs):
+            z = np.exp(2j * math.pi * fr * DT)
+            X = np.linalg.solve(z * np.eye(Phi.shape[0]) - Phi, G)
+            out.append([s * X[2], X[1]])
+        return np.array(out)
+
+    # -- simulation -------------------------------------------------------------------
+    def simulate(self, windows: list[Window], nsub: int = 1) -> list[dict[str, np.ndarray]]:
+        """Simulate each window from its measured initial state (vectorized over windows).
+
+        Returns per window the *measured-equivalent* outputs phi, delta, phidot,
+        deltadot (sensor biases/scale applied), and the applied command T.
+        ``nsub`` substeps per 10 ms loop re-evaluate the Coulomb friction (the
+        controller is still sampled every 10 ms).
+        """
+        if not windows:
+            return []
+        nw = len(windows)
+        nmax = max(w.n for w in windows)
+        cms = self.canonical()
+        vs = np.array([np.mean(w.v_sensor) for w in windows])
+        mats = [self.discrete(self.true_speed(v), DT / nsub, cms) for v in vs]
+        Ad = np.stack([m[0] for m in mats])
+        Bd = np.stack([m[1] for m in mats])
+        npl = Ad.shape[1]
+        m, f = self._delay()
+        g, s = self.e("command_gain"), self.e("roll_rate_scale")
+        brr, bphi, bdel = (
+            self.e("roll_rate_bias"),
+            self.e("roll_angle_bias"),
+            self.e("steer_angle_bias"),
+        )
+        bias_T, tc = self.e("steer_torque_bias"), self.e("steer_coulomb_friction")
+        Kc = self.K * (self.V - vs)
+        H = max(m + 2, 2)
+        hist = np.stack([_hist(w.hist, H) for w in windows])  # oldest first
+        x = np.zeros((nw, npl))
+        x0 = np.stack([w.state0() for w in windows])
+        x[:, 0] = x0[:, 0] - bphi
+        x[:, 1] = x0[:, 1] - bdel
+        x[:, 2] = (x0[:, 2] - brr) / s
+        x[:, 3] = x0[:, 3]
+        if npl == 5:
+            x[:, 4] = g * hist[:, -1]
+        text = np.zeros((nw, nmax))
+        tphi = np.zeros((nw, nmax))
+        for i, w in enumerate(windows):
+            text[i, : w.n] = w.T_ext
+            if w.T_phi is not None:
+                tphi[i, : w.n] = w.T_phi
+        X = np.zeros((nw, nmax, npl))
+        U = np.zeros((nw, nmax))
+        buf = hist  # Tc_{k-H} .. Tc_{k-1}
+        for k in range(nmax):
+            X[:, k] = x
+            tc_k = Kc * (s * x[:, 2] + brr) + text[:, k]
+            seq = np.concatenate([buf, tc_k[:, None]], axis=1)  # ..., Tc_{k-1}, Tc_k
+            u = g * ((1 - f) * seq[:, -1 - m] + f * seq[:, -2 - m])
+            U[:, k] = u
+            for _ in range(nsub):
+                wtq = bias_T - (tc * np.tanh(x[:, 3] / COULOMB_EPS) if tc else 0.0)
+                inp = np.stack([u, wtq + 0.0 * u, tphi[:, k]], axis=1)
+                x = np.einsum("wij,wj->wi", Ad, x) + np.einsum("wij,wj->wi", Bd, inp)
+            buf = seq[:, 1:]
+        out = []
+        for i, w in enumerate(windows):
+            n = w.n
+            out.append(
+                {
+                    "phi": X[i, :n, 0] + bphi,
+                    "delta": X[i, :n, 1] + bdel,
+                    "phidot": s * X[i, :n, 2] + brr,
+                    "deltadot": X[i, :n, 3],
+                    "T": U[i, :n],
+                }
+            )
+        return out
+
+
+def _hist(h: np.ndarray, H: int) -> np.ndarray:
+    h = np.asarray(h, dtype=float)
+    if h.size >= H:
+        return h[-H:]
+    return np.concatenate([np.full(H - h.size, h[0] if h.size else 0.0), h])
+
+
+def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> np.ndarray:
+    """NRMSE per window and channel: ||y_sim - y|| / ||y - mean(y)|| (0 = perfect).
+
+    This is 1 - fit of MATLAB ``compare``/Moore's VAF (identification.md 1.2).
+    """
+    out = np.zeros((len(windows), len(channels)))
+    for i, (w, s) in enumerate(zip(windows, sims, strict=True)):
+        for j, c in enumerate(channels):
+            y = getattr(w, c)
+            out[i, j] = np.linalg.norm(s[c] - y) / max(np.linalg.norm(y - y.mean()), 1e-12)
+    return out
