@@ -1,0 +1,53 @@
+"""Roll-angle controllers, references, dither and lateral-force pulses.
+
+Every controller is a zero-order-hold callable ``controller(t, y) -> T_delta`` [N m]
+on the measured vector ``y`` (``sim.conventions.MEASURED`` order), with
+``sample_time``, ``saturation``, ``reset()``, ``reference(t)`` and ``describe()``;
+see :mod:`controllers.base`.  Heavy modules (scikit-fuzzy, python-control) load
+lazily through the attributes below.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from .base import Controller, ControllerLike, GainSchedule
+from .excitation import (
+    ChirpReference,
+    LateralForcePulses,
+    StepReference,
+    UniformDither,
+    ZeroReference,
+)
+from .registry import CONTROLLER_NAMES, make
+
+__all__ = [
+    "CONTROLLER_NAMES",
+    "PID",
+    "ChirpReference",
+    "Controller",
+    "ControllerLike",
+    "FuzzyController",
+    "GainSchedule",
+    "LateralForcePulses",
+    "PolePlacement",
+    "StepReference",
+    "SteerIntoLean",
+    "UniformDither",
+    "ZeroReference",
+    "make",
+]
+
+_LAZY = {
+    "PID": "pid",
+    "PolePlacement": "pole_placement",
+    "FuzzyController": "fuzzy",
+    "SteerIntoLean": "steer_into_lean",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -203,10 +203,10 @@ def skfuzzy_simulation(n_universe: int = 301):
 
 
 #: Defaults: roll-error scale 0.25 rad, error-rate scale 0.625 rad/s, torque scale
-#: -33.6 N m: Kp ~ 1.5 * -33.6 / 0.25 ~ -200 N m/rad, Kd ~ 1.5 * -33.6 / 0.625 ~ -80 N m s/rad.
+#: -33.3 N m: Kp ~ 1.5 * -33.3 / 0.25 = -200 N m/rad, Kd ~ 1.5 * -33.3 / 0.625 = -80 N m s/rad.
 DEFAULT_E_MAX = 0.25
 DEFAULT_CE_MAX = 0.625
-DEFAULT_TORQUE_SCALE = -200.0 * DEFAULT_E_MAX / 1.5 * (1 - 1e-12)
+DEFAULT_TORQUE_SCALE = -200.0 * DEFAULT_E_MAX / 1.5
 DEFAULT_ADAPT_SPEED = 3.0
 
 

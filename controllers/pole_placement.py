@@ -141,12 +141,19 @@ def pbh_measure(A: np.ndarray, B: np.ndarray) -> tuple[float, complex]:
 
 
 def place_with_integral(
-    A: np.ndarray, B: np.ndarray, poles: Sequence[complex] = DEFAULT_POLES, rtol: float = 1e-4
+    A: np.ndarray,
+    B: np.ndarray,
+    poles: Sequence[complex] = DEFAULT_POLES,
+    rtol: float = 1e-4,
+    pbh_tol: float = 1e-6,
 ) -> tuple[np.ndarray, float]:
     """(K (4,), kI) placing eig(Aa - Ba [K, -kI]) at ``poles``; law T = -K x + kI xi.
 
     Raises ``ValueError`` when the achieved poles miss the requested ones by more than
-    ``rtol`` relative (|p| + 1) scale, which is what happens at an uncontrollable speed.
+    ``rtol`` relative (|p| + 1) scale, which is what happens at an uncontrollable speed,
+    or when the relative PBH measure of the augmented system is below ``pbh_tol`` (gains
+    that place the poles but are hypersensitive: the benchmark gives PBH 4e-8 and a sign
+    flip of the roll-rate gain at 1.411 m/s, and PBH >= 1.7e-6 at 1.410 and 1.412 m/s).
     """
     poles = np.asarray(poles, dtype=complex)
     if poles.shape != (5,):
@@ -162,8 +169,8 @@ def place_with_integral(
         raise ValueError(f"pole placement failed: {exc}") from None
     achieved = np.linalg.eigvals(Aa - Ba @ Ka[None, :])
     err = _pole_mismatch(achieved, poles)
-    if not np.all(np.isfinite(Ka)) or err > rtol:
-        pbh, lam = pbh_measure(Aa, Ba)
+    pbh, lam = pbh_measure(Aa, Ba)
+    if not np.all(np.isfinite(Ka)) or err > rtol or pbh < pbh_tol:
         raise ValueError(
             f"pole placement is inaccurate (relative pole error {err:.1e}, |K| = "
             f"{np.abs(Ka).max():.1e}): the plant is (nearly) uncontrollable, PBH measure "
