@@ -268,9 +268,11 @@ class Sensors:
             )
         return t_s, measured, truth_s
 
-    def chain(self, seed: int, n: int, names: tuple[str, ...] = MEASURED) -> SensorChain:
+    def chain(
+        self, seed: int, n: int, names: tuple[str, ...] = MEASURED, fine_dt: float | None = None
+    ) -> SensorChain:
         """A per-sample corrupter for use inside a control loop (see :class:`SensorChain`)."""
-        return SensorChain(self, seed, n, names)
+        return SensorChain(self, seed, n, names, fine_dt)
 
 
 _IDEAL = Channel()
@@ -279,14 +281,24 @@ _IDEAL = Channel()
 class SensorChain:
     """Corrupts measurement vectors one sample at a time, inside a control loop.
 
-    ``chain(k, y_true)`` returns the measured vector of sensor sample ``k`` (vector in
-    ``names`` order, default ``MEASURED``); the same (seed, k) always gives the same noise,
-    equal to what :meth:`Sensors.measure` adds at sample k, so the signals a run records
-    are exactly the ones the controller saw.  The anti-alias filter is not applied here
-    (the loop sees only sample instants); it needs the fine grid, see :meth:`Sensors.measure`.
+    ``chain(k, y)`` returns the measured vector of sensor sample ``k`` (vector in
+    ``names`` order, default ``MEASURED``) for the true vector ``y`` at that instant; the
+    same (seed, k) always gives the same noise, equal to what :meth:`Sensors.measure` adds
+    at sample k.  With an anti-alias filter, call :meth:`filter` with the true vector at
+    every fine step (spacing ``fine_dt`` [s], e.g. the controller period) and pass its
+    result to ``chain(k, ...)`` at the sensor instants; the filter is the same
+    Butterworth as in :meth:`Sensors.measure`, run sample by sample (direct form II
+    transposed), so it agrees with it to round-off, not bit for bit.
     """
 
-    def __init__(self, sensors: Sensors, seed: int, n: int, names: tuple[str, ...]) -> None:
+    def __init__(
+        self,
+        sensors: Sensors,
+        seed: int,
+        n: int,
+        names: tuple[str, ...] = MEASURED,
+        fine_dt: float | None = None,
+    ) -> None:
         self.names = tuple(names)
         chans = [sensors.channel(k) for k in self.names]
         self.scale = np.array([c.scale for c in chans])
@@ -299,6 +311,33 @@ class SensorChain:
                 w[:, j] = channel_noise(seed, name, n)
         self.offset = w * std + self.bias
         self.quantized = bool(np.any(self.step > 0))
+        self.filtered = sensors.antialias is not None
+        self._sos = None
+        if self.filtered:
+            if fine_dt is None:
+                raise ValueError("an anti-alias filter in the loop needs the fine step fine_dt")
+            sensors.decimation(fine_dt)  # the fine grid must divide the sensor period
+            self._sos = sensors.antialias.sos(1.0 / fine_dt)
+            self._z = None
+
+    def filter(self, y_true: np.ndarray) -> np.ndarray:
+        """Advance the anti-alias filter by one fine step; returns the filtered vector."""
+        x = np.asarray(y_true, dtype=float)
+        if not self.filtered:
+            return x
+        sos = self._sos
+        if self._z is None:  # steady state at the first value (as sosfilt_zi)
+            from scipy.signal import sosfilt_zi
+
+            self._z = sosfilt_zi(sos)[:, :, None] * x[None, None, :]
+        z = self._z
+        for s in range(sos.shape[0]):
+            b0, b1, b2, _, a1, a2 = sos[s]
+            y = b0 * x + z[s, 0]
+            z[s, 0] = b1 * x - a1 * y + z[s, 1]
+            z[s, 1] = b2 * x - a2 * y
+            x = y
+        return x
 
     def __call__(self, k: int, y_true: np.ndarray) -> np.ndarray:
         y = self.scale * np.asarray(y_true, dtype=float) + self.offset[k]

@@ -1,0 +1,236 @@
+"""Closed-loop runs: nonlinear plant + controller + reference + dither + sensors + effects -> Run.
+
+The loop, per controller sample t_j = j * Ts (Ts = ``controller.sample_time``)::
+
+    y_true(t_j)  --anti-alias (optional, at every controller sample)-->
+                 --sensors at sensor instants t_k = k / rate, held in between--> y_meas
+    T_delta(t_j) = controller(t_j, y_meas) + dither(t_j)        (held over [t_j, t_j+1))
+
+so the controller sees only measured signals, and the sensor period must be a whole
+multiple of the controller period (a controller slower than its sensors would leave sensor
+samples nobody computed: refused with a ValueError).  The run is sampled at the sensor
+rate and records, at each sensor instant t_k:
+
+- ``signals``: exactly the measured vector the controller received (MEASURED channels) and
+  the logged steer torque ``T_delta`` (the command incl. dither, through the sensor model's
+  ``T_delta`` channel if it has one; exact by default);
+- ``truth``: the true MEASURED signals, the torque applied from t_k on (after input-side
+  effects, when the plant reports it), pitch ``theta`` and rear contact ``x``, ``y``;
+- ``dither`` [N m] and ``reference`` [rad] at t_k.
+
+The speed is held by the plant's ideal rear drive (``mode="held"``, the default) or
+coasts (``mode="coast"``).  A fall (|roll| above the plant's limit) ends the run early;
+the run is kept, truncated at the fall, with ``meta["fell_at"]`` [s] (None if upright).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from sim.conventions import MEASURED
+from sim.parameters import BicycleParameters
+
+from .run import Run
+from .sensors import Sensors, channel_noise
+from .store import package_version
+
+__all__ = ["simulate_run"]
+
+
+def _describe(obj: Any) -> Any:
+    if obj is None:
+        return None
+    if hasattr(obj, "describe"):
+        return obj.describe()
+    return {"name": getattr(obj, "__name__", type(obj).__name__)}
+
+
+class SampledLoop:
+    """The controller callable handed to the integrator (see the module docstring).
+
+    Records y_true, y_meas, the commanded torque and the dither at sensor instants.
+    """
+
+    def __init__(
+        self,
+        controller: Callable[[float, Sequence[float]], float],
+        sensors: Sensors,
+        seed: int,
+        ctrl_dt: float,
+        n_sensor: int,
+        dither: Callable[[float], float] | None,
+    ) -> None:
+        self.controller = controller
+        self.dither = dither
+        self.ctrl_dt = ctrl_dt
+        self.m = sensors.decimation(ctrl_dt)
+        self.chain = sensors.chain(seed, n_sensor, MEASURED, fine_dt=ctrl_dt)
+        nm = len(MEASURED)
+        self.y_true = np.zeros((n_sensor, nm))
+        self.y_meas = np.zeros((n_sensor, nm))
+        self.u = np.zeros(n_sensor)
+        self.d = np.zeros(n_sensor)
+        self.n_rec = 0
+        self._t_last: float | None = None
+        self._u_last = 0.0
+        self._meas = None
+
+    def __call__(self, t: float, y: Sequence[float]) -> float:
+        if t == self._t_last:
+            return self._u_last
+        j = round(t / self.ctrl_dt)
+        y = np.asarray(y, dtype=float)
+        yf = self.chain.filter(y)
+        k, r = divmod(j, self.m)
+        if r == 0 and k < self.u.size:
+            meas = self.chain(k, yf)
+            self._meas = meas
+            self.y_true[k] = y
+            self.y_meas[k] = meas
+        elif self._meas is None:
+            raise ValueError(f"controller first called at t={t} s, off the sensor grid")
+        u = float(self.controller(t, self._meas.tolist()))
+        d = float(self.dither(t)) if self.dither is not None else 0.0
+        u += d
+        if r == 0 and k < self.u.size:
+            self.u[k] = u
+            self.d[k] = d
+            self.n_rec = k + 1
+        self._t_last = t
+        self._u_last = u
+        return u
+
+
+def simulate_run(
+    bicycle: BicycleParameters,
+    controller,
+    speed: float,
+    duration: float = 50.0,
+    reference: Callable[[float], float] | None = None,
+    dither: Callable[[float], float] | None = None,
+    sensors: Sensors | None = None,
+    effects: Sequence[Any] = (),
+    seed: int = 0,
+    mode: str = "held",
+    initial: dict[str, float] | None = None,
+    lateral_force: Callable[[float], float] | None = None,
+    **integrator_options: Any,
+) -> Run:
+    """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
+
+    bicycle: parameters; controller: a ``controllers`` controller (``sample_time``,
+    ``reset()``, ``__call__(t, y)``, ``describe()``); reference: roll reference [rad]
+    installed as ``controller.reference`` (None keeps the controller's own); dither:
+    steer-torque dither t -> N m added to the command (None: none); sensors: the
+    instruments (default :meth:`Sensors.default`, 100 Hz); effects: ``sim.effects``
+    objects; seed: sensor-noise seed (the dither carries its own seed); mode: ``held``
+    or ``coast`` speed; initial: initial roll/steer values in rad, rad/s (keys phi, delta,
+    phidot, deltadot; default upright); lateral_force: t -> F [N] (None: none);
+    integrator_options go to ``sim.integrate.simulate`` (e.g. ``step``, ``fall_angle``).
+    """
+    speed = float(speed)
+    if not (math.isfinite(speed) and speed > 0):
+        raise ValueError(f"speed must be > 0 m/s, got {speed}")
+    duration = float(duration)
+    if not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    sensors = Sensors.default() if sensors is None else sensors
+    ctrl_dt = float(controller.sample_time)
+    if sensors.dt < ctrl_dt * (1 - 1e-9):
+        raise ValueError(
+            f"sensor rate {sensors.rate} Hz is faster than the controller "
+            f"({1 / ctrl_dt:g} Hz); run the controller at least as fast as its sensors"
+        )
+    if reference is not None:
+        controller.reference = reference
+    controller.reset()
+    n_sensor = int(round(duration * sensors.rate)) + 1
+    loop = SampledLoop(controller, sensors, seed, ctrl_dt, n_sensor, dither)
+    traj = _integrate(
+        bicycle, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force,
+        integrator_options,
+    )  # fmt: skip
+    n = loop.n_rec
+    if n < 2:
+        raise ValueError(f"the run ended after {n} sensor sample(s) (fell at {traj.fell_at} s)")
+    t = np.arange(n) / sensors.rate
+    signals = {name: loop.y_meas[:n, i].copy() for i, name in enumerate(MEASURED)}
+    truth = {name: loop.y_true[:n, i].copy() for i, name in enumerate(MEASURED)}
+    torque = loop.u[:n].copy()
+    ch = sensors.channel("T_delta")
+    signals["T_delta"] = torque if ch.ideal else ch.apply(torque, channel_noise(seed, "T_delta", n))
+    truth.update(_trajectory_extras(traj, t))
+    ref = controller.reference
+    reference_arr = np.array([float(ref(tk)) for tk in t])
+    fell_at = None if traj.fell_at is None else float(traj.fell_at)
+    meta = {
+        "source": "simulated",
+        "bikeid_version": package_version(),
+        "speed": speed,
+        "duration": duration,
+        "seed": int(seed),
+        "fell_at": fell_at,
+        "bicycle": {"name": getattr(bicycle, "name", "custom"), "parameters": bicycle.as_dict()},
+        "controller": controller.describe(),
+        "reference": _describe(ref),
+        "dither": _describe(dither),
+        "lateral_force": _describe(lateral_force),
+        "sensors": sensors.describe(),
+        "effects": [_describe(e) for e in effects],
+        "plant": {"model": "whipple-nonlinear", "initial": initial or {}, **traj.meta},
+    }
+    return Run(
+        t=t,
+        signals=signals,
+        truth=truth,
+        dither=loop.d[:n].copy(),
+        reference=reference_arr,
+        meta=meta,
+    )
+
+
+def _integrate(
+    bicycle, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options
+):
+    """Run ``sim.integrate.simulate`` with ``loop`` as the controller; returns its Trajectory."""
+    from sim.integrate import simulate
+    from sim.nonlinear import WhippleBicycle
+
+    bike = WhippleBicycle(bicycle)
+    init = dict(initial or {})
+    unknown = set(init) - {"phi", "delta", "phidot", "deltadot"}
+    if unknown:
+        raise ValueError(
+            f"unknown initial values {sorted(unknown)}; use phi, delta, phidot, deltadot"
+        )
+    x0 = bike.state(speed, **init)
+    inputs = None
+    if lateral_force is not None:
+        n = int(round(duration / ctrl_dt)) + 1
+        inputs = {"F": np.array([float(lateral_force(k * ctrl_dt)) for k in range(n)])}
+    options = dict(options)
+    for key in ("controller", "dt", "inputs", "measure", "effects", "mode"):
+        if key in options:
+            raise ValueError(f"integrator option {key!r} is set by simulate_run; do not pass it")
+    return simulate(
+        bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
+        effects=list(effects) or None, **options,
+    )  # fmt: skip
+
+
+def _trajectory_extras(traj, t: np.ndarray) -> dict[str, np.ndarray]:
+    """Applied inputs, pitch and contact positions of the trajectory at sensor instants."""
+    tt = np.asarray(traj.t, dtype=float)
+    idx = np.rint(t / (tt[1] - tt[0])).astype(int)
+    if idx.max() >= tt.size or not np.allclose(tt[idx], t, rtol=0, atol=1e-9):
+        raise ValueError("plant trajectory does not contain the sensor instants")  # a bug
+    out = {"T_delta": traj.signal("T_delta")[idx]}
+    if np.any(traj.signal("F") != 0):
+        out["F"] = traj.signal("F")[idx]
+    for name in ("theta", "x", "y", "xF", "yF"):
+        out[name] = np.asarray(traj.signal(name), dtype=float)[idx]
+    return out

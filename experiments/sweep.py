@@ -1,0 +1,382 @@
+"""Resumable, deterministic, parallel sweeps of closed-loop runs over speeds and seeds.
+
+A sweep is one controller run at every (speed, seed) of a grid.  Guarantees:
+
+- **Deterministic.**  Run (speed, seed) draws all its randomness (dither, sensor noise)
+  from ``numpy.random.SeedSequence([seed, round(speed * 1e6), crc32(controller)])``,
+  never from worker order, so the stored data are bit-identical whatever ``workers``
+  or Dask cluster computed them (the file is consolidated in grid order).
+- **Resumable.**  Every finished run is written atomically as its own file
+  ``FILE.h5.parts/<run>.h5`` (HDF5, see :mod:`dataset.store`); when all are done they
+  are copied into ``FILE.h5`` by one atomic replace and the parts folder is removed.
+  Killed at any moment (even SIGKILL) and started again with the same arguments, a sweep
+  reuses every valid part and every run already in ``FILE.h5`` and computes only the
+  missing ones; ``FILE.h5`` is at all times either absent, the previous complete file,
+  or the new complete file.  Runs already in ``FILE.h5`` that the new grid does not
+  list are kept.  A lock file (``flock``) refuses a second sweep on the same output.
+- **Parallel.**  ``workers`` local processes (:class:`concurrent.futures.ProcessPoolExecutor`),
+  or a Dask cluster (``dask="local"`` starts a ``LocalCluster`` of ``workers`` processes;
+  otherwise a scheduler address).  Results travel back to this process, which alone
+  writes files, so Dask workers need no shared file system.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import math
+import os
+import shutil
+import sys
+import time
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dataset.run import Run
+from dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
+
+__all__ = [
+    "CONTROLLERS",
+    "SweepReport",
+    "SweepSpec",
+    "Task",
+    "run_seed",
+    "run_sweep",
+    "simulate_task",
+]
+
+CONTROLLERS = ("fuzzy", "pid", "pole")
+REGISTRY_NAMES = {"fuzzy": "fuzzy", "pid": "pid", "pole": "pole-placement"}
+REFERENCES = ("chirp", "zero")
+SENSORS = ("default", "ideal")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run of a sweep: its group name, speed [m/s] and user seed."""
+
+    name: str
+    speed: float
+    seed: int
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """Everything that defines a sweep's runs (all JSON-serializable).
+
+    controller: ``fuzzy``, ``pid`` or ``pole`` (``controllers.registry`` defaults);
+    speeds [m/s]; seeds (non-negative integers); duration [s]; bicycle: a name for
+    ``sim.parameters.by_name``; reference: ``chirp`` (roll chirp of ``chirp_amplitude``
+    [rad], 0.05 -> 0.5 Hz over the run) or ``zero``; dither: uniform dither amplitude
+    [N m] held ``dither_hold`` [s] (0 = none); sensors: ``default`` or ``ideal`` at
+    ``sensor_rate`` [Hz]; sample_time: controller period [s] (at most the sensor period);
+    extra: keywords for :func:`dataset.closed_loop.simulate_run` (e.g. ``mode``).
+    Controllers are ``controllers.registry`` defaults; pole placement is designed at the
+    run's speed (``design_speed``), PID and fuzzy schedule on the measured speed.
+    """
+
+    controller: str
+    speeds: tuple[float, ...]
+    seeds: tuple[int, ...] = (0,)
+    duration: float = 50.0
+    bicycle: str = "benchmark"
+    reference: str = "chirp"
+    chirp_amplitude: float = math.radians(3.0)
+    dither: float = 1.0
+    dither_hold: float = 0.01
+    sensors: str = "default"
+    sensor_rate: float = 100.0
+    sample_time: float = 0.01
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(
+                f"unknown controller {self.controller!r}; choose one of {', '.join(CONTROLLERS)}"
+            )
+        if self.reference not in REFERENCES:
+            raise ValueError(f"unknown reference {self.reference!r}; choose {REFERENCES}")
+        if self.sensors not in SENSORS:
+            raise ValueError(f"unknown sensors {self.sensors!r}; choose {SENSORS}")
+        speeds = tuple(float(v) for v in np.atleast_1d(self.speeds))
+        if not speeds or not all(math.isfinite(v) and v > 0 for v in speeds):
+            raise ValueError(f"sweep speeds must be positive and finite, got {speeds}")
+        seeds = tuple(int(s) for s in np.atleast_1d(self.seeds))
+        if not seeds or any(s < 0 or s != f for s, f in zip(seeds, np.atleast_1d(self.seeds))):
+            raise ValueError(f"sweep seeds must be non-negative integers, got {self.seeds}")
+        if not (math.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"sweep duration must be > 0 s, got {self.duration}")
+        if not (math.isfinite(self.dither) and self.dither >= 0):
+            raise ValueError(f"dither amplitude must be >= 0 N m, got {self.dither}")
+        object.__setattr__(self, "speeds", speeds)
+        object.__setattr__(self, "seeds", seeds)
+        names = [t.name for t in self.tasks()]
+        if len(set(names)) != len(names):
+            raise ValueError("sweep speeds must differ by at least 1 mm/s (run names collide)")
+
+    def tasks(self) -> list[Task]:
+        """The grid, speed-major then seed, in file order."""
+        return [
+            Task(f"{self.controller}_v{v:07.3f}_s{s}", v, s)
+            for v in self.speeds
+            for s in self.seeds
+        ]
+
+    def settings(self) -> dict[str, Any]:
+        """What must match for runs to be reused (everything but the grid)."""
+        d = asdict(self)
+        del d["speeds"], d["seeds"]
+        return d
+
+
+def run_seed(seed: int, speed: float, controller: str) -> int:
+    """The 32-bit seed of run (seed, speed, controller), independent of worker order."""
+    ss = np.random.SeedSequence([int(seed), round(speed * 1e6), zlib.crc32(controller.encode())])
+    return int(ss.generate_state(1)[0])
+
+
+def simulate_task(spec: SweepSpec, task: Task) -> Run:
+    """Simulate one run of ``spec`` (runs in a worker process)."""
+    from controllers.excitation import ChirpReference, UniformDither, ZeroReference
+    from controllers.registry import make
+    from dataset.closed_loop import simulate_run
+    from dataset.sensors import Sensors
+    from sim.parameters import by_name
+
+    seed = run_seed(task.seed, task.speed, spec.controller)
+    child = np.random.SeedSequence(seed).spawn(2)
+    if spec.reference == "chirp":
+        reference = ChirpReference(
+            amplitude=spec.chirp_amplitude, f0=0.05, f1=0.5, duration=spec.duration
+        )
+    else:
+        reference = ZeroReference()
+    dither = None
+    if spec.dither > 0:
+        dither = UniformDither(spec.dither, spec.dither_hold, int(child[0].generate_state(1)[0]))
+    if spec.sensors == "default":
+        sensors = Sensors.default(rate=spec.sensor_rate)
+    else:
+        sensors = Sensors.ideal(rate=spec.sensor_rate)
+    bicycle = by_name(spec.bicycle)
+    options: dict[str, Any] = {"sample_time": spec.sample_time}
+    if spec.controller == "pole":  # placed on the linear model at the run's speed
+        options["design_speed"] = task.speed
+    controller = make(REGISTRY_NAMES[spec.controller], bicycle, **options)
+    run = simulate_run(
+        bicycle,
+        controller,
+        task.speed,
+        duration=spec.duration,
+        reference=reference,
+        dither=dither,
+        sensors=sensors,
+        seed=int(child[1].generate_state(1)[0]),
+        **spec.extra,
+    )
+    run.meta["sweep"] = {"settings": spec.settings(), "seed": task.seed, "run_seed": seed}
+    return run
+
+
+@dataclass
+class SweepReport:
+    """What a sweep did: file, counts, fallen runs (name -> time [s]), wall time [s]."""
+
+    out: Path
+    total: int
+    computed: int
+    reused: int
+    fell: dict[str, float]
+    elapsed: float
+
+    def summary(self) -> str:
+        lines = [
+            f"wrote {self.out}: {self.total} runs (computed {self.computed}, reused "
+            f"{self.reused}) in {self.elapsed:.1f} s"
+        ]
+        if self.fell:
+            lines.append(f"{len(self.fell)} run(s) fell (kept, flagged in meta['fell_at']):")
+            lines += [f"  {name}: fell at {t:.2f} s" for name, t in self.fell.items()]
+        else:
+            lines.append("no run fell")
+        return "\n".join(lines)
+
+
+def parts_dir(out: Path) -> Path:
+    return out.with_name(out.name + ".parts")
+
+
+@contextlib.contextmanager
+def _lock(parts: Path) -> Iterator[None]:
+    parts.mkdir(parents=True, exist_ok=True)
+    fh = open(parts / ".lock", "w")  # noqa: SIM115 - held for the whole sweep
+    try:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(
+                f"another sweep is writing {parts.name[: -len('.parts')]}; wait for it or use "
+                "another --out"
+            ) from None
+        yield
+    finally:
+        fh.close()
+
+
+def _check_settings(where: Path, found: Any, spec: SweepSpec) -> None:
+    if found != spec.settings():
+        want = spec.settings()
+        diff = sorted(
+            k for k in set(want) | set(found or {}) if (found or {}).get(k) != want.get(k)
+        )
+        raise ValueError(
+            f"{where} was made by a sweep with different settings ({', '.join(diff)}); use "
+            "another --out or delete it"
+        )
+
+
+def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None]):
+    """Runs already done: name -> source file, after validation."""
+    done: dict[str, Path] = {}
+    for tmp in parts.glob(".*.tmp"):  # left by a killed atomic write (we hold the lock)
+        tmp.unlink(missing_ok=True)
+    for tmp in out.parent.glob(f".{out.name}.*.tmp"):
+        tmp.unlink(missing_ok=True)
+    extra: list[str] = []
+    wanted = {t.name for t in spec.tasks()}
+    if out.exists():
+        _check_settings(out, file_attrs(out).get("sweep"), spec)
+        for name in list_runs(out):
+            done[name] = out
+            if name not in wanted:
+                extra.append(name)
+    for part in sorted(parts.glob("*.h5")):
+        name = part.stem
+        if name in done:
+            continue
+        try:
+            run = read_run(part, name)
+        except (ValueError, KeyError) as exc:
+            log(f"discarding damaged part {part.name}: {str(exc).splitlines()[0]}")
+            part.unlink()
+            continue
+        _check_settings(part, run.meta.get("sweep", {}).get("settings"), spec)
+        done[name] = part
+    return done, extra
+
+
+def _execute(
+    spec: SweepSpec, todo: Sequence[Task], workers: int, dask: str | None
+) -> Iterator[tuple[Task, Run]]:
+    if dask:
+        yield from _execute_dask(spec, todo, workers, dask)
+    elif workers == 1:
+        for task in todo:
+            yield task, simulate_task(spec, task)
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(simulate_task, spec, task): task for task in todo}
+            try:
+                for fut in as_completed(futures):
+                    yield futures[fut], fut.result()
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
+
+
+def _execute_dask(
+    spec: SweepSpec, todo: Sequence[Task], workers: int, address: str
+) -> Iterator[tuple[Task, Run]]:
+    try:
+        from distributed import Client, LocalCluster
+        from distributed import as_completed as dask_completed
+    except ImportError:
+        raise ValueError(
+            "--dask needs the 'distributed' package: pip install 'bikeid[dask]'"
+        ) from None
+    cluster = None
+    if address == "local":
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(address, timeout=30)
+        except OSError as exc:
+            raise ValueError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
+    try:
+        futures = [
+            client.submit(simulate_task, spec, task, pure=False, key=f"bikeid-{task.name}")
+            for task in todo
+        ]
+        by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
+        for fut, run in dask_completed(futures, with_results=True):
+            yield by_key[fut.key], run
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_sweep(
+    spec: SweepSpec,
+    out: str | Path,
+    workers: int = 1,
+    dask: str | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] | None = None,
+) -> SweepReport:
+    """Run (or finish) the sweep ``spec`` into the HDF5 file ``out``; see the module doc."""
+    t0 = time.perf_counter()
+    if int(workers) != workers or workers < 1:
+        raise ValueError(f"--workers must be a positive integer, got {workers}")
+    workers = int(workers)
+    out = Path(out)
+    if out.suffix not in (".h5", ".hdf5"):
+        raise ValueError(f"sweep output {out} must end in .h5 or .hdf5")
+    log = log or (lambda msg: print(msg, file=sys.stderr))
+    parts = parts_dir(out)
+    tasks = spec.tasks()
+    with _lock(parts):
+        done, extra = _existing(out, parts, spec, log)
+        todo = [t for t in tasks if t.name not in done]
+        reused = len(tasks) - len(todo)
+        if todo:
+            from tqdm import tqdm
+
+            bar = tqdm(
+                total=len(todo),
+                desc=f"sweep {spec.controller}",
+                unit="run",
+                file=sys.stderr,
+                disable=not progress,
+            )
+            with bar:
+                for task, run in _execute(spec, todo, workers, dask):
+                    part = parts / f"{task.name}.h5"
+                    write_runs(part, [run], names=[task.name])
+                    done[task.name] = part
+                    bar.update(1)
+        names = [t.name for t in tasks] + extra
+        if any(done[n] != out for n in names) or not out.exists():
+            copy_runs(out, [(done[n], n) for n in names], attrs={"sweep": spec.settings()})
+    shutil.rmtree(parts, ignore_errors=True)
+    fell = {}
+    from dataset.store import read_runs
+
+    for name, run in zip(names, read_runs(out, names), strict=True):
+        if run.meta.get("fell_at") is not None:
+            fell[name] = float(run.meta["fell_at"])
+    return SweepReport(out, len(tasks), len(todo), reused, fell, time.perf_counter() - t0)
+
+
+def default_workers() -> int:
+    return max(1, min(os.cpu_count() or 1, 8))
