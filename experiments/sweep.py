@@ -43,6 +43,8 @@ from dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
 
 __all__ = [
     "CONTROLLERS",
+    "stabilization_markdown",
+    "stabilization_table",
     "SweepReport",
     "SweepSpec",
     "Task",
@@ -107,8 +109,9 @@ class SweepSpec:
         speeds = tuple(float(v) for v in np.atleast_1d(self.speeds))
         if not speeds or not all(math.isfinite(v) and v > 0 for v in speeds):
             raise ValueError(f"sweep speeds must be positive and finite, got {speeds}")
-        seeds = tuple(int(s) for s in np.atleast_1d(self.seeds))
-        if not seeds or any(s < 0 or s != f for s, f in zip(seeds, np.atleast_1d(self.seeds))):
+        raw = list(np.atleast_1d(self.seeds))
+        seeds = tuple(int(s) for s in raw)
+        if not seeds or any(s < 0 or s != f for s, f in zip(seeds, raw, strict=True)):
             raise ValueError(f"sweep seeds must be non-negative integers, got {self.seeds}")
         if not (math.isfinite(self.duration) and self.duration > 0):
             raise ValueError(f"sweep duration must be > 0 s, got {self.duration}")
@@ -272,16 +275,21 @@ def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None
 
 
 def _execute(
-    spec: SweepSpec, todo: Sequence[Task], workers: int, dask: str | None
-) -> Iterator[tuple[Task, Run]]:
+    fn: Callable[[SweepSpec, Task], Any],
+    spec: SweepSpec,
+    todo: Sequence[Task],
+    workers: int,
+    dask: str | None,
+) -> Iterator[tuple[Task, Any]]:
+    """``fn(spec, task)`` for every task, in completion order."""
     if dask:
-        yield from _execute_dask(spec, todo, workers, dask)
+        yield from _execute_dask(fn, spec, todo, workers, dask)
     elif workers == 1:
         for task in todo:
-            yield task, simulate_task(spec, task)
+            yield task, fn(spec, task)
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(simulate_task, spec, task): task for task in todo}
+            futures = {pool.submit(fn, spec, task): task for task in todo}
             try:
                 for fut in as_completed(futures):
                     yield futures[fut], fut.result()
@@ -292,15 +300,17 @@ def _execute(
 
 
 def _execute_dask(
-    spec: SweepSpec, todo: Sequence[Task], workers: int, address: str
-) -> Iterator[tuple[Task, Run]]:
+    fn: Callable[[SweepSpec, Task], Any],
+    spec: SweepSpec,
+    todo: Sequence[Task],
+    workers: int,
+    address: str,
+) -> Iterator[tuple[Task, Any]]:
     try:
         from distributed import Client, LocalCluster
         from distributed import as_completed as dask_completed
     except ImportError:
-        raise ValueError(
-            "--dask needs the 'distributed' package: pip install 'bikeid[dask]'"
-        ) from None
+        raise ValueError("--dask needs 'distributed': pip install 'bikeid[dask]'") from None
     cluster = None
     if address == "local":
         cluster = LocalCluster(
@@ -314,12 +324,12 @@ def _execute_dask(
             raise ValueError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
     try:
         futures = [
-            client.submit(simulate_task, spec, task, pure=False, key=f"bikeid-{task.name}")
+            client.submit(fn, spec, task, pure=False, key=f"bikeid-{fn.__name__}-{task.name}")
             for task in todo
         ]
         by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
-        for fut, run in dask_completed(futures, with_results=True):
-            yield by_key[fut.key], run
+        for fut, result in dask_completed(futures, with_results=True):
+            yield by_key[fut.key], result
     finally:
         client.close()
         if cluster is not None:
@@ -360,7 +370,7 @@ def run_sweep(
                 disable=not progress,
             )
             with bar:
-                for task, run in _execute(spec, todo, workers, dask):
+                for task, run in _execute(simulate_task, spec, todo, workers, dask):
                     part = parts / f"{task.name}.h5"
                     write_runs(part, [run], names=[task.name])
                     done[task.name] = part
@@ -380,3 +390,68 @@ def run_sweep(
 
 def default_workers() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
+
+
+# -- stabilization table -------------------------------------------------------------------
+def stabilization_task(spec: SweepSpec, task: Task) -> dict[str, Any]:
+    """One cell of the stabilization table: upright?, RMS tracking error, peak torque."""
+    row: dict[str, Any] = {"controller": spec.controller, "speed": task.speed}
+    try:
+        run = simulate_task(spec, task)
+    except ValueError as exc:  # e.g. pole placement at an uncontrollable speed
+        return {**row, "upright": False, "fell_at": None, "error": str(exc).splitlines()[0],
+                "rms_error_deg": None, "peak_torque": None}  # fmt: skip
+    err = run.reference - run.true("phi")
+    return {
+        **row,
+        "upright": run.meta["fell_at"] is None,
+        "fell_at": run.meta["fell_at"],
+        "error": None,
+        "rms_error_deg": math.degrees(float(np.sqrt(np.mean(err**2)))),
+        "peak_torque": float(np.max(np.abs(run.true("T_delta")))),
+    }
+
+
+def stabilization_table(
+    speeds: Sequence[float],
+    duration: float = 50.0,
+    controllers: Sequence[str] = CONTROLLERS,
+    workers: int = 1,
+    dask: str | None = None,
+    progress: bool = True,
+    **spec_options: Any,
+) -> list[dict[str, Any]]:
+    """Run every controller at every speed (chirp reference, dither, default sensors) on the
+    nonlinear model; one row per (controller, speed), in that order."""
+    from tqdm import tqdm
+
+    jobs = [(SweepSpec(c, tuple(speeds), (0,), duration, **spec_options)) for c in controllers]
+    todo = [(spec, task) for spec in jobs for task in spec.tasks()]
+    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    with tqdm(total=len(todo), desc="stabilization", unit="run", file=sys.stderr,
+              disable=not progress) as bar:  # fmt: skip
+        for spec in jobs:
+            for task, row in _execute(stabilization_task, spec, spec.tasks(), workers, dask):
+                rows[(spec.controller, task.name)] = row
+                bar.update(1)
+    return [rows[(spec.controller, t.name)] for spec, t in todo]
+
+
+def stabilization_markdown(rows: Sequence[dict[str, Any]]) -> str:
+    """The table as markdown: one line per (controller, speed)."""
+    lines = [
+        "| controller | speed [m/s] | upright | RMS roll tracking error [deg] "
+        "| peak steer torque [N m] |",
+        "|---|---:|---|---:|---:|",
+    ]
+    for r in rows:
+        if r["error"]:
+            status = f"design failed: {r['error']}"
+        elif r["upright"]:
+            status = "yes"
+        else:
+            status = f"fell at {r['fell_at']:.2f} s"
+        rms = "" if r["rms_error_deg"] is None else f"{r['rms_error_deg']:.3f}"
+        peak = "" if r["peak_torque"] is None else f"{r['peak_torque']:.2f}"
+        lines.append(f"| {r['controller']} | {r['speed']:g} | {status} | {rms} | {peak} |")
+    return "\n".join(lines) + "\n"
