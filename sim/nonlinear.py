@@ -397,7 +397,7 @@ class WhippleBicycle:
 
     # -- linearization -------------------------------------------------------------------
     def linearize(
-        self, v: float, step: float = 1e-3, lateral_force: bool = False
+        self, v: float, step: float = 1e-3, lateral_force: bool = False, effects=None
     ) -> tuple[np.ndarray, np.ndarray]:
         """A, B about upright straight running at speed v, by finite differences.
 
@@ -405,12 +405,13 @@ class WhippleBicycle:
         inputs [T_phi, T_delta] (+ F if ``lateral_force``), matching
         :func:`sim.linear.state_matrices`.  Fourth-order central differences with
         ``step`` (rad, rad/s); the model is exactly linear in the inputs.
+        Plant-side ``effects`` (:mod:`sim.effects`) are included if given.
         """
         y0 = self.state(v)
         idx = (3, 5, 7, 9)  # phi, delta, phidot, deltadot in STATE
 
         def f(y, r):
-            yd, _ = self.rhs(y, r)
+            yd, _ = self.rhs(y, r, effects=effects)
             return yd[[3, 5, 7, 9]]
 
         zero = np.zeros(4)

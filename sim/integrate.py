@@ -1,0 +1,468 @@
+"""Fixed-step simulation of the nonlinear Whipple bicycle with a sampled controller.
+
+The controller ``u = controller(t, y)`` (``y`` the measurement vector in
+:data:`sim.conventions.MEASURED` order, ``u`` the steer torque T_delta [N m]) runs
+at its own sample time ``dt`` with zero-order hold; the plant advances between
+samples with ``substeps`` classical Runge-Kutta (RK4) steps of ``dt / substeps``
+in a numba kernel.  Sample k at t_k = k dt: measure the state, call the controller,
+hold the command over [t_k, t_k+1).
+
+Per sample the steer torque reaching the plant is
+``T_delta = lag(gain * delayed(controller + open-loop T_delta))`` (input effects of
+:mod:`sim.effects`; the first-order lag is evaluated exactly within the sample).
+Open-loop inputs (T_delta, T_phi, F, T_R) are given on the sample grid and held.
+
+``method="reference"`` integrates each sample interval with
+``scipy.integrate.solve_ivp`` (DOP853, rtol = atol = 1e-12 by default) instead:
+the high-accuracy reference for tests.  Both methods stop cleanly when
+|roll| exceeds ``fall_limit`` (default 60 deg) and report the time
+(``Trajectory.fell_at``), and stop with a message on a non-finite state.
+
+State order, inputs and signs: :mod:`sim.nonlinear`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from .conventions import MEASURED
+from .effects import InputChain, input_chain, plant_vector
+from .nonlinear import INPUTS, WhippleBicycle, outputs, rhs
+from .parameters import BicycleParameters
+
+__all__ = ["Trajectory", "simulate", "simulate_many", "simulate_reference"]
+
+DEFAULT_DT = 0.01
+DEFAULT_SUBSTEPS = 4
+DEFAULT_FALL_LIMIT = math.radians(60.0)
+
+_OK, _FELL, _NONFINITE = 0, 1, 2
+
+
+@dataclass
+class Trajectory:
+    """A simulated run on the controller sample grid.
+
+    t : (N,) sample times [s].
+    y : (N, 8) true measurements, :data:`sim.conventions.MEASURED` order.
+    measured : (N, 8) what the controller saw (``measure`` hook applied; = y without one).
+    theta : (N,) rear-frame pitch from upright [rad], positive nose up.
+    rear, front : (N, 2) rear / front contact points in the ground frame [m].
+    inputs : (N, 4) inputs acting at each sample instant [T_delta, T_phi, F, T_R]
+        (T_delta after input effects; T_R the drive torque in held mode).
+    command : (N,) the controller's steer-torque command [N m] (0 without one).
+    states : (N, 10) integration states (:data:`sim.nonlinear.STATE`).
+    fell_at : time [s] at which |roll| first exceeded the fall limit, else None.
+    stop_reason : None, or why the run ended early.
+    energy : (N,) total energy [J] if requested.
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    measured: np.ndarray
+    theta: np.ndarray
+    rear: np.ndarray
+    front: np.ndarray
+    inputs: np.ndarray
+    command: np.ndarray
+    states: np.ndarray
+    fell_at: float | None = None
+    stop_reason: str | None = None
+    energy: np.ndarray | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def signal(self, name: str) -> np.ndarray:
+        """One true signal by name (MEASURED, INPUTS, 'theta', 'x', 'y', 'xF', 'yF')."""
+        if name in MEASURED:
+            return self.y[:, MEASURED.index(name)]
+        if name in INPUTS:
+            return self.inputs[:, INPUTS.index(name)]
+        extra = {
+            "theta": self.theta,
+            "x": self.rear[:, 0],
+            "y": self.rear[:, 1],
+            "xF": self.front[:, 0],
+            "yF": self.front[:, 1],
+        }
+        if name not in extra:
+            raise ValueError(
+                f"unknown signal {name!r}; use one of {list(MEASURED) + list(INPUTS) + list(extra)}"
+            )
+        return extra[name]
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """All signals as named columns (time first), e.g. for CSV/JSON output."""
+        cols = {"t": self.t}
+        for name in (*MEASURED, "theta", "x", "y", "xF", "yF", *INPUTS):
+            cols[name] = self.signal(name)
+        if self.energy is not None:
+            cols["energy"] = self.energy
+        return cols
+
+
+# -- compiled kernel -------------------------------------------------------------------------
+@njit(cache=True)
+def _lagged(T0, Tc, tau, s):
+    if tau <= 0.0:
+        return Tc
+    return Tc + (T0 - Tc) * math.exp(-s / tau)
+
+
+@njit(cache=True)
+def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info):
+    """Advance ``y`` over one sample interval with ``nsub`` RK4 steps, in place.
+
+    rc = [T_delta command, T_phi, F, T_R] held over the interval; T_delta is
+    lagged from T0 with time constant tau.  info <- [status, time offset of a
+    stop, T_R at the interval start].  Returns the status (0 ok, 1 fell, 2 bad).
+    """
+    h = dt / nsub
+    k1 = np.empty(10)
+    k2 = np.empty(10)
+    k3 = np.empty(10)
+    k4 = np.empty(10)
+    yt = np.empty(10)
+    r = rc.copy()
+    for s in range(nsub):
+        ts = s * h
+        r[0] = _lagged(T0, rc[0], tau, ts)
+        TR = rhs(y, q5g, p, r, ev, held, k1)
+        if s == 0:
+            info[2] = TR
+        r[0] = _lagged(T0, rc[0], tau, ts + 0.5 * h)
+        for i in range(10):
+            yt[i] = y[i] + 0.5 * h * k1[i]
+        rhs(yt, q5g, p, r, ev, held, k2)
+        for i in range(10):
+            yt[i] = y[i] + 0.5 * h * k2[i]
+        rhs(yt, q5g, p, r, ev, held, k3)
+        r[0] = _lagged(T0, rc[0], tau, ts + h)
+        for i in range(10):
+            yt[i] = y[i] + h * k3[i]
+        rhs(yt, q5g, p, r, ev, held, k4)
+        finite = True
+        for i in range(10):
+            y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            if not math.isfinite(y[i]):
+                finite = False
+        if not finite:
+            info[0] = _NONFINITE
+            info[1] = ts + h
+            return _NONFINITE
+        if abs(y[3]) > phimax:
+            info[0] = _FELL
+            info[1] = ts + h
+            return _FELL
+    info[0] = _OK
+    return _OK
+
+
+@njit(cache=True)
+def _rk4_sample(k, Tc, T0, X, OUT, OL, U, q5g, p, ev, held, tau, dt, nsub, phimax, info):
+    """One controller sample: advance X[k] to X[k + 1], outputs into OUT[k + 1].
+
+    Records the inputs acting at t_k in U[k].  Returns the status of
+    :func:`_rk4_interval`.
+    """
+    y = X[k].copy()
+    rc = OL[k].copy()
+    rc[0] = Tc
+    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info)
+    U[k, 0] = T0
+    U[k, 1] = OL[k, 1]
+    U[k, 2] = OL[k, 2]
+    U[k, 3] = info[2]
+    if status == _OK:
+        for i in range(10):
+            X[k + 1, i] = y[i]
+        outputs(y, q5g, p, OUT[k + 1])
+    return status
+
+
+# -- helpers -----------------------------------------------------------------------------------
+def _as_bike(bike) -> WhippleBicycle:
+    if isinstance(bike, WhippleBicycle):
+        return bike
+    if isinstance(bike, BicycleParameters):
+        return WhippleBicycle(bike)
+    raise ValueError(
+        f"bike must be a WhippleBicycle or BicycleParameters, got {type(bike).__name__}"
+    )
+
+
+def _input_array(inputs, n: int) -> np.ndarray:
+    """Open-loop inputs as an (n, 4) array [T_delta, T_phi, F, T_R] on the sample grid."""
+    out = np.zeros((n, 4))
+    if inputs is None:
+        return out
+    if isinstance(inputs, Mapping):
+        for name, val in inputs.items():
+            if name not in INPUTS:
+                raise ValueError(f"unknown input {name!r}; inputs are {list(INPUTS)}")
+            arr = np.asarray(val, dtype=float)
+            if arr.ndim == 0:
+                arr = np.full(n, float(arr))
+            if arr.shape != (n,):
+                raise ValueError(
+                    f"input {name!r} has shape {arr.shape}; give a scalar or one value per "
+                    f"controller sample ({n},)"
+                )
+            out[:, INPUTS.index(name)] = arr
+    else:
+        arr = np.asarray(inputs, dtype=float)
+        if arr.shape != (n, 4):
+            raise ValueError(
+                f"inputs array has shape {arr.shape}; expected ({n}, 4) columns {list(INPUTS)} "
+                "on the controller sample grid"
+            )
+        out[:] = arr
+    if not np.all(np.isfinite(out)):
+        raise ValueError("open-loop inputs must be finite")
+    return out
+
+
+def _reference_interval(bike, y, q5g, ev, held, rc, T0, tau, dt, phimax, info, rtol, atol):
+    from scipy.integrate import solve_ivp
+
+    r = rc.copy()
+    ydot = np.empty(10)
+
+    def fun(s, yy):
+        r[0] = _lagged(T0, rc[0], tau, s)
+        rhs(yy, q5g, bike.p, r, ev, held, ydot)
+        return ydot.copy()
+
+    def fall(s, yy):
+        return abs(yy[3]) - phimax
+
+    fall.terminal = True
+    r[0] = T0
+    info[2] = rhs(y, q5g, bike.p, r, ev, held, ydot)
+    sol = solve_ivp(fun, (0.0, dt), y, method="DOP853", rtol=rtol, atol=atol, events=fall)
+    if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
+        info[0], info[1] = _NONFINITE, sol.t[-1]
+        return _NONFINITE
+    y[:] = sol.y[:, -1]
+    if sol.status == 1:
+        info[0], info[1] = _FELL, sol.t_events[0][0]
+        return _FELL
+    info[0] = _OK
+    return _OK
+
+
+# -- public API --------------------------------------------------------------------------------
+def simulate(
+    bike: WhippleBicycle | BicycleParameters,
+    x0: np.ndarray,
+    duration: float,
+    *,
+    controller: Callable[[float, np.ndarray], float] | None = None,
+    dt: float = DEFAULT_DT,
+    substeps: int = DEFAULT_SUBSTEPS,
+    mode: str = "coast",
+    inputs: np.ndarray | Mapping[str, Any] | None = None,
+    measure: Callable[[np.ndarray], np.ndarray] | None = None,
+    effects: Sequence[object] | None = None,
+    fall_limit: float = DEFAULT_FALL_LIMIT,
+    energy: bool = False,
+    method: str = "rk4",
+    rtol: float = 1e-12,
+    atol: float = 1e-12,
+) -> Trajectory:
+    """Simulate ``duration`` seconds from state ``x0`` (see :meth:`WhippleBicycle.state`).
+
+    controller : ``controller(t, y) -> T_delta`` [N m] with ``y`` in MEASURED order,
+        called every ``dt`` seconds (``reset()`` is called first if it exists).
+    dt : controller sample time [s]; ``duration`` must be a whole number of samples.
+    substeps : RK4 steps per sample (plant step dt / substeps; default 0.0025 s).
+    mode : ``"coast"`` or ``"held"`` (:mod:`sim.nonlinear`).
+    inputs : open-loop inputs on the sample grid: an (N, 4) array [T_delta, T_phi,
+        F, T_R] or a dict of name -> scalar or (N,) array, N = duration/dt + 1.
+    measure : maps the true measurement vector to what the controller sees.
+    effects : :mod:`sim.effects` objects (plant and input side).
+    fall_limit : |roll| [rad] at which the bicycle is considered fallen.
+    energy : record total energy (kinetic + potential) [J] at every sample.
+    method : ``"rk4"`` (fixed step, numba) or ``"reference"`` (DOP853, rtol/atol).
+    """
+    bike = _as_bike(bike)
+    held = mode == "held"
+    if mode not in ("coast", "held"):
+        raise ValueError(f"mode {mode!r} unknown; use 'coast' or 'held'")
+    if method not in ("rk4", "reference"):
+        raise ValueError(f"method {method!r} unknown; use 'rk4' or 'reference'")
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"sample time dt={dt!r} must be a positive number of seconds")
+    if not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration={duration!r} must be a positive number of seconds")
+    nsteps = int(round(duration / dt))
+    if nsteps < 1 or abs(nsteps * dt - duration) > 1e-9 * max(1.0, duration):
+        raise ValueError(f"duration {duration} s is not a whole number of samples of dt={dt} s")
+    if int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps={substeps!r} must be a positive integer")
+    if not (0 < fall_limit <= math.pi / 2):
+        raise ValueError(f"fall_limit={fall_limit!r} rad must lie in (0, pi/2]")
+    y = np.array(x0, dtype=float)
+    if y.shape != (10,) or not np.all(np.isfinite(y)):
+        raise ValueError(
+            "x0 must be 10 finite numbers in sim.nonlinear.STATE order; build it with "
+            "WhippleBicycle.state(v, phi, delta, ...)"
+        )
+    if abs(y[3]) > fall_limit:
+        raise ValueError(f"initial roll {y[3]} rad is beyond the fall limit {fall_limit} rad")
+    n = nsteps + 1
+    ol = _input_array(inputs, n)
+    if held and np.any(ol[:, 3] != 0.0):
+        raise ValueError("open-loop T_R cannot be given in held mode (the drive holds the speed)")
+    chain: InputChain = input_chain(effects, dt)
+    ev = plant_vector(effects)
+    if controller is not None and hasattr(controller, "reset"):
+        controller.reset()
+
+    q5g = np.array([bike.pitch(y[3], y[5])])
+    info = np.zeros(3)
+    t = dt * np.arange(n)
+    OUT = np.empty((n, 13))  # MEASURED, q5, xR, yR, xF, yF
+    Ym = np.empty((n, 8))
+    U = np.zeros((n, 4))
+    cmd = np.zeros(n)
+    X = np.empty((n, 10))
+    X[0] = y
+    outputs(y, q5g, bike.p, OUT[0])
+    E = np.empty(n) if energy else None
+    nd = chain.delay_samples
+    ring = np.zeros(nd + 1)  # delayed command buffer
+    gain, tau = chain.gain, chain.tau
+    T_applied = 0.0
+    fell_at = None
+    reason = None
+    last = n - 1
+    rk4 = method == "rk4"
+    nsub = int(substeps)
+    for k in range(n):
+        if E is not None:
+            ke, pe = bike.energy(X[k])
+            E[k] = ke + pe
+        if measure is None:
+            ym = OUT[k, :8]
+        else:
+            ym = np.asarray(measure(OUT[k, :8].copy()), dtype=float)
+            if ym.shape != (8,):
+                raise ValueError(
+                    f"measure hook must return 8 values (MEASURED order), got {ym.shape}"
+                )
+        Ym[k] = ym
+        c = 0.0 if controller is None else float(controller(t[k], ym))
+        if not math.isfinite(c):
+            reason = f"controller returned a non-finite steer torque {c} at t={t[k]:.4f} s"
+            last = k
+            break
+        cmd[k] = c
+        ring[k % (nd + 1)] = c + ol[k, 0]
+        Tc = gain * ring[(k + 1) % (nd + 1)] if nd else gain * ring[0]
+        if k < nd:
+            Tc = 0.0
+        if tau <= 0.0:
+            T_applied = Tc
+        if k == n - 1:
+            U[k] = ol[k]
+            U[k, 0] = T_applied
+            if held:
+                r_now = U[k].copy()
+                U[k, 3] = rhs(X[k].copy(), q5g, bike.p, r_now, ev, held, np.empty(10))
+            break
+        if rk4:
+            status = _rk4_sample(
+                k, Tc, T_applied, X, OUT, ol, U, q5g, bike.p, ev, held, tau, dt, nsub,
+                fall_limit, info,
+            )  # fmt: skip
+        else:
+            y = X[k].copy()
+            rc = ol[k].copy()
+            rc[0] = Tc
+            U[k] = ol[k]
+            U[k, 0] = T_applied
+            status = _reference_interval(
+                bike, y, q5g, ev, held, rc, T_applied, tau, dt, fall_limit, info, rtol, atol
+            )
+            U[k, 3] = info[2]
+            X[k + 1] = y
+            if status == _OK:
+                outputs(y, q5g, bike.p, OUT[k + 1])
+        if status == _FELL:
+            fell_at = float(t[k] + info[1])
+            reason = (
+                f"fell: |roll| exceeded {math.degrees(fall_limit):.1f} deg at t={fell_at:.3f} s"
+            )
+            last = k
+            break
+        if status == _NONFINITE:
+            reason = (
+                f"state became non-finite (or pitch had no solution) at t={t[k] + info[1]:.4f} s;"
+                " integration stopped (step too large or configuration far from upright?)"
+            )
+            warnings.warn(reason, RuntimeWarning, stacklevel=2)
+            last = k
+            break
+        T_applied = _lagged(T_applied, Tc, tau, dt)
+    sl = slice(0, last + 1)
+    return Trajectory(
+        t=t[sl],
+        y=OUT[sl, :8],
+        measured=Ym[sl],
+        theta=OUT[sl, 8] - bike.lam,
+        rear=OUT[sl, 9:11],
+        front=OUT[sl, 11:13],
+        inputs=U[sl],
+        command=cmd[sl],
+        states=X[sl],
+        fell_at=fell_at,
+        stop_reason=reason,
+        energy=None if E is None else E[sl],
+        meta={
+            "mode": mode,
+            "dt": dt,
+            "substeps": int(substeps),
+            "method": method,
+            "fall_limit": fall_limit,
+            "bicycle": bike.params.name,
+            "lateral_force_point": list(bike.lateral_force_point),
+        },
+    )
+
+
+def simulate_reference(bike, x0, duration, **kwargs) -> Trajectory:
+    """:func:`simulate` with the adaptive DOP853 reference (rtol = atol = 1e-12)."""
+    kwargs.setdefault("method", "reference")
+    return simulate(bike, x0, duration, **kwargs)
+
+
+def _simulate_kwargs(kwargs: Mapping[str, Any]) -> Trajectory:
+    kw = dict(kwargs)
+    try:
+        bike, x0, duration = kw.pop("bike"), kw.pop("x0"), kw.pop("duration")
+    except KeyError as exc:
+        raise ValueError(f"each run needs 'bike', 'x0' and 'duration'; missing {exc}") from None
+    return simulate(bike, x0, duration, **kw)
+
+
+def simulate_many(runs: Sequence[Mapping[str, Any]], processes: int = 1) -> list[Trajectory]:
+    """Simulate several runs; each a dict of :func:`simulate` arguments
+    (``bike``, ``x0``, ``duration`` and keywords).
+
+    ``processes`` > 1 uses a process pool (controllers and hooks must then be
+    picklable); results keep the order of ``runs``.
+    """
+    runs = list(runs)
+    if processes <= 1 or len(runs) <= 1:
+        return [_simulate_kwargs(r) for r in runs]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=int(processes)) as pool:
+        return list(pool.map(_simulate_kwargs, runs))
