@@ -154,7 +154,11 @@ def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20
 
 def decay_windows(run: Run, segments) -> list[Window]:
     """Free-decay windows of a run from ``dataset.measured.Segment`` rows."""
-    return [_window(run, s.start, s.end, "decay") for s in segments]
+    out = [_window(run, s.start, s.end, "decay") for s in segments]
+    if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
+        for w in out:
+            w.speed = float(run.meta["speed"])
+    return out
 
 
 def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> Window:

@@ -1,0 +1,166 @@
+"""Measured-data commands: ``measured fit|evaluate|report`` and ``data fetch``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .cliutil import atomic_write_text, dump_json, parse_range
+
+DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("measured", help="fit/evaluate the experiment model on measured data")
+    msub = p.add_subparsers(dest="measured_command", metavar="SUBCOMMAND")
+    f = msub.add_parser("fit", help="identify missing effects on some speeds, write MODEL.json")
+    f.add_argument("--data", help=DATA_HELP)
+    f.add_argument("--out", required=True, help="model JSON to write")
+    f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
+    f.add_argument("--max-effects", type=int, default=3)
+    f.set_defaults(func=cmd_fit)
+    e = msub.add_parser("evaluate", help="error before/after per file and speed")
+    e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
+    e.add_argument("--data", help=DATA_HELP)
+    e.add_argument("--speeds", help="speeds to evaluate (default: those not used in the fit)")
+    e.add_argument("--json", action="store_true", help="print JSON")
+    e.set_defaults(func=cmd_evaluate)
+    r = msub.add_parser("report", help="write report.md with before/after figures")
+    r.add_argument("--model", help="MODEL.json (default: fit on the first and third speeds)")
+    r.add_argument("--data", help=DATA_HELP)
+    r.add_argument("--out", required=True, help="output folder")
+    r.set_defaults(func=cmd_report)
+    p.set_defaults(func=lambda a: p.print_help() or 2)
+
+    d = sub.add_parser("data", help="measured data files")
+    dsub = d.add_subparsers(dest="data_command", metavar="SUBCOMMAND")
+    g = dsub.add_parser("fetch", help="download the pinned steer-by-wire logs (needs internet)")
+    g.add_argument("--dest", default="data", help="folder to create tudelft-sbw/ in")
+    g.set_defaults(func=cmd_fetch)
+    d.set_defaults(func=lambda a: d.print_help() or 2)
+
+
+def _speeds(text: str | None):
+    return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
+
+
+def load_decays(data: str | None, speeds=None, exclude=None):
+    """Free-decay windows of all eigen logs, optionally only near the given speeds."""
+    from dataset.measured import data_dir, iter_decays
+    from ident.experiment_model import decay_windows
+
+    root = data_dir(data)
+    out = []
+    for run, segs in iter_decays(root):
+        ws = decay_windows(run, segs)
+        out.extend(ws)
+    if not out:
+        raise ValueError(f"{root}: no free-decay windows (need eigen/*.log.gz and segments.csv)")
+
+    def near(w, lst):
+        return any(abs(w.speed - s) < 0.25 for s in lst)
+
+    if speeds is not None:
+        out = [w for w in out if near(w, speeds)]
+    if exclude:
+        out = [w for w in out if not near(w, exclude)]
+    if not out:
+        have = sorted({round(w.speed, 2) for w in load_decays(data)})
+        raise ValueError(f"no decay windows at the requested speeds; the data has {have} m/s")
+    return out
+
+
+def model_from_json(path: str):
+    from ident.experiment_model import ExperimentModel
+
+    try:
+        obj = json.loads(Path(path).read_text())
+        return ExperimentModel(effects=dict(obj["effects"])), obj
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(f"cannot read model {path}: {exc}") from None
+
+
+def fit_model(windows, max_effects=3) -> dict:
+    from ident.discrepancy import identify
+    from ident.experiment_model import ExperimentModel
+
+    res = identify(ExperimentModel(), windows, max_effects=max_effects)
+    return {
+        "bicycle": "steer-by-wire",
+        "effects": {e.name: float(e.value) for e in res.effects},
+        "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
+        "fit_files": sorted({w.file for w in windows}),
+        "identification": res.as_dict(),
+    }
+
+
+def cmd_fit(args) -> int:
+    if args.max_effects < 0:
+        raise ValueError("--max-effects must be >= 0")
+    ws = load_decays(args.data, _speeds(args.speeds))
+    out = fit_model(ws, args.max_effects)
+    atomic_write_text(args.out, dump_json(out) + "\n")
+    print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    return 0
+
+
+def evaluate_json(model_obj: dict, windows) -> dict:
+    from ident.discrepancy import evaluate
+    from ident.experiment_model import ExperimentModel
+
+    aug = ExperimentModel(effects=dict(model_obj["effects"]))
+    ev = evaluate(ExperimentModel(), aug, windows)
+    ident = model_obj.get("identification", {})
+    std = {e["name"]: e for e in ident.get("effects", [])}
+    effects = [
+        {
+            "name": k,
+            "value": v,
+            "std": std.get(k, {}).get("std"),
+            "unit": std.get(k, {}).get("unit"),
+        }
+        for k, v in model_obj["effects"].items()
+    ]
+    return {
+        "metric": "mean over decay windows of NRMSE ||y_sim - y|| / ||y - mean y|| of roll "
+        "rate and steer angle (simulation from the measured initial state); weave error "
+        "|lambda_model - lambda_data| / |lambda_data|",
+        "verdict": ident.get("verdict"),
+        "effects": effects,
+        "fit_speeds": model_obj.get("fit_speeds"),
+        **ev,
+    }
+
+
+def cmd_evaluate(args) -> int:
+    model, obj = model_from_json(args.model)
+    sp = _speeds(args.speeds)
+    ws = load_decays(args.data, sp, exclude=None if sp else obj.get("fit_speeds"))
+    out = evaluate_json(obj, ws)
+    if args.json:
+        print(dump_json(out))
+    else:
+        for f in out["files"]:
+            print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
+                  f"after {f['error_after']:.3f}")  # fmt: skip
+        s = out["summary"]
+        print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
+              f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f})")  # fmt: skip
+    return 0
+
+
+def cmd_report(args) -> int:
+    from experiments.measured_report import write_report
+
+    path = write_report(args.out, args.data, args.model)
+    print(path)
+    return 0
+
+
+def cmd_fetch(args) -> int:
+    from dataset.measured import fetch
+
+    sums = fetch(args.dest)
+    print(f"fetched {len(sums)} files into {Path(args.dest) / 'tudelft-sbw'}")
+    return 0
