@@ -73,6 +73,7 @@ class SampledLoop:
         self.y_true = np.zeros((n_sensor, nm))
         self.y_meas = np.zeros((n_sensor, nm))
         self.u = np.zeros(n_sensor)
+        self.t = np.zeros(n_sensor)
         self.d = np.zeros(n_sensor)
         self.n_rec = 0
         self._t_last: float | None = None
@@ -98,6 +99,7 @@ class SampledLoop:
         u += d
         if r == 0 and k < self.u.size:
             self.u[k] = u
+            self.t[k] = t
             self.d[k] = d
             self.n_rec = k + 1
         self._t_last = t
@@ -157,7 +159,7 @@ def simulate_run(
     n = loop.n_rec
     if n < 2:
         raise ValueError(f"the run ended after {n} sensor sample(s) (fell at {traj.fell_at} s)")
-    t = np.arange(n) / sensors.rate
+    t = loop.t[:n].copy()  # the instants the controller was called at
     signals = {name: loop.y_meas[:n, i].copy() for i, name in enumerate(MEASURED)}
     truth = {name: loop.y_true[:n, i].copy() for i, name in enumerate(MEASURED)}
     torque = loop.u[:n].copy()
