@@ -40,7 +40,7 @@ from .parameters import BicycleParameters
 __all__ = ["Trajectory", "simulate", "simulate_many", "simulate_reference"]
 
 DEFAULT_DT = 0.01
-DEFAULT_SUBSTEPS = 4
+DEFAULT_SUBSTEPS = 2
 DEFAULT_FALL_LIMIT = math.radians(60.0)
 
 _OK, _FELL, _NONFINITE = 0, 1, 2
@@ -147,6 +147,7 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info):
         for i in range(10):
             yt[i] = y[i] + h * k3[i]
         rhs(yt, q5g, p, r, ev, held, k4)
+        phi_prev = abs(y[3])
         finite = True
         for i in range(10):
             y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
@@ -156,9 +157,9 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info):
             info[0] = _NONFINITE
             info[1] = ts + h
             return _NONFINITE
-        if abs(y[3]) > phimax:
+        if abs(y[3]) > phimax:  # crossing time by linear interpolation within the step
             info[0] = _FELL
-            info[1] = ts + h
+            info[1] = ts + h * (phimax - phi_prev) / (abs(y[3]) - phi_prev)
             return _FELL
     info[0] = _OK
     return _OK
@@ -281,7 +282,7 @@ def simulate(
     controller : ``controller(t, y) -> T_delta`` [N m] with ``y`` in MEASURED order,
         called every ``dt`` seconds (``reset()`` is called first if it exists).
     dt : controller sample time [s]; ``duration`` must be a whole number of samples.
-    substeps : RK4 steps per sample (plant step dt / substeps; default 0.0025 s).
+    substeps : RK4 steps per sample (plant step dt / substeps; default 0.005 s).
     mode : ``"coast"`` or ``"held"`` (:mod:`sim.nonlinear`).
     inputs : open-loop inputs on the sample grid: an (N, 4) array [T_delta, T_phi,
         F, T_R] or a dict of name -> scalar or (N,) array, N = duration/dt + 1.
