@@ -171,3 +171,34 @@ def test_bad_arguments(bike, kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         simulate(bike, bike.state(5.0), **args)
+
+
+def test_cli_simulate_reports_fall_in_one_line(tmp_path, capsys):
+    """`bikeid simulate` writes the run up to the fall and reports the fall time."""
+    from experiments.cli import main
+
+    out = tmp_path / "run.csv"
+    rc = main(["simulate", "--speed", "2", "--duration", "10", "--phi0", "2", "--out", str(out)])
+    msg = capsys.readouterr().out.strip()
+    assert rc == 0 and len(msg.splitlines()) == 1 and "fell" in msg
+    bike = WhippleBicycle(benchmark())
+    tr = simulate(bike, bike.state(2.0, phi=math.radians(2.0)), 10.0)
+    assert f"t={tr.fell_at:.3f} s" in msg
+    data = np.loadtxt(out, delimiter=",", skiprows=2)
+    assert data.shape[0] == len(tr.t)
+    np.testing.assert_allclose(data[:, 2], tr.signal("phi"), rtol=1e-11)
+
+
+def test_cli_simulate_json_roll_rate_feedback(tmp_path):
+    """Roll-rate feedback K = 10 at 5 m/s keeps the benchmark upright for 5 s."""
+    import json
+
+    from experiments.cli import main
+
+    out = tmp_path / "run.json"
+    args = ["simulate", "--speed", "5", "--duration", "5", "--phi0", "5", "--roll-rate-gain",
+            "10", "--out", str(out)]  # fmt: skip
+    assert main(args) == 0
+    run = json.loads(out.read_text())
+    assert run["meta"]["fell_at"] is None
+    assert abs(run["signals"]["phi"][-1]) < abs(run["signals"]["phi"][0])
