@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", required=True, help=CONTROLLER_HELP)
     p.add_argument("--speeds", default="1:15:0.5", help="start:stop:step [m/s], stop included")
     p.add_argument("--duration", type=float, default=50.0, help="run length [s]")
-    p.add_argument("--seeds", default="0:4:1", help="seeds as start:stop:step or a list")
+    p.add_argument("--seeds", default="0:4", help="seeds: a:b (b included), a:b:step or a list")
     p.add_argument("--out", required=True, help="output HDF5 file (.h5)")
     _common(p)
     p.set_defaults(func=cmd_sweep)
@@ -86,6 +86,9 @@ def _options(args: argparse.Namespace) -> dict:
 
 
 def _seeds(text: str) -> tuple[int, ...]:
+    """``a:b`` (step 1, b included), ``a:b:step``, a comma list or one seed."""
+    if text.count(":") == 1:
+        text = text + ":1"
     values = parse_range(text, "--seeds", minimum=0)
     if any(v != int(v) for v in values):
         raise ValueError(f"--seeds {text!r}: seeds must be integers")

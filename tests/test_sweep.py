@@ -234,6 +234,14 @@ def test_cli_bad_input(capsys, tmp_path):
     assert "unknown controller 'nope'" in capsys.readouterr().err
     assert main(["sweep", "--controller", "pid", "--out", str(tmp_path / "x.csv")]) == 2
     assert "must end in .h5" in capsys.readouterr().err
+    assert (
+        main(["sweep", "--controller", "pid", "--seeds", "0.5,1", "--out", str(tmp_path / "y.h5")])
+        == 2
+    )
+    assert "seeds must be integers" in capsys.readouterr().err
+    from experiments.cmd_data import _seeds
+
+    assert _seeds("0:4") == (0, 1, 2, 3, 4) and _seeds("3,7") == (3, 7)
 
 
 def test_store_reads_sweep_written_by_other_tools(tmp_path):
