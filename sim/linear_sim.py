@@ -231,7 +231,10 @@ def simulate(
     n = int(round(duration / dt))
     t = np.arange(n) * dt
     rng = np.random.default_rng(seed)
-    rho = np.max(np.abs(np.linalg.eigvals(closed_loop_matrix(p, speed, controller, dt))))
+    Acl = closed_loop_matrix(p, speed, controller, dt)
+    if controller.law(speed)[1] == 0.0:  # the integrator state does not feed back
+        Acl = Acl[:4, :4]
+    rho = np.max(np.abs(np.linalg.eigvals(Acl)))
     if rho >= 1.0:
         raise ValueError(
             f"the controller {controller.as_dict()} does not stabilize the sampled loop at "

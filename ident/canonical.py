@@ -1,0 +1,144 @@
+"""Chen & Dao's canonical state-space form of the Whipple bicycle (C&D eqs. 2-4).
+
+State x = [phi, phidot, delta, deltadot] (``sim.conventions.CANONICAL_STATE``), one
+input T_delta [N m], outputs y = [phi, delta] [rad]::
+
+        [ 0   1   0   0 ]        [ 0  ]
+    A = [ a1  a2  a3  a4 ],  B = [ b1 ],  C = [[1, 0, 0, 0],
+        [ 0   0   0   1 ]        [ 0  ]        [0, 0, 1, 0]]
+        [ a5  a6  a7  a8 ]       [ b2 ]
+
+From M q'' + v C1 q' + (g K0 + v^2 K2) q = [0, T_delta] (reference §1.4):
+A_l = [[a1, a3], [a5, a7]] = -M^-1 (g K0 + v^2 K2), A_r = [[a2, a4], [a6, a8]] =
+-v M^-1 C1, [b1, b2] = second column of M^-1.  Hence (C&D eq. 4) the odd a's are
+alpha + beta v^2, the even a's gamma v, and b1, b2 do not depend on speed: the
+speed-parameterized vector is [alpha1, alpha3, alpha5, alpha7, beta1, beta3, beta5,
+beta7, gamma2, gamma4, gamma6, gamma8, b1, b2] with alpha = -g M^-1 K0 (entries),
+beta = -M^-1 K2, gamma = -M^-1 C1.
+"""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+
+from sim.conventions import CANONICAL_STATE, LINEAR_STATE
+from sim.linear import CanonicalMatrices
+
+__all__ = [
+    "C_OUT",
+    "SPEED_NAMES",
+    "THETA_NAMES",
+    "canonical_ab",
+    "matrices_from_speed_params",
+    "speed_map",
+    "speed_params_from_matrices",
+    "theta_from_matrices",
+    "to_bikeid_order",
+    "to_canonical_form",
+]
+
+THETA_NAMES = ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "b1", "b2")
+SPEED_NAMES = (
+    "alpha1", "alpha3", "alpha5", "alpha7", "beta1", "beta3", "beta5", "beta7",
+    "gamma2", "gamma4", "gamma6", "gamma8", "b1", "b2",
+)  # fmt: skip
+C_OUT = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+#: (row, column) of a1..a8 in A; b1, b2 sit in rows 1 and 3 of B.
+A_POS = ((1, 0), (1, 1), (1, 2), (1, 3), (3, 0), (3, 1), (3, 2), (3, 3))
+B_POS = (1, 3)
+#: x_bikeid = PERM @ x_canonical
+PERM = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])
+
+
+def canonical_ab(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A (4x4) and B (4x1) from theta = [a1..a8, b1, b2]."""
+    theta = np.asarray(theta, dtype=float)
+    if theta.shape != (10,):
+        raise ValueError(f"theta must hold 10 values a1..a8, b1, b2; got shape {theta.shape}")
+    A = np.zeros((4, 4))
+    A[0, 1] = A[2, 3] = 1.0
+    for (r, c), a in zip(A_POS, theta[:8], strict=True):
+        A[r, c] = a
+    B = np.zeros((4, 1))
+    B[1, 0], B[3, 0] = theta[8], theta[9]
+    return A, B
+
+
+def theta_from_matrices(cm: CanonicalMatrices, v: float) -> np.ndarray:
+    """The exact canonical parameters of the linear model ``cm`` at speed v [m/s]."""
+    Minv = np.linalg.inv(cm.M)
+    Al = -Minv @ cm.stiffness(v)
+    Ar = -Minv @ cm.damping(v)
+    return np.array([Al[0, 0], Ar[0, 0], Al[0, 1], Ar[0, 1],
+                     Al[1, 0], Ar[1, 0], Al[1, 1], Ar[1, 1], Minv[0, 1], Minv[1, 1]])  # fmt: skip
+
+
+def speed_params_from_matrices(cm: CanonicalMatrices) -> np.ndarray:
+    """The exact speed-parameterized vector (:data:`SPEED_NAMES`) of ``cm``."""
+    Minv = np.linalg.inv(cm.M)
+    al, be, ga = -cm.g * Minv @ cm.K0, -Minv @ cm.K2, -Minv @ cm.C1
+    order = ((0, 0), (0, 1), (1, 0), (1, 1))
+    return np.array(
+        [al[i] for i in order] + [be[i] for i in order] + [ga[i] for i in order]
+        + [Minv[0, 1], Minv[1, 1]]
+    )  # fmt: skip
+
+
+def speed_map(v: float) -> np.ndarray:
+    """Linear map S(v) (10x14) with theta(v) = S(v) @ speed_params."""
+    S = np.zeros((10, 14))
+    for k, odd in enumerate((0, 2, 4, 6)):  # a1, a3, a5, a7
+        S[odd, k] = 1.0
+        S[odd, 4 + k] = v**2
+    for k, even in enumerate((1, 3, 5, 7)):  # a2, a4, a6, a8
+        S[even, 8 + k] = v
+    S[8, 12] = S[9, 13] = 1.0
+    return S
+
+
+def matrices_from_speed_params(params: np.ndarray, g: float = 9.81) -> CanonicalMatrices:
+    """M^-1-scaled canonical matrices: M = I, K0 = -alpha / g, K2 = -beta, C1 = -gamma.
+
+    These give the same A(v) and eigenvalues as the true M, C1, K0, K2 (M itself is
+    not identifiable from T_delta alone; only its second column of M^-1, [b1, b2]),
+    so ``sim.linear.eigenvalues_vs_speed`` and ``critical_speeds`` apply directly.
+    """
+    p = np.asarray(params, dtype=float)
+    if p.shape != (14,):
+        raise ValueError(f"need 14 speed parameters {SPEED_NAMES}, got shape {p.shape}")
+    al, be, ga = (p[i : i + 4].reshape(2, 2) for i in (0, 4, 8))
+    return CanonicalMatrices(M=np.eye(2), C1=-ga, K0=-al / g, K2=-be, g=g)
+
+
+def to_bikeid_order(sys: control.StateSpace) -> control.StateSpace:
+    """Permute a canonical-order model to bikeid's x = [phi, delta, phidot, deltadot]."""
+    A, B, C, D = (np.asarray(m) for m in (sys.A, sys.B, sys.C, sys.D))
+    if A.shape != (4, 4):
+        raise ValueError("to_bikeid_order expects a 4-state canonical model")
+    return control.ss(PERM @ A @ PERM.T, PERM @ B, C @ PERM.T, D, sys.dt,
+                      inputs=sys.input_labels, outputs=sys.output_labels,
+                      states=list(LINEAR_STATE))  # fmt: skip
+
+
+def to_canonical_form(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """theta of the canonical form similar to (A, B, C) (continuous time, 2 outputs).
+
+    The transformation z = T x with T = [c1; c1 A; c2; c2 A] makes z = [y1, y1', y2,
+    y2']; rows 1 and 3 of T B (which are zero for a true mechanical system) are dropped.
+    Raises ValueError when T is singular (the pair (A, C) has other observability indices).
+    """
+    c1, c2 = C[0], C[1]
+    T = np.vstack([c1, c1 @ A, c2, c2 @ A])
+    if np.linalg.cond(T) > 1e12:
+        raise ValueError(
+            "the model is not observable with indices (2, 2); cannot form the canonical form"
+        )
+    Ti = np.linalg.inv(T)
+    Ac = T @ A @ Ti
+    Bc = T @ B.reshape(4, -1)[:, :1]
+    return np.array([Ac[r, c] for r, c in A_POS] + [Bc[1, 0], Bc[3, 0]])
+
+
+def _state_names() -> list[str]:
+    return list(CANONICAL_STATE)

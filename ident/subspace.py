@@ -1,0 +1,133 @@
+"""Subspace identification: closed-loop-safe PBSID start and open-loop PO-MOESP.
+
+``pbsid`` (predictor-based subspace identification, Chiuso 2007 "The role of VARX
+modeling in PBSID"; the idea behind MATLAB's SSARX weighting) first fits a
+high-order VARX *predictor* y[k] = sum_j (Xi_j^y y[k-j] + Xi_j^u u[k-j]) + e[k] by
+least squares.  The predictor needs no open-loop assumption, so feedback does not
+bias it (direct approach).  Its Markov parameters C F^(j-1) [K, B] (F = A - K C)
+give Gamma_f x[k] = sum_j Theta z[k-j]; an SVD yields the state sequence and least
+squares A, B, C, K.  ``po_moesp`` is the classical open-loop past-output MOESP, which
+is biased under feedback (reference F3, T7); it is here to show exactly that.
+
+Memory: the VARX regression at N samples and order p costs N x p (l + m) doubles;
+the data are decimated first (``decimate``), outputs subsampled and the input
+block-averaged (the exact ZOH input of the coarse sampling would be the average),
+so that N = 50,000 samples at 100 Hz need ~15 MB.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import logm
+
+__all__ = ["d2c", "pbsid", "po_moesp", "decimate"]
+
+
+def decimate(u: np.ndarray, y: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """Outputs subsampled by ``factor``; inputs averaged over each block (ZOH-consistent)."""
+    u = np.asarray(u, float).reshape(len(u), -1)
+    y = np.asarray(y, float).reshape(len(y), -1)
+    if factor <= 1:
+        return u, y
+    n = (len(u) // factor) * factor
+    return u[:n].reshape(-1, factor, u.shape[1]).mean(axis=1), y[:n:factor]
+
+
+def _past(data: np.ndarray, p: int) -> np.ndarray:
+    """Rows k = p..N-1 holding [d[k-1], d[k-2], ..., d[k-p]]."""
+    N = data.shape[0]
+    return np.hstack([data[p - j : N - j] for j in range(1, p + 1)])
+
+
+def pbsid(
+    u: np.ndarray | list, y: np.ndarray | list, n: int = 4, p: int = 40
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closed-loop-safe subspace estimate (A, B, C, K) of the innovations model.
+
+    x[k+1] = A x[k] + B u[k] + K e[k], y[k] = C x[k] + e[k] (no feedthrough).
+    ``u``, ``y``: arrays (N, m), (N, l), or lists of them (several runs, stacked
+    after forming the regressors).  ``p``: past window (VARX order); it must cover
+    the decay of the predictor, p dt >~ 2 / |slowest predictor pole|.
+    """
+    us = u if isinstance(u, list) else [u]
+    ys = y if isinstance(y, list) else [y]
+    Zs, Ys = [], []
+    for ui, yi in zip(us, ys, strict=True):
+        ui = np.asarray(ui, float).reshape(len(ui), -1)
+        yi = np.asarray(yi, float).reshape(len(yi), -1)
+        if len(yi) <= 3 * p:
+            raise ValueError(f"a run of {len(yi)} samples is too short for past window p={p}")
+        Zs.append(_past(np.hstack([yi, ui]), p))
+        Ys.append(yi[p:])
+    Z, Yf = np.vstack(Zs), np.vstack(Ys)
+    l, m = Yf.shape[1], us[0].reshape(len(us[0]), -1).shape[1]
+    q = l + m
+    Xi, *_ = np.linalg.lstsq(Z, Yf, rcond=None)  # (p q, l)
+    Xi = Xi.T  # (l, p q): blocks Xi_j = C F^(j-1) [K, B]
+    f = p
+    Theta = np.zeros((f * l, p * q))
+    for i in range(f):
+        for j in range(p - i):
+            Theta[i * l : (i + 1) * l, j * q : (j + 1) * q] = Xi[:, (i + j) * q : (i + j + 1) * q]
+    # SVD of Theta Z' through its Gram matrix (f l x f l)
+    TZ = Z @ Theta.T  # (N, f l)
+    w, V = np.linalg.eigh(TZ.T @ TZ)
+    Un = V[:, np.argsort(w)[::-1][:n]]
+    X = TZ @ Un  # (N, n) state sequence
+    # y = C x + e
+    Cm, *_ = np.linalg.lstsq(X, Yf, rcond=None)
+    E = Yf - X @ Cm
+    C = Cm.T
+    # per run: x[k+1] = A x[k] + B u[k] + K e[k]
+    rows_x, rows_r = [], []
+    start = 0
+    for ui, yi in zip(us, ys, strict=True):
+        ni = len(yi) - p
+        Xi_ = X[start : start + ni]
+        Ui = np.asarray(ui, float).reshape(len(ui), -1)[p:]
+        Ei = E[start : start + ni]
+        rows_r.append(np.hstack([Xi_[:-1], Ui[:-1], Ei[:-1]]))
+        rows_x.append(Xi_[1:])
+        start += ni
+    R, Xn = np.vstack(rows_r), np.vstack(rows_x)
+    ABK, *_ = np.linalg.lstsq(R, Xn, rcond=None)
+    ABK = ABK.T
+    return ABK[:, :n], ABK[:, n : n + m], C, ABK[:, n + m :]
+
+
+def po_moesp(
+    u: np.ndarray, y: np.ndarray, n: int = 4, f: int = 20
+) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop PO-MOESP estimate of (A, C) (Verhaegen 1994; past inputs and outputs as
+    instruments).  Consistent in open loop, biased under feedback (reference F3)."""
+    u = np.asarray(u, float).reshape(len(u), -1)
+    y = np.asarray(y, float).reshape(len(y), -1)
+    m, l = u.shape[1], y.shape[1]
+    N = len(y) - 2 * f + 1
+    if N < 10 * f:
+        raise ValueError(f"too few samples ({len(y)}) for block size f={f}")
+
+    def hank(d, start):
+        return np.vstack([d[start + i : start + i + N].T for i in range(f)])
+
+    Up, Uf, Yp, Yf = hank(u, 0), hank(u, f), hank(y, 0), hank(y, f)
+    H = np.vstack([Uf, Up, Yp, Yf])
+    L = np.linalg.qr(H.T, mode="r").T
+    r1, r2 = f * m, f * (m + l)
+    L32 = L[r1 + r2 :, r1 : r1 + r2]
+    U, _, _ = np.linalg.svd(L32, full_matrices=False)
+    G = U[:, :n]
+    A, *_ = np.linalg.lstsq(G[:-l], G[l:], rcond=None)
+    return A, G[:l]
+
+
+def d2c(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of the zero-order-hold discretization (principal matrix logarithm)."""
+    n, m = B.shape
+    Z = np.zeros((n + m, n + m))
+    Z[:n, :n], Z[:n, n:], Z[n:, n:] = A, B, np.eye(m)
+    L = logm(Z) / dt
+    L = np.real_if_close(L, tol=1e6)
+    if np.iscomplexobj(L):
+        raise ValueError("the discrete model has no real continuous-time ZOH equivalent")
+    return L[:n, :n], L[:n, n:]
