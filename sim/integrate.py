@@ -34,7 +34,7 @@ from numba import njit
 
 from .conventions import MEASURED
 from .effects import InputChain, input_chain, plant_vector
-from .nonlinear import INPUTS, WhippleBicycle, outputs, rhs
+from .nonlinear import INPUTS, WhippleBicycle, invalidate_stale_caches, outputs, rhs
 from .parameters import BicycleParameters
 
 __all__ = ["Trajectory", "simulate", "simulate_many", "simulate_reference"]
@@ -185,6 +185,9 @@ def _rk4_sample(k, Tc, T0, X, OUT, OL, U, q5g, p, ev, held, tau, dt, nsub, phima
             X[k + 1, i] = y[i]
         outputs(y, q5g, p, OUT[k + 1])
     return status
+
+
+invalidate_stale_caches([_rk4_interval, _rk4_sample], "integrate")
 
 
 # -- helpers -----------------------------------------------------------------------------------

@@ -41,7 +41,9 @@ Extra generalized forces (:mod:`sim.effects`) add to the dynamic rows of
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
@@ -250,6 +252,36 @@ def outputs(y, q5g, p, out):
     out[11] = y[0] + c[2]
     out[12] = y[1] + c[3]
     return q5
+
+
+# -- numba cache hygiene ---------------------------------------------------------------------
+_PLANT_SOURCES = ("_whipple_generated.py", "effects.py", "nonlinear.py", "integrate.py")
+
+
+def invalidate_stale_caches(dispatchers, tag: str) -> None:
+    """Flush numba caches of ``dispatchers`` when any plant source file changed.
+
+    numba's ``cache=True`` only watches the file of the cached function, not the
+    functions it calls in other modules: after regenerating the equations or adding
+    an effect, a cached kernel would silently run the old code.  We keep a digest
+    of all plant sources next to the cache and flush when it changes.
+    """
+    try:
+        here = Path(__file__).parent
+        digest = hashlib.sha256(b"".join((here / n).read_bytes() for n in _PLANT_SOURCES))
+        stamp = Path(dispatchers[0]._cache.cache_path) / f"bikeid_{tag}.sources.sha256"
+        if stamp.exists() and stamp.read_text() == digest.hexdigest():
+            return
+        for d in dispatchers:
+            d._cache.flush()
+        tmp = stamp.with_suffix(f".{id(stamp)}.tmp")
+        tmp.write_text(digest.hexdigest())
+        tmp.replace(stamp)
+    except (OSError, AttributeError):  # read-only or unusual cache: numba's own checks only
+        pass
+
+
+invalidate_stale_caches([pitch, speeds, accelerations, rhs, outputs], "nonlinear")
 
 
 # -- Python object ---------------------------------------------------------------------------
