@@ -1,0 +1,125 @@
+"""``bikeid identify``: direct (Moore & Hubbard) or canonical PEM (Chen & Dao) on an HDF5 file.
+
+For simulated runs (``meta['parameters']`` present) the true linearization is
+printed beside the estimate (``true_eigenvalues``).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from .cliutil import dump_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("identify", help="identify the bicycle from runs in an HDF5 file")
+    p.add_argument("file", help="HDF5 file written by dataset.store.write_runs")
+    p.add_argument("--method", choices=("direct", "pem"), default="direct")
+    p.add_argument(
+        "--speed-parameterized",
+        action="store_true",
+        help="pem: one model over all speeds (odd a's = alpha + beta v^2, even a's = gamma v)",
+    )
+    p.add_argument("--bicycle", help="fixed-entry values for direct (default: the runs' meta)")
+    p.add_argument("--iv", action="store_true", help="direct: instrumental variables (lagged)")
+    p.add_argument(
+        "--derivative", choices=("central", "forward", "backward"), default="central",
+        help="direct: differentiation of the rates (see ident.signals)",
+    )  # fmt: skip
+    p.add_argument("--cutoff", type=float, default=15.0, help="direct: low-pass [Hz], 0 = none")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_identify)
+
+
+def _truth(runs):
+    from sim.parameters import from_mapping
+
+    meta = runs[0].meta.get("parameters")
+    return from_mapping(meta, name="run meta") if meta else None
+
+
+def _sorted(z):
+    import numpy as np
+
+    return sorted(np.asarray(z), key=lambda c: (c.real, c.imag))
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from dataset.store import read_runs
+    from sim.linear import eigenvalues
+
+    runs = read_runs(args.file)
+    if not runs:
+        raise ValueError(f"{args.file} holds no runs")
+    truth = _truth(runs)
+    speeds = sorted({round(r.speed, 6) for r in runs})
+    out: dict = {"file": str(args.file), "method": args.method, "speeds": speeds}
+    if args.method == "direct":
+        from ident.direct import identify
+        from ident.signals import prepare
+        from sim.parameters import by_name
+
+        if args.speed_parameterized:
+            raise ValueError("--speed-parameterized applies to --method pem (direct is always)")
+        reference = by_name(args.bicycle) if args.bicycle else truth
+        if reference is None:
+            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
+        prepared = [
+            prepare(r, cutoff=args.cutoff or None, derivative=args.derivative) for r in runs
+        ]
+        res = identify(prepared, reference, method="iv" if args.iv else "ls")
+        out.update(
+            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H,
+            free={k: {"value": v, "stderr": res.stderr[k]} for k, v in res.free.items()},
+            condition=res.condition, vaf_moore=res.vaf_moore, vaf_variance=res.vaf_variance,
+            notes=list(res.notes),
+        )  # fmt: skip
+        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+    else:
+        from ident import pem
+
+        if args.speed_parameterized:
+            model = pem.fit_speed_model(runs)
+            out["params"] = dict(zip(pem.SPEED_NAMES, model.params, strict=True))
+            out["stderr"] = model.stderr
+            eig = {v: _sorted(model.eigenvalues(v)) for v in speeds}
+        else:
+            if len(speeds) > 1:
+                out["models"] = {}
+            eig = {}
+            for v in speeds:
+                m = pem.fit([r for r in runs if round(r.speed, 6) == v])
+                out.setdefault("models", {})[v] = {
+                    "theta": m.params(),
+                    "stderr": m.stderr,
+                    "A": m.A,
+                    "B": m.B,
+                }
+                eig[v] = _sorted(m.eigenvalues())
+    per_speed = []
+    for v in speeds:
+        row = {"speed": v, "eigenvalues": eig[v]}
+        if truth is not None:
+            row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
+        per_speed.append(row)
+    out["per_speed"] = per_speed
+    if args.json:
+        print(dump_json(out))
+        return 0
+    np.set_printoptions(precision=5, suppress=True, linewidth=110)
+    print(f"{args.file}: {len(runs)} runs, method {args.method}")
+    if args.method == "direct":
+        for k in ("M", "C1", "K0", "K2", "H"):
+            print(f"{k} =\n{out[k]}")
+        for k, d in out["free"].items():
+            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g}")
+        print(f"VAF (Moore eq. 6): {out['vaf_moore']}, condition: {out['condition']}")
+    for row in per_speed:
+        fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
+        print(f"v={row['speed']:6.2f}  identified {fmt}")
+        if "true_eigenvalues" in row:
+            fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
+            print(f"{'':8s}  true       {fmt}")
+    return 0
