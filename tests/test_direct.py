@@ -1,0 +1,94 @@
+"""ident.direct: Moore & Hubbard regressions on exact linear-simulator data."""
+
+import numpy as np
+import pytest
+
+from ident.direct import identify, vaf_moore, vaf_variance
+from sim.linear import canonical_matrices, eigenvalues
+from sim.linear_sim import simulate
+from sim.parameters import benchmark
+
+P = benchmark()
+CM = canonical_matrices(P)
+
+
+@pytest.fixture(scope="module")
+def two_speed_runs():
+    return [simulate(P, v, duration=20, seed=i, dither=1.0, dither_hold=5) for i, v in
+            enumerate((3.0, 6.0))]  # fmt: skip
+
+
+def test_paper_free_sets_recover_benchmark(two_speed_runs):
+    """Noise-free truth + exact accelerations: Moore's free sets return Meijaard's
+    matrices to round-off (1e-10 relative, float64 least squares at cond ~ 10)."""
+    res = identify(two_speed_runs, P, source="truth")
+    for m in ("M", "C1", "K0", "K2"):
+        assert np.allclose(getattr(res, m), getattr(CM, m), rtol=1e-10, atol=1e-10)
+    assert res.vaf_moore["steer"] == pytest.approx(1.0, abs=1e-10)
+    assert "HdF not estimated" in res.notes[0]
+
+
+def test_state_space_matches_sim_linear(two_speed_runs):
+    """The identified model's A equals sim.linear's at the truth (second method)."""
+    res = identify(two_speed_runs, P, source="truth")
+    ev = np.sort_complex(np.linalg.eigvals(np.asarray(res.state_space(5.0).A)))
+    assert np.allclose(ev, np.sort_complex(eigenvalues(P, 5.0)), atol=1e-8)
+
+
+def test_lateral_force_entry_recovered():
+    """With a logged lateral force, HdF is estimated and equals lateral_force_vector's."""
+    from sim.linear import lateral_force_vector
+
+    runs = [simulate(P, v, duration=20, seed=i, lateral_force=5.0) for i, v in enumerate((3, 6))]
+    H = lateral_force_vector(P, 0.5, -1.0)
+    res = identify(runs, P, H=(H[0], 0.0), source="truth")
+    assert res.free["HdF"] == pytest.approx(H[1], rel=1e-9)
+
+
+def test_vaf_definitions_t11():
+    """T11: Moore's VAF is the NRMSE fit; for zero-mean error VAF_var = 1 - (1 - VAF)^2."""
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=1000)
+    y -= y.mean()
+    e = rng.normal(scale=0.3, size=1000)
+    e -= e.mean()
+    m, v = vaf_moore(y, y + e), vaf_variance(y, y + e)
+    assert m == pytest.approx(1 - np.linalg.norm(e) / np.linalg.norm(y), rel=1e-14)
+    assert v == pytest.approx(1 - (1 - m) ** 2, rel=1e-12)
+
+
+def test_bad_inputs_raise(two_speed_runs):
+    with pytest.raises(ValueError, match="not in the roll row"):
+        identify(two_speed_runs, P, free_roll=("Mdd",), source="truth")
+    with pytest.raises(ValueError, match="symmetry"):
+        identify(two_speed_runs, P, free_steer=("Mdp", "Mdd"), source="truth")
+    with pytest.raises(ValueError, match="unknown matrix entry"):
+        identify(two_speed_runs, P, free_steer=("Xdd",), source="truth")
+    with pytest.raises(ValueError, match="HdF"):
+        identify(two_speed_runs, P, free_steer=("Mdd", "HdF"), source="truth")
+
+
+def test_attenuation_scalar_formula_t4():
+    """T4: one free entry (C1dd), white noise on deltadot only, all else exact:
+    plim C1dd_hat = C1dd var(x) / (var(x) + var(n)), x = v deltadot.  Tolerance: 4
+    standard errors of the regression (reported covariance) plus the finite-sample
+    spread of the variance ratio (~1/sqrt(N))."""
+    from dataset.run import Run
+
+    runs = []
+    rng = np.random.default_rng(5)
+    ratios = []
+    for i, v in enumerate((3.0, 5.0)):
+        r = simulate(P, v, duration=60, seed=10 + i, dither=1.0, dither_hold=5)
+        s = dict(r.truth)
+        sx = np.std(v * s["deltadot"])
+        n = rng.normal(scale=sx / v, size=r.n)  # sigma_n = sigma_x (ratio 1)
+        s["deltadot"] = s["deltadot"] + n
+        ratios.append((np.var(v * r.truth["deltadot"]), np.var(v * n)))
+        runs.append(Run(t=r.t, signals=s, meta=r.meta))
+    sx2 = sum(a for a, _ in ratios)
+    sn2 = sum(b for _, b in ratios)
+    res = identify(runs, P, free_roll=("Mpd",), free_steer=("C1dd",))
+    expect = CM.C1[1, 1] * sx2 / (sx2 + sn2)
+    assert expect == pytest.approx(0.5 * CM.C1[1, 1], rel=0.05)
+    assert abs(res.free["C1dd"] - expect) < 4 * res.stderr["C1dd"] + 0.03 * abs(expect)
