@@ -1,0 +1,90 @@
+"""ident.canonical / subspace / pem: mapping identities, exact recovery, error handling."""
+
+import numpy as np
+import pytest
+
+from ident import pem
+from ident.canonical import (
+    canonical_ab,
+    matrices_from_speed_params,
+    speed_map,
+    speed_params_from_matrices,
+    theta_from_matrices,
+    to_bikeid_order,
+)
+from ident.subspace import pbsid
+from sim.linear import canonical_matrices, critical_speeds, eigenvalues, state_space
+from sim.linear_sim import simulate
+from sim.parameters import benchmark
+
+P = benchmark()
+CM = canonical_matrices(P)
+
+
+@pytest.mark.parametrize("v", [1.0, 4.0, 7.5])
+def test_canonical_form_is_a_permutation_of_sim_linear(v):
+    """C&D's canonical A, B permuted to [phi, delta, phidot, deltadot] equal
+    sim.linear.state_space's T_delta model (same algebra, independent code)."""
+    A, B = canonical_ab(theta_from_matrices(CM, v))
+    import control
+
+    sys = to_bikeid_order(control.ss(A, B, np.eye(4), np.zeros((4, 1))))
+    ref = state_space(P, v, inputs=("T_delta",))
+    assert np.allclose(sys.A, ref.A, atol=1e-12) and np.allclose(sys.B, ref.B, atol=1e-14)
+
+
+def test_speed_parameterization_exact():
+    """C&D eq. 4: a_odd = alpha + beta v^2, a_even = gamma v, b constant, exactly."""
+    params = speed_params_from_matrices(CM)
+    for v in (0.5, 3.0, 12.0):
+        assert np.allclose(speed_map(v) @ params, theta_from_matrices(CM, v), atol=1e-12)
+
+
+def test_speed_model_critical_speeds_match_meijaard():
+    """The M = I equivalent of the speed parameters reproduces Meijaard 2007's
+    v_w = 4.2924 m/s and v_c = 6.0243 m/s (Table 2 precision 1e-4)."""
+    cs = critical_speeds(matrices_from_speed_params(speed_params_from_matrices(CM), CM.g))
+    assert cs["v_w"] == pytest.approx(4.2924, abs=1e-4)
+    assert cs["v_c"] == pytest.approx(6.0243, abs=1e-4)
+
+
+def test_pbsid_noise_free_exact_eigenvalues():
+    """Noise-free closed-loop data: the predictor-based subspace estimate at full rate
+    has the plant's exact sampled eigenvalues (1e-6 rad/s, round-off of the SVD)."""
+    r = simulate(P, 4.0, duration=20, seed=1, dither=1.0, dither_hold=5)
+    y = np.column_stack([r["phi"], r["delta"]])
+    A, *_ = pbsid(r["T_delta"], y, n=4, p=20)
+    ev = np.sort_complex(np.log(np.linalg.eigvals(A).astype(complex)) / r.dt)
+    assert np.allclose(ev, np.sort_complex(eigenvalues(P, 4.0)), atol=1e-6)
+
+
+def test_pem_noise_free_exact_recovery():
+    """Noise-free data from the subspace start: PEM returns the exact canonical
+    parameters (relative 1e-7; LM stopping tolerance on a zero-residual problem)."""
+    r = simulate(P, 4.0, duration=20, seed=1, dither=1.0, dither_hold=5)
+    m = pem.fit(r)
+    assert np.allclose(m.theta, theta_from_matrices(CM, 4.0), rtol=1e-7, atol=1e-7)
+    assert m.state_space().nstates == 4 and m.state_space().ninputs == 1
+
+
+def test_speed_model_noise_free_exact():
+    """Noise-free runs at 3 speeds: alpha, beta, gamma, b exact (relative 1e-6)."""
+    runs = [simulate(P, v, duration=15, seed=i, dither=1.0, dither_hold=5)
+            for i, v in enumerate((2.0, 4.0, 6.0))]  # fmt: skip
+    m = pem.fit_speed_model(runs)
+    assert np.allclose(m.params, speed_params_from_matrices(CM), rtol=1e-6, atol=1e-6)
+    cs = m.critical_speeds()
+    assert cs["v_w"] == pytest.approx(4.2924, abs=1e-3)
+
+
+def test_errors():
+    r = simulate(P, 4.0, duration=5, seed=1)
+    with pytest.raises(ValueError, match="2 distinct speeds"):
+        pem.fit_speed_model([r, r])
+    with pytest.raises(ValueError, match="noise_model"):
+        pem.fit(r, noise_model="arx")
+    with pytest.raises(ValueError, match="outputs"):
+        pem.fit(r, outputs=("phi",))
+    r2 = simulate(P, 5.0, duration=5, seed=1)
+    with pytest.raises(ValueError, match="different speeds"):
+        pem.fit([r, r2])
