@@ -115,7 +115,7 @@ def test_t4_attenuation_monotone(seed):
             )
             noisy.append(Run(t=r.t, signals=s, meta=r.meta))
         est.append(identify(noisy, BASE, free_steer=STEER).free["C1dd"])
-    true = BASE and canonical_matrices(BASE).C1[1, 1]
+    true = canonical_matrices(BASE).C1[1, 1]
     assert est[0] == pytest.approx(true, rel=1e-8)
     assert true > est[1] > est[2] > 0
 
@@ -127,8 +127,8 @@ def test_t5_disturbance_biases_ls_iv_fixes(seed, sigma_w):
     regressors: LS is biased (Mdd off by > 10 of its own standard errors; ref sim 0.39
     relative), IV with 1-sample-lagged regressors is consistent (every steer entry within
     4.5 of its IV standard errors; Bonferroni over 5 entries at ~1e-4 two-sided)."""
-    runs = [_logged(simulate(BASE, v, duration=200, seed=seed + i, dither=1.0, dither_hold=10,
-                             disturbance=sigma_w)) for i, v in enumerate((2.0, 4.0, 6.0, 8.0))]  # fmt: skip
+    kw = dict(duration=200, dither=1.0, dither_hold=10, disturbance=sigma_w)
+    runs = [_logged(simulate(BASE, v, seed=seed + i, **kw)) for i, v in enumerate((2, 4, 6, 8))]
     cm = canonical_matrices(BASE)
     ls = identify(runs, BASE)
     iv = identify(runs, BASE, method="iv", instruments="lagged", lags=1)
