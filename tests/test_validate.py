@@ -1,0 +1,84 @@
+"""ident.validate: compare / resid semantics against independent computations."""
+
+import control
+import numpy as np
+import pytest
+
+from ident.canonical import theta_from_matrices
+from ident.pem import CanonicalModel
+from ident.validate import compare, goodness_of_fit, resid, transfer_functions, zeros
+from sim.linear import canonical_matrices, state_space, transfer_function
+from sim.linear_sim import simulate
+from sim.parameters import benchmark
+
+P = benchmark()
+
+
+def test_goodness_of_fit_matlab_definitions():
+    """MathWorks goodnessOfFit: NRMSE 1 - ||y - yh|| / ||y - mean||, NMSE its square form."""
+    y = np.array([1.0, 2.0, 4.0, 3.0])
+    yh = np.array([1.5, 2.0, 3.0, 3.0])
+    g = goodness_of_fit(y, yh)
+    ratio = np.linalg.norm(y - yh) / np.linalg.norm(y - y.mean())
+    assert g["nrmse_fit"] == pytest.approx(1 - ratio) and g["nmse_fit"] == pytest.approx(
+        1 - ratio**2
+    )
+
+
+def test_compare_true_model_noise_free_is_perfect():
+    """Noise-free run, the true stable model (v = 5 m/s), simulation with estimated
+    x0: fit = 1 to 1e-9 (exact ZOH on both sides)."""
+    r = simulate(P, 5.0, duration=10, seed=1, dither=1.0, dither_hold=5)
+    sys = state_space(P, 5.0, inputs=("T_delta",))
+    c = compare(r, sys)
+    for o in ("phi", "delta", "phidot", "deltadot"):
+        assert c.fit[o] == pytest.approx(1.0, abs=1e-9)
+    assert np.allclose(c.x0[0], [0.01, 0, 0, 0], atol=1e-9)
+
+
+def test_unstable_long_simulation_refused_prediction_works():
+    """At 2 m/s the weave is unstable: a 60 s simulation is refused with advice;
+    1-step prediction of noise-free data with the true model is exact."""
+    r = simulate(P, 2.0, duration=60, seed=1, dither=1.0)
+    with pytest.raises(ValueError, match="unstable"):
+        compare(r, state_space(P, 2.0, inputs=("T_delta",)))
+    th = theta_from_matrices(canonical_matrices(P), 2.0)
+    m = CanonicalModel(theta=th, covariance=np.zeros((10, 10)), K=np.zeros((4, 2)), dt=r.dt,
+                       speed=2.0, noise_covariance=np.eye(2), outputs=("phi", "delta"))  # fmt: skip
+    c = compare(r.window(0, 5), m, horizon=1)
+    assert c.fit["phi"] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_k_step_prediction_with_k_zero_equals_simulation():
+    """With K = 0 the k-step predictor is the simulation once k exceeds the sample index."""
+    r = simulate(P, 5.0, duration=2, seed=1, dither=1.0)
+    th = theta_from_matrices(canonical_matrices(P), 5.0)
+    m = CanonicalModel(theta=th, covariance=np.zeros((10, 10)), K=np.zeros((4, 2)), dt=r.dt,
+                       speed=5.0, noise_covariance=np.eye(2), outputs=("phi", "delta"))  # fmt: skip
+    sim = compare(r, m, ic=np.array([0.01, 0, 0, 0]))
+    pred = compare(r, m, horizon=r.n, ic=np.array([0.01, 0, 0, 0]))
+    assert np.allclose(sim.yhat[0], pred.yhat[0], atol=1e-12)
+
+
+def test_transfer_function_matches_sim_linear():
+    """Identified-model TFs (from the canonical state space) equal sim.linear's exact
+    adjugate TF; the steer-angle RHP zero near +3.13 (controllers reference)."""
+    th = theta_from_matrices(canonical_matrices(P), 5.0)
+    m = CanonicalModel(theta=th, covariance=np.zeros((10, 10)), K=np.zeros((4, 4)), dt=0.01,
+                       speed=5.0, noise_covariance=np.eye(4))  # fmt: skip
+    tf = transfer_functions(m)[("phi", "T_delta")]
+    ref = transfer_function(P, 5.0, "phi", "T_delta")
+    w = np.array([0.5, 2.0, 10.0])
+    assert np.allclose(tf(1j * w), ref(1j * w), rtol=1e-8)
+    assert np.max(zeros(m, "delta").real) == pytest.approx(3.13, abs=0.01)
+    assert isinstance(tf, control.TransferFunction)
+
+
+def test_resid_band_and_lags():
+    r = simulate(P, 5.0, duration=20, seed=1, dither=1.0, angle_noise=1e-3)
+    th = theta_from_matrices(canonical_matrices(P), 5.0)
+    m = CanonicalModel(theta=th, covariance=np.zeros((10, 10)), K=np.zeros((4, 2)), dt=r.dt,
+                       speed=5.0, noise_covariance=np.eye(2), outputs=("phi", "delta"))  # fmt: skip
+    rr = resid(r, m, max_lag=25)
+    assert rr.lags[0] == -25 and rr.lags[-1] == 25 and rr.autocorr["phi"][0] == pytest.approx(1)
+    assert rr.band == pytest.approx(2.5758 / np.sqrt(r.n), rel=1e-4)
