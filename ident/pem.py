@@ -404,7 +404,7 @@ def subspace_start(
     dtc = dt * factor
     p = max(8, int(math.ceil(p_seconds / dtc)))
     A, B, C, _ = pbsid(us, ys, n=4, p=p)
-    Ac, Bc = d2c(A, B, dtc)
+    Ac, Bc = d2c(A, B, dtc, strict=False)
     return to_canonical_form(Ac, Bc, C)
 
 
@@ -431,12 +431,14 @@ def fit(
     noise_model: str = "free",
     max_nfev: int = 100,
     method: str = "lm",
+    passes: int = 2,
 ) -> CanonicalModel:
     """Fixed-speed canonical PEM from one or more runs at the same speed and dt.
 
     ``outputs``: measured states fitted (default all four; see module docstring);
     ``theta0``: start (default :func:`subspace_start`); ``noise_model`` "free" (K
-    estimated) or "none" (output error).  Returns a :class:`CanonicalModel`.
+    estimated) or "none" (output error); ``passes``: fits with re-estimated output
+    weights (1 = weights from the output variances only).  Returns a :class:`CanonicalModel`.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -470,7 +472,7 @@ def fit(
     x = np.concatenate([theta, K.ravel()]) if free_k else theta
     nfev = 0
     notes = []
-    for _ in range(2):
+    for _ in range(max(1, passes)):
         prob = _Problem(data, mapping, [K] * len(data), free_k, w, outputs)
         sol = _solve(prob, x, max_nfev, method)
         nfev += sol.nfev
@@ -509,7 +511,7 @@ def fit_speed_model(
             "are not separable at one speed, reference T3)"
         )
     per = {
-        v: fit(rs, outputs=outputs, noise_model=noise_model, method=method)
+        v: fit(rs, outputs=outputs, noise_model=noise_model, method=method, passes=1)
         for v, rs in groups.items()
     }
     Sstack = np.vstack([speed_map(v) for v in per])

@@ -121,13 +121,22 @@ def po_moesp(
     return A, G[:l]
 
 
-def d2c(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse of the zero-order-hold discretization (principal matrix logarithm)."""
+def d2c(
+    A: np.ndarray, B: np.ndarray, dt: float, strict: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of the zero-order-hold discretization (principal matrix logarithm).
+
+    A discrete pole on the negative real axis has no real logarithm: ``strict``
+    raises ValueError, otherwise the real part is returned (good enough as a start).
+    """
     n, m = B.shape
     Z = np.zeros((n + m, n + m))
     Z[:n, :n], Z[:n, n:], Z[n:, n:] = A, B, np.eye(m)
     L = logm(Z) / dt
     L = np.real_if_close(L, tol=1e6)
     if np.iscomplexobj(L):
+        if not strict:
+            L = L.real
+            return L[:n, :n], L[:n, n:]
         raise ValueError("the discrete model has no real continuous-time ZOH equivalent")
     return L[:n, :n], L[:n, n:]
