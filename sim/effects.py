@@ -38,6 +38,7 @@ __all__ = [
     "InputChain",
     "InputDelay",
     "RollDamping",
+    "RollStiffness",
     "SteerCoulomb",
     "SteerDamping",
     "TorqueGain",
@@ -96,6 +97,23 @@ class RollDamping:
 
 
 @dataclass(frozen=True)
+class RollStiffness:
+    """Roll spring: torque -k * phi on the rear frame [k: N m/rad].
+
+    A support that pulls the bicycle back upright (a treadmill safety tether or harness,
+    or a lumped lateral compliance of a support frame); unlike :class:`RollDamping` it
+    acts on the roll *angle*.  It weakens the gravity term g K0[phi, phi] of the
+    linear model (Meijaard 2007 eq. A.21).
+    """
+
+    k: float
+    kind = "plant"
+
+    def __post_init__(self) -> None:
+        _check("RollStiffness.k", self.k, "N m/rad")
+
+
+@dataclass(frozen=True)
 class TorqueGain:
     """Steer torque actually applied = gain * command [-] (actuator calibration error)."""
 
@@ -130,7 +148,13 @@ class InputDelay:
 
 
 #: Slots of the plant-effect vector consumed by :func:`plant_forces`.
-PLANT_SLOTS = ("steer_damping", "steer_coulomb", "steer_coulomb_smoothing", "roll_damping")
+PLANT_SLOTS = (
+    "steer_damping",
+    "steer_coulomb",
+    "steer_coulomb_smoothing",
+    "roll_damping",
+    "roll_stiffness",
+)
 _S = {name: i for i, name in enumerate(PLANT_SLOTS)}
 
 
@@ -147,6 +171,8 @@ def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
             vec[_S["steer_damping"]] += e.c
         elif isinstance(e, RollDamping):
             vec[_S["roll_damping"]] += e.c
+        elif isinstance(e, RollStiffness):
+            vec[_S["roll_stiffness"]] += e.k
         elif isinstance(e, SteerCoulomb):
             if vec[_S["steer_coulomb"]] > 0.0:
                 raise ValueError("give at most one SteerCoulomb effect")
@@ -160,7 +186,7 @@ def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
 @njit(cache=True)
 def plant_forces(ev, q4, q7, u4, u6, u7, out):
     """Extra generalized forces [N m] on the (u4, u6, u7) equations; fills ``out``."""
-    out[0] = -ev[3] * u4
+    out[0] = -ev[3] * u4 - ev[4] * q4
     out[1] = 0.0
     out[2] = -ev[0] * u7 - ev[1] * math.tanh(u7 / ev[2])
 

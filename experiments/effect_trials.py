@@ -1,0 +1,387 @@
+"""Randomized undeclared-effect trials on the nonlinear plant (``bikeid measured trials``).
+
+Each trial imitates the treadmill experiment of the measured data with one hidden effect:
+
+- **Plant**: the nonlinear Carvallo-Whipple model (:mod:`sim.integrate`, RK4, 4 substeps per
+  10 ms sample) of the steer-by-wire bicycle, speed held by the ideal rear drive, with one
+  :mod:`sim.effects` object injected.
+- **Loop**: the firmware's steer-into-lean law ``T = 2 (6.5 - v_s) phidot_m`` evaluated every
+  10 ms on the *measured* roll rate and the *sensor* speed ``v_s = 1.066 v - 0.128`` (the
+  data README's calibration), zero-order hold (:class:`controllers.SteerIntoLean`).
+- **Pushes**: free decays of 1 s (100 samples) from random initial states like those of the
+  logs (|phidot0| 0.35-0.95 rad/s, |deltadot0| 0.4-1.5 rad/s, steer 0-0.15 rad, same sign).
+- **Sensors** (:mod:`dataset.sensors`): white noise on roll rate (std drawn 0.005-0.015
+  rad/s, the second-difference noise of the logs' lean_rate is 0.006-0.017), on roll angle
+  (std/5 rad) and steer angle (3e-4 rad), steer encoder quantization 0.000767 rad
+  (2 pi / 8192) and steer-rate quantization 0.0767 rad/s (encoder difference over 10 ms).
+- **Speeds**: four treadmill speeds drawn from 1.5-4.5 m/s at least 0.5 m/s apart; two
+  (4 decays each) are given to :func:`ident.discrepancy.identify`, the other two (3 decays
+  each) are held out for :func:`ident.discrepancy.evaluate`.
+
+The pipeline is not told the effect.  Scored per trial (library effects): the effect ranks
+first (``verdict[0]``), its magnitude is within 20 % (of the deviation from "absent",
+``|x_hat - x| <= 0.2 |x - absent|``, so a command gain 0.8 must come out in 0.76-0.84) and
+the held-out error (NRMSE of roll rate and steer angle) at least halves.  For effects outside
+the library (``roll_viscous_damping``, ``roll_stiffness``) the score is whether the verdict
+starts with ``unexplained``.  Rates come with exact (Clopper-Pearson) 95 % intervals.
+
+Magnitude ranges (physically plausible; Moore's Davis bicycle has steer viscous damping
+0.34 N m s/rad and Coulomb friction 0.15 N m, identification.md section 5): see
+:data:`EFFECTS`.  Input delays are whole 10 ms samples (the plant's loop is sampled).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = [
+    "EFFECTS",
+    "LIBRARY_EFFECTS",
+    "OUTSIDE_EFFECTS",
+    "EffectSpec",
+    "TrialSpec",
+    "binomial_ci",
+    "decay_windows",
+    "draw_trials",
+    "run_trial",
+    "run_trials",
+    "summarize",
+]
+
+DT = 0.01
+N_SAMPLES = 100  # 1 s decay windows, like eigen/segments.csv
+SUBSTEPS = 4
+STEER_STEP = 2 * math.pi / 8192  # steer encoder resolution [rad]
+SPEED_RANGE = (1.5, 4.5)  # treadmill speeds of the logs [m/s]
+DELTA0 = 0.2  # |delta0| <= DELTA0 / v [rad]: logs 0.06-0.21 at 1.5, 0.01-0.05 at 4.5 m/s
+FIT_PER_SPEED = 4
+EVAL_PER_SPEED = 3
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """An injectable effect: its name, where it sits, the magnitude range drawn from."""
+
+    name: str
+    in_library: bool
+    low: float
+    high: float
+    unit: str
+    absent: float = 0.0
+    choices: tuple[float, ...] = ()  # discrete values instead of [low, high]
+    two_sided: bool = False  # draw absent -/+ [|low - absent|, |high - absent|]
+    doc: str = ""
+
+    def draw(self, rng: np.random.Generator) -> float:
+        if self.choices:
+            return float(rng.choice(self.choices))
+        x = float(rng.uniform(self.low, self.high))
+        if self.two_sided and rng.random() < 0.5:
+            x = 2 * self.absent - x
+        return x
+
+    def sim_effect(self, value: float):
+        """The :mod:`sim.effects` object injecting ``value``."""
+        from sim import effects as fx
+
+        make = {
+            "steer_viscous_damping": lambda x: fx.SteerDamping(x),
+            "steer_coulomb_friction": lambda x: fx.SteerCoulomb(x, smoothing=0.01),
+            "command_gain": lambda x: fx.TorqueGain(x),
+            "actuator_lag": lambda x: fx.ActuatorLag(x),
+            "input_delay": lambda x: fx.InputDelay(x),
+            "roll_viscous_damping": lambda x: fx.RollDamping(x),
+            "roll_stiffness": lambda x: fx.RollStiffness(x),
+        }
+        return make[self.name](value)
+
+
+EFFECTS: dict[str, EffectSpec] = {
+    e.name: e
+    for e in (
+        EffectSpec(
+            "steer_viscous_damping",
+            True,
+            0.2,
+            0.8,
+            "N m s/rad",
+            doc="bearing + motor viscous damping (Moore: 0.34)",
+        ),
+        EffectSpec(
+            "steer_coulomb_friction",
+            True,
+            0.1,
+            0.4,
+            "N m",
+            doc="bearing/motor dry friction, tanh smoothing 0.01 rad/s (Moore: 0.15)",
+        ),
+        EffectSpec(
+            "command_gain",
+            True,
+            1.2,
+            1.4,
+            "-",
+            absent=1.0,
+            two_sided=True,
+            doc="motor torque-constant error 20-40 % either way",
+        ),
+        EffectSpec("actuator_lag", True, 0.01, 0.05, "s", doc="motor current/torque lag"),
+        EffectSpec(
+            "input_delay",
+            True,
+            0.0,
+            0.0,
+            "s",
+            choices=(0.01, 0.02, 0.03, 0.04),
+            doc="transport delay of 1-4 loop samples",
+        ),
+        EffectSpec(
+            "roll_viscous_damping",
+            False,
+            1.0,
+            4.0,
+            "N m s/rad",
+            doc="roll damping (air, treadmill belt), outside the library",
+        ),
+        EffectSpec(
+            "roll_stiffness",
+            False,
+            20.0,
+            60.0,
+            "N m/rad",
+            doc="roll spring of a tether/support, outside the library",
+        ),
+    )  # fmt: skip
+}
+LIBRARY_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.in_library)
+OUTSIDE_EFFECTS = tuple(k for k, e in EFFECTS.items() if not e.in_library)
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """Everything that defines one trial (JSON-friendly)."""
+
+    index: int
+    seed: int
+    effect: str
+    value: float
+    fit_speeds: tuple[float, float]
+    eval_speeds: tuple[float, float]
+    noise: float  # roll-rate noise std [rad/s]
+
+
+def _speeds(rng: np.random.Generator, k: int = 4, gap: float = 0.5) -> list[float]:
+    for _ in range(1000):
+        v = np.sort(rng.uniform(*SPEED_RANGE, size=k))
+        if np.all(np.diff(v) >= gap):
+            return [float(x) for x in rng.permutation(v)]
+    raise RuntimeError("could not draw separated speeds")  # pragma: no cover
+
+
+def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -> list[TrialSpec]:
+    """``n`` trials; effects cycle through ``effects`` (stratified), all else random.
+
+    Trial i depends only on (seed, i): its generator is ``SeedSequence(seed).spawn(n)[i]``
+    without the count mattering (``spawn_key=(i,)``), so a larger grid extends a smaller one.
+    """
+    if int(n) != n or n < 1:
+        raise ValueError(f"number of trials must be a positive integer, got {n!r}")
+    if int(seed) != seed or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    names = tuple(effects) if effects else tuple(EFFECTS)
+    bad = [e for e in names if e not in EFFECTS]
+    if bad:
+        raise ValueError(f"unknown effects {bad}; choose from {list(EFFECTS)}")
+    out = []
+    for i in range(int(n)):
+        rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(i,)))
+        name = names[i % len(names)]
+        value = EFFECTS[name].draw(rng)
+        v = _speeds(rng)
+        noise = float(rng.uniform(0.005, 0.015))
+        sub_seed = int(rng.integers(2**31))
+        out.append(TrialSpec(i, sub_seed, name, value, (v[0], v[1]), (v[2], v[3]), noise))
+    return out
+
+
+def _sensors(noise: float):
+    from dataset.sensors import Channel, Sensors
+
+    return Sensors(
+        {
+            "v": Channel(scale=1.066, bias=-0.128),  # the logs' speed calibration
+            "phi": Channel(std=noise / 5),
+            "phidot": Channel(std=noise),
+            "delta": Channel(std=3e-4, step=STEER_STEP),
+            "deltadot": Channel(std=noise, step=STEER_STEP / DT),
+        }
+    )
+
+
+def decay_windows(
+    effects: list, speeds, per_speed: int, noise: float, seed: int, label: str = "trial"
+):
+    """Free decays of the nonlinear plant with ``effects`` as experiment-model windows.
+
+    Returns ``ident.experiment_model.Window`` objects (measured signals, sensor speed,
+    zero command history: the loop starts with the push).
+    """
+    from controllers.steer_into_lean import SteerIntoLean
+    from dataset.closed_loop import simulate_run
+    from ident.experiment_model import Window
+    from sim.parameters import steer_by_wire
+
+    p = steer_by_wire()
+    rng = np.random.default_rng(seed)
+    out = []
+    for v in speeds:
+        for j in range(per_speed):
+            sgn = rng.choice([-1.0, 1.0])
+            init = {  # as the logs' window starts: steer opposite to the roll rate
+                "phi": float(rng.normal(0.0, 0.01)),
+                "delta": float(-sgn * rng.uniform(0.0, DELTA0 / v)),
+                "phidot": float(sgn * rng.uniform(0.35, 0.95)),
+                "deltadot": float(sgn * rng.uniform(0.4, 1.5)),
+            }
+            run = simulate_run(
+                p, SteerIntoLean(), float(v), duration=N_SAMPLES * DT, sensors=_sensors(noise),
+                effects=effects, seed=int(rng.integers(2**31)), initial=init, substeps=SUBSTEPS,
+            )  # fmt: skip
+            if run.meta["fell_at"] is not None:
+                raise RuntimeError(f"trial plant fell at {v} m/s with {effects}")
+            sl = slice(0, N_SAMPLES)
+            z = np.zeros(N_SAMPLES)
+            out.append(
+                Window(
+                    file=f"{label}_{v:.2f}mps",
+                    speed=float(v),
+                    start=j * N_SAMPLES,
+                    phi=run["phi"][sl].copy(),
+                    delta=run["delta"][sl].copy(),
+                    phidot=run["phidot"][sl].copy(),
+                    deltadot=run["deltadot"][sl].copy(),
+                    v_sensor=run["v"][sl].copy(),
+                    T_ext=z,
+                    hist=np.zeros(20),
+                )  # fmt: skip
+            )
+    return out
+
+
+def run_trial(spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True) -> dict:
+    """Simulate, identify (not told), evaluate on held-out speeds; returns a JSON-able dict.
+
+    ``nonlinear``: the pipeline's nominal model is the nonlinear Whipple model
+    (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
+    """
+    from ident.discrepancy import evaluate, identify
+    from ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+
+    t0 = time.perf_counter()
+    es = EFFECTS[spec.effect]
+    fx = [es.sim_effect(spec.value)]
+    fit = decay_windows(fx, spec.fit_speeds, FIT_PER_SPEED, spec.noise, spec.seed, "fit")
+    held = decay_windows(fx, spec.eval_speeds, EVAL_PER_SPEED, spec.noise, spec.seed + 1, "eval")
+    if nonlinear:
+        attach_nonlinear_correction(fit)
+        attach_nonlinear_correction(held)
+    nominal = ExperimentModel()
+    res = identify(nominal, fit, max_effects=max_effects)
+    ev = evaluate(nominal, res.model, held)["summary"]
+    first = res.verdict[0]
+    est = next((e for e in res.effects if e.name == spec.effect), None)
+    value = None if est is None else float(est.value)
+    dev = abs(spec.value - es.absent)
+    mag_ok = bool(value is not None and abs(value - spec.value) <= 0.2 * dev)
+    ratio = ev["error_after"] / ev["error_before"]
+    out = {
+        **asdict(spec),
+        "in_library": es.in_library,
+        "verdict": res.verdict,
+        "estimate": value,
+        "estimate_std": None if est is None else float(est.std),
+        "explained_fraction": res.explained,
+        "error_before": ev["error_before"],
+        "error_after": ev["error_after"],
+        "error_ratio": ratio,
+        "seconds": time.perf_counter() - t0,
+    }
+    if es.in_library:
+        out["ranked_first"] = first == spec.effect
+        out["magnitude_ok"] = bool(out["ranked_first"] and mag_ok)
+        out["error_halved"] = bool(ratio <= 0.5)
+        out["success"] = bool(out["ranked_first"] and mag_ok and ratio <= 0.5)
+    else:
+        out["unexplained"] = first == "unexplained"
+        out["success"] = out["unexplained"]
+    return out
+
+
+def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) interval for a success probability from k of n."""
+    from scipy.stats import binomtest
+
+    if n == 0:
+        return (0.0, 1.0)
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="exact")
+    return (float(ci.low), float(ci.high))
+
+
+def _rate(rows: list[dict], key: str) -> dict:
+    k = sum(bool(r[key]) for r in rows)
+    n = len(rows)
+    lo, hi = binomial_ci(k, n)
+    return {"k": k, "n": n, "rate": k / n if n else float("nan"), "ci95": [lo, hi]}
+
+
+def summarize(rows: list[dict]) -> dict:
+    """Rates over trials (overall and per effect) with 95 % Clopper-Pearson intervals."""
+    lib = [r for r in rows if r["in_library"]]
+    out_ = [r for r in rows if not r["in_library"]]
+    summ: dict = {"trials": len(rows)}
+    if lib:
+        summ["library"] = {k: _rate(lib, k) for k in
+                           ("ranked_first", "magnitude_ok", "error_halved", "success")}  # fmt: skip
+    if out_:
+        summ["outside"] = {"unexplained": _rate(out_, "unexplained")}
+    per = {}
+    for name in dict.fromkeys(r["effect"] for r in rows):
+        rs = [r for r in rows if r["effect"] == name]
+        keys = ("ranked_first", "magnitude_ok", "error_halved") if rs[0]["in_library"] else (
+            "unexplained",)  # fmt: skip
+        d = {k: _rate(rs, k) for k in keys}
+        firsts: dict[str, int] = {}
+        for r in rs:
+            firsts[r["verdict"][0]] = firsts.get(r["verdict"][0], 0) + 1
+        d["named_first"] = firsts
+        d["median_error_ratio"] = float(np.median([r["error_ratio"] for r in rs]))
+        per[name] = d
+    summ["per_effect"] = per
+    summ["seconds_per_trial"] = float(np.mean([r["seconds"] for r in rows])) if rows else 0.0
+    return summ
+
+
+def run_trials(
+    n: int, seed: int = 0, processes: int = 2, effects: tuple[str, ...] | None = None
+) -> dict:
+    """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary."""
+    if int(processes) != processes or processes < 1:
+        raise ValueError(f"processes must be a positive integer, got {processes!r}")
+    specs = draw_trials(n, seed, effects)
+    t0 = time.perf_counter()
+    if processes == 1 or len(specs) == 1:
+        rows = [run_trial(s) for s in specs]
+    else:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=int(processes)) as pool:
+            rows = list(pool.map(run_trial, specs))
+    summ = summarize(rows)
+    summ["wall_seconds"] = time.perf_counter() - t0
+    summ["seed"] = int(seed)
+    summ["processes"] = int(processes)
+    return {"trials": rows, "summary": summ}
