@@ -1,0 +1,89 @@
+"""Markdown report building: tables of paper | identified | truth, figures, and the
+machine-readable ``summary.json`` written next to ``report.md`` (both atomically)."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .cliutil import atomic_write_text, to_jsonable
+
+__all__ = ["Report", "fmt", "fmt_complex", "write"]
+
+
+def fmt(x: Any, digits: int = 4) -> str:
+    """A number for a table: ``digits`` significant figures; '-' for None/NaN."""
+    if x is None:
+        return "-"
+    if isinstance(x, (complex, np.complexfloating)):
+        return fmt_complex(x, digits)
+    if isinstance(x, str):
+        return x
+    x = float(x)
+    if not math.isfinite(x):
+        return "-"
+    if x == 0:
+        return "0"
+    return f"{x:.{digits}g}"
+
+
+def fmt_complex(z: complex, digits: int = 4) -> str:
+    """``a ± bi`` style for one member of a conjugate pair, plain real otherwise."""
+    z = complex(z)
+    if abs(z.imag) < 1e-9:
+        return fmt(z.real, digits)
+    sign = "+" if z.imag >= 0 else "-"
+    return f"{fmt(z.real, digits)} {sign} {fmt(abs(z.imag), digits)}i"
+
+
+class Report:
+    """An ordered list of markdown blocks."""
+
+    def __init__(self, title: str) -> None:
+        self.blocks: list[str] = [f"# {title}\n"]
+
+    def heading(self, text: str, level: int = 2) -> None:
+        self.blocks.append(f"{'#' * level} {text}\n")
+
+    def para(self, text: str) -> None:
+        self.blocks.append(text.strip() + "\n")
+
+    def bullets(self, items: Sequence[str]) -> None:
+        self.blocks.append("\n".join(f"- {s}" for s in items) + "\n")
+
+    def table(self, headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
+        def cell(x):
+            return str(x if isinstance(x, str) else fmt(x)).replace("|", "\\|").replace("\n", " ")
+
+        lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+        lines += ["| " + " | ".join(cell(x) for x in r) + " |" for r in rows]
+        self.blocks.append("\n".join(lines) + "\n")
+
+    def figure(self, path: str, caption: str) -> None:
+        self.blocks.append(f"![{caption}]({path})\n\n*{caption}* (`{path}`)\n")
+
+    def markdown(self) -> str:
+        return "\n".join(self.blocks)
+
+
+def _strip_private(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _strip_private(v) for k, v in obj.items() if not str(k).startswith("_")}
+    if isinstance(obj, (list, tuple)):
+        return [_strip_private(v) for v in obj]
+    return obj
+
+
+def write(out: Path, report: Report, summary: dict[str, Any]) -> tuple[Path, Path]:
+    """Write ``report.md`` and ``summary.json`` (keys starting with '_' are left out; complex
+    numbers become {"re", "im"}; NaN becomes null)."""
+    out = Path(out)
+    md, js = out / "report.md", out / "summary.json"
+    atomic_write_text(md, report.markdown())
+    atomic_write_text(js, json.dumps(to_jsonable(_strip_private(summary)), indent=1))
+    return md, js
