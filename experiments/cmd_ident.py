@@ -30,6 +30,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
 
+    a = sub.add_parser(
+        "accuracy",
+        help="identification accuracy on the nonlinear closed-loop testbed",
+        description=(
+            "Simulate 50 s of closed-loop data per speed and controller (cached in DIR/data), "
+            "identify with the direct and PEM methods and compare eigenvalues, v_w, v_c and "
+            "the RHP zero of delta/T_delta with the true linearization. Writes "
+            "DIR/accuracy.json and DIR/accuracy.md; progress on stderr."
+        ),
+    )
+    a.add_argument(
+        "--quick",
+        action="store_true",
+        help="speeds 2, 5, 10 m/s (below v_w, between v_w and v_c, above v_c)",
+    )
+    a.add_argument(
+        "--controllers",
+        default="fuzzy,pid,pole",
+        help="comma-separated subset of fuzzy,pid,pole (default all)",
+    )
+    a.add_argument(
+        "--methods",
+        default="direct,pem",
+        help="comma-separated subset of direct,pem (default both)",
+    )
+    a.add_argument(
+        "--speeds",
+        default=None,
+        metavar="A:B:STEP",
+        help="speeds [m/s] (default 1:15:0.5; stop included)",
+    )
+    a.add_argument("--workers", type=int, default=2, help="simulation processes (default 2)")
+    a.add_argument("--out", default="accuracy", metavar="DIR", help="output folder")
+    a.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    a.set_defaults(func=cmd_accuracy)  # fmt: skip
+
 
 def _truth(runs):
     from sim.parameters import from_mapping
@@ -122,4 +158,41 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if "true_eigenvalues" in row:
             fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
             print(f"{'':8s}  true       {fmt}")
+    return 0
+
+
+def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in names if n not in allowed]
+    if bad or not names:
+        raise ValueError(f"--{what} {text!r}: give a comma-separated subset of {','.join(allowed)}")
+    return list(dict.fromkeys(names))
+
+
+def cmd_accuracy(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from . import accuracy as acc
+    from .cliutil import atomic_write_text, parse_range
+
+    controllers = _names(args.controllers, acc.CONTROLLERS, "controllers")
+    methods = _names(args.methods, acc.METHODS, "methods")
+    if args.quick and args.speeds:
+        raise ValueError("--quick fixes the speeds; drop --speeds or --quick")
+    if args.workers < 1:
+        raise ValueError(f"--workers {args.workers}: give at least 1")
+    if args.speeds:
+        speeds = tuple(float(v) for v in parse_range(args.speeds, "--speeds", minimum=0.1))
+    else:
+        speeds = acc.QUICK_SPEEDS if args.quick else acc.FULL_SPEEDS
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    result = acc.run_accuracy(out, controllers, methods, speeds, workers=args.workers)
+    atomic_write_text(out / "accuracy.json", dump_json(result))
+    atomic_write_text(out / "accuracy.md", acc.markdown(result))
+    if args.json:
+        print(dump_json(result))
+    else:
+        print(acc.table_text(result), end="")
+        print(f"wrote {out / 'accuracy.json'} and {out / 'accuracy.md'}")
     return 0

@@ -33,6 +33,7 @@ __all__ = [
     "matrices_from_speed_params",
     "speed_map",
     "speed_params_from_matrices",
+    "steer_zeros",
     "theta_from_matrices",
     "to_bikeid_order",
     "to_canonical_form",
@@ -138,6 +139,26 @@ def to_canonical_form(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray
     Ac = T @ A @ Ti
     Bc = T @ B.reshape(4, -1)[:, :1]
     return np.array([Ac[r, c] for r, c in A_POS] + [Bc[1, 0], Bc[3, 0]])
+
+
+def steer_zeros(theta: np.ndarray) -> np.ndarray:
+    """Zeros [1/s] of delta/T_delta of the canonical model ``theta`` (finite ones, sorted).
+
+    Transmission zeros of (A, B, c_delta, 0): the finite generalized eigenvalues of the
+    Rosenbrock pencil [[A, B], [c_delta, 0]] - s [[I, 0], [0, 0]].  In Meijaard notation
+    they are the roots of M_pp s^2 + v C1_pp s + g K0_pp + v^2 K2_pp (the roll row with
+    delta held), +-sqrt(-g K0_pp / M_pp) = +-3.1347 rad/s for the benchmark at any speed.
+    """
+    from scipy.linalg import eigvals
+
+    A, B = canonical_ab(theta)
+    P = np.zeros((5, 5))
+    P[:4, :4], P[:4, 4:], P[4, 2] = A, B, 1.0
+    E = np.zeros((5, 5))
+    E[:4, :4] = np.eye(4)
+    z = eigvals(P, E)
+    z = z[np.isfinite(z) & (np.abs(z) < 1e8)]
+    return np.sort_complex(np.real_if_close(z, tol=1e6).astype(complex))
 
 
 def _state_names() -> list[str]:

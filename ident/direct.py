@@ -24,7 +24,11 @@ enters q'' and through the loop every regressor (reference F5, F6, T5):
 ``instruments="lagged"`` uses the regressors ``lags`` samples earlier (valid when the
 equation error is white); ``instruments="dither"`` uses the logged dither and its
 lags 0..``lags``, each times 1, v and v^2 (valid for any disturbance independent of
-the dither).
+the dither); ``instruments="external"`` uses both external signals of the loop, the
+dither and the roll reference, at lags 0..``lags`` in about 20 steps, each times 1, v and
+v^2 (valid when the sensor noise and disturbances are independent of both; suited to
+long-memory closed-loop responses such as a chirp-driven loop, where a few dither lags
+explain little of the regressors).
 """
 
 from __future__ import annotations
@@ -261,7 +265,7 @@ def identify(
     free_roll, free_steer : entry names to estimate; defaults are Moore & Hubbard's
         sets, with HdF left out when F is zero in every run.
     symmetric : two-stage, Mdp := Mpd and K0dp := K0pd from the roll row.
-    method : "ls" or "iv"; ``instruments`` "lagged" or "dither", ``lags`` >= 1.
+    method : "ls" or "iv"; ``instruments`` "lagged", "dither" or "external", ``lags`` >= 1.
     source : "signals" (measured) or "truth" (noise-free simulated signals).
     max_condition : an unidentifiable setup (condition number of the column-scaled
         regressor matrix above this) raises ValueError naming the collinear entries.
@@ -271,8 +275,8 @@ def identify(
         raise ValueError("no runs given")
     if method not in ("ls", "iv"):
         raise ValueError(f"method {method!r}: choose 'ls' or 'iv'")
-    if instruments not in ("lagged", "dither"):
-        raise ValueError(f"instruments {instruments!r}: choose 'lagged' or 'dither'")
+    if instruments not in ("lagged", "dither", "external"):
+        raise ValueError(f"instruments {instruments!r}: choose 'lagged', 'dither' or 'external'")
     if method == "iv" and lags < 1:
         raise ValueError(f"lags={lags}: instrumental variables need lags >= 1")
     if source not in ("signals", "truth"):
@@ -315,6 +319,12 @@ def identify(
             )
     if method == "iv" and instruments == "dither" and any(r.dither is None for r in runs):
         raise ValueError("instruments='dither' needs runs with a logged dither")
+    if (
+        method == "iv"
+        and instruments == "external"
+        and any(r.dither is None or r.reference is None for r in runs)
+    ):
+        raise ValueError("instruments='external' needs runs with a logged dither and reference")
 
     cols = [regressors(d, g) for d in data]
     speeds = np.concatenate([d["v"] for d in data])
@@ -332,6 +342,15 @@ def identify(
                 [np.concatenate([cols[i][n][:-cut] for i in range(len(runs))]) for n in names]
             )
         zs = []
+        if instruments == "external":
+            step = max(1, lags // 20)
+            for sig in ("dither", "reference"):
+                for j in range(0, lags + 1, step):
+                    for pw in (0, 1, 2):
+                        zs.append(stack(lambda i, j=j, pw=pw, sig=sig: np.roll(
+                            getattr(runs[i], sig) - getattr(runs[i], sig).mean(), j
+                        ) * data[i]["v"] ** pw))  # fmt: skip
+            return np.column_stack(zs)
         for j in range(lags + 1):
             for pw in (0, 1, 2):
                 zs.append(

@@ -27,13 +27,20 @@ and is rejected.  Outputs are weighted by the inverse residual standard deviatio
 (two passes), so the covariance sigma^2 (J'J)^-1 is that of a whitened residual.
 
 Start.  ``ident.subspace.pbsid`` on decimated data (closed-loop safe), converted to
-continuous time and to the canonical form.
+continuous time and to the canonical form; by default two past windows/decimations
+(:data:`SUBSPACE_STARTS`) plus any ``starts`` given (a neighbouring speed's model, a
+direct estimate) are scored by their one-step prediction cost and the best is refined.
 
-Speed-parameterized model (``fit_speed_model``): per-speed fits give the start
-and each speed's K; then alpha, beta, gamma, b are refined jointly over all runs
-with each speed's K held fixed (shared structural parameters, speed-specific
-noise model).  The runs' nominal speed ``run.speed`` is used (per-sample speed
-variation is ignored here).
+Minimizer.  ``method="lm"`` (default): Levenberg-Marquardt on the P x P normal equations
+with a statistical stopping rule (see ``_lm``); ``method="scipy"``: MINPACK through
+``scipy.optimize.least_squares``.  Profiling showed MINPACK's QR of the full
+(N l) x P Jacobian at every iteration, and a Jacobian at every trial point, dominating.
+
+Speed-parameterized model (``fit_speed_model``): per-speed fits (warm-started from
+the next lower speed, or reused via ``per_speed=``) give the start and each speed's K;
+then alpha, beta, gamma, b are refined jointly over all runs with each speed's K held
+fixed (shared structural parameters, speed-specific noise model).  The runs' nominal
+speed ``run.speed`` is used (per-sample speed variation is ignored here).
 """
 
 from __future__ import annotations
@@ -65,7 +72,14 @@ from .canonical import (
 )
 from .subspace import d2c, decimate, pbsid
 
-__all__ = ["CanonicalModel", "SpeedCanonicalModel", "fit", "fit_speed_model", "subspace_start"]
+__all__ = [
+    "CanonicalModel",
+    "SpeedCanonicalModel",
+    "SUBSPACE_STARTS",
+    "fit",
+    "fit_speed_model",
+    "subspace_start",
+]
 
 #: All four canonical states are measured (Moore & Hubbard Table 1); Chen & Dao used
 #: ("phi", "delta").  Closed-loop consistency needs every signal the controller feeds
@@ -315,7 +329,12 @@ class SpeedCanonicalModel:
 
 
 class _Problem:
-    """Stacked, weighted, x0-projected prediction errors of several runs."""
+    """Stacked, weighted, x0-projected prediction errors of several runs.
+
+    ``residual(x)`` costs one state-only kernel pass per run (the errors are affine in
+    x0: e = E0 + Psi x0, x0 by least squares); ``jacobian(x)`` adds the sensitivity
+    pass.  Both return None at a point whose predictor Ad - K C is unstable.
+    """
 
     def __init__(self, data, mapping, Ks, free_k, weights, outputs):
         self.data, self.mapping, self.Ks, self.free_k = data, mapping, Ks, free_k
@@ -323,61 +342,86 @@ class _Problem:
         self.L = len(outputs)
         self.w = np.asarray(weights, float)
         self._x, self._r, self._J, self.x0s = None, None, None, []
+        self._cache: dict = {}
 
     def split(self, x):
         P = self.mapping[0].shape[1]
         nk = 4 * self.L
         return x[:P], (x[P : P + nk].reshape(4, self.L) if self.free_k else None)
 
-    def evaluate(self, x):
-        if self._x is not None and np.array_equal(x, self._x):
-            return
+    def _models(self, x, derivatives: bool):
+        """Per run (Ad, Bd, dAd, dBd, K, S) or None if a predictor is unstable."""
         p, Kfree = self.split(x)
-        res, jac, x0s = [], [], []
-        cache = {}
-        empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
+        out, cache = [], {}
         for i, d in enumerate(self.data):
             S = self.mapping[i]
             theta = S @ p
-            key = (d.dt, tuple(theta))
+            key = (d.dt, theta.tobytes())
             if key not in cache:
-                cache[key] = _discretize_with_derivatives(theta, d.dt)
+                if derivatives:
+                    cache[key] = _discretize_with_derivatives(theta, d.dt)
+                else:
+                    cache[key] = (*_discretize(theta, d.dt), None, None)
             Ad, Bd, dAd, dBd = cache[key]
             K = Kfree if self.free_k else self.Ks[i]
             rho = np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C)))
             if not rho < 1.0:
-                self._x = x.copy()
-                self._r = np.full(sum(self.L * dd.u.size for dd in self.data), 1e6)
-                self._J = None
-                return
+                return None
+            out.append((Ad, Bd, dAd, dBd, K, S))
+        return out
+
+    def residual(self, x):
+        """Weighted prediction errors (x0 projected out), or None (unstable predictor)."""
+        models = self._models(x, derivatives=False)
+        if models is None:
+            return None
+        res, x0s = [], []
+        empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
+        for d, (Ad, Bd, _, _, K, _) in zip(self.data, models, strict=True):
             E0, Psi = _kernel(Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx, np.zeros(4), False)
-            wt = np.tile(self.w, d.u.size)
-            Psi = Psi.reshape(-1, 4) * wt[:, None]
-            x0, *_ = np.linalg.lstsq(Psi, -(E0 * self.w).ravel(), rcond=None)
-            E, J = _kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
-            e = (E * self.w).ravel()
-            J = J.reshape(e.size, -1) * wt[:, None]
+            Psi = (Psi * self.w[None, :, None]).reshape(-1, 4)
+            e0 = (E0 * self.w).ravel()
+            x0, *_ = np.linalg.lstsq(Psi, -e0, rcond=None)
+            res.append(e0 + Psi @ x0)
+            x0s.append(x0)
+        self.x0s = x0s
+        return np.concatenate(res)
+
+    def jacobian(self, x):
+        """(residual, projected Jacobian) at x, or (None, None)."""
+        r = self.residual(x)
+        if r is None:
+            return None, None
+        models = self._models(x, derivatives=True)
+        jac = []
+        for d, x0, (Ad, Bd, dAd, dBd, K, S) in zip(self.data, self.x0s, models, strict=True):
+            _, J = _kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
+            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
             nm = J.shape[1] - 4
             Jm = np.hstack([J[:, :10] @ S, J[:, 10:nm]])
             Q, _ = np.linalg.qr(J[:, nm:])
             Jm -= Q @ (Q.T @ Jm)
-            res.append(e)
             jac.append(Jm)
-            x0s.append(x0)
-        self._x, self._r, self._J, self.x0s = x.copy(), np.concatenate(res), np.vstack(jac), x0s
+        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
+        return r, self._J
 
+    # scipy.optimize.least_squares interface (method="scipy")
     def fun(self, x):
-        self.evaluate(x)
-        return self._r
+        r = self.residual(x)
+        return np.full(sum(self.L * d.u.size for d in self.data), 1e6) if r is None else r
 
     def jac(self, x):
-        self.evaluate(x)
-        if self._J is None:
+        r, J = self.jacobian(x)
+        if J is None:
             raise RuntimeError("Jacobian requested at a rejected point")
-        return self._J
+        return J
+
+    def evaluate(self, x):
+        if self._x is None or not np.array_equal(x, self._x):
+            self.jacobian(x)
 
     def residuals(self) -> np.ndarray:
-        """Unweighted prediction errors (N_total, L)."""
+        """Unweighted prediction errors (N_total, L) at the last Jacobian point."""
         return self._r.reshape(-1, self.L) / self.w
 
 
@@ -408,8 +452,75 @@ def subspace_start(
     return to_canonical_form(Ac, Bc, C)
 
 
+@dataclass
+class _Solution:
+    x: np.ndarray
+    nfev: int
+    success: bool
+    message: str
+
+
+def _lm(problem: _Problem, x: np.ndarray, max_nfev: int, ftol: float = 1e-3) -> _Solution:
+    """Levenberg-Marquardt on the normal equations (Marquardt scaling, Nielsen's damping).
+
+    Each trial point costs one residual pass; the Jacobian is formed only at accepted
+    points, and the small (P x P) normal equations replace MINPACK's QR of the full
+    N x P Jacobian (which dominated the run time).  Stopping rule on statistical
+    grounds: a step that lowers the cost by less than ``ftol`` residual variances
+    (cost / number of residuals) moves the estimate by about sqrt(ftol) standard errors
+    or less, so iterating further only chases round-off.  Near the predictor-stability
+    boundary (where a free K may push the optimum) trial steps that destabilize
+    Ad - K C are rejected and the damping raised tenfold.
+    """
+    r, J = problem.jacobian(x)
+    if r is None:
+        raise ValueError("the start model gives an unstable predictor; give another start")
+    cost = float(r @ r)
+    m = max(r.size, 1)
+    H, g = J.T @ J, J.T @ r
+    lam, nu = 1e-3, 2.0
+    nfev, success, message = 1, False, "maximum number of evaluations reached"
+    while nfev < max_nfev:
+        D = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
+        try:
+            h = np.linalg.solve(H + lam * np.diag(D), -g)
+        except np.linalg.LinAlgError:
+            lam, nu = lam * nu, nu * 2
+            continue
+        xn = x + h
+        rn = problem.residual(xn)
+        nfev += 1
+        if rn is None:
+            lam *= 10.0
+        elif (cn := float(rn @ rn)) < cost:
+            pred = -(2.0 * h @ g + h @ H @ h)
+            rho = (cost - cn) / pred if pred > 0 else 1.0
+            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            small = cost - cn <= ftol * cost / m
+            x, cost = xn, cn
+            r, J = problem.jacobian(x)
+            H, g = J.T @ J, J.T @ r
+            if small:
+                success, message = True, "converged"
+                break
+        else:
+            lam *= nu
+            nu *= 2.0
+        if lam > 1e12:
+            success, message = True, "no further decrease (damping limit)"
+            break
+    if problem._x is None or not np.array_equal(problem._x, x):
+        problem.jacobian(x)
+    return _Solution(x=x, nfev=nfev, success=success, message=message)
+
+
 def _solve(problem: _Problem, x0: np.ndarray, max_nfev: int, method: str):
-    sol = least_squares(problem.fun, x0, jac=problem.jac, method=method, x_scale="jac",
+    if method == "lm":
+        return _lm(problem, np.asarray(x0, float), max_nfev)
+    if method != "scipy":
+        raise ValueError(f"method {method!r}: choose 'lm' (normal equations) or 'scipy'")
+    sol = least_squares(problem.fun, x0, jac=problem.jac, method="lm", x_scale="jac",
                         max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)  # fmt: skip
     problem.evaluate(sol.x)
     if problem._J is None:
@@ -423,6 +534,44 @@ def _covariance(problem: _Problem, n_extra: int) -> np.ndarray:
     return float(r @ r) / dof * np.linalg.pinv(J.T @ J)
 
 
+#: Subspace starts tried by ``fit(..., multistart=True)``: (past window [s], coarse dt [s]).
+SUBSPACE_STARTS = ((0.5, 0.01), (1.5, 0.02))
+
+
+def _candidates(runs, theta0, starts, multistart) -> list[tuple[str, np.ndarray]]:
+    cands: list[tuple[str, np.ndarray]] = []
+    if theta0 is not None:
+        cands.append(("theta0", np.asarray(theta0, float)))
+    cands += [(f"start{i}", np.asarray(t, float)) for i, t in enumerate(starts or ())]
+    if theta0 is None and (multistart or not cands):
+        windows = SUBSPACE_STARTS if multistart else SUBSPACE_STARTS[:1]
+        for p_s, cdt in windows:
+            try:
+                th = subspace_start(runs, p_seconds=p_s, coarse_dt=cdt)
+            except (ValueError, np.linalg.LinAlgError):
+                continue
+            if np.all(np.isfinite(th)):
+                cands.append((f"pbsid(p={p_s:g}s, dt={cdt:g}s)", th))
+    bad = [n for n, t in cands if t.shape != (10,)]
+    if bad:
+        raise ValueError(f"start values {bad} must hold 10 canonical parameters a1..a8, b1, b2")
+    if not cands:
+        raise ValueError("no usable start: the subspace start failed; pass theta0=")
+    return cands
+
+
+def _initial_k(theta, dt, C, data, yvar, free_k) -> np.ndarray | None:
+    if not free_k:
+        return np.zeros((4, C.shape[0]))
+    Ad, Bd = _discretize(theta, dt)
+    uvar = float(np.mean([np.var(d.u) for d in data]))
+    try:
+        K = _kalman_gain(Ad, Bd, C, uvar, 1e-2 * yvar)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return K if np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0 else None
+
+
 def fit(
     runs: Run | Sequence[Run],
     *,
@@ -432,13 +581,22 @@ def fit(
     max_nfev: int = 100,
     method: str = "lm",
     passes: int = 2,
+    starts: Sequence[np.ndarray] = (),
+    multistart: bool = True,
 ) -> CanonicalModel:
     """Fixed-speed canonical PEM from one or more runs at the same speed and dt.
 
     ``outputs``: measured states fitted (default all four; see module docstring);
-    ``theta0``: start (default :func:`subspace_start`); ``noise_model`` "free" (K
-    estimated) or "none" (output error); ``passes``: fits with re-estimated output
-    weights (1 = weights from the output variances only).  Returns a :class:`CanonicalModel`.
+    ``theta0``: start (default: the subspace starts, see ``multistart``); ``starts``:
+    further candidate starts (e.g. the model of a neighbouring speed or a direct
+    estimate); ``multistart``: also try the PBSID starts of :data:`SUBSPACE_STARTS`.
+    All candidates are scored by their one-step prediction cost (Kalman K of each
+    candidate) and the best is refined, which avoids the local minima a single poor
+    subspace start ran into.  ``noise_model`` "free" (K estimated) or "none" (output
+    error); ``method`` "lm" (Levenberg-Marquardt on the normal equations, default) or
+    "scipy" (``scipy.optimize.least_squares``, MINPACK; same optimum, slower);
+    ``passes``: fits with re-estimated output weights (1 = weights from the output
+    variances only).  Returns a :class:`CanonicalModel` (``notes`` names the start used).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -457,21 +615,28 @@ def fit(
             f"runs at different speeds {sorted(speeds)}: use fit_speed_model for several speeds"
         )
     dt = data[0].dt
-    theta = subspace_start(runs) if theta0 is None else np.asarray(theta0, float)
-    yvar = np.mean([np.var(d.y, axis=0) for d in data], axis=0)
-    Ad, Bd = _discretize(theta, dt)
     free_k = noise_model == "free"
-    L = len(outputs)
-    if free_k:
-        uvar = float(np.mean([np.var(d.u) for d in data]))
-        K = _kalman_gain(Ad, Bd, C, uvar, 1e-2 * yvar)
-    else:
-        K = np.zeros((4, L))
-    mapping = [np.eye(10)] * len(data)
+    yvar = np.mean([np.var(d.y, axis=0) for d in data], axis=0)
     w = 1.0 / np.sqrt(yvar)
-    x = np.concatenate([theta, K.ravel()]) if free_k else theta
+    mapping = [np.eye(10)] * len(data)
+    best = None
+    for name, theta in _candidates(runs, theta0, starts, multistart):
+        K = _initial_k(theta, dt, C, data, yvar, free_k)
+        if K is None:
+            continue
+        x = np.concatenate([theta, K.ravel()]) if free_k else theta
+        prob = _Problem(data, mapping, [K] * len(data), free_k, w, outputs)
+        r = prob.residual(x)
+        if r is not None and (best is None or float(r @ r) < best[0]):
+            best = (float(r @ r), name, x, K)
+    if best is None:
+        raise ValueError(
+            "no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
+            "neighbouring speed)"
+        )
+    _, start_name, x, K = best
     nfev = 0
-    notes = []
+    notes = [f"start: {start_name}"]
     for _ in range(max(1, passes)):
         prob = _Problem(data, mapping, [K] * len(data), free_k, w, outputs)
         sol = _solve(prob, x, max_nfev, method)
@@ -498,8 +663,17 @@ def fit_speed_model(
     noise_model: str = "free",
     max_nfev: int = 50,
     method: str = "lm",
+    per_speed: dict[float, CanonicalModel] | None = None,
+    passes: int = 2,
 ) -> SpeedCanonicalModel:
-    """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc)."""
+    """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
+
+    Per-speed fits (one weighting pass each; speeds in increasing order, each also
+    started from its lower neighbour's model) give the start and each speed's K; pass
+    ``per_speed`` (speed rounded to 1e-6 m/s -> :class:`CanonicalModel`, e.g. from
+    :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are refined
+    jointly over all runs with each speed's K held fixed (``passes`` weighting passes).
+    """
     runs = list(runs)
     outputs = tuple(outputs)
     groups: dict[float, list[Run]] = {}
@@ -510,19 +684,38 @@ def fit_speed_model(
             "the speed-parameterized model needs runs at >= 2 distinct speeds (alpha and beta "
             "are not separable at one speed, reference T3)"
         )
-    per = {
-        v: fit(rs, outputs=outputs, noise_model=noise_model, method=method, passes=1)
-        for v, rs in groups.items()
-    }
+    per: dict[float, CanonicalModel] = {}
+    given = {round(float(v), 6): m for v, m in (per_speed or {}).items()}
+    prev = None
+    for v in sorted(groups):
+        if v in given:
+            per[v] = given[v]
+        else:
+            per[v] = fit(groups[v], outputs=outputs, noise_model=noise_model, method=method,
+                         passes=1, starts=() if prev is None else (prev.theta,))  # fmt: skip
+        prev = per[v]
+    if any(tuple(m.outputs) != outputs for m in per.values()):
+        raise ValueError("per_speed models were fitted with other outputs than outputs=")
     Sstack = np.vstack([speed_map(v) for v in per])
     tstack = np.concatenate([m.theta for m in per.values()])
     params, *_ = np.linalg.lstsq(Sstack, tstack, rcond=None)
     data = _run_data(runs, outputs)
     mapping = [speed_map(d.v) for d in data]
     Ks = [per[round(r.speed, 6)].K for r in runs]
+    C = _out_matrix(outputs)[0]
+    for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
+        Ad, Bd = _discretize(mapping[i] @ params, d.dt)
+        if not np.max(np.abs(np.linalg.eigvals(Ad - Ks[i] @ C))) < 1.0:
+            K = _initial_k(mapping[i] @ params, d.dt, C, [d], np.var(d.y, axis=0), True)
+            if K is None:
+                raise ValueError(
+                    f"no stable predictor for the run at {d.v} m/s from the joint start; "
+                    "fit that speed separately and check its data"
+                )
+            Ks[i] = K
     w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     nfev = 0
-    for _ in range(2):
+    for _ in range(max(1, passes)):
         prob = _Problem(data, mapping, Ks, False, w, outputs)
         sol = _solve(prob, params, max_nfev, method)
         nfev += sol.nfev
