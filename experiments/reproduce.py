@@ -108,23 +108,24 @@ def reproduce(
     t0 = stage("Chen & Dao Fig. 2 / eqs. 5-6 (identification at 4.2 m/s)")
     f2 = cd.fig2(p, out, st.fig2_duration)
     times["fig2"] = time.perf_counter() - t0
-    t0 = stage(f"Chen & Dao Fig. 3: fuzzy runs + PEM/direct at {len(st.fig3_speeds)} speeds")
-    grid = cd.run_grid("fuzzy", st.fig3_speeds, st.id_duration, bicycle, METHODS, workers)
-    zoom = (
-        [
-            g
-            for g in cd.run_grid(
-                "fuzzy",
-                [v for v in st.zoom_speeds if v not in st.fig3_speeds],
-                st.id_duration,
-                bicycle,
-                ("pem",),
-                workers,
-            )
-        ]
-        if st.zoom_speeds
-        else []
+    t0 = stage(
+        f"identification runs (one process pool): fuzzy at {len(st.fig3_speeds)} speeds for "
+        f"Fig. 3, pid and pole placement at {len(st.sweep_speeds)} speeds for the sweep summary"
     )
+    zoom_speeds = [v for v in st.zoom_speeds if v not in st.fig3_speeds]
+    jobs = [("fuzzy", float(v), st.id_duration, bicycle, METHODS) for v in st.fig3_speeds]
+    jobs += [("fuzzy", float(v), st.id_duration, bicycle, ("pem",)) for v in zoom_speeds]
+    jobs += [
+        (c, float(v), st.id_duration, bicycle, METHODS)
+        for c in ("pid", "pole")
+        for v in st.sweep_speeds
+    ]
+    results = cd.run_jobs(jobs, workers)
+    n3 = len(st.fig3_speeds)
+    grid, zoom = results[:n3], results[n3 : n3 + len(zoom_speeds)]
+    rest = results[n3 + len(zoom_speeds) :]
+    times["identification_runs"] = time.perf_counter() - t0
+    t0 = stage("Chen & Dao Fig. 3: eigenvalues against speed")
     f3 = cd.fig3(p, grid, out, zoom)
     times["fig3"] = time.perf_counter() - t0
     log(
@@ -141,10 +142,10 @@ def reproduce(
     t0 = stage("Moore & Hubbard: 3 riders x 2 environments, Tables 2-5, Figs. 2-4")
     mhr = mh.reproduce(out, st.mh_speeds, st.mh_duration, workers, log)
     times["moore_hubbard"] = time.perf_counter() - t0
-    t0 = stage(f"sweep summary: pid and pole placement at {len(st.sweep_speeds)} speeds")
+    t0 = stage("sweep summary")
     sweep = {"fuzzy": [g for g in grid if g["speed"] in st.sweep_speeds]}
     for c in ("pid", "pole"):
-        sweep[c] = cd.run_grid(c, st.sweep_speeds, st.id_duration, bicycle, METHODS, workers)
+        sweep[c] = [g for g in rest if g["controller"] == c]
     sw = _sweep_summary(sweep, out)
     times["sweep"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_all

@@ -181,11 +181,17 @@ def run_grid(
     workers: int = 1,
 ) -> list[dict[str, Any]]:
     """:func:`identify_speed` at every speed (``workers`` processes), in speed order."""
-    jobs = [(controller, float(v), duration, bicycle, tuple(methods)) for v in speeds]
+    return run_jobs(
+        [(controller, float(v), duration, bicycle, tuple(methods)) for v in speeds], workers
+    )
+
+
+def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
+    """:func:`identify_speed` for every job (one process pool for all), in job order."""
     if workers <= 1 or len(jobs) <= 1:
         return [identify_speed(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(identify_speed, jobs))
+        return list(pool.map(identify_speed, jobs, chunksize=1))
 
 
 # -- Fig. 2 / eqs. 5-6 -------------------------------------------------------------------------
