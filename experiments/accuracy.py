@@ -20,7 +20,9 @@ bicycle at the run's speed):
   the controller stacked (one model for all speeds, as the paper), fixed entries at the
   Whipple values, free roll {Mpd, C1pd, K0pd, K0pp} (K0pp added so the delta/T_delta
   zero is identified, not fixed), steer {Mdd, C1dp, C1dd, K0dd, K2dd}; signals prepared
-  by :func:`direct_prepare`; instrumental variables with the external signals.
+  by :func:`direct_prepare` (interval-averaged equation, 3 Hz); instrumental variables
+  with the external signals (dither and roll reference, lags 0..0.4 s) against the
+  closed-loop correlation of sensor noise between regressors and torque.
 
 Goals (issue "Identification", item 6): weave, capsize and caster eigenvalues within 2 %
 (0.05 1/s absolute where |lambda| < 2.5), i.e. |error| <= max(0.02 |lambda|, 0.05);
@@ -174,15 +176,16 @@ def generate(
     return sorted(runs, key=lambda r: r.speed)
 
 
-def direct_prepare(run: Run, cutoff: float = 4.0) -> Run:
-    """Signals for the direct method: every signal (angles, rates, torque) through the same
-    zero-phase 2nd-order Butterworth at ``cutoff`` [Hz], accelerations by central
-    differences of the filtered rates, means removed.  Filtering all signals with one
-    linear filter keeps the (constant-speed) equations of motion exact, while the sensor
-    noise in the regressors and the derivative noise fall with the bandwidth."""
+def direct_prepare(run: Run, cutoff: float = 3.0) -> Run:
+    """Signals for the direct method: the equation of motion averaged over each 10 ms hold
+    interval (``ident.signals.prepare(derivative="interval")``: accelerations = forward
+    differences of the measured rates, angles and rates = trapezoid means, torque = the
+    held value), then every sequence through the same zero-phase 2nd-order Butterworth at
+    ``cutoff`` [Hz], means removed.  One linear filter on every sequence keeps the
+    (constant-speed) averaged equation exact, while sensor noise falls with the bandwidth."""
     from ident.signals import prepare
 
-    return prepare(run, cutoff=cutoff, derivative="central")
+    return prepare(run, cutoff=cutoff, derivative="interval")
 
 
 DIRECT_ROLL = ("Mpd", "C1pd", "K0pd", "K0pp")
@@ -203,8 +206,8 @@ def identify_controller(
     runs: Sequence[Run],
     parameters,
     methods: Sequence[str] = METHODS,
-    direct_cutoff: float = 4.0,
-    direct_lags: int = 100,
+    direct_cutoff: float = 3.0,
+    direct_lags: int = 40,
     log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Identify one controller's runs with ``methods``; per speed and global results."""

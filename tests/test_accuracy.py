@@ -1,0 +1,143 @@
+"""Identification accuracy on the nonlinear testbed (issue "Identification", item 6), reduced.
+
+Truth: ``sim.linear`` of the simulated bicycle at each run's speed (Meijaard 2007 benchmark:
+v_w = 4.2924, v_c = 6.0243 m/s, Table 2) and the delta/T_delta zero +-sqrt(-g K0pp / Mpp)
+= +-3.1347 rad/s.  Tolerances are the issue's: eigenvalues within max(2 % |lambda|,
+0.05 1/s), critical speeds within 0.05 m/s, RHP zero within 2 %.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from experiments import accuracy as acc
+from ident import pem
+from ident.canonical import steer_zeros, theta_from_matrices
+from ident.direct import identify
+from ident.signals import prepare
+from sim.linear import canonical_matrices, eigenvalues
+from sim.linear_sim import simulate
+from sim.parameters import benchmark
+
+P = benchmark()
+CM = canonical_matrices(P)
+
+
+@pytest.mark.parametrize("v", [1.0, 6.0, 15.0])
+def test_steer_zeros_match_roll_row_formula(v):
+    """Zeros of delta/T_delta = roots of Mpp s^2 + v C1pp s + g K0pp + v^2 K2pp (analytic,
+    from M, C1, K0, K2 directly); +3.1347 rad/s for the benchmark at any speed."""
+    z = steer_zeros(theta_from_matrices(CM, v))
+    roots = np.roots([CM.M[0, 0], v * CM.C1[0, 0], CM.g * CM.K0[0, 0] + v**2 * CM.K2[0, 0]])
+    assert np.allclose(np.sort_complex(z), np.sort_complex(roots), atol=1e-9)
+    assert max(z.real) == pytest.approx(3.1347, abs=1e-4)
+
+
+def test_eigen_errors_matching_and_tolerance():
+    """Matching by minimum total distance; tolerance max(0.02 |lambda|, 0.05) (issue)."""
+    truth = acc.true_modes(P, [5.0])[5.0]
+    true_all = np.sort_complex(eigenvalues(P, 5.0))
+    assert truth["weave"] in true_all and truth["capsize"] in true_all
+    shifted = true_all + np.array([0.0, 0.04, 0.04, 0.0])  # caster, weave pair, capsize order
+    e = acc.eigen_errors(shifted[::-1], truth)
+    assert set(e) == {"weave", "capsize", "caster"}
+    assert e["caster"]["error"] == pytest.approx(0.0, abs=1e-12)
+    assert e["weave"]["error"] == pytest.approx(0.04, abs=1e-12)
+    assert e["weave"]["tolerance"] == pytest.approx(0.02 * abs(truth["weave"]))
+    assert e["capsize"]["tolerance"] == 0.05  # |lambda| = 0.32 < 2.5
+
+
+def test_interval_derivative_removes_zoh_bias():
+    """Reference T9: with a ZOH input, central differences leave an O(1) bias and forward
+    differences an O(dt) one; the hold-interval-averaged equation is exact up to the
+    trapezoid error O(dt^2).  Noise-free linear closed loop (exact truth, dither switching
+    every sample), speeds 3 and 5 m/s, Moore's free sets, worst relative entry error:
+    halving dt must cut the interval error by 4 +- 1 (second order) and the forward error
+    by 2 +- 0.5 (first order), and at 10 ms the interval error must be < 2 % and below a
+    tenth of the forward and a hundredth of the central error."""
+
+    def worst(der, dt):
+        runs = [simulate(P, v, duration=20, dt=dt, seed=i, dither=1.0, dither_hold=1)
+                for i, v in enumerate((3.0, 5.0))]  # fmt: skip
+        prepared = [prepare(r, cutoff=None, derivative=der, source="truth") for r in runs]
+        res = identify(prepared, P)
+        return max(abs(res.entry(n) / CM_entry(n) - 1) for n in res.free)
+
+    e = {(der, dt): worst(der, dt) for der in ("central", "forward", "interval")
+         for dt in (0.01, 0.005)}  # fmt: skip
+    assert 3.0 < e["interval", 0.01] / e["interval", 0.005] < 5.0
+    assert 1.5 < e["forward", 0.01] / e["forward", 0.005] < 2.5
+    assert e["interval", 0.01] < 0.02
+    assert e["interval", 0.01] < e["forward", 0.01] / 10 < e["central", 0.01] / 100
+
+
+def CM_entry(name: str) -> float:
+    m, r, c = name[:-2], "pd".index(name[-2]), "pd".index(name[-1])
+    return float(getattr(CM, m)[r, c])
+
+
+def test_lm_matches_minpack():
+    """Second method: the normal-equation LM and MINPACK (scipy least_squares) reach the
+    same optimum within 0.2 standard errors (the LM stops when a step gains less than
+    1e-3 residual variances, i.e. ~0.03 standard errors)."""
+    r = simulate(P, 4.0, duration=30, seed=3, dither=1.0, dither_hold=5, disturbance=0.5,
+                 angle_noise=1e-3, rate_noise=1e-2)  # fmt: skip
+    a = pem.fit(r, method="lm")
+    b = pem.fit(r, method="scipy", theta0=a.theta)
+    se = np.sqrt(np.diag(a.covariance))
+    assert np.max(np.abs(a.theta - b.theta) / se) < 0.2
+
+
+@pytest.mark.slow
+def test_quick_experiment_meets_goals(tmp_path):
+    """The reduced experiment on the nonlinear plant: PID, 50 s at 2, 5 and 10 m/s (below
+    v_w, between v_w and v_c, above v_c), chirp + dither by ``DESIGN``, default sensors.
+    PEM: every eigenvalue, the RHP zero and v_w, v_c within the issue's tolerances.
+    Direct (interval-averaged equation + IV on the external signals): the RHP zero and
+    the weave, capsize and caster eigenvalues within the tolerances; its v_w, v_c from three
+    speeds are reported but only asserted within 0.3 m/s (docs/accuracy.md: the direct
+    critical speeds hinge on K2dd from few speeds)."""
+    runs = acc.generate(tmp_path, "pid", acc.QUICK_SPEEDS, workers=2)
+    assert [r.speed for r in runs] == list(acc.QUICK_SPEEDS)
+    assert all(r.meta["fell_at"] is None for r in runs)
+    # the stated sensor noise is really in the data: roll angle noise std ~ 1e-3 rad
+    noise = runs[1]["phi"] - runs[1].true("phi")
+    assert np.std(noise) == pytest.approx(1e-3, rel=0.1)
+    res = acc.identify_controller(runs, P, ("pem", "direct"))
+    for method in ("pem", "direct"):
+        m = res["methods"][method]
+        assert len(m["rows"]) == 3
+        for row in m["rows"]:
+            for mode, d in row["modes"].items():
+                assert d["pass"], (method, row["speed"], mode, d)
+            assert row["zero"]["pass"], (method, row["speed"], row["zero"])
+    for k, true in (("v_w", 4.2924), ("v_c", 6.0243)):
+        d = res["methods"]["pem"]["critical_speeds"][k]
+        assert d["true"] == pytest.approx(true, abs=1e-4)
+        assert abs(d["identified"] - true) <= 0.05
+        assert abs(res["methods"]["direct"]["critical_speeds"][k]["identified"] - true) < 0.3
+
+
+def test_cli_rejects_bad_lists(tmp_path):
+    """Bad --controllers/--methods: one-line error naming the choices, exit 2."""
+    for opt in (["--controllers", "pid,lqr"], ["--methods", "ls"]):
+        p = subprocess.run(
+            [sys.executable, "-m", "experiments.cli", "accuracy", "--out", str(tmp_path), *opt],
+            capture_output=True, text=True, check=False,
+        )  # fmt: skip
+        assert p.returncode == 2 and "bikeid: error:" in p.stderr
+        assert "subset of" in p.stderr
+
+
+def test_design_covers_speeds():
+    """Every speed 1-15 m/s falls in a band; dither <= 1 N m (issue); chirp amplitudes
+    grow with speed (steer angle of a steady turn ~ phi g w / v^2, docs/accuracy.md)."""
+    assert [acc._band(v) for v in (1.0, 2.9, 3.0, 5.9, 6.0, 15.0)] == [0, 0, 1, 1, 2, 2]
+    assert all(b.dither <= 1.0 for b in acc.DESIGN)
+    amps = [b.chirp_deg for b in acc.DESIGN]
+    assert amps == sorted(amps) and math.isinf(acc.DESIGN[-1].vmax)
