@@ -85,8 +85,8 @@ def test_quasi_periodic_motion_is_not_closed():
 
 def test_small_motion_grows_at_the_linear_weave_rate():
     """From a 1e-5 deg roll, the uncontrolled benchmark at 3.5 m/s stays in its linear range for
-    10 s (the roll stays below 1 deg), so successive roll maxima grow by exp(Re(weave) T) per period T =
-    2 pi / Im(weave) of the linearization (Meijaard 2007, sim.linear); the speed change is
+    10 s (roll below 1 deg), so successive roll maxima grow by exp(Re(weave) T) per period
+    T = 2 pi / Im(weave) of the linearization (Meijaard 2007, sim.linear); the speed change is
     second order in the amplitude.  Tolerance 1 % on the growth rate covers the remaining
     nonlinearity (amplitude < 1 deg) and the section interpolation."""
     from sim.linear import eigenvalues
