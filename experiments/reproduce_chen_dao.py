@@ -524,7 +524,7 @@ def fig3(
         )
         for a in (a1, a2):
             a.axhline(0, color="k", lw=0.5)
-            a.set_xlim(lo, hi)
+            a.set_xlim(lo - 0.02 * (hi - lo), hi + 0.02 * (hi - lo))
             a.grid(alpha=0.3)
             for key in ("v_d", "v_w", "v_c"):
                 val = crit_true[key]
