@@ -251,10 +251,24 @@ def plot_phase_portraits(trajs, labels, path, title: str):
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.6))
     for tr, lab in zip(trajs, labels, strict=True):
-        fell = f" (fell at {tr.fell_at:.1f} s)" if tr.fell_at is not None else ""
+        n = tr.t.size
+        fell = ""
+        if tr.fell_at is not None or tr.stop_reason is not None:
+            # the last phase of a fall is fast and not what the figure is about: draw the
+            # run until |roll| first exceeds 45 deg
+            big = np.nonzero(np.abs(tr.signal("phi")) > math.radians(45.0))[0]
+            n = int(big[0]) + 1 if big.size else n
+            fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
         kw = dict(lw=0.6, label=lab + fell)
-        a1.plot(np.degrees(tr.signal("phi")), np.degrees(tr.signal("phidot")), **kw)
-        a2.plot(np.degrees(tr.signal("delta")), np.degrees(tr.signal("deltadot")), **kw)
+        a1.plot(np.degrees(tr.signal("phi")[:n]), np.degrees(tr.signal("phidot")[:n]), **kw)
+        a2.plot(np.degrees(tr.signal("delta")[:n]), np.degrees(tr.signal("deltadot")[:n]), **kw)
+    kept = [tr for tr in trajs if tr.fell_at is None and tr.stop_reason is None]
+    for ax, (xn, yn) in ((a1, ("phi", "phidot")), (a2, ("delta", "deltadot"))):
+        if kept:  # axes fitted to the runs that stay up; falls leave the frame
+            x = np.degrees(np.concatenate([tr.signal(xn) for tr in kept]))
+            y = np.degrees(np.concatenate([tr.signal(yn) for tr in kept]))
+            ax.set_xlim(1.4 * x.min() - 2, 1.4 * x.max() + 2)
+            ax.set_ylim(1.4 * y.min() - 5, 1.4 * y.max() + 5)
     a1.set_xlabel("roll angle phi [deg]")
     a1.set_ylabel("roll rate [deg/s]")
     a2.set_xlabel("steer angle delta [deg]")

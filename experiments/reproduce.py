@@ -382,7 +382,7 @@ def _report_fig2(rep: Report, f2: dict) -> None:
             fmt(rz["paper"]),
             fmt(rz["identified"]),
             fmt(rz["true"]),
-            "speed independent in the Whipple model: sqrt(g K0_pp / M_pp)"
+            "speed independent in the Whipple model: sqrt(-g K0_pp / M_pp)"
             " (counter-steering); G_phi is minimum phase at 4.2 m/s",
         ]
     )

@@ -115,7 +115,7 @@ def test_quick_reproduction_end_to_end(tmp_path):
       grid adds < 0.03 m/s;
     - v_c within 0.5 m/s: d(capsize)/dv is only ~0.1 1/s per m/s near v_c, so a 0.05 1/s
       error in the capsize root moves v_c by 0.5 m/s;
-    - the right-half-plane zero of delta/T_delta within 0.05 rad/s of sqrt(g K0_pp / M_pp)
+    - the right-half-plane zero of delta/T_delta within 0.05 rad/s of sqrt(-g K0_pp / M_pp)
       (speed independent; 1.5 % covers the identified b and a entries' errors).
     """
     from experiments.cli import main
@@ -132,7 +132,7 @@ def test_quick_reproduction_end_to_end(tmp_path):
     assert crit["v_w"] == pytest.approx(truth["v_w"], abs=0.15)
     assert crit["v_c"] == pytest.approx(truth["v_c"], abs=0.5)
     cm = canonical_matrices(p)
-    rhp = math.sqrt(cm.g * cm.K0[0, 0] / cm.M[0, 0])
+    rhp = math.sqrt(-cm.g * cm.K0[0, 0] / cm.M[0, 0])
     assert rhp == pytest.approx(3.1347, abs=1e-4)  # Meijaard 2007 value, speed independent
     assert s["chen_dao"]["fig2"]["rhp_zero"]["identified"] == pytest.approx(rhp, abs=0.05)
     rows = {r["speed"]: r for r in s["chen_dao"]["fig3"]["rows"]}
