@@ -275,7 +275,13 @@ def plot_phase_portraits(trajs, labels, path, title: str):
     a2.set_ylabel("steer rate [deg/s]")
     for a in (a1, a2):
         a.grid(alpha=0.3)
-    a1.legend(fontsize=7, loc="upper left")
+    fig.legend(
+        *a1.get_legend_handles_labels(),
+        fontsize=7,
+        loc="lower center",
+        ncol=3,
+        bbox_to_anchor=(0.5, -0.08),
+    )
     fig.suptitle(title)
     return save(fig, path)
 
