@@ -572,6 +572,22 @@ def _initial_k(theta, dt, C, data, yvar, free_k) -> np.ndarray | None:
     return K if np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0 else None
 
 
+def _single_threaded_blas(func):
+    """Run ``func`` with one BLAS thread: the fits are loops over 4x4 and 10x10 products,
+    which threaded OpenBLAS makes ~10x slower on a shared 2-core machine (bench_ident)."""
+    import functools
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(1):
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
+@_single_threaded_blas
 def fit(
     runs: Run | Sequence[Run],
     *,
@@ -655,6 +671,7 @@ def fit(
     )  # fmt: skip
 
 
+@_single_threaded_blas
 def fit_speed_model(
     runs: Sequence[Run],
     *,
