@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .cliutil import atomic_write_text, dump_json, parse_range
+from .cliutil import atomic_write_text, dump_json, parse_range, to_jsonable
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 
@@ -19,6 +19,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--out", required=True, help="model JSON to write")
     f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
     f.add_argument("--max-effects", type=int, default=3)
+    f.add_argument(
+        "--plant",
+        choices=("nonlinear", "linear"),
+        default="nonlinear",
+        help="nominal plant: nonlinear Whipple (defect-corrected, default) or linear",
+    )
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
@@ -26,6 +32,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--speeds", help="speeds to evaluate (default: those not used in the fit)")
     e.add_argument("--json", action="store_true", help="print JSON")
     e.set_defaults(func=cmd_evaluate)
+    t = msub.add_parser(
+        "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
+    )
+    t.add_argument("--n", type=int, default=28, help="number of trials (default 28)")
+    t.add_argument("--seed", type=int, default=1, help="grid seed (default 1)")
+    t.add_argument("--processes", type=int, default=2, help="worker processes (default 2)")
+    t.add_argument("--effects", help="comma list of injected effects (default: all)")
+    t.add_argument("--linear", action="store_true", help="linear nominal model (for comparison)")
+    t.add_argument("--json", action="store_true", help="print all trials and the summary as JSON")
+    t.add_argument("--log", help="append each finished trial to this JSON-lines file")
+    t.set_defaults(func=cmd_trials)
     r = msub.add_parser("report", help="write report.md with before/after figures")
     r.add_argument("--model", help="MODEL.json (default: fit on the first and third speeds)")
     r.add_argument("--data", help=DATA_HELP)
@@ -81,13 +98,16 @@ def model_from_json(path: str):
         raise ValueError(f"cannot read model {path}: {exc}") from None
 
 
-def fit_model(windows, max_effects=3) -> dict:
+def fit_model(windows, max_effects=3, plant: str = "nonlinear") -> dict:
     from ident.discrepancy import identify
     from ident.experiment_model import ExperimentModel
 
-    res = identify(ExperimentModel(), windows, max_effects=max_effects)
+    res = identify(
+        ExperimentModel(), windows, max_effects=max_effects, nonlinear=plant == "nonlinear"
+    )
     return {
         "bicycle": "steer-by-wire",
+        "plant": plant,
         "effects": {e.name: float(e.value) for e in res.effects},
         "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
         "fit_files": sorted({w.file for w in windows}),
@@ -99,7 +119,7 @@ def cmd_fit(args) -> int:
     if args.max_effects < 0:
         raise ValueError("--max-effects must be >= 0")
     ws = load_decays(args.data, _speeds(args.speeds))
-    out = fit_model(ws, args.max_effects)
+    out = fit_model(ws, args.max_effects, args.plant)
     atomic_write_text(args.out, dump_json(out) + "\n")
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     return 0
@@ -110,7 +130,8 @@ def evaluate_json(model_obj: dict, windows) -> dict:
     from ident.experiment_model import ExperimentModel
 
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
-    ev = evaluate(ExperimentModel(), aug, windows)
+    plant = model_obj.get("plant", "linear")
+    ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
     ident = model_obj.get("identification", {})
     std = {e["name"]: e for e in ident.get("effects", [])}
     effects = [
@@ -126,6 +147,7 @@ def evaluate_json(model_obj: dict, windows) -> dict:
         "metric": "mean over decay windows of NRMSE ||y_sim - y|| / ||y - mean y|| of roll "
         "rate and steer angle (simulation from the measured initial state); weave error "
         "|lambda_model - lambda_data| / |lambda_data|",
+        "plant": plant,
         "verdict": ident.get("verdict"),
         "effects": effects,
         "fit_speeds": model_obj.get("fit_speeds"),
@@ -147,6 +169,37 @@ def cmd_evaluate(args) -> int:
         s = out["summary"]
         print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
               f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f})")  # fmt: skip
+    return 0
+
+
+def cmd_trials(args) -> int:
+    from experiments.effect_trials import run_trials
+
+    effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
+
+    def progress(row):
+        if args.log:
+            with open(args.log, "a") as fh:
+                fh.write(json.dumps(to_jsonable(row)) + "\n")
+
+    out = run_trials(
+        args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress
+    )
+    if args.json:
+        print(dump_json(out))
+        return 0
+    s = out["summary"]
+    for k, r in s.get("library", {}).items():
+        print(f"library {k:14s} {r['k']:3d}/{r['n']:<3d} = {r['rate']:.2f} "
+              f"(95 % CI {r['ci95'][0]:.2f}-{r['ci95'][1]:.2f})")  # fmt: skip
+    if "outside" in s:
+        r = s["outside"]["unexplained"]
+        print(f"outside unexplained    {r['k']:3d}/{r['n']:<3d} = {r['rate']:.2f} "
+              f"(95 % CI {r['ci95'][0]:.2f}-{r['ci95'][1]:.2f})")  # fmt: skip
+    for name, d in s["per_effect"].items():
+        print(f"  {name:24s} named first: {d['named_first']}  "
+              f"median error ratio {d['median_error_ratio']:.2f}")  # fmt: skip
+    print(f"{s['trials']} trials, {s['wall_seconds']:.0f} s wall, {s['processes']} processes")
     return 0
 
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass
+from functools import partial
 
 import numpy as np
 
@@ -279,19 +280,16 @@ def run_trial(spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True) -> 
     (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
     """
     from ident.discrepancy import evaluate, identify
-    from ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+    from ident.experiment_model import ExperimentModel
 
     t0 = time.perf_counter()
     es = EFFECTS[spec.effect]
     fx = [es.sim_effect(spec.value)]
     fit = decay_windows(fx, spec.fit_speeds, FIT_PER_SPEED, spec.noise, spec.seed, "fit")
     held = decay_windows(fx, spec.eval_speeds, EVAL_PER_SPEED, spec.noise, spec.seed + 1, "eval")
-    if nonlinear:
-        attach_nonlinear_correction(fit)
-        attach_nonlinear_correction(held)
     nominal = ExperimentModel()
-    res = identify(nominal, fit, max_effects=max_effects)
-    ev = evaluate(nominal, res.model, held)["summary"]
+    res = identify(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
+    ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
     first = res.verdict[0]
     est = next((e for e in res.effects if e.name == spec.effect), None)
     value = None if est is None else float(est.value)
@@ -366,22 +364,39 @@ def summarize(rows: list[dict]) -> dict:
 
 
 def run_trials(
-    n: int, seed: int = 0, processes: int = 2, effects: tuple[str, ...] | None = None
+    n: int,
+    seed: int = 0,
+    processes: int = 2,
+    effects: tuple[str, ...] | None = None,
+    nonlinear: bool = True,
+    progress=None,
 ) -> dict:
-    """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary."""
+    """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
+
+    ``progress(row)`` is called with each finished trial (in trial order).
+    """
     if int(processes) != processes or processes < 1:
         raise ValueError(f"processes must be a positive integer, got {processes!r}")
     specs = draw_trials(n, seed, effects)
     t0 = time.perf_counter()
+    rows = []
     if processes == 1 or len(specs) == 1:
-        rows = [run_trial(s) for s in specs]
+        results = (run_trial(s, nonlinear=nonlinear) for s in specs)
+        for r in results:
+            rows.append(r)
+            if progress:
+                progress(r)
     else:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=int(processes)) as pool:
-            rows = list(pool.map(run_trial, specs))
+            for r in pool.map(partial(run_trial, nonlinear=nonlinear), specs):
+                rows.append(r)
+                if progress:
+                    progress(r)
     summ = summarize(rows)
     summ["wall_seconds"] = time.perf_counter() - t0
     summ["seed"] = int(seed)
     summ["processes"] = int(processes)
+    summ["nominal_plant"] = "nonlinear" if nonlinear else "linear"
     return {"trials": rows, "summary": summ}

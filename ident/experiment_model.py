@@ -57,6 +57,7 @@ __all__ = [
     "attach_nonlinear_correction",
     "bode_window",
     "decay_windows",
+    "nonlinear_counterpart",
     "window_errors",
 ]
 
@@ -424,43 +425,88 @@ class ExperimentModel:
         return out
 
 
-def attach_nonlinear_correction(
-    windows: list[Window], params: BicycleParameters | None = None, K: float = 2.0, V: float = 6.5
-) -> list[Window]:
-    """Make the nominal model nonlinear: store y_nl - y_lin in each window (in place).
+def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, dict]:
+    """The part of ``model``'s effects the nonlinear plant can carry, at a true speed.
 
-    For each window the nonlinear Whipple plant (:func:`sim.integrate.simulate`, RK4,
-    4 substeps per 10 ms, speed held at the calibrated treadmill speed) and the linear
-    model are both run without effects from the window's measured initial state, with
-    the same sampled loop ``T = K (V - v_s) phidot`` (v_s the window's mean sensor speed).
-    Their difference is added to every later :meth:`ExperimentModel.simulate` of the
-    window: the nominal model then reproduces the nonlinear plant exactly, and an
-    augmented model is the nonlinear nominal plus the *linearized* effect of its extra
-    terms (first order in the effects; the nonlinearity is not re-evaluated per effect).
-    Needed because the logs' decays reach steer angles of 0.3-0.6 rad at 1.5 m/s, where
-    linear and nonlinear plant differ by 0.1-0.45 in NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+    Returns (``sim.effects`` objects, the same as experiment-model effects).  Mapped:
+    steer viscous damping + tire scrub (c + k / v), steer Coulomb friction (same tanh
+    smoothing 0.1 rad/s), command gain, actuator lag, input delay (rounded to whole
+    10 ms samples), roll damping and stiffness.  Not mapped (they stay linear-only):
+    sensor biases and scales, steer torque bias, steer inertia (trail and speed scale
+    enter through the parameters and the speed instead).
+    """
+    from sim import effects as fx
+
+    out, eq = [], {}
+    c = model.e("steer_viscous_damping") + model.e("tire_scrub_torque") / max(speed, 0.1)
+    if c > 0:
+        out.append(fx.SteerDamping(c))
+        eq["steer_viscous_damping"] = c
+    tc = model.e("steer_coulomb_friction")
+    if tc > 0:
+        out.append(fx.SteerCoulomb(tc, smoothing=COULOMB_EPS))
+        eq["steer_coulomb_friction"] = tc
+    if model.e("command_gain") != 1.0:
+        out.append(fx.TorqueGain(model.e("command_gain")))
+        eq["command_gain"] = model.e("command_gain")
+    if model.e("actuator_lag") > 0:
+        out.append(fx.ActuatorLag(model.e("actuator_lag")))
+        eq["actuator_lag"] = model.e("actuator_lag")
+    nd = int(round(model.e("input_delay") / DT))
+    if nd > 0:
+        out.append(fx.InputDelay(nd * DT))
+        eq["input_delay"] = nd * DT
+    if model.e("roll_viscous_damping") > 0:
+        out.append(fx.RollDamping(model.e("roll_viscous_damping")))
+        eq["roll_viscous_damping"] = model.e("roll_viscous_damping")
+    if model.e("roll_stiffness") > 0:
+        out.append(fx.RollStiffness(model.e("roll_stiffness")))
+        eq["roll_stiffness"] = model.e("roll_stiffness")
+    return out, eq
+
+
+def attach_nonlinear_correction(
+    windows: list[Window], model: ExperimentModel | None = None
+) -> list[Window]:
+    """Make the model nonlinear: store y_nl(m') - y_lin(m') in each window (in place).
+
+    m' is the part of ``model`` (default: the nominal) that the nonlinear plant can carry
+    (:func:`nonlinear_counterpart`).  For each window the nonlinear Whipple plant
+    (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms, speed held at the true
+    speed) and the linear model are both run with m' from the window's measured initial
+    state, zero command history, and the same sampled loop ``T = K (V - v_s) phidot``
+    (v_s the window's mean sensor speed).  Their difference is added to every later
+    :meth:`ExperimentModel.simulate` of the window, so a model m simulates as
+    y_lin(m) + y_nl(m') - y_lin(m'): exactly the nonlinear plant at m = m', and to first
+    order in (m - m') near it (defect correction; :func:`ident.discrepancy.identify`
+    re-attaches at the current model after each accepted effect).  Needed because the
+    logs' decays reach steer angles of 0.3-0.6 rad at 1.5 m/s, where the linear and the
+    nonlinear plant differ by 0.1-0.45 in NRMSE (0.02-0.1 at 2.5-4.5 m/s).
     """
     from controllers.steer_into_lean import SteerIntoLean
     from sim.integrate import simulate
     from sim.nonlinear import WhippleBicycle
 
-    p = params or steer_by_wire()
+    model = model or ExperimentModel()
+    p = model.params
+    if model.e("trail_correction"):
+        p = p.replace(c=p.c + model.e("trail_correction"))
     bike = WhippleBicycle(p)
-    lin = ExperimentModel(params=p, K=K, V=V)
     for w in windows:
-        w.correction = None
-    sims = lin.simulate(windows)
-    for w, sl in zip(windows, sims, strict=True):
         vs = float(np.mean(w.v_sensor))
-        x0 = w.state0()
-        ctrl = SteerIntoLean(K, V, design_speed=vs)
-        v = float(treadmill_speed(vs))
+        v = model.true_speed(vs)
+        fx, eq = nonlinear_counterpart(model, v)
+        keep = {k: model.e(k) for k in ("trail_correction", "speed_scale") if k in model.effects}
+        lin_m = ExperimentModel(params=model.params, effects={**eq, **keep}, K=model.K, V=model.V)
+        w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
+        sl = lin_m.simulate([w0])[0]
+        ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)
         tr = simulate(
-            bike, bike.state(v, *map(float, x0)), (w.n - 1) * DT, controller=ctrl, mode="held",
-            substeps=4,
+            bike, bike.state(v, *map(float, w.state0())), (w.n - 1) * DT, controller=ctrl,
+            mode="held", substeps=4, effects=fx or None,
         )  # fmt: skip
         if tr.stop_reason is not None or tr.t.size != w.n:
-            raise ValueError(f"{w.file}@{w.start}: nonlinear nominal failed: {tr.stop_reason}")
+            raise ValueError(f"{w.file}@{w.start}: nonlinear simulation failed: {tr.stop_reason}")
         w.correction = {c: tr.signal(c) - sl[c] for c in ("phi", "delta", "phidot", "deltadot")}
     return windows
 

@@ -1,0 +1,125 @@
+"""Randomized undeclared-effect trials on the nonlinear plant (experiments.effect_trials).
+
+Budget: the cheap tests take a few seconds; the rate test runs 14 trials on 2 processes
+(about 1 minute on an idle 2-core machine) and is marked slow.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from experiments.effect_trials import (
+    EFFECTS,
+    LIBRARY_EFFECTS,
+    OUTSIDE_EFFECTS,
+    binomial_ci,
+    decay_windows,
+    draw_trials,
+    run_trials,
+)
+from ident.experiment_model import (
+    ExperimentModel,
+    attach_nonlinear_correction,
+    nonlinear_counterpart,
+    window_errors,
+)
+
+
+def test_draw_trials_seeded_stratified_and_extendable():
+    """Same seed -> same grid; effects cycle through the list; a larger grid extends a
+    smaller one (trial i depends only on (seed, i)); four speeds in 1.5-4.5 m/s at least
+    0.5 m/s apart; magnitudes inside the stated ranges."""
+    a, b = draw_trials(14, 3), draw_trials(20, 3)
+    assert a == b[:14] and a != draw_trials(14, 4)
+    assert [t.effect for t in a] == [list(EFFECTS)[i % len(EFFECTS)] for i in range(14)]
+    for t in b:
+        v = np.sort(t.fit_speeds + t.eval_speeds)
+        assert v[0] >= 1.5 and v[-1] <= 4.5 and np.all(np.diff(v) >= 0.5)
+        e = EFFECTS[t.effect]
+        if e.choices:
+            assert t.value in e.choices
+        else:
+            dev = abs(t.value - e.absent)
+            assert abs(e.low - e.absent) <= dev + 1e-12 <= abs(e.high - e.absent) + 2e-12
+    with pytest.raises(ValueError, match="unknown effects"):
+        draw_trials(3, 0, ("steer_stiction",))
+
+
+def test_binomial_ci_exact_limits():
+    """Clopper-Pearson closed forms: k = n gives [(alpha/2)^(1/n), 1], k = 0 gives
+    [0, 1 - (alpha/2)^(1/n)] (Clopper & Pearson 1934), alpha = 0.05."""
+    lo, hi = binomial_ci(20, 20)
+    assert lo == pytest.approx(0.025 ** (1 / 20), rel=1e-9) and hi == 1.0
+    lo, hi = binomial_ci(0, 14)
+    assert lo == 0.0 and hi == pytest.approx(1 - 0.025 ** (1 / 14), rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["steer_coulomb_friction", "command_gain", "input_delay",
+                                  "actuator_lag", "roll_stiffness"])  # fmt: skip
+def test_experiment_model_effects_match_nonlinear_plant_when_small(name):
+    """Second method: the linear experiment model with an effect and the nonlinear plant
+    with the same sim.effects object agree for a 100x smaller push (Whipple nonlinearity
+    scales with amplitude squared: NRMSE 5e-3 at 0.1x, 1e-4 at 0.01x for the nominal).
+    Bound 2e-3 NRMSE covers the Coulomb tanh, which is not small-signal linear either."""
+    spec = EFFECTS[name]
+    value = spec.choices[1] if spec.choices else 0.5 * (spec.low + spec.high)
+    model = ExperimentModel(effects={name: value})
+    if name == "steer_coulomb_friction":  # friction level scaled with the push
+        model = ExperimentModel(effects={name: value * 0.01})
+    fx, eq = nonlinear_counterpart(model, 3.0)
+    assert set(eq) == {name}
+    small = _small_push_windows(fx, scale=0.01)
+    err = window_errors(small, model.simulate(small))
+    assert err.max() < 2e-3
+
+
+def _small_push_windows(fx, scale: float):
+    from controllers.steer_into_lean import SteerIntoLean
+    from dataset.closed_loop import simulate_run
+    from dataset.sensors import Channel, Sensors
+    from ident.experiment_model import Window
+    from sim.parameters import steer_by_wire
+
+    out = []
+    for v in (2.0, 4.0):
+        init = {"phi": 0.0, "delta": -0.02 * scale, "phidot": 0.6 * scale, "deltadot": scale}
+        sens = Sensors({"v": Channel(scale=1.066, bias=-0.128)})
+        run = simulate_run(steer_by_wire(), SteerIntoLean(), v, duration=1.0, sensors=sens,
+                           effects=fx, initial=init, substeps=4)  # fmt: skip
+        sl = slice(0, 100)
+        out.append(Window("small", v, 0, run["phi"][sl], run["delta"][sl], run["phidot"][sl],
+                          run["deltadot"][sl], run["v"][sl], np.zeros(100), np.zeros(20)))  # fmt: skip
+    return out
+
+
+def test_defect_correction_makes_nominal_exact_on_noise_free_plant():
+    """With the nonlinear correction the nominal model reproduces noise-free decays of the
+    nonlinear plant at 1.5 m/s, where the linear model alone is off by NRMSE > 0.05 at
+    these pushes (identity y_lin + (y_nl - y_lin) up to the initial-state fit over 5
+    samples: bound 0.01)."""
+    ws = decay_windows([], [1.5], 2, 1e-12, seed=5)
+    lin = window_errors(ws, ExperimentModel().simulate(ws))
+    attach_nonlinear_correction(ws)
+    nl = window_errors(ws, ExperimentModel().simulate(ws))
+    assert lin.max() > 0.05 and nl.max() < 0.01
+
+
+@pytest.mark.slow
+def test_randomized_trials_name_library_effects_and_flag_outside_ones():
+    """14 trials (2 per effect, seed 1, 2 processes; the 196-trial grid is in
+    docs/measured.md).  Goals of the brief: >= 90 % right-first, magnitude within 20 %,
+    held-out error halved for library effects.  With 10 library trials, 9/10 is the
+    smallest count whose rate meets 90 %.  Outside-library effects: see docs/measured.md
+    for the measured rate; asserted here is the weaker, still failing-capable bound that
+    the pipeline never names an outside effect *with* an explained fraction >= 0.9 more
+    often than it says "unexplained"."""
+    out = run_trials(14, seed=1, processes=2)
+    s = out["summary"]
+    lib = s["library"]
+    assert lib["ranked_first"]["k"] >= 9 and lib["ranked_first"]["n"] == 10
+    assert lib["magnitude_ok"]["k"] >= 9
+    assert lib["error_halved"]["k"] >= 9
+    outside = [r for r in out["trials"] if r["effect"] in OUTSIDE_EFFECTS]
+    assert len(outside) == 4 and set(LIBRARY_EFFECTS).isdisjoint(OUTSIDE_EFFECTS)
+    assert s["outside"]["unexplained"]["k"] >= 2
