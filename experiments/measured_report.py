@@ -54,7 +54,7 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     from experiments.cmd_measured import evaluate_json, fit_model, load_decays, model_from_json
     from experiments.plots import save
     from ident.discrepancy import decay_eigenvalue
-    from ident.experiment_model import ExperimentModel
+    from ident.experiment_model import ExperimentModel, attach_nonlinear_correction
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -72,7 +72,15 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     # 1. decay overlays: first window of each speed
     firsts = [next(w for w in allw if round(w.speed, 1) == s) for s in speeds]
     fig, axes = plt.subplots(2, len(firsts), figsize=(3.2 * len(firsts), 5), squeeze=False)
-    s0, s1 = nom.simulate(firsts), aug.simulate(firsts)
+    nonlinear = obj.get("plant", "linear") == "nonlinear"
+    for w in firsts:
+        w.correction = None
+    if nonlinear:
+        attach_nonlinear_correction(firsts, nom)
+    s0 = nom.simulate(firsts)
+    if nonlinear:
+        attach_nonlinear_correction(firsts, aug)
+    s1 = aug.simulate(firsts)
     for j, w in enumerate(firsts):
         t = np.arange(w.n) * 0.01
         for i, (c, lab) in enumerate((("phidot", "roll rate [rad/s]"), ("delta", "steer [rad]"))):
@@ -138,7 +146,8 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     lines = [
         "# Steer-by-wire bicycle: nominal vs augmented experiment model", "",
         f"Fit speeds: {obj.get('fit_speeds')} m/s; evaluated on the others (held out).", "",
-        f"Verdict: {obj.get('identification', {}).get('verdict')}", "",
+        f"Verdict: {obj.get('identification', {}).get('verdict')}; nominal plant: "
+        f"{obj.get('plant', 'linear')}.", "",
         "| effect | value | std | unit |", "|---|---|---|---|",
         *[f"| {e['name']} | {e['value']:.4g} | {_fmt(e['std'])} | {e['unit']} |"
           for e in ev["effects"]],

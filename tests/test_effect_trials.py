@@ -88,8 +88,8 @@ def _small_push_windows(fx, scale: float):
         run = simulate_run(steer_by_wire(), SteerIntoLean(), v, duration=1.0, sensors=sens,
                            effects=fx, initial=init, substeps=4)  # fmt: skip
         sl = slice(0, 100)
-        out.append(Window("small", v, 0, run["phi"][sl], run["delta"][sl], run["phidot"][sl],
-                          run["deltadot"][sl], run["v"][sl], np.zeros(100), np.zeros(20)))  # fmt: skip
+        sig = [run[k][sl] for k in ("phi", "delta", "phidot", "deltadot", "v")]
+        out.append(Window("small", v, 0, *sig, np.zeros(100), np.zeros(20)))
     return out
 
 

@@ -129,8 +129,9 @@ def test_real_logs_sign_and_controller():
 @needs_data
 @pytest.mark.slow
 def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
-    """Goal of the brief on real data: fit 2.5 + 4.5 m/s, held-out 1.5 + 3.5 m/s
-    decay error at least halves (measured 0.83 -> 0.35)."""
+    """Goal of the brief on real data: fit 2.5 + 4.5 m/s (nonlinear nominal, the
+    default), held-out 1.5 + 3.5 m/s decay error at least halves (measured 0.75 -> 0.31,
+    docs/measured.md); the JSON carries the documented schema."""
     import json
 
     from experiments.cli import main
@@ -142,5 +143,9 @@ def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
     capsys.readouterr()
     assert main(["measured", "evaluate", "--model", str(model), "--data", DATA, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert {f["speed"] for f in out["files"]}.isdisjoint({2.48, 4.55})
+    assert out["plant"] == "nonlinear"
+    assert all({"name", "value", "std", "unit"} <= set(e) for e in out["effects"])
+    assert all({"file", "speed", "error_before", "error_after", "weave_error_before",
+                "weave_error_after"} <= set(f) for f in out["files"])  # fmt: skip
+    assert {round(f["speed"], 1) for f in out["files"]} == {1.5, 3.5}
     assert out["summary"]["error_after"] <= 0.5 * out["summary"]["error_before"]
