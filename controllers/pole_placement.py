@@ -1,9 +1,16 @@
 """Roll tracking by pole placement with integral action (Chen & Dao 2010, eqs. 7-17).
 
-Law (eq. 7):  T = -K x + kI xi,   xi' = phi_ref - phi   (eq. 8, C* = [1 0 0 0]),
-with x = [phi, delta, phidot, deltadot] taken from the measurement (y[1], y[2], y[4],
-y[5]).  The gains come from ``control.place`` on the fifth-order error system
-(eqs. 14-15)
+Two laws, both on the measured x = [phi, delta, phidot, deltadot] (y[1], y[2], y[4],
+y[5]) and the integral xi' = phi_ref - phi (eq. 8, C* = [1 0 0 0]):
+
+- ``law="chen_dao"``, the paper's eq. 7 (default when ``poles`` are given):
+  T = -K x + kI xi.  The reference enters only through the integrator.
+- ``law="servo"``, our extension (default with the default poles):
+  T = -K (x - x_ref) + kI xi with x_ref = [phi_ref, 0, phidot_ref, 0], i.e. the paper's
+  law plus the feedforward K_phi phi_ref + K_phidot phidot_ref (exact ``reference.rate``
+  when the reference has one, else a backward difference).  Same gains, same poles.
+
+The gains come from ``control.place`` on the fifth-order error system (eqs. 14-15)
 
     Aa = [[A, 0], [-C*, 0]],   Ba = [[B], [0]],   Ka = [K, -kI],
 
@@ -13,6 +20,31 @@ uncontrollable (the benchmark at v = 1.4110 m/s, controllers.md §3.3), and that
 raises :class:`ValueError` with the PBH measure
 
     min over eigenvalues lambda of A of  sigma_min([A - lambda I, B]) / ||[A, B]||_2.
+
+Default poles (``poles=None``, :func:`tracking_poles`), speed dependent: two poles on the
+zeros of phi/T_delta at the design speed (left half plane for v > 0.577 m/s on the
+benchmark: -1.71 and -12.9 at 1 m/s, -13.7 and -59.3 at 5 m/s) and three fixed poles
+``free_poles`` = (-6, -8, -10) s^-1.  Zeros faster than ``zero_cap`` (30 s^-1) or slower
+than 0.5 s^-1 are not cancelled (poles -1.2 cap, -1.4 cap, resp. the mirrored zero); a
+zero within 2 % of a free pole is moved 2 % away from it.
+
+Why: placing poles on both roll zeros is the same as choosing the steer gains so that
+steer no longer enters the roll acceleration, K_delta = a_delta / b_phi and
+K_deltadot = a_deltadot / b_phi, where phidot' = a . x + b_phi T is the roll row of the
+model.  Roll then obeys a third-order ODE with the characteristic polynomial
+Delta3(s) = s^3 + d2 s^2 + d1 s + d0 = prod(s - p) over the free poles, d0 = b_phi kI,
+d1 = b_phi K_phi - a_phi, d2 = b_phi K_phidot - a_phidot, so
+
+    chen_dao:  phi/phi_ref = d0 / Delta3(s)
+    servo:     phi/phi_ref = 1 - (s^3 - a_phidot s^2 - a_phi s) / Delta3(s)
+
+at every speed where both zeros are cancelled (a_phi = +9.5 s^-2 is the gravity term of
+the benchmark, a_phidot = -0.1 s^-1 at 1 m/s).  On the benchmark that is v < 2.5 m/s; above,
+the fast zero (beyond 30 s^-1) is left alone and the relations hold approximately.  The cancelled modes are
+invisible in roll and show only in steer.  The paper's law lags like a third-order
+low-pass (its Fig. 7 "delay time", here sum(1/|p|) = 0.39 s); the servo error is 2-10 %
+of the reference over 0.16-0.5 Hz.  ``poles=[...]`` (five values) gives a fixed-pole
+design (e.g. :data:`SLOW_POLES`, the earlier default -2..-6).
 
 Model: by default the true linearization ``sim.linear.state_space(parameters, v)``
 (T_delta column).  Alternatively a user model: a ``control.StateSpace`` with 4 states
@@ -28,12 +60,12 @@ Scheduling: with ``design_speed`` the gains are placed once at that speed.  With
 it (default), gains are placed on ``speed_grid`` and interpolated linearly at the
 measured speed; grid points where placement is inaccurate (near an uncontrollable
 speed) are dropped and listed in ``skipped_speeds``.  The default grid (0.8-16 m/s,
-step 0.2, none closer than 1 % to 1.411 m/s) keeps interpolated loops stable over
+step 0.2, none closer than 0.7 % to 1.411 m/s) keeps interpolated loops stable over
 1-15 m/s in the linear benchmark model (checked in the tests).
 
-Default poles: -2, -3, -4, -5, -6 [1/s] (controllers.md §4.4 lists the gains they
-give).  Poles must be distinct (``place`` refuses a pole repeated more than rank(B) = 1
-times).
+The design is continuous-time; run at ``sample_time`` dt, the zero-order hold adds about
+dt/2 of delay: with the default poles |p| dt <= 0.42 at 100 Hz.  Poles must be distinct
+(``place`` refuses a pole repeated more than rank(B) = 1 times).
 """
 
 from __future__ import annotations
@@ -53,14 +85,32 @@ from .base import I_DELTA, I_DELTADOT, I_PHI, I_PHIDOT, Controller, GainSchedule
 
 __all__ = [
     "DEFAULT_POLES",
+    "LAWS",
+    "SLOW_POLES",
+    "TRACKING_POLES",
+    "ZERO_CAP",
     "PolePlacement",
     "augmented_system",
     "pbh_measure",
     "place_with_integral",
+    "roll_zeros",
     "to_bikeid_order",
+    "tracking_poles",
 ]
 
-DEFAULT_POLES = (-2.0, -3.0, -4.0, -5.0, -6.0)
+#: The earlier default (fixed poles -2..-6 s^-1; controllers.md §4.4 lists their gains).
+SLOW_POLES = (-2.0, -3.0, -4.0, -5.0, -6.0)
+#: Kept for imports written before the tracking default; same as :data:`SLOW_POLES`.
+DEFAULT_POLES = SLOW_POLES
+#: The three poles of the default design that are not placed on the roll zeros [1/s].
+TRACKING_POLES = (-6.0, -8.0, -10.0)
+#: Roll zeros faster than this [1/s] are not cancelled (kept slow against the sample rate).
+ZERO_CAP = 30.0
+#: Slowest roll zero [1/s] that is cancelled (slower or right-half-plane zeros are mirrored).
+_MIN_ZERO_RATE = 0.5
+#: Relative distance below which a cancelling pole is moved off a tracking pole.
+_SEPARATION = 0.02
+LAWS = ("servo", "chen_dao")
 #: Permutation from Chen & Dao order [phi, phidot, delta, deltadot] to bikeid order.
 _CD_TO_BIKEID = [CANONICAL_STATE.index(s) for s in LINEAR_STATE]  # [0, 2, 1, 3]
 
@@ -143,7 +193,7 @@ def pbh_measure(A: np.ndarray, B: np.ndarray) -> tuple[float, complex]:
 def place_with_integral(
     A: np.ndarray,
     B: np.ndarray,
-    poles: Sequence[complex] = DEFAULT_POLES,
+    poles: Sequence[complex] = SLOW_POLES,
     rtol: float = 1e-4,
     pbh_tol: float = 1e-6,
 ) -> tuple[np.ndarray, float]:
@@ -189,14 +239,81 @@ def _pole_mismatch(achieved: np.ndarray, requested: np.ndarray) -> float:
     return worst
 
 
+def roll_zeros(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Finite zeros of phi/T_delta [1/s] for the model (A, B) in bikeid order.
+
+    They are the eigenvalues of the roll zero dynamics (the motions with phi = 0 held by
+    the torque): with B = [0, 0, b_phi, b_delta]^T, eliminating T from the phidot and
+    deltadot rows gives b_delta phi'' - b_phi delta'' = c x, c = b_delta A[2] - b_phi A[3],
+    which at phi = 0 is the second-order ODE  -b_phi delta'' = c_delta delta + c_deltadot
+    delta'  in delta.  Needs b_phi != 0 (relative degree 2, as for every Whipple model).
+    """
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(B, dtype=float).reshape(4)
+    if abs(b[2]) <= 1e-12 * max(abs(b).max(), 1e-300):
+        raise ValueError(
+            "the model has no direct steer-torque effect on roll acceleration (B[phidot] = 0); "
+            "roll zeros need relative degree 2: pass explicit poles="
+        )
+    c = b[3] * A[2] - b[2] * A[3]
+    # delta'' = -(c_delta delta + c_deltadot delta') / b_phi
+    return np.roots([1.0, c[3] / b[2], c[1] / b[2]]).astype(complex)
+
+
+def tracking_poles(
+    A: np.ndarray,
+    B: np.ndarray,
+    free: Sequence[complex] = TRACKING_POLES,
+    cap: float = ZERO_CAP,
+) -> np.ndarray:
+    """The default five poles at one speed: the roll zeros of (A, B) plus ``free`` (3).
+
+    A zero z of phi/T with 0.5 <= -Re z and |z| <= ``cap`` [1/s] becomes a pole (it then
+    cancels from phi/phi_ref and from phi/T); a faster zero gets the pole -cap (1.2 + 0.2 k),
+    k = 0, 1 counting such zeros (20 % beyond any cancelled zero); a slower or
+    right-half-plane zero gets its mirror image -max(|Re z|, 0.5) + j Im z.  A cancelling
+    pole within 2 % of a free pole is moved to 2 % from it (on its own side), so ``place``
+    never sees repeated poles.
+    """
+    free = [complex(p) for p in free]
+    if len(free) != 3:
+        raise ValueError(f"free poles: need 3 (the other 2 sit on the roll zeros), got {free}")
+    cap = float(cap)
+    if not (math.isfinite(cap) and cap > 0):
+        raise ValueError(f"zero cap must be a positive rate [1/s], got {cap}")
+    out: list[complex] = []
+    n_fast = 0
+    for z in sorted(roll_zeros(A, B), key=abs):
+        if abs(z) > cap:
+            p = complex(-cap * (1.2 + 0.2 * n_fast))
+            n_fast += 1
+        elif z.real > -_MIN_ZERO_RATE:
+            p = complex(-max(abs(z.real), _MIN_ZERO_RATE), z.imag)
+        else:
+            p = complex(z)
+        for f in free:
+            if abs(p - f) < _SEPARATION * abs(f):
+                p = f * (1 + _SEPARATION) if abs(p) >= abs(f) else f * (1 - _SEPARATION)
+        out.append(p)
+    return np.array(out + free, dtype=complex)
+
+
 class PolePlacement(Controller):
-    """State feedback with integral action; see the module docstring."""
+    """State feedback with integral action; see the module docstring.
+
+    poles: five closed-loop poles [1/s] (fixed at every speed), or None (default) for
+    :func:`tracking_poles` at each design speed with ``free_poles`` and ``zero_cap``.
+    law: ``"servo"`` (reference feedforward) or ``"chen_dao"`` (the paper's eq. 7); None
+    (default) picks ``"servo"`` with the default poles and ``"chen_dao"`` with explicit
+    ``poles`` (the feedforward x_ref = [phi_ref, 0, phidot_ref, 0] assumes the steer modes
+    are cancelled from roll; with slow fixed poles it hurts: -2..-6 at 15 m/s falls).
+    """
 
     name = "pole_placement"
 
     def __init__(
         self,
-        poles: Sequence[complex] = DEFAULT_POLES,
+        poles: Sequence[complex] | None = None,
         *,
         parameters: BicycleParameters | None = None,
         model: control.StateSpace | Callable[[float], control.StateSpace] | None = None,
@@ -206,8 +323,23 @@ class PolePlacement(Controller):
         sample_time: float = 0.001,
         saturation: float = math.inf,
         reference: Callable[[float], float] | None = None,
+        law: str | None = None,
+        free_poles: Sequence[complex] = TRACKING_POLES,
+        zero_cap: float = ZERO_CAP,
     ):
-        self.poles = [complex(p) for p in poles]
+        if law is None:
+            law = "servo" if poles is None else "chen_dao"
+        if law not in LAWS:
+            raise ValueError(
+                f"law must be 'servo' (reference feedforward) or 'chen_dao' (paper eq. 7), "
+                f"got {law!r}"
+            )
+        self.law = law
+        self.poles = None if poles is None else [complex(p) for p in poles]
+        self.free_poles = [complex(p) for p in free_poles]
+        self.zero_cap = float(zero_cap)
+        if poles is None:
+            tracking_poles(np.zeros((4, 4)), np.r_[0, 0, 1.0, 1.0], self.free_poles, zero_cap)
         self.parameters = parameters if parameters is not None else benchmark()
         self._user_model = model
         if isinstance(model, control.StateSpace):
@@ -251,11 +383,17 @@ class PolePlacement(Controller):
         sys = model if isinstance(model, control.StateSpace) else model(v)
         return _model_matrices(sys, self.state_order)
 
+    def poles_at(self, v: float) -> np.ndarray:
+        """The five requested closed-loop poles [1/s] of the design at speed v [m/s]."""
+        if self.poles is not None:
+            return np.array(self.poles, dtype=complex)
+        return tracking_poles(*self.linear_model(v), self.free_poles, self.zero_cap)
+
     def design(self, v: float) -> tuple[np.ndarray, float]:
         """(K, kI) at speed v; raises ValueError where placement is inaccurate."""
         A, B = self.linear_model(v)
         try:
-            return place_with_integral(A, B, self.poles)
+            return place_with_integral(A, B, self.poles_at(v))
         except ValueError as exc:
             raise ValueError(f"at v = {v} m/s: {exc}") from None
 
@@ -269,12 +407,16 @@ class PolePlacement(Controller):
 
     def _control(self, t: float, y: Sequence[float], dt: float) -> float:
         g = self._fixed if self.schedule is None else self.schedule(self.speed(y))
-        r = self.reference(t)
         phi = y[I_PHI]
         u = (
             -g[0] * phi - g[1] * y[I_DELTA] - g[2] * y[I_PHIDOT] - g[3] * y[I_DELTADOT]
             + g[4] * self.xi
         )  # fmt: skip
+        if self.law == "servo":
+            r, rd = self._reference_and_rate(t, dt)
+            u += g[0] * r + g[2] * rd
+        else:
+            r = self.reference(t)
         s = self.saturation
         e = r - phi
         # conditional integration (anti-windup): freeze xi while saturated and winding up
@@ -283,17 +425,29 @@ class PolePlacement(Controller):
         return u
 
     def _gains_description(self) -> dict[str, Any]:
+        law = {
+            "servo": "T = -K ([phi, delta, phidot, deltadot] - [phi_ref, 0, phidot_ref, 0]) "
+            "+ kI int(phi_ref - phi)",
+            "chen_dao": "T = -K [phi, delta, phidot, deltadot] + kI int(phi_ref - phi)",
+        }[self.law]
         out: dict[str, Any] = {
-            "law": "T = -K [phi, delta, phidot, deltadot] + kI int(phi_ref - phi)",
-            "poles": [[p.real, p.imag] for p in self.poles],
+            "law": law,
+            "law_name": self.law,
             "model": "true linearization" if self._user_model is None else "user model",
             "anti_windup": "clamp",
         }
+        if self.poles is not None:
+            out["poles"] = [[p.real, p.imag] for p in self.poles]
+        else:
+            out["poles"] = "roll zeros of the design model + free poles"
+            out["free_poles"] = [[p.real, p.imag] for p in self.free_poles]
+            out["zero_cap"] = self.zero_cap
         if self._user_model is None:
             out["parameters"] = getattr(self.parameters, "name", None) or "custom"
         if self.schedule is None:
             out["K"] = list(self._fixed[:4])
             out["kI"] = self._fixed[4]
+            out["placed_poles"] = [[p.real, p.imag] for p in self.poles_at(self.design_speed)]
         else:
             out["schedule"] = self.schedule.as_dict()
             out["skipped_speeds"] = self.skipped_speeds

@@ -17,6 +17,8 @@ from pathlib import Path
 import control
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from linear_loop import simulate
 from scipy.optimize import brentq
 
@@ -26,10 +28,13 @@ from controllers.excitation import ChirpReference, StepReference
 from controllers.fuzzy import FuzzyController
 from controllers.pid import PID
 from controllers.pole_placement import (
-    DEFAULT_POLES,
+    SLOW_POLES,
+    TRACKING_POLES,
     PolePlacement,
     augmented_system,
     place_with_integral,
+    roll_zeros,
+    tracking_poles,
 )
 from controllers.steer_into_lean import SteerIntoLean
 from sim.linear import canonical_matrices, state_matrices, state_space
@@ -53,18 +58,21 @@ def _rms(x: np.ndarray) -> float:
 
 
 # -- pole placement ------------------------------------------------------------------------
-@pytest.mark.parametrize("v", [1.0, 2.0, 5.0, 10.0, 15.0])
-def test_placement_gives_requested_poles(v):
-    """eig(Aa - Ba Ka) equals the requested poles.  Tolerance from Bauer-Fike: a
-    backward error of eps * ||[Aa, Ba Ka]|| moves an eigenvalue by at most cond(V) times
-    that, V the closed-loop eigenvector matrix; factor 100 for the solver's own error."""
+@pytest.mark.parametrize("v", [1.0, 2.0, 3.0, 5.0, 10.0, 15.0])
+@pytest.mark.parametrize("which", ["slow", "tracking"])
+def test_placement_gives_requested_poles(v, which):
+    """eig(Aa - Ba Ka) equals the requested poles (the fixed -2..-6 set and the default
+    speed-dependent set).  Tolerance from Bauer-Fike: a backward error of
+    eps * ||[Aa, Ba Ka]|| moves an eigenvalue by at most cond(V) times that, V the
+    closed-loop eigenvector matrix; factor 100 for the solver's own error."""
     A, B = _b(v)
-    K, kI = place_with_integral(A, B, DEFAULT_POLES)
+    poles = SLOW_POLES if which == "slow" else tracking_poles(A, B)
+    K, kI = place_with_integral(A, B, poles)
     Aa, Ba = augmented_system(A, B)
     Acl = Aa - Ba @ np.r_[K, -kI][None, :]
     lam, V = np.linalg.eig(Acl)
     tol = 100 * np.finfo(float).eps * np.linalg.cond(V) * np.linalg.norm(Acl, 2)
-    err = max(min(abs(lam - p)) for p in DEFAULT_POLES)
+    err = max(min(abs(lam - p)) for p in poles)
     assert err <= tol, (err, tol)
 
 
@@ -79,7 +87,7 @@ def test_placement_gives_requested_poles(v):
 def test_placement_matches_reference_table(v, K_ref, kI_ref):
     """controllers.md §4.4 (poles -2..-6), printed to 3-4 significant digits: agree to
     the last printed digit (half a unit, plus 1 % for rounding of the table's inputs)."""
-    K, kI = place_with_integral(*_b(v), DEFAULT_POLES)
+    K, kI = place_with_integral(*_b(v), SLOW_POLES)
     for got, want in zip([*K, kI], [*K_ref, kI_ref], strict=True):
         dec = len(f"{want}".split(".")[1]) if "." in f"{want}" else 0
         assert abs(got - want) <= 0.5 * 10**-dec + 0.01 * abs(want), (got, want)
@@ -135,6 +143,176 @@ def test_scheduled_placement_is_stable_over_speed():
     assert worst < -0.5, worst
 
 
+@pytest.mark.parametrize(
+    "v, want",
+    [(1.0, (-1.71, -12.9)), (2.0, (-5.0, -24.2)), (5.0, (-13.7, -59.3)), (15.0, (-41.9, -177))],
+)
+def test_roll_zeros_match_reference_sheet_and_python_control(v, want):
+    """Zeros of phi/T: controllers.md §4.2 table (printed to 3 significant digits: half a
+    unit of the last digit) and python-control's ``zeros`` of the phi output (1e-9)."""
+    A, B = _b(v)
+    got = np.sort(roll_zeros(A, B).real)[::-1]
+    assert np.all(np.abs(roll_zeros(A, B).imag) == 0)
+    for g, w in zip(got, want, strict=True):
+        dec = len(f"{w}".split(".")[1]) if "." in f"{w}" else 0
+        assert abs(g - w) <= 0.5 * 10**-dec, (g, w)
+    ct = np.sort(control.zeros(control.ss(A, B, [[1.0, 0, 0, 0]], 0)).real)[::-1]
+    np.testing.assert_allclose(got, ct, rtol=1e-9)
+
+
+def test_roll_zero_crosses_at_analytic_speed():
+    """controllers.md §4.2: phi/T has a right-half-plane zero only below
+    v = sqrt(-g K0_phidelta / K2_phidelta) = 0.577 m/s; there one zero is exactly 0, and
+    the default poles mirror a right-half-plane zero (no unstable cancellation)."""
+    cm = canonical_matrices(P)
+    v0 = math.sqrt(-cm.g * cm.K0[0, 1] / cm.K2[0, 1])
+    assert abs(v0 - 0.577) < 5e-4
+    assert min(abs(roll_zeros(*_b(v0)))) < 1e-9
+    A, B = _b(0.5)
+    z = roll_zeros(A, B)
+    assert max(z.real) > 0.3  # §4.2: +0.358 at 0.5 m/s
+    assert np.all(tracking_poles(A, B).real <= -0.5)
+
+
+@settings(max_examples=40, deadline=None)
+@given(v=st.floats(0.7, 16.0))
+def test_tracking_poles_are_distinct_and_placeable(v):
+    """Property: at any speed the default poles are stable, pairwise >= 1.9 % apart (the
+    2 % separation rule; place refuses repeated poles) and placement succeeds to its own
+    1e-4 check, except within 0.5 % of the uncontrollable speed 1.4110 m/s (§3.3)."""
+    assume(abs(v - 1.4110) > 0.005 * 1.4110)
+    A, B = _b(v)
+    p = tracking_poles(A, B)
+    assert np.all(p.real < 0)
+    for i in range(5):
+        for j in range(i):
+            assert abs(p[i] - p[j]) >= 0.019 * max(abs(p[i]), abs(p[j])), (v, p)
+    place_with_integral(A, B, p)
+
+
+@pytest.mark.parametrize("v", [1.0, 2.0])
+def test_cancelled_zeros_decouple_steer_from_roll(v):
+    """Where both roll zeros get poles (v < 2.5 m/s), steer must drop out of the roll
+    acceleration: with phidot' = a . x + b_phi T, K_delta = a_delta / b_phi and
+    K_deltadot = a_deltadot / b_phi (module docstring), and then d1 = b_phi K_phi - a_phi,
+    d2 = b_phi K_phidot - a_phidot, d0 = b_phi kI are the coefficients of
+    prod(s - p) over the three free poles.  Rounding only: 1e-7 relative."""
+    A, B = _b(v)
+    K, kI = place_with_integral(A, B, tracking_poles(A, B))
+    a, b = A[2], B[2, 0]
+    np.testing.assert_allclose([K[1], K[3]], [a[1] / b, a[3] / b], rtol=1e-7)
+    d = np.poly(TRACKING_POLES).real
+    np.testing.assert_allclose([b * K[2] - a[2], b * K[0] - a[0], b * kI], d[1:], rtol=1e-7)
+
+
+def _loop(ctrl: PolePlacement, v: float) -> control.InputOutputSystem:
+    """The linear closed loop assembled by python-control's ``interconnect`` from the
+    plant (``sim.linear.state_space``) and the law written out from its definition:
+    inputs r, rd (reference and rate), d (torque disturbance), n_* (sensor noise)."""
+    plant = state_space(P, v, inputs=("T_delta",))
+    K = np.array(ctrl.current_gains(v)[:4])
+    kI = ctrl.current_gains(v)[4]
+    ff = [K[0], K[2]] if ctrl.law == "servo" else [0.0, 0.0]
+    meas = ["phi_m", "delta_m", "phidot_m", "deltadot_m"]
+    law = control.ss(
+        [[0.0]], [[1.0, 0.0, -1.0, 0.0, 0.0, 0.0]], [[kI]], [[*ff, *(-K)]],
+        inputs=["r", "rd", *meas], outputs=["u"], states=["xi"],
+    )  # fmt: skip
+    parts = [plant, law, control.summing_junction(["u", "d"], "T_delta")]
+    for s in ("phi", "delta", "phidot", "deltadot"):
+        parts.append(control.summing_junction([s, f"n_{s}"], f"{s}_m"))
+    inputs = ["r", "rd", "d", "n_phi", "n_delta", "n_phidot", "n_deltadot"]
+    return control.interconnect(parts, inplist=inputs, outlist=["phi"])
+
+
+@pytest.mark.parametrize("v", [1.0, 2.0])
+@pytest.mark.parametrize("law", ["chen_dao", "servo"])
+def test_tracking_design_frequency_response(v, law):
+    """python-control's frequency response of the assembled loop equals the module's
+    closed forms at 0.01-5 Hz: chen_dao d0 / Delta3(s); servo
+    1 - (s^3 - a_phidot s^2 - a_phi s) / Delta3(s).  Rounding only: 1e-7."""
+    ctrl = PolePlacement(design_speed=v, law=law)
+    w = 2 * np.pi * np.geomspace(0.01, 5.0, 40)
+    H = _loop(ctrl, v)(1j * w)
+    Hr = H[0, 0] + 1j * w * H[0, 1]
+    A = _b(v)[0]
+    d3 = np.polyval(np.poly(TRACKING_POLES), 1j * w)
+    if law == "chen_dao":
+        want = np.poly(TRACKING_POLES)[-1] / d3
+    else:
+        s = 1j * w
+        want = 1 - (s**3 - A[2, 2] * s**2 - A[2, 0] * s) / d3
+    np.testing.assert_allclose(Hr, want, rtol=1e-7, atol=1e-9)
+
+
+def _predicted_rms_deg(ctrl: PolePlacement, v: float, dt: float = 0.01) -> float:
+    """RMS roll error [deg] predicted by the linear loop (python-control, no simulation)
+    for the stabilization settings: 3 deg chirp 0.05-0.5 Hz (quasi-stationary: the error
+    at instantaneous frequency f is |1 - H(j 2 pi f)| A / sqrt(2), averaged over the
+    linear sweep), plus uniform +-1 N m dither held dt and Sensors.default noise (1e-3 rad
+    on angles, 1e-2 rad/s on rates), white at 1/dt Hz: variance sigma^2 dt 2 int_0^{1/2dt}
+    |H|^2 df.  Independent of each other, so the squares add."""
+    loop = _loop(ctrl, v)
+    f = np.linspace(0.05, 0.5, 2001)
+    w = 2 * np.pi * f
+    H = loop(1j * w)
+    track2 = math.radians(3.0) ** 2 * np.mean(np.abs(1 - H[0, 0] - 1j * w * H[0, 1]) ** 2) / 2
+    fn = np.linspace(0.0, 0.5 / dt, 20001)
+    Hn = np.abs(loop(2j * np.pi * fn)[0, 2:]) ** 2
+    var = np.array([1.0 / 3, 1e-6, 1e-6, 1e-4, 1e-4]) * dt
+    noise2 = float(np.sum(2 * np.trapezoid(Hn * var[:, None], fn, axis=1)))
+    return math.degrees(math.sqrt(track2 + noise2))
+
+
+def _stabilization_cell(v: float, monkeypatch=None, **pole_options) -> dict:
+    """One cell of ``bikeid stabilization`` (same code path, ``experiments.sweep``), 50 s;
+    ``pole_options`` are added to the registry's PolePlacement (needs ``monkeypatch``)."""
+    import controllers.registry as registry
+    from experiments import sweep
+
+    if pole_options:
+        orig = registry._FACTORIES["pole-placement"]
+        monkeypatch.setitem(
+            registry._FACTORIES, "pole-placement", lambda p, **kw: orig(p, **kw, **pole_options)
+        )
+    spec = sweep.SweepSpec("pole", (v,), (0,), 50.0)
+    return sweep.stabilization_task(spec, spec.tasks()[0])
+
+
+@pytest.mark.parametrize("v", [1.5, 4.0, 8.0, 15.0])
+@pytest.mark.parametrize("law", ["servo", "chen_dao"])
+def test_pole_placement_stabilization_run_matches_linear_prediction(v, law, monkeypatch):
+    """The stabilization-table run (nonlinear Whipple plant, 100 Hz controller and
+    sensors, noise, dither, 3 deg chirp) with the default poles stays upright and its RMS
+    roll error is within 10 % of the linear prediction ``_predicted_rms_deg``.  The 10 %
+    covers what the prediction leaves out: the zero-order hold's dt/2 = 5 ms delay (phase
+    2 pi 0.5 Hz 5 ms = 0.016 rad at the sweep's end, ~2 % of the error there), the
+    quasi-stationary chirp approximation, one 50 s noise realization (~5000 samples) and
+    the O(phi^2) nonlinear terms at 3 deg (0.3 %).  The servo default must also meet the
+    brief's 1 deg; the paper's law (same poles) cannot: its lag gives ~1.4 deg."""
+    options = {} if law == "servo" else {"law": "chen_dao"}
+    row = _stabilization_cell(v, monkeypatch, **options)
+    assert row["upright"] and row["error"] is None, row
+    want = _predicted_rms_deg(PolePlacement(design_speed=v, sample_time=0.01, law=law), v)
+    assert abs(row["rms_error_deg"] - want) <= 0.10 * want, (row["rms_error_deg"], want)
+    if law == "servo":
+        assert row["rms_error_deg"] < 1.0
+    else:
+        assert row["rms_error_deg"] > 1.0
+
+
+def test_pole_placement_stabilization_at_1_m_s_torque():
+    """At 1 m/s (the hardest speed, controllers.md §4.2) the default stays upright with a
+    physically reasonable peak torque: the brief allows tens of N m; the ideal torque for
+    the 3 deg chirp is ~7 N m (|phi/T| = 0.0076 rad/N m at 0.5 Hz, §4.2 poles and zeros)
+    and sensor noise through the gains adds ~3 N m RMS (K_phidot 1e-2 rad/s + K_phi 1e-3
+    rad), so < 30 N m."""
+    row = _stabilization_cell(1.0)
+    assert row["upright"] and row["peak_torque"] < 30.0, row
+    want = _predicted_rms_deg(PolePlacement(design_speed=1.0, sample_time=0.01), 1.0)
+    assert abs(row["rms_error_deg"] - want) <= 0.10 * want, (row["rms_error_deg"], want)
+
+
 # -- PID -----------------------------------------------------------------------------------
 def test_default_pid_stabilizes_1_to_15():
     """controllers.md §4.3: (Kp, Ki, Kd) = (-200, -500, -80) stabilizes the linear
@@ -165,7 +343,8 @@ def _continuous_rms_error(ctrl, v: float) -> float:
     else:
         g = ctrl.current_gains(v)
         Kx, ki_ = np.array([g[:4]]), g[4]
-        Br = np.zeros((4, 2))
+        # servo: T = -K (x - [r, 0, rd, 0]) + kI xi; chen_dao: no feedforward
+        Br = np.hstack([g[0] * B, g[2] * B]) if ctrl.law == "servo" else np.zeros((4, 2))
     Acl = np.zeros((5, 5))
     Acl[:4, :4] = A - B @ Kx
     Acl[:4, 4:] = ki_ * B
@@ -181,12 +360,21 @@ TRACKERS = {
     "pid": lambda: PID(reference=REF),
     "pid-derr": lambda: PID(reference=REF, derivative="error"),
     "pole-placement": lambda: PolePlacement(reference=REF),
+    "pole-placement-paper": lambda: PolePlacement(SLOW_POLES, reference=REF),
     "fuzzy": lambda: FuzzyController(reference=REF),
 }
-#: RMS error / RMS reference bounds.  PID (D on meas.) and pole placement lag the
-#: reference (controllers.md §4.3: bandwidth ~0.7 Hz; Chen & Dao Fig. 7 "delay time");
-#: the bounds are the continuous-loop values (second method) with ~15 % headroom.
-BOUND = {"pid": 0.17, "pid-derr": 0.07, "pole-placement": 0.95, "fuzzy": 0.2}
+#: RMS error / RMS reference bounds.  PID (D on meas.) and the paper's pole-placement law
+#: lag the reference (controllers.md §4.3: bandwidth ~0.7 Hz; Chen & Dao Fig. 7 "delay
+#: time"); the default pole placement (servo, roll-zero poles) leaves the error
+#: (s^3 - a_phidot s^2 - a_phi s) / Delta3(s) of the module docstring, 1.6-2.5 % here.
+#: The bounds are the continuous-loop values (second method) with ~15 % headroom.
+BOUND = {
+    "pid": 0.17,
+    "pid-derr": 0.07,
+    "pole-placement": 0.03,
+    "pole-placement-paper": 0.95,
+    "fuzzy": 0.2,
+}
 
 
 @pytest.mark.parametrize("name", list(TRACKERS))
