@@ -16,7 +16,12 @@ Two-stage with symmetry (``symmetric=True``, the paper's procedure): solve the r
 row, then set Mdp := Mpd and K0dp := K0pd and solve the steer row.  Parameter
 covariance sigma^2 (Gamma' Gamma)^-1 with sigma^2 = SSE / (N - d) (paper's eqs.
 ``eqVariance``/``eqCovariance``); the steer row's standard errors treat the values
-taken from the roll row as exact.
+taken from the roll row as exact.  That formula assumes white equation errors; after a
+low-pass filter they are strongly coloured and it understates the spread several-fold.
+``covariance="run"`` gives the cluster-robust sandwich instead, runs as independent clusters
+(residuals correlated within a run, independent between runs):
+B^-1 [sum_i W_i' e_i e_i' W_i] B^-T with B = W' Gamma, W = Gamma (LS) or the fitted
+instruments (IV), e_i the residuals of run i; it needs several runs (>= 2 d advisable).
 
 ``method="iv"`` replaces least squares by instrumental variables (two-stage least
 squares) against the closed-loop bias of an unmeasured torque disturbance, which
@@ -28,7 +33,11 @@ the dither); ``instruments="external"`` uses both external signals of the loop, 
 dither and the roll reference, at lags 0..``lags`` in about 20 steps, each times 1, v and
 v^2 (valid when the sensor noise and disturbances are independent of both; suited to
 long-memory closed-loop responses such as a chirp-driven loop, where a few dither lags
-explain little of the regressors).
+explain little of the regressors); ``instruments="simulated"`` takes the regressors of
+``instrument_runs``, noise-free runs simulated from the external signals alone through a
+model of the closed loop (Ljung's "tailor-made" instruments: one instrument per free entry,
+so no overfitting of the sensor noise however coloured it is; built and iterated by
+:func:`ident.tailored_iv.identify_tailored`).
 """
 
 from __future__ import annotations
@@ -211,7 +220,9 @@ def _condition(G: np.ndarray) -> tuple[float, np.ndarray]:
     return cond, Vt[-1]
 
 
-def _solve_row(row, names, G, Y, Z, max_condition, hints) -> tuple[np.ndarray, np.ndarray, float]:
+def _solve_row(
+    row, names, G, Y, Z, max_condition, hints, clusters=None
+) -> tuple[np.ndarray, np.ndarray, float]:
     cond, null = _condition(G)
     if not np.isfinite(cond) or cond > max_condition:
         involved = [n for n, c in zip(names, null, strict=True) if abs(c) > 0.1]
@@ -233,8 +244,14 @@ def _solve_row(row, names, G, Y, Z, max_condition, hints) -> tuple[np.ndarray, n
         Gh = Z @ coef
         theta = np.linalg.solve(Gh.T @ G, Gh.T @ Y)
     res = Y - G @ theta
-    sigma2 = float(res @ res) / max(N - d, 1)
-    cov = sigma2 * np.linalg.inv(Gh.T @ Gh)
+    if clusters is None:
+        sigma2 = float(res @ res) / max(N - d, 1)
+        cov = sigma2 * np.linalg.inv(Gh.T @ Gh)
+    else:
+        Binv = np.linalg.inv(Gh.T @ G)
+        scores = np.array([Gh[a:b].T @ res[a:b] for a, b in clusters])
+        ncl = len(clusters)
+        cov = Binv @ (scores.T @ scores) @ Binv.T * ncl / max(ncl - 1, 1)
     return theta, cov, cond
 
 
@@ -253,6 +270,8 @@ def identify(
     source: str = "signals",
     derivative: str = "central",
     max_condition: float = 1e10,
+    instrument_runs: Sequence[Run] | None = None,
+    covariance: str = "white",
 ) -> DirectResult:
     """Direct least-squares (or IV) identification of M, C1, K0, K2, H from runs.
 
@@ -265,7 +284,12 @@ def identify(
     free_roll, free_steer : entry names to estimate; defaults are Moore & Hubbard's
         sets, with HdF left out when F is zero in every run.
     symmetric : two-stage, Mdp := Mpd and K0dp := K0pd from the roll row.
-    method : "ls" or "iv"; ``instruments`` "lagged", "dither" or "external", ``lags`` >= 1.
+    method : "ls" or "iv"; ``instruments`` "lagged", "dither", "external" or "simulated",
+        ``lags`` >= 1 (not used by "simulated").
+    instrument_runs : for ``instruments="simulated"``, one noise-free run per run (same
+        samples, prepared the same way) whose regressors are the instruments.
+    covariance : "white" (the paper's sigma^2 (Gamma' Gamma)^-1) or "run" (cluster-robust
+        over runs, for coloured equation errors; module docstring).
     source : "signals" (measured) or "truth" (noise-free simulated signals).
     max_condition : an unidentifiable setup (condition number of the column-scaled
         regressor matrix above this) raises ValueError naming the collinear entries.
@@ -275,12 +299,30 @@ def identify(
         raise ValueError("no runs given")
     if method not in ("ls", "iv"):
         raise ValueError(f"method {method!r}: choose 'ls' or 'iv'")
-    if instruments not in ("lagged", "dither", "external"):
-        raise ValueError(f"instruments {instruments!r}: choose 'lagged', 'dither' or 'external'")
-    if method == "iv" and lags < 1:
+    if instruments not in ("lagged", "dither", "external", "simulated"):
+        raise ValueError(
+            f"instruments {instruments!r}: choose 'lagged', 'dither', 'external' or 'simulated'"
+        )
+    simulated = method == "iv" and instruments == "simulated"
+    if simulated:
+        if instrument_runs is None or len(instrument_runs) != len(runs):
+            raise ValueError(
+                "instruments='simulated' needs instrument_runs: one simulated run per run "
+                "(ident.tailored_iv.identify_tailored builds them)"
+            )
+        for r, z in zip(runs, instrument_runs, strict=True):
+            if z.n != r.n:
+                raise ValueError(
+                    f"instrument run has {z.n} samples, its data run {r.n}: prepare both alike"
+                )
+    if method == "iv" and not simulated and lags < 1:
         raise ValueError(f"lags={lags}: instrumental variables need lags >= 1")
     if source not in ("signals", "truth"):
         raise ValueError(f"source {source!r}: choose 'signals' or 'truth'")
+    if covariance not in ("white", "run"):
+        raise ValueError(f"covariance {covariance!r}: choose 'white' or 'run'")
+    if covariance == "run" and len(runs) < 2:
+        raise ValueError("covariance='run' needs at least 2 runs (runs are the clusters)")
     if reference is None:
         if "parameters" not in runs[0].meta:
             raise ValueError(
@@ -329,7 +371,12 @@ def identify(
     cols = [regressors(d, g) for d in data]
     speeds = np.concatenate([d["v"] for d in data])
     one_speed = np.ptp(speeds) <= 1e-9 * max(1.0, float(np.abs(speeds).max()))
-    cut = lags if method == "iv" else 0
+    cut = lags if method == "iv" and not simulated else 0
+    inst_cols = (
+        [regressors(_data(z, "signals", derivative), g) for z in instrument_runs]
+        if simulated
+        else None
+    )
 
     def stack(f) -> np.ndarray:
         return np.concatenate([f(i)[cut:] for i in range(len(runs))])
@@ -337,6 +384,8 @@ def identify(
     def instrument_matrix(names) -> np.ndarray | None:
         if method == "ls":
             return None
+        if simulated:
+            return np.column_stack([stack(lambda i, n=n: inst_cols[i][n]) for n in names])
         if instruments == "lagged":
             return np.column_stack(
                 [np.concatenate([cols[i][n][:-cut] for i in range(len(runs))]) for n in names]
@@ -401,9 +450,12 @@ def identify(
                 f"so its scale is undetermined: fix at least one {row} entry, e.g. "
                 f"{'Mpp' if r_idx == 0 else 'Mdd'}, at a known value"
             )
+        ends = np.cumsum([d["v"].size - cut for d in data])
+        clusters = list(zip(np.r_[0, ends[:-1]], ends, strict=True))
         theta, cov, cond[row] = _solve_row(
-            row, names, G, Y, instrument_matrix(names), max_condition, hints
-        )
+            row, names, G, Y, instrument_matrix(names), max_condition, hints,
+            clusters if covariance == "run" else None,
+        )  # fmt: skip
         for n, th in zip(names, theta, strict=True):
             vals[n] = float(th)
         results[row] = (names, theta, cov)
@@ -428,6 +480,7 @@ def identify(
         M=Mats["M"], C1=Mats["C1"], K0=Mats["K0"], K2=Mats["K2"], H=Hvec, g=g,
         free=free, stderr=stderr, covariance=covs, condition=cond, vaf_moore=vm,
         vaf_variance=vv, n_samples=int(Y.size), method=f"{method}" + (
-            f" ({instruments}, lags={lags})" if method == "iv" else ""),
+            f" ({instruments}" + ("" if simulated else f", lags={lags}") + ")"
+            if method == "iv" else ""),
         notes=tuple(notes),
     )  # fmt: skip
