@@ -40,10 +40,10 @@ d1 = b_phi K_phi - a_phi, d2 = b_phi K_phidot - a_phidot, so
 
 at every speed where both zeros are cancelled (a_phi = +9.5 s^-2 is the gravity term of
 the benchmark, a_phidot = -0.1 s^-1 at 1 m/s).  On the benchmark that is v < 2.5 m/s; above,
-the fast zero (beyond 30 s^-1) is left alone and the relations hold approximately.  The cancelled modes are
-invisible in roll and show only in steer.  The paper's law lags like a third-order
-low-pass (its Fig. 7 "delay time", here sum(1/|p|) = 0.39 s); the servo error is 2-10 %
-of the reference over 0.16-0.5 Hz.  ``poles=[...]`` (five values) gives a fixed-pole
+the fast zero (beyond 30 s^-1) is left alone and the relations hold approximately.  The
+cancelled modes are invisible in roll and show only in steer.  The paper's law lags like a
+third-order low-pass (its Fig. 7 "delay time", here sum(1/|p|) = 0.39 s); the servo error
+is 2-10 % of the reference over 0.16-0.5 Hz.  ``poles=[...]`` (five values) gives a fixed-pole
 design (e.g. :data:`SLOW_POLES`, the earlier default -2..-6).
 
 Model: by default the true linearization ``sim.linear.state_space(parameters, v)``

@@ -511,6 +511,12 @@ def test_bad_input_is_rejected():
         place_with_integral(*_b(5.0), [-3, -3, -4, -5, -6])
     with pytest.raises(ValueError, match="design_speed"):
         PolePlacement(model=state_space(P, 5.0, inputs=("T_delta",)))
+    with pytest.raises(ValueError, match="law must be"):
+        PolePlacement(design_speed=5.0, law="paper")
+    with pytest.raises(ValueError, match="need 3"):
+        PolePlacement(design_speed=5.0, free_poles=(-6, -8))
+    with pytest.raises(ValueError, match="relative degree 2"):
+        roll_zeros(np.eye(4), np.array([0.0, 0.0, 0.0, 1.0]))
 
 
 # -- nonlinear plant -----------------------------------------------------------------------
