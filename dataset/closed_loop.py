@@ -166,6 +166,11 @@ def simulate_run(
     ch = sensors.channel("T_delta")
     signals["T_delta"] = torque if ch.ideal else ch.apply(torque, channel_noise(seed, "T_delta", n))
     truth.update(_trajectory_extras(traj, t))
+    if "F" in truth:  # a load cell logs the applied lateral force (Moore & Hubbard's F_cl)
+        chf = sensors.channel("F")
+        signals["F"] = (
+            truth["F"] if chf.ideal else chf.apply(truth["F"], channel_noise(seed, "F", n))
+        )
     ref = controller.reference
     reference_arr = np.array([float(ref(tk)) for tk in t])
     fell_at = None if traj.fell_at is None else float(traj.fell_at)

@@ -87,6 +87,22 @@ def test_held_speed_and_metadata():
     np.testing.assert_array_equal(run.reference, ChirpReference(0.05, 0.05, 0.5, 3.0).sample(run.t))
 
 
+def test_lateral_force_is_logged_like_a_load_cell():
+    """The applied lateral force (Moore & Hubbard's perturbation F) is a measured signal;
+    with an ideal F channel the log equals the applied force exactly (same samples)."""
+    from controllers.excitation import LateralForcePulses
+
+    pulses = LateralForcePulses(peak=50.0, duration=0.2, mean_gap=1.0, min_gap=0.5, seed=3)
+    run = simulate_run(
+        benchmark(), PID(sample_time=0.01), 4.0, duration=5.0, sensors=Sensors.ideal(),
+        lateral_force=pulses,
+    )  # fmt: skip
+    expected = np.array([pulses(tk) for tk in run.t])
+    assert np.abs(expected).max() > 10.0  # some pushes happened
+    np.testing.assert_array_equal(run["F"], run.true("F"))
+    np.testing.assert_allclose(run["F"], expected, rtol=0, atol=1e-12)
+
+
 def test_fallen_run_is_kept_and_flagged():
     """Without feedback the benchmark at 2 m/s is weave-unstable (Meijaard 2007: stable only
     for 4.29 < v < 6.02 m/s), so a small initial roll rate must end in a fall."""
