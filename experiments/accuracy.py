@@ -22,7 +22,8 @@ bicycle at the run's speed):
   zero is identified, not fixed), steer {Mdd, C1dp, C1dd, K0dd, K2dd}; signals prepared
   by :func:`direct_prepare` (interval-averaged equation, 3 Hz); instrumental variables
   with the external signals (dither and roll reference, lags 0..0.4 s) against the
-  closed-loop correlation of sensor noise between regressors and torque.
+  closed-loop correlation of sensor noise between regressors and torque (default), or
+  tailor-made instruments (``direct_instruments="tailored"``, ``ident.tailored_iv``).
 
 Goals (issue "Identification", item 6): weave, capsize and caster eigenvalues within 2 %
 (0.05 1/s absolute where |lambda| < 2.5), i.e. |error| <= max(0.02 |lambda|, 0.05);
@@ -192,13 +193,26 @@ DIRECT_ROLL = ("Mpd", "C1pd", "K0pd", "K0pp")
 DIRECT_STEER = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd")
 
 
-def _direct(runs: Sequence[Run], parameters, cutoff: float, lags: int):
+def _direct(runs: Sequence[Run], parameters, cutoff: float, lags: int, instruments: str):
+    """``instruments="external"``: IV on the dither and reference lags 0..``lags`` (the
+    default; docs/accuracy.md).  ``"tailored"``: tailor-made IV
+    (``ident.tailored_iv``), instruments simulated through the fitted controller and the
+    current model, started from the Whipple model of the reference (the prior Moore &
+    Hubbard use for the fixed entries), 3 refinements; run-clustered standard errors."""
     from ident.direct import identify
+    from ident.tailored_iv import identify_tailored
+    from sim.linear import canonical_matrices
 
-    prepared = [direct_prepare(r, cutoff) for r in runs]
-    return identify(
-        prepared, parameters, DIRECT_ROLL, DIRECT_STEER, method="iv", instruments="external",
-        lags=lags,
+    if instruments == "external":
+        return identify(
+            [direct_prepare(r, cutoff) for r in runs], parameters, DIRECT_ROLL, DIRECT_STEER,
+            method="iv", instruments="external", lags=lags, covariance="run",
+        )  # fmt: skip
+    if instruments != "tailored":
+        raise ValueError(f"direct instruments {instruments!r}: choose 'tailored' or 'external'")
+    return identify_tailored(
+        runs, parameters, DIRECT_ROLL, DIRECT_STEER, prepare=lambda r: direct_prepare(r, cutoff),
+        start=canonical_matrices(parameters), iterations=3, covariance="run",
     )  # fmt: skip
 
 
@@ -208,6 +222,7 @@ def identify_controller(
     methods: Sequence[str] = METHODS,
     direct_cutoff: float = 3.0,
     direct_lags: int = 40,
+    direct_instruments: str = "external",
     log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Identify one controller's runs with ``methods``; per speed and global results."""
@@ -243,7 +258,8 @@ def identify_controller(
                     glob["critical_speeds"] = sm.critical_speeds()
             elif method == "direct" and ok:
                 try:
-                    res = _direct(ok, parameters, direct_cutoff, direct_lags)
+                    res = _direct(ok, parameters, direct_cutoff, direct_lags,
+                                  direct_instruments)  # fmt: skip
                 except ValueError as exc:
                     glob["error"] = str(exc).splitlines()[0]
                 else:

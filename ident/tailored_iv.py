@@ -72,7 +72,7 @@ def _lagged(x: np.ndarray, lags: range, start: int) -> np.ndarray:
     return np.column_stack([x[start - j : x.size - j] for j in lags])
 
 
-def fit_controller(run: Run, na: int = 2, nb: int = 2) -> ControllerFit:
+def fit_controller(run: Run, na: int = 1, nb: int = 1) -> ControllerFit:
     """ARX fit of the run's controller (see :class:`ControllerFit`) on the *raw* run.
 
     ``na`` >= 1 past outputs (one is enough for integral action: PID, pole placement with an
@@ -173,8 +173,8 @@ def identify_tailored(
     prepare: Callable[[Run], Run],
     start: DirectResult | CanonicalMatrices | str = "external",
     iterations: int = 3,
-    na: int = 2,
-    nb: int = 2,
+    na: int = 1,
+    nb: int = 1,
     **kwargs,
 ) -> DirectResult:
     """Direct identification with tailor-made instruments, iterated.

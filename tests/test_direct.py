@@ -92,3 +92,72 @@ def test_attenuation_scalar_formula_t4():
     expect = CM.C1[1, 1] * sx2 / (sx2 + sn2)
     assert expect == pytest.approx(0.5 * CM.C1[1, 1], rel=0.05)
     assert abs(res.free["C1dd"] - expect) < 4 * res.stderr["C1dd"] + 0.03 * abs(expect)
+
+
+# --- tailor-made instruments (ident.tailored_iv) on the nonlinear closed loop ---------------
+
+
+def _pid_runs(speeds, seed=0, sensors="default", chirp_deg=1.5, duration=50.0):
+    from experiments.sweep import SweepSpec, simulate_task
+
+    spec = SweepSpec("pid", tuple(speeds), (seed,), duration, reference="chirp",
+                     chirp_amplitude=np.radians(chirp_deg), dither=1.0, dither_hold=0.02,
+                     sensors=sensors, sensor_rate=100.0, sample_time=0.01)  # fmt: skip
+    return [simulate_task(spec, t) for t in spec.tasks()]
+
+
+def test_fit_controller_recovers_pid_law():
+    """The PID (controllers/pid.py: u = Kp e + Ki I - Kd phidot, I += e dt after the output)
+    differenced once is exactly u[k] = u[k-1] - Kp phi[k] + (Kp - Ki dt) phi[k-1]
+    - Kd phidot[k] + Kd phidot[k-1] + Kp r[k] - (Kp - Ki dt) r[k-1]: ARX(1, 1) must return
+    these coefficients (float64 least squares on an exact relation: 1e-6 relative)."""
+    from controllers.pid import DEFAULT_PID_GAINS
+    from ident.tailored_iv import fit_controller
+
+    kp, ki, kd = DEFAULT_PID_GAINS
+    run = _pid_runs((5.0,), duration=20.0)[0]
+    c = fit_controller(run)
+    dt = 0.01
+    assert c.vaf == pytest.approx(1.0, abs=1e-9)
+    assert c.a == pytest.approx([1.0], abs=1e-7)
+    assert c.b[:, 0] == pytest.approx([-kp, kp - ki * dt], rel=1e-6)  # phi
+    assert c.b[:, 2] == pytest.approx([-kd, kd], rel=1e-6)  # phidot
+    assert c.c == pytest.approx([kp, -(kp - ki * dt)], rel=1e-6)  # reference
+    assert np.abs(c.b[:, [1, 3]]).max() < 1e-6 * abs(kd)  # delta, deltadot unused
+
+
+def test_simulated_instruments_reproduce_noise_free_loop():
+    """Second method: with the true model (sim.linear) and the fitted controller, the
+    simulated instruments are the noise-free response of the loop to the dither and
+    reference.  On a run with ideal sensors (0.5 deg chirp at 5 m/s, linear range) they
+    must match the nonlinear plant's truth to VAF > 0.999 in phi and delta (the remaining
+    difference is the plant's nonlinearity, O(angle^2) ~ 1e-4, and the start from rest)."""
+    from ident.direct import vaf_variance
+    from ident.tailored_iv import simulate_instruments
+
+    run = _pid_runs((5.0,), sensors="ideal", chirp_deg=0.5, duration=20.0)[0]
+    sim = simulate_instruments(run, CM)
+    for k in ("phi", "delta"):
+        assert vaf_variance(run.true(k)[100:], sim[k][100:]) > 0.999
+
+
+def test_run_clustered_covariance_matches_white_formula_for_white_errors():
+    """T6 setting (white noise on the logged torque only: regressand noise, LS unbiased and
+    the paper's sigma^2 (G'G)^-1 exact): the run-clustered sandwich must agree with it.
+    20 runs = 20 clusters, so the clustered standard error itself scatters by
+    ~1/sqrt(2 * 19) = 16 %; allowed ratio 0.55-1.45 (about 3 of those)."""
+    from dataset.run import Run
+
+    rng = np.random.default_rng(7)
+    runs = []
+    for i in range(20):
+        r = simulate(P, 3.0 + 0.2 * i, duration=8, seed=100 + i, dither=1.0, dither_hold=5)
+        s = dict(r.truth)
+        s["T_delta"] = s["T_delta"] + rng.normal(scale=0.5, size=r.n)
+        runs.append(Run(t=r.t, signals=s, meta=r.meta))
+    white = identify(runs, P)
+    clustered = identify(runs, P, covariance="run")
+    assert white.free == clustered.free
+    for n in white.free:
+        if n in ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd"):
+            assert 0.55 < clustered.stderr[n] / white.stderr[n] < 1.45, n
