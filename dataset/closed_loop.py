@@ -132,7 +132,8 @@ def simulate_run(
     objects; seed: sensor-noise seed (the dither carries its own seed); mode: ``held``
     or ``coast`` speed; initial: initial roll/steer values in rad, rad/s (keys phi, delta,
     phidot, deltadot; default upright); lateral_force: t -> F [N] (None: none);
-    integrator_options go to ``sim.integrate.simulate`` (e.g. ``step``, ``fall_angle``).
+    integrator_options go to ``sim.integrate.simulate`` (``substeps``, ``fall_limit``,
+    ``method``, ``energy``).
     """
     speed = float(speed)
     if not (math.isfinite(speed) and speed > 0):

@@ -562,9 +562,13 @@ def _report_fig7(rep: Report, f7: dict) -> None:
             [
                 "closed-loop poles requested [1/s]",
                 "not given",
-                ", ".join(fmt(x) for x in f7["poles_requested"]),
+                ", ".join(
+                    fmt_complex(x, 3) if isinstance(x, complex) else fmt(x)
+                    for x in f7["poles_requested"]
+                ),
                 "-",
-                f"placed on the model identified at {f7['design_model_speed']} m/s (eqs. 14-15)",
+                f"placed on the model identified at {f7['design_model_speed']} m/s (eqs. 14-15);"
+                " two on its roll zeros, three at -6, -8, -10 (the paper gives none)",
             ],
             [
                 "closed-loop poles with the true linearization at 15 km/h",
@@ -587,7 +591,13 @@ def _report_fig7(rep: Report, f7: dict) -> None:
                 "-",
                 "response lags the chirp as in the paper",
             ],
-            ["max steer torque [N m]", "about 10", fmt(f7["max_torque"]), "-", ""],
+            [
+                "max steer torque [N m]",
+                "about 10",
+                fmt(f7["max_torque"]),
+                "-",
+                "noise-free sensors, no dither (as the paper's tracking simulation)",
+            ],
             ["fell", "no", "no" if f7["fell_at"] is None else f"at {f7['fell_at']} s", "-", ""],
         ],
     )
