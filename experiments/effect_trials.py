@@ -14,7 +14,11 @@ Each trial imitates the treadmill experiment of the measured data with one hidde
   rad/s, the second-difference noise of the logs' lean_rate is 0.006-0.017), on roll angle
   (std/5 rad) and steer angle (3e-4 rad), steer encoder quantization 0.000767 rad
   (2 pi / 8192) and steer-rate quantization 0.0767 rad/s (encoder difference over 10 ms).
-- **Speeds**: four treadmill speeds drawn from 1.5-4.5 m/s at least 0.5 m/s apart; two
+- **Speeds**: four treadmill speeds drawn from 1.5-4.5 m/s at least 0.5 m/s apart, redrawn
+  unless the sampled linear loop with the effect is stable at all four with the weave
+  decaying faster than 0.3 1/s (an unstable combination, e.g. a 40 ms delay at 3.5 m/s,
+  cannot be logged); a push after which the nonlinear plant falls is repeated at 0.7 times
+  its size (up to 3 times), as an experimenter would; two
   (4 decays each) are given to :func:`ident.discrepancy.identify`, the other two (3 decays
   each) are held out for :func:`ident.discrepancy.evaluate`.
 
@@ -27,7 +31,10 @@ starts with ``unexplained``.  Rates come with exact (Clopper-Pearson) 95 % inter
 
 Magnitude ranges (physically plausible; Moore's Davis bicycle has steer viscous damping
 0.34 N m s/rad and Coulomb friction 0.15 N m, identification.md section 5): see
-:data:`EFFECTS`.  Input delays are whole 10 ms samples (the plant's loop is sampled).
+:data:`EFFECTS`.  Input delays are whole 10 ms samples (the plant's loop is sampled).  The
+loop bounds them: with this controller a 40 ms delay or a 50 ms lag makes the weave unstable
+at 3-4.5 m/s and a gain of 0.6 at 1.5 m/s (linear sampled loop), so such a bicycle could not
+have been logged; the ranges stop short of that.
 """
 
 from __future__ import annotations
@@ -123,22 +130,22 @@ EFFECTS: dict[str, EffectSpec] = {
         EffectSpec(
             "command_gain",
             True,
-            1.2,
-            1.4,
+            1.15,
+            1.35,
             "-",
             absent=1.0,
             two_sided=True,
-            doc="motor torque-constant error 20-40 % either way",
+            doc="motor torque-constant error 15-35 % either way",
         ),
-        EffectSpec("actuator_lag", True, 0.01, 0.05, "s", doc="motor current/torque lag"),
+        EffectSpec("actuator_lag", True, 0.005, 0.03, "s", doc="motor current/torque lag"),
         EffectSpec(
             "input_delay",
             True,
             0.0,
             0.0,
             "s",
-            choices=(0.01, 0.02, 0.03, 0.04),
-            doc="transport delay of 1-4 loop samples",
+            choices=(0.01, 0.02, 0.03),
+            doc="transport delay of 1-3 loop samples",
         ),
         EffectSpec(
             "roll_viscous_damping",
@@ -175,12 +182,34 @@ class TrialSpec:
     noise: float  # roll-rate noise std [rad/s]
 
 
-def _speeds(rng: np.random.Generator, k: int = 4, gap: float = 0.5) -> list[float]:
+MIN_DECAY = 0.3  # required decay rate of the weave root [1/s]
+
+
+def _stable(name: str, value: float, speeds) -> bool:
+    """The sampled linear loop with the effect is stable at every speed and its weave decays
+    faster than MIN_DECAY (a free decay must be visible within the 1 s window).
+
+    An unstable combination (e.g. a 40 ms delay at 3.5 m/s) cannot be logged: the bicycle
+    falls or oscillates.
+    """
+    from ident.experiment_model import ExperimentModel
+
+    m = ExperimentModel(effects={name: value})
+    for v in speeds:
+        vs = 1.066 * v - 0.128
+        if m.eigenvalues(vs)[0].real >= 0 or m.weave(vs).real >= -MIN_DECAY:
+            return False
+    return True
+
+
+def _speeds(
+    rng: np.random.Generator, name: str, value: float, k: int = 4, gap: float = 0.5
+) -> list[float]:
     for _ in range(1000):
         v = np.sort(rng.uniform(*SPEED_RANGE, size=k))
-        if np.all(np.diff(v) >= gap):
+        if np.all(np.diff(v) >= gap) and _stable(name, value, v):
             return [float(x) for x in rng.permutation(v)]
-    raise RuntimeError("could not draw separated speeds")  # pragma: no cover
+    raise RuntimeError(f"no stable speeds for {name}={value}")  # pragma: no cover
 
 
 def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -> list[TrialSpec]:
@@ -202,7 +231,7 @@ def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -
         rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(i,)))
         name = names[i % len(names)]
         value = EFFECTS[name].draw(rng)
-        v = _speeds(rng)
+        v = _speeds(rng, name, value)
         noise = float(rng.uniform(0.005, 0.015))
         sub_seed = int(rng.integers(2**31))
         out.append(TrialSpec(i, sub_seed, name, value, (v[0], v[1]), (v[2], v[3]), noise))
@@ -248,11 +277,16 @@ def decay_windows(
                 "phidot": float(sgn * rng.uniform(0.35, 0.95)),
                 "deltadot": float(sgn * rng.uniform(0.4, 1.5)),
             }
-            run = simulate_run(
-                p, SteerIntoLean(), float(v), duration=N_SAMPLES * DT, sensors=_sensors(noise),
-                effects=effects, seed=int(rng.integers(2**31)), initial=init, substeps=SUBSTEPS,
-            )  # fmt: skip
-            if run.meta["fell_at"] is not None:
+            sseed = int(rng.integers(2**31))
+            for _ in range(4):
+                run = simulate_run(
+                    p, SteerIntoLean(), float(v), duration=N_SAMPLES * DT, substeps=SUBSTEPS,
+                    sensors=_sensors(noise), effects=effects, seed=sseed, initial=init,
+                )  # fmt: skip
+                if run.meta["fell_at"] is None and run.n >= N_SAMPLES:
+                    break
+                init = {k: 0.7 * x for k, x in init.items()}  # a gentler push
+            else:
                 raise RuntimeError(f"trial plant fell at {v} m/s with {effects}")
             sl = slice(0, N_SAMPLES)
             z = np.zeros(N_SAMPLES)
