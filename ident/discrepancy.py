@@ -279,7 +279,9 @@ def identify(
 
     ``nonlinear``: the model is the nonlinear plant through the per-window defect
     correction (:func:`ident.experiment_model.attach_nonlinear_correction`), re-attached
-    at the current model after each accepted effect and twice in the final joint fit; the
+    at the current model after each accepted effect, at each of the three leading
+    candidates of a round before they are re-ranked (first-order corrections favoured a
+    fractional input delay over a true actuator lag), and twice in the final joint fit; the
     windows are left corrected at the returned model.  After the joint fit, effects with
     t <= 3 are dropped (backward pruning) and the rest are listed by their contribution
     (increase of the cost when the effect alone is set back to absent).
@@ -314,19 +316,30 @@ def identify(
             gain = (base_cost - res.cost) / max(base_cost, 1e-300)
             trials.append((gain, n, res, EffectEstimate(n, v, sd, cand.unit, t, gain)))
         trials.sort(key=lambda z: -z[0])
+        if nonlinear:  # re-rank the leaders with the correction re-attached at each of them
+            top = []
+            for _gain, n, res, _est in trials[:3]:
+                _attach(windows, res.model, True)
+                res = fit_effects(cur, fit_w, accepted + [n], res.values)
+                v, sd = res.values[n], res.std[n]
+                t = abs(v - LIBRARY[n].absent) / sd if sd > 0 else np.inf
+                gain = (base_cost - res.cost) / max(base_cost, 1e-300)
+                top.append((gain, n, res, EffectEstimate(n, v, sd, LIBRARY[n].unit, t, gain)))
+            trials = sorted(top, key=lambda z: -z[0]) + trials[3:]
         if _round == 0:
             ranking = [z[3] for z in trials]
         took = False
         for gain, n, res, est in trials[:3]:
             if est.t <= T_MIN or gain < min_gain:
                 continue
+            _attach(windows, res.model, nonlinear)
             val = fit_effects(res.model, val_w, []).cost
             if val < cur_val * (1 - min_gain):
                 accepted.append(n)
                 cur, took = res.model, True
-                _attach(windows, cur, nonlinear)
-                cur_val = fit_effects(cur, val_w, []).cost
+                cur_val = val
                 break
+        _attach(windows, cur, nonlinear)
         if not took:
             break
     final = fit_effects(model, windows, accepted, {n: cur.e(n) for n in accepted})
