@@ -44,6 +44,8 @@ import numpy as np
 
 from dataset.run import Run
 
+from .sweep import EXCITATION_BANDS
+
 __all__ = [
     "CONTROLLERS",
     "DESIGN",
@@ -85,11 +87,7 @@ class Band:
 
 
 #: The experiment design (chosen from amplitude/hold scans on the PID loop, docs/accuracy.md).
-DESIGN = (
-    Band(3.0, 0.5, 1.0, 0.05),
-    Band(6.0, 1.5, 1.0, 0.02),
-    Band(math.inf, 3.0, 1.0, 0.02),
-)
+DESIGN = tuple(Band(vmax, deg, 1.0, hold) for vmax, deg, hold in EXCITATION_BANDS)
 
 
 def _band(v: float) -> int:

@@ -53,7 +53,11 @@ def _common(p: argparse.ArgumentParser) -> None:
         "--dither", type=float, default=1.0, help="uniform dither amplitude [N m] (0 = none)"
     )
     p.add_argument(
-        "--chirp-deg", type=float, default=3.0, help="roll chirp amplitude [deg] (0.05-0.5 Hz)"
+        "--chirp-deg",
+        default=None,
+        help="roll chirp amplitude [deg] (0.05-0.5 Hz), 0 = no reference; default: sweep "
+        "0.5/1.5/3 deg below 3 / 3-6 / above 6 m/s (the identification design), "
+        "stabilization 3 deg",
     )
     p.add_argument("--sensors", choices=("default", "ideal"), default="default")
     p.add_argument("--rate", type=float, default=100.0, help="sensor sample rate [Hz]")
@@ -74,11 +78,19 @@ def _options(args: argparse.Namespace) -> dict:
     from sim.parameters import by_name
 
     by_name(args.bicycle)  # fail early on a bad name
+    chirp = args.chirp_deg
+    if chirp is not None:
+        try:
+            chirp = float(chirp)
+        except ValueError:
+            raise ValueError(f"--chirp-deg {args.chirp_deg!r} is not a number") from None
+        if not (math.isfinite(chirp) and chirp >= 0):
+            raise ValueError(f"--chirp-deg must be >= 0 deg, got {args.chirp_deg}")
     return {
         "bicycle": args.bicycle,
         "dither": args.dither,
-        "chirp_amplitude": math.radians(args.chirp_deg),
-        "reference": "chirp" if args.chirp_deg else "zero",
+        "chirp_amplitude": None if chirp is None else math.radians(chirp),
+        "reference": "chirp" if chirp is None or chirp > 0 else "zero",
         "sensors": args.sensors,
         "sensor_rate": args.rate,
         "sample_time": 1.0 / args.rate,
@@ -117,6 +129,8 @@ def cmd_stabilization(args: argparse.Namespace) -> int:
     bad = [c for c in controllers if c not in CONTROLLERS]
     if bad or not controllers:
         raise ValueError(f"--controllers: unknown {bad}; choose from {', '.join(CONTROLLERS)}")
+    if args.chirp_deg is None:
+        args.chirp_deg = 3.0  # a tracking test: the same 3 deg chirp at every speed
     options = _options(args)
     rows = stabilization_table(
         tuple(speeds),

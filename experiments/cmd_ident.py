@@ -23,10 +23,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bicycle", help="fixed-entry values for direct (default: the runs' meta)")
     p.add_argument("--iv", action="store_true", help="direct: instrumental variables (lagged)")
     p.add_argument(
-        "--derivative", choices=("central", "forward", "backward"), default="central",
-        help="direct: differentiation of the rates (see ident.signals)",
+        "--derivative", choices=("interval", "central", "forward", "backward"),
+        default="interval",
+        help="direct: how accelerations are formed (see ident.signals). 'interval' (default): "
+        "the equation averaged over each sample interval, exact for zero-order-held torques; "
+        "Moore & Hubbard's recipe is '--derivative central --cutoff 15', which is biased by "
+        "the torque steps of a sampled controller (docs/accuracy.md)",
     )  # fmt: skip
-    p.add_argument("--cutoff", type=float, default=15.0, help="direct: low-pass [Hz], 0 = none")
+    p.add_argument(
+        "--cutoff", type=float, default=None,
+        help="direct: zero-phase low-pass [Hz], 0 = none (default 3 Hz with 'interval', "
+        "else 15 Hz as Moore & Hubbard)",
+    )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
 
@@ -68,16 +76,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _truth(runs):
+    """The simulated bicycle: ``meta['parameters']`` or ``meta['bicycle']['parameters']``
+    (closed-loop runs and sweeps); None for measured data."""
     from sim.parameters import from_mapping
 
-    meta = runs[0].meta.get("parameters")
-    return from_mapping(meta, name="run meta") if meta else None
+    meta = runs[0].meta
+    values = meta.get("parameters") or (meta.get("bicycle") or {}).get("parameters")
+    return from_mapping(values, name="run meta") if values else None
 
 
 def _sorted(z):
     import numpy as np
 
-    return sorted(np.asarray(z), key=lambda c: (c.real, c.imag))
+    return sorted(np.asarray(z, dtype=complex), key=lambda c: (c.real, c.imag))
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -102,9 +113,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
         reference = by_name(args.bicycle) if args.bicycle else truth
         if reference is None:
             raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
-        prepared = [
-            prepare(r, cutoff=args.cutoff or None, derivative=args.derivative) for r in runs
-        ]
+        cutoff = args.cutoff
+        if cutoff is None:
+            cutoff = 3.0 if args.derivative == "interval" else 15.0
+        if not (cutoff >= 0 and cutoff == cutoff):
+            raise ValueError(f"--cutoff must be >= 0 Hz, got {args.cutoff}")
+        prepared = [prepare(r, cutoff=cutoff or None, derivative=args.derivative) for r in runs]
         res = identify(prepared, reference, method="iv" if args.iv else "ls")
         out.update(
             M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H,
@@ -116,24 +130,31 @@ def cmd_identify(args: argparse.Namespace) -> int:
     else:
         from ident import pem
 
+        # Per-speed fits, each also started from the next lower speed's model (robust
+        # against local minima on low-SNR closed-loop data); the speed-parameterized model
+        # reuses them as its start, as in ``bikeid accuracy``.
+        per: dict = {}
+        prev = None
+        for v in speeds:
+            at_v = [r for r in runs if round(r.speed, 6) == v]
+            prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,))
         if args.speed_parameterized:
-            model = pem.fit_speed_model(runs)
+            if len(speeds) < 2:
+                raise ValueError(
+                    "--speed-parameterized needs runs at two or more speeds to separate "
+                    f"alpha from beta v^2; {args.file} holds speed {speeds[0]} m/s only"
+                )
+            model = pem.fit_speed_model(runs, per_speed=per)
             out["params"] = dict(zip(pem.SPEED_NAMES, model.params, strict=True))
             out["stderr"] = model.stderr
+            out["critical_speeds"] = model.critical_speeds()
             eig = {v: _sorted(model.eigenvalues(v)) for v in speeds}
         else:
-            if len(speeds) > 1:
-                out["models"] = {}
-            eig = {}
-            for v in speeds:
-                m = pem.fit([r for r in runs if round(r.speed, 6) == v])
-                out.setdefault("models", {})[v] = {
-                    "theta": m.params(),
-                    "stderr": m.stderr,
-                    "A": m.A,
-                    "B": m.B,
-                }
-                eig[v] = _sorted(m.eigenvalues())
+            out["models"] = {
+                v: {"theta": m.params(), "stderr": m.stderr, "A": m.A, "B": m.B}
+                for v, m in per.items()
+            }
+            eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
     per_speed = []
     for v in speeds:
         row = {"speed": v, "eigenvalues": eig[v]}
@@ -141,6 +162,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
             row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
         per_speed.append(row)
     out["per_speed"] = per_speed
+    if truth is not None and args.method == "pem" and args.speed_parameterized:
+        from sim.linear import critical_speeds
+
+        out["true_critical_speeds"] = critical_speeds(truth)
     if args.json:
         print(dump_json(out))
         return 0

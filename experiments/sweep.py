@@ -68,6 +68,24 @@ class Task:
     seed: int
 
 
+#: Identification excitation by speed band (``vmax`` [m/s], roll chirp amplitude [deg],
+#: dither hold [s]), used when a sweep leaves ``chirp_amplitude``/``dither_hold`` at None.
+#: Small chirps and a slow dither at low speed, where a 3 deg roll chirp drives the steer
+#: angle to ~0.5 rad, far outside the linearization; larger chirps at high speed.  Chosen
+#: from amplitude/hold scans on the PID loop (docs/accuracy.md); ``bikeid accuracy`` uses it.
+EXCITATION_BANDS: tuple[tuple[float, float, float], ...] = (
+    (3.0, 0.5, 0.05),
+    (6.0, 1.5, 0.02),
+    (math.inf, 3.0, 0.02),
+)
+
+
+def excitation_for(speed: float) -> tuple[float, float]:
+    """(chirp amplitude [rad], dither hold [s]) of :data:`EXCITATION_BANDS` at ``speed``."""
+    vmax, deg, hold = next(b for b in EXCITATION_BANDS if speed < b[0])
+    return math.radians(deg), hold
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     """Everything that defines a sweep's runs (all JSON-serializable).
@@ -76,7 +94,9 @@ class SweepSpec:
     speeds [m/s]; seeds (non-negative integers); duration [s]; bicycle: a name for
     ``sim.parameters.by_name``; reference: ``chirp`` (roll chirp of ``chirp_amplitude``
     [rad], 0.05 -> 0.5 Hz over the run) or ``zero``; dither: uniform dither amplitude
-    [N m] held ``dither_hold`` [s] (0 = none); sensors: ``default`` or ``ideal`` at
+    [N m] held ``dither_hold`` [s] (0 = none); ``chirp_amplitude`` or ``dither_hold`` None
+    (the default) means "by speed band" (:data:`EXCITATION_BANDS`, the identification
+    design); sensors: ``default`` or ``ideal`` at
     ``sensor_rate`` [Hz]; sample_time: controller period [s] (at most the sensor period);
     extra: keywords for :func:`dataset.closed_loop.simulate_run` (e.g. ``mode``).
     Controllers are ``controllers.registry`` defaults; pole placement is designed at the
@@ -89,9 +109,9 @@ class SweepSpec:
     duration: float = 50.0
     bicycle: str = "benchmark"
     reference: str = "chirp"
-    chirp_amplitude: float = math.radians(3.0)
+    chirp_amplitude: float | None = None
     dither: float = 1.0
-    dither_hold: float = 0.01
+    dither_hold: float | None = None
     sensors: str = "default"
     sensor_rate: float = 100.0
     sample_time: float = 0.01
@@ -154,15 +174,16 @@ def simulate_task(spec: SweepSpec, task: Task) -> Run:
 
     seed = run_seed(task.seed, task.speed, spec.controller)
     child = np.random.SeedSequence(seed).spawn(2)
+    band_amplitude, band_hold = excitation_for(task.speed)
+    amplitude = band_amplitude if spec.chirp_amplitude is None else spec.chirp_amplitude
+    hold = band_hold if spec.dither_hold is None else spec.dither_hold
     if spec.reference == "chirp":
-        reference = ChirpReference(
-            amplitude=spec.chirp_amplitude, f0=0.05, f1=0.5, duration=spec.duration
-        )
+        reference = ChirpReference(amplitude=amplitude, f0=0.05, f1=0.5, duration=spec.duration)
     else:
         reference = ZeroReference()
     dither = None
     if spec.dither > 0:
-        dither = UniformDither(spec.dither, spec.dither_hold, int(child[0].generate_state(1)[0]))
+        dither = UniformDither(spec.dither, hold, int(child[0].generate_state(1)[0]))
     if spec.sensors == "default":
         sensors = Sensors.default(rate=spec.sensor_rate)
     else:
@@ -422,8 +443,11 @@ def stabilization_table(
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Run every controller at every speed (chirp reference, dither, default sensors) on the
-    nonlinear model; one row per (controller, speed), in that order."""
+    nonlinear model; one row per (controller, speed), in that order.  A tracking test: the
+    chirp is 3 deg at every speed unless ``chirp_amplitude`` is given."""
     from tqdm import tqdm
+
+    spec_options.setdefault("chirp_amplitude", math.radians(3.0))
 
     jobs = [(SweepSpec(c, tuple(speeds), (0,), duration, **spec_options)) for c in controllers]
     todo = [(spec, task) for spec in jobs for task in spec.tasks()]
