@@ -18,7 +18,6 @@ def test_whiteness_band():
     assert whiteness(e)["fraction_outside"] <= 0.12
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     "effect, value",
     [("steer_viscous_damping", 0.4), ("command_gain", 0.8), ("input_delay", 0.03)],
@@ -35,7 +34,6 @@ def test_injected_library_effect_is_named(effect, value):
     assert ev["summary"]["error_after"] <= 0.5 * ev["summary"]["error_before"]
 
 
-@pytest.mark.slow
 def test_effect_outside_library_is_unexplained():
     """Roll viscous damping is not in the library: the verdict must start 'unexplained'."""
     truth = ExperimentModel(effects={"roll_viscous_damping": 1.5})
