@@ -146,7 +146,9 @@ def evaluate_json(model_obj: dict, windows) -> dict:
     return {
         "metric": "mean over decay windows of NRMSE ||y_sim - y|| / ||y - mean y|| of roll "
         "rate and steer angle (simulation from the measured initial state); weave error "
-        "|lambda_model - lambda_data| / |lambda_data|",
+        "|lambda_model - lambda_data| / |lambda_data|, both the median of damped-oscillation "
+        "fits to the decays (measured; simulated from the same initial states); "
+        "weave_root_error: lambda_model = nearest root of the sampled linear loop",
         "plant": plant,
         "verdict": ident.get("verdict"),
         "effects": effects,
