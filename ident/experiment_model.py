@@ -31,9 +31,20 @@ roll_rate_scale             -           s above (default 1)
 speed_scale                 -           true speed = s * calibrated treadmill speed
 steer_inertia               kg m^2      added to M_dd (front-frame inertia correction)
 trail_correction            m           trail c -> c + dc (all matrices recomputed)
+front_inertia_scale         -           front-frame inertia tensor IH* times s (default 1)
+front_mass_shift            kg          mass moved from rear to front frame (see below)
+rear_inertia_scale          -           rear-frame inertia tensor IB* times s (default 1)
 roll_viscous_damping        N m s/rad   roll torque -c * phidot (NOT in the ident library)
 roll_stiffness              N m/rad     roll torque -k * phi (NOT in the ident library)
 ==========================  ==========  ================================================
+
+The last four rows above the roll terms are *parameter* corrections of the values the data
+README flags as uncertain (borrowed frame/fork inertias, estimated mass split); they change
+the bicycle itself, so the linear matrices and the nonlinear plant both see them
+(:meth:`ExperimentModel.plant_params`).  ``front_mass_shift`` dm moves mass from the rear
+frame (at its mass centre) to the front frame (at its mass centre) keeping the total mass
+and the combined B+H mass centre (the well-measured quantities): the rear-frame centre
+moves to compensate; the moved mass carries no inertia of its own (point mass).
 """
 
 from __future__ import annotations
@@ -51,6 +62,7 @@ from sim.parameters import BicycleParameters, steer_by_wire
 __all__ = [
     "EFFECT_DEFAULTS",
     "EFFECT_UNITS",
+    "PARAMETER_EFFECTS",
     "ExperimentModel",
     "Window",
     "attach_nonlinear_correction",
@@ -77,6 +89,9 @@ EFFECT_UNITS = {
     "speed_scale": "-",
     "steer_inertia": "kg m^2",
     "trail_correction": "m",
+    "front_inertia_scale": "-",
+    "front_mass_shift": "kg",
+    "rear_inertia_scale": "-",
     "roll_viscous_damping": "N m s/rad",
     "roll_stiffness": "N m/rad",
 }
@@ -84,7 +99,15 @@ EFFECT_DEFAULTS = {k: 0.0 for k in EFFECT_UNITS} | {
     "command_gain": 1.0,
     "roll_rate_scale": 1.0,
     "speed_scale": 1.0,
+    "front_inertia_scale": 1.0,
+    "rear_inertia_scale": 1.0,
 }
+PARAMETER_EFFECTS = (
+    "trail_correction",
+    "front_inertia_scale",
+    "front_mass_shift",
+    "rear_inertia_scale",
+)
 
 
 @dataclass
@@ -206,12 +229,37 @@ class ExperimentModel:
         return replace(self, effects={**self.effects, **values})
 
     # -- matrices ---------------------------------------------------------------------
-    def canonical(self) -> CanonicalMatrices:
+    def plant_params(self) -> BicycleParameters:
+        """``params`` with the parameter corrections applied (module docstring).
+
+        Raises ValueError (from the parameter validation) if a correction makes the
+        bicycle unphysical, e.g. a negative rear-frame mass.
+        """
         p = self.params
-        dc = self.e("trail_correction")
-        if dc:
-            p = p.replace(c=p.c + dc)
-        cm = canonical_matrices(p)
+        ch: dict[str, float] = {}
+        if self.e("trail_correction"):
+            ch["c"] = p.c + self.e("trail_correction")
+        sf = self.e("front_inertia_scale")
+        if sf != 1.0:
+            ch.update(IHxx=sf * p.IHxx, IHyy=sf * p.IHyy, IHzz=sf * p.IHzz, IHxz=sf * p.IHxz)
+        sr = self.e("rear_inertia_scale")
+        if sr != 1.0:
+            ch.update(IBxx=sr * p.IBxx, IByy=sr * p.IByy, IBzz=sr * p.IBzz, IBxz=sr * p.IBxz)
+        dm = self.e("front_mass_shift")
+        if dm:
+            mB, mH = p.mB - dm, p.mH + dm
+            if mB <= 0 or mH <= 0:
+                raise ValueError(
+                    f"front_mass_shift {dm} kg leaves a frame without mass "
+                    f"(mB {p.mB}, mH {p.mH} kg); keep it within (-mH, mB)"
+                )
+            xs = (p.mB * p.xB + p.mH * p.xH - mH * p.xH) / mB
+            zs = (p.mB * p.zB + p.mH * p.zH - mH * p.zH) / mB
+            ch.update(mB=mB, mH=mH, xB=xs, zB=zs)
+        return p.replace(**ch) if ch else p
+
+    def canonical(self) -> CanonicalMatrices:
+        cm = canonical_matrices(self.plant_params())
         M = cm.M.copy()
         M[1, 1] += self.e("steer_inertia")
         return CanonicalMatrices(M=M, C1=cm.C1, K0=cm.K0, K2=cm.K2, g=cm.g)
@@ -431,8 +479,8 @@ def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, d
     steer viscous damping + tire scrub (c + k / v), steer Coulomb friction (same tanh
     smoothing 0.1 rad/s), command gain, actuator lag, input delay (rounded to whole
     10 ms samples), roll damping and stiffness.  Not mapped (they stay linear-only):
-    sensor biases and scales, steer torque bias, steer inertia (trail and speed scale
-    enter through the parameters and the speed instead).
+    sensor biases and scales, steer torque bias, steer inertia (the parameter corrections
+    and the speed scale enter through the parameters and the speed instead).
     """
     from sim import effects as fx
 
@@ -487,15 +535,12 @@ def attach_nonlinear_correction(
     from sim.nonlinear import WhippleBicycle
 
     model = model or ExperimentModel()
-    p = model.params
-    if model.e("trail_correction"):
-        p = p.replace(c=p.c + model.e("trail_correction"))
-    bike = WhippleBicycle(p)
+    bike = WhippleBicycle(model.plant_params())
     for w in windows:
         vs = float(np.mean(w.v_sensor))
         v = model.true_speed(vs)
         fx, eq = nonlinear_counterpart(model, v)
-        keep = {k: model.e(k) for k in ("trail_correction", "speed_scale") if k in model.effects}
+        keep = {k: model.e(k) for k in (*PARAMETER_EFFECTS, "speed_scale") if k in model.effects}
         lin_m = ExperimentModel(params=model.params, effects={**eq, **keep}, K=model.K, V=model.V)
         w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
         sl = lin_m.simulate([w0])[0]
