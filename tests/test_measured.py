@@ -115,6 +115,44 @@ def test_simulation_matches_closed_loop_matrix():
     assert abs(H0 - dc) < 1e-12
 
 
+def test_parameter_corrections_match_meijaard_mass_matrix():
+    """Parameter corrections against Meijaard 2007 appendix A written out by hand:
+    M_phiphi = T_xx = I_Rxx + I_Bxx + I_Hxx + I_Fxx + m_R r_R^2 + m_B z_B^2 + m_H z_H^2
+    + m_F r_F^2, and M_deltadelta = I_Alamlam + 2 mu I_Alamz + mu^2 T_zz (mu = c cos lam / w)
+    with the front frame's inertia in I_Alamlam (I_Hxx sin^2 lam + 2 I_Hxz sin lam cos lam +
+    I_Hzz cos^2 lam), I_Alamz (I_Hxz sin lam + I_Hzz cos lam) and T_zz (I_Hzz).  So scaling IH
+    by s adds (s - 1) times those inertia terms to M_dd, scaling IB adds
+    (s - 1) I_Bxx to M_phiphi and (s - 1) mu^2 I_Bzz to M_dd, and a mass shift dm (total
+    mass and B+H mass centre kept) changes M_phiphi by the point-mass terms m z^2 only.
+    Tolerance 1e-12: round-off."""
+    from sim.linear import canonical_matrices
+
+    m0 = ExperimentModel()
+    p = m0.params
+    M0 = canonical_matrices(p).M
+    sl, cl = np.sin(p.lam), np.cos(p.lam)
+    M = ExperimentModel(effects={"front_inertia_scale": 3.0}).canonical().M
+    mu = p.c * cl / p.w
+    ih = p.IHxx * sl**2 + 2 * p.IHxz * sl * cl + p.IHzz * cl**2
+    ih += 2 * mu * (p.IHxz * sl + p.IHzz * cl) + mu**2 * p.IHzz
+    assert abs(M[1, 1] - M0[1, 1] - 2.0 * ih) < 1e-12
+    assert abs(M[0, 0] - M0[0, 0] - 2.0 * p.IHxx) < 1e-12
+    M = ExperimentModel(effects={"rear_inertia_scale": 1.5}).canonical().M
+    assert abs(M[0, 0] - M0[0, 0] - 0.5 * p.IBxx) < 1e-12
+    assert abs(M[1, 1] - M0[1, 1] - 0.5 * mu**2 * p.IBzz) < 1e-12  # I_Bzz in T_zz
+    dm = 2.0
+    q = ExperimentModel(effects={"front_mass_shift": dm}).plant_params()
+    assert abs(q.mB + q.mH - p.mB - p.mH) < 1e-12
+    for a in ("x", "z"):
+        before = p.mB * getattr(p, a + "B") + p.mH * getattr(p, a + "H")
+        assert abs(q.mB * getattr(q, a + "B") + q.mH * getattr(q, a + "H") - before) < 1e-12
+    M = ExperimentModel(effects={"front_mass_shift": dm}).canonical().M
+    point = q.mB * q.zB**2 + q.mH * q.zH**2 - p.mB * p.zB**2 - p.mH * p.zH**2
+    assert abs(M[0, 0] - M0[0, 0] - point) < 1e-12
+    with pytest.raises(ValueError, match="front_mass_shift"):
+        ExperimentModel(effects={"front_mass_shift": -1.0}).plant_params()
+
+
 def test_small_expm_matches_scipy():
     """The experiment model's ZOH exponential (scaling and squaring of a Taylor series)
     equals scipy.linalg.expm (Pade) to 1e-13 relative on the loop matrices at 1-6 m/s
