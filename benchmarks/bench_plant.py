@@ -1,7 +1,8 @@
 """Performance of the nonlinear plant: RHS cost, closed-loop runs, lambdify and pydy-Cython peers.
 
 Run: ``python benchmarks/bench_plant.py [--repeat 5] [--peer-duration 10]``
-(about 2-3 minutes; prints a Markdown table for docs/nonlinear.md).
+(about 45 s on 2 loaded cores, of which ~16 s is the pydy/Cython build; prints a
+Markdown table for docs/nonlinear.md and docs/performance.md).
 
 Measured:
 1. numba compile time, cold (empty cache dir) and warm (cached), in subprocesses;
