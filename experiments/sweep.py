@@ -444,10 +444,11 @@ def stabilization_table(
 ) -> list[dict[str, Any]]:
     """Run every controller at every speed (chirp reference, dither, default sensors) on the
     nonlinear model; one row per (controller, speed), in that order.  A tracking test: the
-    chirp is 3 deg at every speed unless ``chirp_amplitude`` is given."""
+    chirp is 3 deg and the dither hold 10 ms at every speed unless given."""
     from tqdm import tqdm
 
     spec_options.setdefault("chirp_amplitude", math.radians(3.0))
+    spec_options.setdefault("dither_hold", 0.01)
 
     jobs = [(SweepSpec(c, tuple(speeds), (0,), duration, **spec_options)) for c in controllers]
     todo = [(spec, task) for spec in jobs for task in spec.tasks()]

@@ -275,7 +275,10 @@ def _stabilization_cell(v: float, monkeypatch=None, **pole_options) -> dict:
         monkeypatch.setitem(
             registry._FACTORIES, "pole-placement", lambda p, **kw: orig(p, **kw, **pole_options)
         )
-    spec = sweep.SweepSpec("pole", (v,), (0,), 50.0)
+    # the stabilization table's settings: 3 deg chirp at every speed, dither held 10 ms
+    spec = sweep.SweepSpec(
+        "pole", (v,), (0,), 50.0, chirp_amplitude=np.radians(3.0), dither_hold=0.01
+    )
     return sweep.stabilization_task(spec, spec.tasks()[0])
 
 
