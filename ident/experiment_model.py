@@ -34,6 +34,7 @@ trail_correction            m           trail c -> c + dc (all matrices recomput
 front_inertia_scale         -           front-frame inertia tensor IH* times s (default 1)
 front_mass_shift            kg          mass moved from rear to front frame (see below)
 rear_inertia_scale          -           rear-frame inertia tensor IB* times s (default 1)
+tire_relaxation             m           front-tyre lateral relaxation length sigma (below)
 roll_viscous_damping        N m s/rad   roll torque -c * phidot (NOT in the ident library)
 roll_stiffness              N m/rad     roll torque -k * phi (NOT in the ident library)
 ==========================  ==========  ================================================
@@ -45,6 +46,40 @@ the bicycle itself, so the linear matrices and the nonlinear plant both see them
 frame (at its mass centre) to the front frame (at its mass centre) keeping the total mass
 and the combined B+H mass centre (the well-measured quantities): the rear-frame centre
 moves to compensate; the moved mass carries no inertia of its own (point mass).
+
+``tire_relaxation`` sigma [m] replaces the front wheel's lateral non-slip constraint
+(contact path heading = wheel-plane heading psi + delta cos(lam)) by a first-order lag in
+travelled distance: the front contact Q moves along a heading psi_c whose angle to the rear
+frame relaxes towards the steered wheel plane's with time constant sigma / v,
+
+    y_Q' = v psi_c,    (sigma / v) (psi_c - psi)' + (psi_c - psi) = delta cos(lam),
+
+with y_Q = y_P + w psi - c cos(lam) delta.  The rear constraint y_P' = v psi and the
+longitudinal rolling are kept, so the front lateral contact force is still a constraint force.
+With the kinematic steer delta_k = (psi_c - psi) / cos(lam) (= delta in the Whipple model):
+
+    psi'      = (v delta_k + c delta') cos(lam) / w
+    delta_k'  = (v / sigma) (delta - delta_k).
+
+The front slip angle is alpha = (delta - delta_k) cos(lam).  The lag acts on the heading
+relative to the rear frame so that a steady turn is the Whipple one (delta_k = delta, no
+slip); lagging the absolute heading instead, sigma psi_c' = v (psi + delta cos(lam) - psi_c),
+adds a steady slip sigma psi' / v = sigma / R in a turn of radius R (tried on the real data
+too, docs/measured.md).  This is a kinematic one-parameter lag, not a force-based tyre model
+(cornering stiffness and a lateral degree of freedom would add parameters).
+
+The Meijaard (2007, App. A) roll/steer equations depend on the front constraint only through
+the rear-frame yaw: they are  M q'' + v C1d q' + g K0 q + a psi'' + v b psi' = f  with
+a = [ITxz, IAlz + mu ITzz] (yaw-acceleration inertia, incl. the front-force moment mu w F_f),
+b = [ST - mT zT, SA + SF sin(lam)] (wheel gyroscopics and centrifugal terms) and C1d the rest.
+Eliminating psi with the relaxed kinematics gives (e_d the steer column)
+
+    M q'' + v (C1 - nu a e_d^T) q' + g K0 q + v nu a delta_k' + v^2 K2[:, d] delta_k = f,
+    nu = cos(lam) / w,   b nu = K2[:, d],
+
+one extra state delta_k; delta_k = delta recovers  M q'' + v C1 q' + (g K0 + v^2 K2) q = f
+exactly (tests/test_measured.py).  Linear model only: the nonlinear defect correction is taken
+without the relaxation (like steer_inertia), so the model is first order in sigma around it.
 """
 
 from __future__ import annotations
@@ -70,6 +105,7 @@ __all__ = [
     "decay_windows",
     "nonlinear_counterpart",
     "window_errors",
+    "yaw_coupling",
 ]
 
 DT = 0.01
@@ -92,6 +128,7 @@ EFFECT_UNITS = {
     "front_inertia_scale": "-",
     "front_mass_shift": "kg",
     "rear_inertia_scale": "-",
+    "tire_relaxation": "m",
     "roll_viscous_damping": "N m s/rad",
     "roll_stiffness": "N m/rad",
 }
@@ -221,6 +258,8 @@ class ExperimentModel:
                 raise ValueError(f"effect {k!r} must be finite, got {v}")
         if self.e("input_delay") < 0 or self.e("actuator_lag") < 0:
             raise ValueError("input_delay and actuator_lag must be >= 0 s")
+        if self.e("tire_relaxation") < 0:
+            raise ValueError("tire_relaxation (relaxation length sigma) must be >= 0 m")
 
     def e(self, name: str) -> float:
         return float(self.effects.get(name, EFFECT_DEFAULTS[name]))
@@ -265,10 +304,25 @@ class ExperimentModel:
         return CanonicalMatrices(M=M, C1=cm.C1, K0=cm.K0, K2=cm.K2, g=cm.g)
 
     def continuous(self, v: float, cm: CanonicalMatrices | None = None):
-        """(A, B) of [phi, delta, phidot, deltadot(, Ta)] with inputs [u, w, T_phi].
+        """(A, B) of [phi, delta, phidot, deltadot(, Ta)(, delta_k)] with inputs [u, w, T_phi].
 
         u: commanded torque into the actuator (lag); w: torque straight on the steer
-        (friction, bias); T_phi: roll torque.
+        (friction, bias); T_phi: roll torque.  Ta (applied torque) only with an actuator
+        lag, delta_k (kinematic steer) only with a tyre relaxation length (module docstring).
+        """
+        E, A, B = self.descriptor(v, cm)
+        if E is None:
+            return A, B
+        return np.linalg.solve(E, A), np.linalg.solve(E, B)
+
+    def descriptor(self, v: float, cm: CanonicalMatrices | None = None, relax: bool = False):
+        """(E, A, B) with E x' = A x + B u; E is None when it would be the identity.
+
+        With ``tire_relaxation`` sigma the delta_k row is  sigma delta_k' = v (delta -
+        delta_k)  and the steer/roll rows carry
+        v nu a delta_k' (module docstring); E is singular at sigma = 0, where the finite
+        generalized eigenvalues are exactly those of the Whipple model (``relax=True``
+        keeps the delta_k state at sigma = 0 for that check).
         """
         cm = cm or self.canonical()
         Minv = np.linalg.inv(cm.M)
@@ -278,14 +332,14 @@ class ExperimentModel:
                 self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, 0.1),
             ]
         )
-        lag = self.e("actuator_lag")
-        nx = 5 if lag > 0 else 4
-        A = np.zeros((nx, nx))
-        A[0:2, 2:4] = np.eye(2)
         Kq = cm.stiffness(v).copy()
         Kq[0, 0] += self.e("roll_stiffness")
-        A[2:4, 0:2] = -Minv @ Kq
-        A[2:4, 2:4] = -Minv @ C
+        lag = self.e("actuator_lag")
+        sigma = self.e("tire_relaxation")
+        relax = relax or sigma > 0
+        nx = 4 + (lag > 0) + relax
+        A = np.zeros((nx, nx))
+        A[0:2, 2:4] = np.eye(2)
         B = np.zeros((nx, 3))
         B[2:4, 1] = Minv[:, 1]
         B[2:4, 2] = Minv[:, 0]
@@ -295,7 +349,24 @@ class ExperimentModel:
             B[4, 0] = 1.0 / lag
         else:
             B[2:4, 0] = Minv[:, 1]
-        return A, B
+        E = None
+        if relax:
+            p = self.plant_params()
+            a, nu = yaw_coupling(p)
+            k = nx - 1
+            # psi enters the roll/steer rows as a psi'' + v b psi', b nu = K2[:, delta]:
+            C[:, 1] -= v * nu * a
+            Kq[:, 1] -= v**2 * cm.K2[:, 1]
+            Kd = v**2 * cm.K2[:, 1]  # on delta_k
+            E = np.eye(nx)
+            E[2:4, k] = Minv @ (v * nu * a)  # v nu a delta_k' moved to the left side
+            E[k, k] = sigma
+            A[k, 1] = v
+            A[k, k] = -v
+            A[2:4, k] = -Minv @ Kd
+        A[2:4, 0:2] = -Minv @ Kq
+        A[2:4, 2:4] = -Minv @ C
+        return E, A, B
 
     def discrete(self, v: float, h: float = DT, cm=None):
         """ZOH discretization over step h: (Ad, Bd)."""
@@ -433,8 +504,11 @@ class ExperimentModel:
         x[:, 1] = x0[:, 1] - bdel
         x[:, 2] = (x0[:, 2] - brr) / s
         x[:, 3] = x0[:, 3]
-        if npl == 5:
+        if self.e("actuator_lag") > 0:
             x[:, 4] = g * hist[:, -1]
+        if self.e("tire_relaxation") > 0:  # delta_k on the slow manifold, first order in sigma
+            vt = np.array([self.true_speed(v) for v in vs])
+            x[:, -1] = x[:, 1] - self.e("tire_relaxation") / vt * x[:, 3]
         text = np.zeros((nw, nmax))
         tphi = np.zeros((nw, nmax))
         for i, w in enumerate(windows):
@@ -553,6 +627,28 @@ def attach_nonlinear_correction(
             raise ValueError(f"{w.file}@{w.start}: nonlinear simulation failed: {tr.stop_reason}")
         w.correction = {c: tr.signal(c) - sl[c] for c in ("phi", "delta", "phidot", "deltadot")}
     return windows
+
+
+def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
+    """(a, nu) of the rear-frame yaw in the roll/steer equations (Meijaard 2007, App. A).
+
+    a = [ITxz, IAlz + mu ITzz] [kg m^2] multiplies psi'' (roll row: total-bicycle product of
+    inertia; steer row: front-assembly yaw coupling plus the moment mu w F_f of the front
+    contact force needed to yaw the whole bicycle); nu = cos(lam) / w [1/m], with
+    psi' = nu (v delta + c delta') in the Whipple model.
+    """
+    sl, cl = math.sin(p.lam), math.cos(p.lam)
+    ITxz = p.IBxz + p.IHxz - p.mB * p.xB * p.zB - p.mH * p.xH * p.zH + p.mF * p.w * p.rF
+    ITzz = p.IRxx + p.IBzz + p.IHzz + p.IFxx + p.mB * p.xB**2 + p.mH * p.xH**2 + p.mF * p.w**2
+    mA = p.mH + p.mF
+    xA = (p.xH * p.mH + p.w * p.mF) / mA
+    zA = (p.zH * p.mH - p.rF * p.mF) / mA
+    IAxz = p.IHxz - p.mH * (p.xH - xA) * (p.zH - zA) + p.mF * (p.w - xA) * (p.rF + zA)
+    IAzz = p.IHzz + p.IFxx + p.mH * (p.xH - xA) ** 2 + p.mF * (p.w - xA) ** 2
+    uA = (xA - p.w - p.c) * cl - zA * sl
+    IAlz = mA * uA * xA + IAxz * sl + IAzz * cl
+    mu = p.c / p.w * cl
+    return np.array([ITxz, IAlz + mu * ITzz]), cl / p.w
 
 
 def _expm_small(M: np.ndarray) -> np.ndarray:
