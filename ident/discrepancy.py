@@ -147,6 +147,15 @@ LIBRARY: dict[str, Candidate] = {
             grid=(0.005, 0.01, 0.02, 0.035, 0.05, 0.08),
             doc="motor current/torque lag",
         ),
+        Candidate(
+            "tire_relaxation",
+            "structural",
+            0.1,
+            0.0,
+            0.6,
+            grid=(0.02, 0.05, 0.1, 0.2, 0.35, 0.5),
+            doc="front-tyre lateral relaxation length sigma (lag sigma / v of the path heading)",
+        ),
     )  # fmt: skip
 }
 
