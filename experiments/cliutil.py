@@ -11,6 +11,9 @@ from typing import Any
 
 import numpy as np
 
+#: Largest number of values a range may expand to.
+MAX_POINTS = 1_000_000
+
 
 def parse_range(text: str, name: str = "range", minimum: float | None = None) -> np.ndarray:
     """Parse ``start:stop:step`` (stop included, MATLAB style), ``a,b,c`` or one value."""
@@ -28,7 +31,13 @@ def parse_range(text: str, name: str = "range", minimum: float | None = None) ->
         start, stop, step = parts
         if step <= 0 or stop < start:
             raise ValueError(f"{name} {text!r}: need start <= stop and step > 0")
-        values = start + step * np.arange(int(math.floor((stop - start) / step + 1e-9)) + 1)
+        count = math.floor((stop - start) / step + 1e-9) + 1
+        if count > MAX_POINTS:
+            raise ValueError(
+                f"{name} {text!r} has {count:.3g} values; at most {MAX_POINTS:,} "
+                "(use a larger step)"
+            )
+        values = start + step * np.arange(int(count))
     if values.size == 0 or not np.all(np.isfinite(values)):
         raise ValueError(f"{name} {text!r} holds no finite values")
     if minimum is not None and values.min() < minimum:

@@ -255,6 +255,11 @@ def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> Ei
         raise ValueError("speeds must be a non-empty 1-D array of finite values")
     cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
     lo, hi = float(speeds.min()), float(speeds.max())
+    if hi - lo > 1000.0:
+        raise ValueError(
+            f"speeds span {lo:g}..{hi:g} m/s; branch tracking uses a 0.01 m/s grid, so keep the "
+            "span below 1000 m/s"
+        )
     fine = np.union1d(np.linspace(lo, hi, max(2, int(math.ceil((hi - lo) / 0.01)) + 1)), speeds)
     vals = np.array([np.sort_complex(eigenvalues(cm, v)) for v in fine])
     tracked = _track(vals)

@@ -65,6 +65,8 @@ def test_eig_json_and_plot(tmp_path):
         (("critical-speeds", "--bicycle", "Penny"), "unknown bicycle 'Penny'"),
         (("eig", "--speeds", "10:0:1"), "need start <= stop"),
         (("eig", "--speeds", "a:b"), "is not start:stop:step"),
+        (("eig", "--speeds", "0:1e9:1"), "at most 1,000,000"),
+        (("eig", "--speeds", "0:5000:10"), "keep the span below 1000 m/s"),
         (("linearize", "--speed", "nan"), "need a finite speed"),
         (("critical-speeds", "--bicycle", "missing.yaml"), "does not exist"),
     ],
