@@ -371,6 +371,28 @@ def identify(
     cols = [regressors(d, g) for d in data]
     speeds = np.concatenate([d["v"] for d in data])
     one_speed = np.ptp(speeds) <= 1e-9 * max(1.0, float(np.abs(speeds).max()))
+    # One nominal speed measured with noise is still one speed: the v^2 column then differs
+    # from the g column only by sensor noise, which a finite condition number hides.
+    means = np.array([float(np.mean(d["v"])) for d in data])
+    wobble = max(float(np.std(d["v"])) for d in data)
+    nominal_one_speed = np.ptp(means) < 0.1 and wobble < 0.02 * max(float(np.mean(means)), 1e-9)
+    if nominal_one_speed:
+        for row, names in (("roll", free_roll), ("steer", free_steer)):
+            r = "pd"[row == "steer"]
+            for c in "pd":
+                pair = [f"K0{r}{c}", f"K2{r}{c}"]
+                if all(n in names for n in pair):
+                    G = np.column_stack([np.concatenate([k[n] for k in cols]) for n in pair])
+                    cond_now, _ = _condition(G)
+                    raise ValueError(
+                        f"{row} row is unidentifiable: {pair[0]} and {pair[1]} are both free "
+                        f"but the runs cover one speed ({means.min():.3f}-{means.max():.3f} "
+                        f"m/s, within-run std {wobble:.3g} m/s); a single constant speed cannot "
+                        "separate K0 from K2: g q and v^2 q differ only by speed noise "
+                        f"(condition number {cond_now:.3g} of the two columns; "
+                        "infinite at the nominal speed). Fix one of them at a known value or "
+                        "add runs at other speeds."
+                    )
     cut = lags if method == "iv" and not simulated else 0
     inst_cols = (
         [regressors(_data(z, "signals", derivative), g) for z in instrument_runs]

@@ -95,6 +95,17 @@ def test_moore_hubbard_recipe_is_biased_by_held_torque(sweeps, capsys):
     assert abs(ident[0] - truth[0]) > 0.10 * abs(truth[0])  # caster, -10.35 1/s
 
 
+def test_direct_single_speed_with_speed_noise_is_refused(tmp_path, capsys):
+    """Reference T3: at one nominal speed g q and v^2 q are collinear; speed-sensor noise
+    (1e-2 m/s) makes the regression numerically finite but meaningless, so the command must
+    refuse with the conditioning, not print K0dd and K2dd."""
+    f = tmp_path / "one.h5"
+    run_sweep(SweepSpec("pid", (5.0,), (0, 1), 10.0), f, workers=1, progress=False)
+    assert main(["identify", "--method", "direct", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "K0dd and K2dd are both free" in err and "condition number" in err
+
+
 def test_speed_model_needs_two_speeds(tmp_path, capsys):
     f = tmp_path / "one.h5"
     run_sweep(SweepSpec("pid", (5.0,), (0,), 5.0), f, workers=1, progress=False)
