@@ -19,21 +19,7 @@ import platform
 import time
 
 from experiments.cliutil import to_jsonable
-from experiments.effect_trials import run_trials, summarize
-
-
-def _print_summary(s: dict) -> None:
-    for k, r in s.get("library", {}).items():
-        print(f"library {k:14s} {r['k']:3d}/{r['n']:<3d} = {r['rate']:.3f} "
-              f"(95 % CI {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f})")  # fmt: skip
-    if "outside" in s:
-        r = s["outside"]["unexplained"]
-        print(f"outside unexplained    {r['k']:3d}/{r['n']:<3d} = {r['rate']:.3f} "
-              f"(95 % CI {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f})")  # fmt: skip
-    for name, d in s["per_effect"].items():
-        rates = {k: f"{v['k']}/{v['n']}" for k, v in d.items() if isinstance(v, dict) and "k" in v}
-        print(f"  {name:24s} {rates} named first {d['named_first']} "
-              f"median error ratio {d['median_error_ratio']:.2f}")  # fmt: skip
+from experiments.effect_trials import format_summary, run_trials, summarize
 
 
 def main() -> None:
@@ -49,7 +35,7 @@ def main() -> None:
     if args.resume:
         with open(args.resume) as fh:
             rows = [json.loads(line) for line in fh if line.strip()]
-        _print_summary(summarize(rows))
+        print(format_summary(summarize(rows)))
         return
 
     def progress(r):
@@ -65,7 +51,7 @@ def main() -> None:
     t0 = time.perf_counter()
     out = run_trials(args.n, args.seed, args.processes, progress=progress)
     print(f"{args.n} trials in {time.perf_counter() - t0:.0f} s wall")
-    _print_summary(out["summary"])
+    print(format_summary(out["summary"]))
 
 
 if __name__ == "__main__":

@@ -175,7 +175,7 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_trials(args) -> int:
-    from experiments.effect_trials import run_trials
+    from experiments.effect_trials import format_summary, run_trials
 
     effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
 
@@ -191,16 +191,7 @@ def cmd_trials(args) -> int:
         print(dump_json(out))
         return 0
     s = out["summary"]
-    for k, r in s.get("library", {}).items():
-        print(f"library {k:14s} {r['k']:3d}/{r['n']:<3d} = {r['rate']:.2f} "
-              f"(95 % CI {r['ci95'][0]:.2f}-{r['ci95'][1]:.2f})")  # fmt: skip
-    if "outside" in s:
-        r = s["outside"]["unexplained"]
-        print(f"outside unexplained    {r['k']:3d}/{r['n']:<3d} = {r['rate']:.2f} "
-              f"(95 % CI {r['ci95'][0]:.2f}-{r['ci95'][1]:.2f})")  # fmt: skip
-    for name, d in s["per_effect"].items():
-        print(f"  {name:24s} named first: {d['named_first']}  "
-              f"median error ratio {d['median_error_ratio']:.2f}")  # fmt: skip
+    print(format_summary(s))
     print(f"{s['trials']} trials, {s['wall_seconds']:.0f} s wall, {s['processes']} processes")
     return 0
 

@@ -397,6 +397,24 @@ def summarize(rows: list[dict]) -> dict:
     return summ
 
 
+def format_summary(s: dict) -> str:
+    """The rates of :func:`summarize` as text: library and outside-library rates with 95 %
+    Clopper-Pearson intervals, then per effect what was named first."""
+    lines = []
+    for k, r in s.get("library", {}).items():
+        lines.append(f"library {k:14s} {r['k']:3d}/{r['n']:<3d} = {r['rate']:.3f} "
+                     f"(95 % CI {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f})")  # fmt: skip
+    if "outside" in s:
+        r = s["outside"]["unexplained"]
+        lines.append(f"outside unexplained    {r['k']:3d}/{r['n']:<3d} = {r['rate']:.3f} "
+                     f"(95 % CI {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f})")  # fmt: skip
+    for name, d in s["per_effect"].items():
+        rates = {k: f"{v['k']}/{v['n']}" for k, v in d.items() if isinstance(v, dict) and "k" in v}
+        lines.append(f"  {name:24s} {rates} named first {d['named_first']} "
+                     f"median error ratio {d['median_error_ratio']:.2f}")  # fmt: skip
+    return "\n".join(lines)
+
+
 def run_trials(
     n: int,
     seed: int = 0,
