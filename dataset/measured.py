@@ -402,5 +402,12 @@ def fetch(
 
 
 def _urlopen(url: str) -> bytes:  # pragma: no cover - needs network
-    with urllib.request.urlopen(url, timeout=60) as resp:
-        return resp.read()
+    try:
+        with urllib.request.urlopen(url, timeout=60) as resp:
+            return resp.read()
+    except OSError as exc:  # URLError, HTTPError and timeouts are OSErrors
+        reason = getattr(exc, "reason", exc)
+        raise ValueError(
+            f"could not download {url}: {reason}; check the network connection, or copy the "
+            "data folder by hand and point --data / BIKEID_DATA at it"
+        ) from None
