@@ -99,6 +99,7 @@ class EffectSpec:
         make = {
             "steer_viscous_damping": lambda x: fx.SteerDamping(x),
             "steer_coulomb_friction": lambda x: fx.SteerCoulomb(x, smoothing=0.01),
+            "steer_stiffness": lambda x: fx.SteerStiffness(x),
             "command_gain": lambda x: fx.TorqueGain(x),
             "actuator_lag": lambda x: fx.ActuatorLag(x),
             "input_delay": lambda x: fx.InputDelay(x),
@@ -126,6 +127,15 @@ EFFECTS: dict[str, EffectSpec] = {
             0.4,
             "N m",
             doc="bearing/motor dry friction, tanh smoothing 0.01 rad/s (Moore: 0.15)",
+        ),
+        EffectSpec(
+            "steer_stiffness",
+            True,
+            0.4,
+            1.2,
+            "N m/rad",
+            doc="centring spring of the fork: cables, belt, tyre twist (real logs: ~1.1; above "
+            "~1.2 the capsize mode of this loop is unstable at 4.5 m/s)",
         ),
         EffectSpec(
             "command_gain",

@@ -59,6 +59,7 @@ __all__ = [
     "fit_effects",
     "identify",
     "noise_floor",
+    "weave_error",
     "output_residuals",
     "spectrum",
     "synthetic_windows",
@@ -67,6 +68,8 @@ __all__ = [
 
 EXPLAINED_MIN = 0.9
 T_MIN = 3.0
+N_EXAMINED = 5  # candidates per round (by fit gain) tested on the held-out windows
+WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter, ~2 %)
 
 
 @dataclass(frozen=True)
@@ -95,6 +98,9 @@ LIBRARY: dict[str, Candidate] = {
     for c in (
         Candidate("steer_viscous_damping", "additive", 0.3, doc="bearing/motor viscous damping"),
         Candidate("steer_coulomb_friction", "additive", 0.1, 0.0, doc="tanh-smoothed friction"),
+        Candidate(
+            "steer_stiffness", "additive", 1.0, doc="centring spring: cables, belt, tyre twist"
+        ),
         Candidate("tire_scrub_torque", "additive", 0.5, doc="tyre scrub damping ~ 1/v"),
         Candidate("command_gain", "additive", 0.2, 0.05, doc="motor torque constant error"),
         Candidate("steer_torque_bias", "additive", 0.05, doc="constant steer torque"),
@@ -242,18 +248,41 @@ def fit_effects(
 
     sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
-    n, p = r.size, len(cands)
-    r1 = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if n > 3 else 0.0
-    neff = max(n * (1 - r1) / (1 + r1), p + 1)
-    s2 = float(r @ r) / (neff - p)
-    try:
-        cov = s2 * np.linalg.pinv(sol.jac.T @ sol.jac)
-        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    except np.linalg.LinAlgError:
-        std = np.full(p, np.inf)
+    std = _effect_std(sol.jac, r, [2 * w.n for w in windows])
     vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x, strict=True)}
     stds = {c.name: c.scale * si for c, si in zip(cands, std, strict=True)}
     return FitResult(mk(sol.x), vals, stds, float(r @ r))
+
+
+def _effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
+    """Standard errors of output-error estimates, clustered by window.
+
+    The residual of one decay is smooth and mostly model error, so its samples are far
+    from independent, while separate pushes are: the covariance is the cluster-robust
+    sandwich (J^T J)^-1 (sum_g J_g^T r_g r_g^T J_g) (J^T J)^-1 G / (G - 1) over the G
+    windows (Liang & Zeger 1986).  With fewer than p + 2 windows it falls back to
+    s^2 (J^T J)^-1 with the sample count reduced for the lag-1 autocorrelation r1,
+    N_eff = N (1 - r1) / (1 + r1).
+    """
+    n, p = J.shape
+    try:
+        bread = np.linalg.pinv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return np.full(p, np.inf)
+    g = len(sizes)
+    if g >= p + 2 and sum(sizes) == n:
+        meat = np.zeros((p, p))
+        i = 0
+        for m in sizes:
+            u = J[i : i + m].T @ r[i : i + m]
+            meat += np.outer(u, u)
+            i += m
+        cov = bread @ meat @ bread * g / (g - 1)
+    else:
+        r1 = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if n > 3 else 0.0
+        neff = max(n * (1 - r1) / (1 + r1), p + 1)
+        cov = float(r @ r) / (neff - p) * bread
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
 def _scan_start(model, windows, cand: Candidate, base: list[str], start: dict) -> float:
@@ -332,6 +361,8 @@ def identify(
     accepted: list[str] = []
     cur = model
     cur_val = fit_effects(cur, val_w, []).cost
+    lam_val = [decay_eigenvalue(w) for w in val_w]  # measured weave of each held-out decay
+    cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
     ranking: list[EffectEstimate] = []
     for _round in range(max_effects):
         trials = []
@@ -361,19 +392,23 @@ def identify(
             trials = sorted(top, key=lambda z: -z[0]) + trials[3:]
         if _round == 0:
             ranking = [z[3] for z in trials]
-        took = False
-        for gain, n, res, est in trials[:3]:
+        passing = []  # (score, name, result, validation cost, validation weave error)
+        for gain, n, res, est in trials[:N_EXAMINED]:
             if est.t <= T_MIN or gain < min_gain:
                 continue
             _attach(windows, res.model, nonlinear)
-            val = fit_effects(res.model, val_w, []).cost
+            sims = res.model.simulate(val_w)
+            val = float(np.sum(window_errors(val_w, sims) ** 2))
             if val < cur_val * (1 - min_gain):
-                accepted.append(n)
-                cur, took = res.model, True
-                cur_val = val
-                break
+                wv = weave_error(val_w, sims, lam_val)
+                score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
+                passing.append((score, n, res, val, wv))
+        if passing:
+            _score, n, res, cur_val, cur_wv = min(passing, key=lambda z: z[0])
+            accepted.append(n)
+            cur = res.model
         _attach(windows, cur, nonlinear)
-        if not took:
+        if not passing:
             break
     final = fit_effects(model, windows, accepted, {n: cur.e(n) for n in accepted})
     for _ in range(2 if nonlinear and accepted else 0):
@@ -428,14 +463,15 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
     logged command.  Regressors (per unit of effect) for the steer row:
     steer_viscous_damping -deltadot, steer_coulomb_friction -tanh(deltadot/0.1),
     tire_scrub_torque -deltadot/v, command_gain T, steer_torque_bias 1,
-    steer_inertia -deltaddot; for the roll row: roll_viscous_damping -phidot
+    steer_inertia -deltaddot, steer_stiffness -delta; for the roll row: roll_viscous_damping -phidot
     (outside the library, used only to show the residual pattern).
     """
     cm = model.canonical()
     rows = {k: [] for k in ("roll", "steer", "T", "v")}
     reg = {k: [] for k in ("steer_viscous_damping", "steer_coulomb_friction",
                            "tire_scrub_torque", "command_gain", "steer_torque_bias",
-                           "steer_inertia", "roll_viscous_damping")}  # fmt: skip
+                           "steer_inertia", "steer_stiffness",
+                           "roll_viscous_damping")}  # fmt: skip
     sims = model.simulate(windows)
     for w, s in zip(windows, sims, strict=True):
         v = model.true_speed(float(np.mean(w.v_sensor)))
@@ -454,6 +490,7 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
         reg["command_gain"].append(T)
         reg["steer_torque_bias"].append(np.ones(w.n))
         reg["steer_inertia"].append(-qdd[1])
+        reg["steer_stiffness"].append(-w.delta)
         reg["roll_viscous_damping"].append(-w.phidot)
     out = {k: np.concatenate(v) for k, v in rows.items()}
     out.update({f"reg:{k}": np.concatenate(v) for k, v in reg.items()})
@@ -642,6 +679,34 @@ def evaluate(
     summ["ratio"] = summ["error_after"] / summ["error_before"]
     summ["weave_ratio"] = summ["weave_error_after"] / max(summ["weave_error_before"], 1e-12)
     return {"files": files, "summary": summ}
+
+
+def weave_error(windows: list[Window], sims, lam_data) -> float:
+    """Mean relative weave-eigenvalue error of simulated decays against measured ones.
+
+    Windows are grouped by (file, speed to 0.1 m/s); per group the weave of the data is
+    the median (real, imaginary parts) of ``lam_data`` (:func:`decay_eigenvalue` of each
+    measured window) and that of the model the median of the same fit applied to the
+    simulated decays ``sims`` from the same initial states.  Returns the mean over groups
+    of |lambda_model - lambda_data| / |lambda_data| (the ``weave_error`` of
+    :func:`evaluate`).
+    """
+    groups: dict[tuple, list[int]] = {}
+    for i, w in enumerate(windows):
+        groups.setdefault((w.file, round(w.speed, 1)), []).append(i)
+    errs = []
+    for idx in groups.values():
+        lam_d = _median_complex([lam_data[i] for i in idx])
+        lam_m = _median_complex(
+            [decay_eigenvalue(replace(windows[i], phidot=sims[i]["phidot"],
+                                      delta=sims[i]["delta"])) for i in idx]
+        )  # fmt: skip
+        errs.append(abs(lam_m - lam_d) / abs(lam_d))
+    return float(np.mean(errs))
+
+
+def _median_complex(lams) -> complex:
+    return complex(np.median(np.real(lams)), np.median(np.imag(lams)))
 
 
 # -- injected-effect trials ------------------------------------------------------------------

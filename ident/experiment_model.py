@@ -19,6 +19,7 @@ name                        unit        term
 ==========================  ==========  ================================================
 steer_viscous_damping       N m s/rad   steer torque -c * deltadot
 steer_coulomb_friction      N m         steer torque -T_c * tanh(deltadot / 0.1 rad/s)
+steer_stiffness             N m/rad     steer torque -k * delta (centring spring)
 tire_scrub_torque           N m s^2/... steer torque -(k / v) * deltadot  (k in N m s/rad * m/s)
 command_gain                -           applied torque = gain * command (default 1)
 steer_torque_bias           N m         constant steer torque
@@ -113,6 +114,7 @@ COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
 EFFECT_UNITS = {
     "steer_viscous_damping": "N m s/rad",
     "steer_coulomb_friction": "N m",
+    "steer_stiffness": "N m/rad",
     "tire_scrub_torque": "N m s/rad * m/s",
     "command_gain": "-",
     "steer_torque_bias": "N m",
@@ -334,6 +336,7 @@ class ExperimentModel:
         )
         Kq = cm.stiffness(v).copy()
         Kq[0, 0] += self.e("roll_stiffness")
+        Kq[1, 1] += self.e("steer_stiffness")
         lag = self.e("actuator_lag")
         sigma = self.e("tire_relaxation")
         relax = relax or sigma > 0
@@ -550,11 +553,11 @@ def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, d
     """The part of ``model``'s effects the nonlinear plant can carry, at a true speed.
 
     Returns (``sim.effects`` objects, the same as experiment-model effects).  Mapped:
-    steer viscous damping + tire scrub (c + k / v), steer Coulomb friction (same tanh
-    smoothing 0.1 rad/s), command gain, actuator lag, input delay (rounded to whole
-    10 ms samples), roll damping and stiffness.  Not mapped (they stay linear-only):
-    sensor biases and scales, steer torque bias, steer inertia (the parameter corrections
-    and the speed scale enter through the parameters and the speed instead).
+    steer viscous damping + tire scrub (c + k / v), steer stiffness, steer Coulomb
+    friction (same tanh smoothing 0.1 rad/s), command gain, actuator lag, input delay
+    (rounded to whole 10 ms samples), roll damping and stiffness.  Not mapped (they stay
+    linear-only): sensor biases and scales, steer torque bias, steer inertia (the parameter
+    corrections and the speed scale enter through the parameters and the speed instead).
     """
     from sim import effects as fx
 
@@ -563,6 +566,10 @@ def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, d
     if c > 0:
         out.append(fx.SteerDamping(c))
         eq["steer_viscous_damping"] = c
+    ks = model.e("steer_stiffness")
+    if ks != 0.0:
+        out.append(fx.SteerStiffness(ks))
+        eq["steer_stiffness"] = ks
     tc = model.e("steer_coulomb_friction")
     if tc > 0:
         out.append(fx.SteerCoulomb(tc, smoothing=COULOMB_EPS))

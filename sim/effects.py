@@ -41,6 +41,7 @@ __all__ = [
     "RollStiffness",
     "SteerCoulomb",
     "SteerDamping",
+    "SteerStiffness",
     "TorqueGain",
     "describe",
     "input_chain",
@@ -114,6 +115,25 @@ class RollStiffness:
 
 
 @dataclass(frozen=True)
+class SteerStiffness:
+    """Steer centring spring: torque -k * delta on the steer axis [k: N m/rad].
+
+    Lumps what pulls the fork back to centre besides gravity and the tyres' kinematics:
+    cable harness and motor belt/gearbox of a steer-by-wire fork, tyre twist torque at
+    the contact patch.  It adds to g K0[delta, delta] + v^2 K2[delta, delta] of the linear
+    model (Meijaard 2007 eq. A.21).  Either sign is accepted (k < 0 is a destabilizing
+    spring).
+    """
+
+    k: float
+    kind = "plant"
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.k):
+            raise ValueError(f"SteerStiffness.k must be finite N m/rad, got {self.k!r}")
+
+
+@dataclass(frozen=True)
 class TorqueGain:
     """Steer torque actually applied = gain * command [-] (actuator calibration error)."""
 
@@ -154,6 +174,7 @@ PLANT_SLOTS = (
     "steer_coulomb_smoothing",
     "roll_damping",
     "roll_stiffness",
+    "steer_stiffness",
 )
 _S = {name: i for i, name in enumerate(PLANT_SLOTS)}
 
@@ -173,6 +194,8 @@ def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
             vec[_S["roll_damping"]] += e.c
         elif isinstance(e, RollStiffness):
             vec[_S["roll_stiffness"]] += e.k
+        elif isinstance(e, SteerStiffness):
+            vec[_S["steer_stiffness"]] += e.k
         elif isinstance(e, SteerCoulomb):
             if vec[_S["steer_coulomb"]] > 0.0:
                 raise ValueError("give at most one SteerCoulomb effect")
@@ -188,7 +211,7 @@ def plant_forces(ev, q4, q7, u4, u6, u7, out):
     """Extra generalized forces [N m] on the (u4, u6, u7) equations; fills ``out``."""
     out[0] = -ev[3] * u4 - ev[4] * q4
     out[1] = 0.0
-    out[2] = -ev[0] * u7 - ev[1] * math.tanh(u7 / ev[2])
+    out[2] = -ev[0] * u7 - ev[1] * math.tanh(u7 / ev[2]) - ev[5] * q7
 
 
 @dataclass(frozen=True)

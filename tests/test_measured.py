@@ -187,8 +187,11 @@ def test_real_logs_sign_and_controller():
 @pytest.mark.slow
 def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
     """Goal of the brief on real data: fit 2.5 + 4.5 m/s (nonlinear nominal, the
-    default), held-out 1.5 + 3.5 m/s decay error at least halves (measured 0.75 -> 0.31,
-    docs/measured.md); the JSON carries the documented schema."""
+    default), held-out 1.5 + 3.5 m/s decay error at least halves (measured 0.748 -> 0.314,
+    docs/measured.md); the JSON carries the documented schema.  The weave goal (halving)
+    is not met on this split (0.141 -> 0.076, ratio 0.54): asserted is that the weave
+    error of the held-out decays drops (it rose to 0.269 before steer_stiffness and the
+    weave-aware selection)."""
     import json
 
     from experiments.cli import main
@@ -206,3 +209,4 @@ def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
                 "weave_error_after"} <= set(f) for f in out["files"])  # fmt: skip
     assert {round(f["speed"], 1) for f in out["files"]} == {1.5, 3.5}
     assert out["summary"]["error_after"] <= 0.5 * out["summary"]["error_before"]
+    assert out["summary"]["weave_error_after"] < out["summary"]["weave_error_before"]

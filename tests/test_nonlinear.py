@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from sim.effects import RollDamping, SteerDamping
+from sim.effects import RollDamping, RollStiffness, SteerDamping, SteerStiffness
 from sim.integrate import simulate
 from sim.linear import canonical_matrices, state_matrices
 from sim.nonlinear import WhippleBicycle
@@ -159,6 +159,18 @@ def test_linearization_with_damping_effects(bike):
     Minv = np.linalg.inv(cm.M)
     A0, _ = state_matrices(cm, 5.0)
     A0[2:, 2:] -= Minv @ np.diag([c_r, c_s])
+    np.testing.assert_allclose(A, A0, rtol=0, atol=LIN_TOL)
+
+
+def test_linearization_with_stiffness_effects(bike):
+    """Roll and steer springs add diag(k_roll, k_steer) to g K0 + v^2 K2 (Meijaard 2007
+    eq. A.21 form); a negative steer spring is accepted (destabilizing)."""
+    k_r, k_s = 30.0, -1.5
+    A, _ = bike.linearize(5.0, effects=[RollStiffness(k_r), SteerStiffness(k_s)])
+    cm = canonical_matrices(benchmark())
+    Minv = np.linalg.inv(cm.M)
+    A0, _ = state_matrices(cm, 5.0)
+    A0[2:, :2] -= Minv @ np.diag([k_r, k_s])
     np.testing.assert_allclose(A, A0, rtol=0, atol=LIN_TOL)
 
 
