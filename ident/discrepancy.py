@@ -68,7 +68,6 @@ __all__ = [
 
 EXPLAINED_MIN = 0.9
 T_MIN = 3.0
-N_EXAMINED = 5  # candidates per round (by fit gain) tested on the held-out windows
 WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter, ~2 %)
 
 
@@ -393,16 +392,17 @@ def identify(
         if _round == 0:
             ranking = [z[3] for z in trials]
         passing = []  # (score, name, result, validation cost, validation weave error)
-        for gain, n, res, est in trials[:N_EXAMINED]:
+        for gain, n, res, est in trials:
             if est.t <= T_MIN or gain < min_gain:
                 continue
             _attach(windows, res.model, nonlinear)
             sims = res.model.simulate(val_w)
             val = float(np.sum(window_errors(val_w, sims) ** 2))
-            if val < cur_val * (1 - min_gain):
-                wv = weave_error(val_w, sims, lam_val)
-                score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
-                passing.append((score, n, res, val, wv))
+            if val >= cur_val * (1 - min_gain):
+                continue
+            wv = weave_error(val_w, sims, lam_val)
+            score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
+            passing.append((score, n, res, val, wv))
         if passing:
             _score, n, res, cur_val, cur_wv = min(passing, key=lambda z: z[0])
             accepted.append(n)

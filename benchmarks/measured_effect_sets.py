@@ -1,0 +1,82 @@
+"""Fit fixed sets of library effects to the measured decays and report held-out errors.
+
+The pipeline (``bikeid measured fit``) *chooses* effects; this script answers the
+complementary question "how well would this set of effects do?", for the comparison
+tables of docs/measured.md.  Each set is fitted jointly (output error, nonlinear nominal
+by defect correction re-attached at the fitted model twice, as in the pipeline's final
+fit) on the decays of the fit speeds and evaluated on the other speeds with the same
+metrics as ``bikeid measured evaluate``.  ``--per-file`` instead fits each set to each
+file alone (the spread of the values across speeds tests whether an effect is a constant).
+
+    python benchmarks/measured_effect_sets.py --data ../shared/data \\
+        --sets "steer_viscous_damping;steer_viscous_damping,steer_stiffness,steer_angle_bias"
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from experiments.cmd_measured import load_decays  # noqa: E402
+from ident.discrepancy import LIBRARY, _attach, evaluate, fit_effects  # noqa: E402
+from ident.experiment_model import ExperimentModel  # noqa: E402
+
+
+def fit_set(windows, names, nonlinear=True):
+    m0 = ExperimentModel()
+    start = {n: LIBRARY[n].absent + LIBRARY[n].scale for n in names}
+    _attach(windows, m0, nonlinear)
+    res = fit_effects(m0, windows, names, start)
+    for _ in range(2 if nonlinear else 0):
+        _attach(windows, res.model, True)
+        res = fit_effects(m0, windows, names, res.values)
+    return res
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", required=True, help="folder containing tudelft-sbw/")
+    ap.add_argument("--sets", required=True, help="effect sets: 'a,b;c,d' (';' between sets)")
+    ap.add_argument("--splits", default="2.5,4.5/1.5,3.5", help="fit speeds, '/' between")
+    ap.add_argument("--per-file", action="store_true", help="fit each file alone instead")
+    ap.add_argument("--linear", action="store_true", help="linear nominal (no correction)")
+    a = ap.parse_args(argv)
+    sets = [[n.strip() for n in s.split(",") if n.strip()] for s in a.sets.split(";")]
+    bad = sorted({n for s in sets for n in s} - set(LIBRARY))
+    if bad:
+        raise SystemExit(f"unknown effects {bad}; the library has {sorted(LIBRARY)}")
+    allw = load_decays(a.data)
+    nl = not a.linear
+    if a.per_file:
+        files = sorted({w.file for w in allw}, key=lambda f: next(w.speed for w in allw
+                                                                      if w.file == f))
+        for names in sets:
+            print(", ".join(names))
+            for f in files:
+                ws = [w for w in allw if w.file == f]
+                r = fit_set(ws, names, nl)
+                vals = "  ".join(f"{n} {r.values[n]:.3f} +- {r.std[n]:.3f}" for n in names)
+                print(f"  {ws[0].speed:.2f} m/s ({len(ws)} decays): cost {r.cost:.3f}  {vals}")
+        return 0
+    for split in a.splits.split("/"):
+        sp = [float(x) for x in split.split(",")]
+        fw = [w for w in allw if min(abs(w.speed - s) for s in sp) < 0.25]
+        hw = [w for w in allw if w not in fw]
+        for names in sets:
+            t0 = time.perf_counter()
+            r = fit_set(fw, names, nl)
+            s = evaluate(ExperimentModel(), r.model, hw, nonlinear=nl)["summary"]
+            vals = ", ".join(f"{n} {r.values[n]:.3f} +- {r.std[n]:.3f}" for n in names)
+            print(f"fit {split:9s} [{vals}]\n    held out: error {s['error_before']:.3f} -> "
+                  f"{s['error_after']:.3f} ({s['ratio']:.2f}), weave {s['weave_error_before']:.3f}"
+                  f" -> {s['weave_error_after']:.3f} ({s['weave_ratio']:.2f})"
+                  f"  [{time.perf_counter() - t0:.0f} s]", flush=True)  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
