@@ -1,6 +1,6 @@
 """Benchmark: the randomized undeclared-effect grid on the nonlinear plant.
 
-    /work/venv/bin/python benchmarks/bench_effect_trials.py [--n 140] [--seed 1]
+    python benchmarks/bench_effect_trials.py [--n 160] [--seed 1]
         [--processes 2] [--log trials.jsonl] [--resume trials.jsonl]
 
 Runs ``experiments.effect_trials.run_trials`` (the same as ``bikeid measured trials``),
