@@ -24,7 +24,7 @@ from experiments.effect_trials import format_summary, run_trials, summarize
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=140)
+    ap.add_argument("--n", type=int, default=160)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--log", help="append each finished trial to this JSON-lines file")

@@ -52,8 +52,9 @@ def main(argv=None) -> int:
     allw = load_decays(a.data)
     nl = not a.linear
     if a.per_file:
-        files = sorted({w.file for w in allw}, key=lambda f: next(w.speed for w in allw
-                                                                      if w.file == f))
+        files = sorted(
+            {w.file for w in allw}, key=lambda f: next(w.speed for w in allw if w.file == f)
+        )
         for names in sets:
             print(", ".join(names))
             for f in files:

@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
     )
-    t.add_argument("--n", type=int, default=28, help="number of trials (default 28)")
+    t.add_argument("--n", type=int, default=32, help="number of trials (default 32: 4 per effect)")
     t.add_argument("--seed", type=int, default=1, help="grid seed (default 1)")
     t.add_argument("--processes", type=int, default=2, help="worker processes (default 2)")
     t.add_argument("--effects", help="comma list of injected effects (default: all)")
