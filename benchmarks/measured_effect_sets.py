@@ -19,6 +19,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from experiments.cmd_measured import load_decays  # noqa: E402
@@ -37,10 +39,38 @@ def fit_set(windows, names, nonlinear=True):
     return res
 
 
+def lean_check(windows) -> None:
+    """Per speed: the logged lean angle (Kalman estimate) against the integrated roll rate
+    (gyro) in each decay, phi[k] ~ g * int(phidot)[k + s] + a + b t; median g and shift s."""
+    from scipy.integrate import cumulative_trapezoid
+
+    rows = []
+    for w in windows:
+        ip = cumulative_trapezoid(w.phidot, dx=0.01, initial=0.0)
+        t = np.arange(w.n) * 0.01
+        best = None
+        for sh in range(-15, 16):
+            k0, k1 = max(0, -sh), min(w.n, w.n - sh)
+            A = np.c_[ip[k0 + sh : k1 + sh], np.ones(k1 - k0), t[k0:k1]]
+            c, *_ = np.linalg.lstsq(A, w.phi[k0:k1], rcond=None)
+            e = float(np.mean((A @ c - w.phi[k0:k1]) ** 2))
+            if best is None or e < best[0]:
+                best = (e, sh, c[0])
+        rows.append((w.speed, best[1], best[2]))
+    r = np.array(rows)
+    for v in sorted({round(x, 1) for x in r[:, 0]}):
+        sel = r[np.abs(r[:, 0] - v) < 0.1]
+        print(f"{v:.1f} m/s ({len(sel)} decays): lean angle = {np.median(sel[:, 2]):.3f} x "
+              f"integrated roll rate, shifted {np.median(sel[:, 1]):+.0f} samples")  # fmt: skip
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", required=True, help="folder containing tudelft-sbw/")
-    ap.add_argument("--sets", required=True, help="effect sets: 'a,b;c,d' (';' between sets)")
+    ap.add_argument("--sets", default="", help="effect sets: 'a,b;c,d' (';' between sets)")
+    ap.add_argument(
+        "--lean-check", action="store_true", help="lean angle vs integrated roll rate, per speed"
+    )
     ap.add_argument("--splits", default="2.5,4.5/1.5,3.5", help="fit speeds, '/' between")
     ap.add_argument("--per-file", action="store_true", help="fit each file alone instead")
     ap.add_argument("--linear", action="store_true", help="linear nominal (no correction)")
@@ -50,6 +80,11 @@ def main(argv=None) -> int:
     if bad:
         raise SystemExit(f"unknown effects {bad}; the library has {sorted(LIBRARY)}")
     allw = load_decays(a.data)
+    if a.lean_check:
+        lean_check(allw)
+        return 0
+    if not sets or not sets[0]:
+        raise SystemExit("give --sets (or --lean-check)")
     nl = not a.linear
     if a.per_file:
         files = sorted(
