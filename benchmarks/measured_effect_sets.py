@@ -5,8 +5,10 @@ complementary question "how well would this set of effects do?", for the compari
 tables of docs/measured.md.  Each set is fitted jointly (output error, nonlinear nominal
 by defect correction re-attached at the fitted model twice, as in the pipeline's final
 fit) on the decays of the fit speeds and evaluated on the other speeds with the same
-metrics as ``bikeid measured evaluate``.  ``--per-file`` instead fits each set to each
-file alone (the spread of the values across speeds tests whether an effect is a constant).
+metrics as ``bikeid measured evaluate``.  Any experiment-model effect can be named, also those
+kept out of the library (``tire_twist_stiffness``, ``roll_stiffness``, ...).  ``--per-file``
+instead fits each set to each file alone (the spread of the values across speeds tests
+whether an effect is a constant).
 
     python benchmarks/measured_effect_sets.py --data ../shared/data \\
         --sets "steer_viscous_damping;steer_viscous_damping,steer_stiffness,steer_angle_bias"
@@ -25,12 +27,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from experiments.cmd_measured import load_decays  # noqa: E402
 from ident.discrepancy import LIBRARY, _attach, evaluate, fit_effects  # noqa: E402
-from ident.experiment_model import ExperimentModel  # noqa: E402
+from ident.experiment_model import EFFECT_DEFAULTS, EFFECT_UNITS, ExperimentModel  # noqa: E402
 
 
 def fit_set(windows, names, nonlinear=True):
     m0 = ExperimentModel()
-    start = {n: LIBRARY[n].absent + LIBRARY[n].scale for n in names}
+    start = {n: LIBRARY[n].absent + LIBRARY[n].scale if n in LIBRARY else EFFECT_DEFAULTS[n] + 1.0
+             for n in names}  # fmt: skip
     _attach(windows, m0, nonlinear)
     res = fit_effects(m0, windows, names, start)
     for _ in range(2 if nonlinear else 0):
@@ -76,9 +79,9 @@ def main(argv=None) -> int:
     ap.add_argument("--linear", action="store_true", help="linear nominal (no correction)")
     a = ap.parse_args(argv)
     sets = [[n.strip() for n in s.split(",") if n.strip()] for s in a.sets.split(";")]
-    bad = sorted({n for s in sets for n in s} - set(LIBRARY))
+    bad = sorted({n for s in sets for n in s} - set(EFFECT_UNITS))
     if bad:
-        raise SystemExit(f"unknown effects {bad}; the library has {sorted(LIBRARY)}")
+        raise SystemExit(f"unknown effects {bad}; the experiment model has {sorted(EFFECT_UNITS)}")
     allw = load_decays(a.data)
     if a.lean_check:
         lean_check(allw)

@@ -20,6 +20,7 @@ name                        unit        term
 steer_viscous_damping       N m s/rad   steer torque -c * deltadot
 steer_coulomb_friction      N m         steer torque -T_c * tanh(deltadot / 0.1 rad/s)
 steer_stiffness             N m/rad     steer torque -k * delta (centring spring)
+tire_twist_stiffness        N m/rad*m/s steer torque -(k / v) * delta (NOT in the ident library)
 tire_scrub_torque           N m s^2/... steer torque -(k / v) * deltadot  (k in N m s/rad * m/s)
 command_gain                -           applied torque = gain * command (default 1)
 steer_torque_bias           N m         constant steer torque
@@ -39,6 +40,10 @@ tire_relaxation             m           front-tyre lateral relaxation length sig
 roll_viscous_damping        N m s/rad   roll torque -c * phidot (NOT in the ident library)
 roll_stiffness              N m/rad     roll torque -k * phi (NOT in the ident library)
 ==========================  ==========  ================================================
+
+``tire_twist_stiffness`` (a contact-patch twist torque that falls with speed) can be fitted
+by name but is kept out of the identification library: the per-file fits contradict its 1/v
+law (docs/measured.md).
 
 The last four rows above the roll terms are *parameter* corrections of the values the data
 README flags as uncertain (borrowed frame/fork inertias, estimated mass split); they change
@@ -115,6 +120,7 @@ EFFECT_UNITS = {
     "steer_viscous_damping": "N m s/rad",
     "steer_coulomb_friction": "N m",
     "steer_stiffness": "N m/rad",
+    "tire_twist_stiffness": "N m/rad * m/s",
     "tire_scrub_torque": "N m s/rad * m/s",
     "command_gain": "-",
     "steer_torque_bias": "N m",
@@ -336,7 +342,7 @@ class ExperimentModel:
         )
         Kq = cm.stiffness(v).copy()
         Kq[0, 0] += self.e("roll_stiffness")
-        Kq[1, 1] += self.e("steer_stiffness")
+        Kq[1, 1] += self.e("steer_stiffness") + self.e("tire_twist_stiffness") / max(v, 0.1)
         lag = self.e("actuator_lag")
         sigma = self.e("tire_relaxation")
         relax = relax or sigma > 0
@@ -553,8 +559,8 @@ def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, d
     """The part of ``model``'s effects the nonlinear plant can carry, at a true speed.
 
     Returns (``sim.effects`` objects, the same as experiment-model effects).  Mapped:
-    steer viscous damping + tire scrub (c + k / v), steer stiffness, steer Coulomb
-    friction (same tanh smoothing 0.1 rad/s), command gain, actuator lag, input delay
+    steer viscous damping + tire scrub (c + k / v), steer stiffness + tyre twist (k + k_t / v),
+    steer Coulomb friction (same tanh smoothing 0.1 rad/s), command gain, actuator lag, input delay
     (rounded to whole 10 ms samples), roll damping and stiffness.  Not mapped (they stay
     linear-only): sensor biases and scales, steer torque bias, steer inertia (the parameter
     corrections and the speed scale enter through the parameters and the speed instead).
@@ -566,7 +572,7 @@ def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, d
     if c > 0:
         out.append(fx.SteerDamping(c))
         eq["steer_viscous_damping"] = c
-    ks = model.e("steer_stiffness")
+    ks = model.e("steer_stiffness") + model.e("tire_twist_stiffness") / max(speed, 0.1)
     if ks != 0.0:
         out.append(fx.SteerStiffness(ks))
         eq["steer_stiffness"] = ks

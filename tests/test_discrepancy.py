@@ -109,3 +109,25 @@ def test_weave_error_is_relative_root_shift():
     vs = float(np.mean(ws[0].v_sensor))
     r0, r1 = truth.weave(vs), other.weave(vs)
     assert got == pytest.approx(abs(r1 - r0) / abs(r0), rel=0.2)
+
+
+def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
+    """tire_twist_stiffness k_t (kept out of the library) is the steer spring k_t / v at the
+    true speed v: the sampled loops' eigenvalues agree to round-off (1e-9) at 1.5 and 4.5 m/s,
+    and the nonlinear counterpart is a SteerStiffness of k_t / v (analytic identity)."""
+    import numpy as np
+
+    from dataset.measured import SPEED_CALIBRATION
+    from ident.experiment_model import nonlinear_counterpart
+
+    a, b = SPEED_CALIBRATION
+    for v in (1.5, 4.5):
+        twist = ExperimentModel(effects={"tire_twist_stiffness": 3.0})
+        spring = ExperimentModel(effects={"steer_stiffness": 3.0 / v})
+        vs = a * v + b
+        np.testing.assert_allclose(
+            np.sort_complex(twist.eigenvalues(vs)), np.sort_complex(spring.eigenvalues(vs)),
+            atol=1e-9,
+        )  # fmt: skip
+        fx, eq = nonlinear_counterpart(twist, v)
+        assert eq == {"steer_stiffness": pytest.approx(3.0 / v, rel=1e-12)}
