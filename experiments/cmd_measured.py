@@ -20,6 +20,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
     f.add_argument("--max-effects", type=int, default=3)
     f.add_argument(
+        "--stability",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also refit on N random 75 %% subsamples of the decays and report how often each "
+        "effect is selected (stability selection; about N x the fit time)",
+    )
+    f.add_argument(
         "--plant",
         choices=("nonlinear", "linear"),
         default="nonlinear",
@@ -98,13 +106,19 @@ def model_from_json(path: str):
         raise ValueError(f"cannot read model {path}: {exc}") from None
 
 
-def fit_model(windows, max_effects=3, plant: str = "nonlinear") -> dict:
-    from ident.discrepancy import identify
+def fit_model(windows, max_effects=3, plant: str = "nonlinear", stability: int = 0) -> dict:
+    from ident.discrepancy import identify, selection_frequencies
     from ident.experiment_model import ExperimentModel
 
-    res = identify(
-        ExperimentModel(), windows, max_effects=max_effects, nonlinear=plant == "nonlinear"
-    )
+    nl = plant == "nonlinear"
+    extra = {}
+    if stability:
+        freq = selection_frequencies(
+            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl
+        )
+        extra = {"selection_frequency": freq,
+                 "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
+    res = identify(ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl)
     return {
         "bicycle": "steer-by-wire",
         "plant": plant,
@@ -112,16 +126,22 @@ def fit_model(windows, max_effects=3, plant: str = "nonlinear") -> dict:
         "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
         "fit_files": sorted({w.file for w in windows}),
         "identification": res.as_dict(),
+        **extra,
     }
 
 
 def cmd_fit(args) -> int:
     if args.max_effects < 0:
         raise ValueError("--max-effects must be >= 0")
+    if args.stability < 0:
+        raise ValueError("--stability must be >= 0 (number of subsamples)")
     ws = load_decays(args.data, _speeds(args.speeds))
-    out = fit_model(ws, args.max_effects, args.plant)
+    out = fit_model(ws, args.max_effects, args.plant, args.stability)
     atomic_write_text(args.out, dump_json(out) + "\n")
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    if "selection_frequency" in out:
+        freq = ", ".join(f"{k} {v:.2f}" for k, v in out["selection_frequency"].items())
+        print(f"selected in {args.stability} subsamples (fraction): {freq}")
     return 0
 
 

@@ -61,6 +61,7 @@ __all__ = [
     "noise_floor",
     "weave_error",
     "output_residuals",
+    "selection_frequencies",
     "spectrum",
     "synthetic_windows",
     "whiteness",
@@ -446,6 +447,43 @@ def identify(
         cost_nominal=cost0, cost_final=final.cost, cost_floor=floor, explained=float(explained),
         eq_ranking=err_ranking(model, windows),
     )  # fmt: skip
+
+
+def selection_frequencies(
+    model: ExperimentModel,
+    windows: list[Window],
+    resamples: int = 20,
+    fraction: float = 0.75,
+    seed: int = 0,
+    **identify_kw,
+) -> dict[str, float]:
+    """How stable is the verdict?  Fraction of subsamples in which each name is selected.
+
+    Stability selection (Meinshausen & Buehlmann 2010) over decays: each of ``resamples``
+    runs of :func:`identify` sees a random ``fraction`` of the windows of every file (drawn
+    without replacement, at least 2 per file, so every speed stays in), and each name of its
+    verdict (``"unexplained"`` included) is counted.  A name near 1 is what the data say
+    whichever decays are used; names well below 1 depend on which pushes were logged.
+    ``identify_kw`` go to :func:`identify` (e.g. ``nonlinear=True``, ``max_effects``).
+    """
+    if int(resamples) != resamples or resamples < 1:
+        raise ValueError(f"resamples must be a positive integer, got {resamples!r}")
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction!r}")
+    rng = np.random.default_rng(seed)
+    groups: dict[str, list[int]] = {}
+    for i, w in enumerate(windows):
+        groups.setdefault(w.file, []).append(i)
+    counts: dict[str, int] = {}
+    for _ in range(int(resamples)):
+        pick = []
+        for idx in groups.values():
+            k = min(len(idx), max(2, round(fraction * len(idx))))
+            pick.extend(sorted(rng.choice(idx, size=k, replace=False)))
+        sub = [replace(windows[i], correction=None) for i in sorted(pick)]  # own copies
+        for name in identify(model, sub, **identify_kw).verdict:
+            counts[name] = counts.get(name, 0) + 1
+    return dict(sorted(((k, v / resamples) for k, v in counts.items()), key=lambda z: -z[1]))
 
 
 # -- equation error -------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from ident.discrepancy import (
     evaluate,
     fit_effects,
     identify,
+    selection_frequencies,
     synthetic_windows,
     weave_error,
     whiteness,
@@ -131,3 +132,23 @@ def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
         )  # fmt: skip
         fx, eq = nonlinear_counterpart(twist, v)
         assert eq == {"steer_stiffness": pytest.approx(3.0 / v, rel=1e-12)}
+
+
+def test_selection_frequencies_stable_for_a_clear_effect():
+    """Stability selection: with a clear injected steer damping (0.4 N m s/rad, 5 decays per
+    speed, linear simulator) every 75 % subsample names it (frequency 1, the single-shot test
+    above names it too); for roll damping, outside the library, every subsample says
+    "unexplained".  Bad arguments are refused by name."""
+    truth = ExperimentModel(effects={"steer_viscous_damping": 0.4})
+    ws = synthetic_windows(truth, [1.5, 3.5], 5, seed=1)
+    freq = selection_frequencies(ExperimentModel(), ws, resamples=4, max_effects=2)
+    assert freq["steer_viscous_damping"] == 1.0
+    assert freq.get("unexplained", 0.0) == 0.0
+    outside = ExperimentModel(effects={"roll_viscous_damping": 1.5})
+    ws = synthetic_windows(outside, [1.5, 3.5], 5, seed=3)
+    freq = selection_frequencies(ExperimentModel(), ws, resamples=4, max_effects=2)
+    assert freq["unexplained"] == 1.0
+    with pytest.raises(ValueError, match="fraction"):
+        selection_frequencies(ExperimentModel(), ws, resamples=2, fraction=1.5)
+    with pytest.raises(ValueError, match="resamples"):
+        selection_frequencies(ExperimentModel(), ws, resamples=0)

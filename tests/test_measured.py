@@ -240,3 +240,14 @@ def test_report_bode_runs_are_an_independent_check(tmp_path):
     assert {"decays.png", "eigenvalues.png", "bode.png", "report.md"} <= {
         p.name for p in out.iterdir()
     }
+
+
+def test_cli_fit_refuses_negative_stability(tmp_path, capsys):
+    """``--stability`` is a count of subsamples: a negative one is refused by name before any
+    data is read (no model file is written)."""
+    from experiments.cli import main
+
+    out = tmp_path / "m.json"
+    rc = main(["measured", "fit", "--data", str(tmp_path), "--out", str(out), "--stability", "-1"])
+    assert rc != 0 and "--stability" in capsys.readouterr().err
+    assert not out.exists()
