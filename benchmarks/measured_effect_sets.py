@@ -26,26 +26,26 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from experiments.cmd_measured import load_decays  # noqa: E402
-from ident.discrepancy import LIBRARY, _attach, evaluate, fit_effects  # noqa: E402
+from ident.discrepancy import LIBRARY, evaluate, joint_fit  # noqa: E402
 from ident.experiment_model import EFFECT_DEFAULTS, EFFECT_UNITS, ExperimentModel  # noqa: E402
 
 
 def fit_set(windows, names, nonlinear=True):
-    m0 = ExperimentModel()
     start = {n: LIBRARY[n].absent + LIBRARY[n].scale if n in LIBRARY else EFFECT_DEFAULTS[n] + 1.0
              for n in names}  # fmt: skip
-    _attach(windows, m0, nonlinear)
-    res = fit_effects(m0, windows, names, start)
-    for _ in range(2 if nonlinear else 0):
-        _attach(windows, res.model, True)
-        res = fit_effects(m0, windows, names, res.values)
-    return res
+    for w in windows:  # start from the nominal's defect correction
+        w.correction = None
+    return joint_fit(ExperimentModel(), windows, names, start, nonlinear)
 
 
-def lean_check(windows) -> None:
+def lean_check(windows, data: str) -> None:
     """Per speed: the logged lean angle (Kalman estimate) against the integrated roll rate
-    (gyro) in each decay, phi[k] ~ g * int(phidot)[k + s] + a + b t; median g and shift s."""
+    (gyro) in each decay, phi[k] ~ g * int(phidot)[k + s] + a + b t; median g and shift s.
+    Then per log the means over the whole file (straight running between pushes): steer
+    angle, lean angle, lean rate and steer command."""
     from scipy.integrate import cumulative_trapezoid
+
+    from dataset.measured import data_dir, iter_decays
 
     rows = []
     for w in windows:
@@ -65,6 +65,11 @@ def lean_check(windows) -> None:
         sel = r[np.abs(r[:, 0] - v) < 0.1]
         print(f"{v:.1f} m/s ({len(sel)} decays): lean angle = {np.median(sel[:, 2]):.3f} x "
               f"integrated roll rate, shifted {np.median(sel[:, 1]):+.0f} samples")  # fmt: skip
+    for run, _segs in iter_decays(data_dir(data)):
+        m = {k: float(np.mean(run[k])) for k in ("delta", "phi", "phidot", "T_delta")}
+        print(f"{run.meta.get('file')}: whole-log means: steer {m['delta']:+.4f} rad, lean "
+              f"{m['phi']:+.4f} rad, lean rate {m['phidot']:+.4f} rad/s, command "
+              f"{m['T_delta']:+.4f} N m")  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -84,7 +89,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"unknown effects {bad}; the experiment model has {sorted(EFFECT_UNITS)}")
     allw = load_decays(a.data)
     if a.lean_check:
-        lean_check(allw)
+        lean_check(allw, a.data)
         return 0
     if not sets or not sets[0]:
         raise SystemExit("give --sets (or --lean-check)")

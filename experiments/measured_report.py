@@ -50,7 +50,7 @@ def bode_points(root) -> list[dict]:
 def write_report(out: str | Path, data: str | None, model_path: str | None) -> Path:
     import matplotlib.pyplot as plt
 
-    from dataset.measured import data_dir
+    from dataset.measured import SPEED_CALIBRATION, data_dir
     from experiments.cmd_measured import evaluate_json, fit_model, load_decays, model_from_json
     from experiments.plots import save
     from ident.discrepancy import decay_eigenvalue
@@ -96,13 +96,13 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     # 2. weave eigenvalue against speed
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(6, 6), sharex=True)
     vv = np.linspace(min(w.speed for w in allw) - 0.2, max(w.speed for w in allw) + 0.2, 40)
-    vsens = 1.066 * vv - 0.128
+    a_cal, b_cal = SPEED_CALIBRATION
+    vsens = a_cal * vv + b_cal
     for mdl, col, lab in ((nom, "tab:red", "nominal"), (aug, "tab:blue", "augmented")):
         # every oscillatory root of the sampled loop: below ~1.8 m/s the loop has two
         # oscillatory pairs, and the measured decays follow the faster one
         for k, (v, vs) in enumerate(zip(vv, vsens, strict=True)):
-            lam = mdl.eigenvalues(vs)
-            lam = lam[(lam.imag > 0.5) & (lam.imag < 0.8 * np.pi / 0.01)]
+            lam = mdl.oscillatory_roots(vs)
             kw = {"label": lab} if k == 0 else {}
             a1.plot(np.full(lam.size, v), lam.real, ".", color=col, ms=3, **kw)
             a2.plot(np.full(lam.size, v), lam.imag, ".", color=col, ms=3)

@@ -58,6 +58,7 @@ __all__ = [
     "evaluate",
     "fit_effects",
     "identify",
+    "joint_fit",
     "noise_floor",
     "weave_error",
     "output_residuals",
@@ -254,6 +255,26 @@ def fit_effects(
     return FitResult(mk(sol.x), vals, stds, float(r @ r))
 
 
+def joint_fit(
+    model: ExperimentModel,
+    windows: list[Window],
+    names: list[str],
+    start: dict | None = None,
+    nonlinear: bool = False,
+) -> FitResult:
+    """Fit the named effects jointly on all windows; with ``nonlinear`` the defect
+    correction is attached at the nominal first and re-attached at the fitted model twice
+    (each re-attachment moves the linearization point of the correction to the fit).
+    Leaves the windows corrected at the returned model."""
+    if nonlinear and all(w.correction is None for w in windows):
+        _attach(windows, model, True)
+    res = fit_effects(model, windows, names, start)
+    for _ in range(2 if nonlinear and names else 0):
+        _attach(windows, res.model, True)
+        res = fit_effects(model, windows, names, res.values)
+    return res
+
+
 def _effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
     """Standard errors of output-error estimates, clustered by window.
 
@@ -308,9 +329,11 @@ class Identification:
     cost_floor: float
     explained: float
     eq_ranking: list[dict] = field(default_factory=list)
+    rounds: list[dict] = field(default_factory=list)  # forward-selection log, per round
 
     def as_dict(self) -> dict:
         return {
+            "selection_rounds": self.rounds,
             "verdict": self.verdict,
             "effects": [e.as_dict() for e in self.effects],
             "ranking": [e.as_dict() for e in self.ranking],
@@ -364,6 +387,7 @@ def identify(
     lam_val = [decay_eigenvalue(w) for w in val_w]  # measured weave of each held-out decay
     cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
     ranking: list[EffectEstimate] = []
+    rounds: list[dict] = []
     for _round in range(max_effects):
         trials = []
         base_cost = fit_effects(cur, fit_w, []).cost
@@ -393,28 +417,31 @@ def identify(
         if _round == 0:
             ranking = [z[3] for z in trials]
         passing = []  # (score, name, result, validation cost, validation weave error)
+        log = []
         for gain, n, res, est in trials:
+            row = {"name": n, "value": est.value, "t": est.t, "fit_gain": gain}
+            log.append(row)
             if est.t <= T_MIN or gain < min_gain:
                 continue
-            _attach(windows, res.model, nonlinear)
+            _attach(val_w, res.model, nonlinear)  # only the held-out half is simulated here
             sims = res.model.simulate(val_w)
             val = float(np.sum(window_errors(val_w, sims) ** 2))
+            row["heldout_cost_ratio"] = val / cur_val
             if val >= cur_val * (1 - min_gain):
                 continue
             wv = weave_error(val_w, sims, lam_val)
             score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
+            row.update(heldout_weave_error=wv, heldout_weave_before=cur_wv, score=score)
             passing.append((score, n, res, val, wv))
         if passing:
             _score, n, res, cur_val, cur_wv = min(passing, key=lambda z: z[0])
             accepted.append(n)
             cur = res.model
+        rounds.append({"accepted": n if passing else None, "candidates": log})
         _attach(windows, cur, nonlinear)
         if not passing:
             break
-    final = fit_effects(model, windows, accepted, {n: cur.e(n) for n in accepted})
-    for _ in range(2 if nonlinear and accepted else 0):
-        _attach(windows, final.model, nonlinear)
-        final = fit_effects(model, windows, accepted, final.values)
+    final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear)
 
     def tval(n):
         sd = final.std[n]
@@ -445,7 +472,7 @@ def identify(
     return Identification(
         model=final.model, effects=effects, ranking=ranking, verdict=verdict,
         cost_nominal=cost0, cost_final=final.cost, cost_floor=floor, explained=float(explained),
-        eq_ranking=err_ranking(model, windows),
+        eq_ranking=err_ranking(model, windows), rounds=rounds,
     )  # fmt: skip
 
 
@@ -672,23 +699,17 @@ def evaluate(
     s1 = augmented.simulate(windows)
     e1 = window_errors(windows, s1)
 
-    def med(lams):
-        return complex(np.median(np.real(lams)), np.median(np.imag(lams)))
-
-    def fitted(ws, sims):
-        return med(
-            [decay_eigenvalue(replace(w, phidot=s["phidot"], delta=s["delta"]))
-             for w, s in zip(ws, sims, strict=True)]
-        )  # fmt: skip
-
     files = []
     for f in sorted({w.file for w in windows}):
         idx = [i for i, w in enumerate(windows) if w.file == f]
         ws = [windows[i] for i in idx]
         vs = float(np.mean([np.mean(w.v_sensor) for w in ws]))
-        lam_data = med([decay_eigenvalue(w) for w in ws])
+        lam_data = _median_complex([decay_eigenvalue(w) for w in ws])
         r0, r1 = nominal.weave(vs, lam_data), augmented.weave(vs, lam_data)
-        f0, f1 = fitted(ws, [s0[i] for i in idx]), fitted(ws, [s1[i] for i in idx])
+        f0, f1 = (
+            _simulated_weave(ws, [s0[i] for i in idx]),
+            _simulated_weave(ws, [s1[i] for i in idx]),
+        )
         files.append(
             {
                 "file": f,
@@ -735,12 +756,18 @@ def weave_error(windows: list[Window], sims, lam_data) -> float:
     errs = []
     for idx in groups.values():
         lam_d = _median_complex([lam_data[i] for i in idx])
-        lam_m = _median_complex(
-            [decay_eigenvalue(replace(windows[i], phidot=sims[i]["phidot"],
-                                      delta=sims[i]["delta"])) for i in idx]
-        )  # fmt: skip
+        lam_m = _simulated_weave([windows[i] for i in idx], [sims[i] for i in idx])
         errs.append(abs(lam_m - lam_d) / abs(lam_d))
     return float(np.mean(errs))
+
+
+def _simulated_weave(windows: list[Window], sims) -> complex:
+    """Median weave of the damped-oscillation fits to simulated decays (same estimator as
+    for the measured ones)."""
+    return _median_complex(
+        [decay_eigenvalue(replace(w, phidot=s["phidot"], delta=s["delta"]))
+         for w, s in zip(windows, sims, strict=True)]
+    )  # fmt: skip
 
 
 def _median_complex(lams) -> complex:

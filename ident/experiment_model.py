@@ -451,15 +451,19 @@ class ExperimentModel:
         lam = np.log(z.astype(complex)) / DT
         return lam[np.argsort(-lam.real)]
 
+    def oscillatory_roots(self, v_sensor: float) -> np.ndarray:
+        """Closed-loop roots with 0 < Im < 0.8 Nyquist (one of each complex pair) [1/s]."""
+        lam = self.eigenvalues(v_sensor)
+        return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
+
     def weave(self, v_sensor: float, near: complex | None = None) -> complex:
-        """An oscillatory closed-loop root (Im > 0, below 0.8 Nyquist).
+        """An oscillatory closed-loop root (:meth:`oscillatory_roots`).
 
         Without ``near``: the least damped one; with ``near``: the one closest to it
-        (mode matching against a root fitted to data; at 1.5 m/s the loop has two
+        (mode matching against a root fitted to data; below ~1.8 m/s the loop has two
         oscillatory pairs).
         """
-        lam = self.eigenvalues(v_sensor)
-        osc = lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
+        osc = self.oscillatory_roots(v_sensor)
         if osc.size == 0:
             return complex(np.nan, np.nan)
         if near is not None:
