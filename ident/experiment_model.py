@@ -262,8 +262,14 @@ class ExperimentModel:
         if unknown:
             raise ValueError(f"unknown effects {unknown}; known are {sorted(EFFECT_UNITS)}")
         for k, v in self.effects.items():
-            if not math.isfinite(float(v)):
-                raise ValueError(f"effect {k!r} must be finite, got {v}")
+            try:
+                ok = math.isfinite(float(v))
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise ValueError(
+                    f"effect {k!r} must be a finite number [{EFFECT_UNITS[k]}], got {v!r}"
+                )
         if self.e("input_delay") < 0 or self.e("actuator_lag") < 0:
             raise ValueError("input_delay and actuator_lag must be >= 0 s")
         if self.e("tire_relaxation") < 0:

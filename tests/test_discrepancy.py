@@ -93,8 +93,8 @@ def test_weave_error_is_relative_root_shift():
     """weave_error of noise-free decays: ~0 against their own model (bound 1e-3, fit
     round-off), and for a model with more steer damping the relative shift of the fitted
     weave, which must match the relative shift of the loop's weave root (the independent
-    eigenvalue computation) within 20 % (the decay fit is not the root: ZOH + the other
-    modes)."""
+    eigenvalue computation): measured 0.126 against 0.129 (2.4 % apart); bound 10 %, since
+    the decay fit is not the root (the other modes leak into a 1 s fit)."""
     import numpy as np
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.3})
@@ -109,7 +109,7 @@ def test_weave_error_is_relative_root_shift():
     got = weave_error(ws, other.simulate(ws, nsub=10), lam)
     vs = float(np.mean(ws[0].v_sensor))
     r0, r1 = truth.weave(vs), other.weave(vs)
-    assert got == pytest.approx(abs(r1 - r0) / abs(r0), rel=0.2)
+    assert got == pytest.approx(abs(r1 - r0) / abs(r0), rel=0.1)
 
 
 def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():

@@ -251,3 +251,11 @@ def test_cli_fit_refuses_negative_stability(tmp_path, capsys):
     rc = main(["measured", "fit", "--data", str(tmp_path), "--out", str(out), "--stability", "-1"])
     assert rc != 0 and "--stability" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("value", ["abc", float("nan"), None])
+def test_model_effect_values_must_be_numbers(value):
+    """A model JSON with a non-numeric or NaN effect value is refused naming the effect and
+    its unit (not a bare float() error)."""
+    with pytest.raises(ValueError, match=r"'steer_stiffness' must be a finite number \[N m/rad\]"):
+        ExperimentModel(effects={"steer_stiffness": value})
