@@ -9,6 +9,10 @@ from pathlib import Path
 from .cliutil import atomic_write_text, dump_json, parse_range, to_jsonable
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
+DECAYS_HELP = (
+    "free-decay windows: 'listed' = eigen/segments.csv rows, detected from the roll rate "
+    "for logs it does not list (default); 'detected' = detected for every log"
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--out", required=True, help="model JSON to write")
     f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
     f.add_argument("--max-effects", type=int, default=3)
+    f.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     f.add_argument(
         "--stability",
         type=int,
@@ -39,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--data", help=DATA_HELP)
     e.add_argument("--speeds", help="speeds to evaluate (default: those not used in the fit)")
     e.add_argument("--json", action="store_true", help="print JSON")
+    e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     e.set_defaults(func=cmd_evaluate)
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
@@ -70,18 +76,22 @@ def _speeds(text: str | None):
     return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
 
 
-def load_decays(data: str | None, speeds=None, exclude=None):
-    """Free-decay windows of all eigen logs, optionally only near the given speeds."""
+def load_decays(data: str | None, speeds=None, exclude=None, source: str = "listed"):
+    """Free-decay windows of all eigen logs, optionally only near the given speeds
+    (``source``: see :func:`dataset.measured.iter_decays`)."""
     from dataset.measured import data_dir, iter_decays
     from ident.experiment_model import decay_windows
 
     root = data_dir(data)
     out = []
-    for run, segs in iter_decays(root):
+    for run, segs in iter_decays(root, source):
         ws = decay_windows(run, segs)
         out.extend(ws)
     if not out:
-        raise ValueError(f"{root}: no free-decay windows (need eigen/*.log.gz and segments.csv)")
+        raise ValueError(
+            f"{root}: no free-decay windows (need eigen*.log[.gz] logs with pushes the detector "
+            "finds, or rows for them in eigen/segments.csv)"
+        )
 
     def near(w, lst):
         return any(abs(w.speed - s) < 0.25 for s in lst)
@@ -91,7 +101,7 @@ def load_decays(data: str | None, speeds=None, exclude=None):
     if exclude:
         out = [w for w in out if not near(w, exclude)]
     if not out:
-        have = sorted({round(w.speed, 2) for w in load_decays(data)})
+        have = sorted({round(w.speed, 2) for w in load_decays(data, source=source)})
         raise ValueError(f"no decay windows at the requested speeds; the data has {have} m/s")
     return out
 
@@ -125,6 +135,7 @@ def fit_model(windows, max_effects=3, plant: str = "nonlinear", stability: int =
         "effects": {e.name: float(e.value) for e in res.effects},
         "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
         "fit_files": sorted({w.file for w in windows}),
+        "fit_windows": [{"file": w.file, "start": w.start, "end": w.start + w.n} for w in windows],
         "identification": res.as_dict(),
         **extra,
     }
@@ -135,8 +146,9 @@ def cmd_fit(args) -> int:
         raise ValueError("--max-effects must be >= 0")
     if args.stability < 0:
         raise ValueError("--stability must be >= 0 (number of subsamples)")
-    ws = load_decays(args.data, _speeds(args.speeds))
+    ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     out = fit_model(ws, args.max_effects, args.plant, args.stability)
+    out["decays"] = args.decays
     atomic_write_text(args.out, dump_json(out) + "\n")
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     if "selection_frequency" in out:
@@ -180,7 +192,9 @@ def evaluate_json(model_obj: dict, windows) -> dict:
 def cmd_evaluate(args) -> int:
     model, obj = model_from_json(args.model)
     sp = _speeds(args.speeds)
-    ws = load_decays(args.data, sp, exclude=None if sp else obj.get("fit_speeds"))
+    ws = load_decays(
+        args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
+    )
     out = evaluate_json(obj, ws)
     if args.json:
         print(dump_json(out))

@@ -244,8 +244,9 @@ def fit_effects(
         )
 
     def fun(x):
-        r = output_residuals(mk(x), windows, norms)
-        return np.where(np.isfinite(r), r, 1e3)
+        r = output_residuals(mk(x), windows, norms)  # ~O(1) per sample (normalized)
+        # a trial value that makes the loop diverge must not overflow the Jacobian
+        return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
 
     sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
