@@ -70,6 +70,7 @@ import numpy as np
 from dataset.run import Run
 
 __all__ = [
+    "CAMPAIGN",
     "COLUMNS",
     "DT",
     "SPEED_CALIBRATION",
@@ -127,6 +128,15 @@ PINNED = {
             "3.0",
         )  # fmt: skip
     },
+}
+
+#: the campaign's other free-decay runs with the same controller (2, 3, 4, 5 m/s), listed
+#: in the transcribed segments.csv; ``bikeid data fetch --all-speeds``.  Their upstream
+#: paths follow the pinned eigen logs' pattern (not verified from the offline build
+#: machine; a missing file fails with the URL and writes nothing for it).
+CAMPAIGN = {
+    f"eigen/eigen_normal_sil6.5n2_{k}kph.log.gz": f"eigen_normal_sil6.5n2_{k}kph.log"
+    for k in ("7.2", "10.8", "14.4", "18")
 }
 
 

@@ -68,6 +68,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     dsub = d.add_subparsers(dest="data_command", metavar="SUBCOMMAND")
     g = dsub.add_parser("fetch", help="download the pinned steer-by-wire logs (needs internet)")
     g.add_argument("--dest", default="data", help="folder to create tudelft-sbw/ in")
+    g.add_argument(
+        "--all-speeds",
+        action="store_true",
+        help="also fetch the campaign's free-decay runs at 2, 3, 4 and 5 m/s (more decays "
+        "per speed and two more speeds for held-out tests)",
+    )
     g.set_defaults(func=cmd_fetch)
     d.set_defaults(func=lambda a: d.print_help() or 2)
 
@@ -239,8 +245,8 @@ def cmd_report(args) -> int:
 
 
 def cmd_fetch(args) -> int:
-    from dataset.measured import fetch
+    from dataset.measured import CAMPAIGN, PINNED, fetch
 
-    sums = fetch(args.dest)
+    sums = fetch(args.dest, files=PINNED | CAMPAIGN if args.all_speeds else PINNED)
     print(f"fetched {len(sums)} files into {Path(args.dest) / 'tudelft-sbw'}")
     return 0

@@ -81,6 +81,22 @@ def test_fetch_with_local_opener_records_checksums(tmp_path):
         fetch(tmp_path, opener=lambda u: payload[u], url_pattern="https://x/{path}", files=files)
 
 
+def test_fetch_all_speeds_adds_the_campaign_runs(tmp_path, monkeypatch, capsys):
+    """`bikeid data fetch --all-speeds` asks for the 20 pinned files plus the campaign's
+    four other eigen runs (2, 3, 4, 5 m/s: 7.2, 10.8, 14.4, 18 km/h, the names the
+    transcribed segments.csv lists) at the pinned commit."""
+    import dataset.measured as dm
+    from experiments.cli import main
+
+    asked = []
+    monkeypatch.setattr(dm, "_urlopen", lambda url: asked.append(url) or b"h\n1\n")
+    assert main(["data", "fetch", "--dest", str(tmp_path), "--all-speeds"]) == 0
+    assert len(asked) == 24 and all(dm.UPSTREAM_COMMIT in u for u in asked)
+    kph = sorted(float(u.split("_")[-1][:-7]) for u in asked if "eigen_normal" in u)
+    assert kph == [5.4, 7.2, 9.0, 10.8, 12.6, 14.4, 16.2, 18.0]
+    assert (tmp_path / "tudelft-sbw/eigen/eigen_normal_sil6.5n2_18kph.log.gz").is_file()
+
+
 def test_closed_loop_sign_stabilizes():
     """Steer-into-lean +K (V - v) phidot keeps the Whipple model of this bicycle stable at
     the measured speeds; the opposite sign does not (physics check of the log signs)."""
