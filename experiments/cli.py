@@ -22,10 +22,6 @@ COMMAND_MODULES = (
 )
 
 
-class UsageError(ValueError):
-    """A bad command-line value; reported as a one-line error."""
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="bikeid",

@@ -178,16 +178,10 @@ def periodicity(traj, label: str = "", closure_tol: float = CLOSURE_TOL) -> Peri
     common["turn_radius"] = None if r is None else abs(r)
     tc, pts = section_points(t, phi, phidot, delta, deltadot, v)
     n = len(tc)
+    common["n_returns"] = n
+    no_period = dict(returns_per_period=None, period=None, closure=None, contraction=None)
     if traj.fell_at is not None or traj.stop_reason is not None:
-        return Periodicity(
-            verdict="fell",
-            n_returns=n,
-            returns_per_period=None,
-            period=None,
-            closure=None,
-            contraction=None,
-            **common,
-        )
+        return Periodicity(verdict="fell", **no_period, **common)
     best = None
     tail0 = n // 2
     for p in range(1, 5):
@@ -200,15 +194,7 @@ def periodicity(traj, label: str = "", closure_tol: float = CLOSURE_TOL) -> Peri
             best = (p, d)
             break
     if best is None:
-        return Periodicity(
-            verdict="not closed",
-            n_returns=n,
-            returns_per_period=None,
-            period=None,
-            closure=None,
-            contraction=None,
-            **common,
-        )
+        return Periodicity(verdict="not closed", **no_period, **common)
     p, closure = best
     period = float(np.mean(tc[tail0 + p :] - tc[tail0 : n - p]))
     dn = np.linalg.norm(pts[p:] - pts[:-p], axis=1)
@@ -216,7 +202,6 @@ def periodicity(traj, label: str = "", closure_tol: float = CLOSURE_TOL) -> Peri
     verdict = "periodic" if closure < closure_tol else "not closed"
     return Periodicity(
         verdict=verdict,
-        n_returns=n,
         returns_per_period=p,
         period=period,
         closure=float(closure),

@@ -53,9 +53,6 @@ class Report:
     def para(self, text: str) -> None:
         self.blocks.append(text.strip() + "\n")
 
-    def bullets(self, items: Sequence[str]) -> None:
-        self.blocks.append("\n".join(f"- {s}" for s in items) + "\n")
-
     def table(self, headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
         def cell(x):
             return str(x if isinstance(x, str) else fmt(x)).replace("|", "\\|").replace("\n", " ")

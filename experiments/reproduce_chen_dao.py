@@ -172,20 +172,6 @@ def identify_speed(args: tuple) -> dict[str, Any]:
     return out
 
 
-def run_grid(
-    controller: str,
-    speeds: Sequence[float],
-    duration: float,
-    bicycle: str,
-    methods: Sequence[str],
-    workers: int = 1,
-) -> list[dict[str, Any]]:
-    """:func:`identify_speed` at every speed (``workers`` processes), in speed order."""
-    return run_jobs(
-        [(controller, float(v), duration, bicycle, tuple(methods)) for v in speeds], workers
-    )
-
-
 def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
     """:func:`identify_speed` for every job (one process pool for all), in job order."""
     if workers <= 1 or len(jobs) <= 1:
@@ -408,27 +394,19 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
             "delta": float(np.degrees(np.abs(y[:, 1] - y_ol[:, 1]).max())),
         },
         "max_error_paper_deg": PAPER["max_error_deg"],
-        "G_phi": {
-            "num_identified": tfi["phi"]["num"],
-            "den_identified": tfi["phi"]["den"],
-            "num_true": np.asarray(tft["phi"].num[0][0]) / tft["phi"].den[0][0][0],
-            "den_true": np.asarray(tft["phi"].den[0][0]) / tft["phi"].den[0][0][0],
-            "num_paper": paper["num_phi"],
-            "den_paper": paper["char_poly"],
-            "zeros_identified": tfi["phi"]["zeros"],
-            "zeros_true": zt["phi"],
-            "zeros_paper": paper["zeros_phi"],
-        },
-        "G_delta": {
-            "num_identified": tfi["delta"]["num"],
-            "den_identified": tfi["delta"]["den"],
-            "num_true": np.asarray(tft["delta"].num[0][0]) / tft["delta"].den[0][0][0],
-            "den_true": np.asarray(tft["delta"].den[0][0]) / tft["delta"].den[0][0][0],
-            "num_paper": paper["num_delta"],
-            "den_paper": paper["char_poly"],
-            "zeros_identified": tfi["delta"]["zeros"],
-            "zeros_true": zt["delta"],
-            "zeros_paper": paper["zeros_delta"],
+        **{
+            f"G_{n}": {
+                "num_identified": tfi[n]["num"],
+                "den_identified": tfi[n]["den"],
+                "num_true": np.asarray(tft[n].num[0][0]) / tft[n].den[0][0][0],
+                "den_true": np.asarray(tft[n].den[0][0]) / tft[n].den[0][0][0],
+                "num_paper": paper[f"num_{n}"],
+                "den_paper": paper["char_poly"],
+                "zeros_identified": tfi[n]["zeros"],
+                "zeros_true": zt[n],
+                "zeros_paper": paper[f"zeros_{n}"],
+            }
+            for n in ("phi", "delta")
         },
         "rhp_zero": {
             "identified": rhp_id[0] if rhp_id else None,
@@ -441,10 +419,6 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
 
 
 # -- Fig. 3 ------------------------------------------------------------------------------------
-def _modes(ev_matched: np.ndarray, labels: Sequence[str]) -> dict[str, np.ndarray]:
-    return {lab: ev_matched[[j for j, L in enumerate(labels) if L == lab]] for lab in set(labels)}
-
-
 def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float | None]:
     """Critical speeds read off identified eigenvalues on a speed grid (linear interpolation).
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import control
 import numpy as np
 
-from sim.conventions import CANONICAL_STATE, LINEAR_STATE
+from sim.conventions import LINEAR_STATE
 from sim.linear import CanonicalMatrices
 
 __all__ = [
@@ -159,7 +159,3 @@ def steer_zeros(theta: np.ndarray) -> np.ndarray:
     z = eigvals(P, E)
     z = z[np.isfinite(z) & (np.abs(z) < 1e8)]
     return np.sort_complex(np.real_if_close(z, tol=1e6).astype(complex))
-
-
-def _state_names() -> list[str]:
-    return list(CANONICAL_STATE)
