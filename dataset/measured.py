@@ -417,13 +417,13 @@ def iter_decays(
     """
     if source not in ("listed", "detected"):
         raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
+    lists: dict[Path, list[Segment]] = {}  # segments.csv of each folder, read once
     for path in find_logs(root, "eigen"):
-        listed = []
         sf = path.parent / "segments.csv"
-        if source == "listed" and sf.is_file():
-            listed = [sg for sg in read_segments(sf, {path.name})]
+        if source == "listed" and sf.is_file() and sf not in lists:
+            lists[sf] = read_segments(sf)
         run = load_log(path)
-        segs = listed or detect_decays(run)
+        segs = [sg for sg in lists.get(sf, []) if sg.file == path.name] or detect_decays(run)
         if segs:
             yield run, segs
 

@@ -102,12 +102,12 @@ def load_decays(data: str | None, speeds=None, exclude=None, source: str = "list
     def near(w, lst):
         return any(abs(w.speed - s) < 0.25 for s in lst)
 
+    have = sorted({round(w.speed, 2) for w in out})
     if speeds is not None:
         out = [w for w in out if near(w, speeds)]
     if exclude:
         out = [w for w in out if not near(w, exclude)]
     if not out:
-        have = sorted({round(w.speed, 2) for w in load_decays(data, source=source)})
         raise ValueError(f"no decay windows at the requested speeds; the data has {have} m/s")
     return out
 

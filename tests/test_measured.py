@@ -296,14 +296,15 @@ def _push_log(tmp_path: Path, name: str, pushes: dict[int, float], n: int = 3000
     return _write(tmp_path / name, rows)
 
 
-def test_detect_decays_finds_clean_pushes_only(tmp_path):
+def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
     """Pushes at known rows: the windows start at each push's roll-rate extreme (to 1
     sample: the lobe's maximum is at k by construction) and last 1 s.  Rejected by the
     rules of ``detect_decays``: a decay spoilt by a second push 0.5 s in (its peak is
     exceeded within the window; 1000 by 1050, 2000 by 2060; the search resumes after
-    the spoilt window).  Without the quiet-before rule a third window appears (checked
-    by hand: DECAY_QUIET = 10 gives [500, 2100, 2600]).
+    the spoilt window).  The quiet-before rule matters: switched off, a third window
+    (the tail of the 2060 push) is accepted.
     """
+    import dataset.measured as dm
     from dataset.measured import detect_decays
 
     pushes = {500: 0.8, 1000: -0.6, 1050: 0.9, 2000: 0.7, 2060: -0.7, 2600: 0.5}
@@ -312,6 +313,8 @@ def test_detect_decays_finds_clean_pushes_only(tmp_path):
     assert len(starts) == 2
     assert abs(starts[0] - 500) <= 1 and abs(starts[1] - 2600) <= 1
     assert all(s.end - s.start == 100 for s in detect_decays(run))
+    monkeypatch.setattr(dm, "DECAY_QUIET", 10.0)
+    assert len(detect_decays(run)) == 3
 
 
 def test_iter_decays_rejects_unknown_source(tmp_path):
@@ -342,8 +345,10 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     """A log the segments file does not list (here a copy of the 3.5 m/s log under a new
     name, in a folder without segments.csv) is evaluated from detected windows.  Check
     against the listed windows of the original: on the detected windows that coincide
-    with listed ones, the nominal error is the same to 5 % (starts differ by <= 2
-    samples), and `measured evaluate` runs on the folder."""
+    with listed ones (9 of 9), the nominal error is the same to 5 % (measured 0.419 vs
+    0.424, 1.3 %: the starts differ by <= 2 samples, and a later start drops part of the
+    first swing; 5 % leaves room for a 3-sample shift), and `measured evaluate` runs on
+    the folder."""
     import json
     import shutil
 
@@ -357,7 +362,7 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     old = [w for w in load_decays(DATA) if w.file == src.name]
     assert len(new) >= len(old) - 1
     pairs = [(o, n) for o in old for n in new if abs(o.start - n.start) <= 3]
-    assert len(pairs) >= len(old) - 1
+    assert len(pairs) == len(old)
     from ident.experiment_model import attach_nonlinear_correction, window_errors
 
     m = ExperimentModel()
