@@ -15,10 +15,11 @@ Workflow (identification.md section 5, approaches A/B/E):
    followed by a local refinement.  Candidates are ordered by the fraction of the
    output-error cost they remove.
 3. **Acceptance.**  An effect is accepted only if |value - absent| / std > 3
-   (least-squares covariance ``s^2 (J^T J)^-1`` with the sample count reduced for the
-   residual autocorrelation, N_eff = N (1 - r1)/(1 + r1)) *and* it lowers the error
-   on held-out windows (every other window is held out while selecting).  Accepted
-   effects are refitted jointly on all fit windows.
+   (standard errors clustered by window, :func:`_effect_std`) *and* it lowers the error
+   on held-out windows (every other window is held out while selecting); among those,
+   a round takes the smallest product of held-out cost ratio and held-out weave-error
+   ratio.  Accepted effects are refitted jointly on all fit windows, and effects with
+   t <= 3 there are pruned.
 4. **"unexplained".**  The measurement-noise floor of each window is estimated from
    second differences (sigma^2 = mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6).  If the
    accepted effects remove less than ``EXPLAINED_MIN`` = 90 % of the nominal cost
