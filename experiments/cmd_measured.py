@@ -211,6 +211,12 @@ def cmd_evaluate(args) -> int:
         s = out["summary"]
         print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
               f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f})")  # fmt: skip
+        for when in ("before", "after"):
+            a = s[f"push_asymmetry_{when}"]
+            print(
+                f"error by push direction {when}: right {a['error_right']:.3f}, left "
+                f"{a['error_left']:.3f} (ratio {a['ratio']:.2f}, p = {a['p_value']:.3g})"
+            )
     return 0
 
 

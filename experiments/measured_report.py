@@ -29,6 +29,25 @@ def sine_fit(y: np.ndarray, u: np.ndarray, freq: float, dt: float = 0.01) -> com
     return complex(cy[0], -cy[1]) / cu_
 
 
+def _asymmetry_lines(s: dict) -> list[str]:
+    """Push-direction asymmetry of the error (ident.discrepancy.push_asymmetry)."""
+    out = []
+    for when in ("before", "after"):
+        a = s.get(f"push_asymmetry_{when}")
+        if a:
+            out.append(
+                f"Error by push direction, {when}: right {a['error_right']:.3f} "
+                f"({a['n_right']} decays), left {a['error_left']:.3f} ({a['n_left']}), "
+                f"ratio {a['ratio']:.2f}, Mann-Whitney p = {a['p_value']:.3g}."
+            )
+    if out:
+        out.append(
+            "(The model is mirror-symmetric; a difference between the directions points to a "
+            "symmetry-breaking term: a sensor zero offset or a constant torque.)"
+        )
+    return out
+
+
 def bode_points(root) -> list[dict]:
     """Measured closed-loop response T_ext -> (roll rate, steer angle), one per Bode file."""
     from dataset.measured import find_logs, load_log
@@ -165,6 +184,7 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
         "", f"Summary: error {s['error_before']:.3f} -> {s['error_after']:.3f} "
         f"(ratio {s['ratio']:.2f}); weave {s['weave_error_before']:.3f} -> "
         f"{s['weave_error_after']:.3f}.", "",
+        *_asymmetry_lines(s), "",
         "![free decays](decays.png)", "", "![weave eigenvalue](eigenvalues.png)", "",
     ]  # fmt: skip
     if bode_rows:

@@ -63,6 +63,7 @@ __all__ = [
     "noise_floor",
     "weave_error",
     "output_residuals",
+    "push_asymmetry",
     "selection_frequencies",
     "spectrum",
     "synthetic_windows",
@@ -641,6 +642,33 @@ def spectrum(e: np.ndarray, dt: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
     return signal.welch(np.asarray(e, float), fs=1 / dt, nperseg=min(256, len(e)))
 
 
+def push_asymmetry(windows: list[Window], errors) -> dict:
+    """Does the error depend on the direction of the push?
+
+    The Whipple model and the steer-into-lean loop are mirror-symmetric: a push to the left
+    is the mirror image of one to the right.  A term that breaks the symmetry (a sensor
+    zero offset, a constant torque, a lateral mass offset) makes the errors of the two
+    directions differ, while symmetric errors (damping, stiffness, inertia, gains, delay)
+    do not.  ``errors``: one number per window (e.g. the mean NRMSE of
+    :func:`window_errors`).  Windows are split by the sign of the measured initial roll rate;
+    returns the counts, the mean error of each side, their ratio (right / left) and the
+    two-sided Mann-Whitney p-value of "same distribution" (nan with fewer than 2 per side).
+    """
+    from scipy.stats import mannwhitneyu
+
+    e = np.asarray(errors, float)
+    if e.shape != (len(windows),):
+        raise ValueError(f"need one error per window ({len(windows)}), got shape {e.shape}")
+    right = np.array([w.state0()[2] > 0 for w in windows])
+    a, b = e[right], e[~right]
+    p = float(mannwhitneyu(a, b).pvalue) if min(a.size, b.size) >= 2 else float("nan")
+    ea = float(a.mean()) if a.size else float("nan")
+    eb = float(b.mean()) if b.size else float("nan")
+    return {"n_right": int(a.size), "n_left": int(b.size), "error_right": ea,
+            "error_left": eb, "ratio": ea / eb if b.size and eb > 0 else float("nan"),
+            "p_value": p}  # fmt: skip
+
+
 # -- eigenvalues from decays ---------------------------------------------------------------
 def decay_eigenvalue(w: Window) -> complex:
     """Weave eigenvalue sigma + i omega fitted to one free decay.
@@ -739,6 +767,8 @@ def evaluate(
     summ = {k: float(np.mean([f[k] for f in files])) for k in keys}
     summ["ratio"] = summ["error_after"] / summ["error_before"]
     summ["weave_ratio"] = summ["weave_error_after"] / max(summ["weave_error_before"], 1e-12)
+    summ["push_asymmetry_before"] = push_asymmetry(windows, e0.mean(axis=1))
+    summ["push_asymmetry_after"] = push_asymmetry(windows, e1.mean(axis=1))
     return {"files": files, "summary": summ}
 
 
