@@ -210,7 +210,8 @@ def cmd_evaluate(args) -> int:
                   f"after {f['error_after']:.3f}")  # fmt: skip
         s = out["summary"]
         print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
-              f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f})")  # fmt: skip
+              f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f}; the "
+              f"measured weave is uncertain by {s['weave_data_rel_std']:.3f})")  # fmt: skip
         for when in ("before", "after"):
             a = s[f"push_asymmetry_{when}"]
             print(

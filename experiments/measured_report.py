@@ -183,7 +183,8 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
           f"{f['weave_error_before']:.3f} | {f['weave_error_after']:.3f} |" for f in ev["files"]],
         "", f"Summary: error {s['error_before']:.3f} -> {s['error_after']:.3f} "
         f"(ratio {s['ratio']:.2f}); weave {s['weave_error_before']:.3f} -> "
-        f"{s['weave_error_after']:.3f}.", "",
+        f"{s['weave_error_after']:.3f} (the measured weave itself is uncertain by "
+        f"{s['weave_data_rel_std']:.3f}, bootstrap over the decays).", "",
         *_asymmetry_lines(s), "",
         "![free decays](decays.png)", "", "![weave eigenvalue](eigenvalues.png)", "",
     ]  # fmt: skip

@@ -62,6 +62,7 @@ __all__ = [
     "joint_fit",
     "noise_floor",
     "weave_error",
+    "weave_uncertainty",
     "output_residuals",
     "push_asymmetry",
     "selection_frequencies",
@@ -734,7 +735,8 @@ def evaluate(
         idx = [i for i, w in enumerate(windows) if w.file == f]
         ws = [windows[i] for i in idx]
         vs = float(np.mean([np.mean(w.v_sensor) for w in ws]))
-        lam_data = _median_complex([decay_eigenvalue(w) for w in ws])
+        lams = [decay_eigenvalue(w) for w in ws]
+        lam_data = _median_complex(lams)
         r0, r1 = nominal.weave(vs, lam_data), augmented.weave(vs, lam_data)
         f0, f1 = (
             _simulated_weave(ws, [s0[i] for i in idx]),
@@ -752,6 +754,7 @@ def evaluate(
                 "error_after_channels": {"phidot": float(e1[idx, 0].mean()),
                                          "delta": float(e1[idx, 1].mean())},
                 "weave_data": lam_data,
+                "weave_data_rel_std": weave_uncertainty(lams),
                 "weave_before": f0,
                 "weave_after": f1,
                 "weave_error_before": abs(f0 - lam_data) / abs(lam_data),
@@ -767,6 +770,7 @@ def evaluate(
     summ = {k: float(np.mean([f[k] for f in files])) for k in keys}
     summ["ratio"] = summ["error_after"] / summ["error_before"]
     summ["weave_ratio"] = summ["weave_error_after"] / max(summ["weave_error_before"], 1e-12)
+    summ["weave_data_rel_std"] = float(np.mean([f["weave_data_rel_std"] for f in files]))
     summ["push_asymmetry_before"] = push_asymmetry(windows, e0.mean(axis=1))
     summ["push_asymmetry_after"] = push_asymmetry(windows, e1.mean(axis=1))
     return {"files": files, "summary": summ}
@@ -800,6 +804,21 @@ def _simulated_weave(windows: list[Window], sims) -> complex:
         [decay_eigenvalue(replace(w, phidot=s["phidot"], delta=s["delta"]))
          for w, s in zip(windows, sims, strict=True)]
     )  # fmt: skip
+
+
+def weave_uncertainty(lams, resamples: int = 2000, seed: int = 0) -> float:
+    """Relative standard error of the measured weave (the median of the per-decay fits
+    ``lams``): rms of |median(resample) - median| / |median| over bootstrap resamples of
+    the decays (fixed seed).  A model equal to the truth would still show a weave error
+    of about this size; nan with fewer than 3 decays."""
+    lams = np.asarray(lams, complex)
+    if lams.size < 3:
+        return float("nan")
+    med = _median_complex(lams)
+    idx = np.random.default_rng(seed).integers(0, lams.size, (resamples, lams.size))
+    res = lams[idx]
+    bs = np.median(res.real, axis=1) + 1j * np.median(res.imag, axis=1)
+    return float(np.sqrt(np.mean(np.abs(bs - med) ** 2)) / abs(med))
 
 
 def _median_complex(lams) -> complex:
