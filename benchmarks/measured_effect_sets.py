@@ -8,7 +8,8 @@ fit) on the decays of the fit speeds and evaluated on the other speeds with the 
 metrics as ``bikeid measured evaluate``.  Any experiment-model effect can be named, also those
 kept out of the library (``tire_twist_stiffness``, ``roll_stiffness``, ...).  ``--per-file``
 instead fits each set to each file alone (the spread of the values across speeds tests
-whether an effect is a constant).
+whether an effect is a constant) and reports the in-sample weave error of that fit against
+the weave's measurement uncertainty (can the set reproduce this speed's weave at all?).
 
     python benchmarks/measured_effect_sets.py --data ../shared/data \\
         --sets "steer_viscous_damping;steer_viscous_damping,steer_stiffness,steer_angle_bias"
@@ -105,6 +106,11 @@ def main(argv=None) -> int:
                 r = fit_set(ws, names, nl)
                 vals = "  ".join(f"{n} {r.values[n]:.3f} +- {r.std[n]:.3f}" for n in names)
                 print(f"  {ws[0].speed:.2f} m/s ({len(ws)} decays): cost {r.cost:.3f}  {vals}")
+                fe = evaluate(ExperimentModel(), r.model, ws, nonlinear=nl)["files"][0]
+                print(f"      in-sample weave error {fe['weave_error_before']:.3f} -> "
+                      f"{fe['weave_error_after']:.3f} (the data resolve the weave to "
+                      f"{fe['weave_data_rel_std']:.3f}); weave data {fe['weave_data']:.2f}, "
+                      f"model {fe['weave_after']:.2f} 1/s")  # fmt: skip
         return 0
     for split in a.splits.split("/"):
         sp = [float(x) for x in split.split(",")]
