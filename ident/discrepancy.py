@@ -770,7 +770,8 @@ def evaluate(
     summ = {k: float(np.mean([f[k] for f in files])) for k in keys}
     summ["ratio"] = summ["error_after"] / summ["error_before"]
     summ["weave_ratio"] = summ["weave_error_after"] / max(summ["weave_error_before"], 1e-12)
-    summ["weave_data_rel_std"] = float(np.mean([f["weave_data_rel_std"] for f in files]))
+    unc = [f["weave_data_rel_std"] for f in files if np.isfinite(f["weave_data_rel_std"])]
+    summ["weave_data_rel_std"] = float(np.mean(unc)) if unc else float("nan")  # files with >= 3
     summ["push_asymmetry_before"] = push_asymmetry(windows, e0.mean(axis=1))
     summ["push_asymmetry_after"] = push_asymmetry(windows, e1.mean(axis=1))
     return {"files": files, "summary": summ}
