@@ -28,10 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from experiments.cmd_measured import evaluate_json, fit_model, load_decays  # noqa: E402
 
 
-def run_split(data: str | None, fit_speeds: list[float], decays: str = "listed") -> dict:
+def run_split(
+    data: str | None, fit_speeds: list[float], decays: str = "listed", weave_weight=0.0
+) -> dict:
     """Fit on ``fit_speeds``, evaluate on every other speed; the row of the table."""
     t0 = time.perf_counter()
-    model = fit_model(load_decays(data, fit_speeds, source=decays))
+    model = fit_model(load_decays(data, fit_speeds, source=decays), weave_weight=weave_weight)
     ev = evaluate_json(model, load_decays(data, exclude=fit_speeds, source=decays))
     s = ev["summary"]
     return {
@@ -59,12 +61,14 @@ def main(argv=None) -> int:
         help="fit-speed sets separated by ';' (each evaluated on the other speeds)",
     )
     ap.add_argument("--decays", choices=("listed", "detected"), default="listed")
+    ap.add_argument("--weave-weight", default="0", help="as for 'bikeid measured fit'")
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args(argv)
     rows = []
     for text in a.splits.split(";"):
         sp = [float(x) for x in text.split(",") if x.strip()]
-        rows.append(run_split(a.data, sp, a.decays))
+        ww = a.weave_weight if a.weave_weight == "auto" else float(a.weave_weight)
+        rows.append(run_split(a.data, sp, a.decays, ww))
         r = rows[-1]
         if not a.json:
             eff = ", ".join(f"{k} {v:.3g}" for k, v in r["effects"].items()) or "-"

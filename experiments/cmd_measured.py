@@ -38,6 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="nonlinear",
         help="nominal plant: nonlinear Whipple (defect-corrected, default) or linear",
     )
+    f.add_argument(
+        "--weave-weight",
+        default="0",
+        metavar="W",
+        help="also fit the measured weave eigenvalue of each speed (>= 3 decays): 'auto' gives "
+        "it the nominal model's output-error cost, a number is the weight, 0 (default) fits "
+        "the decay signals only; see docs/measured.md for when it helps and when it is biased",
+    )
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
@@ -122,7 +130,9 @@ def model_from_json(path: str):
         raise ValueError(f"cannot read model {path}: {exc}") from None
 
 
-def fit_model(windows, max_effects=3, plant: str = "nonlinear", stability: int = 0) -> dict:
+def fit_model(
+    windows, max_effects=3, plant: str = "nonlinear", stability: int = 0, weave_weight=0.0
+) -> dict:
     from ident.discrepancy import identify, selection_frequencies
     from ident.experiment_model import ExperimentModel
 
@@ -134,7 +144,9 @@ def fit_model(windows, max_effects=3, plant: str = "nonlinear", stability: int =
         )
         extra = {"selection_frequency": freq,
                  "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
-    res = identify(ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl)
+    res = identify(
+        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl, weave_weight=weave_weight
+    )
     return {
         "bicycle": "steer-by-wire",
         "plant": plant,
@@ -152,8 +164,16 @@ def cmd_fit(args) -> int:
         raise ValueError("--max-effects must be >= 0")
     if args.stability < 0:
         raise ValueError("--stability must be >= 0 (number of subsamples)")
+    ww = args.weave_weight
+    if ww != "auto":
+        try:
+            ww = float(ww)
+        except ValueError:
+            raise ValueError(
+                f"--weave-weight must be 'auto' or a number >= 0, got {ww!r}"
+            ) from None
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
-    out = fit_model(ws, args.max_effects, args.plant, args.stability)
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
     out["decays"] = args.decays
     atomic_write_text(args.out, dump_json(out) + "\n")
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")

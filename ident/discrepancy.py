@@ -62,7 +62,9 @@ __all__ = [
     "joint_fit",
     "noise_floor",
     "weave_error",
+    "weave_targets",
     "weave_uncertainty",
+    "WeaveTerm",
     "output_residuals",
     "push_asymmetry",
     "selection_frequencies",
@@ -225,12 +227,56 @@ class FitResult:
     cost: float
 
 
+@dataclass(frozen=True)
+class WeaveTerm:
+    """The measured weave eigenvalues as extra data of an output-error fit.
+
+    ``targets``: per speed (mean sensor speed [m/s], measured weave [1/s], its standard
+    error [1/s]) from :func:`weave_targets`; ``weight``: the factor on the residuals
+    (lambda_model - lambda_data) / standard error (real and imaginary parts), lambda_model
+    the loop root nearest to the data (:meth:`ExperimentModel.weave`).
+    """
+
+    weight: float
+    targets: tuple[tuple[float, complex, float], ...]
+
+    def residuals(self, model: ExperimentModel) -> np.ndarray:
+        d = [(model.weave(vs, lam) - lam) / unc for vs, lam, unc in self.targets]
+        return self.weight * np.concatenate([np.real(d), np.imag(d)])
+
+
+def weave_targets(windows: list[Window]) -> tuple[tuple[float, complex, float], ...]:
+    """(mean sensor speed, measured weave, standard error) of each speed with >= 3 decays:
+    the median of :func:`decay_eigenvalue` over the decays and :func:`weave_uncertainty`."""
+    groups: dict[float, list[Window]] = {}
+    for w in windows:
+        if w.kind == "decay":
+            groups.setdefault(round(w.speed, 1), []).append(w)
+    out = []
+    for g in groups.values():
+        if len(g) >= 3:
+            lams = [decay_eigenvalue(w) for w in g]
+            lam = _median_complex(lams)
+            vs = float(np.mean([np.mean(w.v_sensor) for w in g]))
+            out.append((vs, lam, weave_uncertainty(lams) * abs(lam)))
+    return tuple(out)
+
+
 def fit_effects(
-    model: ExperimentModel, windows: list[Window], names: list[str], start: dict | None = None
+    model: ExperimentModel,
+    windows: list[Window],
+    names: list[str],
+    start: dict | None = None,
+    weave: WeaveTerm | None = None,
 ) -> FitResult:
-    """Output-error least squares of the named effects (others kept as in ``model``)."""
+    """Output-error least squares of the named effects (others kept as in ``model``);
+    with ``weave``, the weave-eigenvalue residuals are appended (one more cluster for the
+    standard errors) and ``cost`` includes them."""
+    extra = weave is not None and weave.weight > 0 and bool(weave.targets)
     if not names:
         r = output_residuals(model, windows)
+        if extra:
+            r = np.concatenate([r, weave.residuals(model)])
         return FitResult(model, {}, {}, float(r @ r))
     norms = _norms(windows)
     cands = [LIBRARY[n] if n in LIBRARY else Candidate(n, "additive", 0.1) for n in names]
@@ -247,13 +293,20 @@ def fit_effects(
         )
 
     def fun(x):
-        r = output_residuals(mk(x), windows, norms)  # ~O(1) per sample (normalized)
+        m = mk(x)
+        r = output_residuals(m, windows, norms)  # ~O(1) per sample (normalized)
+        if extra:
+            try:
+                r = np.concatenate([r, weave.residuals(m)])
+            except ValueError:  # a trial value the loop roots cannot take
+                r = np.concatenate([r, np.full(2 * len(weave.targets), 1e3)])
         # a trial value that makes the loop diverge must not overflow the Jacobian
         return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
 
     sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
-    std = _effect_std(sol.jac, r, [2 * w.n for w in windows])
+    sizes = [2 * w.n for w in windows] + ([2 * len(weave.targets)] if extra else [])
+    std = _effect_std(sol.jac, r, sizes)
     vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x, strict=True)}
     stds = {c.name: c.scale * si for c, si in zip(cands, std, strict=True)}
     return FitResult(mk(sol.x), vals, stds, float(r @ r))
@@ -265,17 +318,19 @@ def joint_fit(
     names: list[str],
     start: dict | None = None,
     nonlinear: bool = False,
+    weave: WeaveTerm | None = None,
 ) -> FitResult:
-    """Fit the named effects jointly on all windows; with ``nonlinear`` the defect
+    """Fit the named effects jointly on all windows (and ``weave``, see
+    :func:`fit_effects`); with ``nonlinear`` the defect
     correction is attached at the nominal first and re-attached at the fitted model twice
     (each re-attachment moves the linearization point of the correction to the fit).
     Leaves the windows corrected at the returned model."""
     if nonlinear and all(w.correction is None for w in windows):
         _attach(windows, model, True)
-    res = fit_effects(model, windows, names, start)
+    res = fit_effects(model, windows, names, start, weave)
     for _ in range(2 if nonlinear and names else 0):
         _attach(windows, res.model, True)
-        res = fit_effects(model, windows, names, res.values)
+        res = fit_effects(model, windows, names, res.values, weave)
     return res
 
 
@@ -334,6 +389,7 @@ class Identification:
     explained: float
     eq_ranking: list[dict] = field(default_factory=list)
     rounds: list[dict] = field(default_factory=list)  # forward-selection log, per round
+    weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
 
     def as_dict(self) -> dict:
         return {
@@ -346,6 +402,7 @@ class Identification:
             "cost_final": self.cost_final,
             "cost_noise_floor": self.cost_floor,
             "explained_fraction": self.explained,
+            "weave_weight": self.weave_weight,
         }
 
 
@@ -363,8 +420,14 @@ def identify(
     max_effects: int = 3,
     min_gain: float = 0.02,
     nonlinear: bool = False,
+    weave_weight: float | str = 0.0,
 ) -> Identification:
     """Greedy forward selection of library effects by output error (module docstring).
+
+    ``weave_weight``: every fit also matches the measured weave eigenvalue of each speed
+    with >= 3 decays (:class:`WeaveTerm`, targets from the windows being fitted).  "auto"
+    weighs it so that, at the nominal model, it carries as much cost as the decay signals
+    (w^2 chi2_weave = output-error cost); 0 fits the decay signals only.
 
     ``nonlinear``: the model is the nonlinear plant through the per-window defect
     correction (:func:`ident.experiment_model.attach_nonlinear_correction`), re-attached
@@ -383,8 +446,17 @@ def identify(
         raise ValueError("identification needs at least 2 windows (one is held out)")
     fit_w, val_w = windows[0::2], windows[1::2]
     _attach(windows, model, nonlinear)
-    cost0 = fit_effects(model, windows, []).cost
+    cost0 = fit_effects(model, windows, []).cost  # decay signals only (for "explained")
     floor = noise_floor(windows)
+    w_all = weave_targets(windows)
+    if weave_weight == "auto":
+        chi0 = float(np.sum(WeaveTerm(1.0, w_all).residuals(model) ** 2)) if w_all else 0.0
+        weave_weight = math.sqrt(cost0 / chi0) if chi0 > 0 else 0.0
+    weave_weight = float(weave_weight)
+    if not (weave_weight >= 0 and math.isfinite(weave_weight)):
+        raise ValueError(f"weave_weight must be 'auto' or a finite number >= 0, got {weave_weight}")
+    wv_fit = WeaveTerm(weave_weight, weave_targets(fit_w)) if weave_weight > 0 else None
+    wv_all = WeaveTerm(weave_weight, w_all) if weave_weight > 0 else None
     accepted: list[str] = []
     cur = model
     cur_val = fit_effects(cur, val_w, []).cost
@@ -394,7 +466,7 @@ def identify(
     rounds: list[dict] = []
     for _round in range(max_effects):
         trials = []
-        base_cost = fit_effects(cur, fit_w, []).cost
+        base_cost = fit_effects(cur, fit_w, [], weave=wv_fit).cost
         for n in names:
             if n in accepted:
                 continue
@@ -402,7 +474,7 @@ def identify(
             start = {}
             if cand.kind == "structural":
                 start[n] = _scan_start(cur, fit_w, cand, accepted, {})
-            res = fit_effects(cur, fit_w, accepted + [n], start)
+            res = fit_effects(cur, fit_w, accepted + [n], start, wv_fit)
             v, sd = res.values[n], res.std[n]
             t = abs(v - cand.absent) / sd if sd > 0 else np.inf
             gain = (base_cost - res.cost) / max(base_cost, 1e-300)
@@ -412,7 +484,7 @@ def identify(
             top = []
             for _gain, n, res, _est in trials[:3]:
                 _attach(windows, res.model, True)
-                res = fit_effects(cur, fit_w, accepted + [n], res.values)
+                res = fit_effects(cur, fit_w, accepted + [n], res.values, wv_fit)
                 v, sd = res.values[n], res.std[n]
                 t = abs(v - LIBRARY[n].absent) / sd if sd > 0 else np.inf
                 gain = (base_cost - res.cost) / max(base_cost, 1e-300)
@@ -445,7 +517,7 @@ def identify(
         _attach(windows, cur, nonlinear)
         if not passing:
             break
-    final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear)
+    final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all)
 
     def tval(n):
         sd = final.std[n]
@@ -453,21 +525,23 @@ def identify(
 
     while accepted and min(tval(n) for n in accepted) <= T_MIN:  # backward pruning
         accepted.remove(min(accepted, key=tval))
-        final = fit_effects(model, windows, accepted, final.values)
+        final = fit_effects(model, windows, accepted, final.values, wv_all)
         _attach(windows, final.model, nonlinear and bool(accepted))
         if nonlinear and not accepted:
             _attach(windows, model, True)
-    contrib = {}
+    contrib = {}  # increase of the fitted cost (signals + weave term) without the effect
     for n in accepted:
-        r = output_residuals(final.model.with_effects(**{n: LIBRARY[n].absent}), windows)
-        contrib[n] = float(r @ r) - final.cost
+        without = final.model.with_effects(**{n: LIBRARY[n].absent})
+        contrib[n] = fit_effects(without, windows, [], weave=wv_all).cost - final.cost
     accepted.sort(key=lambda n: -contrib[n])
+    r_sig = output_residuals(final.model, windows)
+    cost_sig = float(r_sig @ r_sig)  # decay signals only, as cost0 and the floor
     effects = []
     for n in accepted:
         cand = LIBRARY[n]
         v, sd = final.values[n], final.std[n]
         effects.append(EffectEstimate(n, v, sd, cand.unit, tval(n), accepted=True))
-    explained = (cost0 - final.cost) / max(cost0 - floor, 1e-12 * cost0)
+    explained = (cost0 - cost_sig) / max(cost0 - floor, 1e-12 * cost0)
     verdict = [e.name for e in effects]
     if explained < EXPLAINED_MIN or not effects:
         verdict = ["unexplained"] + verdict
@@ -475,8 +549,8 @@ def identify(
         e.explained = float(explained)
     return Identification(
         model=final.model, effects=effects, ranking=ranking, verdict=verdict,
-        cost_nominal=cost0, cost_final=final.cost, cost_floor=floor, explained=float(explained),
-        eq_ranking=err_ranking(model, windows), rounds=rounds,
+        cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor, explained=float(explained),
+        eq_ranking=err_ranking(model, windows), rounds=rounds, weave_weight=weave_weight,
     )  # fmt: skip
 
 
