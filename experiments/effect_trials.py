@@ -317,11 +317,14 @@ def decay_windows(
     return out
 
 
-def run_trial(spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True) -> dict:
+def run_trial(
+    spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True, weave_weight=0.0
+) -> dict:
     """Simulate, identify (not told), evaluate on held-out speeds; returns a JSON-able dict.
 
     ``nonlinear``: the pipeline's nominal model is the nonlinear Whipple model
     (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
+    ``weave_weight``: as for :func:`ident.discrepancy.identify` (default off).
     """
     from ident.discrepancy import evaluate, identify
     from ident.experiment_model import ExperimentModel
@@ -332,7 +335,9 @@ def run_trial(spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True) -> 
     fit = decay_windows(fx, spec.fit_speeds, FIT_PER_SPEED, spec.noise, spec.seed, "fit")
     held = decay_windows(fx, spec.eval_speeds, EVAL_PER_SPEED, spec.noise, spec.seed + 1, "eval")
     nominal = ExperimentModel()
-    res = identify(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
+    res = identify(
+        nominal, fit, max_effects=max_effects, nonlinear=nonlinear, weave_weight=weave_weight
+    )
     ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
     first = res.verdict[0]
     est = next((e for e in res.effects if e.name == spec.effect), None)
@@ -432,6 +437,7 @@ def run_trials(
     effects: tuple[str, ...] | None = None,
     nonlinear: bool = True,
     progress=None,
+    weave_weight=0.0,
 ) -> dict:
     """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
 
@@ -443,7 +449,7 @@ def run_trials(
     t0 = time.perf_counter()
     rows = []
     if processes == 1 or len(specs) == 1:
-        results = (run_trial(s, nonlinear=nonlinear) for s in specs)
+        results = (run_trial(s, nonlinear=nonlinear, weave_weight=weave_weight) for s in specs)
         for r in results:
             rows.append(r)
             if progress:
@@ -452,7 +458,8 @@ def run_trials(
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=int(processes)) as pool:
-            for r in pool.map(partial(run_trial, nonlinear=nonlinear), specs):
+            job = partial(run_trial, nonlinear=nonlinear, weave_weight=weave_weight)
+            for r in pool.map(job, specs):
                 rows.append(r)
                 if progress:
                     progress(r)
@@ -461,4 +468,5 @@ def run_trials(
     summ["seed"] = int(seed)
     summ["processes"] = int(processes)
     summ["nominal_plant"] = "nonlinear" if nonlinear else "linear"
+    summ["weave_weight"] = weave_weight
     return {"trials": rows, "summary": summ}
