@@ -29,7 +29,7 @@ def main() -> None:
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--log", help="append each finished trial to this JSON-lines file")
     ap.add_argument("--resume", help="only summarize this JSON-lines log")
-    ap.add_argument("--weave-weight", default="0", help="as for 'bikeid measured fit'")
+    ap.add_argument("--weave-weight", default="auto", help="as for 'bikeid measured fit'")
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"Python {platform.python_version()}, load {os.getloadavg()[0]:.1f}")  # fmt: skip

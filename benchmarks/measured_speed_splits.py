@@ -29,7 +29,7 @@ from experiments.cmd_measured import evaluate_json, fit_model, load_decays  # no
 
 
 def run_split(
-    data: str | None, fit_speeds: list[float], decays: str = "listed", weave_weight=0.0
+    data: str | None, fit_speeds: list[float], decays: str = "listed", weave_weight="auto"
 ) -> dict:
     """Fit on ``fit_speeds``, evaluate on every other speed; the row of the table."""
     t0 = time.perf_counter()
@@ -61,7 +61,7 @@ def main(argv=None) -> int:
         help="fit-speed sets separated by ';' (each evaluated on the other speeds)",
     )
     ap.add_argument("--decays", choices=("listed", "detected"), default="listed")
-    ap.add_argument("--weave-weight", default="0", help="as for 'bikeid measured fit'")
+    ap.add_argument("--weave-weight", default="auto", help="as for 'bikeid measured fit'")
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args(argv)
     rows = []

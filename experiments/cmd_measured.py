@@ -40,11 +40,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--weave-weight",
-        default="0",
+        default="auto",
         metavar="W",
-        help="also fit the measured weave eigenvalue of each speed (>= 3 decays): 'auto' gives "
-        "it the nominal model's output-error cost, a number is the weight, 0 (default) fits "
-        "the decay signals only; see docs/measured.md for when it helps and when it is biased",
+        help="weight of the measured weave eigenvalue of each speed (>= 3 decays) in every "
+        "fit: 'auto' (default) gives it the nominal model's output-error cost, a number is "
+        "the weight, 0 fits the decay signals only (docs/measured.md)",
     )
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
@@ -131,7 +131,7 @@ def model_from_json(path: str):
 
 
 def fit_model(
-    windows, max_effects=3, plant: str = "nonlinear", stability: int = 0, weave_weight=0.0
+    windows, max_effects=3, plant: str = "nonlinear", stability: int = 0, weave_weight="auto"
 ) -> dict:
     from ident.discrepancy import identify, selection_frequencies
     from ident.experiment_model import ExperimentModel

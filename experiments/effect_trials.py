@@ -318,13 +318,13 @@ def decay_windows(
 
 
 def run_trial(
-    spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True, weave_weight=0.0
+    spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True, weave_weight="auto"
 ) -> dict:
     """Simulate, identify (not told), evaluate on held-out speeds; returns a JSON-able dict.
 
     ``nonlinear``: the pipeline's nominal model is the nonlinear Whipple model
     (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
-    ``weave_weight``: as for :func:`ident.discrepancy.identify` (default off).
+    ``weave_weight``: as for :func:`ident.discrepancy.identify` (default "auto").
     """
     from ident.discrepancy import evaluate, identify
     from ident.experiment_model import ExperimentModel
@@ -437,7 +437,7 @@ def run_trials(
     effects: tuple[str, ...] | None = None,
     nonlinear: bool = True,
     progress=None,
-    weave_weight=0.0,
+    weave_weight="auto",
 ) -> dict:
     """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
 

@@ -231,34 +231,57 @@ class FitResult:
 class WeaveTerm:
     """The measured weave eigenvalues as extra data of an output-error fit.
 
-    ``targets``: per speed (mean sensor speed [m/s], measured weave [1/s], its standard
-    error [1/s]) from :func:`weave_targets`; ``weight``: the factor on the residuals
-    (lambda_model - lambda_data) / standard error (real and imaginary parts), lambda_model
-    the loop root nearest to the data (:meth:`ExperimentModel.weave`).
+    ``targets``: per speed (speed key, mean sensor speed [m/s], measured weave [1/s], its
+    standard error [1/s]) from :func:`weave_targets`; ``weight``: the factor on the
+    residuals (lambda_model + offset - lambda_data) / standard error (real and imaginary
+    parts), lambda_model the loop root nearest to the data (:meth:`ExperimentModel.weave`).
+    ``offsets`` (see :meth:`at`) carry the difference between the estimator used on the data
+    (damped-oscillation fit of nonlinear decays) and the linear loop root.
     """
 
     weight: float
-    targets: tuple[tuple[float, complex, float], ...]
+    targets: tuple[tuple[float, float, complex, float], ...]
+    offsets: tuple[complex, ...] = ()
 
     def residuals(self, model: ExperimentModel) -> np.ndarray:
-        d = [(model.weave(vs, lam) - lam) / unc for vs, lam, unc in self.targets]
+        off = self.offsets or (0j,) * len(self.targets)
+        d = [(model.weave(vs, lam) + o - lam) / unc
+             for (_k, vs, lam, unc), o in zip(self.targets, off, strict=True)]  # fmt: skip
         return self.weight * np.concatenate([np.real(d), np.imag(d)])
 
+    def at(self, model: ExperimentModel, windows: list[Window]) -> WeaveTerm:
+        """Offsets at ``model``: per speed, the median decay fit of the model's simulated
+        decays (windows corrected at ``model`` when the plant is nonlinear) minus the loop
+        root, so that the term compares like with like at ``model`` and to first order near
+        it (the defect correction of the signals, applied to the eigenvalue estimator)."""
+        sims = model.simulate(windows)
+        off = []
+        for key, vs, lam, _unc in self.targets:
+            idx = [i for i, w in enumerate(windows) if w.kind == "decay" and _key(w) == key]
+            fitted = _simulated_weave([windows[i] for i in idx], [sims[i] for i in idx])
+            off.append(fitted - model.weave(vs, lam))
+        return replace(self, offsets=tuple(off))
 
-def weave_targets(windows: list[Window]) -> tuple[tuple[float, complex, float], ...]:
-    """(mean sensor speed, measured weave, standard error) of each speed with >= 3 decays:
-    the median of :func:`decay_eigenvalue` over the decays and :func:`weave_uncertainty`."""
+
+def _key(w: Window) -> float:
+    return round(w.speed, 1)
+
+
+def weave_targets(windows: list[Window]) -> tuple[tuple[float, float, complex, float], ...]:
+    """(speed key, mean sensor speed, measured weave, standard error) of each speed with
+    >= 3 decays: the median of :func:`decay_eigenvalue` over the decays and
+    :func:`weave_uncertainty`."""
     groups: dict[float, list[Window]] = {}
     for w in windows:
         if w.kind == "decay":
-            groups.setdefault(round(w.speed, 1), []).append(w)
+            groups.setdefault(_key(w), []).append(w)
     out = []
-    for g in groups.values():
+    for key, g in groups.items():
         if len(g) >= 3:
             lams = [decay_eigenvalue(w) for w in g]
             lam = _median_complex(lams)
             vs = float(np.mean([np.mean(w.v_sensor) for w in g]))
-            out.append((vs, lam, weave_uncertainty(lams) * abs(lam)))
+            out.append((key, vs, lam, weave_uncertainty(lams) * abs(lam)))
     return tuple(out)
 
 
@@ -420,14 +443,15 @@ def identify(
     max_effects: int = 3,
     min_gain: float = 0.02,
     nonlinear: bool = False,
-    weave_weight: float | str = 0.0,
+    weave_weight: float | str = "auto",
 ) -> Identification:
     """Greedy forward selection of library effects by output error (module docstring).
 
     ``weave_weight``: every fit also matches the measured weave eigenvalue of each speed
-    with >= 3 decays (:class:`WeaveTerm`, targets from the windows being fitted).  "auto"
-    weighs it so that, at the nominal model, it carries as much cost as the decay signals
-    (w^2 chi2_weave = output-error cost); 0 fits the decay signals only.
+    with >= 3 decays (:class:`WeaveTerm`, targets from the windows being fitted, offsets
+    for the estimator bias re-taken at the current model with the defect correction).
+    "auto" (default) weighs it so that, at the nominal model, it carries as much cost as
+    the decay signals (w^2 chi2_weave = output-error cost); 0 fits the decay signals only.
 
     ``nonlinear``: the model is the nonlinear plant through the per-window defect
     correction (:func:`ident.experiment_model.attach_nonlinear_correction`), re-attached
@@ -450,13 +474,16 @@ def identify(
     floor = noise_floor(windows)
     w_all = weave_targets(windows)
     if weave_weight == "auto":
-        chi0 = float(np.sum(WeaveTerm(1.0, w_all).residuals(model) ** 2)) if w_all else 0.0
+        unit = WeaveTerm(1.0, w_all).at(model, windows) if w_all else None
+        chi0 = float(np.sum(unit.residuals(model) ** 2)) if unit else 0.0
         weave_weight = math.sqrt(cost0 / chi0) if chi0 > 0 else 0.0
     weave_weight = float(weave_weight)
     if not (weave_weight >= 0 and math.isfinite(weave_weight)):
         raise ValueError(f"weave_weight must be 'auto' or a finite number >= 0, got {weave_weight}")
-    wv_fit = WeaveTerm(weave_weight, weave_targets(fit_w)) if weave_weight > 0 else None
-    wv_all = WeaveTerm(weave_weight, w_all) if weave_weight > 0 else None
+    wv_fit = (
+        WeaveTerm(weave_weight, weave_targets(fit_w)).at(model, fit_w) if weave_weight > 0 else None
+    )
+    wv_all = WeaveTerm(weave_weight, w_all).at(model, windows) if weave_weight > 0 else None
     accepted: list[str] = []
     cur = model
     cur_val = fit_effects(cur, val_w, []).cost
@@ -484,7 +511,8 @@ def identify(
             top = []
             for _gain, n, res, _est in trials[:3]:
                 _attach(windows, res.model, True)
-                res = fit_effects(cur, fit_w, accepted + [n], res.values, wv_fit)
+                wv_n = wv_fit.at(res.model, fit_w) if wv_fit else None
+                res = fit_effects(cur, fit_w, accepted + [n], res.values, wv_n)
                 v, sd = res.values[n], res.std[n]
                 t = abs(v - LIBRARY[n].absent) / sd if sd > 0 else np.inf
                 gain = (base_cost - res.cost) / max(base_cost, 1e-300)
@@ -515,6 +543,8 @@ def identify(
             cur = res.model
         rounds.append({"accepted": n if passing else None, "candidates": log})
         _attach(windows, cur, nonlinear)
+        if wv_fit:
+            wv_fit, wv_all = wv_fit.at(cur, fit_w), wv_all.at(cur, windows)
         if not passing:
             break
     final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all)
