@@ -203,11 +203,10 @@ def test_real_logs_sign_and_controller():
 @pytest.mark.slow
 def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
     """Goal of the brief on real data: fit 2.5 + 4.5 m/s (nonlinear nominal, the
-    default), held-out 1.5 + 3.5 m/s decay error at least halves (measured 0.748 -> 0.314,
-    docs/measured.md); the JSON carries the documented schema.  The weave goal (halving)
-    is not met on this split (0.141 -> 0.076, ratio 0.54): asserted is that the weave
-    error of the held-out decays drops (it rose to 0.269 before steer_stiffness and the
-    weave-aware selection)."""
+    default, with the weave term), held-out 1.5 + 3.5 m/s decay error and weave error
+    both at least halve (measured 0.748 -> 0.318 and 0.141 -> 0.028, docs/measured.md);
+    the JSON carries the documented schema.  (The reverse split, fit 1.5 + 3.5, does not
+    meet the goal: 0.58 / 0.35; docs/measured.md.)"""
     import json
 
     from experiments.cli import main
@@ -225,7 +224,7 @@ def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
                 "weave_error_after"} <= set(f) for f in out["files"])  # fmt: skip
     assert {round(f["speed"], 1) for f in out["files"]} == {1.5, 3.5}
     assert out["summary"]["error_after"] <= 0.5 * out["summary"]["error_before"]
-    assert out["summary"]["weave_error_after"] < out["summary"]["weave_error_before"]
+    assert out["summary"]["weave_error_after"] <= 0.5 * out["summary"]["weave_error_before"]
 
 
 @needs_data
@@ -234,7 +233,7 @@ def test_report_bode_runs_are_an_independent_check(tmp_path):
     """``bikeid measured report``: a model fitted on the 2.5 + 4.5 m/s free decays predicts the
     4 m/s Bode runs (handlebar torque sweeps, never used in the fit: independent data) better
     than the nominal model: median relative complex error of T_ext -> (roll rate, steer)
-    measured 0.61 -> 0.38, better in 12 of 14 files.  Asserted: the median drops and more than
+    measured 0.61 -> 0.45, better in 13 of 14 files.  Asserted: the median drops and more than
     half of the files improve (a model that only fitted the decays' quirks would not)."""
     import json
 
