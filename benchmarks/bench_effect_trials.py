@@ -19,6 +19,7 @@ import platform
 import time
 
 from experiments.cliutil import to_jsonable
+from experiments.cmd_measured import parse_weave_weight
 from experiments.effect_trials import format_summary, run_trials, summarize
 
 
@@ -29,7 +30,12 @@ def main() -> None:
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--log", help="append each finished trial to this JSON-lines file")
     ap.add_argument("--resume", help="only summarize this JSON-lines log")
-    ap.add_argument("--weave-weight", default="auto", help="as for 'bikeid measured fit'")
+    ap.add_argument(
+        "--weave-weight",
+        default="auto",
+        type=parse_weave_weight,
+        help="as for 'bikeid measured fit'",
+    )
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"Python {platform.python_version()}, load {os.getloadavg()[0]:.1f}")  # fmt: skip
@@ -50,8 +56,9 @@ def main() -> None:
                 fh.write(json.dumps(to_jsonable(r)) + "\n")
 
     t0 = time.perf_counter()
-    ww = args.weave_weight if args.weave_weight == "auto" else float(args.weave_weight)
-    out = run_trials(args.n, args.seed, args.processes, progress=progress, weave_weight=ww)
+    out = run_trials(
+        args.n, args.seed, args.processes, progress=progress, weave_weight=args.weave_weight
+    )
     print(f"{args.n} trials in {time.perf_counter() - t0:.0f} s wall")
     print(format_summary(out["summary"]))
 

@@ -25,7 +25,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from experiments.cmd_measured import evaluate_json, fit_model, load_decays  # noqa: E402
+from experiments.cmd_measured import (  # noqa: E402
+    evaluate_json,
+    fit_model,
+    load_decays,
+    parse_weave_weight,
+)
 
 
 def run_split(
@@ -61,14 +66,18 @@ def main(argv=None) -> int:
         help="fit-speed sets separated by ';' (each evaluated on the other speeds)",
     )
     ap.add_argument("--decays", choices=("listed", "detected"), default="listed")
-    ap.add_argument("--weave-weight", default="auto", help="as for 'bikeid measured fit'")
+    ap.add_argument(
+        "--weave-weight",
+        default="auto",
+        type=parse_weave_weight,
+        help="as for 'bikeid measured fit'",
+    )
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args(argv)
     rows = []
     for text in a.splits.split(";"):
         sp = [float(x) for x in text.split(",") if x.strip()]
-        ww = a.weave_weight if a.weave_weight == "auto" else float(a.weave_weight)
-        rows.append(run_split(a.data, sp, a.decays, ww))
+        rows.append(run_split(a.data, sp, a.decays, a.weave_weight))
         r = rows[-1]
         if not a.json:
             eff = ", ".join(f"{k} {v:.3g}" for k, v in r["effects"].items()) or "-"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from .cliutil import atomic_write_text, dump_json, parse_range, to_jsonable
@@ -86,6 +87,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.set_defaults(func=lambda a: d.print_help() or 2)
 
 
+def parse_weave_weight(text: str) -> float | str:
+    """``--weave-weight``: 'auto' or a finite number >= 0 (a clear error otherwise)."""
+    if text == "auto":
+        return text
+    try:
+        w = float(text)
+    except ValueError:
+        w = float("nan")
+    if not (math.isfinite(w) and w >= 0):
+        raise ValueError(f"--weave-weight must be 'auto' or a number >= 0, got {text!r}")
+    return w
+
+
 def _speeds(text: str | None):
     return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
 
@@ -164,14 +178,7 @@ def cmd_fit(args) -> int:
         raise ValueError("--max-effects must be >= 0")
     if args.stability < 0:
         raise ValueError("--stability must be >= 0 (number of subsamples)")
-    ww = args.weave_weight
-    if ww != "auto":
-        try:
-            ww = float(ww)
-        except ValueError:
-            raise ValueError(
-                f"--weave-weight must be 'auto' or a number >= 0, got {ww!r}"
-            ) from None
+    ww = parse_weave_weight(args.weave_weight)
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
     out["decays"] = args.decays

@@ -267,21 +267,25 @@ def _key(w: Window) -> float:
     return round(w.speed, 1)
 
 
-def weave_targets(windows: list[Window]) -> tuple[tuple[float, float, complex, float], ...]:
+def weave_targets(
+    windows: list[Window], lams: list[complex] | None = None
+) -> tuple[tuple[float, float, complex, float], ...]:
     """(speed key, mean sensor speed, measured weave, standard error) of each speed with
     >= 3 decays: the median of :func:`decay_eigenvalue` over the decays and
-    :func:`weave_uncertainty`."""
-    groups: dict[float, list[Window]] = {}
-    for w in windows:
+    :func:`weave_uncertainty`.  ``lams``: the windows' decay fits if already computed."""
+    if lams is None:
+        lams = [decay_eigenvalue(w) if w.kind == "decay" else 0j for w in windows]
+    groups: dict[float, list[int]] = {}
+    for i, w in enumerate(windows):
         if w.kind == "decay":
-            groups.setdefault(_key(w), []).append(w)
+            groups.setdefault(_key(w), []).append(i)
     out = []
-    for key, g in groups.items():
-        if len(g) >= 3:
-            lams = [decay_eigenvalue(w) for w in g]
-            lam = _median_complex(lams)
-            vs = float(np.mean([np.mean(w.v_sensor) for w in g]))
-            out.append((key, vs, lam, weave_uncertainty(lams) * abs(lam)))
+    for key, idx in groups.items():
+        if len(idx) >= 3:
+            g = [lams[i] for i in idx]
+            lam = _median_complex(g)
+            vs = float(np.mean([np.mean(windows[i].v_sensor) for i in idx]))
+            out.append((key, vs, lam, weave_uncertainty(g) * abs(lam)))
     return tuple(out)
 
 
@@ -472,22 +476,23 @@ def identify(
     _attach(windows, model, nonlinear)
     cost0 = fit_effects(model, windows, []).cost  # decay signals only (for "explained")
     floor = noise_floor(windows)
-    w_all = weave_targets(windows)
+    lam_all = [decay_eigenvalue(w) for w in windows]  # measured weave of each decay
+    lam_val = lam_all[1::2]
+    unit = WeaveTerm(1.0, weave_targets(windows, lam_all))
     if weave_weight == "auto":
-        unit = WeaveTerm(1.0, w_all).at(model, windows) if w_all else None
-        chi0 = float(np.sum(unit.residuals(model) ** 2)) if unit else 0.0
-        weave_weight = math.sqrt(cost0 / chi0) if chi0 > 0 else 0.0
+        unit = unit.at(model, windows) if unit.targets else unit
+        chi0 = float(np.sum(unit.residuals(model) ** 2)) if unit.targets else 0.0
+        weave_weight = math.sqrt(cost0 / chi0) if chi0 > 0 else 0.0  # no weave data: off
     weave_weight = float(weave_weight)
     if not (weave_weight >= 0 and math.isfinite(weave_weight)):
         raise ValueError(f"weave_weight must be 'auto' or a finite number >= 0, got {weave_weight}")
-    wv_fit = (
-        WeaveTerm(weave_weight, weave_targets(fit_w)).at(model, fit_w) if weave_weight > 0 else None
-    )
-    wv_all = WeaveTerm(weave_weight, w_all).at(model, windows) if weave_weight > 0 else None
+    wv_fit = wv_all = None
+    if weave_weight > 0:
+        wv_fit = WeaveTerm(weave_weight, weave_targets(fit_w, lam_all[0::2])).at(model, fit_w)
+        wv_all = replace(unit, weight=weave_weight)  # offsets taken at the final model below
     accepted: list[str] = []
     cur = model
     cur_val = fit_effects(cur, val_w, []).cost
-    lam_val = [decay_eigenvalue(w) for w in val_w]  # measured weave of each held-out decay
     cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
     ranking: list[EffectEstimate] = []
     rounds: list[dict] = []
@@ -543,10 +548,12 @@ def identify(
             cur = res.model
         rounds.append({"accepted": n if passing else None, "candidates": log})
         _attach(windows, cur, nonlinear)
-        if wv_fit:
-            wv_fit, wv_all = wv_fit.at(cur, fit_w), wv_all.at(cur, windows)
         if not passing:
             break
+        if wv_fit:  # the estimator offsets follow the current model, like the correction
+            wv_fit = wv_fit.at(cur, fit_w)
+    if wv_all:
+        wv_all = wv_all.at(cur, windows)
     final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all)
 
     def tval(n):
