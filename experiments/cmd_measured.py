@@ -184,6 +184,9 @@ def cmd_fit(args) -> int:
     out["decays"] = args.decays
     atomic_write_text(args.out, dump_json(out) + "\n")
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    w = out["identification"]["weave_weight"]
+    if ww == "auto" and w == 0:
+        print("weave term off: no fit speed has >= 3 decays with a measurable weave")
     if "selection_frequency" in out:
         freq = ", ".join(f"{k} {v:.2f}" for k, v in out["selection_frequency"].items())
         print(f"selected in {args.stability} subsamples (fraction): {freq}")
