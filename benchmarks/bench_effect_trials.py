@@ -18,9 +18,9 @@ import os
 import platform
 import time
 
-from experiments.cliutil import to_jsonable
-from experiments.cmd_measured import parse_weave_weight
-from experiments.effect_trials import format_summary, run_trials, summarize
+from bikeid.experiments.cliutil import to_jsonable
+from bikeid.experiments.cmd_measured import parse_weave_weight
+from bikeid.experiments.effect_trials import format_summary, run_trials, summarize
 
 
 def main() -> None:

@@ -25,9 +25,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from ident import pem  # noqa: E402
-from sim.linear_sim import simulate  # noqa: E402
-from sim.parameters import benchmark  # noqa: E402
+from bikeid.ident import pem  # noqa: E402
+from bikeid.sim.linear_sim import simulate  # noqa: E402
+from bikeid.sim.parameters import benchmark  # noqa: E402
 
 KW = dict(dither=1.0, dither_hold=5, disturbance=0.5, angle_noise=1e-3, rate_noise=1e-2)
 

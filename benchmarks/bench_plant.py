@@ -43,9 +43,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sim.integrate import simulate, simulate_reference  # noqa: E402
-from sim.nonlinear import WhippleBicycle, rhs  # noqa: E402
-from sim.parameters import benchmark  # noqa: E402
+from bikeid.sim.integrate import simulate, simulate_reference  # noqa: E402
+from bikeid.sim.nonlinear import WhippleBicycle, rhs  # noqa: E402
+from bikeid.sim.parameters import benchmark  # noqa: E402
 
 V, K = 5.0, 10.0
 

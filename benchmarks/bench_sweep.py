@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.sweep import SweepSpec, Task, run_sweep, simulate_task
+from bikeid.experiments.sweep import SweepSpec, Task, run_sweep, simulate_task
 
 
 def main() -> None:

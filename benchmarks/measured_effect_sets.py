@@ -26,9 +26,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from experiments.cmd_measured import load_decays  # noqa: E402
-from ident.discrepancy import LIBRARY, evaluate, joint_fit  # noqa: E402
-from ident.experiment_model import EFFECT_DEFAULTS, EFFECT_UNITS, ExperimentModel  # noqa: E402
+from bikeid.experiments.cmd_measured import load_decays  # noqa: E402
+from bikeid.ident.discrepancy import LIBRARY, evaluate, joint_fit  # noqa: E402
+from bikeid.ident.experiment_model import EFFECT_DEFAULTS, EFFECT_UNITS, ExperimentModel  # noqa: E402
 
 
 def fit_set(windows, names, nonlinear=True):
@@ -46,7 +46,7 @@ def lean_check(windows, data: str) -> None:
     angle, lean angle, lean rate and steer command."""
     from scipy.integrate import cumulative_trapezoid
 
-    from dataset.measured import data_dir, iter_decays
+    from bikeid.dataset.measured import data_dir, iter_decays
 
     rows = []
     for w in windows:

@@ -39,8 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from measured_effect_sets import fit_set  # noqa: E402
 
-from experiments.cmd_measured import evaluate_json, fit_model, load_decays  # noqa: E402
-from ident.experiment_model import attach_nonlinear_correction  # noqa: E402
+from bikeid.experiments.cmd_measured import evaluate_json, fit_model, load_decays  # noqa: E402
+from bikeid.ident.experiment_model import attach_nonlinear_correction  # noqa: E402
 
 CHANNELS = ("phi", "delta", "phidot", "deltadot")
 SPLITS = ((2.5, 4.5), (1.5, 3.5))

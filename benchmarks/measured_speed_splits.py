@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from experiments.cmd_measured import (  # noqa: E402
+from bikeid.experiments.cmd_measured import (  # noqa: E402
     evaluate_json,
     fit_model,
     load_decays,

@@ -31,9 +31,9 @@ from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from experiments.cmd_measured import evaluate_json, load_decays  # noqa: E402
-from ident.discrepancy import WeaveTerm, joint_fit, weave_targets  # noqa: E402
-from ident.experiment_model import EFFECT_DEFAULTS, ExperimentModel  # noqa: E402
+from bikeid.experiments.cmd_measured import evaluate_json, load_decays  # noqa: E402
+from bikeid.ident.discrepancy import WeaveTerm, joint_fit, weave_targets  # noqa: E402
+from bikeid.ident.experiment_model import EFFECT_DEFAULTS, ExperimentModel  # noqa: E402
 
 
 def fit_weaves(names: list[str], targets: tuple) -> tuple[float, dict]:

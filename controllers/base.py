@@ -27,7 +27,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol, runtime_checkable
 
-from sim.conventions import IDX, MEASURED
+from bikeid.sim.conventions import IDX, MEASURED
 
 __all__ = ["Controller", "ControllerLike", "GainSchedule", "Reference", "check_measurement"]
 

@@ -77,9 +77,9 @@ from typing import Any
 import control
 import numpy as np
 
-from sim.conventions import CANONICAL_STATE, LINEAR_STATE
-from sim.linear import state_matrices
-from sim.parameters import BicycleParameters, benchmark
+from bikeid.sim.conventions import CANONICAL_STATE, LINEAR_STATE
+from bikeid.sim.linear import state_matrices
+from bikeid.sim.parameters import BicycleParameters, benchmark
 
 from .base import I_DELTA, I_DELTADOT, I_PHI, I_PHIDOT, Controller, GainSchedule
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from sim.parameters import BicycleParameters
+from bikeid.sim.parameters import BicycleParameters
 
 from .base import Controller
 

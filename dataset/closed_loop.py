@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from sim.conventions import MEASURED
-from sim.parameters import BicycleParameters
+from bikeid.sim.conventions import MEASURED
+from bikeid.sim.parameters import BicycleParameters
 
 from .run import Run
 from .sensors import Sensors, channel_noise
@@ -205,8 +205,8 @@ def _integrate(
     bicycle, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options
 ):
     """Run ``sim.integrate.simulate`` with ``loop`` as the controller; returns its Trajectory."""
-    from sim.integrate import simulate
-    from sim.nonlinear import WhippleBicycle
+    from bikeid.sim.integrate import simulate
+    from bikeid.sim.nonlinear import WhippleBicycle
 
     bike = WhippleBicycle(bicycle)
     init = dict(initial or {})

@@ -67,7 +67,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset.run import Run
+from bikeid.dataset.run import Run
 
 __all__ = [
     "CAMPAIGN",

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from sim.conventions import INPUTS, MEASURED
+from bikeid.sim.conventions import INPUTS, MEASURED
 
 __all__ = ["Run"]
 

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from sim.conventions import INPUTS, MEASURED
+from bikeid.sim.conventions import INPUTS, MEASURED
 
 __all__ = ["AntiAlias", "Channel", "SensorChain", "Sensors", "channel_noise"]
 

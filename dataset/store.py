@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from sim.conventions import INPUTS, MEASURED, UNITS
+from bikeid.sim.conventions import INPUTS, MEASURED, UNITS
 
 from .run import REQUIRED, Run
 

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from dataset.run import Run
+from bikeid.dataset.run import Run
 
 from .sweep import EXCITATION_BANDS
 
@@ -101,7 +101,7 @@ def eigen_tolerance(lam: complex) -> float:
 
 def true_modes(parameters, speeds: Sequence[float]) -> dict[float, dict[str, complex]]:
     """True weave (positive imaginary part), capsize and caster eigenvalues per speed."""
-    from sim.linear import eigenvalues_vs_speed
+    from bikeid.sim.linear import eigenvalues_vs_speed
 
     es = eigenvalues_vs_speed(parameters, np.asarray(speeds, float))
     out = {}
@@ -151,8 +151,8 @@ def generate(
 ) -> list[Run]:
     """Closed-loop runs of ``controller`` at ``speeds`` by :data:`DESIGN`, cached in
     ``out_dir/data`` (one resumable sweep file per band); returned in speed order."""
-    from dataset.store import read_runs
-    from experiments.sweep import SweepSpec, run_sweep
+    from bikeid.dataset.store import read_runs
+    from bikeid.experiments.sweep import SweepSpec, run_sweep
 
     data = Path(out_dir) / "data"
     data.mkdir(parents=True, exist_ok=True)
@@ -182,7 +182,7 @@ def direct_prepare(run: Run, cutoff: float = 3.0) -> Run:
     held value), then every sequence through the same zero-phase 2nd-order Butterworth at
     ``cutoff`` [Hz], means removed.  One linear filter on every sequence keeps the
     (constant-speed) averaged equation exact, while sensor noise falls with the bandwidth."""
-    from ident.signals import prepare
+    from bikeid.ident.signals import prepare
 
     return prepare(run, cutoff=cutoff, derivative="interval")
 
@@ -197,9 +197,9 @@ def _direct(runs: Sequence[Run], parameters, cutoff: float, lags: int, instrumen
     (``ident.tailored_iv``), instruments simulated through the fitted controller and the
     current model, started from the Whipple model of the reference (the prior Moore &
     Hubbard use for the fixed entries), 3 refinements; run-clustered standard errors."""
-    from ident.direct import identify
-    from ident.tailored_iv import identify_tailored
-    from sim.linear import canonical_matrices
+    from bikeid.ident.direct import identify
+    from bikeid.ident.tailored_iv import identify_tailored
+    from bikeid.sim.linear import canonical_matrices
 
     if instruments == "external":
         return identify(
@@ -226,9 +226,9 @@ def identify_controller(
     """Identify one controller's runs with ``methods``; per speed and global results."""
     from threadpoolctl import threadpool_limits
 
-    from ident import pem
-    from ident.canonical import steer_zeros
-    from sim.linear import critical_speeds
+    from bikeid.ident import pem
+    from bikeid.ident.canonical import steer_zeros
+    from bikeid.sim.linear import critical_speeds
 
     log = log or (lambda msg: None)
     ok = [r for r in runs if r.meta.get("fell_at") is None]
@@ -284,8 +284,8 @@ def identify_controller(
 
 
 def steer_zeros_true(parameters) -> np.ndarray:
-    from ident.canonical import steer_zeros, theta_from_matrices
-    from sim.linear import canonical_matrices
+    from bikeid.ident.canonical import steer_zeros, theta_from_matrices
+    from bikeid.sim.linear import canonical_matrices
 
     return steer_zeros(theta_from_matrices(canonical_matrices(parameters), 5.0))
 
@@ -313,7 +313,7 @@ def run_accuracy(
     log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """The whole experiment; returns the JSON-able result (also written by the CLI)."""
-    from sim.parameters import by_name
+    from bikeid.sim.parameters import by_name
 
     log = log or (lambda msg: print(msg, file=sys.stderr))
     bad = [c for c in controllers if c not in CONTROLLERS]

@@ -13,12 +13,12 @@ import importlib
 import sys
 
 COMMAND_MODULES = (
-    "experiments.cmd_plant",  # eig, linearize, critical-speeds
-    "experiments.cmd_simulate",  # simulate
-    "experiments.cmd_data",  # sweep, stabilization
-    "experiments.cmd_ident",  # identify
-    "experiments.cmd_reproduce",  # reproduce
-    "experiments.cmd_measured",  # measured fit/evaluate, data fetch
+    "bikeid.experiments.cmd_plant",  # eig, linearize, critical-speeds
+    "bikeid.experiments.cmd_simulate",  # simulate
+    "bikeid.experiments.cmd_data",  # sweep, stabilization
+    "bikeid.experiments.cmd_ident",  # identify
+    "bikeid.experiments.cmd_reproduce",  # reproduce
+    "bikeid.experiments.cmd_measured",  # measured fit/evaluate, data fetch
 )
 
 

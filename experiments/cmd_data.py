@@ -75,7 +75,7 @@ def _options(args: argparse.Namespace) -> dict:
         raise ValueError(f"--rate must be > 0 Hz, got {args.rate}")
     if args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    from sim.parameters import by_name
+    from bikeid.sim.parameters import by_name
 
     by_name(args.bicycle)  # fail early on a bad name
     chirp = args.chirp_deg

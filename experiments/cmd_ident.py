@@ -78,7 +78,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _truth(runs):
     """The simulated bicycle: ``meta['parameters']`` or ``meta['bicycle']['parameters']``
     (closed-loop runs and sweeps); None for measured data."""
-    from sim.parameters import from_mapping
+    from bikeid.sim.parameters import from_mapping
 
     meta = runs[0].meta
     values = meta.get("parameters") or (meta.get("bicycle") or {}).get("parameters")
@@ -94,8 +94,8 @@ def _sorted(z):
 def cmd_identify(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from dataset.store import read_runs
-    from sim.linear import eigenvalues
+    from bikeid.dataset.store import read_runs
+    from bikeid.sim.linear import eigenvalues
 
     runs = read_runs(args.file)
     if not runs:
@@ -104,9 +104,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
     speeds = sorted({round(r.speed, 6) for r in runs})
     out: dict = {"file": str(args.file), "method": args.method, "speeds": speeds}
     if args.method == "direct":
-        from ident.direct import identify
-        from ident.signals import prepare
-        from sim.parameters import by_name
+        from bikeid.ident.direct import identify
+        from bikeid.ident.signals import prepare
+        from bikeid.sim.parameters import by_name
 
         if args.speed_parameterized:
             raise ValueError("--speed-parameterized applies to --method pem (direct is always)")
@@ -128,7 +128,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         )  # fmt: skip
         eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
     else:
-        from ident import pem
+        from bikeid.ident import pem
 
         # Per-speed fits, each also started from the next lower speed's model (robust
         # against local minima on low-SNR closed-loop data); the speed-parameterized model
@@ -163,7 +163,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         per_speed.append(row)
     out["per_speed"] = per_speed
     if truth is not None and args.method == "pem" and args.speed_parameterized:
-        from sim.linear import critical_speeds
+        from bikeid.sim.linear import critical_speeds
 
         out["true_critical_speeds"] = critical_speeds(truth)
     if args.json:

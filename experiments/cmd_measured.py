@@ -107,8 +107,8 @@ def _speeds(text: str | None):
 def load_decays(data: str | None, speeds=None, exclude=None, source: str = "listed"):
     """Free-decay windows of all eigen logs, optionally only near the given speeds
     (``source``: see :func:`dataset.measured.iter_decays`)."""
-    from dataset.measured import data_dir, iter_decays
-    from ident.experiment_model import decay_windows
+    from bikeid.dataset.measured import data_dir, iter_decays
+    from bikeid.ident.experiment_model import decay_windows
 
     root = data_dir(data)
     out = []
@@ -135,7 +135,7 @@ def load_decays(data: str | None, speeds=None, exclude=None, source: str = "list
 
 
 def model_from_json(path: str):
-    from ident.experiment_model import ExperimentModel
+    from bikeid.ident.experiment_model import ExperimentModel
 
     try:
         obj = json.loads(Path(path).read_text())
@@ -147,8 +147,8 @@ def model_from_json(path: str):
 def fit_model(
     windows, max_effects=3, plant: str = "nonlinear", stability: int = 0, weave_weight="auto"
 ) -> dict:
-    from ident.discrepancy import identify, selection_frequencies
-    from ident.experiment_model import ExperimentModel
+    from bikeid.ident.discrepancy import identify, selection_frequencies
+    from bikeid.ident.experiment_model import ExperimentModel
 
     nl = plant == "nonlinear"
     extra = {}
@@ -194,8 +194,8 @@ def cmd_fit(args) -> int:
 
 
 def evaluate_json(model_obj: dict, windows) -> dict:
-    from ident.discrepancy import evaluate
-    from ident.experiment_model import ExperimentModel
+    from bikeid.ident.discrepancy import evaluate
+    from bikeid.ident.experiment_model import ExperimentModel
 
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
     plant = model_obj.get("plant", "linear")
@@ -252,7 +252,7 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_trials(args) -> int:
-    from experiments.effect_trials import format_summary, run_trials
+    from bikeid.experiments.effect_trials import format_summary, run_trials
 
     effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
 
@@ -274,7 +274,7 @@ def cmd_trials(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from experiments.measured_report import write_report
+    from bikeid.experiments.measured_report import write_report
 
     path = write_report(args.out, args.data, args.model)
     print(path)
@@ -282,7 +282,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_fetch(args) -> int:
-    from dataset.measured import CAMPAIGN, PINNED, fetch
+    from bikeid.dataset.measured import CAMPAIGN, PINNED, fetch
 
     sums = fetch(args.dest, files=PINNED | CAMPAIGN if args.all_speeds else PINNED)
     print(f"fetched {len(sums)} files into {Path(args.dest) / 'tudelft-sbw'}")

@@ -33,19 +33,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _bicycle(name: str):
-    from sim.parameters import by_name
+    from bikeid.sim.parameters import by_name
 
     return by_name(name)
 
 
 def cmd_eig(args: argparse.Namespace) -> int:
-    from sim.linear import eigenvalues_vs_speed
+    from bikeid.sim.linear import eigenvalues_vs_speed
 
     speeds = parse_range(args.speeds, "--speeds", minimum=0.0)
     p = _bicycle(args.bicycle)
     sweep = eigenvalues_vs_speed(p, speeds)
     if args.plot:
-        from experiments.plots import plot_eigenvalues
+        from bikeid.experiments.plots import plot_eigenvalues
 
         plot_eigenvalues(sweep, args.plot, title=f"{p.name}: eigenvalues against speed")
     if args.json:
@@ -68,7 +68,7 @@ def cmd_eig(args: argparse.Namespace) -> int:
 def cmd_linearize(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from sim.linear import canonical_matrices, state_matrices
+    from bikeid.sim.linear import canonical_matrices, state_matrices
 
     if not np.isfinite(args.speed) or args.speed < 0:
         raise ValueError(f"--speed {args.speed}: need a finite speed >= 0 m/s")
@@ -95,7 +95,7 @@ def cmd_linearize(args: argparse.Namespace) -> int:
 
 
 def cmd_critical_speeds(args: argparse.Namespace) -> int:
-    from sim.linear import critical_speeds
+    from bikeid.sim.linear import critical_speeds
 
     p = _bicycle(args.bicycle)
     cs = critical_speeds(p)

@@ -64,9 +64,9 @@ def _finite(name: str, value: float | None) -> None:
 def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from sim.integrate import simulate
-    from sim.nonlinear import WhippleBicycle
-    from sim.parameters import by_name
+    from bikeid.sim.integrate import simulate
+    from bikeid.sim.nonlinear import WhippleBicycle
+    from bikeid.sim.parameters import by_name
 
     out = Path(args.out)
     if out.suffix.lower() not in (".csv", ".json"):

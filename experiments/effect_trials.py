@@ -94,7 +94,7 @@ class EffectSpec:
 
     def sim_effect(self, value: float):
         """The :mod:`sim.effects` object injecting ``value``."""
-        from sim import effects as fx
+        from bikeid.sim import effects as fx
 
         make = {
             "steer_viscous_damping": lambda x: fx.SteerDamping(x),
@@ -202,7 +202,7 @@ def _stable(name: str, value: float, speeds) -> bool:
     An unstable combination (e.g. a 40 ms delay at 3.5 m/s) cannot be logged: the bicycle
     falls or oscillates.
     """
-    from ident.experiment_model import ExperimentModel
+    from bikeid.ident.experiment_model import ExperimentModel
 
     m = ExperimentModel(effects={name: value})
     for v in speeds:
@@ -249,7 +249,7 @@ def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -
 
 
 def _sensors(noise: float):
-    from dataset.sensors import Channel, Sensors
+    from bikeid.dataset.sensors import Channel, Sensors
 
     return Sensors(
         {
@@ -270,10 +270,10 @@ def decay_windows(
     Returns ``ident.experiment_model.Window`` objects (measured signals, sensor speed,
     zero command history: the loop starts with the push).
     """
-    from controllers.steer_into_lean import SteerIntoLean
-    from dataset.closed_loop import simulate_run
-    from ident.experiment_model import Window
-    from sim.parameters import steer_by_wire
+    from bikeid.controllers.steer_into_lean import SteerIntoLean
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.ident.experiment_model import Window
+    from bikeid.sim.parameters import steer_by_wire
 
     p = steer_by_wire()
     rng = np.random.default_rng(seed)
@@ -326,8 +326,8 @@ def run_trial(
     (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
     ``weave_weight``: as for :func:`ident.discrepancy.identify` (default "auto").
     """
-    from ident.discrepancy import evaluate, identify
-    from ident.experiment_model import ExperimentModel
+    from bikeid.ident.discrepancy import evaluate, identify
+    from bikeid.ident.experiment_model import ExperimentModel
 
     t0 = time.perf_counter()
     es = EFFECTS[spec.effect]

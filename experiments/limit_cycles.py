@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from sim.parameters import BicycleParameters
+from bikeid.sim.parameters import BicycleParameters
 
 __all__ = [
     "FIG4_CONDITIONS",
@@ -93,8 +93,8 @@ def coast(
 
     Returns a :class:`sim.integrate.Trajectory`; it ends early at a fall (|roll| > 60 deg).
     """
-    from sim.integrate import simulate
-    from sim.nonlinear import WhippleBicycle
+    from bikeid.sim.integrate import simulate
+    from bikeid.sim.nonlinear import WhippleBicycle
 
     bike = WhippleBicycle(p)
     x0 = bike.state(speed, **ic.radians())

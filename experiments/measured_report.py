@@ -50,8 +50,8 @@ def _asymmetry_lines(s: dict) -> list[str]:
 
 def bode_points(root) -> list[dict]:
     """Measured closed-loop response T_ext -> (roll rate, steer angle), one per Bode file."""
-    from dataset.measured import find_logs, load_log
-    from ident.experiment_model import bode_window
+    from bikeid.dataset.measured import find_logs, load_log
+    from bikeid.ident.experiment_model import bode_window
 
     out = []
     for p in find_logs(root, "bode"):
@@ -69,11 +69,16 @@ def bode_points(root) -> list[dict]:
 def write_report(out: str | Path, data: str | None, model_path: str | None) -> Path:
     import matplotlib.pyplot as plt
 
-    from dataset.measured import SPEED_CALIBRATION, data_dir
-    from experiments.cmd_measured import evaluate_json, fit_model, load_decays, model_from_json
-    from experiments.plots import save
-    from ident.discrepancy import decay_eigenvalue
-    from ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+    from bikeid.dataset.measured import SPEED_CALIBRATION, data_dir
+    from bikeid.experiments.cmd_measured import (
+        evaluate_json,
+        fit_model,
+        load_decays,
+        model_from_json,
+    )
+    from bikeid.experiments.plots import save
+    from bikeid.ident.discrepancy import decay_eigenvalue
+    from bikeid.ident.experiment_model import ExperimentModel, attach_nonlinear_correction
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

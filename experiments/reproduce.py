@@ -85,8 +85,8 @@ def reproduce(
     bicycle: str = "benchmark",
 ) -> dict[str, Any]:
     """Run everything into ``out``; returns the summary (also written as summary.json)."""
-    from sim.linear import critical_speeds
-    from sim.parameters import by_name
+    from bikeid.sim.linear import critical_speeds
+    from bikeid.sim.parameters import by_name
 
     from . import reproduce_chen_dao as cd
     from . import reproduce_moore_hubbard as mh
@@ -221,8 +221,8 @@ def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
             }
         sp = [g["speed"] for g in rows]
         if sp:
-            from sim.linear import eigenvalues_vs_speed
-            from sim.parameters import benchmark
+            from bikeid.sim.linear import eigenvalues_vs_speed
+            from bikeid.sim.parameters import benchmark
 
             fine = np.linspace(min(sp), max(sp), 300)
             ev = eigenvalues_vs_speed(benchmark(), fine).values
@@ -273,7 +273,7 @@ def _report(s: dict[str, Any]) -> Report:
 
 
 def _report_fig2(rep: Report, f2: dict) -> None:
-    from ident.canonical import THETA_NAMES
+    from bikeid.ident.canonical import THETA_NAMES
 
     rep.heading("Chen & Dao Fig. 2 and eqs. 5-6: identification at 4.2 m/s")
     rep.para(

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from sim.parameters import BicycleParameters
+from bikeid.sim.parameters import BicycleParameters
 
 __all__ = [
     "PAPER",
@@ -91,7 +91,7 @@ def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.n
     """Standard errors of Re and Im of the eigenvalues of the canonical A(theta), by first-order
     propagation of the parameter covariance (central differences); shape (4, 2), rows in the
     order of ``np.sort_complex(eig(A(theta)))``."""
-    from ident.canonical import canonical_ab
+    from bikeid.ident.canonical import canonical_ab
 
     base = np.sort_complex(np.linalg.eigvals(canonical_ab(theta)[0]))
     J = np.zeros((8, theta.size))
@@ -123,9 +123,9 @@ def identify_speed(args: tuple) -> dict[str, Any]:
     ``args`` = (controller, speed, duration, bicycle, methods).  Returns eigenvalues
     (identified, matched to the truth's order), their standard errors and run facts.
     """
-    from ident import pem
-    from sim.linear import eigenvalues
-    from sim.parameters import by_name
+    from bikeid.ident import pem
+    from bikeid.sim.linear import eigenvalues
+    from bikeid.sim.parameters import by_name
 
     from .sweep import Task, simulate_task
 
@@ -158,8 +158,8 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         except (ValueError, np.linalg.LinAlgError) as exc:
             out["methods"]["pem"] = {"error": str(exc)}
     if "direct" in methods:
-        from ident.direct import identify
-        from ident.signals import prepare
+        from bikeid.ident.direct import identify
+        from bikeid.ident.signals import prepare
 
         try:
             res = identify(prepare(run, derivative="forward"), reference=p)
@@ -193,7 +193,7 @@ def paper_eq5_reading() -> dict[str, Any]:
     """
     from scipy.signal import ss2tf
 
-    from ident.canonical import canonical_ab
+    from bikeid.ident.canonical import canonical_ab
 
     a, b = np.array(PAPER["eq5_abs"]["a"]), np.array(PAPER["eq5_abs"]["b"])
     den = np.array(PAPER["den"])
@@ -286,9 +286,9 @@ def k_step_prediction(Ad, Bd, C, K, u, y, k: int) -> np.ndarray:
 
 def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, Any]:
     """Identification at 4.2 m/s: data, model simulation, errors; eqs. 5-6 side by side."""
-    from ident import pem
-    from ident.canonical import theta_from_matrices
-    from sim.linear import canonical_matrices, eigenvalues, transfer_function
+    from bikeid.ident import pem
+    from bikeid.ident.canonical import theta_from_matrices
+    from bikeid.sim.linear import canonical_matrices, eigenvalues, transfer_function
 
     from .plots import plt, save
     from .sweep import Task, simulate_task
@@ -465,7 +465,7 @@ def fig3(
     zoom: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Identified eigenvalues (PEM) against speed over the true linearization, ranges marked."""
-    from sim.linear import critical_speeds, eigenvalues_vs_speed
+    from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
 
     from .plots import MODE_STYLE, plt, save
 
@@ -602,16 +602,16 @@ def fig7(
     poles sit on the identified model's roll zeros and three at -6, -8, -10 1/s
     (``controllers.pole_placement.tracking_poles``), so roll follows the same third-order
     response at every speed and the paper's "delay time" is the only tracking error."""
-    from controllers.excitation import ChirpReference
-    from controllers.pole_placement import (
+    from bikeid.controllers.excitation import ChirpReference
+    from bikeid.controllers.pole_placement import (
         PolePlacement,
         augmented_system,
         to_bikeid_order,
         tracking_poles,
     )
-    from dataset.closed_loop import simulate_run
-    from dataset.sensors import Sensors
-    from sim.linear import state_matrices
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.sensors import Sensors
+    from bikeid.sim.linear import state_matrices
 
     from .plots import plt, save
 
@@ -675,7 +675,7 @@ def limit_cycle_study(
     p: BicycleParameters, out: Path, duration: float, log: Callable[[str], None] = lambda s: None
 ) -> dict[str, Any]:
     """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check."""
-    from sim.linear import critical_speeds, eigenvalues
+    from bikeid.sim.linear import critical_speeds, eigenvalues
 
     from . import limit_cycles as lc
 

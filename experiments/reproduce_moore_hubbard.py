@@ -75,18 +75,18 @@ SUBSETS = _subsets()
 
 
 def _effects(env: str) -> list:
-    from sim.effects import SteerCoulomb, SteerDamping
+    from bikeid.sim.effects import SteerCoulomb, SteerDamping
 
     return [] if env == "N" else [SteerDamping(0.3), SteerCoulomb(0.1, smoothing=0.05)]
 
 
 def _one_run(args: tuple) -> Any:
-    from controllers.excitation import ChirpReference, LateralForcePulses
-    from controllers.registry import make
-    from dataset.closed_loop import simulate_run
-    from dataset.sensors import Sensors
-    from ident.signals import prepare
-    from sim.parameters import by_name
+    from bikeid.controllers.excitation import ChirpReference, LateralForcePulses
+    from bikeid.controllers.registry import make
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.sensors import Sensors
+    from bikeid.ident.signals import prepare
+    from bikeid.sim.parameters import by_name
 
     rider, env, speed, duration, seed = args
     with warnings.catch_warnings():  # Browser's IByy is clipped by sim.parameters (stated)
@@ -130,9 +130,9 @@ def make_runs(speeds: Sequence[float], duration: float, workers: int = 1) -> lis
 @functools.cache
 def _whipple_values(rider: str) -> dict[str, float]:
     """All entries (M.., C1.., K0.., K2.., HpF, HdF) of a rider's Whipple model."""
-    from ident.direct import ALL_ENTRIES, _parse
-    from sim.linear import canonical_matrices, lateral_force_vector
-    from sim.parameters import by_name
+    from bikeid.ident.direct import ALL_ENTRIES, _parse
+    from bikeid.sim.linear import canonical_matrices, lateral_force_vector
+    from bikeid.sim.parameters import by_name
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
@@ -148,7 +148,7 @@ def _whipple_values(rider: str) -> dict[str, float]:
 
 
 def _columns(run) -> dict[str, np.ndarray]:
-    from ident.direct import regressors
+    from bikeid.ident.direct import regressors
 
     d = {
         k: np.asarray(run[k], float)
@@ -161,7 +161,7 @@ def _columns(run) -> dict[str, np.ndarray]:
 def _row_parts(run, free_names: Sequence[str], row: int, model: dict[str, float] | None):
     """(Gamma, Y) of one run's row; entries outside ``free_names`` (and outside the symmetric
     pair) take the rider's Whipple values; ``model`` supplies Mdp/K0dp for the steer row."""
-    from ident.direct import ALL_ENTRIES, _parse
+    from bikeid.ident.direct import ALL_ENTRIES, _parse
 
     cols = _columns(run)
     wv = dict(_whipple_values(run.meta["rider"]))
@@ -203,7 +203,7 @@ def _whipple_free(rider: str) -> dict[str, float]:
 def row_vaf(runs: Sequence, model: dict[str, float] | None) -> dict[str, float]:
     """Eq.-6 VAF of the roll and steer rows on ``runs`` for ``model`` (free entries; None =
     each run's own Whipple model)."""
-    from ident.direct import vaf_moore
+    from bikeid.ident.direct import vaf_moore
 
     out = {}
     for row, free in ((0, ROLL_FREE), (1, STEER_FREE)):
@@ -219,7 +219,7 @@ def row_vaf(runs: Sequence, model: dict[str, float] | None) -> dict[str, float]:
 
 def _model_matrices(rider: str, model: dict[str, float] | None):
     """CanonicalMatrices and H of ``model``'s free entries over the rider's Whipple values."""
-    from sim.linear import CanonicalMatrices
+    from bikeid.sim.linear import CanonicalMatrices
 
     vals = dict(_whipple_values(rider))
     if model is not None:
@@ -237,8 +237,8 @@ def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WIND
     """Eq.-6 VAF of phi, delta, phidot, deltadot for a windowed simulation (module doc)."""
     from scipy.linalg import expm
 
-    from ident.direct import vaf_moore
-    from sim.linear import state_matrices
+    from bikeid.ident.direct import vaf_moore
+    from bikeid.sim.linear import state_matrices
 
     from .reproduce_chen_dao import open_loop_simulation
 
@@ -343,7 +343,7 @@ def reproduce(
 def _figures(out: Path, models: dict[str, Any], whipple) -> list[str]:
     import control
 
-    from sim.linear import eigenvalues_vs_speed, state_space
+    from bikeid.sim.linear import eigenvalues_vs_speed, state_space
 
     from .plots import plt, save
 

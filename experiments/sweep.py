@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from dataset.run import Run
-from dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
+from bikeid.dataset.run import Run
+from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
 
 __all__ = [
     "CONTROLLERS",
@@ -166,11 +166,11 @@ def run_seed(seed: int, speed: float, controller: str) -> int:
 
 def simulate_task(spec: SweepSpec, task: Task) -> Run:
     """Simulate one run of ``spec`` (runs in a worker process)."""
-    from controllers.excitation import ChirpReference, UniformDither, ZeroReference
-    from controllers.registry import make
-    from dataset.closed_loop import simulate_run
-    from dataset.sensors import Sensors
-    from sim.parameters import by_name
+    from bikeid.controllers.excitation import ChirpReference, UniformDither, ZeroReference
+    from bikeid.controllers.registry import make
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.sensors import Sensors
+    from bikeid.sim.parameters import by_name
 
     seed = run_seed(task.seed, task.speed, spec.controller)
     child = np.random.SeedSequence(seed).spawn(2)
@@ -407,7 +407,7 @@ def run_sweep(
             copy_runs(out, [(done[n], n) for n in names], attrs={"sweep": spec.settings()})
     shutil.rmtree(parts, ignore_errors=True)
     fell = {}
-    from dataset.store import read_runs
+    from bikeid.dataset.store import read_runs
 
     for name, run in zip(names, read_runs(out, names), strict=True):
         if run.meta.get("fell_at") is not None:

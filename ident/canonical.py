@@ -22,8 +22,8 @@ from __future__ import annotations
 import control
 import numpy as np
 
-from sim.conventions import LINEAR_STATE
-from sim.linear import CanonicalMatrices
+from bikeid.sim.conventions import LINEAR_STATE
+from bikeid.sim.linear import CanonicalMatrices
 
 __all__ = [
     "C_OUT",

@@ -48,9 +48,9 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from dataset.run import Run
-from sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
-from sim.parameters import BicycleParameters, from_mapping
+from bikeid.dataset.run import Run
+from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
+from bikeid.sim.parameters import BicycleParameters, from_mapping
 
 from .signals import differentiate
 

@@ -38,7 +38,7 @@ import numpy as np
 from scipy import signal
 from scipy.optimize import least_squares
 
-from ident.experiment_model import (
+from bikeid.ident.experiment_model import (
     EFFECT_DEFAULTS,
     EFFECT_UNITS,
     ExperimentModel,
@@ -435,7 +435,7 @@ class Identification:
 
 def _attach(windows, model, nonlinear: bool) -> None:
     if nonlinear:
-        from ident.experiment_model import attach_nonlinear_correction
+        from bikeid.ident.experiment_model import attach_nonlinear_correction
 
         attach_nonlinear_correction(windows, model)
 
@@ -945,7 +945,7 @@ def synthetic_windows(
     from random initial states like the measured pushes (|phidot0| ~ 0.3-0.6 rad/s),
     1 s long; white noise (``noise`` rad/s on roll rate, noise/5 rad on angles) and the
     steer encoder's 0.000767 rad quantization added to what the "sensors" report."""
-    from dataset.measured import SPEED_CALIBRATION
+    from bikeid.dataset.measured import SPEED_CALIBRATION
 
     rng = np.random.default_rng(seed)
     a, b = SPEED_CALIBRATION

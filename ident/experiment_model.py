@@ -95,10 +95,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from dataset.measured import treadmill_speed
-from dataset.run import Run
-from sim.linear import CanonicalMatrices, canonical_matrices
-from sim.parameters import BicycleParameters, steer_by_wire
+from bikeid.dataset.measured import treadmill_speed
+from bikeid.dataset.run import Run
+from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
+from bikeid.sim.parameters import BicycleParameters, steer_by_wire
 
 __all__ = [
     "EFFECT_DEFAULTS",
@@ -575,7 +575,7 @@ def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, d
     linear-only): sensor biases and scales, steer torque bias, steer inertia (the parameter
     corrections and the speed scale enter through the parameters and the speed instead).
     """
-    from sim import effects as fx
+    from bikeid.sim import effects as fx
 
     out, eq = [], {}
     c = model.e("steer_viscous_damping") + model.e("tire_scrub_torque") / max(speed, 0.1)
@@ -627,9 +627,9 @@ def attach_nonlinear_correction(
     logs' decays reach steer angles of 0.3-0.6 rad at 1.5 m/s, where the linear and the
     nonlinear plant differ by 0.1-0.45 in NRMSE (0.02-0.1 at 2.5-4.5 m/s).
     """
-    from controllers.steer_into_lean import SteerIntoLean
-    from sim.integrate import simulate
-    from sim.nonlinear import WhippleBicycle
+    from bikeid.controllers.steer_into_lean import SteerIntoLean
+    from bikeid.sim.integrate import simulate
+    from bikeid.sim.nonlinear import WhippleBicycle
 
     model = model or ExperimentModel()
     bike = WhippleBicycle(model.plant_params())

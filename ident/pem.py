@@ -55,9 +55,9 @@ import numpy as np
 from scipy.linalg import expm_frechet, solve_discrete_are
 from scipy.optimize import least_squares
 
-from dataset.run import Run
-from sim.conventions import CANONICAL_STATE
-from sim.linear import critical_speeds, eigenvalues_vs_speed
+from bikeid.dataset.run import Run
+from bikeid.sim.conventions import CANONICAL_STATE
+from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
 
 from .canonical import (
     A_POS,

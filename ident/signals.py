@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from dataset.run import Run
+from bikeid.dataset.run import Run
 
 __all__ = ["NO_MEAN_REMOVAL", "differentiate", "lowpass", "prepare", "remove_means"]
 

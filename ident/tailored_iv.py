@@ -40,8 +40,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.linalg import expm
 
-from dataset.run import Run
-from sim.linear import CanonicalMatrices, state_matrices
+from bikeid.dataset.run import Run
+from bikeid.sim.linear import CanonicalMatrices, state_matrices
 
 from .direct import DirectResult, identify
 

@@ -25,7 +25,7 @@ import control
 import numpy as np
 from scipy.linalg import expm
 
-from dataset.run import Run
+from bikeid.dataset.run import Run
 
 from .direct import vaf_variance
 

@@ -41,7 +41,7 @@ import numba
 import numpy as np
 from scipy.linalg import expm
 
-from dataset.run import Run
+from bikeid.dataset.run import Run
 
 from .linear import lateral_force_vector, state_matrices, yaw_rate
 from .parameters import BicycleParameters
@@ -290,7 +290,7 @@ def simulate(
     }  # fmt: skip
     meta = {
         "source": "simulated",
-        "simulator": "sim.linear_sim (exact ZOH, linear)",
+        "simulator": "bikeid.sim.linear_sim (exact ZOH, linear)",
         "parameters": p.as_dict(),
         "bicycle": p.name,
         "speed": float(speed),

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from sim.linear import state_matrices
-from sim.parameters import BicycleParameters
+from bikeid.sim.linear import state_matrices
+from bikeid.sim.parameters import BicycleParameters
 
 __all__ = ["LoopResult", "closed_loop_matrix", "discretize", "simulate"]
 

@@ -15,14 +15,14 @@ import sys
 import numpy as np
 import pytest
 
-from experiments import accuracy as acc
-from ident import pem
-from ident.canonical import steer_zeros, theta_from_matrices
-from ident.direct import identify
-from ident.signals import prepare
-from sim.linear import canonical_matrices, eigenvalues
-from sim.linear_sim import simulate
-from sim.parameters import benchmark
+from bikeid.experiments import accuracy as acc
+from bikeid.ident import pem
+from bikeid.ident.canonical import steer_zeros, theta_from_matrices
+from bikeid.ident.direct import identify
+from bikeid.ident.signals import prepare
+from bikeid.sim.linear import canonical_matrices, eigenvalues
+from bikeid.sim.linear_sim import simulate
+from bikeid.sim.parameters import benchmark
 
 P = benchmark()
 CM = canonical_matrices(P)
@@ -127,7 +127,8 @@ def test_cli_rejects_bad_lists(tmp_path):
     """Bad --controllers/--methods: one-line error naming the choices, exit 2."""
     for opt in (["--controllers", "pid,lqr"], ["--methods", "ls"]):
         p = subprocess.run(
-            [sys.executable, "-m", "experiments.cli", "accuracy", "--out", str(tmp_path), *opt],
+            [sys.executable, "-m", "bikeid.experiments.cli", "accuracy",
+             "--out", str(tmp_path), *opt],
             capture_output=True, text=True, check=False,
         )  # fmt: skip
         assert p.returncode == 2 and "bikeid: error:" in p.stderr

@@ -9,10 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from experiments.cli import main
-from experiments.sweep import SweepSpec, run_sweep
-from sim.linear import critical_speeds, eigenvalues
-from sim.parameters import benchmark
+from bikeid.experiments.cli import main
+from bikeid.experiments.sweep import SweepSpec, run_sweep
+from bikeid.sim.linear import critical_speeds, eigenvalues
+from bikeid.sim.parameters import benchmark
 
 SPEEDS = (3.0, 4.5, 6.0, 8.0)
 

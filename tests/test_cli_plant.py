@@ -12,7 +12,7 @@ BIN = Path(sys.executable).parent / "bikeid"
 
 
 def run(*args, check=True):
-    cmd = [str(BIN)] if BIN.exists() else [sys.executable, "-m", "experiments.cli"]
+    cmd = [str(BIN)] if BIN.exists() else [sys.executable, "-m", "bikeid.experiments.cli"]
     env = os.environ | {"MPLBACKEND": "Agg"}
     res = subprocess.run(cmd + list(args), capture_output=True, text=True, env=env, timeout=300)
     if check:

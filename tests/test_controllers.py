@@ -22,12 +22,12 @@ from hypothesis import strategies as st
 from linear_loop import simulate
 from scipy.optimize import brentq
 
-from controllers import make
-from controllers.base import GainSchedule
-from controllers.excitation import ChirpReference, StepReference
-from controllers.fuzzy import FuzzyController
-from controllers.pid import PID
-from controllers.pole_placement import (
+from bikeid.controllers import make
+from bikeid.controllers.base import GainSchedule
+from bikeid.controllers.excitation import ChirpReference, StepReference
+from bikeid.controllers.fuzzy import FuzzyController
+from bikeid.controllers.pid import PID
+from bikeid.controllers.pole_placement import (
     SLOW_POLES,
     TRACKING_POLES,
     PolePlacement,
@@ -36,9 +36,9 @@ from controllers.pole_placement import (
     roll_zeros,
     tracking_poles,
 )
-from controllers.steer_into_lean import SteerIntoLean
-from sim.linear import canonical_matrices, state_matrices, state_space
-from sim.parameters import benchmark, steer_by_wire
+from bikeid.controllers.steer_into_lean import SteerIntoLean
+from bikeid.sim.linear import canonical_matrices, state_matrices, state_space
+from bikeid.sim.parameters import benchmark, steer_by_wire
 
 P = benchmark()
 SPEEDS = (1.5, 4.0, 8.0, 15.0)
@@ -267,8 +267,8 @@ def _predicted_rms_deg(ctrl: PolePlacement, v: float, dt: float = 0.01) -> float
 def _stabilization_cell(v: float, monkeypatch=None, **pole_options) -> dict:
     """One cell of ``bikeid stabilization`` (same code path, ``experiments.sweep``), 50 s;
     ``pole_options`` are added to the registry's PolePlacement (needs ``monkeypatch``)."""
-    import controllers.registry as registry
-    from experiments import sweep
+    import bikeid.controllers.registry as registry
+    from bikeid.experiments import sweep
 
     if pole_options:
         orig = registry._FACTORIES["pole-placement"]
@@ -529,8 +529,8 @@ def test_controller_tracks_on_nonlinear_plant(name, v):
     """Same chirp on the nonlinear Whipple plant (sim.integrate, RK4, speed held): upright
     and within the same RMS bounds as the linear loop (3 deg keeps the nonlinear terms,
     O(phi^2) ~ 0.3 %, far below the bounds' headroom)."""
-    from sim.integrate import simulate as simulate_nonlinear
-    from sim.nonlinear import WhippleBicycle
+    from bikeid.sim.integrate import simulate as simulate_nonlinear
+    from bikeid.sim.nonlinear import WhippleBicycle
 
     bike = WhippleBicycle(P)
     ctrl = TRACKERS[name]()

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim import _whipple_generated as gen
-from sim.nonlinear import parameter_vector
-from sim.parameters import benchmark, steer_by_wire
+from bikeid.sim import _whipple_generated as gen
+from bikeid.sim.nonlinear import parameter_vector
+from bikeid.sim.parameters import benchmark, steer_by_wire
 
 pytestmark = pytest.mark.slow
 

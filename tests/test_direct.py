@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from ident.direct import identify, vaf_moore, vaf_variance
-from sim.linear import canonical_matrices, eigenvalues
-from sim.linear_sim import simulate
-from sim.parameters import benchmark
+from bikeid.ident.direct import identify, vaf_moore, vaf_variance
+from bikeid.sim.linear import canonical_matrices, eigenvalues
+from bikeid.sim.linear_sim import simulate
+from bikeid.sim.parameters import benchmark
 
 P = benchmark()
 CM = canonical_matrices(P)
@@ -37,7 +37,7 @@ def test_state_space_matches_sim_linear(two_speed_runs):
 
 def test_lateral_force_entry_recovered():
     """With a logged lateral force, HdF is estimated and equals lateral_force_vector's."""
-    from sim.linear import lateral_force_vector
+    from bikeid.sim.linear import lateral_force_vector
 
     runs = [simulate(P, v, duration=20, seed=i, lateral_force=5.0) for i, v in enumerate((3, 6))]
     H = lateral_force_vector(P, 0.5, -1.0)
@@ -73,7 +73,7 @@ def test_attenuation_scalar_formula_t4():
     plim C1dd_hat = C1dd var(x) / (var(x) + var(n)), x = v deltadot.  Tolerance: 4
     standard errors of the regression (reported covariance) plus the finite-sample
     spread of the variance ratio (~1/sqrt(N))."""
-    from dataset.run import Run
+    from bikeid.dataset.run import Run
 
     runs = []
     rng = np.random.default_rng(5)
@@ -98,7 +98,7 @@ def test_attenuation_scalar_formula_t4():
 
 
 def _pid_runs(speeds, seed=0, sensors="default", chirp_deg=1.5, duration=50.0):
-    from experiments.sweep import SweepSpec, simulate_task
+    from bikeid.experiments.sweep import SweepSpec, simulate_task
 
     spec = SweepSpec("pid", tuple(speeds), (seed,), duration, reference="chirp",
                      chirp_amplitude=np.radians(chirp_deg), dither=1.0, dither_hold=0.02,
@@ -111,8 +111,8 @@ def test_fit_controller_recovers_pid_law():
     differenced once is exactly u[k] = u[k-1] - Kp phi[k] + (Kp - Ki dt) phi[k-1]
     - Kd phidot[k] + Kd phidot[k-1] + Kp r[k] - (Kp - Ki dt) r[k-1]: ARX(1, 1) must return
     these coefficients (float64 least squares on an exact relation: 1e-6 relative)."""
-    from controllers.pid import DEFAULT_PID_GAINS
-    from ident.tailored_iv import fit_controller
+    from bikeid.controllers.pid import DEFAULT_PID_GAINS
+    from bikeid.ident.tailored_iv import fit_controller
 
     kp, ki, kd = DEFAULT_PID_GAINS
     run = _pid_runs((5.0,), duration=20.0)[0]
@@ -132,8 +132,8 @@ def test_simulated_instruments_reproduce_noise_free_loop():
     reference.  On a run with ideal sensors (0.5 deg chirp at 5 m/s, linear range) they
     must match the nonlinear plant's truth to VAF > 0.999 in phi and delta (the remaining
     difference is the plant's nonlinearity, O(angle^2) ~ 1e-4, and the start from rest)."""
-    from ident.direct import vaf_variance
-    from ident.tailored_iv import simulate_instruments
+    from bikeid.ident.direct import vaf_variance
+    from bikeid.ident.tailored_iv import simulate_instruments
 
     run = _pid_runs((5.0,), sensors="ideal", chirp_deg=0.5, duration=20.0)[0]
     sim = simulate_instruments(run, CM)
@@ -146,7 +146,7 @@ def test_run_clustered_covariance_matches_white_formula_for_white_errors():
     the paper's sigma^2 (G'G)^-1 exact): the run-clustered sandwich must agree with it.
     20 runs = 20 clusters, so the clustered standard error itself scatters by
     ~1/sqrt(2 * 19) = 16 %; allowed ratio 0.55-1.45 (about 3 of those)."""
-    from dataset.run import Run
+    from bikeid.dataset.run import Run
 
     rng = np.random.default_rng(7)
     runs = []

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from ident.discrepancy import (
+from bikeid.ident.discrepancy import (
     evaluate,
     fit_effects,
     identify,
@@ -15,7 +15,7 @@ from ident.discrepancy import (
     weave_error,
     whiteness,
 )
-from ident.experiment_model import ExperimentModel
+from bikeid.ident.experiment_model import ExperimentModel
 
 
 def test_whiteness_band():
@@ -102,7 +102,7 @@ def test_weave_error_is_relative_root_shift():
     ws = synthetic_windows(truth, [3.5], 3, noise=0.0, seed=5)
     for w in ws:  # undo the encoder quantization for a clean check
         w.delta = truth.simulate([w], nsub=10)[0]["delta"]
-    from ident.discrepancy import decay_eigenvalue
+    from bikeid.ident.discrepancy import decay_eigenvalue
 
     lam = [decay_eigenvalue(w) for w in ws]
     assert weave_error(ws, truth.simulate(ws, nsub=10), lam) < 1e-3
@@ -118,8 +118,8 @@ def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
     and the nonlinear counterpart is a SteerStiffness of k_t / v (analytic identity)."""
     import numpy as np
 
-    from dataset.measured import SPEED_CALIBRATION
-    from ident.experiment_model import nonlinear_counterpart
+    from bikeid.dataset.measured import SPEED_CALIBRATION
+    from bikeid.ident.experiment_model import nonlinear_counterpart
 
     a, b = SPEED_CALIBRATION
     for v in (1.5, 4.5):
@@ -167,8 +167,8 @@ def test_push_asymmetry_mirror_symmetry():
 
     import numpy as np
 
-    from ident.discrepancy import push_asymmetry
-    from ident.experiment_model import window_errors
+    from bikeid.ident.discrepancy import push_asymmetry
+    from bikeid.ident.experiment_model import window_errors
 
     nominal = ExperimentModel()
     ws = synthetic_windows(ExperimentModel(effects={"steer_viscous_damping": 0.4}), [2.5, 4.0],
@@ -203,7 +203,7 @@ def test_weave_uncertainty_matches_monte_carlo_scatter():
     distinct values; Efron & Tibshirani 1993, sec. 7.3), so the bound is 0.7-1.6x."""
     import numpy as np
 
-    from ident.discrepancy import _median_complex, decay_eigenvalue, weave_uncertainty
+    from bikeid.ident.discrepancy import _median_complex, decay_eigenvalue, weave_uncertainty
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.3})
     meds, boot = [], []
@@ -235,7 +235,7 @@ def test_weave_term_recovers_linear_effects():
 
     import numpy as np
 
-    from ident.discrepancy import WeaveTerm, output_residuals, weave_targets
+    from bikeid.ident.discrepancy import WeaveTerm, output_residuals, weave_targets
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.4, "steer_stiffness": 1.5})
     ws = synthetic_windows(truth, [2.5, 4.5], 6, seed=4)

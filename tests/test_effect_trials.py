@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from experiments.effect_trials import (
+from bikeid.experiments.effect_trials import (
     EFFECTS,
     LIBRARY_EFFECTS,
     OUTSIDE_EFFECTS,
@@ -18,7 +18,7 @@ from experiments.effect_trials import (
     draw_trials,
     run_trials,
 )
-from ident.experiment_model import (
+from bikeid.ident.experiment_model import (
     ExperimentModel,
     attach_nonlinear_correction,
     nonlinear_counterpart,
@@ -77,11 +77,11 @@ def test_experiment_model_effects_match_nonlinear_plant_when_small(name):
 
 
 def _small_push_windows(fx, scale: float):
-    from controllers.steer_into_lean import SteerIntoLean
-    from dataset.closed_loop import simulate_run
-    from dataset.sensors import Channel, Sensors
-    from ident.experiment_model import Window
-    from sim.parameters import steer_by_wire
+    from bikeid.controllers.steer_into_lean import SteerIntoLean
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.sensors import Channel, Sensors
+    from bikeid.ident.experiment_model import Window
+    from bikeid.sim.parameters import steer_by_wire
 
     out = []
     for v in (2.0, 4.0):

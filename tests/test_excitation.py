@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from controllers.excitation import (
+from bikeid.controllers.excitation import (
     ChirpReference,
     LateralForcePulses,
     StepReference,

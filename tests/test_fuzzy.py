@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controllers.fuzzy import ControlSurface, FuzzyController, mamdani, skfuzzy_simulation
+from bikeid.controllers.fuzzy import ControlSurface, FuzzyController, mamdani, skfuzzy_simulation
 
 # scikit-fuzzy 0.5 calls np.maximum with a positional out argument (deprecated in numpy 2)
 pytestmark = pytest.mark.filterwarnings("ignore:Passing more than 2 positional:DeprecationWarning")

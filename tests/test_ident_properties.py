@@ -11,15 +11,15 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from dataset.run import Run
-from ident import pem
-from ident.canonical import theta_from_matrices
-from ident.direct import identify, vaf_moore, vaf_variance
-from ident.subspace import po_moesp
-from ident.validate import resid
-from sim.linear import canonical_matrices, eigenvalues
-from sim.linear_sim import simulate
-from sim.parameters import benchmark
+from bikeid.dataset.run import Run
+from bikeid.ident import pem
+from bikeid.ident.canonical import theta_from_matrices
+from bikeid.ident.direct import identify, vaf_moore, vaf_variance
+from bikeid.ident.subspace import po_moesp
+from bikeid.ident.validate import resid
+from bikeid.sim.linear import canonical_matrices, eigenvalues
+from bikeid.sim.linear_sim import simulate
+from bikeid.sim.parameters import benchmark
 
 BASE = benchmark()
 FAST = settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -200,7 +200,7 @@ def test_t10_residual_band(seed):
     """T10: with the true model and its Kalman gain, white innovations: about 1 % of the
     autocorrelations at lags 1..25 leave the 99 % band (allow <= 3 of 25 per output,
     binomial P ~ 0.002), and the residual-dither cross-correlation stays mostly inside."""
-    from ident.pem import CanonicalModel, _discretize, _kalman_gain
+    from bikeid.ident.pem import CanonicalModel, _discretize, _kalman_gain
 
     v = 5.0
     r = simulate(BASE, v, duration=100, seed=seed, dither=1.0, dither_hold=5, disturbance=0.5,

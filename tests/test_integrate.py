@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from sim.effects import ActuatorLag, InputDelay, TorqueGain
-from sim.integrate import simulate, simulate_many, simulate_reference
-from sim.linear import state_matrices
-from sim.nonlinear import WhippleBicycle
-from sim.parameters import benchmark
+from bikeid.sim.effects import ActuatorLag, InputDelay, TorqueGain
+from bikeid.sim.integrate import simulate, simulate_many, simulate_reference
+from bikeid.sim.linear import state_matrices
+from bikeid.sim.nonlinear import WhippleBicycle
+from bikeid.sim.parameters import benchmark
 
 
 @pytest.fixture(scope="module")
@@ -175,7 +175,7 @@ def test_bad_arguments(bike, kwargs, match):
 
 def test_cli_simulate_reports_fall_in_one_line(tmp_path, capsys):
     """`bikeid simulate` writes the run up to the fall and reports the fall time."""
-    from experiments.cli import main
+    from bikeid.experiments.cli import main
 
     out = tmp_path / "run.csv"
     rc = main(["simulate", "--speed", "2", "--duration", "10", "--phi0", "2", "--out", str(out)])
@@ -193,7 +193,7 @@ def test_cli_simulate_json_roll_rate_feedback(tmp_path):
     """Roll-rate feedback K = 10 at 5 m/s keeps the benchmark upright for 5 s."""
     import json
 
-    from experiments.cli import main
+    from bikeid.experiments.cli import main
 
     out = tmp_path / "run.json"
     args = ["simulate", "--speed", "5", "--duration", "5", "--phi0", "5", "--roll-rate-gain",

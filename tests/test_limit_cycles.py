@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from experiments import limit_cycles as lc
+from bikeid.experiments import limit_cycles as lc
 
 
 class _FakeTrajectory:
@@ -89,8 +89,8 @@ def test_small_motion_grows_at_the_linear_weave_rate():
     T = 2 pi / Im(weave) of the linearization (Meijaard 2007, sim.linear); the speed change is
     second order in the amplitude.  Tolerance 1 % on the growth rate covers the remaining
     nonlinearity (amplitude < 1 deg) and the section interpolation."""
-    from sim.linear import eigenvalues
-    from sim.parameters import benchmark
+    from bikeid.sim.linear import eigenvalues
+    from bikeid.sim.parameters import benchmark
 
     p = benchmark()
     weave = max(eigenvalues(p, 3.5), key=lambda z: z.imag)
@@ -110,7 +110,7 @@ def test_small_motion_grows_at_the_linear_weave_rate():
 def test_fall_is_reported_for_a_large_initial_lean():
     """A 25 deg lean at 3.5 m/s with no steer (paper's Fig. 5 case) falls (|roll| > 60 deg)
     within 10 s; the verdict must say so and carry the fall time from the integrator."""
-    from sim.parameters import benchmark
+    from bikeid.sim.parameters import benchmark
 
     tr = lc.coast(benchmark(), lc.InitialCondition("lean", phi=25.0), duration=10.0)
     res = lc.periodicity(tr, "lean")

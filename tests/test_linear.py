@@ -12,7 +12,7 @@ import control
 import numpy as np
 import pytest
 
-from sim import linear, parameters
+from bikeid.sim import linear, parameters
 
 # Meijaard 2007, section 5 (published to 14 decimals; 20-digit values from an exact
 # rational evaluation of Appendix A with exact pi, quoted in whipple-benchmarks.md).

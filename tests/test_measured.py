@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dataset.measured import despike, fetch, load_log, read_segments, treadmill_speed
-from ident.experiment_model import ExperimentModel
+from bikeid.dataset.measured import despike, fetch, load_log, read_segments, treadmill_speed
+from bikeid.ident.experiment_model import ExperimentModel
 
 DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
 HAVE = (Path(DATA) / "tudelft-sbw" / "eigen").is_dir()
@@ -85,8 +85,8 @@ def test_fetch_all_speeds_adds_the_campaign_runs(tmp_path, monkeypatch, capsys):
     """`bikeid data fetch --all-speeds` asks for the 20 pinned files plus the campaign's
     four other eigen runs (2, 3, 4, 5 m/s: 7.2, 10.8, 14.4, 18 km/h, the names the
     transcribed segments.csv lists) at the pinned commit."""
-    import dataset.measured as dm
-    from experiments.cli import main
+    import bikeid.dataset.measured as dm
+    from bikeid.experiments.cli import main
 
     asked = []
     monkeypatch.setattr(dm, "_urlopen", lambda url: asked.append(url) or b"h\n1\n")
@@ -110,7 +110,7 @@ def test_closed_loop_sign_stabilizes():
 def test_simulation_matches_closed_loop_matrix():
     """Second method: the vectorized simulation equals powers of the augmented loop
     matrix (delay, lag, gain, biases) to round-off (1e-10)."""
-    from ident.discrepancy import synthetic_windows
+    from bikeid.ident.discrepancy import synthetic_windows
 
     m = ExperimentModel(effects={"input_delay": 0.023, "actuator_lag": 0.02, "command_gain": 0.9,
                                  "roll_rate_bias": 0.01, "steer_torque_bias": 0.05})  # fmt: skip
@@ -141,7 +141,7 @@ def test_parameter_corrections_match_meijaard_mass_matrix():
     (s - 1) I_Bxx to M_phiphi and (s - 1) mu^2 I_Bzz to M_dd, and a mass shift dm (total
     mass and B+H mass centre kept) changes M_phiphi by the point-mass terms m z^2 only.
     Tolerance 1e-12: round-off."""
-    from sim.linear import canonical_matrices
+    from bikeid.sim.linear import canonical_matrices
 
     m0 = ExperimentModel()
     p = m0.params
@@ -175,7 +175,7 @@ def test_small_expm_matches_scipy():
     with an actuator lag (second method)."""
     from scipy.linalg import expm
 
-    from ident.experiment_model import _expm_small
+    from bikeid.ident.experiment_model import _expm_small
 
     m = ExperimentModel(effects={"actuator_lag": 0.02, "steer_viscous_damping": 0.5})
     for v in (1.0, 3.0, 6.0):
@@ -209,7 +209,7 @@ def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
     meet the goal: 0.58 / 0.35; docs/measured.md.)"""
     import json
 
-    from experiments.cli import main
+    from bikeid.experiments.cli import main
 
     model = tmp_path / "m.json"
     assert (
@@ -237,7 +237,7 @@ def test_report_bode_runs_are_an_independent_check(tmp_path):
     half of the files improve (a model that only fitted the decays' quirks would not)."""
     import json
 
-    from experiments.cli import main
+    from bikeid.experiments.cli import main
 
     model = tmp_path / "m.json"
     fit = ["measured", "fit", "--data", DATA, "--speeds", "2.5,4.5", "--out", str(model)]
@@ -260,7 +260,7 @@ def test_report_bode_runs_are_an_independent_check(tmp_path):
 def test_cli_fit_refuses_negative_stability(tmp_path, capsys):
     """``--stability`` is a count of subsamples: a negative one is refused by name before any
     data is read (no model file is written)."""
-    from experiments.cli import main
+    from bikeid.experiments.cli import main
 
     out = tmp_path / "m.json"
     rc = main(["measured", "fit", "--data", str(tmp_path), "--out", str(out), "--stability", "-1"])
@@ -303,8 +303,8 @@ def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
     the spoilt window).  The quiet-before rule matters: switched off, a third window
     (the tail of the 2060 push) is accepted.
     """
-    import dataset.measured as dm
-    from dataset.measured import detect_decays
+    import bikeid.dataset.measured as dm
+    from bikeid.dataset.measured import detect_decays
 
     pushes = {500: 0.8, 1000: -0.6, 1050: 0.9, 2000: 0.7, 2060: -0.7, 2600: 0.5}
     run = load_log(_push_log(tmp_path, "eigen_x.log.gz", pushes))
@@ -317,7 +317,7 @@ def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
 
 
 def test_iter_decays_rejects_unknown_source(tmp_path):
-    from dataset.measured import iter_decays
+    from bikeid.dataset.measured import iter_decays
 
     with pytest.raises(ValueError, match="unknown decay source"):
         list(iter_decays(tmp_path, "guessed"))
@@ -330,7 +330,7 @@ def test_detected_decays_match_transcribed_segments():
     windows are found, each start within 2 samples (the 28th push, 1.5 m/s row 10603,
     peaks below the detection threshold).  Asserted: >= 90 % found within 3 samples
     (30 ms, under 1/20 of a weave period)."""
-    from dataset.measured import iter_decays
+    from bikeid.dataset.measured import iter_decays
 
     root = Path(DATA) / "tudelft-sbw"
     listed = read_segments(root / "eigen" / "segments.csv", {p.name for p in root.rglob("*.gz")})
@@ -351,8 +351,8 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     import json
     import shutil
 
-    from experiments.cli import main
-    from experiments.cmd_measured import load_decays
+    from bikeid.experiments.cli import main
+    from bikeid.experiments.cmd_measured import load_decays
 
     src = Path(DATA) / "tudelft-sbw" / "eigen" / "eigen_normal_sil6.5n2_12.6kph.log.gz"
     (tmp_path / "tudelft-sbw" / "eigen").mkdir(parents=True)
@@ -362,7 +362,7 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     assert len(new) >= len(old) - 1
     pairs = [(o, n) for o in old for n in new if abs(o.start - n.start) <= 3]
     assert len(pairs) == len(old)
-    from ident.experiment_model import attach_nonlinear_correction, window_errors
+    from bikeid.ident.experiment_model import attach_nonlinear_correction, window_errors
 
     m = ExperimentModel()
     eo, en = ([p[i] for p in pairs] for i in (0, 1))

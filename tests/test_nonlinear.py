@@ -13,11 +13,11 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from sim.effects import RollDamping, RollStiffness, SteerDamping, SteerStiffness
-from sim.integrate import simulate
-from sim.linear import canonical_matrices, state_matrices
-from sim.nonlinear import WhippleBicycle
-from sim.parameters import BicycleParameters, benchmark, by_name, known_names
+from bikeid.sim.effects import RollDamping, RollStiffness, SteerDamping, SteerStiffness
+from bikeid.sim.integrate import simulate
+from bikeid.sim.linear import canonical_matrices, state_matrices
+from bikeid.sim.nonlinear import WhippleBicycle
+from bikeid.sim.parameters import BicycleParameters, benchmark, by_name, known_names
 
 
 @pytest.fixture(scope="module")

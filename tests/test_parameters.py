@@ -7,8 +7,8 @@ import warnings
 import numpy as np
 import pytest
 
-from sim import parameters
-from sim.parameters import BicycleParameters
+from bikeid.sim import parameters
+from bikeid.sim.parameters import BicycleParameters
 
 # Moore (2012) parameters of the benchmark as produced by symbrim/bicycleparameters
 # (whipple-benchmarks.md section 1.4, 16 digits).

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from ident import pem
-from ident.canonical import (
+from bikeid.ident import pem
+from bikeid.ident.canonical import (
     canonical_ab,
     matrices_from_speed_params,
     speed_map,
@@ -12,10 +12,10 @@ from ident.canonical import (
     theta_from_matrices,
     to_bikeid_order,
 )
-from ident.subspace import pbsid
-from sim.linear import canonical_matrices, critical_speeds, eigenvalues, state_space
-from sim.linear_sim import simulate
-from sim.parameters import benchmark
+from bikeid.ident.subspace import pbsid
+from bikeid.sim.linear import canonical_matrices, critical_speeds, eigenvalues, state_space
+from bikeid.sim.linear_sim import simulate
+from bikeid.sim.parameters import benchmark
 
 P = benchmark()
 CM = canonical_matrices(P)

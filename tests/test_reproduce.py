@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from experiments import reproduce_chen_dao as cd
-from sim.linear import canonical_matrices, critical_speeds, eigenvalues
-from sim.parameters import benchmark
+from bikeid.experiments import reproduce_chen_dao as cd
+from bikeid.sim.linear import canonical_matrices, critical_speeds, eigenvalues
+from bikeid.sim.parameters import benchmark
 
 
 def test_paper_eq5_reading_reproduces_the_printed_poles_and_zeros():
@@ -53,7 +53,7 @@ def test_open_loop_and_k_step_prediction_are_exact_for_the_true_model():
     transient of the observer is over: the data start from x0 = 0)."""
     from scipy.linalg import expm
 
-    from ident.canonical import canonical_ab, theta_from_matrices
+    from bikeid.ident.canonical import canonical_ab, theta_from_matrices
 
     A, B = canonical_ab(theta_from_matrices(canonical_matrices(benchmark()), 5.0))
     dt = 0.01
@@ -86,9 +86,9 @@ def test_moore_hubbard_stacked_fit_equals_ident_direct_for_one_rider():
     """For runs of a single rider, the stacked two-stage regression of the Moore & Hubbard
     reproduction must equal ident.direct.identify (an independent implementation of the same
     eqs. 4-5) to round-off, with the same fixed entries (Whipple, HpF = push height)."""
-    from experiments import reproduce_moore_hubbard as mh
-    from ident.direct import identify
-    from sim.linear import lateral_force_vector
+    from bikeid.experiments import reproduce_moore_hubbard as mh
+    from bikeid.ident.direct import identify
+    from bikeid.sim.linear import lateral_force_vector
 
     runs = [mh._one_run(("B", "S", 4.0, 8.0, 1)), mh._one_run(("B", "S", 6.0, 8.0, 2))]
     mine = mh.fit_subset(runs)
@@ -118,7 +118,7 @@ def test_quick_reproduction_end_to_end(tmp_path):
     - the right-half-plane zero of delta/T_delta within 0.05 rad/s of sqrt(-g K0_pp / M_pp)
       (speed independent; 1.5 % covers the identified b and a entries' errors).
     """
-    from experiments.cli import main
+    from bikeid.experiments.cli import main
 
     assert main(["reproduce", "--quick", "--out", str(tmp_path)]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from dataset.sensors import AntiAlias, Channel, Sensors, channel_noise
-from sim.conventions import MEASURED
+from bikeid.dataset.sensors import AntiAlias, Channel, Sensors, channel_noise
+from bikeid.sim.conventions import MEASURED
 
 
 def fine_grid(duration: float = 2.0, h: float = 1e-3) -> np.ndarray:

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from ident.signals import differentiate, lowpass, prepare, remove_means
-from sim.linear_sim import simulate
-from sim.parameters import benchmark
+from bikeid.ident.signals import differentiate, lowpass, prepare, remove_means
+from bikeid.sim.linear_sim import simulate
+from bikeid.sim.parameters import benchmark
 
 
 @pytest.mark.parametrize("f", [2.0, 15.0, 30.0])

@@ -18,9 +18,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import dataset.store as store
-from dataset.run import REQUIRED, Run
-from dataset.store import (
+import bikeid.dataset.store as store
+from bikeid.dataset.run import REQUIRED, Run
+from bikeid.dataset.store import (
     copy_runs,
     export_csv,
     file_attrs,
@@ -29,7 +29,7 @@ from dataset.store import (
     read_runs,
     write_runs,
 )
-from sim.conventions import UNITS
+from bikeid.sim.conventions import UNITS
 
 
 def make_run(n: int = 300, seed: int = 0, marker: str = "meta-marker") -> Run:

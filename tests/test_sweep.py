@@ -18,13 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.excitation import ChirpReference, UniformDither
-from controllers.pid import PID
-from dataset.closed_loop import simulate_run
-from dataset.sensors import Channel, Sensors
-from dataset.store import list_runs, read_run, read_runs, write_runs
-from experiments.cli import main
-from experiments.sweep import (
+from bikeid.controllers.excitation import ChirpReference, UniformDither
+from bikeid.controllers.pid import PID
+from bikeid.dataset.closed_loop import simulate_run
+from bikeid.dataset.sensors import Channel, Sensors
+from bikeid.dataset.store import list_runs, read_run, read_runs, write_runs
+from bikeid.experiments.cli import main
+from bikeid.experiments.sweep import (
     SweepSpec,
     Task,
     _lock,
@@ -34,8 +34,8 @@ from experiments.sweep import (
     simulate_task,
     stabilization_table,
 )
-from sim.conventions import MEASURED
-from sim.parameters import benchmark
+from bikeid.sim.conventions import MEASURED
+from bikeid.sim.parameters import benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,7 +90,7 @@ def test_held_speed_and_metadata():
 def test_lateral_force_is_logged_like_a_load_cell():
     """The applied lateral force (Moore & Hubbard's perturbation F) is a measured signal;
     with an ideal F channel the log equals the applied force exactly (same samples)."""
-    from controllers.excitation import LateralForcePulses
+    from bikeid.controllers.excitation import LateralForcePulses
 
     pulses = LateralForcePulses(peak=50.0, duration=0.2, mean_gap=1.0, min_gap=0.5, seed=3)
     run = simulate_run(
@@ -170,7 +170,7 @@ def test_resume_after_sigkill(tmp_path):
     out = tmp_path / "killed.h5"
     parts = parts_dir(out)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "experiments.cli", "sweep", *args, "--out", str(out),
+        [sys.executable, "-m", "bikeid.experiments.cli", "sweep", *args, "--out", str(out),
          "--no-progress"],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )  # fmt: skip
@@ -255,7 +255,7 @@ def test_cli_bad_input(capsys, tmp_path):
         == 2
     )
     assert "seeds must be integers" in capsys.readouterr().err
-    from experiments.cmd_data import _seeds
+    from bikeid.experiments.cmd_data import _seeds
 
     assert _seeds("0:4") == (0, 1, 2, 3, 4) and _seeds("3,7") == (3, 7)
 

@@ -4,12 +4,12 @@ import control
 import numpy as np
 import pytest
 
-from ident.canonical import theta_from_matrices
-from ident.pem import CanonicalModel
-from ident.validate import compare, goodness_of_fit, resid, transfer_functions, zeros
-from sim.linear import canonical_matrices, state_space, transfer_function
-from sim.linear_sim import simulate
-from sim.parameters import benchmark
+from bikeid.ident.canonical import theta_from_matrices
+from bikeid.ident.pem import CanonicalModel
+from bikeid.ident.validate import compare, goodness_of_fit, resid, transfer_functions, zeros
+from bikeid.sim.linear import canonical_matrices, state_space, transfer_function
+from bikeid.sim.linear_sim import simulate
+from bikeid.sim.parameters import benchmark
 
 P = benchmark()
 

@@ -1,0 +1,38 @@
+"""bikeid: the nonlinear Carvallo-Whipple bicycle and its closed-loop identification.
+
+The package is five stages; data flows one way and a later stage imports earlier
+ones only (``tests/test_layers.py`` enforces it):
+
+``bikeid.sim``
+    Parameters (Meijaard 2007 notation), the linear benchmark model
+    (``linear.state_space`` -> ``control.StateSpace``, ``linear.critical_speeds``),
+    the nonlinear plant, the integrator and the effect registry.
+``bikeid.controllers``
+    Roll-angle controllers (``make("pid" | "pole-placement" | "fuzzy" |
+    "steer-into-lean", p)``), references and dither.
+``bikeid.dataset``
+    ``Run`` (the time-series type), the closed-loop engines (``closed_loop.simulate_run``
+    for the nonlinear plant, ``linear_loop.simulate`` for the exact linear one),
+    sensors, the HDF5 store and the measured-data loaders.
+``bikeid.ident``
+    Moore & Hubbard's direct least squares (``ident.identify``), Chen & Dao's
+    canonical PEM (``ident.fit``, ``ident.fit_speed_model``), validation
+    (``ident.validate.compare``, ``ident.validate.resid``) and the effect-library
+    discrepancy analysis of measured data.
+``bikeid.experiments``
+    The ``bikeid`` command line, sweeps, accuracy tables and the reproductions of
+    both papers.
+
+Conventions (state order, signal names, units, signs) are stated once in
+``bikeid.sim.conventions``: SI units, radians, Meijaard 2007 axes (x forward,
+y right, z down; roll, steer and steer torque positive to the right).
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("bikeid")
+except PackageNotFoundError:  # imported from a source tree that is not installed
+    __version__ = "0+unknown"
+
+__all__ = ["__version__"]
