@@ -36,6 +36,7 @@ __all__ = [
     "eigenvalues",
     "eigenvalues_vs_speed",
     "lateral_force_vector",
+    "match_eigenvalues",
     "state_matrices",
     "state_space",
     "transfer_function",
@@ -240,6 +241,30 @@ def _track(values: np.ndarray) -> np.ndarray:
         _, col = linear_sum_assignment(cost)
         out[k] = values[k][col]
     return out
+
+
+def match_eigenvalues(found, truth) -> np.ndarray:
+    """``found`` reordered to pair with ``truth`` (minimum total distance |found - truth|).
+
+    Parameters
+    ----------
+    found : (n,) array_like of complex
+        Eigenvalues to reorder (identified, say) [1/s].
+    truth : (n,) array_like of complex
+        Reference eigenvalues [1/s], in the order wanted.
+
+    Returns
+    -------
+    (n,) ndarray of complex
+        ``found[col]`` with ``col`` the optimal assignment (Hungarian algorithm,
+        ``scipy.optimize.linear_sum_assignment``), so element i pairs with ``truth[i]``.
+    """
+    found = np.asarray(found, dtype=complex).ravel()
+    truth = np.asarray(truth, dtype=complex).ravel()
+    if found.size != truth.size:
+        raise ValueError(f"cannot pair {found.size} eigenvalues with {truth.size}")
+    _, col = linear_sum_assignment(np.abs(truth[:, None] - found[None, :]))
+    return found[col]
 
 
 def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> EigenSweep:
