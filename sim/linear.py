@@ -49,7 +49,25 @@ INPUT_NAMES = ("T_phi", "T_delta", "F")
 
 @dataclass(frozen=True)
 class CanonicalMatrices:
-    """M, C1, K0, K2 (2x2 each, rows/cols [phi, delta]) and the gravity g."""
+    """Canonical matrices of the linearized Whipple bicycle (Meijaard 2007, eq. A1).
+
+    The equations of motion about upright straight-ahead running at speed v are
+    ``M q'' + v C1 q' + (g K0 + v^2 K2) q = [T_phi, T_delta]`` with q = [phi, delta].
+    Rows are the roll and steer equations, columns the coordinates phi and delta.
+
+    Attributes
+    ----------
+    M : (2, 2) ndarray
+        Mass matrix [kg m^2] (symmetric, positive definite).
+    C1 : (2, 2) ndarray
+        Velocity-dependent damping-like matrix [kg m]; ``v C1`` is in N m s/rad.
+    K0 : (2, 2) ndarray
+        Gravity-dependent stiffness matrix [kg m]; ``g K0`` is in N m/rad.
+    K2 : (2, 2) ndarray
+        Velocity-dependent stiffness matrix [kg]; ``v^2 K2`` is in N m/rad.
+    g : float
+        Gravitational acceleration [m/s^2].
+    """
 
     M: np.ndarray
     C1: np.ndarray
@@ -58,15 +76,50 @@ class CanonicalMatrices:
     g: float
 
     def stiffness(self, v: float) -> np.ndarray:
-        """g K0 + v^2 K2."""
+        """Stiffness matrix g K0 + v^2 K2 at speed ``v``.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (2, 2) ndarray
+            g K0 + v^2 K2 [N m/rad], rows/columns [phi, delta].
+        """
         return self.g * self.K0 + v**2 * self.K2
 
     def damping(self, v: float) -> np.ndarray:
-        """v C1."""
+        """Damping matrix v C1 at speed ``v``.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (2, 2) ndarray
+            v C1 [N m s/rad], rows/columns [phi, delta].
+        """
         return v * self.C1
 
     def char_poly(self, v: float) -> np.ndarray:
-        """Coefficients (ascending powers of s) of det(M s^2 + v C1 s + g K0 + v^2 K2)."""
+        """Characteristic polynomial det(M s^2 + v C1 s + g K0 + v^2 K2) at speed ``v``.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (5,) ndarray
+            Coefficients in *ascending* powers of s (``numpy.polynomial`` order):
+            ``[e, d, c, b, a]`` for ``a s^4 + b s^3 + c s^2 + d s + e``.  Its roots are
+            the eigenvalues of :func:`state_matrices` ``(cm, v)[0]`` [1/s].
+        """
         return _det_poly(self._poly_matrix(v))
 
     def _poly_matrix(self, v: float) -> list[list[np.ndarray]]:
@@ -80,7 +133,20 @@ def _det_poly(Pm: list[list[np.ndarray]]) -> np.ndarray:
 
 
 def canonical_matrices(p: BicycleParameters) -> CanonicalMatrices:
-    """M, C1, K0, K2 from the benchmark parameters (Meijaard 2007, Appendix A)."""
+    """Canonical matrices M, C1, K0, K2 from the benchmark parameters (Meijaard 2007, App. A).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        Bicycle in Meijaard (2007) notation, SI units.  The wheels are axisymmetric
+        (IRzz = IRxx, IFzz = IFxx).
+
+    Returns
+    -------
+    CanonicalMatrices
+        M [kg m^2], C1 [kg m], K0 [kg m], K2 [kg] (rows/columns [phi, delta]) and
+        g = ``p.g`` [m/s^2].
+    """
     sl, cl = math.sin(p.lam), math.cos(p.lam)
     IRzz, IFzz = p.IRxx, p.IFxx
     mT = p.mR + p.mB + p.mH + p.mF
@@ -121,18 +187,51 @@ def canonical_matrices(p: BicycleParameters) -> CanonicalMatrices:
 
 
 def lateral_force_vector(p: BicycleParameters, x_F: float, z_F: float) -> np.ndarray:
-    """H for a lateral force F [N] (positive right) on the rear frame at (x_F, z_F).
+    """Input vector H of a lateral force F on the rear frame at (x_F, z_F).
 
     The generalized force is F times the partial velocity of the application point:
     roll lever -z_F (height above ground) and, through the yaw rate
     psi' = (v delta + c delta') cos(lam) / w, a steer lever x_F c cos(lam) / w.
-    Units: m (N m per N).
+    F enters the equations of motion as ``H F`` on the right-hand side.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        Bicycle parameters (uses c, w and lam).
+    x_F : float
+        Application point, benchmark x (forward of the rear contact) [m].
+    z_F : float
+        Application point, benchmark z (down; negative above the ground) [m].
+
+    Returns
+    -------
+    (2,) ndarray
+        H = [-z_F, x_F c cos(lam) / w] [m] (N m of generalized force per N of F), rows
+        [phi, delta].  F [N] is positive to the right (+y).
     """
     return np.array([-z_F, x_F * p.c * math.cos(p.lam) / p.w])
 
 
 def yaw_rate(p: BicycleParameters, v: float, delta: np.ndarray, deltadot: np.ndarray) -> np.ndarray:
-    """Linearized rear-frame yaw rate psi' = (v delta + c delta') cos(lam) / w [rad/s]."""
+    """Linearized rear-frame yaw rate psi' = (v delta + c delta') cos(lam) / w.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        Bicycle parameters (uses c, w and lam).
+    v : float
+        Forward speed [m/s].
+    delta : array_like
+        Steer angle [rad], positive to the right.
+    deltadot : array_like
+        Steer rate [rad/s], same shape as ``delta`` (or broadcastable).
+
+    Returns
+    -------
+    ndarray
+        Yaw rate psi' [rad/s] (positive turning to the right), broadcast shape of
+        ``delta`` and ``deltadot``.
+    """
     return (v * np.asarray(delta) + p.c * np.asarray(deltadot)) * math.cos(p.lam) / p.w
 
 
@@ -141,10 +240,34 @@ def state_matrices(
     v: float,
     lateral_force_point: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A (4x4) and B for x = [phi, delta, phidot, deltadot].
+    """State matrices A and B of the linear model at speed ``v``.
 
-    B has columns [T_phi, T_delta] and, if ``lateral_force_point`` = (x_F, z_F)
-    is given, a third column for F.
+    x' = A x + B u with x = [phi, delta, phidot, deltadot] (:data:`STATE_NAMES`)
+    and u = [T_phi, T_delta] or, with ``lateral_force_point``, [T_phi, T_delta, F].
+
+    Parameters
+    ----------
+    p : BicycleParameters or CanonicalMatrices
+        Bicycle parameters or precomputed canonical matrices.
+    v : float
+        Forward speed [m/s].
+    lateral_force_point : (float, float), optional
+        (x_F, z_F) [m], benchmark axes, where a lateral force F acts on the rear
+        frame (:func:`lateral_force_vector`).  If given, B gets a third column for F.
+
+    Returns
+    -------
+    A : (4, 4) ndarray
+        State matrix: ``[[0, I], [-M^-1 (g K0 + v^2 K2), -M^-1 v C1]]``.
+    B : (4, 2) or (4, 3) ndarray
+        Input matrix, columns [T_phi, T_delta] (per N m) and optionally F (per N);
+        the first two rows are zero.
+
+    Raises
+    ------
+    ValueError
+        If ``lateral_force_point`` is given with ``p`` a :class:`CanonicalMatrices`
+        (the force lever needs the geometry).
     """
     cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
     Minv = np.linalg.inv(cm.M)
@@ -168,10 +291,34 @@ def state_space(
     inputs: tuple[str, ...] = ("T_phi", "T_delta"),
     lateral_force_point: tuple[float, float] | None = None,
 ) -> control.StateSpace:
-    """python-control ``StateSpace`` at speed v [m/s]; all four states are outputs.
+    """Linear model as a python-control ``StateSpace`` at speed ``v``.
 
-    ``inputs`` selects from ``("T_phi", "T_delta", "F")``; "F" needs
-    ``lateral_force_point`` = (x_F, z_F) [m].
+    Parameters
+    ----------
+    p : BicycleParameters or CanonicalMatrices
+        Bicycle parameters or precomputed canonical matrices.
+    v : float
+        Forward speed [m/s].
+    inputs : tuple of str, optional
+        Inputs, in the order wanted, chosen from :data:`INPUT_NAMES`
+        ``("T_phi", "T_delta", "F")``: roll torque [N m], steer torque [N m] and
+        lateral force [N], all positive to the right.  Default ``("T_phi", "T_delta")``.
+    lateral_force_point : (float, float), optional
+        (x_F, z_F) [m], benchmark axes, of the lateral force; required for "F".
+
+    Returns
+    -------
+    control.StateSpace
+        Continuous-time system with states and outputs x = [phi, delta, phidot,
+        deltadot] [rad, rad, rad/s, rad/s] (C = I, D = 0), labelled with
+        :data:`STATE_NAMES`; inputs labelled as in ``inputs``.
+
+    Raises
+    ------
+    ValueError
+        If ``inputs`` names an unknown input, if "F" is requested without
+        ``lateral_force_point``, or (from :func:`state_matrices`) if
+        ``lateral_force_point`` is given with ``p`` a :class:`CanonicalMatrices`.
     """
     unknown = [u for u in inputs if u not in INPUT_NAMES]
     if unknown:
@@ -189,11 +336,34 @@ def state_space(
 def transfer_function(
     p: BicycleParameters | CanonicalMatrices, v: float, output: str = "phi", input: str = "T_delta"
 ) -> control.TransferFunction:
-    """Exact SISO transfer function from ``input`` (T_phi or T_delta) to ``output``.
+    """Exact SISO transfer function from a torque ``input`` to an angle ``output``.
 
     Built from the adjugate of P(s) = M s^2 + v C1 s + g K0 + v^2 K2, so there are
     no round-off coefficients: e.g. phi/T_delta = -P_phidelta(s) / det P(s).
-    ``output`` is "phi" or "delta"; multiply by s for the rates.
+    Multiply by s for the rates.
+
+    Parameters
+    ----------
+    p : BicycleParameters or CanonicalMatrices
+        Bicycle parameters or precomputed canonical matrices.
+    v : float
+        Forward speed [m/s].
+    output : {"phi", "delta"}, optional
+        Roll or steer angle [rad]. Default "phi".
+    input : {"T_phi", "T_delta"}, optional
+        Roll or steer torque [N m]. Default "T_delta".
+
+    Returns
+    -------
+    control.TransferFunction
+        Continuous-time transfer function [rad/(N m)]; denominator the quartic
+        det P(s) (:meth:`CanonicalMatrices.char_poly`), leading zero coefficients of
+        the numerator removed.
+
+    Raises
+    ------
+    ValueError
+        If ``output`` or ``input`` is not one of the names above.
     """
     cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
     outs, ins = ("phi", "delta"), ("T_phi", "T_delta")
@@ -209,7 +379,21 @@ def transfer_function(
 
 # -- eigenvalues ---------------------------------------------------------------------------
 def eigenvalues(p: BicycleParameters | CanonicalMatrices, v: float) -> np.ndarray:
-    """The four eigenvalues of A(v) [1/s], unsorted."""
+    """Eigenvalues of the linear model at speed ``v``.
+
+    Parameters
+    ----------
+    p : BicycleParameters or CanonicalMatrices
+        Bicycle parameters or precomputed canonical matrices.
+    v : float
+        Forward speed [m/s].
+
+    Returns
+    -------
+    (4,) ndarray of complex
+        The four eigenvalues of A(v) (:func:`state_matrices`) [1/s], unsorted
+        (``numpy.linalg.eigvals`` order).
+    """
     return np.linalg.eigvals(state_matrices(p, v)[0])
 
 
@@ -217,9 +401,18 @@ def eigenvalues(p: BicycleParameters | CanonicalMatrices, v: float) -> np.ndarra
 class EigenSweep:
     """Eigenvalues against speed, tracked along continuous branches.
 
-    ``values[k, j]`` is branch j at ``speeds[k]``; ``labels[j]`` is one of
-    ``weave``, ``capsize``, ``caster`` (the two weave branches are the pair that is
-    complex above v_d) or ``mode<j>`` where no such structure exists.
+    Returned by :func:`eigenvalues_vs_speed`.
+
+    Attributes
+    ----------
+    speeds : (K,) ndarray
+        Forward speeds [m/s], as given to :func:`eigenvalues_vs_speed`.
+    values : (K, 4) ndarray of complex
+        ``values[k, j]`` is branch j at ``speeds[k]`` [1/s].
+    labels : tuple of str
+        ``labels[j]`` is one of ``weave``, ``capsize``, ``caster`` (the two weave
+        branches are the pair that is complex above v_d) or ``mode<j>`` where no such
+        structure exists.
     """
 
     speeds: np.ndarray
@@ -227,7 +420,25 @@ class EigenSweep:
     labels: tuple[str, ...]
 
     def mode(self, label: str) -> np.ndarray:
-        """Columns with this label (weave gives two)."""
+        """Eigenvalue branches with a given label.
+
+        Parameters
+        ----------
+        label : str
+            One of the labels in :attr:`labels` (``weave``, ``capsize``, ``caster`` or
+            ``mode<j>``).
+
+        Returns
+        -------
+        (K, n) ndarray of complex
+            The columns of :attr:`values` with this label [1/s]; n = 2 for ``weave``,
+            1 otherwise.
+
+        Raises
+        ------
+        ValueError
+            If no branch has this label.
+        """
         idx = [j for j, lab in enumerate(self.labels) if lab == label]
         if not idx:
             raise ValueError(f"no mode {label!r}; modes are {sorted(set(self.labels))}")
@@ -258,6 +469,12 @@ def match_eigenvalues(found, truth) -> np.ndarray:
     (n,) ndarray of complex
         ``found[col]`` with ``col`` the optimal assignment (Hungarian algorithm,
         ``scipy.optimize.linear_sum_assignment``), so element i pairs with ``truth[i]``.
+        Both inputs are flattened.
+
+    Raises
+    ------
+    ValueError
+        If ``found`` and ``truth`` have different numbers of elements.
     """
     found = np.asarray(found, dtype=complex).ravel()
     truth = np.asarray(truth, dtype=complex).ravel()
@@ -268,12 +485,30 @@ def match_eigenvalues(found, truth) -> np.ndarray:
 
 
 def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> EigenSweep:
-    """Eigenvalues over ``speeds`` [m/s], branches tracked and labelled.
+    """Eigenvalues over a range of speeds, branches tracked and labelled.
 
     Tracking uses a fine internal grid (step <= 0.01 m/s) so that labels follow
     continuous branches through the real-to-complex transition at v_d.
     Labelling: at the highest speed with a complex pair, that pair is the weave,
     the most negative real root the caster and the other real root the capsize.
+
+    Parameters
+    ----------
+    p : BicycleParameters or CanonicalMatrices
+        Bicycle parameters or precomputed canonical matrices.
+    speeds : (K,) array_like
+        Forward speeds [m/s], finite, any order; their span must be below 1000 m/s.
+
+    Returns
+    -------
+    EigenSweep
+        ``values`` (K, 4) [1/s] at ``speeds`` (in the given order), with the branch
+        labels.
+
+    Raises
+    ------
+    ValueError
+        If ``speeds`` is empty, not 1-D or not finite, or spans 1000 m/s or more.
     """
     speeds = np.asarray(speeds, dtype=float)
     if speeds.ndim != 1 or speeds.size == 0 or not np.all(np.isfinite(speeds)):
@@ -345,17 +580,38 @@ def _roots(f, cm: CanonicalMatrices, vmax: float, step: float = 0.01) -> list[fl
 
 
 def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0) -> dict:
-    """Critical speeds [m/s] by root finding on the characteristic polynomial.
+    """Critical speeds by root finding on the characteristic polynomial.
 
-    - ``v_d``: the weave pair turns from two real roots into a complex pair
-      (a zero of the quartic's discriminant);
-    - ``v_w``: the weave pair crosses the imaginary axis (zero of the third
-      Hurwitz determinant b c d - a d^2 - b^2 e), with ``weave_frequency`` [rad/s];
-    - ``v_c``: the capsize root crosses zero (zero of the constant term,
-      det(g K0 + v^2 K2)).
+    The quartic a s^4 + b s^3 + c s^2 + d s + e = det(M s^2 + v C1 s + g K0 + v^2 K2)
+    is scanned on a 0.01 m/s grid over (0, vmax] and each sign change refined with
+    ``scipy.optimize.brentq`` (xtol = rtol = 1e-15).
 
-    A speed that does not exist in (0, vmax] is ``None``.  If several crossings
-    exist, the lowest is reported and all are listed under ``all``.
+    Parameters
+    ----------
+    p : BicycleParameters or CanonicalMatrices
+        Bicycle parameters or precomputed canonical matrices.
+    vmax : float, optional
+        Highest speed searched [m/s]. Default 30.
+
+    Returns
+    -------
+    dict
+        ``"v_d"`` : float or None
+            Speed [m/s] at which the weave pair turns from two real roots into a
+            complex pair (a zero of the quartic's discriminant).
+        ``"v_w"`` : float or None
+            Weave speed [m/s]: the weave pair crosses the imaginary axis (zero of the
+            third Hurwitz determinant b c d - a d^2 - b^2 e).
+        ``"v_c"`` : float or None
+            Capsize speed [m/s]: the capsize root crosses zero (zero of the constant
+            term, det(g K0 + v^2 K2)).
+        ``"weave_frequency"`` : float or None
+            Imaginary part of the weave pair at ``v_w`` [rad/s].
+        ``"all"`` : dict of str to list of float
+            Every crossing found, keyed ``"v_d"``, ``"v_w"``, ``"v_c"`` [m/s].
+
+        A speed that does not exist in (0, vmax] is ``None``.  If several crossings
+        exist, the lowest is reported and all are listed under ``all``.
     """
     cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
     d_roots = [
