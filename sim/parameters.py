@@ -71,6 +71,63 @@ class BicycleParameters:
 
     Construction validates every value and raises :class:`ValueError` naming the
     parameter and the rule it breaks.  Use :meth:`replace` to derive a variant.
+    Every numerical value is converted to ``float``.  Axes: x forward, y right,
+    z down, origin at the rear contact point; a mass centre above the ground has
+    a negative z.  The wheels are axisymmetric: IRzz = IRxx and IFzz = IFxx are implied.
+
+    Parameters
+    ----------
+    w : float
+        Wheelbase [m], > 0.
+    c : float
+        Trail [m], |c| < w.
+    lam : float
+        Steer axis tilt from vertical [rad], in (-pi/2, pi/2).
+    g : float
+        Gravitational acceleration [m/s^2], > 0.
+    rR : float
+        Rear wheel radius [m], > 0.
+    mR : float
+        Rear wheel mass [kg], > 0.
+    IRxx : float
+        Rear wheel diametral inertia (= IRzz) [kg m^2], > 0.
+    IRyy : float
+        Rear wheel spin inertia [kg m^2], in (0, 2 IRxx].
+    xB, zB : float
+        Rear body (frame and rider) mass centre [m]; zB < 0.
+    mB : float
+        Rear body mass [kg], > 0.
+    IBxx, IByy, IBzz, IBxz : float
+        Rear body inertia about its mass centre, benchmark axes [kg m^2]; the tensor
+        must be positive definite and its principal moments obey the triangle
+        inequality.
+    xH, zH : float
+        Front frame (fork and handlebar) mass centre [m]; zH < 0.
+    mH : float
+        Front frame mass [kg], > 0.
+    IHxx, IHyy, IHzz, IHxz : float
+        Front frame inertia about its mass centre, benchmark axes [kg m^2]; same
+        rules as the rear body.
+    rF : float
+        Front wheel radius [m], > 0.
+    mF : float
+        Front wheel mass [kg], > 0.
+    IFxx : float
+        Front wheel diametral inertia (= IFzz) [kg m^2], > 0.
+    IFyy : float
+        Front wheel spin inertia [kg m^2], in (0, 2 IFxx].
+    name : str, optional
+        Label of the bicycle. Default "custom".
+
+    Raises
+    ------
+    ValueError
+        If a value is not a finite real number or breaks a physical rule (the
+        message names the parameter and the rule).
+
+    See Also
+    --------
+    PARAMETER_DOC : units and meaning of every parameter.
     """
 
     w: float
@@ -121,11 +178,36 @@ class BicycleParameters:
 
     # -- conversions -----------------------------------------------------------------
     def as_dict(self) -> dict[str, float]:
-        """The numerical parameters as a plain ``{name: value}`` dict (no ``name``)."""
+        """The numerical parameters as a plain dict.
+
+        Returns
+        -------
+        dict of str to float
+            ``{parameter: value}`` in SI units, field order (Meijaard 2007 Table 1
+            order); the ``name`` label is not included.
+        """
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "name"}
 
     def replace(self, **changes: Any) -> BicycleParameters:
-        """A validated copy with some values changed."""
+        """A validated copy with some values changed.
+
+        Parameters
+        ----------
+        **changes : float or str
+            New values by field name (SI units), e.g. ``c=0.1``; ``name`` relabels.
+
+        Returns
+        -------
+        BicycleParameters
+            The copy (``dataclasses.replace``), validated on construction.
+
+        Raises
+        ------
+        ValueError
+            If a new value breaks a rule (see :class:`BicycleParameters`).
+        TypeError
+            If a keyword is not a field name.
+        """
         return dataclasses.replace(self, **changes)
 
     def to_moore(self) -> dict[str, float]:
@@ -135,6 +217,14 @@ class BicycleParameters:
         rear offset, steer-axis length and fork offset; l1..l4 locate the frame mass
         centres in the frame-fixed axes; ic.., ie.. are the frame inertias rotated
         into the steer-axis-aligned frames; id.., if.. the wheel inertias.
+
+        Returns
+        -------
+        dict of str to float
+            Keys ``rf, rr, d1, d2, d3, l1, l2, l3, l4`` [m]; ``mc, md, me, mf`` (rear
+            body, rear wheel, front frame, front wheel masses) [kg]; ``id11, id22,
+            if11, if22, ic11, ic22, ic33, ic31, ie11, ie22, ie33, ie31`` [kg m^2];
+            ``g`` [m/s^2].
         """
         lam = self.lam
         cl, sl = math.cos(lam), math.sin(lam)
@@ -161,13 +251,25 @@ class BicycleParameters:
         }  # fmt: skip
 
     def inertia_B(self) -> np.ndarray:
-        """Rear body inertia tensor about its mass centre, benchmark axes [kg m^2]."""
+        """Rear body inertia tensor about its mass centre, benchmark axes.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            ``[[IBxx, 0, IBxz], [0, IByy, 0], [IBxz, 0, IBzz]]`` [kg m^2].
+        """
         return np.array(
             [[self.IBxx, 0.0, self.IBxz], [0.0, self.IByy, 0.0], [self.IBxz, 0.0, self.IBzz]]
         )
 
     def inertia_H(self) -> np.ndarray:
-        """Front frame inertia tensor about its mass centre, benchmark axes [kg m^2]."""
+        """Front frame inertia tensor about its mass centre, benchmark axes.
+
+        Returns
+        -------
+        (3, 3) ndarray
+            ``[[IHxx, 0, IHxz], [0, IHyy, 0], [IHxz, 0, IHzz]]`` [kg m^2].
+        """
         return np.array(
             [[self.IHxx, 0.0, self.IHxz], [0.0, self.IHyy, 0.0], [self.IHxz, 0.0, self.IHzz]]
         )
@@ -245,7 +347,27 @@ _REQUIRED = tuple(f.name for f in fields(BicycleParameters) if f.name != "name")
 
 
 def from_mapping(values: Mapping[str, Any], name: str = "custom") -> BicycleParameters:
-    """Build from a ``{parameter: value}`` mapping; missing or unknown keys raise."""
+    """Build parameters from a ``{parameter: value}`` mapping.
+
+    Parameters
+    ----------
+    values : mapping of str to float
+        Every field of :class:`BicycleParameters` except ``name`` [SI units].  The
+        keys ``IRzz``, ``IFzz`` (must equal IRxx, IFxx) and ``name`` (ignored) are
+        also accepted.
+    name : str, optional
+        Label of the bicycle. Default "custom".
+
+    Returns
+    -------
+    BicycleParameters
+
+    Raises
+    ------
+    ValueError
+        If a parameter is missing or unknown, if IRzz/IFzz differ from IRxx/IFxx, or
+        if a value breaks a rule (see :class:`BicycleParameters`).
+    """
     missing = [k for k in _REQUIRED if k not in values]
     if missing:
         raise ValueError(
@@ -271,6 +393,11 @@ def benchmark() -> BicycleParameters:
     """The benchmark bicycle, exact values of Meijaard et al. (2007) Table 1.
 
     IByy and IHyy are the paper's 11 and 0.06 kg m^2; lam = pi/10 exactly.
+
+    Returns
+    -------
+    BicycleParameters
+        Named ``"benchmark"``.
     """
     return BicycleParameters(
         w=1.02, c=0.08, lam=math.pi / 10.0, g=9.81,
@@ -293,6 +420,11 @@ def steer_by_wire() -> BicycleParameters:
     IFyy = 0.1289 breaks the wheel triangle inequality IFyy <= 2 IFxx by 0.08 %;
     0.0644 is consistent with 0.06445 rounded to three figures, which we use
     (the thin-hoop limit IFyy = 2 IFxx).
+
+    Returns
+    -------
+    BicycleParameters
+        Named ``"steer-by-wire"``.
     """
     IBxx, IBzz = 1.64, 1.94
     IHxx, IHzz = 0.0098, 0.00396
@@ -327,7 +459,25 @@ def from_bicycleparameters(name: str) -> BicycleParameters:
 
     Reads the package's ``<Name>Benchmark.txt`` and keeps the nominal values
     (uncertainties dropped).  Note: the shipped ``Benchmark`` file rounds IHxx,
-    IHzz and IHxz; use :func:`benchmark` for the exact benchmark.
+    IHzz and IHxz; use :func:`benchmark` for the exact benchmark.  A measured IByy or
+    IHyy outside the triangle-inequality range is clipped onto it with a
+    ``UserWarning`` (Browser, Yellow, Yellowrev).
+
+    Parameters
+    ----------
+    name : str
+        Bicycle name, case-insensitive (one of the shipped folders with a
+        ``Parameters/<Name>Benchmark.txt`` file).
+
+    Returns
+    -------
+    BicycleParameters
+        Named with the shipped spelling (e.g. ``"Browser"``).
+
+    Raises
+    ------
+    ValueError
+        If no shipped bicycle has this name, or its values break a rule.
     """
     from bicycleparameters.io import load_parameter_text_file
 
@@ -375,9 +525,26 @@ def _clip_iyy(values: dict[str, float], body: str, bicycle: str) -> None:
 
 
 def from_file(path: str | Path) -> BicycleParameters:
-    """Read a YAML (``.yml``/``.yaml``) or JSON file of ``{parameter: value}``.
+    """Read bicycle parameters from a YAML (``.yml``/``.yaml``) or JSON file.
 
-    Values are SI (m, kg, kg m^2, rad).  An optional ``name`` key names the bicycle.
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        File holding a mapping ``{parameter: value}`` in Meijaard notation; values
+        SI (m, kg, kg m^2, rad, m/s^2).  An optional ``name`` key names the bicycle
+        (default: the file's stem).  ``IRzz``/``IFzz`` may be given if equal to
+        ``IRxx``/``IFxx``.
+
+    Returns
+    -------
+    BicycleParameters
+
+    Raises
+    ------
+    ValueError
+        If the file does not exist, has another extension, does not parse, does not
+        hold a mapping, or its parameters are missing, unknown or invalid
+        (:func:`from_mapping`).
     """
     path = Path(path)
     if not path.exists():
@@ -415,7 +582,15 @@ _ALIASES = {
 
 
 def known_names() -> list[str]:
-    """Names accepted by :func:`by_name` (besides file paths)."""
+    """Names accepted by :func:`by_name` (besides file paths).
+
+    Returns
+    -------
+    list of str
+        The aliases (``benchmark``, ``meijaard2007``, ``steer-by-wire``, ``sbw``,
+        ``tudelft-sbw``), then the bicycles shipped with ``bicycleparameters`` except
+        its ``Benchmark``.
+    """
     shipped = [n for n in _shipped_names() if n.lower() != "benchmark"]
     return list(_ALIASES) + shipped
 
@@ -426,6 +601,23 @@ def by_name(name: str) -> BicycleParameters:
     ``benchmark`` is the exact Meijaard (2007) bicycle; ``steer-by-wire`` (or
     ``sbw``) the TU Delft bicycle; any name shipped by ``bicycleparameters``
     (case-insensitive); or a path to a ``.yaml``/``.json`` file.
+
+    Parameters
+    ----------
+    name : str
+        An alias (case-insensitive, surrounding blanks ignored: ``benchmark``,
+        ``meijaard2007``, ``steer-by-wire``, ``sbw``, ``tudelft-sbw``), a
+        ``bicycleparameters`` bicycle, or a path ending in ``.yaml``, ``.yml`` or
+        ``.json``.
+
+    Returns
+    -------
+    BicycleParameters
+
+    Raises
+    ------
+    ValueError
+        If the name is unknown, or the file or bicycle is invalid.
     """
     key = name.strip().lower()
     if key in _ALIASES:
