@@ -50,18 +50,43 @@ _OK, _FELL, _NONFINITE = 0, 1, 2
 class Trajectory:
     """A simulated run on the controller sample grid.
 
-    t : (N,) sample times [s].
-    y : (N, 8) true measurements, :data:`sim.conventions.MEASURED` order.
-    measured : (N, 8) what the controller saw (``measure`` hook applied; = y without one).
-    theta : (N,) rear-frame pitch from upright [rad], positive nose up.
-    rear, front : (N, 2) rear / front contact points in the ground frame [m].
-    inputs : (N, 4) inputs acting at each sample instant [T_delta, T_phi, F, T_R]
-        (T_delta after input effects; T_R the drive torque in held mode).
-    command : (N,) the controller's steer-torque command [N m] (0 without one).
-    states : (N, 10) integration states (:data:`sim.nonlinear.STATE`).
-    fell_at : time [s] at which |roll| first exceeded the fall limit, else None.
-    stop_reason : None, or why the run ended early.
-    energy : (N,) total energy [J] if requested.
+    Returned by :func:`simulate`.  N is the number of samples kept: duration/dt + 1,
+    or fewer if the run stopped early (the last sample is the one before the stop).
+
+    Attributes
+    ----------
+    t : (N,) ndarray
+        Sample times [s], t_k = k dt.
+    y : (N, 8) ndarray
+        True measurements, :data:`sim.conventions.MEASURED` order
+        [v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot]
+        [m/s, rad, rad, rad, rad/s, rad/s, rad/s, rad/s]; Meijaard signs (positive
+        to the right; thetaRdot = -v / rR upright).
+    measured : (N, 8) ndarray
+        What the controller saw (``measure`` hook applied; = y without one).
+    theta : (N,) ndarray
+        Rear-frame pitch from upright [rad], positive nose up.
+    rear, front : (N, 2) ndarray
+        Rear / front contact points (x, y) in the ground frame [m] (x forward at
+        t = 0 with zero yaw, y right).
+    inputs : (N, 4) ndarray
+        Inputs acting at each sample instant [T_delta, T_phi, F, T_R]
+        [N m, N m, N, N m] (T_delta after input effects; T_R the drive torque in
+        held mode).
+    command : (N,) ndarray
+        The controller's steer-torque command [N m] (0 without one).
+    states : (N, 10) ndarray
+        Integration states (:data:`sim.nonlinear.STATE`).
+    fell_at : float or None
+        Time [s] at which |roll| first exceeded the fall limit, else None.
+    stop_reason : str or None
+        None, or why the run ended early.
+    energy : (N,) ndarray or None
+        Total energy (kinetic + potential) [J] if requested, else None.
+    meta : dict
+        Settings of the run: ``mode``, ``dt`` [s], ``substeps``, ``method``,
+        ``fall_limit`` [rad], ``bicycle`` (name) and ``lateral_force_point``
+        (x_F, z_F) [m].
     """
 
     t: np.ndarray
@@ -79,7 +104,26 @@ class Trajectory:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def signal(self, name: str) -> np.ndarray:
-        """One true signal by name (MEASURED, INPUTS, 'theta', 'x', 'y', 'xF', 'yF')."""
+        """One true signal by name.
+
+        Parameters
+        ----------
+        name : str
+            A :data:`sim.conventions.MEASURED` name, an input of
+            :data:`sim.nonlinear.INPUTS` (``T_delta``, ``T_phi``, ``F``, ``T_R``),
+            ``theta`` (pitch), or a contact coordinate ``x``, ``y`` (rear) or ``xF``,
+            ``yF`` (front).
+
+        Returns
+        -------
+        (N,) ndarray
+            The signal in SI units (:data:`sim.conventions.UNITS`).
+
+        Raises
+        ------
+        ValueError
+            If the name is unknown.
+        """
         if name in MEASURED:
             return self.y[:, MEASURED.index(name)]
         if name in INPUTS:
@@ -98,7 +142,15 @@ class Trajectory:
         return extra[name]
 
     def columns(self) -> dict[str, np.ndarray]:
-        """All signals as named columns (time first), e.g. for CSV/JSON output."""
+        """All signals as named columns (time first), e.g. for CSV/JSON output.
+
+        Returns
+        -------
+        dict of str to (N,) ndarray
+            ``t``, the MEASURED signals, ``theta``, ``x``, ``y``, ``xF``, ``yF``,
+            the inputs ``T_delta``, ``T_phi``, ``F``, ``T_R`` and, if recorded,
+            ``energy``; SI units.
+        """
         cols = {"t": self.t}
         for name in (*MEASURED, "theta", "x", "y", "xF", "yF", *INPUTS):
             cols[name] = self.signal(name)
@@ -280,20 +332,66 @@ def simulate(
     rtol: float = 1e-12,
     atol: float = 1e-12,
 ) -> Trajectory:
-    """Simulate ``duration`` seconds from state ``x0`` (see :meth:`WhippleBicycle.state`).
+    """Simulate the nonlinear Whipple bicycle under a sampled controller.
 
-    controller : ``controller(t, y) -> T_delta`` [N m] with ``y`` in MEASURED order,
-        called every ``dt`` seconds (``reset()`` is called first if it exists).
-    dt : controller sample time [s]; ``duration`` must be a whole number of samples.
-    substeps : RK4 steps per sample (plant step dt / substeps; default 0.005 s).
-    mode : ``"coast"`` or ``"held"`` (:mod:`sim.nonlinear`).
-    inputs : open-loop inputs on the sample grid: an (N, 4) array [T_delta, T_phi,
-        F, T_R] or a dict of name -> scalar or (N,) array, N = duration/dt + 1.
-    measure : maps the true measurement vector to what the controller sees.
-    effects : :mod:`sim.effects` objects (plant and input side).
-    fall_limit : |roll| [rad] at which the bicycle is considered fallen.
-    energy : record total energy (kinetic + potential) [J] at every sample.
-    method : ``"rk4"`` (fixed step, numba) or ``"reference"`` (DOP853, rtol/atol).
+    See the module docstring for the sampling scheme and the input chain.
+
+    Parameters
+    ----------
+    bike : WhippleBicycle or BicycleParameters
+        The plant (parameters are wrapped in a :class:`WhippleBicycle` with the lateral
+        force at the rear body mass centre).
+    x0 : (10,) array_like
+        Initial integration state in :data:`sim.nonlinear.STATE` order; build it with
+        :meth:`WhippleBicycle.state`.  |roll| must not exceed ``fall_limit``.
+    duration : float
+        Simulated time [s], > 0 and a whole number of samples ``dt``.
+    controller : callable, optional
+        ``controller(t, y) -> T_delta`` [N m] with ``t`` [s] and ``y`` the (8,)
+        measurement vector in MEASURED order, called every ``dt`` seconds
+        (``reset()`` is called first if it exists).  None: no feedback.
+    dt : float, optional
+        Controller sample time [s]. Default 0.01.
+    substeps : int, optional
+        RK4 steps per sample (plant step dt / substeps). Default 2 (0.005 s).
+    mode : {"coast", "held"}, optional
+        Rear wheel free or speed held by an ideal drive torque (:mod:`sim.nonlinear`).
+        Default "coast".
+    inputs : (N, 4) array_like or mapping, optional
+        Open-loop inputs on the sample grid, held over each sample: an (N, 4) array
+        [T_delta, T_phi, F, T_R] [N m, N m, N, N m] or a dict of name -> scalar or
+        (N,) array, N = duration/dt + 1.  The open-loop T_delta adds to the controller
+        command before the input effects.  T_R must be zero in held mode.
+    measure : callable, optional
+        ``measure(y) -> y_m`` maps the true (8,) measurement vector to the (8,) vector
+        the controller sees.
+    effects : sequence, optional
+        :mod:`sim.effects` objects (plant and input side).
+    fall_limit : float, optional
+        |roll| [rad] at which the bicycle is considered fallen, in (0, pi/2].
+        Default 60 deg.
+    energy : bool, optional
+        Record total energy (kinetic + potential) [J] at every sample.
+    method : {"rk4", "reference"}, optional
+        ``"rk4"`` (fixed step, numba) or ``"reference"`` (``solve_ivp`` DOP853 over
+        each sample interval with ``rtol``/``atol``). Default "rk4".
+    rtol, atol : float, optional
+        Tolerances of the reference method. Default 1e-12.
+
+    Returns
+    -------
+    Trajectory
+        The run on the sample grid; shorter than N samples if the bicycle fell
+        (``fell_at``), the state became non-finite (a ``RuntimeWarning`` is issued)
+        or the controller returned a non-finite torque (see ``stop_reason``).
+
+    Raises
+    ------
+    ValueError
+        If ``bike``, ``mode``, ``method``, ``dt``, ``duration`` (not a whole number of
+        samples), ``substeps``, ``fall_limit``, ``x0`` (shape, finiteness, roll beyond
+        the fall limit) or ``inputs`` (names, shapes, finiteness, T_R in held mode) is
+        invalid, or if ``measure`` returns other than 8 values.
     """
     bike = _as_bike(bike)
     held = mode == "held"
@@ -442,7 +540,28 @@ def simulate(
 
 
 def simulate_reference(bike, x0, duration, **kwargs) -> Trajectory:
-    """:func:`simulate` with the adaptive DOP853 reference (rtol = atol = 1e-12)."""
+    """:func:`simulate` with the adaptive DOP853 reference (rtol = atol = 1e-12).
+
+    Parameters
+    ----------
+    bike : WhippleBicycle or BicycleParameters
+        The plant.
+    x0 : (10,) array_like
+        Initial state, :data:`sim.nonlinear.STATE` order.
+    duration : float
+        Simulated time [s].
+    **kwargs
+        Further :func:`simulate` keywords; ``method`` defaults to ``"reference"``.
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    ValueError
+        As :func:`simulate`.
+    """
     kwargs.setdefault("method", "reference")
     return simulate(bike, x0, duration, **kwargs)
 
@@ -457,11 +576,27 @@ def _simulate_kwargs(kwargs: Mapping[str, Any]) -> Trajectory:
 
 
 def simulate_many(runs: Sequence[Mapping[str, Any]], processes: int = 1) -> list[Trajectory]:
-    """Simulate several runs; each a dict of :func:`simulate` arguments
-    (``bike``, ``x0``, ``duration`` and keywords).
+    """Simulate several runs, optionally in parallel processes.
 
-    ``processes`` > 1 uses a process pool (controllers and hooks must then be
-    picklable); results keep the order of ``runs``.
+    Parameters
+    ----------
+    runs : sequence of mapping
+        Each a dict of :func:`simulate` arguments: ``bike``, ``x0``, ``duration`` and
+        keywords.
+    processes : int, optional
+        Number of worker processes. ``processes`` > 1 uses a process pool
+        (controllers and hooks must then be picklable). Default 1 (serial).
+
+    Returns
+    -------
+    list of Trajectory
+        One per run, in the order of ``runs``.
+
+    Raises
+    ------
+    ValueError
+        If a run lacks ``bike``, ``x0`` or ``duration``, or :func:`simulate` refuses
+        its arguments.
     """
     runs = list(runs)
     if processes <= 1 or len(runs) <= 1:
