@@ -61,14 +61,14 @@ class Trajectory:
         True measurements, :data:`sim.conventions.MEASURED` order
         [v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot]
         [m/s, rad, rad, rad, rad/s, rad/s, rad/s, rad/s]; Meijaard signs (positive
-        to the right; thetaRdot = -v / rR upright).
+        to the right; v = -rR thetaRdot by definition).
     measured : (N, 8) ndarray
         What the controller saw (``measure`` hook applied; = y without one).
     theta : (N,) ndarray
         Rear-frame pitch from upright [rad], positive nose up.
     rear, front : (N, 2) ndarray
-        Rear / front contact points (x, y) in the ground frame [m] (x forward at
-        t = 0 with zero yaw, y right).
+        Rear / front contact points (x, y) in the inertial ground frame N [m]
+        (x forward at zero yaw, y right).
     inputs : (N, 4) ndarray
         Inputs acting at each sample instant [T_delta, T_phi, F, T_R]
         [N m, N m, N, N m] (T_delta after input effects; T_R the drive torque in
