@@ -74,10 +74,28 @@ _NEWTON_MAXIT = 40
 def parameter_vector(
     p: BicycleParameters, lateral_force_point: tuple[float, float] | None = None
 ) -> np.ndarray:
-    """Numerical parameter vector in ``gen.PARAMETERS`` order.
+    """Numerical parameter vector of the generated equations.
 
-    ``lateral_force_point`` = (x_F, z_F) in benchmark axes [m] (z down, origin at
-    the rear contact); default: the rear body mass centre (xB, zB).
+    Parameters
+    ----------
+    p : BicycleParameters
+        Bicycle in Meijaard notation.
+    lateral_force_point : (float, float), optional
+        (x_F, z_F) in benchmark axes [m] (x forward, z down, origin at the rear
+        contact) where the lateral force F acts on the rear frame; default: the rear
+        body mass centre (xB, zB).
+
+    Returns
+    -------
+    (28,) ndarray
+        The Moore (2012) parameters of :meth:`BicycleParameters.to_moore` plus the
+        force point ``lf1``, ``lf3`` (relative to the rear wheel centre in rear-frame
+        axes) [m], in ``sim._whipple_generated.PARAMETERS`` order; SI units.
+
+    Raises
+    ------
+    ValueError
+        If ``lateral_force_point`` is not finite.
     """
     x_F, z_F = (p.xB, p.zB) if lateral_force_point is None else lateral_force_point
     if not (math.isfinite(x_F) and math.isfinite(z_F)):
@@ -288,11 +306,37 @@ invalidate_stale_caches([pitch, speeds, accelerations, rhs, outputs], "nonlinear
 class WhippleBicycle:
     """The nonlinear Whipple bicycle for one parameter set (see the module docstring).
 
+    State order :data:`STATE` ``[q1, q2, q3, q4, q6, q7, q8, u4, u6, u7]``
+    (x, y [m], yaw, roll, rear wheel angle, steer, front wheel angle [rad], roll
+    rate, rear wheel rate, steer rate [rad/s]); inputs :data:`INPUTS`
+    ``[T_delta, T_phi, F, T_R]`` [N m, N m, N, N m].
+
     Parameters
     ----------
-    p : benchmark-notation parameters.
-    lateral_force_point : (x_F, z_F) [m], benchmark axes, where the lateral force F
-        acts on the rear frame; default (xB, zB).
+    p : BicycleParameters
+        Benchmark-notation parameters.
+    lateral_force_point : (float, float), optional
+        (x_F, z_F) [m], benchmark axes, where the lateral force F acts on the rear
+        frame; default (xB, zB).
+
+    Attributes
+    ----------
+    params : BicycleParameters
+        The parameters ``p``.
+    lateral_force_point : (float, float)
+        (x_F, z_F) [m] in use.
+    p : (28,) ndarray
+        Numerical parameter vector (:func:`parameter_vector`).
+    rR : float
+        Rear wheel radius [m].
+    lam : float
+        Steer axis tilt [rad]; Moore's pitch q5 equals lam upright.
+
+    Raises
+    ------
+    ValueError
+        If ``p`` is not a :class:`BicycleParameters`, the force point is not finite,
+        or the holonomic constraint has no upright solution.
     """
 
     def __init__(
@@ -311,14 +355,46 @@ class WhippleBicycle:
 
     # -- configuration --------------------------------------------------------------------
     def upright_pitch(self) -> float:
-        """q5 at phi = delta = 0 (equals lam for the Meijaard geometry)."""
+        """Moore pitch q5 of the upright configuration.
+
+        Returns
+        -------
+        float
+            q5 [rad] at phi = delta = 0 (equals lam for the Meijaard geometry).
+
+        Raises
+        ------
+        ValueError
+            If the Newton iteration on the holonomic constraint fails.
+        """
         q5 = pitch(0.0, 0.0, self.lam, self.p)
         if not math.isfinite(q5):
             raise ValueError(f"bicycle {self.params.name!r}: no upright pitch solution")
         return float(q5)
 
     def pitch(self, phi: float, delta: float, guess: float | None = None) -> float:
-        """Moore pitch q5 [rad] satisfying the holonomic constraint at (phi, delta)."""
+        """Moore pitch q5 satisfying the holonomic constraint at (phi, delta).
+
+        Parameters
+        ----------
+        phi : float
+            Roll angle q4 [rad], positive to the right.
+        delta : float
+            Steer angle q7 [rad], positive to the right.
+        guess : float, optional
+            Newton starting value [rad]; default ``lam``.
+
+        Returns
+        -------
+        float
+            q5 [rad] (rear-frame pitch; pitch from upright is q5 - lam, positive nose
+            up).
+
+        Raises
+        ------
+        ValueError
+            If the Newton iteration fails (configuration too far from upright).
+        """
         q5 = pitch(float(phi), float(delta), self.lam if guess is None else float(guess), self.p)
         if not math.isfinite(q5):
             raise ValueError(
@@ -340,8 +416,33 @@ class WhippleBicycle:
     ) -> np.ndarray:
         """A consistent integration state from benchmark quantities (SI, radians).
 
-        v is the forward speed -rR u6 [m/s]; x, y the rear contact position [m].
-        Pitch and the dependent speeds are implied (solved at every evaluation).
+        Pitch and the dependent speeds are implied (solved at every evaluation); the
+        wheel angles q6, q8 start at 0.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed -rR u6 [m/s].
+        phi, delta : float, optional
+            Roll and steer angles [rad], positive to the right. Default 0.
+        phidot, deltadot : float, optional
+            Roll and steer rates [rad/s]. Default 0.
+        psi : float, optional
+            Yaw (heading) [rad], positive to the right. Default 0.
+        x, y : float, optional
+            Rear contact position in N [m] (x forward, y right). Default 0.
+
+        Returns
+        -------
+        (10,) ndarray
+            ``[x, y, psi, phi, 0, delta, 0, phidot, -v / rR, deltadot]``
+            (:data:`STATE` order).
+
+        Raises
+        ------
+        ValueError
+            If a value is not finite or no pitch satisfies the holonomic constraint at
+            (phi, delta).
         """
         vals = dict(v=v, phi=phi, delta=delta, phidot=phidot, deltadot=deltadot, psi=psi, x=x, y=y)
         for k, val in vals.items():
@@ -360,7 +461,32 @@ class WhippleBicycle:
         mode: str = "coast",
         effects=None,
     ) -> tuple[np.ndarray, float]:
-        """(y', T_R) at state ``y`` with inputs [T_delta, T_phi, F, T_R]."""
+        """State derivative at ``y``.
+
+        Parameters
+        ----------
+        y : (10,) array_like
+            State in :data:`STATE` order.
+        inputs : (4,) array_like, optional
+            [T_delta, T_phi, F, T_R] [N m, N m, N, N m] (:data:`INPUTS`); default zero.
+        mode : {"coast", "held"}, optional
+            Speed mode; in "held" T_R is ignored and solved for. Default "coast".
+        effects : sequence, optional
+            Plant-side :mod:`sim.effects` objects.
+
+        Returns
+        -------
+        ydot : (10,) ndarray
+            dy/dt, :data:`STATE` order.
+        T_R : float
+            Rear-wheel drive torque [N m] (the input in "coast", the holding torque in
+            "held").
+
+        Raises
+        ------
+        ValueError
+            If ``mode`` or ``inputs`` is invalid or the pitch Newton iteration fails.
+        """
         held = _mode(mode)
         ydot = np.empty(10)
         ev = plant_vector(effects)
@@ -369,8 +495,24 @@ class WhippleBicycle:
             raise ValueError("pitch Newton iteration failed: state too far from upright")
         return ydot, float(T_R)
 
-    def all_speeds(self, q4: float, q5: float, q7: float, u4: float, u6: float, u7: float):
-        """[u4, u6, u7, u3, u5, u8] from the nonholonomic constraints at pitch q5."""
+    def all_speeds(
+        self, q4: float, q5: float, q7: float, u4: float, u6: float, u7: float
+    ) -> np.ndarray:
+        """All six generalized speeds from the independent ones.
+
+        Parameters
+        ----------
+        q4, q5, q7 : float
+            Roll, pitch and steer [rad] (q5 consistent with the holonomic constraint).
+        u4, u6, u7 : float
+            Roll rate, rear wheel rate and steer rate [rad/s].
+
+        Returns
+        -------
+        (6,) ndarray
+            [u4, u6, u7, u3, u5, u8] (:data:`SPEEDS` order) [rad/s], the dependent ones
+            from the nonholonomic constraints.
+        """
         u = np.empty(6)
         speeds(q4, q5, q7, u4, u6, u7, self.p, u)
         return u
@@ -387,7 +529,36 @@ class WhippleBicycle:
         mode: str = "coast",
         extra=(0.0, 0.0, 0.0),
     ) -> tuple[np.ndarray, np.ndarray, float]:
-        """(u, u', T_R) at a given pitch: u and u' in :data:`SPEEDS` order."""
+        """Speeds, accelerations and drive torque at a given configuration.
+
+        Parameters
+        ----------
+        q4, q5, q7 : float
+            Roll, pitch and steer [rad].
+        u4, u6, u7 : float
+            Independent speeds [rad/s].
+        inputs : (4,) array_like, optional
+            [T_delta, T_phi, F, T_R] [N m, N m, N, N m]; default zero.
+        mode : {"coast", "held"}, optional
+            Speed mode. Default "coast".
+        extra : (3,) array_like, optional
+            Extra generalized forces added to the dynamic rows of (u4, u6, u7)
+            [N m]; default zero.
+
+        Returns
+        -------
+        u : (6,) ndarray
+            Speeds in :data:`SPEEDS` order [rad/s].
+        udot : (6,) ndarray
+            Their time derivatives [rad/s^2] (u6' = 0 in "held").
+        T_R : float
+            Rear-wheel drive torque [N m].
+
+        Raises
+        ------
+        ValueError
+            If ``mode`` or ``inputs`` is invalid.
+        """
         u = self.all_speeds(q4, q5, q7, u4, u6, u7)
         udot = np.empty(6)
         T_R = accelerations(
@@ -396,14 +567,37 @@ class WhippleBicycle:
         return u, udot, float(T_R)
 
     def measurements(self, y: np.ndarray) -> np.ndarray:
-        """The :data:`sim.conventions.MEASURED` signals at state ``y``."""
+        """The measured signals at state ``y``.
+
+        Parameters
+        ----------
+        y : (10,) array_like
+            State in :data:`STATE` order.
+
+        Returns
+        -------
+        (8,) ndarray
+            [v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot]
+            (:data:`sim.conventions.MEASURED`) [m/s, rad, rad, rad, rad/s, rad/s,
+            rad/s, rad/s].
+        """
         return self.outputs(y)[: len(MEASURED)]
 
     def outputs(self, y: np.ndarray) -> np.ndarray:
-        """[v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot, theta, xR, yR, xF, yF].
+        """Measured signals, pitch and contact points at state ``y``.
 
-        theta = q5 - lam is the pitch from upright [rad]; (xR, yR), (xF, yF) the
-        rear and front contact points in N [m].
+        Parameters
+        ----------
+        y : (10,) array_like
+            State in :data:`STATE` order.
+
+        Returns
+        -------
+        (13,) ndarray
+            [v, phi, delta, psi, phidot, deltadot, psidot, thetaRdot, theta, xR, yR,
+            xF, yF]: the MEASURED signals, theta = q5 - lam the pitch from upright
+            [rad] (positive nose up), and (xR, yR), (xF, yF) the rear and front contact
+            points in N [m].
         """
         out = np.empty(13)
         outputs(np.asarray(y, float), self._q5, self.p, out)
@@ -411,14 +605,50 @@ class WhippleBicycle:
         return out
 
     def energy(self, y: np.ndarray) -> tuple[float, float]:
-        """(kinetic, potential) energy [J]; potential zero with mass centres at ground level."""
+        """Kinetic and potential energy at state ``y``.
+
+        Parameters
+        ----------
+        y : (10,) array_like
+            State in :data:`STATE` order.
+
+        Returns
+        -------
+        kinetic : float
+            Kinetic energy [J].
+        potential : float
+            Gravitational potential energy [J], zero with mass centres at ground level.
+
+        Raises
+        ------
+        ValueError
+            If no pitch satisfies the holonomic constraint.
+        """
         q5 = self.pitch(y[3], y[5], self._q5[0])
         u = self.all_speeds(y[3], q5, y[5], y[7], y[8], y[9])
         ke, pe = gen.energy(y[3], q5, y[5], u, self.p)
         return float(ke), float(pe)
 
     def constraint_residuals(self, y: np.ndarray) -> tuple[float, np.ndarray]:
-        """(holonomic residual [m], nonholonomic residuals [m/s]) at ``y``."""
+        """Constraint residuals at state ``y`` (zero to round-off for a valid state).
+
+        Parameters
+        ----------
+        y : (10,) array_like
+            State in :data:`STATE` order.
+
+        Returns
+        -------
+        holonomic : float
+            Holonomic constraint residual [m].
+        nonholonomic : (3,) ndarray
+            Nonholonomic (velocity) constraint residuals [m/s].
+
+        Raises
+        ------
+        ValueError
+            If no pitch satisfies the holonomic constraint.
+        """
         q5 = self.pitch(y[3], y[5], self._q5[0])
         h, _ = gen.holonomic(y[3], q5, y[5], self.p)
         u = self.all_speeds(y[3], q5, y[5], y[7], y[8], y[9])
@@ -437,7 +667,26 @@ class WhippleBicycle:
         inputs [T_phi, T_delta] (+ F if ``lateral_force``), matching
         :func:`sim.linear.state_matrices`.  Fourth-order central differences with
         ``step`` (rad, rad/s); the model is exactly linear in the inputs.
-        Plant-side ``effects`` (:mod:`sim.effects`) are included if given.
+        Plant-side ``effects`` (:mod:`sim.effects`) are included if given.  Coast
+        mode (the rear wheel rate is not perturbed).
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+        step : float, optional
+            Finite-difference step [rad or rad/s]. Default 1e-3.
+        lateral_force : bool, optional
+            Add a column for F at :attr:`lateral_force_point`. Default False.
+        effects : sequence, optional
+            Plant-side :mod:`sim.effects` objects.
+
+        Returns
+        -------
+        A : (4, 4) ndarray
+            State matrix.
+        B : (4, 2) or (4, 3) ndarray
+            Input matrix, columns [T_phi, T_delta] (per N m) and optionally F (per N).
         """
         y0 = self.state(v)
         idx = (3, 5, 7, 9)  # phi, delta, phidot, deltadot in STATE
