@@ -24,6 +24,8 @@ INPUTS = ("T_delta", "T_phi", "F")
 #: Index of each measured channel in a measurement vector.
 IDX = {name: i for i, name in enumerate(MEASURED)}
 
+#: SI unit of every signal name (measured channels, inputs, pitch ``theta`` and the rear
+#: (``x``, ``y``) and front (``xF``, ``yF``) contact coordinates).
 UNITS = {
     "v": "m/s", "phi": "rad", "delta": "rad", "psi": "rad",
     "phidot": "rad/s", "deltadot": "rad/s", "psidot": "rad/s", "thetaRdot": "rad/s",

@@ -86,6 +86,12 @@ class Effect:
         instrument field (``"bias"`` or ``"scale"``) it sets.
     no_plant : str
         Why the nonlinear plant does not carry it (empty when it does).
+
+    Raises
+    ------
+    ValueError
+        On construction, if ``layer`` is not in :data:`LAYERS`, ``absent`` lies outside
+        ``plausible``, or not exactly one of ``plant_term`` and ``no_plant`` is given.
     """
 
     name: str
@@ -123,6 +129,13 @@ class Effect:
         Returns
         -------
         float
+            The value [``unit``].
+
+        Raises
+        ------
+        ValueError
+            If ``value`` is not an int or float (or is a bool), is not finite, or lies
+            outside :attr:`plausible`.
         """
         where = f"{source}: " if source else ""
         lo, hi = self.plausible
@@ -217,7 +230,22 @@ EFFECTS: Mapping[str, Effect] = {
 
 
 def effect(name: str) -> Effect:
-    """The registry entry of ``name``; ValueError listing the known names otherwise."""
+    """The registry entry of an effect.
+
+    Parameters
+    ----------
+    name : str
+        Registry name (a key of :data:`EFFECTS`).
+
+    Returns
+    -------
+    Effect
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is unknown (the message lists the known names).
+    """
     try:
         return EFFECTS[name]
     except (KeyError, TypeError):
@@ -227,7 +255,13 @@ def effect(name: str) -> Effect:
 
 
 def library_names() -> tuple[str, ...]:
-    """Names of the effects the identification library may select, in registry order."""
+    """Names of the effects the identification library may select.
+
+    Returns
+    -------
+    tuple of str
+        Names with ``in_library`` true, in registry order.
+    """
     return tuple(n for n, e in EFFECTS.items() if e.in_library)
 
 
@@ -274,6 +308,11 @@ def nonlinear_effects(
     equivalent : dict of str to float
         The carried terms as effect values (1/v terms folded in at ``speed``, the delay
         rounded): the same model expressed in the plant's own terms.
+
+    Raises
+    ------
+    ValueError
+        If a name in ``values`` is not in the registry.
 
     Notes
     -----
@@ -327,6 +366,13 @@ def check_values(values: Mapping[str, object], source: str = "") -> dict[str, fl
     Returns
     -------
     dict of str to float
+        The values as floats, keyed by name, in the order of ``values``.
+
+    Raises
+    ------
+    ValueError
+        If ``values`` is not a mapping, a name is unknown, or a value is not a number in
+        its plausible range (:meth:`Effect.check`).
     """
     if not isinstance(values, Mapping):
         raise ValueError(f"{source or 'effects'}: expected a mapping of effect names to numbers")
@@ -334,5 +380,21 @@ def check_values(values: Mapping[str, object], source: str = "") -> dict[str, fl
 
 
 def names(effects: Iterable[str]) -> tuple[str, ...]:
-    """Validate a list of effect names (ValueError on an unknown one)."""
+    """Validate a list of effect names.
+
+    Parameters
+    ----------
+    effects : iterable of str
+        Effect names.
+
+    Returns
+    -------
+    tuple of str
+        The names, in the given order.
+
+    Raises
+    ------
+    ValueError
+        If a name is unknown.
+    """
     return tuple(effect(n).name for n in effects)

@@ -59,11 +59,12 @@ def zoh(
     Parameters
     ----------
     A : (..., n, n) ndarray
-        Continuous state matrix [1/s]; leading dimensions are a batch.
+        Continuous state matrix (entries in state units per second per state unit);
+        leading dimensions are a batch.
     B : (..., n, m) ndarray
         Continuous input matrix (same batch shape as ``A``, or unbatched).
     dt : float
-        Sample period [s], > 0.
+        Sample period [s], > 0 (not checked).
     small : bool, optional
         Use :func:`expm_small` (unbatched matrices only) instead of ``scipy.linalg.expm``;
         same result to round-off, faster for many small matrices on a loaded machine.
@@ -71,7 +72,15 @@ def zoh(
     Returns
     -------
     Ad : (..., n, n) ndarray
+        Discrete state matrix expm(A dt) (dimensionless).
     Bd : (..., n, m) ndarray
+        Discrete input matrix (integral of expm(A s) ds over [0, dt], times B): the
+        state change over one sample per unit of held input.
+
+    Raises
+    ------
+    ValueError
+        If ``small=True`` with a batch of systems.
     """
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
