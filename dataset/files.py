@@ -46,7 +46,8 @@ def check_output_path(path: str | os.PathLike) -> Path:
     Raises
     ------
     ValueError
-        If ``path`` is a symlink, a folder, a device, a FIFO or a socket, or its folder
+        If ``path`` is a symlink, a folder, a device, a FIFO or a socket, cannot be
+        inspected (``os.lstat`` fails other than with "not found"), or its folder
         exists as something other than a folder.
     """
     path = Path(path)
@@ -120,11 +121,37 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (:func:`atomic_path`)."""
+    """Write bytes to a file atomically (:func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The final file; its folder is created if missing.
+    data : bytes
+        The complete new content.
+
+    Raises
+    ------
+    ValueError
+        If ``path`` is not (or would not be) a regular file (:func:`check_output_path`).
+    """
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(data)
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`atomic_path`)."""
+    """Write text (UTF-8) to a file atomically (:func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The final file; its folder is created if missing.
+    text : str
+        The complete new content, encoded as UTF-8.
+
+    Raises
+    ------
+    ValueError
+        If ``path`` is not (or would not be) a regular file (:func:`check_output_path`).
+    """
     atomic_write_bytes(path, text.encode("utf-8"))

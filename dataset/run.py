@@ -24,19 +24,37 @@ REQUIRED = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
 class Run:
     """A run sampled on a uniform time base.
 
+    Every array is converted to ``float`` and checked on construction.  Units and
+    signs are those of :mod:`sim.conventions` (:data:`~sim.conventions.UNITS`):
+    angles rad, rates rad/s, v m/s, torques N m, force N, positive to the right.
+
     Attributes
     ----------
-    t : (N,) time [s], uniform, increasing.
-    signals : measured signals by name (see ``sim.conventions.MEASURED`` and
-        ``INPUTS``); at least phi, delta, phidot, deltadot, v and T_delta.
-        Optional extras (pitch ``theta``, contact positions ``x``, ``y``, ...) are
-        allowed.  For measured data these are what the sensors reported.
-    truth : the same signals without sensor effects (simulated runs only).
-    dither : (N,) steer-torque dither [N m] (part of T_delta), or None.
-    reference : (N,) roll-angle reference [rad], or None.
-    meta : JSON-serializable metadata: bicycle parameters, controller and gains,
+    t : (N,) ndarray
+        Time [s], uniform, strictly increasing, N >= 2.  Uniformity is assumed,
+        not checked (:attr:`dt` is the median spacing).
+    signals : dict of str to (N,) ndarray
+        Measured signals by name (see ``sim.conventions.MEASURED`` and ``INPUTS``);
+        at least phi, delta, phidot, deltadot, v and T_delta.  Optional extras (pitch
+        ``theta``, contact positions ``x``, ``y``, ...) are allowed.  For measured data
+        these are what the sensors reported.
+    truth : dict of str to (N,) ndarray or None
+        The same signals without sensor effects (simulated runs only).
+    dither : (N,) ndarray or None
+        Steer-torque dither [N m] (part of T_delta), or None.
+    reference : (N,) ndarray or None
+        Roll-angle reference [rad], or None.
+    meta : dict
+        JSON-serializable metadata: bicycle parameters, controller and gains,
         effects, noise, seed, speed, source ("simulated" or "measured"),
         ``fell_at`` [s] if the bicycle fell, package version, ...
+
+    Raises
+    ------
+    ValueError
+        On construction, if ``t`` is not 1-D with at least 2 finite, strictly
+        increasing samples, a required signal is missing, an array does not have
+        shape (N,) or holds non-finite samples, or ``meta`` is not JSON-serializable.
     """
 
     t: np.ndarray
@@ -85,6 +103,7 @@ class Run:
     # -- convenience ---------------------------------------------------------------
     @property
     def n(self) -> int:
+        """Number of samples N."""
         return self.t.size
 
     @property
@@ -98,7 +117,24 @@ class Run:
         return float(self.meta.get("speed", np.mean(self.signals["v"])))
 
     def __getitem__(self, name: str) -> np.ndarray:
-        """A measured signal; T_phi and F default to zeros when not recorded."""
+        """A measured signal by name: ``run["phi"]``.
+
+        Parameters
+        ----------
+        name : str
+            Signal name (a key of :attr:`signals`, or an input of
+            ``sim.conventions.INPUTS``).
+
+        Returns
+        -------
+        (N,) ndarray
+            The signal; T_phi and F default to zeros when not recorded.
+
+        Raises
+        ------
+        KeyError
+            If the run has no such signal and it is not an input.
+        """
         if name in self.signals:
             return self.signals[name]
         if name in INPUTS:
@@ -109,7 +145,26 @@ class Run:
         )
 
     def true(self, name: str) -> np.ndarray:
-        """A noise-free signal (simulated runs only)."""
+        """A noise-free signal (simulated runs only).
+
+        Parameters
+        ----------
+        name : str
+            Signal name (a key of :attr:`truth`, or an input of
+            ``sim.conventions.INPUTS``).
+
+        Returns
+        -------
+        (N,) ndarray
+            The true signal; an input not stored in :attr:`truth` is zeros.
+
+        Raises
+        ------
+        ValueError
+            If the run has no noise-free signals (measured data).
+        KeyError
+            If :attr:`truth` has no such signal and it is not an input.
+        """
         if self.truth is None:
             raise ValueError("this run has no noise-free signals (measured data)")
         if name not in self.truth:
@@ -119,7 +174,25 @@ class Run:
         return self.truth[name]
 
     def window(self, t0: float, t1: float) -> Run:
-        """The samples with t0 <= t < t1, as a new run (metadata copied)."""
+        """The samples with t0 <= t < t1, as a new run (metadata copied).
+
+        Parameters
+        ----------
+        t0, t1 : float
+            Start (included) and end (excluded) of the window [s], on the run's own
+            time base (not shifted to zero).
+
+        Returns
+        -------
+        Run
+            Signals, truth, dither and reference cut to the window; a shallow copy of
+            ``meta``.
+
+        Raises
+        ------
+        ValueError
+            If the window holds fewer than 2 samples.
+        """
         sel = (self.t >= t0) & (self.t < t1)
         if sel.sum() < 2:
             raise ValueError(f"window [{t0}, {t1}) s holds fewer than 2 samples")
