@@ -53,7 +53,28 @@ PERM = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])
 
 
 def canonical_ab(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A (4x4) and B (4x1) from theta = [a1..a8, b1, b2]."""
+    """Canonical-form A and B from the parameter vector theta.
+
+    Parameters
+    ----------
+    theta : (10,) array_like
+        [a1, ..., a8, b1, b2] (:data:`THETA_NAMES`).
+
+    Returns
+    -------
+    A : (4, 4) ndarray
+        State matrix for x = [phi, phidot, delta, deltadot] (Chen & Dao's order,
+        :data:`sim.conventions.CANONICAL_STATE`): rows 0 and 2 are [0, 1, 0, 0] and
+        [0, 0, 0, 1], rows 1 and 3 hold a1..a4 and a5..a8 [1/s^2 or 1/s].
+    B : (4, 1) ndarray
+        Input matrix for T_delta: b1 in row 1, b2 in row 3 [1/(kg m^2)], zeros
+        elsewhere.
+
+    Raises
+    ------
+    ValueError
+        If ``theta`` does not hold exactly 10 values.
+    """
     theta = np.asarray(theta, dtype=float)
     if theta.shape != (10,):
         raise ValueError(f"theta must hold 10 values a1..a8, b1, b2; got shape {theta.shape}")
@@ -67,7 +88,22 @@ def canonical_ab(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def theta_from_matrices(cm: CanonicalMatrices, v: float) -> np.ndarray:
-    """The exact canonical parameters of the linear model ``cm`` at speed v [m/s]."""
+    """The exact canonical parameters of a linear model at one speed.
+
+    Parameters
+    ----------
+    cm : CanonicalMatrices
+        Linear model (:func:`sim.linear.canonical_matrices`).
+    v : float
+        Forward speed [m/s].
+
+    Returns
+    -------
+    (10,) ndarray
+        theta = [a1, ..., a8, b1, b2] (:data:`THETA_NAMES`): odd a's from
+        -M^-1 (g K0 + v^2 K2) [1/s^2], even a's from -v M^-1 C1 [1/s], [b1, b2] the
+        second column of M^-1 [1/(kg m^2)].
+    """
     Minv = np.linalg.inv(cm.M)
     Al = -Minv @ cm.stiffness(v)
     Ar = -Minv @ cm.damping(v)
@@ -76,7 +112,21 @@ def theta_from_matrices(cm: CanonicalMatrices, v: float) -> np.ndarray:
 
 
 def speed_params_from_matrices(cm: CanonicalMatrices) -> np.ndarray:
-    """The exact speed-parameterized vector (:data:`SPEED_NAMES`) of ``cm``."""
+    """The exact speed-parameterized vector of a linear model.
+
+    Parameters
+    ----------
+    cm : CanonicalMatrices
+        Linear model (:func:`sim.linear.canonical_matrices`).
+
+    Returns
+    -------
+    (14,) ndarray
+        [alpha1, alpha3, alpha5, alpha7, beta1, beta3, beta5, beta7, gamma2, gamma4,
+        gamma6, gamma8, b1, b2] (:data:`SPEED_NAMES`) with alpha = -g M^-1 K0
+        [1/s^2], beta = -M^-1 K2 [1/m^2], gamma = -M^-1 C1 [1/m] (row-major entries)
+        and [b1, b2] the second column of M^-1 [1/(kg m^2)].
+    """
     Minv = np.linalg.inv(cm.M)
     al, be, ga = -cm.g * Minv @ cm.K0, -Minv @ cm.K2, -Minv @ cm.C1
     order = ((0, 0), (0, 1), (1, 0), (1, 1))
@@ -87,7 +137,19 @@ def speed_params_from_matrices(cm: CanonicalMatrices) -> np.ndarray:
 
 
 def speed_map(v: float) -> np.ndarray:
-    """Linear map S(v) (10x14) with theta(v) = S(v) @ speed_params."""
+    """Linear map from the speed parameters to theta at speed ``v``.
+
+    Parameters
+    ----------
+    v : float
+        Forward speed [m/s].
+
+    Returns
+    -------
+    (10, 14) ndarray
+        S(v) with theta(v) = S(v) @ speed_params: a_odd = alpha + beta v^2,
+        a_even = gamma v, b1 and b2 copied.
+    """
     S = np.zeros((10, 14))
     for k, odd in enumerate((0, 2, 4, 6)):  # a1, a3, a5, a7
         S[odd, k] = 1.0
@@ -104,6 +166,26 @@ def matrices_from_speed_params(params: np.ndarray, g: float = 9.81) -> Canonical
     These give the same A(v) and eigenvalues as the true M, C1, K0, K2 (M itself is
     not identifiable from T_delta alone; only its second column of M^-1, [b1, b2]),
     so ``sim.linear.eigenvalues_vs_speed`` and ``critical_speeds`` apply directly.
+    The B matrix of ``sim.linear.state_matrices`` on the result is *not* the true
+    one (it is [0; I]): take b1, b2 from ``params`` instead.
+
+    Parameters
+    ----------
+    params : (14,) array_like
+        Speed parameters in :data:`SPEED_NAMES` order (b1, b2 are not used).
+    g : float, optional
+        Gravitational acceleration [m/s^2] to divide alpha by. Default 9.81.
+
+    Returns
+    -------
+    CanonicalMatrices
+        M = I, C1 = -gamma, K0 = -alpha / g, K2 = -beta (rows/columns [phi, delta],
+        units of the true matrices divided by kg m^2), and ``g``.
+
+    Raises
+    ------
+    ValueError
+        If ``params`` does not hold exactly 14 values.
     """
     p = np.asarray(params, dtype=float)
     if p.shape != (14,):
@@ -113,7 +195,25 @@ def matrices_from_speed_params(params: np.ndarray, g: float = 9.81) -> Canonical
 
 
 def to_bikeid_order(sys: control.StateSpace) -> control.StateSpace:
-    """Permute a canonical-order model to bikeid's x = [phi, delta, phidot, deltadot]."""
+    """Permute a canonical-order model to bikeid's state order.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        4-state model with x = [phi, phidot, delta, deltadot] (Chen & Dao's order).
+
+    Returns
+    -------
+    control.StateSpace
+        The same system with x = [phi, delta, phidot, deltadot]
+        (:data:`sim.conventions.LINEAR_STATE`): A' = P A P^T, B' = P B, C' = C P^T,
+        D unchanged, with P = :data:`PERM`; same sample time and input/output labels.
+
+    Raises
+    ------
+    ValueError
+        If ``sys`` does not have 4 states.
+    """
     A, B, C, D = (np.asarray(m) for m in (sys.A, sys.B, sys.C, sys.D))
     if A.shape != (4, 4):
         raise ValueError("to_bikeid_order expects a 4-state canonical model")
@@ -127,7 +227,28 @@ def to_canonical_form(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray
 
     The transformation z = T x with T = [c1; c1 A; c2; c2 A] makes z = [y1, y1', y2,
     y2']; rows 1 and 3 of T B (which are zero for a true mechanical system) are dropped.
-    Raises ValueError when T is singular (the pair (A, C) has other observability indices).
+    With outputs y = [phi, delta] the result is in Chen & Dao's state order
+    [phi, phidot, delta, deltadot].
+
+    Parameters
+    ----------
+    A : (4, 4) ndarray
+        State matrix, any state basis.
+    B : (4,) or (4, m) ndarray
+        Input matrix; only the first column (T_delta) is used.
+    C : (2, 4) ndarray
+        Output matrix; rows c1, c2 give y1 (phi) and y2 (delta).
+
+    Returns
+    -------
+    (10,) ndarray
+        theta = [a1, ..., a8, b1, b2] (:data:`THETA_NAMES`).
+
+    Raises
+    ------
+    ValueError
+        When T is singular (condition number above 1e12: the pair (A, C) has other
+        observability indices than (2, 2)).
     """
     c1, c2 = C[0], C[1]
     T = np.vstack([c1, c1 @ A, c2, c2 @ A])
@@ -147,7 +268,24 @@ def steer_zeros(theta: np.ndarray) -> np.ndarray:
     Transmission zeros of (A, B, c_delta, 0): the finite generalized eigenvalues of the
     Rosenbrock pencil [[A, B], [c_delta, 0]] - s [[I, 0], [0, 0]].  In Meijaard notation
     they are the roots of M_pp s^2 + v C1_pp s + g K0_pp + v^2 K2_pp (the roll row with
-    delta held), +-sqrt(-g K0_pp / M_pp) = +-3.1347 rad/s for the benchmark at any speed.
+    delta held), +-sqrt(-g K0_pp / M_pp) = +-3.1347 rad/s for the benchmark at any speed
+    (C1_pp = K2_pp = 0 in the Whipple model).
+
+    Parameters
+    ----------
+    theta : (10,) array_like
+        Canonical parameters [a1, ..., a8, b1, b2] (:data:`THETA_NAMES`).
+
+    Returns
+    -------
+    (k,) ndarray of complex
+        The finite zeros (|z| < 1e8) [1/s], sorted by real then imaginary part
+        (``numpy.sort_complex``); k = 2 for a mechanical model with b2 != 0.
+
+    Raises
+    ------
+    ValueError
+        If ``theta`` does not hold exactly 10 values.
     """
     from scipy.linalg import eigvals
 

@@ -24,7 +24,28 @@ __all__ = ["d2c", "pbsid", "po_moesp", "decimate"]
 
 
 def decimate(u: np.ndarray, y: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
-    """Outputs subsampled by ``factor``; inputs averaged over each block (ZOH-consistent)."""
+    """Decimate input-output data: outputs subsampled, inputs block-averaged.
+
+    Averaging the input over each block is ZOH-consistent: it is the exact held input
+    of the coarse sampling when the fine input is itself held.
+
+    Parameters
+    ----------
+    u : (N,) or (N, m) array_like
+        Inputs (any units; e.g. T_delta [N m]).
+    y : (N,) or (N, l) array_like
+        Outputs, same number of samples as ``u`` (not checked).
+    factor : int
+        Decimation factor; <= 1 returns the data unchanged (reshaped to 2-D).
+
+    Returns
+    -------
+    u_d : (N // factor, m) ndarray
+        Block means of ``u`` (a last incomplete block is dropped).
+    y_d : (N // factor, l) ndarray
+        ``y[:n:factor]`` with n = (N // factor) * factor: the sample at the start of
+        each block.  The new sample period is ``factor`` times the old one.
+    """
     u = np.asarray(u, float).reshape(len(u), -1)
     y = np.asarray(y, float).reshape(len(y), -1)
     if factor <= 1:
@@ -44,10 +65,40 @@ def pbsid(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Closed-loop-safe subspace estimate (A, B, C, K) of the innovations model.
 
-    x[k+1] = A x[k] + B u[k] + K e[k], y[k] = C x[k] + e[k] (no feedthrough).
-    ``u``, ``y``: arrays (N, m), (N, l), or lists of them (several runs, stacked
-    after forming the regressors).  ``p``: past window (VARX order); it must cover
-    the decay of the predictor, p dt >~ 2 / |slowest predictor pole|.
+    x[k+1] = A x[k] + B u[k] + K e[k], y[k] = C x[k] + e[k] (no feedthrough),
+    discrete time with the data's sample period, in an arbitrary state basis.
+
+    Parameters
+    ----------
+    u : (N, m) array_like or list of them
+        Inputs; a 1-D array is one input.  A *list* means several runs (each an
+        array), stacked after forming the regressors; a single run must therefore
+        be an array, not a list of numbers.
+    y : (N, l) array_like or list of them
+        Outputs, matching ``u`` run by run.
+    n : int, optional
+        Model order (state dimension). Default 4.
+    p : int, optional
+        Past window (VARX order); it must cover the decay of the predictor,
+        p dt >~ 2 / |slowest predictor pole|.  Every run needs more than 3 p samples.
+        Default 40.
+
+    Returns
+    -------
+    A : (n, n) ndarray
+        Discrete state matrix.
+    B : (n, m) ndarray
+        Discrete input matrix.
+    C : (l, n) ndarray
+        Output matrix.
+    K : (n, l) ndarray
+        Innovations (Kalman) gain.
+
+    Raises
+    ------
+    ValueError
+        If a run has 3 p samples or fewer, or ``u`` and ``y`` hold different numbers
+        of runs.
     """
     us = u if isinstance(u, list) else [u]
     ys = y if isinstance(y, list) else [y]
@@ -98,8 +149,34 @@ def pbsid(
 def po_moesp(
     u: np.ndarray, y: np.ndarray, n: int = 4, f: int = 20
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop PO-MOESP estimate of (A, C) (Verhaegen 1994; past inputs and outputs as
-    instruments).  Consistent in open loop, biased under feedback (reference F3)."""
+    """Open-loop PO-MOESP estimate of (A, C) (Verhaegen 1994).
+
+    Past inputs and outputs are the instruments.  Consistent in open loop, biased
+    under feedback (reference F3).
+
+    Parameters
+    ----------
+    u : (N,) or (N, m) array_like
+        Inputs.
+    y : (N,) or (N, l) array_like
+        Outputs, same N.
+    n : int, optional
+        Model order. Default 4.
+    f : int, optional
+        Block (future and past horizon) size; needs N - 2 f + 1 >= 10 f. Default 20.
+
+    Returns
+    -------
+    A : (n, n) ndarray
+        Discrete state matrix, in the basis of the extended observability matrix.
+    C : (l, n) ndarray
+        Output matrix in the same basis.
+
+    Raises
+    ------
+    ValueError
+        If there are too few samples for the block size ``f``.
+    """
     u = np.asarray(u, float).reshape(len(u), -1)
     y = np.asarray(y, float).reshape(len(y), -1)
     m, l = u.shape[1], y.shape[1]
@@ -126,8 +203,33 @@ def d2c(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of the zero-order-hold discretization (principal matrix logarithm).
 
-    A discrete pole on the negative real axis has no real logarithm: ``strict``
-    raises ValueError, otherwise the real part is returned (good enough as a start).
+    [[A_c, B_c], [0, 0]] = logm([[A, B], [0, I]]) / dt, the inverse of
+    :func:`sim.sampling.zoh`.  A discrete pole on the negative real axis has no real
+    logarithm: ``strict`` raises ValueError, otherwise the real part is returned
+    (good enough as a start).
+
+    Parameters
+    ----------
+    A : (n, n) ndarray
+        Discrete state matrix.
+    B : (n, m) ndarray
+        Discrete input matrix.
+    dt : float
+        Sample period [s].
+    strict : bool, optional
+        Refuse models without a real continuous-time equivalent. Default True.
+
+    Returns
+    -------
+    Ac : (n, n) ndarray
+        Continuous state matrix [1/s per state unit ratio].
+    Bc : (n, m) ndarray
+        Continuous input matrix.
+
+    Raises
+    ------
+    ValueError
+        If ``strict`` and the matrix logarithm is not real.
     """
     n, m = B.shape
     Z = np.zeros((n + m, n + m))
