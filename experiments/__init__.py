@@ -1,0 +1,35 @@
+"""Stage 5, the experiments: the ``bikeid`` command line, paper reproductions and reports.
+
+Modules:
+
+- :mod:`~bikeid.experiments.cli`: the ``bikeid`` command line (entry point); each group of
+  subcommands lives in a ``cmd_*`` module:
+  :mod:`~bikeid.experiments.cmd_plant` (``eig``, ``linearize``, ``critical-speeds``),
+  :mod:`~bikeid.experiments.cmd_simulate` (``simulate``),
+  :mod:`~bikeid.experiments.cmd_data` (``sweep``, ``stabilization``),
+  :mod:`~bikeid.experiments.cmd_ident` (``identify``, ``accuracy``),
+  :mod:`~bikeid.experiments.cmd_reproduce` (``reproduce``),
+  :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials``,
+  ``data fetch``).
+- :mod:`~bikeid.experiments.cliutil`: helpers shared by the command modules (ranges, JSON
+  output, bicycles).
+- :mod:`~bikeid.experiments.sweep`: resumable, deterministic, parallel sweeps of
+  closed-loop runs over speeds and seeds.
+- :mod:`~bikeid.experiments.accuracy`: identification accuracy on the nonlinear closed-loop
+  testbed (``bikeid accuracy``).
+- :mod:`~bikeid.experiments.reproduce`: both papers redone (``bikeid reproduce``), built on
+  :mod:`~bikeid.experiments.reproduce_chen_dao` (Chen & Dao 2010, Figs. 2-5, 7, eqs. 5-6)
+  and :mod:`~bikeid.experiments.reproduce_moore_hubbard` (Moore & Hubbard, Tables 2-5,
+  Figs. 2-4 analogues).
+- :mod:`~bikeid.experiments.limit_cycles`: Chen & Dao Figs. 4-5, uncontrolled coasting at
+  3.5 m/s and whether the motion is periodic.
+- :mod:`~bikeid.experiments.effect_trials`: randomized undeclared-effect trials on the
+  nonlinear plant (``bikeid measured trials``).
+- :mod:`~bikeid.experiments.measured_report`: before/after report on the measured data
+  (``bikeid measured report``).
+- :mod:`~bikeid.experiments.report`: Markdown reports (paper | identified | truth tables)
+  and ``summary.json``.
+- :mod:`~bikeid.experiments.plots`: Matplotlib figures shared by commands and reports.
+
+Nothing is imported here; import the modules.
+"""

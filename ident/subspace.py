@@ -222,7 +222,7 @@ def d2c(
     Returns
     -------
     Ac : (n, n) ndarray
-        Continuous state matrix [1/s per state unit ratio].
+        Continuous state matrix (per second).
     Bc : (n, m) ndarray
         Continuous input matrix.
 

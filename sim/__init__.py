@@ -1,0 +1,31 @@
+"""Stage 1, the plant: the Carvallo-Whipple bicycle, linear and nonlinear.
+
+Conventions (Meijaard et al. 2007): x forward, y right, z down; roll phi, steer delta,
+steer torque T_delta and lateral force F positive to the right; SI units (m, kg,
+kg m^2, s, rad, N m, N).  Linear state order x = [phi, delta, phidot, deltadot].
+
+Modules:
+
+- :mod:`~bikeid.sim.conventions`: state orders, signal names, units and sign conventions,
+  stated once for all of bikeid.
+- :mod:`~bikeid.sim.parameters`: :class:`BicycleParameters` in Meijaard notation
+  (validated) and the bicycles by name (benchmark, steer-by-wire, ``bicycleparameters``
+  bicycles, YAML/JSON files).
+- :mod:`~bikeid.sim.linear`: the linearized model M, C1, K0, K2 (Meijaard 2007, App. A),
+  state-space and transfer-function forms, eigenvalues against speed, critical speeds.
+- :mod:`~bikeid.sim.nonlinear`: the nonlinear Whipple bicycle in Moore (2012) coordinates
+  (:class:`WhippleBicycle`), built on the generated equations.
+- :mod:`~bikeid.sim.integrate`: fixed-step (RK4, numba) and reference (DOP853) simulation
+  of the nonlinear bicycle under a sampled controller (:func:`simulate`).
+- :mod:`~bikeid.sim.linear_sim`: exact zero-order-hold simulation of the linear bicycle in
+  closed loop.
+- :mod:`~bikeid.sim.effects`: optional physical effects the Whipple model lacks (steer
+  friction, actuator lag, ...), injected by the simulator.
+- :mod:`~bikeid.sim.effect_registry`: every such effect declared once (name, unit,
+  plausible range, layer, how the plant carries it).
+- :mod:`~bikeid.sim.sampling`: the one exact zero-order-hold discretization (:func:`zoh`).
+- ``_whipple_generated``: the equations of motion emitted by ``scripts/derive_whipple.py``
+  (private).
+
+Nothing is imported here, so ``import bikeid.sim`` stays cheap; import the modules.
+"""
