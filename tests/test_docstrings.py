@@ -1,0 +1,277 @@
+"""The public API's docstrings follow numpydoc in python-control's style.
+
+For every module ``bikeid.<stage>.<name>`` listed in :data:`DOCUMENTED_MODULES`:
+
+- every function named in the module's ``__all__`` (or, without ``__all__``, every public
+  function defined in it) has a docstring with a ``Parameters`` section (numpydoc
+  underline) if it takes parameters other than ``self``/``cls``, and a ``Returns`` or
+  ``Yields`` section unless its return annotation is ``None``;
+- every class named there has a docstring with an ``Attributes`` or ``Parameters``
+  section, and each of its public methods (defined in the class, not inherited; dunders
+  skipped) obeys the function rule; a public property has a non-empty docstring.
+
+Other modules are being converted: add a module to :data:`DOCUMENTED_MODULES` once it
+complies.  The list only grows: :data:`_BASELINE` is the set it must always contain
+(extend it together with the list; never remove from it).
+
+Each stage package listed in :data:`DOCUMENTED_PACKAGES` must have a docstring that names
+every public module of its folder as ``bikeid.<stage>.<module>`` and names no module that
+does not exist, so the one-line-per-module list stays true as modules are added.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
+
+#: Modules whose public API must comply (sorted; extend when a module is converted).
+DOCUMENTED_MODULES = (
+    "bikeid.dataset.files",
+    "bikeid.dataset.run",
+    "bikeid.ident.canonical",
+    "bikeid.ident.subspace",
+    "bikeid.sim.conventions",
+    "bikeid.sim.effect_registry",
+    "bikeid.sim.integrate",
+    "bikeid.sim.linear",
+    "bikeid.sim.nonlinear",
+    "bikeid.sim.parameters",
+    "bikeid.sim.sampling",
+)
+
+#: DOCUMENTED_MODULES may only grow: it must always contain these (never remove one).
+_BASELINE = frozenset(
+    {
+        "bikeid.dataset.files",
+        "bikeid.dataset.run",
+        "bikeid.ident.canonical",
+        "bikeid.ident.subspace",
+        "bikeid.sim.conventions",
+        "bikeid.sim.effect_registry",
+        "bikeid.sim.integrate",
+        "bikeid.sim.linear",
+        "bikeid.sim.nonlinear",
+        "bikeid.sim.parameters",
+        "bikeid.sim.sampling",
+    }
+)
+
+#: Stage packages whose docstring must list their modules.
+DOCUMENTED_PACKAGES = ("bikeid.dataset", "bikeid.experiments", "bikeid.sim")
+
+
+def _section(doc: str, title: str) -> bool:
+    """True if ``doc`` (cleaned) has a numpydoc section ``title`` with its underline."""
+    return re.search(rf"^{title}\n-{{{len(title)}}}\s*$", doc, re.MULTILINE) is not None
+
+
+def _returns_none(sig: inspect.Signature) -> bool:
+    ann = sig.return_annotation
+    return ann is None or ann == "None" or ann is type(None)
+
+
+def check_function(func, qualname: str, method: bool = False) -> list[str]:
+    """Problems with one function's docstring (empty list if it complies)."""
+    func = inspect.unwrap(getattr(func, "py_func", func))  # numba dispatchers, decorators
+    doc = inspect.getdoc(func) or ""
+    if not doc.strip():
+        return [f"{qualname}: no docstring"]
+    problems = []
+    sig = inspect.signature(func)
+    params = list(sig.parameters)
+    if method and params and params[0] in ("self", "cls"):
+        params = params[1:]
+    if params and not _section(doc, "Parameters"):
+        problems.append(f"{qualname}: takes {params} but has no 'Parameters' section")
+    if not _returns_none(sig) and not (_section(doc, "Returns") or _section(doc, "Yields")):
+        problems.append(f"{qualname}: no 'Returns' or 'Yields' section (annotate -> None?)")
+    return problems
+
+
+def check_class(cls, qualname: str) -> tuple[list[str], int]:
+    """Problems with a class and its public methods; also the number of methods checked."""
+    problems = []
+    doc = inspect.getdoc(cls) or ""
+    if not (_section(doc, "Attributes") or _section(doc, "Parameters")):
+        problems.append(f"{qualname}: class docstring has no 'Attributes' or 'Parameters'")
+    n = 0
+    for name, member in vars(cls).items():
+        if name.startswith("_"):
+            continue
+        where = f"{qualname}.{name}"
+        if isinstance(member, property):
+            n += 1
+            if not (inspect.getdoc(member) or "").strip():
+                problems.append(f"{where}: property has no docstring")
+        elif isinstance(member, (staticmethod, classmethod)):
+            n += 1
+            problems += check_function(
+                member.__func__, where, method=isinstance(member, classmethod)
+            )
+        elif inspect.isfunction(member):
+            n += 1
+            problems += check_function(member, where, method=True)
+    return problems, n
+
+
+def check_module(modname: str) -> tuple[list[str], dict[str, int]]:
+    """Problems in one module, and counts of the functions, classes and methods checked."""
+    mod = importlib.import_module(modname)
+    public = getattr(mod, "__all__", None)
+    if public is None:
+        public = [
+            n
+            for n, obj in vars(mod).items()
+            if not n.startswith("_")
+            and (inspect.isfunction(obj) or inspect.isclass(obj))
+            and getattr(obj, "__module__", None) == modname
+        ]
+    problems: list[str] = []
+    counts = {"functions": 0, "classes": 0, "methods": 0}
+    for name in public:
+        obj = getattr(mod, name)
+        where = f"{modname}.{name}"
+        if inspect.isclass(obj):
+            counts["classes"] += 1
+            found, n = check_class(obj, where)
+            problems += found
+            counts["methods"] += n
+        elif inspect.isfunction(inspect.unwrap(getattr(obj, "py_func", obj))):
+            counts["functions"] += 1
+            problems += check_function(obj, where)
+    return problems, counts
+
+
+def _discovered() -> set[str]:
+    """Modules ``bikeid.<stage>.<name>`` the convention applies to (from the files)."""
+    out = set()
+    for stage in STAGES:
+        for f in (ROOT / stage).glob("*.py"):
+            name = f.stem
+            if name.startswith("_"):
+                continue
+            if stage == "experiments" and (name.startswith("cli") or name.startswith("cmd_")):
+                continue
+            out.add(f"bikeid.{stage}.{name}")
+    return out
+
+
+# -- the list itself ---------------------------------------------------------------------
+def test_documented_list_only_grows():
+    missing = sorted(_BASELINE - set(DOCUMENTED_MODULES))
+    assert not missing, f"modules removed from DOCUMENTED_MODULES (the list only grows): {missing}"
+    assert list(DOCUMENTED_MODULES) == sorted(set(DOCUMENTED_MODULES)), "keep it sorted, unique"
+
+
+def test_documented_list_names_real_modules():
+    unknown = sorted(set(DOCUMENTED_MODULES) - _discovered())
+    assert not unknown, f"not a module the convention covers (typo, private or CLI): {unknown}"
+
+
+# -- the convention ----------------------------------------------------------------------
+@pytest.mark.parametrize("modname", DOCUMENTED_MODULES)
+def test_module_complies(modname):
+    problems, _ = check_module(modname)
+    assert not problems, "\n".join(problems)
+
+
+def test_count_checked(capsys):
+    total = {"functions": 0, "classes": 0, "methods": 0}
+    for modname in DOCUMENTED_MODULES:
+        _, counts = check_module(modname)
+        for k, v in counts.items():
+            total[k] += v
+    with capsys.disabled():
+        print(
+            f"\ndocstrings checked: {total['functions']} functions, {total['classes']} classes, "
+            f"{total['methods']} methods in {len(DOCUMENTED_MODULES)} modules"
+        )
+    assert total["functions"] > 0 and total["methods"] > 0
+
+
+# -- the checker can fail ----------------------------------------------------------------
+def _summary_only(x: float, y: float = 1.0) -> float:
+    """Just a summary line, no sections."""
+    return x * y
+
+
+def _no_return_section(x: float) -> float:
+    """Has parameters but no returns.
+
+    Parameters
+    ----------
+    x : float
+        A value.
+    """
+    return x
+
+
+def _returns_nothing(x: float) -> None:
+    """Returns None, so no Returns section is needed.
+
+    Parameters
+    ----------
+    x : float
+        A value.
+    """
+
+
+def _generator(n: int):
+    """Yield 0..n-1.
+
+    Parameters
+    ----------
+    n : int
+        How many.
+
+    Yields
+    ------
+    int
+    """
+    yield from range(n)
+
+
+def _undocumented(x):
+    return x
+
+
+class _NoAttributes:
+    """A class without an Attributes or Parameters section."""
+
+    def method(self, a: int) -> int:
+        """No sections."""
+        return a
+
+
+def test_checker_self_check():
+    summary = check_function(_summary_only, "_summary_only")
+    assert any("'Parameters'" in p for p in summary)
+    assert any("'Returns'" in p for p in summary)
+    assert check_function(_no_return_section, "f") == ["f: no 'Returns' or 'Yields' section "
+                                                       "(annotate -> None?)"]
+    assert check_function(_undocumented, "g") == ["g: no docstring"]
+    assert check_function(_returns_nothing, "h") == []
+    assert check_function(_generator, "k") == []
+    problems, n = check_class(_NoAttributes, "C")
+    assert n == 1 and len(problems) == 3, problems
+
+
+# -- stage package docstrings ------------------------------------------------------------
+@pytest.mark.parametrize("package", DOCUMENTED_PACKAGES)
+def test_package_docstring_lists_its_modules(package):
+    stage = package.split(".")[1]
+    doc = (importlib.import_module(package).__doc__ or "").strip()
+    assert doc, f"{package} has no docstring"
+    present = {f.stem for f in (ROOT / stage).glob("*.py") if not f.stem.startswith("_")}
+    named = set(re.findall(rf"bikeid\.{stage}\.([A-Za-z_]\w*)", doc))
+    unlisted = sorted(present - named)
+    stale = sorted(named - present)
+    assert not unlisted, f"{package} docstring does not list modules {unlisted}"
+    assert not stale, f"{package} docstring lists modules that do not exist: {stale}"
