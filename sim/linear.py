@@ -583,8 +583,8 @@ def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0
     """Critical speeds by root finding on the characteristic polynomial.
 
     The quartic a s^4 + b s^3 + c s^2 + d s + e = det(M s^2 + v C1 s + g K0 + v^2 K2)
-    is scanned on a 0.01 m/s grid over (0, vmax] and each sign change refined with
-    ``scipy.optimize.brentq`` (xtol = rtol = 1e-15).
+    is scanned on a 0.01 m/s grid from 0.01 m/s to vmax and each sign change refined
+    with ``scipy.optimize.brentq`` (xtol = rtol = 1e-15).
 
     Parameters
     ----------
