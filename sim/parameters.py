@@ -127,7 +127,7 @@ class BicycleParameters:
 
     See Also
     --------
-    PARAMETER_DOC : units and meaning of every parameter.
+    PARAMETER_DOC : Units and meaning of every parameter.
     """
 
     w: float
