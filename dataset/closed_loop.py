@@ -135,7 +135,9 @@ def simulate_run(
     """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
 
     bicycle: parameters; controller: a ``controllers`` controller (``sample_time``,
-    ``reset()``, ``__call__(t, y)``, ``describe()``); reference: roll reference [rad]
+    ``reset()``, ``__call__(t, y)``, ``describe()``; its ``sample_time`` should be the
+    sensor period, the default, for the run to be identifiable, see the module docstring);
+    reference: roll reference [rad]
     installed as ``controller.reference`` (None keeps the controller's own); dither:
     steer-torque dither t -> N m added to the command (None: none); sensors: the
     instruments (default :meth:`Sensors.default`, 100 Hz); effects: ``sim.effects``

@@ -181,6 +181,12 @@ def _python_loop(p, Ad, Bd, Ac, Bc, x0, controller, t, v, dither, w, tphi, force
     return X, U, Qdd
 
 
+def _describe(obj: Any) -> dict[str, Any]:
+    if hasattr(obj, "describe"):
+        return obj.describe()
+    return {"name": getattr(obj, "__name__", type(obj).__name__)}
+
+
 def _held(rng: np.random.Generator, n: int, amplitude: float, hold: int) -> np.ndarray:
     """Uniform pseudo-random in [-amplitude, amplitude], each value held ``hold`` samples."""
     if amplitude == 0.0:
@@ -372,7 +378,7 @@ def simulate(
         rho = np.max(np.abs(np.linalg.eigvals(Acl)))
         if rho >= 1.0:
             raise ValueError(
-                f"the controller {controller.describe()} does not stabilize the sampled loop "
+                f"the controller {_describe(controller)} does not stabilize the sampled loop "
                 f"at v={speed} m/s (spectral radius {rho:.4f}); choose other gains or speed"
             )
 
@@ -439,9 +445,6 @@ def simulate(
         "v": v, "psi": psi + psi_noise, "psidot": psidot + yaw_noise, "thetaRdot": -v / p.rR,
         "T_delta": U + log_noise, "T_phi": tphi, "F": force,
     }  # fmt: skip
-    ref_desc = ref_fn.describe() if hasattr(ref_fn, "describe") else {
-        "name": getattr(ref_fn, "__name__", type(ref_fn).__name__)
-    }  # fmt: skip
     meta = {
         "source": "simulated",
         "simulator": "bikeid.dataset.linear_loop (exact ZOH, linear)",
@@ -451,8 +454,8 @@ def simulate(
         "speed": float(speed),
         "dt": dt,
         "seed": int(seed),
-        "controller": controller.describe(),
-        "reference": ref_desc,
+        "controller": {"sample_time": dt, **_describe(controller)},
+        "reference": _describe(ref_fn),
         "sampling": {
             "controller_period": dt,
             "logging_period": dt,
