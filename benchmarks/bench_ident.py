@@ -5,7 +5,7 @@
 1. PEM at one speed, 50 s at 100 Hz (N = 5,000): target <= 1 s.
 2. Speed-parameterized PEM over 29 speeds (1..15 m/s step 0.5, 50 s each): <= 10 s.
 3. Subspace start (PBSID) at N = 50,000: <= 3 s and <= 500 MB (tracemalloc peak).
-Data: linear closed loop (sim.linear_sim), roll PID, dither 1 N m held 50 ms,
+Data: linear closed loop (dataset.linear_loop), roll PID, dither 1 N m held 50 ms,
 disturbance 0.5 N m, sensor noise 1e-3 rad / 1e-2 rad/s.  Single-threaded BLAS is
 recommended: on a shared 2-core machine threaded BLAS made the 5,000-sample fit ~10x
 slower.
@@ -25,8 +25,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from bikeid.dataset.linear_loop import simulate  # noqa: E402
 from bikeid.ident import pem  # noqa: E402
-from bikeid.sim.linear_sim import simulate  # noqa: E402
 from bikeid.sim.parameters import benchmark  # noqa: E402
 
 KW = dict(dither=1.0, dither_hold=5, disturbance=0.5, angle_noise=1e-3, rate_noise=1e-2)

@@ -2,7 +2,8 @@
 
 Every controller is a zero-order-hold callable ``controller(t, y) -> T_delta`` [N m]
 on the measured vector ``y`` (``sim.conventions.MEASURED`` order), with
-``sample_time``, ``saturation``, ``reset()``, ``reference(t)`` and ``describe()``;
+``sample_time`` (default :data:`DEFAULT_SAMPLE_TIME`, the default logging period),
+``saturation``, ``reset()``, ``reference(t)`` and ``describe()``;
 see :mod:`controllers.base`.  Heavy modules (scikit-fuzzy, python-control) load
 lazily through the attributes below.
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from .base import Controller, ControllerLike, GainSchedule
+from .base import DEFAULT_SAMPLE_TIME, Controller, ControllerLike, GainSchedule, LinearLaw
 from .excitation import (
     ChirpReference,
     LateralForcePulses,
@@ -24,6 +25,7 @@ from .registry import CONTROLLER_NAMES, make
 
 __all__ = [
     "CONTROLLER_NAMES",
+    "DEFAULT_SAMPLE_TIME",
     "PID",
     "ChirpReference",
     "Controller",
@@ -31,6 +33,7 @@ __all__ = [
     "FuzzyController",
     "GainSchedule",
     "LateralForcePulses",
+    "LinearLaw",
     "PolePlacement",
     "StepReference",
     "SteerIntoLean",

@@ -18,6 +18,20 @@ see :mod:`controllers.excitation`) and clips its output to ``+-saturation`` [N m
 
 Speed scheduling: ``design_speed=None`` schedules the gains on the *measured* speed
 ``y[0]`` at every call; a number fixes the gains at that design speed [m/s].
+
+Sample time: every controller defaults to :data:`DEFAULT_SAMPLE_TIME` = 0.01 s, the
+logging period of the default instruments (``dataset.sensors.Sensors``, 100 Hz).  A run
+logs the steer torque once per logging period; identification (``ident``) assumes that
+the logged value was held by the plant over the whole logging interval, which holds only
+when the controller runs at the logging period (or a whole multiple of it).  A faster
+controller is allowed when asked for explicitly, but the estimators refuse its runs
+(``ident.signals.check_sampling``).
+
+Linear laws: controllers whose output is linear in the measurement (PID, pole placement,
+steer-into-lean, without saturation) describe it by :meth:`Controller.linear_law` as a
+:class:`LinearLaw`, which the exact linear closed-loop engine
+(``dataset.linear_loop``) runs in compiled code; the others return None and run through
+the engine's per-sample Python loop.
 """
 
 from __future__ import annotations
@@ -25,11 +39,24 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
 
 from bikeid.sim.conventions import IDX, MEASURED
 
-__all__ = ["Controller", "ControllerLike", "GainSchedule", "Reference", "check_measurement"]
+__all__ = [
+    "DEFAULT_SAMPLE_TIME",
+    "Controller",
+    "ControllerLike",
+    "GainSchedule",
+    "LinearLaw",
+    "Reference",
+    "check_measurement",
+]
+
+#: Default controller period [s]: the logging period of the default sensors (100 Hz).
+DEFAULT_SAMPLE_TIME = 0.01
 
 I_V, I_PHI, I_DELTA, I_PHIDOT, I_DELTADOT = (
     IDX["v"], IDX["phi"], IDX["delta"], IDX["phidot"], IDX["deltadot"]
@@ -121,6 +148,25 @@ class GainSchedule:
         return {"speeds": list(self.speeds), "gains": [list(g) for g in self.gains]}
 
 
+class LinearLaw(NamedTuple):
+    """A controller law that is linear in the measurement, at one speed.
+
+    With the measured state y_x = [phi, delta, phidot, deltadot] (rad, rad/s), the
+    reference r [rad] and its rate r' [rad/s] at sample t_k, and the integral
+    xi[k] = sum_{j<k} dt (r[j] - phi_meas[j]) [rad s] (forward Euler, xi[0] = 0)::
+
+        T_delta[k] = L @ y_x[k] + l_i xi[k] + l_r r[k] + l_rd r'[k]   [N m]
+
+    Signs as in the benchmark convention (module docstring): stabilizing roll gains
+    are negative in ``-L``, i.e. ``L[0]`` > 0 for a controller that steers into the lean.
+    """
+
+    L: np.ndarray  #: (4,) [N m/rad, N m/rad, N m s/rad, N m s/rad]
+    l_i: float  #: integral gain [N m/(rad s)]
+    l_r: float  #: reference gain [N m/rad]
+    l_rd: float  #: reference-rate gain [N m s/rad]
+
+
 class Controller(ABC):
     """Base class: sample time, saturation, reference, ZOH hold and ``describe()``.
 
@@ -132,7 +178,7 @@ class Controller(ABC):
 
     def __init__(
         self,
-        sample_time: float = 0.001,
+        sample_time: float = DEFAULT_SAMPLE_TIME,
         saturation: float = math.inf,
         reference: Callable[[float], float] | None = None,
         design_speed: float | None = None,
@@ -177,6 +223,20 @@ class Controller(ABC):
         self._t_last = t
         self._u_last = u
         return u
+
+    def linear_law(self, v: float) -> LinearLaw | None:
+        """The law as a :class:`LinearLaw` with the gains at speed ``v`` [m/s], or None.
+
+        None (the default) means the law is not linear in the measurement (or saturates),
+        so a simulator must call the controller itself.  Subclasses whose law is linear
+        override this; the law must equal :meth:`__call__` to round-off on every sample.
+        """
+        return None
+
+    @property
+    def speed_scheduled(self) -> bool:
+        """True if the gains follow the *measured* speed (so they change when it does)."""
+        return False
 
     def speed(self, y: Sequence[float]) -> float:
         """The speed the gains are scheduled on: ``design_speed`` or the measured ``y[0]``."""

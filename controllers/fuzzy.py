@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import I_PHI, I_PHIDOT, Controller
+from .base import DEFAULT_SAMPLE_TIME, I_PHI, I_PHIDOT, Controller
 
 __all__ = [
     "ControlSurface",
@@ -231,7 +231,7 @@ class FuzzyController(Controller):
         *,
         surface_size: int = 301,
         exact: bool = False,
-        sample_time: float = 0.001,
+        sample_time: float = DEFAULT_SAMPLE_TIME,
         saturation: float = math.inf,
         reference: Callable[[float], float] | None = None,
         design_speed: float | None = None,

@@ -29,7 +29,9 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .base import I_PHI, I_PHIDOT, Controller, GainSchedule
+import numpy as np
+
+from .base import DEFAULT_SAMPLE_TIME, I_PHI, I_PHIDOT, Controller, GainSchedule, LinearLaw
 
 __all__ = ["DEFAULT_PID_GAINS", "PID"]
 
@@ -52,7 +54,7 @@ class PID(Controller):
         derivative: str = "measurement",
         anti_windup: str = "clamp",
         tracking_time: float = 0.1,
-        sample_time: float = 0.001,
+        sample_time: float = DEFAULT_SAMPLE_TIME,
         saturation: float = math.inf,
         reference: Callable[[float], float] | None = None,
         design_speed: float | None = None,
@@ -83,6 +85,30 @@ class PID(Controller):
     def current_gains(self, v: float) -> tuple[float, float, float]:
         """(Kp, Ki, Kd) at speed v [m/s]."""
         return self.gains if self.schedule is None else self.schedule(v)  # type: ignore[return-value]
+
+    @property
+    def speed_scheduled(self) -> bool:
+        return self.schedule is not None and self.design_speed is None
+
+    def linear_law(self, v: float) -> LinearLaw | None:
+        """T = Kp (r - phi) + Ki xi - Kd phidot (+ Kd r' with ``derivative="error"``).
+
+        Parameters
+        ----------
+        v : float
+            Speed [m/s] the gains are scheduled on (``design_speed`` wins if set).
+
+        Returns
+        -------
+        LinearLaw or None
+            L = [-Kp, 0, -Kd, 0], l_i = Ki, l_r = Kp, l_rd = Kd (error derivative) or 0;
+            None with a finite ``saturation`` (clipping and anti-windup are not linear).
+        """
+        if math.isfinite(self.saturation):
+            return None
+        kp, ki, kd = self.current_gains(self.design_speed if self.design_speed is not None else v)
+        lrd = kd if self.derivative == "error" else 0.0
+        return LinearLaw(np.array([-kp, 0.0, -kd, 0.0]), float(ki), float(kp), float(lrd))
 
     def _control(self, t: float, y: Sequence[float], dt: float) -> float:
         if self.schedule is None:

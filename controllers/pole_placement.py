@@ -81,7 +81,16 @@ from bikeid.sim.conventions import CANONICAL_STATE, LINEAR_STATE
 from bikeid.sim.linear import state_matrices
 from bikeid.sim.parameters import BicycleParameters, benchmark
 
-from .base import I_DELTA, I_DELTADOT, I_PHI, I_PHIDOT, Controller, GainSchedule
+from .base import (
+    DEFAULT_SAMPLE_TIME,
+    I_DELTA,
+    I_DELTADOT,
+    I_PHI,
+    I_PHIDOT,
+    Controller,
+    GainSchedule,
+    LinearLaw,
+)
 
 __all__ = [
     "DEFAULT_POLES",
@@ -320,7 +329,7 @@ class PolePlacement(Controller):
         state_order: str | None = None,
         design_speed: float | None = None,
         speed_grid: Sequence[float] | None = None,
-        sample_time: float = 0.001,
+        sample_time: float = DEFAULT_SAMPLE_TIME,
         saturation: float = math.inf,
         reference: Callable[[float], float] | None = None,
         law: str | None = None,
@@ -400,6 +409,33 @@ class PolePlacement(Controller):
     def current_gains(self, v: float) -> tuple[float, ...]:
         """(K_phi, K_delta, K_phidot, K_deltadot, kI) at speed v [m/s]."""
         return self._fixed if self.schedule is None else self.schedule(v)
+
+    @property
+    def speed_scheduled(self) -> bool:
+        return self.schedule is not None
+
+    def linear_law(self, v: float) -> LinearLaw | None:
+        """T = -K x + kI xi (+ K_phi r + K_phidot r' for the servo law).
+
+        Parameters
+        ----------
+        v : float
+            Speed [m/s] of the scheduled gains (ignored with ``design_speed``).
+
+        Returns
+        -------
+        LinearLaw or None
+            L = -K, l_i = kI, l_r = K_phi and l_rd = K_phidot (servo) or 0 (chen_dao);
+            None with a finite ``saturation``.
+        """
+        if math.isfinite(self.saturation):
+            return None
+        g = self.current_gains(v)
+        servo = self.law == "servo"
+        return LinearLaw(
+            -np.array(g[:4], dtype=float), float(g[4]),
+            float(g[0]) if servo else 0.0, float(g[2]) if servo else 0.0,
+        )  # fmt: skip
 
     def _reset_state(self) -> None:
         super()._reset_state()

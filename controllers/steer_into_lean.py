@@ -23,7 +23,9 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .base import I_PHIDOT, I_V, Controller
+import numpy as np
+
+from .base import DEFAULT_SAMPLE_TIME, I_PHIDOT, I_V, Controller, LinearLaw
 
 __all__ = ["SteerIntoLean"]
 
@@ -39,7 +41,7 @@ class SteerIntoLean(Controller):
         gain: float = 2.0,
         max_speed: float = 6.5,
         *,
-        sample_time: float = 0.01,
+        sample_time: float = DEFAULT_SAMPLE_TIME,
         saturation: float = math.inf,
         reference: Callable[[float], float] | None = None,
         design_speed: float | None = None,
@@ -59,6 +61,30 @@ class SteerIntoLean(Controller):
         if dv <= 0.0:
             return 0.0
         return self.gain * dv * y[I_PHIDOT]
+
+    @property
+    def speed_scheduled(self) -> bool:
+        return self.design_speed is None
+
+    def linear_law(self, v: float) -> LinearLaw | None:
+        """T = K (V - v) phidot below V, 0 above: L = [0, 0, K max(V - v, 0), 0].
+
+        Parameters
+        ----------
+        v : float
+            Speed [m/s] the gain is scheduled on (``design_speed`` wins if set).
+
+        Returns
+        -------
+        LinearLaw or None
+            No integral or reference terms; None with a finite ``saturation``.
+        """
+        if math.isfinite(self.saturation):
+            return None
+        vs = self.design_speed if self.design_speed is not None else v
+        dv = self.max_speed - vs
+        k = self.gain * dv if dv > 0.0 else 0.0
+        return LinearLaw(np.array([0.0, 0.0, k, 0.0]), 0.0, 0.0, 0.0)
 
     def roll_rate_gain(self, v: float) -> float:
         """The equivalent Kd(v) in T = -Kd phidot [N m s/rad] (negative below V)."""

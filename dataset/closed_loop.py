@@ -16,7 +16,17 @@ rate and records, at each sensor instant t_k:
   ``T_delta`` channel if it has one; exact by default);
 - ``truth``: the true MEASURED signals, the torque applied from t_k on (after input-side
   effects, when the plant reports it), pitch ``theta`` and rear contact ``x``, ``y``;
-- ``dither`` [N m] and ``reference`` [rad] at t_k.
+- ``dither`` [N m] and ``reference`` [rad] at t_k;
+- ``meta["sampling"]``: ``controller_period`` Ts, ``logging_period`` (the sensor period)
+  and ``dither_hold`` [s] (the dither's ``hold`` attribute, None if it has none).
+
+Sampling contract: the logged T_delta at t_k is the command computed at t_k; it is the
+torque the plant held over the whole logging interval only if the controller runs at the
+logging period (the default: every controller's ``sample_time`` defaults to
+``controllers.DEFAULT_SAMPLE_TIME`` = 0.01 s, the default sensors' period) and the dither
+is held a whole number of logging periods (``UniformDither`` defaults to 0.01 s).  A
+faster controller can be asked for explicitly (e.g. to study the loop at 1 kHz); its runs
+record both periods and the estimators refuse them (``ident.signals.check_sampling``).
 
 The speed is held by the plant's ideal rear drive (``mode="held"``, the default) or
 coasts (``mode="coast"``).  A fall (|roll| above the plant's limit) ends the run early;
@@ -125,7 +135,9 @@ def simulate_run(
     """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
 
     bicycle: parameters; controller: a ``controllers`` controller (``sample_time``,
-    ``reset()``, ``__call__(t, y)``, ``describe()``); reference: roll reference [rad]
+    ``reset()``, ``__call__(t, y)``, ``describe()``; its ``sample_time`` should be the
+    sensor period, the default, for the run to be identifiable, see the module docstring);
+    reference: roll reference [rad]
     installed as ``controller.reference`` (None keeps the controller's own); dither:
     steer-torque dither t -> N m added to the command (None: none); sensors: the
     instruments (default :meth:`Sensors.default`, 100 Hz); effects: ``sim.effects``
@@ -188,6 +200,11 @@ def simulate_run(
         "dither": _describe(dither),
         "lateral_force": _describe(lateral_force),
         "sensors": sensors.describe(),
+        "sampling": {
+            "controller_period": ctrl_dt,
+            "logging_period": float(sensors.dt),
+            "dither_hold": None if getattr(dither, "hold", None) is None else float(dither.hold),
+        },
         "effects": [_describe(e) for e in effects],
         "plant": {"model": "whipple-nonlinear", "initial": initial or {}, **traj.meta},
     }

@@ -52,7 +52,7 @@ from bikeid.dataset.run import Run
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
 from bikeid.sim.parameters import BicycleParameters, from_mapping
 
-from .signals import differentiate
+from .signals import check_sampling, differentiate
 
 __all__ = [
     "MOORE_ROLL",
@@ -293,10 +293,12 @@ def identify(
     source : "signals" (measured) or "truth" (noise-free simulated signals).
     max_condition : an unidentifiable setup (condition number of the column-scaled
         regressor matrix above this) raises ValueError naming the collinear entries.
+    Runs that break the sampling contract (``ident.signals.check_sampling``) raise ValueError.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
         raise ValueError("no runs given")
+    check_sampling(runs, "direct.identify")
     if method not in ("ls", "iv"):
         raise ValueError(f"method {method!r}: choose 'ls' or 'iv'")
     if instruments not in ("lagged", "dither", "external", "simulated"):

@@ -70,6 +70,7 @@ from .canonical import (
     to_bikeid_order,
     to_canonical_form,
 )
+from .signals import check_sampling
 from .subspace import d2c, decimate, pbsid
 
 __all__ = [
@@ -613,10 +614,13 @@ def fit(
     "scipy" (``scipy.optimize.least_squares``, MINPACK; same optimum, slower);
     ``passes``: fits with re-estimated output weights (1 = weights from the output
     variances only).  Returns a :class:`CanonicalModel` (``notes`` names the start used).
+    Runs whose logged torque was not held over each sample (controller or dither faster
+    than the logging, ``ident.signals.check_sampling``) raise ValueError.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
         raise ValueError("no runs given")
+    check_sampling(runs, "pem.fit")
     if noise_model not in ("free", "none"):
         raise ValueError(f"noise_model {noise_model!r}: choose 'free' or 'none'")
     outputs = tuple(outputs)
@@ -690,8 +694,10 @@ def fit_speed_model(
     ``per_speed`` (speed rounded to 1e-6 m/s -> :class:`CanonicalModel`, e.g. from
     :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are refined
     jointly over all runs with each speed's K held fixed (``passes`` weighting passes).
+    Runs that break the sampling contract (``ident.signals.check_sampling``) raise ValueError.
     """
     runs = list(runs)
+    check_sampling(runs, "pem.fit_speed_model")
     outputs = tuple(outputs)
     groups: dict[float, list[Run]] = {}
     for r in runs:

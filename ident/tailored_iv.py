@@ -44,6 +44,7 @@ from bikeid.dataset.run import Run
 from bikeid.sim.linear import CanonicalMatrices, state_matrices
 
 from .direct import DirectResult, identify
+from .signals import check_sampling
 
 __all__ = ["ControllerFit", "fit_controller", "identify_tailored", "simulate_instruments"]
 
@@ -190,12 +191,14 @@ def identify_tailored(
         estimate stays consistent, and the iterations remove its influence.
     iterations : instrument/model refinements (>= 1); ``na``, ``nb``: controller ARX orders.
     Other keywords go to :func:`ident.direct.identify`.  The result's ``notes`` record the
-    iterations and the worst controller-fit VAF."""
+    iterations and the worst controller-fit VAF.  Runs that break the sampling contract
+    (``ident.signals.check_sampling``) raise ValueError."""
     if iterations < 1:
         raise ValueError(f"iterations={iterations}: need at least 1")
     runs = list(runs)
     if not runs:
         raise ValueError("no runs given")
+    check_sampling(runs, "tailored_iv.identify_tailored")
     prepared = [prepare(r) for r in runs]
     controllers = [fit_controller(r, na, nb) for r in runs]
     if isinstance(start, str):

@@ -15,13 +15,13 @@ import sys
 import numpy as np
 import pytest
 
+from bikeid.dataset.linear_loop import simulate
 from bikeid.experiments import accuracy as acc
 from bikeid.ident import pem
 from bikeid.ident.canonical import steer_zeros, theta_from_matrices
 from bikeid.ident.direct import identify
 from bikeid.ident.signals import prepare
 from bikeid.sim.linear import canonical_matrices, eigenvalues
-from bikeid.sim.linear_sim import simulate
 from bikeid.sim.parameters import benchmark
 
 P = benchmark()

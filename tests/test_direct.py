@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from bikeid.dataset.linear_loop import simulate
 from bikeid.ident.direct import identify, vaf_moore, vaf_variance
 from bikeid.sim.linear import canonical_matrices, eigenvalues
-from bikeid.sim.linear_sim import simulate
 from bikeid.sim.parameters import benchmark
 
 P = benchmark()

@@ -1,6 +1,6 @@
 """Property tests T1-T11 of the identification reference (§4.2), with hypothesis.
 
-Plant: ``sim.linear_sim`` (exact ZOH, so the truth is known exactly).  Bicycles are
+Plant: ``dataset.linear_loop`` (exact ZOH, so the truth is known exactly).  Bicycles are
 the benchmark with perturbed trail, steer tilt, front-frame mass and rear-body
 inertia, kept only if ``BicycleParameters`` validates them and the roll PID
 stabilizes them.  Tolerances are stated per test.
@@ -11,6 +11,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from bikeid.dataset.linear_loop import simulate
 from bikeid.dataset.run import Run
 from bikeid.ident import pem
 from bikeid.ident.canonical import theta_from_matrices
@@ -18,7 +19,6 @@ from bikeid.ident.direct import identify, vaf_moore, vaf_variance
 from bikeid.ident.subspace import po_moesp
 from bikeid.ident.validate import resid
 from bikeid.sim.linear import canonical_matrices, eigenvalues
-from bikeid.sim.linear_sim import simulate
 from bikeid.sim.parameters import benchmark
 
 BASE = benchmark()

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from bikeid.dataset.linear_loop import simulate
 from bikeid.ident import pem
 from bikeid.ident.canonical import (
     canonical_ab,
@@ -14,7 +15,6 @@ from bikeid.ident.canonical import (
 )
 from bikeid.ident.subspace import pbsid
 from bikeid.sim.linear import canonical_matrices, critical_speeds, eigenvalues, state_space
-from bikeid.sim.linear_sim import simulate
 from bikeid.sim.parameters import benchmark
 
 P = benchmark()

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from bikeid.dataset.linear_loop import simulate
 from bikeid.ident.signals import differentiate, lowpass, prepare, remove_means
-from bikeid.sim.linear_sim import simulate
 from bikeid.sim.parameters import benchmark
 
 

@@ -4,11 +4,11 @@ import control
 import numpy as np
 import pytest
 
+from bikeid.dataset.linear_loop import simulate
 from bikeid.ident.canonical import theta_from_matrices
 from bikeid.ident.pem import CanonicalModel
 from bikeid.ident.validate import compare, goodness_of_fit, resid, transfer_functions, zeros
 from bikeid.sim.linear import canonical_matrices, state_space, transfer_function
-from bikeid.sim.linear_sim import simulate
 from bikeid.sim.parameters import benchmark
 
 P = benchmark()
