@@ -30,7 +30,7 @@ def sine_fit(y: np.ndarray, u: np.ndarray, freq: float, dt: float = 0.01) -> com
 
 
 def _asymmetry_lines(s: dict) -> list[str]:
-    """Push-direction asymmetry of the error (ident.discrepancy.push_asymmetry)."""
+    """Push-direction asymmetry of the error (``discrepancy_diagnostics.push_asymmetry``)."""
     out = []
     for when in ("before", "after"):
         a = s.get(f"push_asymmetry_{when}")
@@ -50,8 +50,8 @@ def _asymmetry_lines(s: dict) -> list[str]:
 
 def bode_points(root) -> list[dict]:
     """Measured closed-loop response T_ext -> (roll rate, steer angle), one per Bode file."""
-    from bikeid.dataset.measured import find_logs, load_log
-    from bikeid.ident.experiment_model import bode_window
+    from bikeid.dataset.sbw_logs import find_logs, load_log
+    from bikeid.dataset.windows import bode_window
 
     out = []
     for p in find_logs(root, "bode"):
@@ -69,16 +69,12 @@ def bode_points(root) -> list[dict]:
 def write_report(out: str | Path, data: str | None, model_path: str | None) -> Path:
     import matplotlib.pyplot as plt
 
-    from bikeid.dataset.measured import SPEED_CALIBRATION, data_dir
-    from bikeid.experiments.cmd_measured import (
-        evaluate_json,
-        fit_model,
-        load_decays,
-        model_from_json,
-    )
+    from bikeid.dataset.decays import load_decays
+    from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir
+    from bikeid.experiments.measured_study import evaluate_json, fit_model, model_from_json
     from bikeid.experiments.plots import save
-    from bikeid.ident.discrepancy import decay_eigenvalue
     from bikeid.ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+    from bikeid.ident.weave import decay_eigenvalue
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

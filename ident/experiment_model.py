@@ -10,42 +10,20 @@ Controller: the logged steer-into-lean law ``T_cmd = K (V - v_s) phidot_m + T_ex
 v_s and the measured roll rate and held over the loop (zero-order hold, exactly as the
 firmware does).  ``T_ext`` is the relayed handlebar torque of the Bode runs (zero in the
 free decays).  Sign: with roll/steer positive to the right, +K stabilizes (see
-``dataset.measured``).
+``bikeid.dataset.sbw_logs``).
 
-Effects (all default to "absent"; each is one named physical term):
-
-==========================  ==========  ================================================
-name                        unit        term
-==========================  ==========  ================================================
-steer_viscous_damping       N m s/rad   steer torque -c * deltadot
-steer_coulomb_friction      N m         steer torque -T_c * tanh(deltadot / 0.1 rad/s)
-steer_stiffness             N m/rad     steer torque -k * delta (centring spring)
-tire_twist_stiffness        N m/rad*m/s steer torque -(k / v) * delta (NOT in the ident library)
-tire_scrub_torque           N m s^2/... steer torque -(k / v) * deltadot  (k in N m s/rad * m/s)
-command_gain                -           applied torque = gain * command (default 1)
-steer_torque_bias           N m         constant steer torque
-input_delay                 s           command applied tau later (fractional samples)
-actuator_lag                s           first-order lag of the applied torque
-roll_angle_bias             rad         phi_m = phi + b
-steer_angle_bias            rad         delta_m = delta + b
-roll_rate_bias              rad/s       phidot_m = s phidot + b (controller sees it)
-roll_rate_scale             -           s above (default 1)
-speed_scale                 -           true speed = s * calibrated treadmill speed
-steer_inertia               kg m^2      added to M_dd (front-frame inertia correction)
-trail_correction            m           trail c -> c + dc (all matrices recomputed)
-front_inertia_scale         -           front-frame inertia tensor IH* times s (default 1)
-front_mass_shift            kg          mass moved from rear to front frame (see below)
-rear_inertia_scale          -           rear-frame inertia tensor IB* times s (default 1)
-tire_relaxation             m           front-tyre lateral relaxation length sigma (below)
-roll_viscous_damping        N m s/rad   roll torque -c * phidot (NOT in the ident library)
-roll_stiffness              N m/rad     roll torque -k * phi (NOT in the ident library)
-==========================  ==========  ================================================
+Effects: every name, unit, absent value, plausible range and one-line term is declared once
+in :mod:`bikeid.sim.effect_registry` (``EFFECTS``); all default to absent.  This model
+applies every entry to the linear model (plant terms to the matrices, input terms to the
+command, sensor terms to the outputs, parameter corrections through :meth:`plant_params`);
+the steer Coulomb friction is smoothed as -T_c * tanh(deltadot / 0.1 rad/s) here.
 
 ``tire_twist_stiffness`` (a contact-patch twist torque that falls with speed) can be fitted
 by name but is kept out of the identification library: the per-file fits contradict its 1/v
 law (docs/measured.md).
 
-The last four rows above the roll terms are *parameter* corrections of the values the data
+The four *parameter* corrections trail_correction, front_inertia_scale, front_mass_shift and
+rear_inertia_scale are corrections of the values the data
 README flags as uncertain (borrowed frame/fork inertias, estimated mass split); they change
 the bicycle itself, so the linear matrices and the nonlinear plant both see them
 (:meth:`ExperimentModel.plant_params`).  ``front_mass_shift`` dm moves mass from the rear
@@ -95,157 +73,23 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from bikeid.dataset.measured import treadmill_speed
-from bikeid.dataset.run import Run
+from bikeid.dataset.sbw_logs import treadmill_speed
+from bikeid.dataset.windows import Window
+from bikeid.sim.effect_registry import EFFECTS, effect, nonlinear_effects
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
 from bikeid.sim.parameters import BicycleParameters, steer_by_wire
+from bikeid.sim.sampling import zoh
 
 __all__ = [
-    "EFFECT_DEFAULTS",
-    "EFFECT_UNITS",
-    "PARAMETER_EFFECTS",
+    "COULOMB_EPS",
     "ExperimentModel",
-    "Window",
     "attach_nonlinear_correction",
-    "bode_window",
-    "decay_windows",
-    "nonlinear_counterpart",
     "window_errors",
     "yaw_coupling",
 ]
 
-DT = 0.01
+DT = 0.01  # s, one control loop
 COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
-EFFECT_UNITS = {
-    "steer_viscous_damping": "N m s/rad",
-    "steer_coulomb_friction": "N m",
-    "steer_stiffness": "N m/rad",
-    "tire_twist_stiffness": "N m/rad * m/s",
-    "tire_scrub_torque": "N m s/rad * m/s",
-    "command_gain": "-",
-    "steer_torque_bias": "N m",
-    "input_delay": "s",
-    "actuator_lag": "s",
-    "roll_angle_bias": "rad",
-    "steer_angle_bias": "rad",
-    "roll_rate_bias": "rad/s",
-    "roll_rate_scale": "-",
-    "speed_scale": "-",
-    "steer_inertia": "kg m^2",
-    "trail_correction": "m",
-    "front_inertia_scale": "-",
-    "front_mass_shift": "kg",
-    "rear_inertia_scale": "-",
-    "tire_relaxation": "m",
-    "roll_viscous_damping": "N m s/rad",
-    "roll_stiffness": "N m/rad",
-}
-EFFECT_DEFAULTS = {k: 0.0 for k in EFFECT_UNITS} | {
-    "command_gain": 1.0,
-    "roll_rate_scale": 1.0,
-    "speed_scale": 1.0,
-    "front_inertia_scale": 1.0,
-    "rear_inertia_scale": 1.0,
-}
-PARAMETER_EFFECTS = (
-    "trail_correction",
-    "front_inertia_scale",
-    "front_mass_shift",
-    "rear_inertia_scale",
-)
-
-
-@dataclass
-class Window:
-    """One stretch of an experiment to simulate: a free decay or a Bode record.
-
-    Measured arrays (length n, sample time 0.01 s): phi, delta, phidot, deltadot,
-    v_sensor, T_ext (external steer torque relayed to the motor), T_phi (roll torque,
-    simulation only).  ``hist`` holds the logged steer commands before the window
-    start (oldest first) for the delay buffer.  ``speed`` is the treadmill speed [m/s].
-    """
-
-    file: str
-    speed: float
-    start: int
-    phi: np.ndarray
-    delta: np.ndarray
-    phidot: np.ndarray
-    deltadot: np.ndarray
-    v_sensor: np.ndarray
-    T_ext: np.ndarray
-    hist: np.ndarray
-    kind: str = "decay"
-    freq: float | None = None
-    T_phi: np.ndarray | None = None
-    meta: dict = field(default_factory=dict)
-    correction: dict | None = None  # nonlinear - linear nominal outputs (see below)
-
-    @property
-    def n(self) -> int:
-        return self.phi.size
-
-    def state0(self) -> np.ndarray:
-        """Measured state at the start: quadratic fit over the first 5 samples at t=0."""
-        k = min(5, self.n)
-        tt = np.arange(k) * DT
-        out = []
-        for y in (self.phi, self.delta, self.phidot, self.deltadot):
-            c = np.polyfit(tt, y[:k], 2 if k >= 4 else 0)
-            out.append(np.polyval(c, 0.0))
-        return np.array(out)
-
-
-def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20) -> Window:
-    first = int(run.meta.get("first_index", 0))
-    a, b = i0 - first, i1 - first
-    if a < 0 or b > run.n or b - a < 10:
-        raise ValueError(
-            f"{run.meta.get('file', 'run')}: window rows {i0}..{i1} outside the file "
-            f"(rows {first}..{first + run.n})"
-        )
-    sl = slice(a, b)
-    h = run["T_delta"][max(0, a - hist_len) : a]
-    h = np.concatenate([np.full(hist_len - h.size, h[0] if h.size else 0.0), h])
-    ext = run.signals.get("T_ext", np.zeros(run.n))
-    return Window(
-        file=str(run.meta.get("file", "run")),
-        speed=float(treadmill_speed(np.mean(run["v"][sl]))),
-        start=i0,
-        phi=run["phi"][sl].copy(),
-        delta=run["delta"][sl].copy(),
-        phidot=run["phidot"][sl].copy(),
-        deltadot=run["deltadot"][sl].copy(),
-        v_sensor=run["v"][sl].copy(),
-        T_ext=ext[sl].copy(),
-        hist=h,
-        kind=kind,
-        freq=freq,
-    )
-
-
-def decay_windows(run: Run, segments) -> list[Window]:
-    """Free-decay windows of a run from ``dataset.measured.Segment`` rows."""
-    out = [_window(run, s.start, s.end, "decay") for s in segments]
-    if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
-        for w in out:
-            w.speed = float(run.meta["speed"])
-    return out
-
-
-def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> Window:
-    """The settled-speed stretch of a Bode run (at most ``max_len`` s, skipping 1 s)."""
-    first = int(run.meta.get("first_index", 0))
-    i0 = int(run.meta.get("ramp_end_index", first)) + 100
-    i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))
-    if freq is None:
-        import re
-
-        m = re.search(r"_([0-9.]+)Hz", str(run.meta.get("file", "")))
-        if not m:
-            raise ValueError(f"cannot read the excitation frequency from {run.meta.get('file')}")
-        freq = float(m.group(1))
-    return _window(run, i0, i1, "bode", freq=freq)
 
 
 @dataclass(frozen=True)
@@ -258,27 +102,26 @@ class ExperimentModel:
     V: float = 6.5
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.effects) - set(EFFECT_UNITS))
-        if unknown:
-            raise ValueError(f"unknown effects {unknown}; known are {sorted(EFFECT_UNITS)}")
         for k, v in self.effects.items():
+            unit = effect(k).unit  # ValueError naming the known effects
             try:
                 ok = math.isfinite(float(v))
             except (TypeError, ValueError):
                 ok = False
             if not ok:
-                raise ValueError(
-                    f"effect {k!r} must be a finite number [{EFFECT_UNITS[k]}], got {v!r}"
-                )
+                raise ValueError(f"effect {k!r} must be a finite number [{unit}], got {v!r}")
         if self.e("input_delay") < 0 or self.e("actuator_lag") < 0:
             raise ValueError("input_delay and actuator_lag must be >= 0 s")
         if self.e("tire_relaxation") < 0:
             raise ValueError("tire_relaxation (relaxation length sigma) must be >= 0 m")
 
     def e(self, name: str) -> float:
-        return float(self.effects.get(name, EFFECT_DEFAULTS[name]))
+        """Value of effect ``name`` [its registry unit]; its absent value when not set."""
+        v = self.effects.get(name)
+        return float(effect(name).absent if v is None else v)
 
     def with_effects(self, **values: float) -> ExperimentModel:
+        """A copy with the effects ``values`` (registry names) set or replaced."""
         return replace(self, effects={**self.effects, **values})
 
     # -- matrices ---------------------------------------------------------------------
@@ -384,14 +227,9 @@ class ExperimentModel:
         return E, A, B
 
     def discrete(self, v: float, h: float = DT, cm=None):
-        """ZOH discretization over step h: (Ad, Bd)."""
+        """ZOH discretization over step h [s]: (Ad, Bd) (:func:`bikeid.sim.sampling.zoh`)."""
         A, B = self.continuous(v, cm)
-        n, m = B.shape
-        big = np.zeros((n + m, n + m))
-        big[:n, :n] = A
-        big[:n, n:] = B
-        E = _expm_small(big * h)
-        return E[:n, :n], E[:n, n:]
+        return zoh(A, B, h, small=True)
 
     def true_speed(self, v_sensor: float) -> float:
         return float(self.e("speed_scale") * treadmill_speed(v_sensor))
@@ -516,7 +354,7 @@ class ExperimentModel:
         bias_T, tc = self.e("steer_torque_bias"), self.e("steer_coulomb_friction")
         Kc = self.K * (self.V - vs)
         H = max(m + 2, 2)
-        hist = np.stack([_hist(w.hist, H) for w in windows])  # oldest first
+        hist = np.stack([w.command_history(H) for w in windows])  # oldest first
         x = np.zeros((nw, npl))
         x0 = np.stack([w.state0() for w in windows])
         x[:, 0] = x0[:, 0] - bphi
@@ -565,67 +403,25 @@ class ExperimentModel:
         return out
 
 
-def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, dict]:
-    """The part of ``model``'s effects the nonlinear plant can carry, at a true speed.
-
-    Returns (``sim.effects`` objects, the same as experiment-model effects).  Mapped:
-    steer viscous damping + tire scrub (c + k / v), steer stiffness + tyre twist (k + k_t / v),
-    steer Coulomb friction (same tanh smoothing 0.1 rad/s), command gain, actuator lag, input delay
-    (rounded to whole 10 ms samples), roll damping and stiffness.  Not mapped (they stay
-    linear-only): sensor biases and scales, steer torque bias, steer inertia (the parameter
-    corrections and the speed scale enter through the parameters and the speed instead).
-    """
-    from bikeid.sim import effects as fx
-
-    out, eq = [], {}
-    c = model.e("steer_viscous_damping") + model.e("tire_scrub_torque") / max(speed, 0.1)
-    if c > 0:
-        out.append(fx.SteerDamping(c))
-        eq["steer_viscous_damping"] = c
-    ks = model.e("steer_stiffness") + model.e("tire_twist_stiffness") / max(speed, 0.1)
-    if ks != 0.0:
-        out.append(fx.SteerStiffness(ks))
-        eq["steer_stiffness"] = ks
-    tc = model.e("steer_coulomb_friction")
-    if tc > 0:
-        out.append(fx.SteerCoulomb(tc, smoothing=COULOMB_EPS))
-        eq["steer_coulomb_friction"] = tc
-    if model.e("command_gain") != 1.0:
-        out.append(fx.TorqueGain(model.e("command_gain")))
-        eq["command_gain"] = model.e("command_gain")
-    if model.e("actuator_lag") > 0:
-        out.append(fx.ActuatorLag(model.e("actuator_lag")))
-        eq["actuator_lag"] = model.e("actuator_lag")
-    nd = int(round(model.e("input_delay") / DT))
-    if nd > 0:
-        out.append(fx.InputDelay(nd * DT))
-        eq["input_delay"] = nd * DT
-    if model.e("roll_viscous_damping") > 0:
-        out.append(fx.RollDamping(model.e("roll_viscous_damping")))
-        eq["roll_viscous_damping"] = model.e("roll_viscous_damping")
-    if model.e("roll_stiffness") > 0:
-        out.append(fx.RollStiffness(model.e("roll_stiffness")))
-        eq["roll_stiffness"] = model.e("roll_stiffness")
-    return out, eq
-
-
 def attach_nonlinear_correction(
     windows: list[Window], model: ExperimentModel | None = None
 ) -> list[Window]:
     """Make the model nonlinear: store y_nl(m') - y_lin(m') in each window (in place).
 
     m' is the part of ``model`` (default: the nominal) that the nonlinear plant can carry
-    (:func:`nonlinear_counterpart`).  For each window the nonlinear Whipple plant
+    (:func:`bikeid.sim.effect_registry.nonlinear_effects`, Coulomb smoothing COULOMB_EPS).
+    For each window the nonlinear Whipple plant
     (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms, speed held at the true
     speed) and the linear model are both run with m' from the window's measured initial
     state, zero command history, and the same sampled loop ``T = K (V - v_s) phidot``
     (v_s the window's mean sensor speed).  Their difference is added to every later
     :meth:`ExperimentModel.simulate` of the window, so a model m simulates as
     y_lin(m) + y_nl(m') - y_lin(m'): exactly the nonlinear plant at m = m', and to first
-    order in (m - m') near it (defect correction; :func:`ident.discrepancy.identify`
-    re-attaches at the current model after each accepted effect).  Needed because the
-    logs' decays reach steer angles of 0.3-0.6 rad at 1.5 m/s, where the linear and the
-    nonlinear plant differ by 0.1-0.45 in NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+    order in (m - m') near it (defect correction;
+    :func:`bikeid.ident.effect_selection.select_effects` re-attaches at the current model
+    after each accepted effect).  Needed because the logs' decays reach steer angles of
+    0.3-0.6 rad at 1.5 m/s, where the linear and the nonlinear plant differ by 0.1-0.45 in
+    NRMSE (0.02-0.1 at 2.5-4.5 m/s).
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.sim.integrate import simulate
@@ -636,8 +432,8 @@ def attach_nonlinear_correction(
     for w in windows:
         vs = float(np.mean(w.v_sensor))
         v = model.true_speed(vs)
-        fx, eq = nonlinear_counterpart(model, v)
-        keep = {k: model.e(k) for k in (*PARAMETER_EFFECTS, "speed_scale") if k in model.effects}
+        fx, eq = nonlinear_effects(model.effects, v, DT, COULOMB_EPS)
+        keep = {k: model.e(k) for k in model.effects if EFFECTS[k].layer == "parameter"}
         lin_m = ExperimentModel(params=model.params, effects={**eq, **keep}, K=model.K, V=model.V)
         w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
         sl = lin_m.simulate([w0])[0]
@@ -672,34 +468,6 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
     IAlz = mA * uA * xA + IAxz * sl + IAzz * cl
     mu = p.c / p.w * cl
     return np.array([ITxz, IAlz + mu * ITzz]), cl / p.w
-
-
-def _expm_small(M: np.ndarray) -> np.ndarray:
-    """Matrix exponential of a small matrix: scaling and squaring of an order-16 Taylor
-    series (truncation < 1e-20 relative after scaling to norm <= 0.5).
-
-    Used instead of ``scipy.linalg.expm`` because the latter goes through multithreaded
-    OpenBLAS, which on a loaded 2-core machine took ~5-8 ms per 7x7 call (vs 10 us with one
-    thread) and dominated identification.  Checked against scipy in tests/test_measured.py.
-    """
-    nrm = float(np.max(np.sum(np.abs(M), axis=1)))
-    k = max(0, int(math.ceil(math.log2(nrm / 0.5)))) if nrm > 0.5 else 0
-    A = M / (2.0**k)
-    E = np.eye(M.shape[0])
-    term = np.eye(M.shape[0])
-    for j in range(1, 17):
-        term = term @ A / j
-        E = E + term
-    for _ in range(k):
-        E = E @ E
-    return E
-
-
-def _hist(h: np.ndarray, H: int) -> np.ndarray:
-    h = np.asarray(h, dtype=float)
-    if h.size >= H:
-        return h[-H:]
-    return np.concatenate([np.full(H - h.size, h[0] if h.size else 0.0), h])
 
 
 def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Loader for the TU Delft steer-by-wire treadmill logs (``tudelft-sbw``).
+"""Parser of the TU Delft steer-by-wire treadmill logs (``tudelft-sbw``): reading and despiking.
 
 Format (see the data README): gzip CSV with a header, one row per 10 ms control loop,
 no time column, so t = i * 0.01 s.  Units are SI (rad, rad/s, N m, m/s).
@@ -7,10 +7,9 @@ What the loader does, and why
 ------------------------------
 - **Time base**: t = i * 0.01 s from the first row of the file (row indices of
   ``eigen/segments.csv`` refer to the same numbering).
-- **Free-decay windows**: the rows of ``eigen/segments.csv`` (transcribed from the
-  source's analysis) where it lists the log; for any other eigen log (a new run, a
-  fetched folder without the segments file) :func:`detect_decays` finds them from the
-  roll rate.
+- **Free-decay windows**: :mod:`bikeid.dataset.decays` (the listed rows of
+  ``eigen/segments.csv`` or detected from the roll rate); download:
+  :mod:`bikeid.dataset.download`.
 - **Empty sil_command rows**: some logs open with rows whose ``sil_command`` field is
   empty (controller not running yet).  Those leading rows are cut; an empty field later
   in the file is a malformed file.
@@ -54,15 +53,9 @@ from __future__ import annotations
 
 import csv
 import gzip
-import hashlib
 import io
-import json
 import os
-import tempfile
-import urllib.request
 import zlib
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -70,74 +63,33 @@ import numpy as np
 from bikeid.dataset.run import Run
 
 __all__ = [
-    "CAMPAIGN",
     "COLUMNS",
+    "DATASET",
     "DT",
     "SPEED_CALIBRATION",
-    "UPSTREAM_COMMIT",
-    "Segment",
     "data_dir",
     "despike",
-    "detect_decays",
-    "fetch",
     "find_logs",
-    "iter_decays",
     "load_log",
-    "read_segments",
     "treadmill_speed",
 ]
 
 DT = 0.01  # s, one control loop
+
 COLUMNS = (
     "sil_command", "speed", "lean_angle", "lean_rate", "hand_angle", "fork_angle",
     "fork_rate", "lean_torque", "hand_torque", "x_acceleration", "y_acceleration",
     "command_fork", "command_hand",
 )  # fmt: skip
+
 #: sensor = a * treadmill + b (source calibration, data README)
 SPEED_CALIBRATION = (1.066, -0.128)
-SPIKE_K = 8.0
-SPIKE_FLOOR = {"fork_rate": 0.5, "x_acceleration": 5.0, "y_acceleration": 5.0}
-DATASET = "tudelft-sbw"
-UPSTREAM_REPO = "mechmotum/sbw_bicycle_with_model_matching"
-UPSTREAM_COMMIT = "2e7bb2451997fa821b5e90bf6ca5d2acbb7948a8"
-UPSTREAM_URL = "https://raw.githubusercontent.com/{repo}/{commit}/teensy/logs/{path}"
-#: pinned files: local path under tudelft-sbw/ -> upstream path under teensy/logs/
-PINNED = {
-    **{
-        f"eigen/eigen_normal_sil6.5n2_{k}kph.log.gz": f"eigen_normal_sil6.5n2_{k}kph.log"
-        for k in ("5.4", "9", "12.6", "16.2")
-    },
-    **{
-        f"bode-4mps/bode_normal_4mps_{f}Hz.log.gz": f"bodetest-4m_per_s/bode_normal_4mps_{f}Hz.log"
-        for f in (
-            "1.0",
-            "1.1",
-            "1.2",
-            "1.3",
-            "1.4",
-            "1.5",
-            "1.6",
-            "1.7",
-            "1.8",
-            "1.9",
-            "2.05",
-            "2.2",
-            "2.4",
-            "2.6",
-            "2.8",
-            "3.0",
-        )  # fmt: skip
-    },
-}
 
-#: the campaign's other free-decay runs with the same controller (2, 3, 4, 5 m/s), listed
-#: in the transcribed segments.csv; ``bikeid data fetch --all-speeds``.  Their upstream
-#: paths follow the pinned eigen logs' pattern (not verified from the offline build
-#: machine; a missing file fails with the URL and writes nothing for it).
-CAMPAIGN = {
-    f"eigen/eigen_normal_sil6.5n2_{k}kph.log.gz": f"eigen_normal_sil6.5n2_{k}kph.log"
-    for k in ("7.2", "10.8", "14.4", "18")
-}
+SPIKE_K = 8.0
+
+SPIKE_FLOOR = {"fork_rate": 0.5, "x_acceleration": 5.0, "y_acceleration": 5.0}
+
+DATASET = "tudelft-sbw"
 
 
 def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
@@ -312,188 +264,3 @@ def _settled_speed(v: np.ndarray) -> tuple[float, int, int]:
     settled = float(np.median(v[ok]))
     idx = np.flatnonzero(ok)
     return settled, int(idx[0]), int(idx[-1] + 1)
-
-
-@dataclass(frozen=True)
-class Segment:
-    """A free-decay window: rows start..end-1 of ``file`` (indices in file rows)."""
-
-    file: str
-    speed: float
-    start: int
-    end: int
-
-
-def read_segments(path: str | os.PathLike, available: set[str] | None = None) -> list[Segment]:
-    """Rows of ``segments.csv``; rows whose file is not in ``available`` are skipped."""
-    path = Path(path)
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        need = {"file", "speed_mps", "start_idx", "end_idx"}
-        if not reader.fieldnames or not need <= set(reader.fieldnames):
-            raise ValueError(f"{path.name}: need columns {sorted(need)}")
-        out = []
-        for i, r in enumerate(reader):
-            try:
-                seg = Segment(
-                    r["file"].strip(), float(r["speed_mps"]), int(r["start_idx"]), int(r["end_idx"])
-                )
-            except (TypeError, ValueError):
-                raise ValueError(f"{path.name}: row {i + 2} is malformed: {r}") from None
-            if seg.end <= seg.start + 10:
-                raise ValueError(f"{path.name}: row {i + 2} has end <= start + 10")
-            if available is None or seg.file in available:
-                out.append(seg)
-    return out
-
-
-#: free-decay detector settings (:func:`detect_decays`)
-DECAY_LENGTH = 1.0  # s, window length (the transcribed windows are 1 s)
-DECAY_K = 6.0  # onset threshold in robust standard deviations of the roll rate
-DECAY_MIN_PEAK = 0.2  # rad/s, lower bound of the onset threshold
-DECAY_QUIET = 0.35  # max |roll rate| in the second before the push, relative to the peak
-DECAY_RATIO = 0.5  # max |roll rate| over the window's second half, relative to the peak
-
-
-def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
-    """Free decays in an eigen log found from the roll rate alone (no segments file).
-
-    A push shows as |roll rate| rising above max(6 sigma, 0.2 rad/s), sigma the robust
-    (1.4826 MAD) scale of the whole log's roll rate.  The window starts at the extreme of
-    that first lobe (|roll rate| > half the threshold with the same sign; the hand has
-    left: from there on the motion is the loop's own) and lasts ``length`` s.  It is kept
-    only if it is a clean decay from rest: within the settled-speed part of the log; in
-    the second before the push (less its last 0.15 s) |roll rate| stayed below 0.35 x the
-    peak; over the window's second half it stays below 0.5 x the peak; and it never
-    exceeds 1.1 x the peak (no second push).  The next search starts after the window.  On the four
-    ``eigen_normal`` logs this finds every window of the transcribed ``segments.csv``
-    whose push clears the threshold, at the same start to a few samples, plus the
-    pushes the source's analysis did not use (tests/test_measured.py, docs/measured.md);
-    those fit the model worse, so the curated list is the default where it exists.
-    """
-    pr = np.asarray(run.signals["phidot"], dtype=float)
-    first = int(run.meta.get("first_index", 0))
-    lo = int(run.meta.get("ramp_end_index", first)) - first
-    hi = int(run.meta.get("settled_end_index", first + pr.size)) - first
-    m = int(round(length / DT))
-    if m < 20:
-        raise ValueError(f"decay window length {length} s is too short (need >= 0.2 s)")
-    sigma = 1.4826 * float(np.median(np.abs(pr - np.median(pr))))
-    thr = max(DECAY_K * sigma, DECAY_MIN_PEAK)
-    pre, gap = int(round(1.0 / DT)), int(round(0.15 / DT))
-    speed = float(run.meta.get("speed", np.nan))
-    out: list[Segment] = []
-    i = max(lo, pre)
-    while i < hi - m:
-        if abs(pr[i]) <= thr:
-            i += 1
-            continue
-        sgn, k = np.sign(pr[i]), i
-        while k + 1 < hi and sgn * pr[k + 1] > 0.5 * thr:  # the push's first lobe
-            k += 1
-        j = i + int(np.argmax(sgn * pr[i : k + 1]))
-        peak = abs(pr[j])
-        win = np.abs(pr[j : j + m])
-        clean = (
-            j + m <= hi
-            and np.max(np.abs(pr[i - pre : i - gap])) < DECAY_QUIET * peak
-            and np.max(win[m // 2 :]) < DECAY_RATIO * peak
-            and np.max(win) <= 1.1 * peak
-        )
-        if clean:
-            out.append(Segment(run.meta.get("file", "?"), speed, first + j, first + j + m))
-        i = j + m
-    return out
-
-
-def iter_decays(
-    root: str | os.PathLike, source: str = "listed"
-) -> Iterator[tuple[Run, list[Segment]]]:
-    """(run, its free-decay windows) for every eigen log (name starting ``eigen``) under root.
-
-    ``source="listed"``: the windows of ``segments.csv`` (in the log's folder) for the logs
-    it lists, :func:`detect_decays` for the others, so a new log of this format needs no
-    segments file.  ``source="detected"``: :func:`detect_decays` for every log.
-    """
-    if source not in ("listed", "detected"):
-        raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
-    lists: dict[Path, list[Segment]] = {}  # segments.csv of each folder, read once
-    for path in find_logs(root, "eigen"):
-        sf = path.parent / "segments.csv"
-        if source == "listed" and sf.is_file() and sf not in lists:
-            lists[sf] = read_segments(sf)
-        run = load_log(path)
-        segs = [sg for sg in lists.get(sf, []) if sg.file == path.name] or detect_decays(run)
-        if segs:
-            yield run, segs
-
-
-# -- download -----------------------------------------------------------------------------
-def _sha256(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def fetch(
-    dest: str | os.PathLike,
-    commit: str = UPSTREAM_COMMIT,
-    opener: Callable[[str], bytes] | None = None,
-    url_pattern: str = UPSTREAM_URL,
-    files: dict[str, str] | None = None,
-) -> dict[str, str]:
-    """Download the pinned logs into ``dest/tudelft-sbw/`` (gzip), atomically.
-
-    Each file is fetched from ``url_pattern`` (upstream raw GitHub at the pinned
-    commit), gzip-compressed and written via a temporary file + rename.  The SHA-256
-    of the upstream bytes is recorded in ``checksums.json`` on first download and
-    checked on every later one (a mismatch raises ValueError and writes nothing).
-    ``segments.csv`` is not an upstream file (it was transcribed from the source's
-    analysis script) and is not fetched: in a fetched folder the decay windows are
-    detected (:func:`detect_decays`).  Returns {local path: sha256}.
-    """
-    opener = opener or _urlopen
-    files = PINNED if files is None else files
-    root = Path(dest) / DATASET
-    root.mkdir(parents=True, exist_ok=True)
-    sums_path = root / "checksums.json"
-    sums = json.loads(sums_path.read_text()) if sums_path.exists() else {}
-    out = {}
-    for local, remote in files.items():
-        url = url_pattern.format(repo=UPSTREAM_REPO, commit=commit, path=remote)
-        data = opener(url)
-        digest = _sha256(data)
-        if local in sums and sums[local] != digest:
-            raise ValueError(
-                f"checksum mismatch for {local}: recorded {sums[local][:12]}..., got "
-                f"{digest[:12]}...; delete {sums_path} only if the upstream file really changed"
-            )
-        target = root / local
-        target.parent.mkdir(parents=True, exist_ok=True)
-        payload = gzip.compress(data, mtime=0) if local.endswith(".gz") else data
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(payload)
-            os.replace(tmp, target)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        sums[local] = digest
-        out[local] = digest
-    text = json.dumps(sums, indent=2, sort_keys=True) + "\n"
-    fd, tmp = tempfile.mkstemp(dir=root, prefix=".checksums.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, sums_path)
-    return out
-
-
-def _urlopen(url: str) -> bytes:  # pragma: no cover - needs network
-    try:
-        with urllib.request.urlopen(url, timeout=60) as resp:
-            return resp.read()
-    except OSError as exc:  # URLError, HTTPError and timeouts are OSErrors
-        reason = getattr(exc, "reason", exc)
-        raise ValueError(
-            f"could not download {url}: {reason}; check the network connection, or copy the "
-            "data folder by hand and point --data / BIKEID_DATA at it"
-        ) from None
