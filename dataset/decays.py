@@ -49,7 +49,19 @@ class Segment:
 
 
 def read_segments(path: str | os.PathLike, available: set[str] | None = None) -> list[Segment]:
-    """Rows of ``segments.csv``; rows whose file is not in ``available`` are skipped."""
+    """Rows of ``segments.csv``; rows whose file is not in ``available`` are skipped.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The CSV (columns file, speed_mps, start_idx, end_idx).
+    available : set of str, optional
+        File names to keep.
+
+    Returns
+    -------
+    list of Segment
+    """
     path = Path(path)
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
@@ -94,6 +106,17 @@ def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
     whose push clears the threshold, at the same start to a few samples, plus the
     pushes the source's analysis did not use (tests/test_measured.py, docs/measured.md);
     those fit the model worse, so the curated list is the default where it exists.
+
+    Parameters
+    ----------
+    run : Run
+        An eigen log.
+    length : float, optional
+        Window length [s].
+
+    Returns
+    -------
+    list of Segment
     """
     pr = np.asarray(run.signals["phidot"], dtype=float)
     first = int(run.meta.get("first_index", 0))
@@ -138,6 +161,17 @@ def iter_decays(
     ``source="listed"``: the windows of ``segments.csv`` (in the log's folder) for the logs
     it lists, :func:`detect_decays` for the others, so a new log of this format needs no
     segments file.  ``source="detected"``: :func:`detect_decays` for every log.
+
+    Parameters
+    ----------
+    root : str or path-like
+        Folder searched recursively.
+    source : str, optional
+        ``"listed"`` or ``"detected"``.
+
+    Yields
+    ------
+    (Run, list of Segment)
     """
     if source not in ("listed", "detected"):
         raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")

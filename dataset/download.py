@@ -82,6 +82,24 @@ def fetch(
     ``segments.csv`` is not an upstream file (it was transcribed from the source's
     analysis script) and is not fetched: in a fetched folder the decay windows are
     detected (:func:`detect_decays`).  Returns {local path: sha256}.
+
+    Parameters
+    ----------
+    dest : str or path-like
+        Folder to create ``tudelft-sbw/`` in.
+    commit : str, optional
+        Upstream commit.
+    opener : callable, optional
+        url -> bytes (default: HTTP download).
+    url_pattern : str, optional
+        With ``{repo}``, ``{commit}``, ``{path}``.
+    files : dict of str to str, optional
+        Local path -> upstream path (default :data:`PINNED`).
+
+    Returns
+    -------
+    dict of str to str
+        Local path -> SHA-256 of the upstream bytes.
     """
     opener = opener or _urlopen
     files = PINNED if files is None else files

@@ -51,7 +51,13 @@ class Window:
         return self.phi.size
 
     def state0(self) -> np.ndarray:
-        """Measured state at the start: quadratic fit over the first 5 samples at t=0."""
+        """Measured state at the start: quadratic fit over the first 5 samples at t=0.
+
+        Returns
+        -------
+        (4,) ndarray
+            phi [rad], delta [rad], phidot [rad/s], deltadot [rad/s] at the first sample.
+        """
         k = min(5, self.n)
         tt = np.arange(k) * DT
         out = []
@@ -109,7 +115,20 @@ def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20
 
 
 def decay_windows(run: Run, segments) -> list[Window]:
-    """Free-decay windows of a run from ``bikeid.dataset.decays.Segment`` rows."""
+    """Free-decay windows of a run from ``bikeid.dataset.decays.Segment`` rows.
+
+    Parameters
+    ----------
+    run : Run
+        A log read by :func:`bikeid.dataset.sbw_logs.load_log`.
+    segments : iterable of Segment
+        Rows start..end-1 (file row indices).
+
+    Returns
+    -------
+    list of Window
+        With the file's settled treadmill speed [m/s] when the run knows it.
+    """
     out = [_window(run, s.start, s.end, "decay") for s in segments]
     if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
         for w in out:
@@ -118,7 +137,22 @@ def decay_windows(run: Run, segments) -> list[Window]:
 
 
 def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> Window:
-    """The settled-speed stretch of a Bode run (at most ``max_len`` s, skipping 1 s)."""
+    """The settled-speed stretch of a Bode run (at most ``max_len`` s, skipping 1 s).
+
+    Parameters
+    ----------
+    run : Run
+        A Bode log.
+    freq : float, optional
+        Excitation frequency [Hz] (default: read from the file name, ``_<f>Hz``).
+    max_len : float, optional
+        Longest window [s].
+
+    Returns
+    -------
+    Window
+        ``kind="bode"``.
+    """
     first = int(run.meta.get("first_index", 0))
     i0 = int(run.meta.get("ramp_end_index", first)) + 100
     i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))

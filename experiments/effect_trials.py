@@ -150,22 +150,46 @@ class EffectSpec:
 EFFECTS: dict[str, EffectSpec] = {
     e.name: e
     for e in (
-        EffectSpec("steer_viscous_damping", 0.2, 0.8,
-                   doc="bearing + motor viscous damping (Moore: 0.34)"),
-        EffectSpec("steer_coulomb_friction", 0.1, 0.4,
-                   doc="bearing/motor dry friction, tanh smoothing 0.01 rad/s (Moore: 0.15)"),
-        EffectSpec("steer_stiffness", 0.4, 1.2,
-                   doc="centring spring of the fork: cables, belt, tyre twist (real logs: ~1.1; "
-                   "above ~1.2 the capsize mode of this loop is unstable at 4.5 m/s)"),
-        EffectSpec("command_gain", 1.15, 1.35, two_sided=True,
-                   doc="motor torque-constant error 15-35 % either way"),
+        EffectSpec(
+            "steer_viscous_damping", 0.2, 0.8, doc="bearing + motor viscous damping (Moore: 0.34)"
+        ),
+        EffectSpec(
+            "steer_coulomb_friction",
+            0.1,
+            0.4,
+            doc="bearing/motor dry friction, tanh smoothing 0.01 rad/s (Moore: 0.15)",
+        ),
+        EffectSpec(
+            "steer_stiffness",
+            0.4,
+            1.2,
+            doc="centring spring of the fork: cables, belt, tyre twist (real logs: ~1.1; "
+            "above ~1.2 the capsize mode of this loop is unstable at 4.5 m/s)",
+        ),
+        EffectSpec(
+            "command_gain",
+            1.15,
+            1.35,
+            two_sided=True,
+            doc="motor torque-constant error 15-35 % either way",
+        ),
         EffectSpec("actuator_lag", 0.005, 0.03, doc="motor current/torque lag"),
-        EffectSpec("input_delay", 0.0, 0.0, choices=(0.01, 0.02, 0.03),
-                   doc="transport delay of 1-3 loop samples"),
-        EffectSpec("roll_viscous_damping", 1.0, 4.0,
-                   doc="roll damping (air, treadmill belt), outside the library"),
-        EffectSpec("roll_stiffness", 20.0, 60.0,
-                   doc="roll spring of a tether/support, outside the library"),
+        EffectSpec(
+            "input_delay",
+            0.0,
+            0.0,
+            choices=(0.01, 0.02, 0.03),
+            doc="transport delay of 1-3 loop samples",
+        ),
+        EffectSpec(
+            "roll_viscous_damping",
+            1.0,
+            4.0,
+            doc="roll damping (air, treadmill belt), outside the library",
+        ),
+        EffectSpec(
+            "roll_stiffness", 20.0, 60.0, doc="roll spring of a tether/support, outside the library"
+        ),
     )  # fmt: skip
 }
 LIBRARY_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.in_library)

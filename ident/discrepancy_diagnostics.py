@@ -45,6 +45,17 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
     tire_scrub_torque -deltadot/v, command_gain T, steer_torque_bias 1,
     steer_inertia -deltaddot, steer_stiffness -delta; for the roll row: roll_viscous_damping -phidot
     (outside the library, used only to show the residual pattern).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+    windows : list of Window
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``roll``, ``steer`` [N m], ``T`` [N m], ``v`` [m/s] stacked over the windows, and
+        ``reg:<name>`` the regressor of each candidate per unit of the effect.
     """
     cm = model.canonical()
     rows = {k: [] for k in ("roll", "steer", "T", "v")}
@@ -84,6 +95,19 @@ def err_ranking(model: ExperimentModel, windows: list[Window], steps: int = 4) -
     against those already chosen.  Also reports, for comparison, the share of the
     roll-row residual a roll damping term would explain (an effect outside the library:
     a large value there points to "unexplained").
+
+    Parameters
+    ----------
+    model : ExperimentModel
+    windows : list of Window
+    steps : int, optional
+        Number of FROLS steps.
+
+    Returns
+    -------
+    list of dict
+        ``name``, ``err`` (dimensionless, 0-1) and ``row`` per chosen regressor, then the
+        roll-row pattern.
     """
     ee = equation_error(model, windows)
     r = ee["steer"]
@@ -120,7 +144,22 @@ def err_ranking(model: ExperimentModel, windows: list[Window], steps: int = 4) -
 
 
 def spectrum(e: np.ndarray, dt: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
-    """Welch power spectral density (Hz, unit^2/Hz)."""
+    """Welch power spectral density (Hz, unit^2/Hz).
+
+    Parameters
+    ----------
+    e : array_like
+        A residual sequence.
+    dt : float, optional
+        Sample time [s].
+
+    Returns
+    -------
+    f : ndarray
+        Frequencies [Hz].
+    psd : ndarray
+        Power spectral density [unit^2/Hz].
+    """
     return signal.welch(np.asarray(e, float), fs=1 / dt, nperseg=min(256, len(e)))
 
 
@@ -135,6 +174,17 @@ def push_asymmetry(windows: list[Window], errors) -> dict:
     :func:`window_errors`).  Windows are split by the sign of the measured initial roll rate;
     returns the counts, the mean error of each side, their ratio (right / left) and the
     two-sided Mann-Whitney p-value of "same distribution" (nan with fewer than 2 per side).
+
+    Parameters
+    ----------
+    windows : list of Window
+    errors : array_like
+        One error per window.
+
+    Returns
+    -------
+    dict
+        ``n_right``, ``n_left``, ``error_right``, ``error_left``, ``ratio``, ``p_value``.
     """
     from scipy.stats import mannwhitneyu
 
@@ -171,6 +221,19 @@ def evaluate(
     (``weave_error_*``: one estimator on both sides, so its bias on the large, nonlinear
     decays at low speed cancels).  ``weave_root_error_*``: lambda_model is instead the
     oscillatory root of the sampled *linear* loop nearest to lambda_data.
+
+    Parameters
+    ----------
+    nominal, augmented : ExperimentModel
+    windows : list of Window
+        The decays (left corrected at ``augmented`` when ``nonlinear``).
+    nonlinear : bool, optional
+
+    Returns
+    -------
+    dict
+        ``files``: per file its speed [m/s], window count, errors (dimensionless) and weave
+        eigenvalues [1/s]; ``summary``: their means, ratios and the push asymmetry.
     """
     attach_correction(windows, nominal, nonlinear)
     s0 = nominal.simulate(windows)

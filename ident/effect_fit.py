@@ -42,7 +42,21 @@ def _norms(windows, channels=("phidot", "delta")):
 
 def output_residuals(model: ExperimentModel, windows: list[Window], norms=None) -> np.ndarray:
     """Stacked residuals (sim - measured) of roll rate and steer angle, each window and
-    channel divided by ||y - mean y|| so the sum of squares is a sum of NRMSE^2."""
+    channel divided by ||y - mean y|| so the sum of squares is a sum of NRMSE^2.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+    windows : list of Window
+    norms : list of [float, float], optional
+        ||y - mean y|| of roll rate [rad/s] and steer angle [rad] per window (computed when
+        not given).
+
+    Returns
+    -------
+    ndarray
+        Dimensionless residuals, window by window (roll rate, then steer angle).
+    """
     norms = norms or _norms(windows)
     sims = model.simulate(windows)
     parts = []
@@ -53,7 +67,18 @@ def output_residuals(model: ExperimentModel, windows: list[Window], norms=None) 
 
 
 def noise_floor(windows: list[Window]) -> float:
-    """Expected normalized cost of a perfect model: sum n sigma^2 / ||y - ybar||^2."""
+    """Expected normalized cost of a perfect model: sum n sigma^2 / ||y - ybar||^2.
+
+    Parameters
+    ----------
+    windows : list of Window
+        sigma^2 of each channel from second differences, mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6.
+
+    Returns
+    -------
+    float
+        Dimensionless cost (comparable with the sum of squares of :func:`output_residuals`).
+    """
     tot = 0.0
     for w, nr in zip(windows, _norms(windows), strict=True):
         for y, ni in ((w.phidot, nr[0]), (w.delta, nr[1])):
@@ -106,7 +131,26 @@ def fit_effects(
 ) -> FitResult:
     """Output-error least squares of the named effects (others kept as in ``model``);
     with ``weave``, the weave-eigenvalue residuals are appended (one more cluster for the
-    standard errors) and ``cost`` includes them."""
+    standard errors) and ``cost`` includes them.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        Start model; effects not in ``names`` stay as they are.
+    windows : list of Window
+        The decays.
+    names : list of str
+        Registry names to fit (library settings :data:`bikeid.ident.effect_library.LIBRARY`;
+        other names: additive, scale 0.1, unbounded).
+    start : dict, optional
+        Start values by name [effect units] (default: those of ``model``).
+    weave : WeaveTerm, optional
+        Weave-eigenvalue residuals to append.
+
+    Returns
+    -------
+    FitResult
+    """
     extra = weave is not None and weave.weight > 0 and bool(weave.targets)
     if not names:
         r = output_residuals(model, windows)
@@ -159,7 +203,19 @@ def joint_fit(
     :func:`fit_effects`); with ``nonlinear`` the defect
     correction is attached at the nominal first and re-attached at the fitted model twice
     (each re-attachment moves the linearization point of the correction to the fit).
-    Leaves the windows corrected at the returned model."""
+    Leaves the windows corrected at the returned model.
+
+    Parameters
+    ----------
+    model, windows, names, start, weave
+        As for :func:`fit_effects`.
+    nonlinear : bool, optional
+        Nonlinear plant by defect correction.
+
+    Returns
+    -------
+    FitResult
+    """
     if nonlinear and all(w.correction is None for w in windows):
         attach_correction(windows, model, True)
     res = fit_effects(model, windows, names, start, weave)
@@ -178,6 +234,20 @@ def effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
     windows (Liang & Zeger 1986).  With fewer than p + 2 windows it falls back to
     s^2 (J^T J)^-1 with the sample count reduced for the lag-1 autocorrelation r1,
     N_eff = N (1 - r1) / (1 + r1).
+
+    Parameters
+    ----------
+    J : (n, p) ndarray
+        Jacobian of the residuals with respect to the (scaled) parameters.
+    r : (n,) ndarray
+        Residuals at the estimate.
+    sizes : list of int
+        Residual count of each cluster (window), in order.
+
+    Returns
+    -------
+    (p,) ndarray
+        Standard errors in the parameters' (scaled) units.
     """
     n, p = J.shape
     try:

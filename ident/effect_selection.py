@@ -135,6 +135,29 @@ def select_effects(
     windows are left corrected at the returned model.  After the joint fit, effects with
     t <= 3 are dropped (backward pruning) and the rest are listed by their contribution
     (increase of the cost when the effect alone is set back to absent).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model.
+    windows : list of Window
+        The decays (at least 2; every other one is held out while selecting).
+    candidates : list of str, optional
+        Library names to try (default: all of :data:`bikeid.ident.effect_library.LIBRARY`).
+    max_effects : int, optional
+        At most this many rounds.
+    min_gain : float, optional
+        Least fractional cost reduction (fit and held-out) for acceptance.
+    nonlinear : bool, optional
+        Nonlinear plant by defect correction.
+    weave_weight : float or "auto", optional
+        Weight of the weave term (see above).
+
+    Returns
+    -------
+    Identification
+        The final model, accepted effects with values [registry units], standard errors and
+        t, the first round's ranking, the verdict, costs (dimensionless) and the round log.
     """
     names = list(candidates or LIBRARY)
     bad = [n for n in names if n not in LIBRARY]
@@ -279,6 +302,23 @@ def selection_frequencies(
     verdict (``"unexplained"`` included) is counted.  A name near 1 is what the data say
     whichever decays are used; names well below 1 depend on which pushes were logged.
     ``select_kw`` go to :func:`select_effects` (e.g. ``nonlinear=True``, ``max_effects``).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model.
+    windows : list of Window
+    resamples : int, optional
+        Number of subsamples.
+    fraction : float, optional
+        Fraction of each file's windows in a subsample.
+    seed : int, optional
+        Generator seed.
+
+    Returns
+    -------
+    dict of str to float
+        Selection frequency (0-1) of each name, highest first.
     """
     if int(resamples) != resamples or resamples < 1:
         raise ValueError(f"resamples must be a positive integer, got {resamples!r}")

@@ -23,7 +23,26 @@ def synthetic_windows(
     """Free decays simulated by ``truth`` (linear experiment model, 10 substeps per loop)
     from random initial states like the measured pushes (|phidot0| ~ 0.3-0.6 rad/s),
     1 s long; white noise (``noise`` rad/s on roll rate, noise/5 rad on angles) and the
-    steer encoder's 0.000767 rad quantization added to what the "sensors" report."""
+    steer encoder's 0.000767 rad quantization added to what the "sensors" report.
+
+    Parameters
+    ----------
+    truth : ExperimentModel
+        The model the decays come from.
+    speeds : iterable of float
+        Treadmill speeds [m/s].
+    per_speed : int, optional
+        Decays per speed.
+    noise : float, optional
+        Roll-rate noise std [rad/s].
+    seed : int, optional
+        Generator seed.
+
+    Returns
+    -------
+    list of Window
+        Files named ``synthetic_<speed>mps``.
+    """
     rng = np.random.default_rng(seed)
     a, b = SPEED_CALIBRATION
     clean = []

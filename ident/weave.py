@@ -49,6 +49,18 @@ class WeaveTerm:
     offsets: tuple[complex, ...] = ()
 
     def residuals(self, model: ExperimentModel) -> np.ndarray:
+        """The weighted weave residuals of ``model``.
+
+        Parameters
+        ----------
+        model : ExperimentModel
+
+        Returns
+        -------
+        (2 * len(targets),) ndarray
+            ``weight`` (lambda_model + offset - lambda_data) / standard error, real parts then
+            imaginary parts (dimensionless).
+        """
         off = self.offsets or (0j,) * len(self.targets)
         d = [(model.weave(vs, lam) + o - lam) / unc
              for (_k, vs, lam, unc), o in zip(self.targets, off, strict=True)]  # fmt: skip
@@ -58,7 +70,20 @@ class WeaveTerm:
         """Offsets at ``model``: per speed, the median decay fit of the model's simulated
         decays (windows corrected at ``model`` when the plant is nonlinear) minus the loop
         root, so that the term compares like with like at ``model`` and to first order near
-        it (the defect correction of the signals, applied to the eigenvalue estimator)."""
+        it (the defect correction of the signals, applied to the eigenvalue estimator).
+
+        Parameters
+        ----------
+        model : ExperimentModel
+            Where the offsets are taken.
+        windows : list of Window
+            The decays the targets came from.
+
+        Returns
+        -------
+        WeaveTerm
+            A copy with ``offsets`` [1/s], one per target.
+        """
         sims = model.simulate(windows)
         off = []
         for key, vs, lam, _unc in self.targets:
@@ -77,7 +102,20 @@ def weave_targets(
 ) -> tuple[tuple[float, float, complex, float], ...]:
     """(speed key, mean sensor speed, measured weave, standard error) of each speed with
     >= 3 decays: the median of :func:`decay_eigenvalue` over the decays and
-    :func:`weave_uncertainty`.  ``lams``: the windows' decay fits if already computed."""
+    :func:`weave_uncertainty`.  ``lams``: the windows' decay fits if already computed.
+
+    Parameters
+    ----------
+    windows : list of Window
+        Decays (other kinds are ignored), grouped by speed to 0.1 m/s.
+    lams : list of complex, optional
+        :func:`decay_eigenvalue` of each window [1/s].
+
+    Returns
+    -------
+    tuple of (float, float, complex, float)
+        Speed key [m/s], mean sensor speed [m/s], measured weave [1/s], standard error [1/s].
+    """
     if lams is None:
         lams = [decay_eigenvalue(w) if w.kind == "decay" else 0j for w in windows]
     groups: dict[float, list[int]] = {}
@@ -100,6 +138,16 @@ def decay_eigenvalue(w: Window) -> complex:
     Model (both channels share sigma, omega): y_c(t) = e^{sigma t}(a_c cos wt + b_c sin wt)
     + d_c e^{-p t} + o_c; sigma, omega, p by nonlinear LS, the rest linear (variable
     projection).  Start: omega from the steer-angle zero crossings.
+
+    Parameters
+    ----------
+    w : Window
+        A free decay (roll rate [rad/s] and steer angle [rad], 0.01 s samples).
+
+    Returns
+    -------
+    complex
+        sigma + i omega [1/s].
     """
     t = np.arange(w.n) * 0.01
     ys = [w.delta / np.std(w.delta), w.phidot / np.std(w.phidot)]
@@ -132,7 +180,21 @@ def weave_error(windows: list[Window], sims, lam_data) -> float:
     measured window) and that of the model the median of the same fit applied to the
     simulated decays ``sims`` from the same initial states.  Returns the mean over groups
     of |lambda_model - lambda_data| / |lambda_data| (the ``weave_error`` of
-    :func:`evaluate`).
+    :func:`bikeid.ident.discrepancy_diagnostics.evaluate`).
+
+    Parameters
+    ----------
+    windows : list of Window
+        The measured decays.
+    sims : list of dict
+        :meth:`ExperimentModel.simulate` of each window.
+    lam_data : list of complex
+        :func:`decay_eigenvalue` of each window [1/s].
+
+    Returns
+    -------
+    float
+        Mean relative error (dimensionless).
     """
     groups: dict[tuple, list[int]] = {}
     for i, w in enumerate(windows):
@@ -173,7 +235,22 @@ def weave_uncertainty(lams, resamples: int = 2000, seed: int = 0) -> float:
     """Relative standard error of the measured weave (the median of the per-decay fits
     ``lams``): rms of |median(resample) - median| / |median| over bootstrap resamples of
     the decays (fixed seed).  A model equal to the truth would still show a weave error
-    of about this size; nan with fewer than 3 decays."""
+    of about this size; nan with fewer than 3 decays.
+
+    Parameters
+    ----------
+    lams : array_like of complex
+        Per-decay weave fits [1/s].
+    resamples : int, optional
+        Bootstrap resamples.
+    seed : int, optional
+        Generator seed.
+
+    Returns
+    -------
+    float
+        Relative standard error (dimensionless), nan with fewer than 3 decays.
+    """
     lams = np.asarray(lams, complex)
     if lams.size < 3:
         return float("nan")
