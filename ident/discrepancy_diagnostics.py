@@ -18,7 +18,7 @@ from scipy import signal
 
 from bikeid.dataset.windows import Window
 from bikeid.ident.effect_fit import attach_correction
-from bikeid.ident.experiment_model import ExperimentModel, window_errors
+from bikeid.ident.experiment_model import COULOMB_EPS, ExperimentModel, window_errors
 from bikeid.ident.weave import (
     decay_eigenvalue,
     median_complex,
@@ -76,7 +76,7 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
         rows["T"].append(T)
         rows["v"].append(np.full(w.n, v))
         reg["steer_viscous_damping"].append(-w.deltadot)
-        reg["steer_coulomb_friction"].append(-np.tanh(w.deltadot / 0.1))
+        reg["steer_coulomb_friction"].append(-np.tanh(w.deltadot / COULOMB_EPS))
         reg["tire_scrub_torque"].append(-w.deltadot / v)
         reg["command_gain"].append(T)
         reg["steer_torque_bias"].append(np.ones(w.n))

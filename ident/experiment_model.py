@@ -75,7 +75,7 @@ import numpy as np
 
 from bikeid.dataset.sbw_logs import treadmill_speed
 from bikeid.dataset.windows import Window
-from bikeid.sim.effect_registry import EFFECTS, effect, nonlinear_effects
+from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, effect, nonlinear_effects
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
 from bikeid.sim.parameters import BicycleParameters, steer_by_wire
 from bikeid.sim.sampling import zoh
@@ -186,12 +186,12 @@ class ExperimentModel:
         C = v * cm.C1 + np.diag(
             [
                 self.e("roll_viscous_damping"),
-                self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, 0.1),
+                self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, V_FLOOR),
             ]
         )
         Kq = cm.stiffness(v).copy()
         Kq[0, 0] += self.e("roll_stiffness")
-        Kq[1, 1] += self.e("steer_stiffness") + self.e("tire_twist_stiffness") / max(v, 0.1)
+        Kq[1, 1] += self.e("steer_stiffness") + self.e("tire_twist_stiffness") / max(v, V_FLOOR)
         lag = self.e("actuator_lag")
         sigma = self.e("tire_relaxation")
         relax = relax or sigma > 0
