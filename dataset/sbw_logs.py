@@ -93,7 +93,18 @@ DATASET = "tudelft-sbw"
 
 
 def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
-    """Treadmill speed [m/s] from the rear-wheel sensor speed (inverse calibration)."""
+    """Treadmill speed [m/s] from the rear-wheel sensor speed (inverse calibration).
+
+    Parameters
+    ----------
+    sensor : float or ndarray
+        Sensor speed [m/s].
+
+    Returns
+    -------
+    float or ndarray
+        [m/s].
+    """
     a, b = SPEED_CALIBRATION
     return (np.asarray(sensor) - b) / a
 
@@ -102,6 +113,14 @@ def data_dir(path: str | os.PathLike | None = None) -> Path:
     """The ``tudelft-sbw`` folder: from ``path`` (``--data``), else ``$BIKEID_DATA``.
 
     Either may name the folder itself or its parent (CI: ``BIKEID_DATA=../shared/data``).
+
+    Parameters
+    ----------
+    path : str or path-like, optional
+
+    Returns
+    -------
+    pathlib.Path
     """
     src = path if path is not None else os.environ.get("BIKEID_DATA")
     if not src:
@@ -117,7 +136,19 @@ def data_dir(path: str | os.PathLike | None = None) -> Path:
 
 
 def find_logs(root: str | os.PathLike, kind: str | None = None) -> list[Path]:
-    """All ``*.log``/``*.log.gz`` files under ``root`` (optionally whose name starts with kind)."""
+    """All ``*.log``/``*.log.gz`` files under ``root`` (optionally whose name starts with kind).
+
+    Parameters
+    ----------
+    root : str or path-like
+    kind : str, optional
+        File-name prefix (``"eigen"``, ``"bode"``).
+
+    Returns
+    -------
+    list of pathlib.Path
+        Sorted.
+    """
     files = sorted(
         p for p in Path(root).rglob("*") if p.is_file() and p.name.endswith((".log", ".log.gz"))
     )
@@ -139,7 +170,23 @@ def _read_text(path: Path) -> str:
 
 
 def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray, int]:
-    """Replace isolated spikes by interpolation (detector: see module docstring)."""
+    """Replace isolated spikes by interpolation (detector: see module docstring).
+
+    Parameters
+    ----------
+    x : ndarray
+    floor : float
+        Least deviation counted as a spike [unit of x].
+    k : float, optional
+        Threshold in robust standard deviations.
+
+    Returns
+    -------
+    ndarray
+        Despiked copy.
+    int
+        Number of spikes replaced.
+    """
     x = np.asarray(x, dtype=float)
     if x.size < 5:
         return x.copy(), 0
@@ -162,6 +209,15 @@ def load_log(path: str | os.PathLike) -> Run:
 
     Raises ValueError naming the file and the problem for missing columns,
     non-numeric fields, a truncated gzip stream or too few rows.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    Run
+        Signals in SI units (module docstring) and ``meta``.
     """
     path = Path(path)
     if not path.is_file():

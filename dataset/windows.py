@@ -48,6 +48,7 @@ class Window:
 
     @property
     def n(self) -> int:
+        """Number of samples."""
         return self.phi.size
 
     def state0(self) -> np.ndarray:

@@ -126,7 +126,16 @@ class EffectSpec:
         return self.entry.in_library
 
     def draw(self, rng: np.random.Generator) -> float:
-        """One magnitude [unit] from the generator ``rng``."""
+        """One magnitude [unit] from the generator ``rng``.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        float
+        """
         if self.choices:
             return float(rng.choice(self.choices))
         x = float(rng.uniform(self.low, self.high))
@@ -140,6 +149,16 @@ class EffectSpec:
         Through :func:`bikeid.sim.effect_registry.nonlinear_effects` with the trials' steer
         Coulomb smoothing TRIAL_COULOMB_SMOOTHING (0.01 rad/s; the experiment model smooths
         with 0.1 rad/s).  The speed does not enter (no 1/v effect is drawn).
+
+        Parameters
+        ----------
+        value : float
+            Magnitude [unit].
+
+        Returns
+        -------
+        list
+            Non-empty.
         """
         objects, _ = nonlinear_effects({self.name: value}, 1.0, DT, TRIAL_COULOMB_SMOOTHING)
         if not objects:
@@ -244,6 +263,19 @@ def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -
 
     Trial i depends only on (seed, i): its generator is ``SeedSequence(seed).spawn(n)[i]``
     without the count mattering (``spawn_key=(i,)``), so a larger grid extends a smaller one.
+
+    Parameters
+    ----------
+    n : int
+        Number of trials.
+    seed : int, optional
+        Grid seed.
+    effects : tuple of str, optional
+        Names of :data:`EFFECTS` (default all).
+
+    Returns
+    -------
+    list of TrialSpec
     """
     if int(n) != n or n < 1:
         raise ValueError(f"number of trials must be a positive integer, got {n!r}")
@@ -286,6 +318,25 @@ def decay_windows(
 
     Returns ``bikeid.dataset.windows.Window`` objects (measured signals, sensor speed,
     zero command history: the loop starts with the push).
+
+    Parameters
+    ----------
+    effects : list
+        :mod:`bikeid.sim.effects` objects injected into the plant.
+    speeds : iterable of float
+        Treadmill speeds [m/s].
+    per_speed : int
+        Decays per speed.
+    noise : float
+        Roll-rate noise std [rad/s].
+    seed : int
+        Generator seed.
+    label : str, optional
+        File-name prefix.
+
+    Returns
+    -------
+    list of Window
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.dataset.closed_loop import simulate_run
@@ -343,6 +394,19 @@ def run_trial(
     (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
     ``weave_weight``: as for :func:`bikeid.ident.effect_selection.select_effects` (default
     "auto").
+
+    Parameters
+    ----------
+    spec : TrialSpec
+    max_effects : int, optional
+    nonlinear : bool, optional
+    weave_weight : float or "auto", optional
+
+    Returns
+    -------
+    dict
+        The spec, verdict, estimate [unit] and its std, errors before/after (NRMSE) and the
+        scores.
     """
     from bikeid.ident.discrepancy_diagnostics import evaluate
     from bikeid.ident.effect_selection import select_effects
@@ -388,7 +452,19 @@ def run_trial(
 
 
 def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Exact (Clopper-Pearson) interval for a success probability from k of n."""
+    """Exact (Clopper-Pearson) interval for a success probability from k of n.
+
+    Parameters
+    ----------
+    k, n : int
+        Successes and trials.
+    level : float, optional
+        Confidence level.
+
+    Returns
+    -------
+    (float, float)
+    """
     from scipy.stats import binomtest
 
     if n == 0:
@@ -405,7 +481,17 @@ def _rate(rows: list[dict], key: str) -> dict:
 
 
 def summarize(rows: list[dict]) -> dict:
-    """Rates over trials (overall and per effect) with 95 % Clopper-Pearson intervals."""
+    """Rates over trials (overall and per effect) with 95 % Clopper-Pearson intervals.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_trial` results.
+
+    Returns
+    -------
+    dict
+    """
     lib = [r for r in rows if r["in_library"]]
     out_ = [r for r in rows if not r["in_library"]]
     summ: dict = {"trials": len(rows)}
@@ -433,7 +519,17 @@ def summarize(rows: list[dict]) -> dict:
 
 def format_summary(s: dict) -> str:
     """The rates of :func:`summarize` as text: library and outside-library rates with 95 %
-    Clopper-Pearson intervals, then per effect what was named first."""
+    Clopper-Pearson intervals, then per effect what was named first.
+
+    Parameters
+    ----------
+    s : dict
+        :func:`summarize` output.
+
+    Returns
+    -------
+    str
+    """
     lines = []
     for k, r in s.get("library", {}).items():
         lines.append(f"library {k:14s} {r['k']:3d}/{r['n']:<3d} = {r['rate']:.3f} "
@@ -461,6 +557,22 @@ def run_trials(
     """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
 
     ``progress(row)`` is called with each finished trial (in trial order).
+
+    Parameters
+    ----------
+    n : int
+        Number of trials.
+    seed : int, optional
+    processes : int, optional
+    effects : tuple of str, optional
+    nonlinear : bool, optional
+    progress : callable, optional
+    weave_weight : float or "auto", optional
+
+    Returns
+    -------
+    dict
+        ``trials`` (list of dict) and ``summary``.
     """
     if int(processes) != processes or processes < 1:
         raise ValueError(f"processes must be a positive integer, got {processes!r}")

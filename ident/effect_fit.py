@@ -104,6 +104,7 @@ class EffectEstimate:
     accepted: bool = False
 
     def as_dict(self) -> dict:
+        """The estimate as a JSON-able dict (the keys of the attributes)."""
         return {
             "name": self.name, "value": self.value, "std": self.std, "unit": self.unit,
             "t": self.t, "explained": self.explained, "accepted": self.accepted,

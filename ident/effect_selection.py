@@ -96,6 +96,7 @@ class Identification:
     weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
 
     def as_dict(self) -> dict:
+        """The identification's JSON record (``identification`` of a model file)."""
         return {
             "selection_rounds": self.rounds,
             "verdict": self.verdict,

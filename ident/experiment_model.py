@@ -82,6 +82,7 @@ from bikeid.sim.sampling import zoh
 
 __all__ = [
     "COULOMB_EPS",
+    "DT",
     "ExperimentModel",
     "attach_nonlinear_correction",
     "window_errors",
@@ -116,7 +117,17 @@ class ExperimentModel:
             raise ValueError("tire_relaxation (relaxation length sigma) must be >= 0 m")
 
     def e(self, name: str) -> float:
-        """Value of effect ``name`` [its registry unit]; its absent value when not set."""
+        """Value of effect ``name`` [its registry unit]; its absent value when not set.
+
+        Parameters
+        ----------
+        name : str
+            Registry name (ValueError for an unknown one).
+
+        Returns
+        -------
+        float
+        """
         v = self.effects.get(name)
         return float(effect(name).absent if v is None else v)
 
@@ -155,6 +166,8 @@ class ExperimentModel:
         return p.replace(**ch) if ch else p
 
     def canonical(self) -> CanonicalMatrices:
+        """Canonical matrices M, C1, K0, K2 of :meth:`plant_params`, steer_inertia added to
+        M[delta, delta] [kg m^2]."""
         cm = canonical_matrices(self.plant_params())
         M = cm.M.copy()
         M[1, 1] += self.e("steer_inertia")
@@ -166,6 +179,20 @@ class ExperimentModel:
         u: commanded torque into the actuator (lag); w: torque straight on the steer
         (friction, bias); T_phi: roll torque.  Ta (applied torque) only with an actuator
         lag, delta_k (kinematic steer) only with a tyre relaxation length (module docstring).
+
+        Parameters
+        ----------
+        v : float
+            True speed [m/s].
+        cm : CanonicalMatrices, optional
+            :meth:`canonical` (computed when not given).
+
+        Returns
+        -------
+        A : (n, n) ndarray
+            [1/s, 1/s^2 blocks].
+        B : (n, 3) ndarray
+            Inputs in N m.
         """
         E, A, B = self.descriptor(v, cm)
         if E is None:
@@ -180,6 +207,20 @@ class ExperimentModel:
         v nu a delta_k' (module docstring); E is singular at sigma = 0, where the finite
         generalized eigenvalues are exactly those of the Whipple model (``relax=True``
         keeps the delta_k state at sigma = 0 for that check).
+
+        Parameters
+        ----------
+        v : float
+            True speed [m/s].
+        cm : CanonicalMatrices, optional
+        relax : bool, optional
+            Keep the delta_k state when sigma = 0.
+
+        Returns
+        -------
+        E : (n, n) ndarray or None
+        A : (n, n) ndarray
+        B : (n, 3) ndarray
         """
         cm = cm or self.canonical()
         Minv = np.linalg.inv(cm.M)
@@ -226,12 +267,27 @@ class ExperimentModel:
         A[2:4, 2:4] = -Minv @ C
         return E, A, B
 
-    def discrete(self, v: float, h: float = DT, cm=None):
-        """ZOH discretization over step h [s]: (Ad, Bd) (:func:`bikeid.sim.sampling.zoh`)."""
+    def discrete(self, v: float, h: float = DT, cm: CanonicalMatrices | None = None):
+        """ZOH discretization over step h [s]: (Ad, Bd) (:func:`bikeid.sim.sampling.zoh`).
+
+        Parameters
+        ----------
+        v : float
+            True speed [m/s].
+        h : float, optional
+            Step [s].
+        cm : CanonicalMatrices, optional
+
+        Returns
+        -------
+        Ad : (n, n) ndarray
+        Bd : (n, 3) ndarray
+        """
         A, B = self.continuous(v, cm)
         return zoh(A, B, h, small=True)
 
     def true_speed(self, v_sensor: float) -> float:
+        """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale."""
         return float(self.e("speed_scale") * treadmill_speed(v_sensor))
 
     def _delay(self) -> tuple[int, float]:
@@ -243,6 +299,20 @@ class ExperimentModel:
         """Augmented discrete closed loop z+ = Phi z + G_ext T_ext + c (no Coulomb term).
 
         z = [x(4), (Ta), command buffer (m+1)].  Returns (Phi, G_ext, c, n_plant).
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s] (the loop gain uses it; the plant runs at :meth:`true_speed`).
+
+        Returns
+        -------
+        Phi : (nz, nz) ndarray
+        G : (nz,) ndarray
+            Per N m of T_ext.
+        c : (nz,) ndarray
+            Constant terms (biases).
+        n_plant : int
         """
         v = self.true_speed(v_sensor)
         Ad, Bd = self.discrete(v)
@@ -288,6 +358,15 @@ class ExperimentModel:
 
         Includes the zero-order hold and any delay; delay-buffer roots near z = 0 are
         dropped.  Sorted by decreasing real part.
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+
+        Returns
+        -------
+        ndarray of complex
         """
         Phi = self.closed_loop(v_sensor)[0]
         z = np.linalg.eigvals(Phi)
@@ -296,7 +375,17 @@ class ExperimentModel:
         return lam[np.argsort(-lam.real)]
 
     def oscillatory_roots(self, v_sensor: float) -> np.ndarray:
-        """Closed-loop roots with 0 < Im < 0.8 Nyquist (one of each complex pair) [1/s]."""
+        """Closed-loop roots with 0 < Im < 0.8 Nyquist (one of each complex pair) [1/s].
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+
+        Returns
+        -------
+        ndarray of complex
+        """
         lam = self.eigenvalues(v_sensor)
         return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
 
@@ -306,6 +395,18 @@ class ExperimentModel:
         Without ``near``: the least damped one; with ``near``: the one closest to it
         (mode matching against a root fitted to data; below ~1.8 m/s the loop has two
         oscillatory pairs).
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+        near : complex, optional
+            A root to match [1/s].
+
+        Returns
+        -------
+        complex
+            [1/s]; nan + nan i when the loop has no oscillatory root.
         """
         osc = self.oscillatory_roots(v_sensor)
         if osc.size == 0:
@@ -315,7 +416,20 @@ class ExperimentModel:
         return complex(osc[np.argmax(osc.real)])
 
     def frequency_response(self, v_sensor: float, freqs) -> np.ndarray:
-        """Complex response (len(freqs), 2) from T_ext to [phidot_m, delta_m]."""
+        """Complex response (len(freqs), 2) from T_ext to [phidot_m, delta_m].
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+        freqs : array_like
+            Frequencies [Hz].
+
+        Returns
+        -------
+        (len(freqs), 2) ndarray of complex
+            [rad/s per N m, rad per N m].
+        """
         Phi, G, _, _ = self.closed_loop(v_sensor)
         s = self.e("roll_rate_scale")
         out = []
@@ -333,6 +447,18 @@ class ExperimentModel:
         deltadot (sensor biases/scale applied), and the applied command T.
         ``nsub`` substeps per 10 ms loop re-evaluate the Coulomb friction (the
         controller is still sampled every 10 ms).
+
+        Parameters
+        ----------
+        windows : list of Window
+        nsub : int, optional
+            Substeps per loop.
+
+        Returns
+        -------
+        list of dict of str to ndarray
+            ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s], ``T`` [N m] per window
+            (each window's defect correction added, when one is attached).
         """
         if not windows:
             return []
@@ -422,6 +548,18 @@ def attach_nonlinear_correction(
     after each accepted effect).  Needed because the logs' decays reach steer angles of
     0.3-0.6 rad at 1.5 m/s, where the linear and the nonlinear plant differ by 0.1-0.45 in
     NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+
+    Parameters
+    ----------
+    windows : list of Window
+        Corrected in place.
+    model : ExperimentModel, optional
+        The linearization point (default: the nominal model).
+
+    Returns
+    -------
+    list of Window
+        ``windows``.
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.sim.integrate import simulate
@@ -455,6 +593,17 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
     inertia; steer row: front-assembly yaw coupling plus the moment mu w F_f of the front
     contact force needed to yaw the whole bicycle); nu = cos(lam) / w [1/m], with
     psi' = nu (v delta + c delta') in the Whipple model.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+
+    Returns
+    -------
+    a : (2,) ndarray
+        [kg m^2].
+    nu : float
+        [1/m].
     """
     sl, cl = math.sin(p.lam), math.cos(p.lam)
     ITxz = p.IBxz + p.IHxz - p.mB * p.xB * p.zB - p.mH * p.xH * p.zH + p.mF * p.w * p.rF
@@ -474,6 +623,18 @@ def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> 
     """NRMSE per window and channel: ||y_sim - y|| / ||y - mean(y)|| (0 = perfect).
 
     This is 1 - fit of MATLAB ``compare``/Moore's VAF (identification.md 1.2).
+
+    Parameters
+    ----------
+    windows : list of Window
+    sims : list of dict
+        :meth:`ExperimentModel.simulate` of each window.
+    channels : tuple of str, optional
+
+    Returns
+    -------
+    (len(windows), len(channels)) ndarray
+        Dimensionless.
     """
     out = np.zeros((len(windows), len(channels)))
     for i, (w, s) in enumerate(zip(windows, sims, strict=True)):
