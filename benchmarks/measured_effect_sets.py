@@ -18,25 +18,15 @@ the weave's measurement uncertainty (can the set reproduce this speed's weave at
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bikeid.experiments.cmd_measured import load_decays  # noqa: E402
-from bikeid.ident.discrepancy import LIBRARY, evaluate, joint_fit  # noqa: E402
-from bikeid.ident.experiment_model import EFFECT_DEFAULTS, EFFECT_UNITS, ExperimentModel  # noqa: E402
-
-
-def fit_set(windows, names, nonlinear=True):
-    start = {n: LIBRARY[n].absent + LIBRARY[n].scale if n in LIBRARY else EFFECT_DEFAULTS[n] + 1.0
-             for n in names}  # fmt: skip
-    for w in windows:  # start from the nominal's defect correction
-        w.correction = None
-    return joint_fit(ExperimentModel(), windows, names, start, nonlinear)
+from bikeid.dataset.decays import load_decays
+from bikeid.experiments.measured_study import fit_effect_set
+from bikeid.ident.discrepancy_diagnostics import evaluate
+from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.sim.effect_registry import EFFECTS
 
 
 def lean_check(windows, data: str) -> None:
@@ -46,7 +36,8 @@ def lean_check(windows, data: str) -> None:
     angle, lean angle, lean rate and steer command."""
     from scipy.integrate import cumulative_trapezoid
 
-    from bikeid.dataset.measured import data_dir, iter_decays
+    from bikeid.dataset.decays import iter_decays
+    from bikeid.dataset.sbw_logs import data_dir
 
     rows = []
     for w in windows:
@@ -85,9 +76,9 @@ def main(argv=None) -> int:
     ap.add_argument("--linear", action="store_true", help="linear nominal (no correction)")
     a = ap.parse_args(argv)
     sets = [[n.strip() for n in s.split(",") if n.strip()] for s in a.sets.split(";")]
-    bad = sorted({n for s in sets for n in s} - set(EFFECT_UNITS))
+    bad = sorted({n for s in sets for n in s} - set(EFFECTS))
     if bad:
-        raise SystemExit(f"unknown effects {bad}; the experiment model has {sorted(EFFECT_UNITS)}")
+        raise SystemExit(f"unknown effects {bad}; the registry has {sorted(EFFECTS)}")
     allw = load_decays(a.data)
     if a.lean_check:
         lean_check(allw, a.data)
@@ -103,7 +94,7 @@ def main(argv=None) -> int:
             print(", ".join(names))
             for f in files:
                 ws = [w for w in allw if w.file == f]
-                r = fit_set(ws, names, nl)
+                r = fit_effect_set(ws, names, nl)
                 vals = "  ".join(f"{n} {r.values[n]:.3f} +- {r.std[n]:.3f}" for n in names)
                 print(f"  {ws[0].speed:.2f} m/s ({len(ws)} decays): cost {r.cost:.3f}  {vals}")
                 fe = evaluate(ExperimentModel(), r.model, ws, nonlinear=nl)["files"][0]
@@ -118,7 +109,7 @@ def main(argv=None) -> int:
         hw = [w for w in allw if w not in fw]
         for names in sets:
             t0 = time.perf_counter()
-            r = fit_set(fw, names, nl)
+            r = fit_effect_set(fw, names, nl)
             s = evaluate(ExperimentModel(), r.model, hw, nonlinear=nl)["summary"]
             vals = ", ".join(f"{n} {r.values[n]:.3f} +- {r.std[n]:.3f}" for n in names)
             print(f"fit {split:9s} [{vals}]\n    held out: error {s['error_before']:.3f} -> "

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -34,13 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from measured_effect_sets import fit_set  # noqa: E402
-
-from bikeid.experiments.cmd_measured import evaluate_json, fit_model, load_decays  # noqa: E402
-from bikeid.ident.experiment_model import attach_nonlinear_correction  # noqa: E402
+from bikeid.dataset.decays import load_decays
+from bikeid.experiments.measured_study import evaluate_json, fit_effect_set, fit_model
+from bikeid.ident.experiment_model import attach_nonlinear_correction
 
 CHANNELS = ("phi", "delta", "phidot", "deltadot")
 SPLITS = ((2.5, 4.5), (1.5, 3.5))
@@ -50,7 +45,7 @@ _STATE: dict = {}
 def setup(data: str | None, truth_set: list[str]) -> dict:
     """Fit the truth on all decays; keep its simulation of each decay."""
     ws = load_decays(data)
-    truth = fit_set(ws, truth_set).model
+    truth = fit_effect_set(ws, truth_set).model
     attach_nonlinear_correction(ws, truth)
     return {"windows": ws, "truth": truth, "sims": truth.simulate(ws)}
 

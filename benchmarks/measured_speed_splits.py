@@ -19,18 +19,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bikeid.experiments.cmd_measured import (  # noqa: E402
-    evaluate_json,
-    fit_model,
-    load_decays,
-    parse_weave_weight,
-)
+from bikeid.dataset.decays import load_decays
+from bikeid.experiments.cmd_measured import parse_weave_weight
+from bikeid.experiments.measured_study import evaluate_json, fit_model
 
 
 def run_split(

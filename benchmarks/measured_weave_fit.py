@@ -1,7 +1,7 @@
 """Fit library effects to the measured weave *eigenvalues* instead of the decay time series.
 
 Per speed, the measured weave is the median of the damped-oscillation fits to the decays
-with its bootstrap standard error (``ident.discrepancy.weave_targets``).  A set of effects
+with its bootstrap standard error (``bikeid.ident.weave.weave_targets``).  A set of effects
 is fitted by least squares on (lambda_model - lambda_data) / uncertainty, real and
 imaginary parts, with lambda_model the oscillatory root of the sampled linear closed loop
 nearest to the data (``ExperimentModel.weave``).  chi2 = the weighted sum of squares (about
@@ -23,27 +23,26 @@ nonlinear decay (nominal: root -3.18 + 5.80j, decay fit of the simulated decays 
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bikeid.experiments.cmd_measured import evaluate_json, load_decays  # noqa: E402
-from bikeid.ident.discrepancy import WeaveTerm, joint_fit, weave_targets  # noqa: E402
-from bikeid.ident.experiment_model import EFFECT_DEFAULTS, ExperimentModel  # noqa: E402
+from bikeid.dataset.decays import load_decays
+from bikeid.experiments.measured_study import evaluate_json
+from bikeid.ident.effect_fit import joint_fit
+from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.weave import WeaveTerm, weave_targets
+from bikeid.sim.effect_registry import effect
 
 
 def fit_weaves(names: list[str], targets: tuple) -> tuple[float, dict]:
     """Least squares of the named effects on the weave eigenvalues ``targets``
-    (:func:`ident.discrepancy.weave_targets` rows; residuals of :class:`WeaveTerm`, weight 1,
+    (:func:`bikeid.ident.weave.weave_targets` rows; residuals of :class:`WeaveTerm`, weight 1,
     no estimator offsets: the loop root is compared with the decay fits directly)."""
     term = WeaveTerm(1.0, targets)
 
     def resid(x):
-        effects = {n: EFFECT_DEFAULTS[n] + v for n, v in zip(names, x, strict=True)}
+        effects = {n: effect(n).absent + v for n, v in zip(names, x, strict=True)}
         try:
             r = term.residuals(ExperimentModel(effects=effects))
         except ValueError:  # an unphysical trial value
@@ -54,7 +53,7 @@ def fit_weaves(names: list[str], targets: tuple) -> tuple[float, dict]:
           for n in names]  # fmt: skip
     sol = least_squares(resid, x0, diff_step=1e-3)
     return float(sol.fun @ sol.fun), {
-        n: EFFECT_DEFAULTS[n] + v for n, v in zip(names, sol.x, strict=True)
+        n: effect(n).absent + v for n, v in zip(names, sol.x, strict=True)
     }
 
 
@@ -91,7 +90,7 @@ def main(argv=None) -> int:
         if a.offset:
             r = joint_fit(model, load_decays(a.data, fit_sp), [a.offset], {a.offset: 0.01}, True)
             model = r.model
-            t = abs(r.values[a.offset] - EFFECT_DEFAULTS[a.offset]) / r.std[a.offset]
+            t = abs(r.values[a.offset] - effect(a.offset).absent) / r.std[a.offset]
             print(f"  fit {split}: {a.offset} by output error, t = {t:.1f}")
         ev = evaluate_json(
             {"effects": dict(model.effects), "plant": "nonlinear"},

@@ -33,12 +33,13 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED
+from bikeid.sim.effect_registry import effect
 
 __all__ = ["AntiAlias", "Channel", "SensorChain", "Sensors", "channel_noise"]
 
@@ -215,6 +216,35 @@ class Sensors:
             if self.antialias is None
             else {"cutoff": self.antialias.cutoff, "order": self.antialias.order},
         }
+
+    def with_effects(self, values: Mapping[str, float]) -> Sensors:
+        """These instruments with the ``sensor``-layer effects of ``values`` applied.
+
+        Each such registry entry (:mod:`bikeid.sim.effect_registry`) sets one field of one
+        channel: its ``sensor_field`` (``bias`` or ``scale``) of channel ``sensor_channel``,
+        e.g. ``roll_rate_bias`` b and ``roll_rate_scale`` s give phidot_m = s phidot + b.
+        The channel's other fields (noise, quantization) are kept.
+
+        Parameters
+        ----------
+        values : mapping of str to float
+            Effect values by registry name, in the registry's units (bias: the channel's
+            unit; scale: dimensionless).  Entries of other layers are skipped (the plant,
+            the command or the parameters carry them); unknown names raise ValueError.
+
+        Returns
+        -------
+        Sensors
+            A new instrument set (this one is unchanged).
+        """
+        chans = dict(self.channels)
+        for name, value in values.items():
+            e = effect(name)
+            if e.layer != "sensor":
+                continue
+            ch = chans.get(e.sensor_channel, _IDEAL)
+            chans[e.sensor_channel] = replace(ch, **{e.sensor_field: float(value)})
+        return Sensors(chans, self.rate, self.antialias)
 
     # -- use ------------------------------------------------------------------------
     @property

@@ -104,76 +104,10 @@ def _speeds(text: str | None):
     return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
 
 
-def load_decays(data: str | None, speeds=None, exclude=None, source: str = "listed"):
-    """Free-decay windows of all eigen logs, optionally only near the given speeds
-    (``source``: see :func:`dataset.measured.iter_decays`)."""
-    from bikeid.dataset.measured import data_dir, iter_decays
-    from bikeid.ident.experiment_model import decay_windows
-
-    root = data_dir(data)
-    out = []
-    for run, segs in iter_decays(root, source):
-        ws = decay_windows(run, segs)
-        out.extend(ws)
-    if not out:
-        raise ValueError(
-            f"{root}: no free-decay windows (need eigen*.log[.gz] logs with pushes the detector "
-            "finds, or rows for them in eigen/segments.csv)"
-        )
-
-    def near(w, lst):
-        return any(abs(w.speed - s) < 0.25 for s in lst)
-
-    have = sorted({round(w.speed, 2) for w in out})
-    if speeds is not None:
-        out = [w for w in out if near(w, speeds)]
-    if exclude:
-        out = [w for w in out if not near(w, exclude)]
-    if not out:
-        raise ValueError(f"no decay windows at the requested speeds; the data has {have} m/s")
-    return out
-
-
-def model_from_json(path: str):
-    from bikeid.ident.experiment_model import ExperimentModel
-
-    try:
-        obj = json.loads(Path(path).read_text())
-        return ExperimentModel(effects=dict(obj["effects"])), obj
-    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise ValueError(f"cannot read model {path}: {exc}") from None
-
-
-def fit_model(
-    windows, max_effects=3, plant: str = "nonlinear", stability: int = 0, weave_weight="auto"
-) -> dict:
-    from bikeid.ident.discrepancy import identify, selection_frequencies
-    from bikeid.ident.experiment_model import ExperimentModel
-
-    nl = plant == "nonlinear"
-    extra = {}
-    if stability:
-        freq = selection_frequencies(
-            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl
-        )
-        extra = {"selection_frequency": freq,
-                 "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
-    res = identify(
-        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl, weave_weight=weave_weight
-    )
-    return {
-        "bicycle": "steer-by-wire",
-        "plant": plant,
-        "effects": {e.name: float(e.value) for e in res.effects},
-        "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
-        "fit_files": sorted({w.file for w in windows}),
-        "fit_windows": [{"file": w.file, "start": w.start, "end": w.start + w.n} for w in windows],
-        "identification": res.as_dict(),
-        **extra,
-    }
-
-
 def cmd_fit(args) -> int:
+    from bikeid.dataset.decays import load_decays
+    from bikeid.experiments.measured_study import fit_model
+
     if args.max_effects < 0:
         raise ValueError("--max-effects must be >= 0")
     if args.stability < 0:
@@ -193,39 +127,10 @@ def cmd_fit(args) -> int:
     return 0
 
 
-def evaluate_json(model_obj: dict, windows) -> dict:
-    from bikeid.ident.discrepancy import evaluate
-    from bikeid.ident.experiment_model import ExperimentModel
-
-    aug = ExperimentModel(effects=dict(model_obj["effects"]))
-    plant = model_obj.get("plant", "linear")
-    ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
-    ident = model_obj.get("identification", {})
-    std = {e["name"]: e for e in ident.get("effects", [])}
-    effects = [
-        {
-            "name": k,
-            "value": v,
-            "std": std.get(k, {}).get("std"),
-            "unit": std.get(k, {}).get("unit"),
-        }
-        for k, v in model_obj["effects"].items()
-    ]
-    return {
-        "metric": "mean over decay windows of NRMSE ||y_sim - y|| / ||y - mean y|| of roll "
-        "rate and steer angle (simulation from the measured initial state); weave error "
-        "|lambda_model - lambda_data| / |lambda_data|, both the median of damped-oscillation "
-        "fits to the decays (measured; simulated from the same initial states); "
-        "weave_root_error: lambda_model = nearest root of the sampled linear loop",
-        "plant": plant,
-        "verdict": ident.get("verdict"),
-        "effects": effects,
-        "fit_speeds": model_obj.get("fit_speeds"),
-        **ev,
-    }
-
-
 def cmd_evaluate(args) -> int:
+    from bikeid.dataset.decays import load_decays
+    from bikeid.experiments.measured_study import evaluate_json, model_from_json
+
     model, obj = model_from_json(args.model)
     sp = _speeds(args.speeds)
     ws = load_decays(
@@ -282,7 +187,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_fetch(args) -> int:
-    from bikeid.dataset.measured import CAMPAIGN, PINNED, fetch
+    from bikeid.dataset.download import CAMPAIGN, PINNED, fetch
 
     sums = fetch(args.dest, files=PINNED | CAMPAIGN if args.all_speeds else PINNED)
     print(f"fetched {len(sums)} files into {Path(args.dest) / 'tudelft-sbw'}")

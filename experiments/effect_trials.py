@@ -19,8 +19,8 @@ Each trial imitates the treadmill experiment of the measured data with one hidde
   decaying faster than 0.3 1/s (an unstable combination, e.g. a 40 ms delay at 3.5 m/s,
   cannot be logged); a push after which the nonlinear plant falls is repeated at 0.7 times
   its size (up to 3 times), as an experimenter would; two
-  (4 decays each) are given to :func:`ident.discrepancy.identify`, the other two (3 decays
-  each) are held out for :func:`ident.discrepancy.evaluate`.
+  (4 decays each) are given to :func:`bikeid.ident.effect_selection.select_effects`, the other
+  two (3 decays each) are held out for :func:`bikeid.ident.discrepancy_diagnostics.evaluate`.
 
 The pipeline is not told the effect.  Scored per trial (library effects): the effect ranks
 first (``verdict[0]``), its magnitude is within 20 % (of the deviation from "absent",
@@ -46,6 +46,8 @@ from functools import partial
 
 import numpy as np
 
+from bikeid.sim.effect_registry import Effect, effect, nonlinear_effects
+
 __all__ = [
     "EFFECTS",
     "LIBRARY_EFFECTS",
@@ -68,23 +70,72 @@ SPEED_RANGE = (1.5, 4.5)  # treadmill speeds of the logs [m/s]
 DELTA0 = 0.2  # |delta0| <= DELTA0 / v [rad]: logs 0.06-0.21 at 1.5, 0.01-0.05 at 4.5 m/s
 FIT_PER_SPEED = 4
 EVAL_PER_SPEED = 3
+TRIAL_COULOMB_SMOOTHING = 0.01  # rad/s, tanh smoothing of the injected steer Coulomb friction
 
 
 @dataclass(frozen=True)
 class EffectSpec:
-    """An injectable effect: its name, where it sits, the magnitude range drawn from."""
+    """How the trials draw one injected effect (its facts are the registry's).
+
+    Attributes
+    ----------
+    name : str
+        Registry name (:mod:`bikeid.sim.effect_registry`); the nonlinear plant must carry it
+        without a speed dependence.
+    low, high : float
+        Magnitude range drawn from [the effect's unit].
+    choices : tuple of float
+        Discrete values instead of [low, high].
+    two_sided : bool
+        Draw absent -/+ [|low - absent|, |high - absent|].
+    doc : str
+        Why this range.
+    """
 
     name: str
-    in_library: bool
     low: float
     high: float
-    unit: str
-    absent: float = 0.0
-    choices: tuple[float, ...] = ()  # discrete values instead of [low, high]
-    two_sided: bool = False  # draw absent -/+ [|low - absent|, |high - absent|]
+    choices: tuple[float, ...] = ()
+    two_sided: bool = False
     doc: str = ""
 
+    def __post_init__(self) -> None:
+        e = effect(self.name)
+        if e.plant_term is None or e.per_speed:
+            raise ValueError(f"trial effect {self.name}: the nonlinear plant must carry it "
+                             "at every speed alike")  # fmt: skip
+
+    @property
+    def entry(self) -> Effect:
+        """The registry entry."""
+        return effect(self.name)
+
+    @property
+    def unit(self) -> str:
+        """Unit of the value (registry)."""
+        return self.entry.unit
+
+    @property
+    def absent(self) -> float:
+        """The value that means "absent" (registry)."""
+        return self.entry.absent
+
+    @property
+    def in_library(self) -> bool:
+        """Whether the identification library may select it (registry)."""
+        return self.entry.in_library
+
     def draw(self, rng: np.random.Generator) -> float:
+        """One magnitude [unit] from the generator ``rng``.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        float
+        """
         if self.choices:
             return float(rng.choice(self.choices))
         x = float(rng.uniform(self.low, self.high))
@@ -92,86 +143,71 @@ class EffectSpec:
             x = 2 * self.absent - x
         return x
 
-    def sim_effect(self, value: float):
-        """The :mod:`sim.effects` object injecting ``value``."""
-        from bikeid.sim import effects as fx
+    def sim_effects(self, value: float) -> list:
+        """The :mod:`bikeid.sim.effects` objects injecting ``value`` [unit].
 
-        make = {
-            "steer_viscous_damping": lambda x: fx.SteerDamping(x),
-            "steer_coulomb_friction": lambda x: fx.SteerCoulomb(x, smoothing=0.01),
-            "steer_stiffness": lambda x: fx.SteerStiffness(x),
-            "command_gain": lambda x: fx.TorqueGain(x),
-            "actuator_lag": lambda x: fx.ActuatorLag(x),
-            "input_delay": lambda x: fx.InputDelay(x),
-            "roll_viscous_damping": lambda x: fx.RollDamping(x),
-            "roll_stiffness": lambda x: fx.RollStiffness(x),
-        }
-        return make[self.name](value)
+        Through :func:`bikeid.sim.effect_registry.nonlinear_effects` with the trials' steer
+        Coulomb smoothing TRIAL_COULOMB_SMOOTHING (0.01 rad/s; the experiment model smooths
+        with 0.1 rad/s).  The speed does not enter (no 1/v effect is drawn).
+
+        Parameters
+        ----------
+        value : float
+            Magnitude [unit].
+
+        Returns
+        -------
+        list
+            Non-empty.
+        """
+        objects, _ = nonlinear_effects({self.name: value}, 1.0, DT, TRIAL_COULOMB_SMOOTHING)
+        if not objects:
+            raise ValueError(f"{self.name} = {value} is absent on the plant")
+        return objects
 
 
 EFFECTS: dict[str, EffectSpec] = {
     e.name: e
     for e in (
         EffectSpec(
-            "steer_viscous_damping",
-            True,
-            0.2,
-            0.8,
-            "N m s/rad",
-            doc="bearing + motor viscous damping (Moore: 0.34)",
+            "steer_viscous_damping", 0.2, 0.8, doc="bearing + motor viscous damping (Moore: 0.34)"
         ),
         EffectSpec(
             "steer_coulomb_friction",
-            True,
             0.1,
             0.4,
-            "N m",
             doc="bearing/motor dry friction, tanh smoothing 0.01 rad/s (Moore: 0.15)",
         ),
         EffectSpec(
             "steer_stiffness",
-            True,
             0.4,
             1.2,
-            "N m/rad",
-            doc="centring spring of the fork: cables, belt, tyre twist (real logs: ~1.1; above "
-            "~1.2 the capsize mode of this loop is unstable at 4.5 m/s)",
+            doc="centring spring of the fork: cables, belt, tyre twist (real logs: ~1.1; "
+            "above ~1.2 the capsize mode of this loop is unstable at 4.5 m/s)",
         ),
         EffectSpec(
             "command_gain",
-            True,
             1.15,
             1.35,
-            "-",
-            absent=1.0,
             two_sided=True,
             doc="motor torque-constant error 15-35 % either way",
         ),
-        EffectSpec("actuator_lag", True, 0.005, 0.03, "s", doc="motor current/torque lag"),
+        EffectSpec("actuator_lag", 0.005, 0.03, doc="motor current/torque lag"),
         EffectSpec(
             "input_delay",
-            True,
             0.0,
             0.0,
-            "s",
             choices=(0.01, 0.02, 0.03),
             doc="transport delay of 1-3 loop samples",
         ),
         EffectSpec(
             "roll_viscous_damping",
-            False,
             1.0,
             4.0,
-            "N m s/rad",
             doc="roll damping (air, treadmill belt), outside the library",
         ),
         EffectSpec(
-            "roll_stiffness",
-            False,
-            20.0,
-            60.0,
-            "N m/rad",
-            doc="roll spring of a tether/support, outside the library",
+            "roll_stiffness", 20.0, 60.0, doc="roll spring of a tether/support, outside the library"
         ),
     )  # fmt: skip
 }
@@ -227,6 +263,19 @@ def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -
 
     Trial i depends only on (seed, i): its generator is ``SeedSequence(seed).spawn(n)[i]``
     without the count mattering (``spawn_key=(i,)``), so a larger grid extends a smaller one.
+
+    Parameters
+    ----------
+    n : int
+        Number of trials.
+    seed : int, optional
+        Grid seed.
+    effects : tuple of str, optional
+        Names of :data:`EFFECTS` (default all).
+
+    Returns
+    -------
+    list of TrialSpec
     """
     if int(n) != n or n < 1:
         raise ValueError(f"number of trials must be a positive integer, got {n!r}")
@@ -267,12 +316,31 @@ def decay_windows(
 ):
     """Free decays of the nonlinear plant with ``effects`` as experiment-model windows.
 
-    Returns ``ident.experiment_model.Window`` objects (measured signals, sensor speed,
+    Returns ``bikeid.dataset.windows.Window`` objects (measured signals, sensor speed,
     zero command history: the loop starts with the push).
+
+    Parameters
+    ----------
+    effects : list
+        :mod:`bikeid.sim.effects` objects injected into the plant.
+    speeds : iterable of float
+        Treadmill speeds [m/s].
+    per_speed : int
+        Decays per speed.
+    noise : float
+        Roll-rate noise std [rad/s].
+    seed : int
+        Generator seed.
+    label : str, optional
+        File-name prefix.
+
+    Returns
+    -------
+    list of Window
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.dataset.closed_loop import simulate_run
-    from bikeid.ident.experiment_model import Window
+    from bikeid.dataset.windows import Window
     from bikeid.sim.parameters import steer_by_wire
 
     p = steer_by_wire()
@@ -324,18 +392,33 @@ def run_trial(
 
     ``nonlinear``: the pipeline's nominal model is the nonlinear Whipple model
     (:func:`ident.experiment_model.attach_nonlinear_correction`); False uses the linear one.
-    ``weave_weight``: as for :func:`ident.discrepancy.identify` (default "auto").
+    ``weave_weight``: as for :func:`bikeid.ident.effect_selection.select_effects` (default
+    "auto").
+
+    Parameters
+    ----------
+    spec : TrialSpec
+    max_effects : int, optional
+    nonlinear : bool, optional
+    weave_weight : float or "auto", optional
+
+    Returns
+    -------
+    dict
+        The spec, verdict, estimate [unit] and its std, errors before/after (NRMSE) and the
+        scores.
     """
-    from bikeid.ident.discrepancy import evaluate, identify
+    from bikeid.ident.discrepancy_diagnostics import evaluate
+    from bikeid.ident.effect_selection import select_effects
     from bikeid.ident.experiment_model import ExperimentModel
 
     t0 = time.perf_counter()
     es = EFFECTS[spec.effect]
-    fx = [es.sim_effect(spec.value)]
+    fx = es.sim_effects(spec.value)
     fit = decay_windows(fx, spec.fit_speeds, FIT_PER_SPEED, spec.noise, spec.seed, "fit")
     held = decay_windows(fx, spec.eval_speeds, EVAL_PER_SPEED, spec.noise, spec.seed + 1, "eval")
     nominal = ExperimentModel()
-    res = identify(
+    res = select_effects(
         nominal, fit, max_effects=max_effects, nonlinear=nonlinear, weave_weight=weave_weight
     )
     ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
@@ -369,7 +452,19 @@ def run_trial(
 
 
 def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Exact (Clopper-Pearson) interval for a success probability from k of n."""
+    """Exact (Clopper-Pearson) interval for a success probability from k of n.
+
+    Parameters
+    ----------
+    k, n : int
+        Successes and trials.
+    level : float, optional
+        Confidence level.
+
+    Returns
+    -------
+    (float, float)
+    """
     from scipy.stats import binomtest
 
     if n == 0:
@@ -386,7 +481,17 @@ def _rate(rows: list[dict], key: str) -> dict:
 
 
 def summarize(rows: list[dict]) -> dict:
-    """Rates over trials (overall and per effect) with 95 % Clopper-Pearson intervals."""
+    """Rates over trials (overall and per effect) with 95 % Clopper-Pearson intervals.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_trial` results.
+
+    Returns
+    -------
+    dict
+    """
     lib = [r for r in rows if r["in_library"]]
     out_ = [r for r in rows if not r["in_library"]]
     summ: dict = {"trials": len(rows)}
@@ -414,7 +519,17 @@ def summarize(rows: list[dict]) -> dict:
 
 def format_summary(s: dict) -> str:
     """The rates of :func:`summarize` as text: library and outside-library rates with 95 %
-    Clopper-Pearson intervals, then per effect what was named first."""
+    Clopper-Pearson intervals, then per effect what was named first.
+
+    Parameters
+    ----------
+    s : dict
+        :func:`summarize` output.
+
+    Returns
+    -------
+    str
+    """
     lines = []
     for k, r in s.get("library", {}).items():
         lines.append(f"library {k:14s} {r['k']:3d}/{r['n']:<3d} = {r['rate']:.3f} "
@@ -442,6 +557,22 @@ def run_trials(
     """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
 
     ``progress(row)`` is called with each finished trial (in trial order).
+
+    Parameters
+    ----------
+    n : int
+        Number of trials.
+    seed : int, optional
+    processes : int, optional
+    effects : tuple of str, optional
+    nonlinear : bool, optional
+    progress : callable, optional
+    weave_weight : float or "auto", optional
+
+    Returns
+    -------
+    dict
+        ``trials`` (list of dict) and ``summary``.
     """
     if int(processes) != processes or processes < 1:
         raise ValueError(f"processes must be a positive integer, got {processes!r}")

@@ -16,7 +16,22 @@ from .cliutil import atomic_write_text, dump_json
 
 
 def sine_fit(y: np.ndarray, u: np.ndarray, freq: float, dt: float = 0.01) -> complex:
-    """Complex ratio Y/U at ``freq`` [Hz] from least-squares sinusoid fits (with offset)."""
+    """Complex ratio Y/U at ``freq`` [Hz] from least-squares sinusoid fits (with offset).
+
+    Parameters
+    ----------
+    y, u : ndarray
+        Output and input, sampled every ``dt`` [s].
+    freq : float
+        Frequency [Hz].
+    dt : float, optional
+        Sample time [s].
+
+    Returns
+    -------
+    complex
+        Y/U [unit of y per unit of u]; nan when u has no component at ``freq``.
+    """
     t = np.arange(y.size) * dt
     basis = np.column_stack(
         [np.cos(2 * math.pi * freq * t), np.sin(2 * math.pi * freq * t), np.ones_like(t)]
@@ -30,7 +45,7 @@ def sine_fit(y: np.ndarray, u: np.ndarray, freq: float, dt: float = 0.01) -> com
 
 
 def _asymmetry_lines(s: dict) -> list[str]:
-    """Push-direction asymmetry of the error (ident.discrepancy.push_asymmetry)."""
+    """Push-direction asymmetry of the error (``discrepancy_diagnostics.push_asymmetry``)."""
     out = []
     for when in ("before", "after"):
         a = s.get(f"push_asymmetry_{when}")
@@ -48,10 +63,22 @@ def _asymmetry_lines(s: dict) -> list[str]:
     return out
 
 
-def bode_points(root) -> list[dict]:
-    """Measured closed-loop response T_ext -> (roll rate, steer angle), one per Bode file."""
-    from bikeid.dataset.measured import find_logs, load_log
-    from bikeid.ident.experiment_model import bode_window
+def bode_points(root: str | Path) -> list[dict]:
+    """Measured closed-loop response T_ext -> (roll rate, steer angle), one per Bode file.
+
+    Parameters
+    ----------
+    root : str or Path
+        Folder with ``bode*`` logs.
+
+    Returns
+    -------
+    list of dict
+        ``file``, ``freq`` [Hz], ``v_sensor`` [m/s] and the complex responses ``phidot``
+        [rad/s per N m] and ``delta`` [rad per N m] at the file's frequency.
+    """
+    from bikeid.dataset.sbw_logs import find_logs, load_log
+    from bikeid.dataset.windows import bode_window
 
     out = []
     for p in find_logs(root, "bode"):
@@ -67,18 +94,30 @@ def bode_points(root) -> list[dict]:
 
 
 def write_report(out: str | Path, data: str | None, model_path: str | None) -> Path:
+    """Write report.md, report.json and the figures into ``out``.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder (created).
+    data : str or None
+        Data folder (None: ``$BIKEID_DATA``).
+    model_path : str or None
+        A model file of ``measured fit`` (None: fit on every other speed first).
+
+    Returns
+    -------
+    Path
+        The report.md written.
+    """
     import matplotlib.pyplot as plt
 
-    from bikeid.dataset.measured import SPEED_CALIBRATION, data_dir
-    from bikeid.experiments.cmd_measured import (
-        evaluate_json,
-        fit_model,
-        load_decays,
-        model_from_json,
-    )
+    from bikeid.dataset.decays import load_decays
+    from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir
+    from bikeid.experiments.measured_study import evaluate_json, fit_model, model_from_json
     from bikeid.experiments.plots import save
-    from bikeid.ident.discrepancy import decay_eigenvalue
     from bikeid.ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+    from bikeid.ident.weave import decay_eigenvalue
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -10,42 +10,20 @@ Controller: the logged steer-into-lean law ``T_cmd = K (V - v_s) phidot_m + T_ex
 v_s and the measured roll rate and held over the loop (zero-order hold, exactly as the
 firmware does).  ``T_ext`` is the relayed handlebar torque of the Bode runs (zero in the
 free decays).  Sign: with roll/steer positive to the right, +K stabilizes (see
-``dataset.measured``).
+``bikeid.dataset.sbw_logs``).
 
-Effects (all default to "absent"; each is one named physical term):
-
-==========================  ==========  ================================================
-name                        unit        term
-==========================  ==========  ================================================
-steer_viscous_damping       N m s/rad   steer torque -c * deltadot
-steer_coulomb_friction      N m         steer torque -T_c * tanh(deltadot / 0.1 rad/s)
-steer_stiffness             N m/rad     steer torque -k * delta (centring spring)
-tire_twist_stiffness        N m/rad*m/s steer torque -(k / v) * delta (NOT in the ident library)
-tire_scrub_torque           N m s^2/... steer torque -(k / v) * deltadot  (k in N m s/rad * m/s)
-command_gain                -           applied torque = gain * command (default 1)
-steer_torque_bias           N m         constant steer torque
-input_delay                 s           command applied tau later (fractional samples)
-actuator_lag                s           first-order lag of the applied torque
-roll_angle_bias             rad         phi_m = phi + b
-steer_angle_bias            rad         delta_m = delta + b
-roll_rate_bias              rad/s       phidot_m = s phidot + b (controller sees it)
-roll_rate_scale             -           s above (default 1)
-speed_scale                 -           true speed = s * calibrated treadmill speed
-steer_inertia               kg m^2      added to M_dd (front-frame inertia correction)
-trail_correction            m           trail c -> c + dc (all matrices recomputed)
-front_inertia_scale         -           front-frame inertia tensor IH* times s (default 1)
-front_mass_shift            kg          mass moved from rear to front frame (see below)
-rear_inertia_scale          -           rear-frame inertia tensor IB* times s (default 1)
-tire_relaxation             m           front-tyre lateral relaxation length sigma (below)
-roll_viscous_damping        N m s/rad   roll torque -c * phidot (NOT in the ident library)
-roll_stiffness              N m/rad     roll torque -k * phi (NOT in the ident library)
-==========================  ==========  ================================================
+Effects: every name, unit, absent value, plausible range and one-line term is declared once
+in :mod:`bikeid.sim.effect_registry` (``EFFECTS``); all default to absent.  This model
+applies every entry to the linear model (plant terms to the matrices, input terms to the
+command, sensor terms to the outputs, parameter corrections through :meth:`plant_params`);
+the steer Coulomb friction is smoothed as -T_c * tanh(deltadot / 0.1 rad/s) here.
 
 ``tire_twist_stiffness`` (a contact-patch twist torque that falls with speed) can be fitted
 by name but is kept out of the identification library: the per-file fits contradict its 1/v
 law (docs/measured.md).
 
-The last four rows above the roll terms are *parameter* corrections of the values the data
+The four *parameter* corrections trail_correction, front_inertia_scale, front_mass_shift and
+rear_inertia_scale are corrections of the values the data
 README flags as uncertain (borrowed frame/fork inertias, estimated mass split); they change
 the bicycle itself, so the linear matrices and the nonlinear plant both see them
 (:meth:`ExperimentModel.plant_params`).  ``front_mass_shift`` dm moves mass from the rear
@@ -95,157 +73,24 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from bikeid.dataset.measured import treadmill_speed
-from bikeid.dataset.run import Run
+from bikeid.dataset.sbw_logs import treadmill_speed
+from bikeid.dataset.windows import Window
+from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, effect, nonlinear_effects
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
 from bikeid.sim.parameters import BicycleParameters, steer_by_wire
+from bikeid.sim.sampling import zoh
 
 __all__ = [
-    "EFFECT_DEFAULTS",
-    "EFFECT_UNITS",
-    "PARAMETER_EFFECTS",
+    "COULOMB_EPS",
+    "DT",
     "ExperimentModel",
-    "Window",
     "attach_nonlinear_correction",
-    "bode_window",
-    "decay_windows",
-    "nonlinear_counterpart",
     "window_errors",
     "yaw_coupling",
 ]
 
-DT = 0.01
+DT = 0.01  # s, one control loop
 COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
-EFFECT_UNITS = {
-    "steer_viscous_damping": "N m s/rad",
-    "steer_coulomb_friction": "N m",
-    "steer_stiffness": "N m/rad",
-    "tire_twist_stiffness": "N m/rad * m/s",
-    "tire_scrub_torque": "N m s/rad * m/s",
-    "command_gain": "-",
-    "steer_torque_bias": "N m",
-    "input_delay": "s",
-    "actuator_lag": "s",
-    "roll_angle_bias": "rad",
-    "steer_angle_bias": "rad",
-    "roll_rate_bias": "rad/s",
-    "roll_rate_scale": "-",
-    "speed_scale": "-",
-    "steer_inertia": "kg m^2",
-    "trail_correction": "m",
-    "front_inertia_scale": "-",
-    "front_mass_shift": "kg",
-    "rear_inertia_scale": "-",
-    "tire_relaxation": "m",
-    "roll_viscous_damping": "N m s/rad",
-    "roll_stiffness": "N m/rad",
-}
-EFFECT_DEFAULTS = {k: 0.0 for k in EFFECT_UNITS} | {
-    "command_gain": 1.0,
-    "roll_rate_scale": 1.0,
-    "speed_scale": 1.0,
-    "front_inertia_scale": 1.0,
-    "rear_inertia_scale": 1.0,
-}
-PARAMETER_EFFECTS = (
-    "trail_correction",
-    "front_inertia_scale",
-    "front_mass_shift",
-    "rear_inertia_scale",
-)
-
-
-@dataclass
-class Window:
-    """One stretch of an experiment to simulate: a free decay or a Bode record.
-
-    Measured arrays (length n, sample time 0.01 s): phi, delta, phidot, deltadot,
-    v_sensor, T_ext (external steer torque relayed to the motor), T_phi (roll torque,
-    simulation only).  ``hist`` holds the logged steer commands before the window
-    start (oldest first) for the delay buffer.  ``speed`` is the treadmill speed [m/s].
-    """
-
-    file: str
-    speed: float
-    start: int
-    phi: np.ndarray
-    delta: np.ndarray
-    phidot: np.ndarray
-    deltadot: np.ndarray
-    v_sensor: np.ndarray
-    T_ext: np.ndarray
-    hist: np.ndarray
-    kind: str = "decay"
-    freq: float | None = None
-    T_phi: np.ndarray | None = None
-    meta: dict = field(default_factory=dict)
-    correction: dict | None = None  # nonlinear - linear nominal outputs (see below)
-
-    @property
-    def n(self) -> int:
-        return self.phi.size
-
-    def state0(self) -> np.ndarray:
-        """Measured state at the start: quadratic fit over the first 5 samples at t=0."""
-        k = min(5, self.n)
-        tt = np.arange(k) * DT
-        out = []
-        for y in (self.phi, self.delta, self.phidot, self.deltadot):
-            c = np.polyfit(tt, y[:k], 2 if k >= 4 else 0)
-            out.append(np.polyval(c, 0.0))
-        return np.array(out)
-
-
-def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20) -> Window:
-    first = int(run.meta.get("first_index", 0))
-    a, b = i0 - first, i1 - first
-    if a < 0 or b > run.n or b - a < 10:
-        raise ValueError(
-            f"{run.meta.get('file', 'run')}: window rows {i0}..{i1} outside the file "
-            f"(rows {first}..{first + run.n})"
-        )
-    sl = slice(a, b)
-    h = run["T_delta"][max(0, a - hist_len) : a]
-    h = np.concatenate([np.full(hist_len - h.size, h[0] if h.size else 0.0), h])
-    ext = run.signals.get("T_ext", np.zeros(run.n))
-    return Window(
-        file=str(run.meta.get("file", "run")),
-        speed=float(treadmill_speed(np.mean(run["v"][sl]))),
-        start=i0,
-        phi=run["phi"][sl].copy(),
-        delta=run["delta"][sl].copy(),
-        phidot=run["phidot"][sl].copy(),
-        deltadot=run["deltadot"][sl].copy(),
-        v_sensor=run["v"][sl].copy(),
-        T_ext=ext[sl].copy(),
-        hist=h,
-        kind=kind,
-        freq=freq,
-    )
-
-
-def decay_windows(run: Run, segments) -> list[Window]:
-    """Free-decay windows of a run from ``dataset.measured.Segment`` rows."""
-    out = [_window(run, s.start, s.end, "decay") for s in segments]
-    if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
-        for w in out:
-            w.speed = float(run.meta["speed"])
-    return out
-
-
-def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> Window:
-    """The settled-speed stretch of a Bode run (at most ``max_len`` s, skipping 1 s)."""
-    first = int(run.meta.get("first_index", 0))
-    i0 = int(run.meta.get("ramp_end_index", first)) + 100
-    i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))
-    if freq is None:
-        import re
-
-        m = re.search(r"_([0-9.]+)Hz", str(run.meta.get("file", "")))
-        if not m:
-            raise ValueError(f"cannot read the excitation frequency from {run.meta.get('file')}")
-        freq = float(m.group(1))
-    return _window(run, i0, i1, "bode", freq=freq)
 
 
 @dataclass(frozen=True)
@@ -258,27 +103,36 @@ class ExperimentModel:
     V: float = 6.5
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.effects) - set(EFFECT_UNITS))
-        if unknown:
-            raise ValueError(f"unknown effects {unknown}; known are {sorted(EFFECT_UNITS)}")
         for k, v in self.effects.items():
+            unit = effect(k).unit  # ValueError naming the known effects
             try:
                 ok = math.isfinite(float(v))
             except (TypeError, ValueError):
                 ok = False
             if not ok:
-                raise ValueError(
-                    f"effect {k!r} must be a finite number [{EFFECT_UNITS[k]}], got {v!r}"
-                )
+                raise ValueError(f"effect {k!r} must be a finite number [{unit}], got {v!r}")
         if self.e("input_delay") < 0 or self.e("actuator_lag") < 0:
             raise ValueError("input_delay and actuator_lag must be >= 0 s")
         if self.e("tire_relaxation") < 0:
             raise ValueError("tire_relaxation (relaxation length sigma) must be >= 0 m")
 
     def e(self, name: str) -> float:
-        return float(self.effects.get(name, EFFECT_DEFAULTS[name]))
+        """Value of effect ``name`` [its registry unit]; its absent value when not set.
+
+        Parameters
+        ----------
+        name : str
+            Registry name (ValueError for an unknown one).
+
+        Returns
+        -------
+        float
+        """
+        v = self.effects.get(name)
+        return float(effect(name).absent if v is None else v)
 
     def with_effects(self, **values: float) -> ExperimentModel:
+        """A copy with the effects ``values`` (registry names) set or replaced."""
         return replace(self, effects={**self.effects, **values})
 
     # -- matrices ---------------------------------------------------------------------
@@ -312,6 +166,8 @@ class ExperimentModel:
         return p.replace(**ch) if ch else p
 
     def canonical(self) -> CanonicalMatrices:
+        """Canonical matrices M, C1, K0, K2 of :meth:`plant_params`, steer_inertia added to
+        M[delta, delta] [kg m^2]."""
         cm = canonical_matrices(self.plant_params())
         M = cm.M.copy()
         M[1, 1] += self.e("steer_inertia")
@@ -323,6 +179,20 @@ class ExperimentModel:
         u: commanded torque into the actuator (lag); w: torque straight on the steer
         (friction, bias); T_phi: roll torque.  Ta (applied torque) only with an actuator
         lag, delta_k (kinematic steer) only with a tyre relaxation length (module docstring).
+
+        Parameters
+        ----------
+        v : float
+            True speed [m/s].
+        cm : CanonicalMatrices, optional
+            :meth:`canonical` (computed when not given).
+
+        Returns
+        -------
+        A : (n, n) ndarray
+            [1/s, 1/s^2 blocks].
+        B : (n, 3) ndarray
+            Inputs in N m.
         """
         E, A, B = self.descriptor(v, cm)
         if E is None:
@@ -337,18 +207,32 @@ class ExperimentModel:
         v nu a delta_k' (module docstring); E is singular at sigma = 0, where the finite
         generalized eigenvalues are exactly those of the Whipple model (``relax=True``
         keeps the delta_k state at sigma = 0 for that check).
+
+        Parameters
+        ----------
+        v : float
+            True speed [m/s].
+        cm : CanonicalMatrices, optional
+        relax : bool, optional
+            Keep the delta_k state when sigma = 0.
+
+        Returns
+        -------
+        E : (n, n) ndarray or None
+        A : (n, n) ndarray
+        B : (n, 3) ndarray
         """
         cm = cm or self.canonical()
         Minv = np.linalg.inv(cm.M)
         C = v * cm.C1 + np.diag(
             [
                 self.e("roll_viscous_damping"),
-                self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, 0.1),
+                self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, V_FLOOR),
             ]
         )
         Kq = cm.stiffness(v).copy()
         Kq[0, 0] += self.e("roll_stiffness")
-        Kq[1, 1] += self.e("steer_stiffness") + self.e("tire_twist_stiffness") / max(v, 0.1)
+        Kq[1, 1] += self.e("steer_stiffness") + self.e("tire_twist_stiffness") / max(v, V_FLOOR)
         lag = self.e("actuator_lag")
         sigma = self.e("tire_relaxation")
         relax = relax or sigma > 0
@@ -383,17 +267,27 @@ class ExperimentModel:
         A[2:4, 2:4] = -Minv @ C
         return E, A, B
 
-    def discrete(self, v: float, h: float = DT, cm=None):
-        """ZOH discretization over step h: (Ad, Bd)."""
+    def discrete(self, v: float, h: float = DT, cm: CanonicalMatrices | None = None):
+        """ZOH discretization over step h [s]: (Ad, Bd) (:func:`bikeid.sim.sampling.zoh`).
+
+        Parameters
+        ----------
+        v : float
+            True speed [m/s].
+        h : float, optional
+            Step [s].
+        cm : CanonicalMatrices, optional
+
+        Returns
+        -------
+        Ad : (n, n) ndarray
+        Bd : (n, 3) ndarray
+        """
         A, B = self.continuous(v, cm)
-        n, m = B.shape
-        big = np.zeros((n + m, n + m))
-        big[:n, :n] = A
-        big[:n, n:] = B
-        E = _expm_small(big * h)
-        return E[:n, :n], E[:n, n:]
+        return zoh(A, B, h, small=True)
 
     def true_speed(self, v_sensor: float) -> float:
+        """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale."""
         return float(self.e("speed_scale") * treadmill_speed(v_sensor))
 
     def _delay(self) -> tuple[int, float]:
@@ -405,6 +299,20 @@ class ExperimentModel:
         """Augmented discrete closed loop z+ = Phi z + G_ext T_ext + c (no Coulomb term).
 
         z = [x(4), (Ta), command buffer (m+1)].  Returns (Phi, G_ext, c, n_plant).
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s] (the loop gain uses it; the plant runs at :meth:`true_speed`).
+
+        Returns
+        -------
+        Phi : (nz, nz) ndarray
+        G : (nz,) ndarray
+            Per N m of T_ext.
+        c : (nz,) ndarray
+            Constant terms (biases).
+        n_plant : int
         """
         v = self.true_speed(v_sensor)
         Ad, Bd = self.discrete(v)
@@ -450,6 +358,15 @@ class ExperimentModel:
 
         Includes the zero-order hold and any delay; delay-buffer roots near z = 0 are
         dropped.  Sorted by decreasing real part.
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+
+        Returns
+        -------
+        ndarray of complex
         """
         Phi = self.closed_loop(v_sensor)[0]
         z = np.linalg.eigvals(Phi)
@@ -458,7 +375,17 @@ class ExperimentModel:
         return lam[np.argsort(-lam.real)]
 
     def oscillatory_roots(self, v_sensor: float) -> np.ndarray:
-        """Closed-loop roots with 0 < Im < 0.8 Nyquist (one of each complex pair) [1/s]."""
+        """Closed-loop roots with 0 < Im < 0.8 Nyquist (one of each complex pair) [1/s].
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+
+        Returns
+        -------
+        ndarray of complex
+        """
         lam = self.eigenvalues(v_sensor)
         return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
 
@@ -468,6 +395,18 @@ class ExperimentModel:
         Without ``near``: the least damped one; with ``near``: the one closest to it
         (mode matching against a root fitted to data; below ~1.8 m/s the loop has two
         oscillatory pairs).
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+        near : complex, optional
+            A root to match [1/s].
+
+        Returns
+        -------
+        complex
+            [1/s]; nan + nan i when the loop has no oscillatory root.
         """
         osc = self.oscillatory_roots(v_sensor)
         if osc.size == 0:
@@ -477,7 +416,20 @@ class ExperimentModel:
         return complex(osc[np.argmax(osc.real)])
 
     def frequency_response(self, v_sensor: float, freqs) -> np.ndarray:
-        """Complex response (len(freqs), 2) from T_ext to [phidot_m, delta_m]."""
+        """Complex response (len(freqs), 2) from T_ext to [phidot_m, delta_m].
+
+        Parameters
+        ----------
+        v_sensor : float
+            Sensor speed [m/s].
+        freqs : array_like
+            Frequencies [Hz].
+
+        Returns
+        -------
+        (len(freqs), 2) ndarray of complex
+            [rad/s per N m, rad per N m].
+        """
         Phi, G, _, _ = self.closed_loop(v_sensor)
         s = self.e("roll_rate_scale")
         out = []
@@ -495,6 +447,18 @@ class ExperimentModel:
         deltadot (sensor biases/scale applied), and the applied command T.
         ``nsub`` substeps per 10 ms loop re-evaluate the Coulomb friction (the
         controller is still sampled every 10 ms).
+
+        Parameters
+        ----------
+        windows : list of Window
+        nsub : int, optional
+            Substeps per loop.
+
+        Returns
+        -------
+        list of dict of str to ndarray
+            ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s], ``T`` [N m] per window
+            (each window's defect correction added, when one is attached).
         """
         if not windows:
             return []
@@ -516,7 +480,7 @@ class ExperimentModel:
         bias_T, tc = self.e("steer_torque_bias"), self.e("steer_coulomb_friction")
         Kc = self.K * (self.V - vs)
         H = max(m + 2, 2)
-        hist = np.stack([_hist(w.hist, H) for w in windows])  # oldest first
+        hist = np.stack([w.command_history(H) for w in windows])  # oldest first
         x = np.zeros((nw, npl))
         x0 = np.stack([w.state0() for w in windows])
         x[:, 0] = x0[:, 0] - bphi
@@ -565,67 +529,37 @@ class ExperimentModel:
         return out
 
 
-def nonlinear_counterpart(model: ExperimentModel, speed: float) -> tuple[list, dict]:
-    """The part of ``model``'s effects the nonlinear plant can carry, at a true speed.
-
-    Returns (``sim.effects`` objects, the same as experiment-model effects).  Mapped:
-    steer viscous damping + tire scrub (c + k / v), steer stiffness + tyre twist (k + k_t / v),
-    steer Coulomb friction (same tanh smoothing 0.1 rad/s), command gain, actuator lag, input delay
-    (rounded to whole 10 ms samples), roll damping and stiffness.  Not mapped (they stay
-    linear-only): sensor biases and scales, steer torque bias, steer inertia (the parameter
-    corrections and the speed scale enter through the parameters and the speed instead).
-    """
-    from bikeid.sim import effects as fx
-
-    out, eq = [], {}
-    c = model.e("steer_viscous_damping") + model.e("tire_scrub_torque") / max(speed, 0.1)
-    if c > 0:
-        out.append(fx.SteerDamping(c))
-        eq["steer_viscous_damping"] = c
-    ks = model.e("steer_stiffness") + model.e("tire_twist_stiffness") / max(speed, 0.1)
-    if ks != 0.0:
-        out.append(fx.SteerStiffness(ks))
-        eq["steer_stiffness"] = ks
-    tc = model.e("steer_coulomb_friction")
-    if tc > 0:
-        out.append(fx.SteerCoulomb(tc, smoothing=COULOMB_EPS))
-        eq["steer_coulomb_friction"] = tc
-    if model.e("command_gain") != 1.0:
-        out.append(fx.TorqueGain(model.e("command_gain")))
-        eq["command_gain"] = model.e("command_gain")
-    if model.e("actuator_lag") > 0:
-        out.append(fx.ActuatorLag(model.e("actuator_lag")))
-        eq["actuator_lag"] = model.e("actuator_lag")
-    nd = int(round(model.e("input_delay") / DT))
-    if nd > 0:
-        out.append(fx.InputDelay(nd * DT))
-        eq["input_delay"] = nd * DT
-    if model.e("roll_viscous_damping") > 0:
-        out.append(fx.RollDamping(model.e("roll_viscous_damping")))
-        eq["roll_viscous_damping"] = model.e("roll_viscous_damping")
-    if model.e("roll_stiffness") > 0:
-        out.append(fx.RollStiffness(model.e("roll_stiffness")))
-        eq["roll_stiffness"] = model.e("roll_stiffness")
-    return out, eq
-
-
 def attach_nonlinear_correction(
     windows: list[Window], model: ExperimentModel | None = None
 ) -> list[Window]:
     """Make the model nonlinear: store y_nl(m') - y_lin(m') in each window (in place).
 
     m' is the part of ``model`` (default: the nominal) that the nonlinear plant can carry
-    (:func:`nonlinear_counterpart`).  For each window the nonlinear Whipple plant
+    (:func:`bikeid.sim.effect_registry.nonlinear_effects`, Coulomb smoothing COULOMB_EPS).
+    For each window the nonlinear Whipple plant
     (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms, speed held at the true
     speed) and the linear model are both run with m' from the window's measured initial
     state, zero command history, and the same sampled loop ``T = K (V - v_s) phidot``
     (v_s the window's mean sensor speed).  Their difference is added to every later
     :meth:`ExperimentModel.simulate` of the window, so a model m simulates as
     y_lin(m) + y_nl(m') - y_lin(m'): exactly the nonlinear plant at m = m', and to first
-    order in (m - m') near it (defect correction; :func:`ident.discrepancy.identify`
-    re-attaches at the current model after each accepted effect).  Needed because the
-    logs' decays reach steer angles of 0.3-0.6 rad at 1.5 m/s, where the linear and the
-    nonlinear plant differ by 0.1-0.45 in NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+    order in (m - m') near it (defect correction;
+    :func:`bikeid.ident.effect_selection.select_effects` re-attaches at the current model
+    after each accepted effect).  Needed because the logs' decays reach steer angles of
+    0.3-0.6 rad at 1.5 m/s, where the linear and the nonlinear plant differ by 0.1-0.45 in
+    NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+
+    Parameters
+    ----------
+    windows : list of Window
+        Corrected in place.
+    model : ExperimentModel, optional
+        The linearization point (default: the nominal model).
+
+    Returns
+    -------
+    list of Window
+        ``windows``.
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.sim.integrate import simulate
@@ -636,8 +570,8 @@ def attach_nonlinear_correction(
     for w in windows:
         vs = float(np.mean(w.v_sensor))
         v = model.true_speed(vs)
-        fx, eq = nonlinear_counterpart(model, v)
-        keep = {k: model.e(k) for k in (*PARAMETER_EFFECTS, "speed_scale") if k in model.effects}
+        fx, eq = nonlinear_effects(model.effects, v, DT, COULOMB_EPS)
+        keep = {k: model.e(k) for k in model.effects if EFFECTS[k].layer == "parameter"}
         lin_m = ExperimentModel(params=model.params, effects={**eq, **keep}, K=model.K, V=model.V)
         w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
         sl = lin_m.simulate([w0])[0]
@@ -659,6 +593,17 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
     inertia; steer row: front-assembly yaw coupling plus the moment mu w F_f of the front
     contact force needed to yaw the whole bicycle); nu = cos(lam) / w [1/m], with
     psi' = nu (v delta + c delta') in the Whipple model.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+
+    Returns
+    -------
+    a : (2,) ndarray
+        [kg m^2].
+    nu : float
+        [1/m].
     """
     sl, cl = math.sin(p.lam), math.cos(p.lam)
     ITxz = p.IBxz + p.IHxz - p.mB * p.xB * p.zB - p.mH * p.xH * p.zH + p.mF * p.w * p.rF
@@ -674,38 +619,22 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
     return np.array([ITxz, IAlz + mu * ITzz]), cl / p.w
 
 
-def _expm_small(M: np.ndarray) -> np.ndarray:
-    """Matrix exponential of a small matrix: scaling and squaring of an order-16 Taylor
-    series (truncation < 1e-20 relative after scaling to norm <= 0.5).
-
-    Used instead of ``scipy.linalg.expm`` because the latter goes through multithreaded
-    OpenBLAS, which on a loaded 2-core machine took ~5-8 ms per 7x7 call (vs 10 us with one
-    thread) and dominated identification.  Checked against scipy in tests/test_measured.py.
-    """
-    nrm = float(np.max(np.sum(np.abs(M), axis=1)))
-    k = max(0, int(math.ceil(math.log2(nrm / 0.5)))) if nrm > 0.5 else 0
-    A = M / (2.0**k)
-    E = np.eye(M.shape[0])
-    term = np.eye(M.shape[0])
-    for j in range(1, 17):
-        term = term @ A / j
-        E = E + term
-    for _ in range(k):
-        E = E @ E
-    return E
-
-
-def _hist(h: np.ndarray, H: int) -> np.ndarray:
-    h = np.asarray(h, dtype=float)
-    if h.size >= H:
-        return h[-H:]
-    return np.concatenate([np.full(H - h.size, h[0] if h.size else 0.0), h])
-
-
 def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> np.ndarray:
     """NRMSE per window and channel: ||y_sim - y|| / ||y - mean(y)|| (0 = perfect).
 
     This is 1 - fit of MATLAB ``compare``/Moore's VAF (identification.md 1.2).
+
+    Parameters
+    ----------
+    windows : list of Window
+    sims : list of dict
+        :meth:`ExperimentModel.simulate` of each window.
+    channels : tuple of str, optional
+
+    Returns
+    -------
+    (len(windows), len(channels)) ndarray
+        Dimensionless.
     """
     out = np.zeros((len(windows), len(channels)))
     for i, (w, s) in enumerate(zip(windows, sims, strict=True)):

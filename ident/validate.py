@@ -268,3 +268,67 @@ def transfer_functions(model) -> dict[tuple[str, str], control.TransferFunction]
             lead = np.argmax(np.abs(num) > 1e-9 * scale) if scale > 0 else len(num) - 1
             out[(o, u)] = control.tf(num[lead:], den)  # drop round-off leading terms
     return out
+
+
+# -- correlation tests of one residual sequence (resid's tests, also used by the effect
+# diagnostics of the measured data) ---------------------------------------------------------
+__all__ += ["cross_correlation", "whiteness"]
+
+
+def _band(n: int, confidence: float) -> float:
+    from scipy.stats import norm
+
+    return float(norm.ppf(0.5 + confidence / 2) / np.sqrt(n))
+
+
+def whiteness(e: np.ndarray, max_lag: int = 25, confidence: float = 0.99) -> dict:
+    """Autocorrelation test of one residual sequence (the test of :func:`resid`).
+
+    Parameters
+    ----------
+    e : (N,) array_like
+        Residuals (any unit; the mean is removed).
+    max_lag : int, optional
+        Largest lag [samples].
+    confidence : float, optional
+        Level of the band (0.99: +-2.576 / sqrt(N)).
+
+    Returns
+    -------
+    dict
+        ``acf``: normalized autocorrelation at lags 1..max_lag; ``band``; and
+        ``fraction_outside``: the fraction of ``acf`` outside +-band.
+    """
+    e = np.asarray(e, float) - np.mean(e)
+    r = np.array([_xcorr(e, e, k) for k in range(1, max_lag + 1)])
+    band = _band(e.size, confidence)
+    return {"acf": r, "band": band, "fraction_outside": float(np.mean(np.abs(r) > band))}
+
+
+def cross_correlation(
+    e: np.ndarray, u: np.ndarray, max_lag: int = 25, confidence: float = 0.99
+) -> dict:
+    """Residual-input cross-correlation test (that of :func:`resid`).
+
+    Parameters
+    ----------
+    e, u : (N,) array_like
+        Residual and input (means removed).
+    max_lag : int, optional
+        Lags -max_lag..max_lag [samples]; lag tau pairs e[k] with u[k - tau].
+    confidence : float, optional
+        Level of the band (0.99: +-2.576 / sqrt(N)).
+
+    Returns
+    -------
+    dict
+        ``lags``; ``ccf``: normalized cross-correlation at ``lags``; ``band``;
+        ``fraction_outside``: the fraction of ``ccf`` outside +-band (all lags).
+    """
+    e = np.asarray(e, float) - np.mean(e)
+    u = np.asarray(u, float) - np.mean(u)
+    lags = np.arange(-max_lag, max_lag + 1)
+    r = np.array([_xcorr(e, u, int(k)) for k in lags])
+    band = _band(e.size, confidence)
+    return {"lags": lags, "ccf": r, "band": band,
+            "fraction_outside": float(np.mean(np.abs(r) > band))}  # fmt: skip

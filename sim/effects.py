@@ -15,12 +15,25 @@ are two kinds:
 Signs follow :mod:`sim.conventions`: a damping torque opposes the rate, so a steer
 damping c gives the generalized force -c * deltadot on the steer equation.
 
-Adding an effect (kept deliberately obvious):
+Adding an effect: its facts (name, unit, absent value, plausible range, layer, whether the
+identification library may select it) are declared once, as an entry of
+:data:`bikeid.sim.effect_registry.EFFECTS`; this module only implements the ``plant`` and
+``input`` layers for the nonlinear simulator.  For an effect the plant carries:
+
 1. give it a dataclass below with a ``kind`` of ``"plant"`` or ``"input"``;
 2. for a plant effect, append its slots to :data:`PLANT_SLOTS`, fill them in
    :func:`plant_vector` and add its generalized force to :func:`plant_forces`;
    for an input effect, handle it in :func:`input_chain` and in
-   ``sim.integrate`` (only there are commands shaped).
+   ``sim.integrate`` (only there are commands shaped);
+3. name it as the entry's ``plant_term`` and add its class to the registry's builders
+   (``effect_registry._plant_builders``), so that
+   :func:`bikeid.sim.effect_registry.nonlinear_effects` builds it from a value;
+4. apply the entry in the linear experiment model (``bikeid.ident.experiment_model``) and,
+   if the identification may select it, give it fit settings in
+   ``bikeid.ident.effect_library.LIBRARY`` (tests/test_effect_registry_use.py checks both).
+
+An effect the plant cannot carry states why in the entry's ``no_plant`` instead (sensor
+effects are applied by :meth:`bikeid.dataset.sensors.Sensors.with_effects`).
 """
 
 from __future__ import annotations

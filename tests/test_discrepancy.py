@@ -6,16 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from bikeid.ident.discrepancy import (
-    evaluate,
-    fit_effects,
-    identify,
-    selection_frequencies,
-    synthetic_windows,
-    weave_error,
-    whiteness,
-)
+from bikeid.ident.discrepancy_diagnostics import evaluate
+from bikeid.ident.effect_fit import fit_effects
+from bikeid.ident.effect_selection import select_effects, selection_frequencies
 from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.synthetic_decays import synthetic_windows
+from bikeid.ident.validate import whiteness
+from bikeid.ident.weave import weave_error
 
 
 def test_whiteness_band():
@@ -40,7 +37,7 @@ def test_injected_library_effect_is_named(effect, value):
     truth = ExperimentModel(effects={effect: value})
     fit = synthetic_windows(truth, [1.5, 3.5], 4, seed=1)
     held = synthetic_windows(truth, [2.5, 4.5], 4, seed=2)
-    res = identify(ExperimentModel(), fit, max_effects=2)
+    res = select_effects(ExperimentModel(), fit, max_effects=2)
     assert res.verdict[0] == effect
     assert res.effects[0].value == pytest.approx(value, rel=0.2)
     ev = evaluate(ExperimentModel(), res.model, held)
@@ -50,7 +47,7 @@ def test_injected_library_effect_is_named(effect, value):
 def test_effect_outside_library_is_unexplained():
     """Roll viscous damping is not in the library: the verdict must start 'unexplained'."""
     truth = ExperimentModel(effects={"roll_viscous_damping": 1.5})
-    res = identify(ExperimentModel(), synthetic_windows(truth, [1.5, 3.5], 4, seed=3),
+    res = select_effects(ExperimentModel(), synthetic_windows(truth, [1.5, 3.5], 4, seed=3),
                    max_effects=2)  # fmt: skip
     assert res.verdict[0] == "unexplained"
 
@@ -102,7 +99,7 @@ def test_weave_error_is_relative_root_shift():
     ws = synthetic_windows(truth, [3.5], 3, noise=0.0, seed=5)
     for w in ws:  # undo the encoder quantization for a clean check
         w.delta = truth.simulate([w], nsub=10)[0]["delta"]
-    from bikeid.ident.discrepancy import decay_eigenvalue
+    from bikeid.ident.weave import decay_eigenvalue
 
     lam = [decay_eigenvalue(w) for w in ws]
     assert weave_error(ws, truth.simulate(ws, nsub=10), lam) < 1e-3
@@ -118,8 +115,9 @@ def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
     and the nonlinear counterpart is a SteerStiffness of k_t / v (analytic identity)."""
     import numpy as np
 
-    from bikeid.dataset.measured import SPEED_CALIBRATION
-    from bikeid.ident.experiment_model import nonlinear_counterpart
+    from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+    from bikeid.ident.experiment_model import COULOMB_EPS, DT
+    from bikeid.sim.effect_registry import nonlinear_effects
 
     a, b = SPEED_CALIBRATION
     for v in (1.5, 4.5):
@@ -130,7 +128,7 @@ def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
             np.sort_complex(twist.eigenvalues(vs)), np.sort_complex(spring.eigenvalues(vs)),
             atol=1e-9,
         )  # fmt: skip
-        fx, eq = nonlinear_counterpart(twist, v)
+        fx, eq = nonlinear_effects(twist.effects, v, DT, COULOMB_EPS)
         assert eq == {"steer_stiffness": pytest.approx(3.0 / v, rel=1e-12)}
 
 
@@ -167,7 +165,7 @@ def test_push_asymmetry_mirror_symmetry():
 
     import numpy as np
 
-    from bikeid.ident.discrepancy import push_asymmetry
+    from bikeid.ident.discrepancy_diagnostics import push_asymmetry
     from bikeid.ident.experiment_model import window_errors
 
     nominal = ExperimentModel()
@@ -203,14 +201,14 @@ def test_weave_uncertainty_matches_monte_carlo_scatter():
     distinct values; Efron & Tibshirani 1993, sec. 7.3), so the bound is 0.7-1.6x."""
     import numpy as np
 
-    from bikeid.ident.discrepancy import _median_complex, decay_eigenvalue, weave_uncertainty
+    from bikeid.ident.weave import decay_eigenvalue, median_complex, weave_uncertainty
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.3})
     meds, boot = [], []
     for seed in range(30):
         ws = synthetic_windows(truth, [3.5], per_speed=7, noise=0.05, seed=seed)
         lams = [decay_eigenvalue(w) for w in ws]
-        meds.append(_median_complex(lams))
+        meds.append(median_complex(lams))
         boot.append(weave_uncertainty(lams))
     meds = np.array(meds)
     mc = np.sqrt(np.mean(np.abs(meds - meds.mean()) ** 2)) / abs(meds.mean())
@@ -235,7 +233,8 @@ def test_weave_term_recovers_linear_effects():
 
     import numpy as np
 
-    from bikeid.ident.discrepancy import WeaveTerm, output_residuals, weave_targets
+    from bikeid.ident.effect_fit import output_residuals
+    from bikeid.ident.weave import WeaveTerm, weave_targets
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.4, "steer_stiffness": 1.5})
     ws = synthetic_windows(truth, [2.5, 4.5], 6, seed=4)
@@ -252,9 +251,9 @@ def test_weave_term_recovers_linear_effects():
     r = output_residuals(nominal, ws)
     unit = WeaveTerm(1.0, tg).at(nominal, ws)
     expect = math.sqrt(float(r @ r) / float(np.sum(unit.residuals(nominal) ** 2)))
-    b = identify(nominal, ws, max_effects=1)
+    b = select_effects(nominal, ws, max_effects=1)
     assert b.weave_weight == pytest.approx(expect, rel=1e-9)
     assert [e.name for e in b.effects] in ([names[0]], [names[1]])  # one of two allowed
-    assert identify(nominal, ws, max_effects=1, weave_weight=0.0).weave_weight == 0.0
+    assert select_effects(nominal, ws, max_effects=1, weave_weight=0.0).weave_weight == 0.0
     with pytest.raises(ValueError, match="weave_weight"):
-        identify(nominal, ws, max_effects=1, weave_weight=-1.0)
+        select_effects(nominal, ws, max_effects=1, weave_weight=-1.0)

@@ -19,11 +19,13 @@ from bikeid.experiments.effect_trials import (
     run_trials,
 )
 from bikeid.ident.experiment_model import (
+    COULOMB_EPS,
+    DT,
     ExperimentModel,
     attach_nonlinear_correction,
-    nonlinear_counterpart,
     window_errors,
 )
+from bikeid.sim.effect_registry import nonlinear_effects
 
 
 def test_draw_trials_seeded_stratified_and_extendable():
@@ -69,7 +71,7 @@ def test_experiment_model_effects_match_nonlinear_plant_when_small(name):
     model = ExperimentModel(effects={name: value})
     if name == "steer_coulomb_friction":  # friction level scaled with the push
         model = ExperimentModel(effects={name: value * 0.01})
-    fx, eq = nonlinear_counterpart(model, 3.0)
+    fx, eq = nonlinear_effects(model.effects, 3.0, DT, COULOMB_EPS)
     assert set(eq) == {name}
     small = _small_push_windows(fx, scale=0.01)
     err = window_errors(small, model.simulate(small, nsub=10))
@@ -80,7 +82,7 @@ def _small_push_windows(fx, scale: float):
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.dataset.closed_loop import simulate_run
     from bikeid.dataset.sensors import Channel, Sensors
-    from bikeid.ident.experiment_model import Window
+    from bikeid.dataset.windows import Window
     from bikeid.sim.parameters import steer_by_wire
 
     out = []

@@ -9,7 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bikeid.dataset.measured import despike, fetch, load_log, read_segments, treadmill_speed
+from bikeid.dataset.decays import read_segments
+from bikeid.dataset.download import fetch
+from bikeid.dataset.sbw_logs import despike, load_log, treadmill_speed
 from bikeid.ident.experiment_model import ExperimentModel
 
 DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -85,7 +87,7 @@ def test_fetch_all_speeds_adds_the_campaign_runs(tmp_path, monkeypatch, capsys):
     """`bikeid data fetch --all-speeds` asks for the 20 pinned files plus the campaign's
     four other eigen runs (2, 3, 4, 5 m/s: 7.2, 10.8, 14.4, 18 km/h, the names the
     transcribed segments.csv lists) at the pinned commit."""
-    import bikeid.dataset.measured as dm
+    import bikeid.dataset.download as dm
     from bikeid.experiments.cli import main
 
     asked = []
@@ -110,7 +112,7 @@ def test_closed_loop_sign_stabilizes():
 def test_simulation_matches_closed_loop_matrix():
     """Second method: the vectorized simulation equals powers of the augmented loop
     matrix (delay, lag, gain, biases) to round-off (1e-10)."""
-    from bikeid.ident.discrepancy import synthetic_windows
+    from bikeid.ident.synthetic_decays import synthetic_windows
 
     m = ExperimentModel(effects={"input_delay": 0.023, "actuator_lag": 0.02, "command_gain": 0.9,
                                  "roll_rate_bias": 0.01, "steer_torque_bias": 0.05})  # fmt: skip
@@ -170,12 +172,12 @@ def test_parameter_corrections_match_meijaard_mass_matrix():
 
 
 def test_small_expm_matches_scipy():
-    """The experiment model's ZOH exponential (scaling and squaring of a Taylor series)
-    equals scipy.linalg.expm (Pade) to 1e-13 relative on the loop matrices at 1-6 m/s
-    with an actuator lag (second method)."""
+    """The experiment model's ZOH exponential (``sim.sampling.expm_small``: scaling and
+    squaring of a Taylor series) equals scipy.linalg.expm (Pade) to 1e-13 relative on the
+    loop matrices at 1-6 m/s with an actuator lag (second method)."""
     from scipy.linalg import expm
 
-    from bikeid.ident.experiment_model import _expm_small
+    from bikeid.sim.sampling import expm_small
 
     m = ExperimentModel(effects={"actuator_lag": 0.02, "steer_viscous_damping": 0.5})
     for v in (1.0, 3.0, 6.0):
@@ -185,7 +187,7 @@ def test_small_expm_matches_scipy():
         big[: A.shape[0], A.shape[0] :] = B
         for h in (0.01, 0.1):
             ref = expm(big * h)
-            assert np.max(np.abs(_expm_small(big * h) - ref)) < 1e-13 * np.max(np.abs(ref))
+            assert np.max(np.abs(expm_small(big * h) - ref)) < 1e-13 * np.max(np.abs(ref))
 
 
 @needs_data
@@ -303,8 +305,8 @@ def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
     the spoilt window).  The quiet-before rule matters: switched off, a third window
     (the tail of the 2060 push) is accepted.
     """
-    import bikeid.dataset.measured as dm
-    from bikeid.dataset.measured import detect_decays
+    import bikeid.dataset.decays as dm
+    from bikeid.dataset.decays import detect_decays
 
     pushes = {500: 0.8, 1000: -0.6, 1050: 0.9, 2000: 0.7, 2060: -0.7, 2600: 0.5}
     run = load_log(_push_log(tmp_path, "eigen_x.log.gz", pushes))
@@ -317,7 +319,7 @@ def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
 
 
 def test_iter_decays_rejects_unknown_source(tmp_path):
-    from bikeid.dataset.measured import iter_decays
+    from bikeid.dataset.decays import iter_decays
 
     with pytest.raises(ValueError, match="unknown decay source"):
         list(iter_decays(tmp_path, "guessed"))
@@ -330,7 +332,7 @@ def test_detected_decays_match_transcribed_segments():
     windows are found, each start within 2 samples (the 28th push, 1.5 m/s row 10603,
     peaks below the detection threshold).  Asserted: >= 90 % found within 3 samples
     (30 ms, under 1/20 of a weave period)."""
-    from bikeid.dataset.measured import iter_decays
+    from bikeid.dataset.decays import iter_decays
 
     root = Path(DATA) / "tudelft-sbw"
     listed = read_segments(root / "eigen" / "segments.csv", {p.name for p in root.rglob("*.gz")})
@@ -351,8 +353,8 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     import json
     import shutil
 
+    from bikeid.dataset.decays import load_decays
     from bikeid.experiments.cli import main
-    from bikeid.experiments.cmd_measured import load_decays
 
     src = Path(DATA) / "tudelft-sbw" / "eigen" / "eigen_normal_sil6.5n2_12.6kph.log.gz"
     (tmp_path / "tudelft-sbw" / "eigen").mkdir(parents=True)

@@ -152,7 +152,7 @@ def test_steady_turn_unchanged():
 def test_simulation_with_relaxation_matches_closed_loop():
     """The vectorized simulation with the extra state equals powers of the augmented loop
     matrix to round-off (1e-10), lag and relaxation together (state layout check)."""
-    from bikeid.ident.discrepancy import synthetic_windows
+    from bikeid.ident.synthetic_decays import synthetic_windows
 
     m = ExperimentModel(effects={"tire_relaxation": 0.2, "actuator_lag": 0.02})
     w = synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0]

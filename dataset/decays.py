@@ -1,0 +1,234 @@
+"""Free-decay windows of the eigen logs: the listed rows of ``segments.csv`` or detected.
+
+- **Listed**: the rows of ``eigen/segments.csv`` (transcribed from the source's analysis)
+  where it lists the log (:func:`read_segments`).
+- **Detected**: for any other eigen log (a new run, a fetched folder without the segments
+  file) :func:`detect_decays` finds them from the roll rate.
+
+:func:`iter_decays` gives each eigen log with its windows; :func:`load_decays` turns them
+into :class:`bikeid.dataset.windows.Window` objects, optionally only near some speeds.
+Row indices are those of the log file (t = index * 0.01 s, :mod:`bikeid.dataset.sbw_logs`).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bikeid.dataset.run import Run
+from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log
+from bikeid.dataset.windows import Window, decay_windows
+
+__all__ = [
+    "DECAY_K",
+    "DECAY_LENGTH",
+    "DECAY_MIN_PEAK",
+    "DECAY_QUIET",
+    "DECAY_RATIO",
+    "Segment",
+    "detect_decays",
+    "iter_decays",
+    "load_decays",
+    "read_segments",
+]
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A free-decay window: rows start..end-1 of ``file`` (indices in file rows)."""
+
+    file: str
+    speed: float
+    start: int
+    end: int
+
+
+def read_segments(path: str | os.PathLike, available: set[str] | None = None) -> list[Segment]:
+    """Rows of ``segments.csv``; rows whose file is not in ``available`` are skipped.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The CSV (columns file, speed_mps, start_idx, end_idx).
+    available : set of str, optional
+        File names to keep.
+
+    Returns
+    -------
+    list of Segment
+    """
+    path = Path(path)
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        need = {"file", "speed_mps", "start_idx", "end_idx"}
+        if not reader.fieldnames or not need <= set(reader.fieldnames):
+            raise ValueError(f"{path.name}: need columns {sorted(need)}")
+        out = []
+        for i, r in enumerate(reader):
+            try:
+                seg = Segment(
+                    r["file"].strip(), float(r["speed_mps"]), int(r["start_idx"]), int(r["end_idx"])
+                )
+            except (TypeError, ValueError):
+                raise ValueError(f"{path.name}: row {i + 2} is malformed: {r}") from None
+            if seg.end <= seg.start + 10:
+                raise ValueError(f"{path.name}: row {i + 2} has end <= start + 10")
+            if available is None or seg.file in available:
+                out.append(seg)
+    return out
+
+
+#: free-decay detector settings (:func:`detect_decays`)
+DECAY_LENGTH = 1.0  # s, window length (the transcribed windows are 1 s)
+DECAY_K = 6.0  # onset threshold in robust standard deviations of the roll rate
+DECAY_MIN_PEAK = 0.2  # rad/s, lower bound of the onset threshold
+DECAY_QUIET = 0.35  # max |roll rate| in the second before the push, relative to the peak
+DECAY_RATIO = 0.5  # max |roll rate| over the window's second half, relative to the peak
+
+
+def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
+    """Free decays in an eigen log found from the roll rate alone (no segments file).
+
+    A push shows as |roll rate| rising above max(6 sigma, 0.2 rad/s), sigma the robust
+    (1.4826 MAD) scale of the whole log's roll rate.  The window starts at the extreme of
+    that first lobe (|roll rate| > half the threshold with the same sign; the hand has
+    left: from there on the motion is the loop's own) and lasts ``length`` s.  It is kept
+    only if it is a clean decay from rest: within the settled-speed part of the log; in
+    the second before the push (less its last 0.15 s) |roll rate| stayed below 0.35 x the
+    peak; over the window's second half it stays below 0.5 x the peak; and it never
+    exceeds 1.1 x the peak (no second push).  The next search starts after the window.  On the four
+    ``eigen_normal`` logs this finds every window of the transcribed ``segments.csv``
+    whose push clears the threshold, at the same start to a few samples, plus the
+    pushes the source's analysis did not use (tests/test_measured.py, docs/measured.md);
+    those fit the model worse, so the curated list is the default where it exists.
+
+    Parameters
+    ----------
+    run : Run
+        An eigen log.
+    length : float, optional
+        Window length [s].
+
+    Returns
+    -------
+    list of Segment
+    """
+    pr = np.asarray(run.signals["phidot"], dtype=float)
+    first = int(run.meta.get("first_index", 0))
+    lo = int(run.meta.get("ramp_end_index", first)) - first
+    hi = int(run.meta.get("settled_end_index", first + pr.size)) - first
+    m = int(round(length / DT))
+    if m < 20:
+        raise ValueError(f"decay window length {length} s is too short (need >= 0.2 s)")
+    sigma = 1.4826 * float(np.median(np.abs(pr - np.median(pr))))
+    thr = max(DECAY_K * sigma, DECAY_MIN_PEAK)
+    pre, gap = int(round(1.0 / DT)), int(round(0.15 / DT))
+    speed = float(run.meta.get("speed", np.nan))
+    out: list[Segment] = []
+    i = max(lo, pre)
+    while i < hi - m:
+        if abs(pr[i]) <= thr:
+            i += 1
+            continue
+        sgn, k = np.sign(pr[i]), i
+        while k + 1 < hi and sgn * pr[k + 1] > 0.5 * thr:  # the push's first lobe
+            k += 1
+        j = i + int(np.argmax(sgn * pr[i : k + 1]))
+        peak = abs(pr[j])
+        win = np.abs(pr[j : j + m])
+        clean = (
+            j + m <= hi
+            and np.max(np.abs(pr[i - pre : i - gap])) < DECAY_QUIET * peak
+            and np.max(win[m // 2 :]) < DECAY_RATIO * peak
+            and np.max(win) <= 1.1 * peak
+        )
+        if clean:
+            out.append(Segment(run.meta.get("file", "?"), speed, first + j, first + j + m))
+        i = j + m
+    return out
+
+
+def iter_decays(
+    root: str | os.PathLike, source: str = "listed"
+) -> Iterator[tuple[Run, list[Segment]]]:
+    """(run, its free-decay windows) for every eigen log (name starting ``eigen``) under root.
+
+    ``source="listed"``: the windows of ``segments.csv`` (in the log's folder) for the logs
+    it lists, :func:`detect_decays` for the others, so a new log of this format needs no
+    segments file.  ``source="detected"``: :func:`detect_decays` for every log.
+
+    Parameters
+    ----------
+    root : str or path-like
+        Folder searched recursively.
+    source : str, optional
+        ``"listed"`` or ``"detected"``.
+
+    Yields
+    ------
+    (Run, list of Segment)
+    """
+    if source not in ("listed", "detected"):
+        raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
+    lists: dict[Path, list[Segment]] = {}  # segments.csv of each folder, read once
+    for path in find_logs(root, "eigen"):
+        sf = path.parent / "segments.csv"
+        if source == "listed" and sf.is_file() and sf not in lists:
+            lists[sf] = read_segments(sf)
+        run = load_log(path)
+        segs = [sg for sg in lists.get(sf, []) if sg.file == path.name] or detect_decays(run)
+        if segs:
+            yield run, segs
+
+
+def load_decays(
+    data: str | os.PathLike | None,
+    speeds: list[float] | None = None,
+    exclude: list[float] | None = None,
+    source: str = "listed",
+) -> list[Window]:
+    """Free-decay windows of all eigen logs, optionally only near some speeds.
+
+    Parameters
+    ----------
+    data : str or path-like or None
+        The data folder (:func:`bikeid.dataset.sbw_logs.data_dir`; None: ``$BIKEID_DATA``).
+    speeds : list of float, optional
+        Keep only windows within 0.25 m/s of one of these treadmill speeds [m/s].
+    exclude : list of float, optional
+        Drop windows within 0.25 m/s of one of these treadmill speeds [m/s].
+    source : str, optional
+        ``"listed"`` or ``"detected"`` (:func:`iter_decays`).
+
+    Returns
+    -------
+    list of Window
+        Raises ValueError when no window is left, naming the speeds the data has.
+    """
+    root = data_dir(data)
+    out = []
+    for run, segs in iter_decays(root, source):
+        ws = decay_windows(run, segs)
+        out.extend(ws)
+    if not out:
+        raise ValueError(
+            f"{root}: no free-decay windows (need eigen*.log[.gz] logs with pushes the detector "
+            "finds, or rows for them in eigen/segments.csv)"
+        )
+
+    def near(w, lst):
+        return any(abs(w.speed - s) < 0.25 for s in lst)
+
+    have = sorted({round(w.speed, 2) for w in out})
+    if speeds is not None:
+        out = [w for w in out if near(w, speeds)]
+    if exclude:
+        out = [w for w in out if not near(w, exclude)]
+    if not out:
+        raise ValueError(f"no decay windows at the requested speeds; the data has {have} m/s")
+    return out

@@ -1,0 +1,322 @@
+"""Parser of the TU Delft steer-by-wire treadmill logs (``tudelft-sbw``): reading and despiking.
+
+Format (see the data README): gzip CSV with a header, one row per 10 ms control loop,
+no time column, so t = i * 0.01 s.  Units are SI (rad, rad/s, N m, m/s).
+
+What the loader does, and why
+------------------------------
+- **Time base**: t = i * 0.01 s from the first row of the file (row indices of
+  ``eigen/segments.csv`` refer to the same numbering).
+- **Free-decay windows**: :mod:`bikeid.dataset.decays` (the listed rows of
+  ``eigen/segments.csv`` or detected from the roll rate); download:
+  :mod:`bikeid.dataset.download`.
+- **Empty sil_command rows**: some logs open with rows whose ``sil_command`` field is
+  empty (controller not running yet).  Those leading rows are cut; an empty field later
+  in the file is a malformed file.
+- **Spikes** in ``fork_rate``, ``x_acceleration`` and ``y_acceleration``: a sample is a
+  spike when its distance from the 5-sample running median exceeds
+  ``SPIKE_K`` = 8 times the robust scale (1.4826 * median absolute deviation of that
+  distance over the whole file) *and* ``SPIKE_FLOOR`` (0.5 rad/s, 5 m/s^2).  Spikes
+  are replaced by linear interpolation between good neighbours; the count goes to
+  ``meta['spikes']``.  (fork_rate is the encoder difference, quantized at 0.077 rad/s;
+  its spikes are isolated one-sample jumps the steer angle does not follow.)
+- **Speed**: the ``speed`` column is the rear-wheel encoder (500-sample moving
+  average), which per the source's calibration reads ``1.066 * treadmill - 0.128``.
+  ``signals['v']`` is the logged sensor speed (what the controller used);
+  ``meta['speed']`` is the treadmill speed from the calibration applied to the median of
+  the settled part of the file; ``meta['speed_sensor']`` the settled sensor median.
+  The plateau is the most populated 0.05 m/s bin of the speed histogram; samples more
+  than 5 % off it belong to a ramp.  ``meta['ramp_end_index']`` is the first settled
+  row, ``meta['settled_end_index']`` one past the last one (a run-down at the end);
+  the Run keeps all rows so that segment indices stay valid.
+- **Signals**: phi = lean_angle, phidot = lean_rate, delta = fork_angle,
+  deltadot = fork_rate, v = speed, T_delta = command_fork (total steer-motor command,
+  the plant input); extras ``sil_command``, ``hand_torque``, ``hand_angle``,
+  ``command_hand``, ``x_acceleration``, ``y_acceleration`` and ``T_ext`` =
+  command_fork - sil_command (the part of the steer torque that is not the balance
+  controller: the relayed handlebar torque in the Bode runs, zero in the eigen runs).
+
+Sign conventions (checked against the physics, see ``docs/measured.md``)
+-----------------------------------------------------------------------
+``sil_command`` equals ``+2 (6.5 - speed) lean_rate`` to 1e-9 (correlation) in every
+file.  With roll and steer positive to the right (Meijaard 2007) a steer torque *in
+the direction of the roll rate* is the stabilizing steer-into-lean law: the Whipple
+model of this bicycle closed with ``T = +K (V - v) phidot`` is stable at 1.5-4.5 m/s,
+with ``-K`` it is unstable.  The bicycle stayed up in all runs, and the free decays
+show steer and roll of the same sign (steer into the lean), as the model predicts.  So
+roll, roll rate, steer and steer torque of the logs share the benchmark's signs.  A
+mirror image (all four flipped together) leaves the dynamics unchanged, so physics
+alone cannot fix the absolute direction; the relative signs are what the model needs.
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import os
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from bikeid.dataset.run import Run
+
+__all__ = [
+    "COLUMNS",
+    "DATASET",
+    "DT",
+    "SPEED_CALIBRATION",
+    "data_dir",
+    "despike",
+    "find_logs",
+    "load_log",
+    "treadmill_speed",
+]
+
+DT = 0.01  # s, one control loop
+
+COLUMNS = (
+    "sil_command", "speed", "lean_angle", "lean_rate", "hand_angle", "fork_angle",
+    "fork_rate", "lean_torque", "hand_torque", "x_acceleration", "y_acceleration",
+    "command_fork", "command_hand",
+)  # fmt: skip
+
+#: sensor = a * treadmill + b (source calibration, data README)
+SPEED_CALIBRATION = (1.066, -0.128)
+
+SPIKE_K = 8.0
+
+SPIKE_FLOOR = {"fork_rate": 0.5, "x_acceleration": 5.0, "y_acceleration": 5.0}
+
+DATASET = "tudelft-sbw"
+
+
+def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
+    """Treadmill speed [m/s] from the rear-wheel sensor speed (inverse calibration).
+
+    Parameters
+    ----------
+    sensor : float or ndarray
+        Sensor speed [m/s].
+
+    Returns
+    -------
+    float or ndarray
+        [m/s].
+    """
+    a, b = SPEED_CALIBRATION
+    return (np.asarray(sensor) - b) / a
+
+
+def data_dir(path: str | os.PathLike | None = None) -> Path:
+    """The ``tudelft-sbw`` folder: from ``path`` (``--data``), else ``$BIKEID_DATA``.
+
+    Either may name the folder itself or its parent (CI: ``BIKEID_DATA=../shared/data``).
+
+    Parameters
+    ----------
+    path : str or path-like, optional
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    src = path if path is not None else os.environ.get("BIKEID_DATA")
+    if not src:
+        raise ValueError(
+            "no data directory: pass --data DIR or set BIKEID_DATA to the folder that "
+            f"contains {DATASET}/ (get the files with 'bikeid data fetch')"
+        )
+    root = Path(src).expanduser()
+    for cand in (root / DATASET, root):
+        if cand.is_dir() and (any(cand.glob("*/*.log*")) or any(cand.glob("*.log*"))):
+            return cand
+    raise ValueError(f"data directory {root} holds no {DATASET} logs (*.log or *.log.gz)")
+
+
+def find_logs(root: str | os.PathLike, kind: str | None = None) -> list[Path]:
+    """All ``*.log``/``*.log.gz`` files under ``root`` (optionally whose name starts with kind).
+
+    Parameters
+    ----------
+    root : str or path-like
+    kind : str, optional
+        File-name prefix (``"eigen"``, ``"bode"``).
+
+    Returns
+    -------
+    list of pathlib.Path
+        Sorted.
+    """
+    files = sorted(
+        p for p in Path(root).rglob("*") if p.is_file() and p.name.endswith((".log", ".log.gz"))
+    )
+    if kind:
+        files = [p for p in files if p.name.startswith(kind)]
+    return files
+
+
+def _read_text(path: Path) -> str:
+    try:
+        if path.name.endswith(".gz"):
+            with gzip.open(path, "rt", newline="") as fh:
+                return fh.read()
+        return path.read_text()
+    except (EOFError, gzip.BadGzipFile, zlib.error, UnicodeDecodeError) as exc:
+        raise ValueError(
+            f"{path.name}: corrupt or truncated file ({exc}); fetch it again"
+        ) from None
+
+
+def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray, int]:
+    """Replace isolated spikes by interpolation (detector: see module docstring).
+
+    Parameters
+    ----------
+    x : ndarray
+    floor : float
+        Least deviation counted as a spike [unit of x].
+    k : float, optional
+        Threshold in robust standard deviations.
+
+    Returns
+    -------
+    ndarray
+        Despiked copy.
+    int
+        Number of spikes replaced.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.size < 5:
+        return x.copy(), 0
+    pad = np.pad(x, 2, mode="edge")
+    med = np.median(np.lib.stride_tricks.sliding_window_view(pad, 5), axis=1)
+    dev = np.abs(x - med)
+    scale = 1.4826 * np.median(dev)
+    bad = dev > max(k * scale, floor)
+    nbad = int(bad.sum())
+    if nbad == 0 or nbad == x.size:
+        return x.copy(), 0
+    out = x.copy()
+    idx = np.arange(x.size)
+    out[bad] = np.interp(idx[bad], idx[~bad], x[~bad])
+    return out, nbad
+
+
+def load_log(path: str | os.PathLike) -> Run:
+    """Read one steer-by-wire log into a :class:`dataset.run.Run` (see module docstring).
+
+    Raises ValueError naming the file and the problem for missing columns,
+    non-numeric fields, a truncated gzip stream or too few rows.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    Run
+        Signals in SI units (module docstring) and ``meta``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"log file {path} does not exist")
+    text = _read_text(path)
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise ValueError(f"{path.name}: empty file, expected a CSV header") from None
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise ValueError(f"{path.name}: missing columns {missing}; expected {list(COLUMNS)}")
+    col = {c: header.index(c) for c in COLUMNS}
+    rows = [r for r in reader if r and any(f.strip() for f in r)]
+    if len(rows) < 10:
+        raise ValueError(f"{path.name}: only {len(rows)} data rows; need at least 10")
+    # leading rows with an empty sil_command: controller not yet running
+    first = 0
+    while first < len(rows) and (
+        len(rows[first]) <= col["sil_command"] or not rows[first][col["sil_command"]].strip()
+    ):
+        first += 1
+    if first == len(rows):
+        raise ValueError(f"{path.name}: sil_command is empty in every row")
+    data = np.empty((len(rows) - first, len(COLUMNS)))
+    for i, r in enumerate(rows[first:]):
+        if len(r) != len(header):
+            raise ValueError(
+                f"{path.name}: row {first + i + 2} has {len(r)} fields, header has "
+                f"{len(header)} (truncated or malformed file)"
+            )
+        for j, c in enumerate(COLUMNS):
+            try:
+                data[i, j] = float(r[col[c]])
+            except ValueError:
+                raise ValueError(
+                    f"{path.name}: row {first + i + 2}, column {c!r}: non-numeric value "
+                    f"{r[col[c]]!r}"
+                ) from None
+    if not np.all(np.isfinite(data)):
+        raise ValueError(f"{path.name}: non-finite values in the data")
+    raw = {c: data[:, j] for j, c in enumerate(COLUMNS)}
+    spikes = {}
+    for c, floor in SPIKE_FLOOR.items():
+        raw[c], spikes[c] = despike(raw[c], floor)
+    n = data.shape[0]
+    t = (first + np.arange(n)) * DT
+    v = raw["speed"]
+    settled, ramp_end, run_end = _settled_speed(v)
+    signals = {
+        "phi": raw["lean_angle"],
+        "phidot": raw["lean_rate"],
+        "delta": raw["fork_angle"],
+        "deltadot": raw["fork_rate"],
+        "v": v,
+        "T_delta": raw["command_fork"],
+        "T_ext": raw["command_fork"] - raw["sil_command"],
+        **{
+            c: raw[c]
+            for c in (
+                "sil_command",
+                "hand_torque",
+                "hand_angle",
+                "command_hand",
+                "x_acceleration",
+                "y_acceleration",
+            )  # fmt: skip
+        },
+    }
+    meta = {
+        "source": "measured",
+        "dataset": DATASET,
+        "file": path.name,
+        "speed": float(treadmill_speed(settled)),
+        "speed_sensor": settled,
+        "first_index": first,
+        "ramp_end_index": first + ramp_end,
+        "settled_end_index": first + run_end,
+        "spikes": spikes,
+        "controller": {"law": "steer-into-lean", "T": "K (V - speed) phidot", "K": 2.0, "V": 6.5},
+        "bicycle": "steer-by-wire",
+        "dt": DT,
+    }
+    return Run(t=t, signals=signals, meta=meta)
+
+
+def _settled_speed(v: np.ndarray) -> tuple[float, int, int]:
+    """Treadmill plateau of the sensor speed: (median, first index, end index).
+
+    The plateau is the most populated 0.05 m/s bin of the speed histogram; samples
+    within 5 % of it are settled.  Returns the median of the settled samples, the first
+    settled index (the end of a start-up ramp) and one past the last settled index
+    (a run-down at the end is cut there).
+    """
+    edges = np.arange(np.floor(v.min() / 0.05) * 0.05, v.max() + 0.1, 0.05)
+    hist, edges = np.histogram(v, bins=edges)
+    mode = 0.5 * (edges[np.argmax(hist)] + edges[np.argmax(hist) + 1])
+    ok = np.abs(v - mode) <= 0.05 * max(abs(mode), 0.1)
+    settled = float(np.median(v[ok]))
+    idx = np.flatnonzero(ok)
+    return settled, int(idx[0]), int(idx[-1] + 1)

@@ -1,0 +1,165 @@
+"""Windows of an experiment: the stretches of a measured log a model is compared with.
+
+A :class:`Window` is a free decay (:func:`decay_windows`, from the rows of
+:mod:`bikeid.dataset.decays`) or the settled stretch of a Bode run (:func:`bode_window`),
+with the measured signals, the sensor and treadmill speeds and the logged steer commands
+before its start (for a model's delay buffer).  Sample time 0.01 s (one control loop,
+:data:`bikeid.dataset.sbw_logs.DT`); units SI (rad, rad/s, m/s, N m).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bikeid.dataset.run import Run
+from bikeid.dataset.sbw_logs import DT, treadmill_speed
+
+__all__ = ["Window", "bode_window", "decay_windows"]
+
+
+@dataclass
+class Window:
+    """One stretch of an experiment to simulate: a free decay or a Bode record.
+
+    Measured arrays (length n, sample time 0.01 s): phi, delta, phidot, deltadot,
+    v_sensor, T_ext (external steer torque relayed to the motor), T_phi (roll torque,
+    simulation only).  ``hist`` holds the logged steer commands before the window
+    start (oldest first) for the delay buffer.  ``speed`` is the treadmill speed [m/s].
+    """
+
+    file: str
+    speed: float
+    start: int
+    phi: np.ndarray
+    delta: np.ndarray
+    phidot: np.ndarray
+    deltadot: np.ndarray
+    v_sensor: np.ndarray
+    T_ext: np.ndarray
+    hist: np.ndarray
+    kind: str = "decay"
+    freq: float | None = None
+    T_phi: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+    correction: dict | None = None  # nonlinear - linear nominal outputs (ident.experiment_model)
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return self.phi.size
+
+    def state0(self) -> np.ndarray:
+        """Measured state at the start: quadratic fit over the first 5 samples at t=0.
+
+        Returns
+        -------
+        (4,) ndarray
+            phi [rad], delta [rad], phidot [rad/s], deltadot [rad/s] at the first sample.
+        """
+        k = min(5, self.n)
+        tt = np.arange(k) * DT
+        out = []
+        for y in (self.phi, self.delta, self.phidot, self.deltadot):
+            c = np.polyfit(tt, y[:k], 2 if k >= 4 else 0)
+            out.append(np.polyval(c, 0.0))
+        return np.array(out)
+
+    def command_history(self, length: int) -> np.ndarray:
+        """The last ``length`` logged commands before the start, oldest first.
+
+        Parameters
+        ----------
+        length : int
+            Number of samples.
+
+        Returns
+        -------
+        (length,) ndarray
+            Steer commands [N m]; a shorter history is padded at the front with its oldest
+            value (zero when there is none).
+        """
+        h = np.asarray(self.hist, dtype=float)
+        if h.size >= length:
+            return h[-length:]
+        return np.concatenate([np.full(length - h.size, h[0] if h.size else 0.0), h])
+
+
+def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20) -> Window:
+    first = int(run.meta.get("first_index", 0))
+    a, b = i0 - first, i1 - first
+    if a < 0 or b > run.n or b - a < 10:
+        raise ValueError(
+            f"{run.meta.get('file', 'run')}: window rows {i0}..{i1} outside the file "
+            f"(rows {first}..{first + run.n})"
+        )
+    sl = slice(a, b)
+    h = run["T_delta"][max(0, a - hist_len) : a]
+    h = np.concatenate([np.full(hist_len - h.size, h[0] if h.size else 0.0), h])
+    ext = run.signals.get("T_ext", np.zeros(run.n))
+    return Window(
+        file=str(run.meta.get("file", "run")),
+        speed=float(treadmill_speed(np.mean(run["v"][sl]))),
+        start=i0,
+        phi=run["phi"][sl].copy(),
+        delta=run["delta"][sl].copy(),
+        phidot=run["phidot"][sl].copy(),
+        deltadot=run["deltadot"][sl].copy(),
+        v_sensor=run["v"][sl].copy(),
+        T_ext=ext[sl].copy(),
+        hist=h,
+        kind=kind,
+        freq=freq,
+    )
+
+
+def decay_windows(run: Run, segments) -> list[Window]:
+    """Free-decay windows of a run from ``bikeid.dataset.decays.Segment`` rows.
+
+    Parameters
+    ----------
+    run : Run
+        A log read by :func:`bikeid.dataset.sbw_logs.load_log`.
+    segments : iterable of Segment
+        Rows start..end-1 (file row indices).
+
+    Returns
+    -------
+    list of Window
+        With the file's settled treadmill speed [m/s] when the run knows it.
+    """
+    out = [_window(run, s.start, s.end, "decay") for s in segments]
+    if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
+        for w in out:
+            w.speed = float(run.meta["speed"])
+    return out
+
+
+def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> Window:
+    """The settled-speed stretch of a Bode run (at most ``max_len`` s, skipping 1 s).
+
+    Parameters
+    ----------
+    run : Run
+        A Bode log.
+    freq : float, optional
+        Excitation frequency [Hz] (default: read from the file name, ``_<f>Hz``).
+    max_len : float, optional
+        Longest window [s].
+
+    Returns
+    -------
+    Window
+        ``kind="bode"``.
+    """
+    first = int(run.meta.get("first_index", 0))
+    i0 = int(run.meta.get("ramp_end_index", first)) + 100
+    i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))
+    if freq is None:
+        m = re.search(r"_([0-9.]+)Hz", str(run.meta.get("file", "")))
+        if not m:
+            raise ValueError(f"cannot read the excitation frequency from {run.meta.get('file')}")
+        freq = float(m.group(1))
+    return _window(run, i0, i1, "bode", freq=freq)

@@ -1,0 +1,287 @@
+"""Output-error fits of named effects to free decays, with clustered standard errors.
+
+The residuals (:func:`output_residuals`) are the simulated minus the measured roll rate and
+steer angle of each decay, divided per window and channel by ||y - mean y||, so that their
+sum of squares is a sum of NRMSE^2 (dimensionless).  :func:`fit_effects` fits named effects
+by least squares on them (optionally with the weave term of :mod:`bikeid.ident.weave`);
+:func:`joint_fit` adds the nonlinear plant through the defect correction
+(:func:`bikeid.ident.experiment_model.attach_nonlinear_correction`).  Standard errors are
+clustered by window (:func:`effect_std`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from bikeid.dataset.windows import Window
+from bikeid.ident.effect_library import LIBRARY, Candidate
+from bikeid.ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+from bikeid.ident.weave import WeaveTerm
+
+__all__ = [
+    "EffectEstimate",
+    "FitResult",
+    "attach_correction",
+    "effect_std",
+    "fit_effects",
+    "joint_fit",
+    "noise_floor",
+    "output_residuals",
+]
+
+
+def _norms(windows, channels=("phidot", "delta")):
+    return [
+        [max(np.linalg.norm(getattr(w, c) - getattr(w, c).mean()), 1e-12) for c in channels]
+        for w in windows
+    ]
+
+
+def output_residuals(model: ExperimentModel, windows: list[Window], norms=None) -> np.ndarray:
+    """Stacked residuals (sim - measured) of roll rate and steer angle, each window and
+    channel divided by ||y - mean y|| so the sum of squares is a sum of NRMSE^2.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+    windows : list of Window
+    norms : list of [float, float], optional
+        ||y - mean y|| of roll rate [rad/s] and steer angle [rad] per window (computed when
+        not given).
+
+    Returns
+    -------
+    ndarray
+        Dimensionless residuals, window by window (roll rate, then steer angle).
+    """
+    norms = norms or _norms(windows)
+    sims = model.simulate(windows)
+    parts = []
+    for w, s, nr in zip(windows, sims, norms, strict=True):
+        parts.append((s["phidot"] - w.phidot) / nr[0])
+        parts.append((s["delta"] - w.delta) / nr[1])
+    return np.concatenate(parts)
+
+
+def noise_floor(windows: list[Window]) -> float:
+    """Expected normalized cost of a perfect model: sum n sigma^2 / ||y - ybar||^2.
+
+    Parameters
+    ----------
+    windows : list of Window
+        sigma^2 of each channel from second differences, mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6.
+
+    Returns
+    -------
+    float
+        Dimensionless cost (comparable with the sum of squares of :func:`output_residuals`).
+    """
+    tot = 0.0
+    for w, nr in zip(windows, _norms(windows), strict=True):
+        for y, ni in ((w.phidot, nr[0]), (w.delta, nr[1])):
+            s2 = np.mean(np.diff(y, 2) ** 2) / 6.0
+            tot += y.size * s2 / ni**2
+    return float(tot)
+
+
+@dataclass
+class EffectEstimate:
+    """One effect's estimate.
+
+    ``value`` and ``std`` (clustered standard error) in ``unit``; ``t`` = |value - absent| /
+    std; ``explained``: fraction of the nominal cost removed; ``accepted``: selected.
+    """
+
+    name: str
+    value: float
+    std: float
+    unit: str
+    t: float
+    explained: float = 0.0  # fraction of the nominal cost removed when added
+    accepted: bool = False
+
+    def as_dict(self) -> dict:
+        """The estimate as a JSON-able dict (the keys of the attributes)."""
+        return {
+            "name": self.name, "value": self.value, "std": self.std, "unit": self.unit,
+            "t": self.t, "explained": self.explained, "accepted": self.accepted,
+        }  # fmt: skip
+
+
+@dataclass
+class FitResult:
+    """A fit: the fitted ``model``, the fitted ``values`` and their standard errors ``std``
+    (effect units) and the final ``cost`` (sum of squared normalized residuals, with the
+    weave term when one was given)."""
+
+    model: ExperimentModel
+    values: dict[str, float]
+    std: dict[str, float]
+    cost: float
+
+
+def fit_effects(
+    model: ExperimentModel,
+    windows: list[Window],
+    names: list[str],
+    start: dict | None = None,
+    weave: WeaveTerm | None = None,
+) -> FitResult:
+    """Output-error least squares of the named effects (others kept as in ``model``);
+    with ``weave``, the weave-eigenvalue residuals are appended (one more cluster for the
+    standard errors) and ``cost`` includes them.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        Start model; effects not in ``names`` stay as they are.
+    windows : list of Window
+        The decays.
+    names : list of str
+        Registry names to fit (library settings :data:`bikeid.ident.effect_library.LIBRARY`;
+        other names: additive, scale 0.1, unbounded).
+    start : dict, optional
+        Start values by name [effect units] (default: those of ``model``).
+    weave : WeaveTerm, optional
+        Weave-eigenvalue residuals to append.
+
+    Returns
+    -------
+    FitResult
+    """
+    extra = weave is not None and weave.weight > 0 and bool(weave.targets)
+    if not names:
+        r = output_residuals(model, windows)
+        if extra:
+            r = np.concatenate([r, weave.residuals(model)])
+        return FitResult(model, {}, {}, float(r @ r))
+    norms = _norms(windows)
+    cands = [LIBRARY[n] if n in LIBRARY else Candidate(n, "additive", 0.1) for n in names]
+    start = start or {}
+    x0 = np.array([(start.get(c.name, model.e(c.name)) - c.absent) / c.scale for c in cands])
+    lo = np.array([(c.lower - c.absent) / c.scale if c.lower > -np.inf else -np.inf for c in cands])
+    hi = np.array([(c.upper - c.absent) / c.scale if c.upper < np.inf else np.inf for c in cands])
+    lo = np.where(np.isfinite(lo), lo, -np.inf)
+    x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+
+    def mk(x):
+        return model.with_effects(
+            **{c.name: c.absent + c.scale * xi for c, xi in zip(cands, x, strict=True)}
+        )
+
+    def fun(x):
+        m = mk(x)
+        r = output_residuals(m, windows, norms)  # ~O(1) per sample (normalized)
+        if extra:
+            try:
+                r = np.concatenate([r, weave.residuals(m)])
+            except ValueError:  # a trial value the loop roots cannot take
+                r = np.concatenate([r, np.full(2 * len(weave.targets), 1e3)])
+        # a trial value that makes the loop diverge must not overflow the Jacobian
+        return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
+
+    sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
+    r = sol.fun
+    sizes = [2 * w.n for w in windows] + ([2 * len(weave.targets)] if extra else [])
+    std = effect_std(sol.jac, r, sizes)
+    vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x, strict=True)}
+    stds = {c.name: c.scale * si for c, si in zip(cands, std, strict=True)}
+    return FitResult(mk(sol.x), vals, stds, float(r @ r))
+
+
+def joint_fit(
+    model: ExperimentModel,
+    windows: list[Window],
+    names: list[str],
+    start: dict | None = None,
+    nonlinear: bool = False,
+    weave: WeaveTerm | None = None,
+) -> FitResult:
+    """Fit the named effects jointly on all windows (and ``weave``, see
+    :func:`fit_effects`); with ``nonlinear`` the defect
+    correction is attached at the nominal first and re-attached at the fitted model twice
+    (each re-attachment moves the linearization point of the correction to the fit).
+    Leaves the windows corrected at the returned model.
+
+    Parameters
+    ----------
+    model, windows, names, start, weave
+        As for :func:`fit_effects`.
+    nonlinear : bool, optional
+        Nonlinear plant by defect correction.
+
+    Returns
+    -------
+    FitResult
+    """
+    if nonlinear and all(w.correction is None for w in windows):
+        attach_correction(windows, model, True)
+    res = fit_effects(model, windows, names, start, weave)
+    for _ in range(2 if nonlinear and names else 0):
+        attach_correction(windows, res.model, True)
+        res = fit_effects(model, windows, names, res.values, weave)
+    return res
+
+
+def effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
+    """Standard errors of output-error estimates, clustered by window.
+
+    The residual of one decay is smooth and mostly model error, so its samples are far
+    from independent, while separate pushes are: the covariance is the cluster-robust
+    sandwich (J^T J)^-1 (sum_g J_g^T r_g r_g^T J_g) (J^T J)^-1 G / (G - 1) over the G
+    windows (Liang & Zeger 1986).  With fewer than p + 2 windows it falls back to
+    s^2 (J^T J)^-1 with the sample count reduced for the lag-1 autocorrelation r1,
+    N_eff = N (1 - r1) / (1 + r1).
+
+    Parameters
+    ----------
+    J : (n, p) ndarray
+        Jacobian of the residuals with respect to the (scaled) parameters.
+    r : (n,) ndarray
+        Residuals at the estimate.
+    sizes : list of int
+        Residual count of each cluster (window), in order.
+
+    Returns
+    -------
+    (p,) ndarray
+        Standard errors in the parameters' (scaled) units.
+    """
+    n, p = J.shape
+    try:
+        bread = np.linalg.pinv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return np.full(p, np.inf)
+    g = len(sizes)
+    if g >= p + 2 and sum(sizes) == n:
+        meat = np.zeros((p, p))
+        i = 0
+        for m in sizes:
+            u = J[i : i + m].T @ r[i : i + m]
+            meat += np.outer(u, u)
+            i += m
+        cov = bread @ meat @ bread * g / (g - 1)
+    else:
+        r1 = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if n > 3 else 0.0
+        neff = max(n * (1 - r1) / (1 + r1), p + 1)
+        cov = float(r @ r) / (neff - p) * bread
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def attach_correction(windows: list[Window], model: ExperimentModel, nonlinear: bool) -> None:
+    """Attach the nonlinear plant's defect correction at ``model`` when ``nonlinear``.
+
+    Parameters
+    ----------
+    windows : list of Window
+        Corrected in place (:func:`bikeid.ident.experiment_model.attach_nonlinear_correction`).
+    model : ExperimentModel
+        The linearization point of the correction.
+    nonlinear : bool
+        False: nothing is done (the linear experiment model stays as it is).
+    """
+    if nonlinear:
+        attach_nonlinear_correction(windows, model)

@@ -1,0 +1,106 @@
+"""The identification library: the effects the selection may add, with their fit settings.
+
+Each effect's facts (name, unit, absent value, its one-line doc) are those of the registry
+(:mod:`bikeid.sim.effect_registry`); a :class:`Candidate` adds only how the ident layer fits
+it: additive or structural, the scale the optimizer works in, the fit bounds and, for a
+structural effect, the grid its start value is scanned on.  ``LIBRARY`` holds exactly the
+registry's entries with ``in_library`` (tests/test_discrepancy.py), in the order the
+selection tries them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bikeid.sim.effect_registry import Effect, effect
+
+__all__ = ["LIBRARY", "Candidate"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """How the identification fits one effect.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (:func:`bikeid.sim.effect_registry.effect`).
+    kind : str
+        ``"additive"`` (fitted from its absent value) or ``"structural"`` (start scanned on
+        ``grid`` first, then refined).
+    scale : float
+        Typical magnitude [the effect's unit]: the optimizer's unit step.
+    lower, upper : float
+        Fit bounds [the effect's unit] (infinite: none).
+    grid : tuple of float
+        Scan grid of a structural effect [the effect's unit].
+    """
+
+    name: str
+    kind: str
+    scale: float
+    lower: float = -np.inf
+    upper: float = np.inf
+    grid: tuple[float, ...] = ()
+
+    @property
+    def entry(self) -> Effect:
+        """The registry entry."""
+        return effect(self.name)
+
+    @property
+    def unit(self) -> str:
+        """Unit of the value (registry)."""
+        return self.entry.unit
+
+    @property
+    def absent(self) -> float:
+        """The value that means "no such effect" (registry)."""
+        return self.entry.absent
+
+    @property
+    def doc(self) -> str:
+        """The term the effect adds (registry)."""
+        return self.entry.doc
+
+
+LIBRARY: dict[str, Candidate] = {
+    c.name: c
+    for c in (
+        Candidate("steer_viscous_damping", "additive", 0.3),
+        Candidate("steer_coulomb_friction", "additive", 0.1, 0.0),
+        Candidate("steer_stiffness", "additive", 1.0),
+        Candidate("tire_scrub_torque", "additive", 0.5),
+        Candidate("command_gain", "additive", 0.2, 0.05),
+        Candidate("steer_torque_bias", "additive", 0.05),
+        Candidate("steer_inertia", "additive", 0.02),
+        Candidate("trail_correction", "additive", 0.01, -0.07, 0.2),
+        # front-frame (fork + motor) inertia borrowed from a similar bicycle: x0.2-20
+        Candidate("front_inertia_scale", "additive", 0.5, 0.2, 20.0),
+        # estimated rear/front mass split: -0.5..5 kg to the front frame
+        Candidate("front_mass_shift", "additive", 0.5, -0.5, 5.0),
+        # rear-frame inertia borrowed from a similar bicycle: x0.5-2
+        Candidate("rear_inertia_scale", "additive", 0.2, 0.5, 2.0),
+        Candidate("roll_angle_bias", "additive", 0.01),
+        Candidate("steer_angle_bias", "additive", 0.01),
+        Candidate("roll_rate_bias", "additive", 0.01),
+        Candidate("roll_rate_scale", "additive", 0.05, 0.2),
+        Candidate("speed_scale", "additive", 0.05, 0.3),
+        Candidate(
+            "input_delay", "structural", 0.02, 0.0, 0.1, grid=(0.005, 0.01, 0.02, 0.03, 0.045, 0.06)
+        ),
+        Candidate(
+            "actuator_lag",
+            "structural",
+            0.02,
+            0.0,
+            0.2,
+            grid=(0.005, 0.01, 0.02, 0.035, 0.05, 0.08),
+        ),
+        Candidate(
+            "tire_relaxation", "structural", 0.1, 0.0, 0.6, grid=(0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
+        ),
+    )  # fmt: skip
+}

@@ -1,0 +1,341 @@
+"""Effect selection: residual -> named physical effect -> augmented model.
+
+Workflow (identification.md section 5, approaches A/B/E):
+
+1. **Residuals.**  Output residuals of the experiment model (:mod:`ident.experiment_model`)
+   on free-decay windows (roll rate, steer angle), and equation-error residuals of the
+   roll and steer rows in Moore & Hubbard's form ``M q'' + v C1 q' + (g K0 + v^2 K2) q
+   = [0, T]`` (accelerations from zero-phase-filtered central differences).
+   Diagnostics: whiteness (fraction of autocorrelations outside the 99 % band,
+   lags 1..25), cross-correlation with the steer command, Welch spectra.
+2. **Ranking.**  Additive candidates are ranked by the orthogonal error-reduction ratio
+   (ERR, forward orthogonal least squares) on the steer- and roll-row equation errors.
+   Every candidate (additive or structural: delay, lag, ...) is then fitted by
+   output error on the decays; the structural ones by a scan of their parameter
+   followed by a local refinement.  Candidates are ordered by the fraction of the
+   output-error cost they remove.
+3. **Acceptance.**  An effect is accepted only if |value - absent| / std > 3
+   (standard errors clustered by window, :func:`bikeid.ident.effect_fit.effect_std`) *and*
+   it lowers the error on held-out windows (every other window is held out while
+   selecting); among those, a round takes the smallest product of held-out cost ratio and
+   held-out weave-error ratio.  Accepted effects are refitted jointly on all fit windows,
+   and effects with t <= 3 there are pruned.
+4. **"unexplained".**  The measurement-noise floor of each window is estimated from
+   second differences (sigma^2 = mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6).  If the
+   accepted effects remove less than ``EXPLAINED_MIN`` = 90 % of the nominal cost
+   above that floor, the verdict is ``unexplained`` (listed first), with the
+   accepted effects reported as partial.
+
+The pieces live in their own modules: the library and its fit settings in
+:mod:`bikeid.ident.effect_library` (effect facts: :mod:`bikeid.sim.effect_registry`), the
+output-error fits in :mod:`bikeid.ident.effect_fit`, the weave eigenvalue in
+:mod:`bikeid.ident.weave`, the equation-error ranking and the before/after evaluation in
+:mod:`bikeid.ident.discrepancy_diagnostics`.  This module holds the greedy selection
+:func:`select_effects` and its stability check :func:`selection_frequencies`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from bikeid.dataset.windows import Window
+from bikeid.ident.discrepancy_diagnostics import err_ranking
+from bikeid.ident.effect_fit import (
+    EffectEstimate,
+    attach_correction,
+    fit_effects,
+    joint_fit,
+    noise_floor,
+    output_residuals,
+)
+from bikeid.ident.effect_library import LIBRARY, Candidate
+from bikeid.ident.experiment_model import ExperimentModel, window_errors
+from bikeid.ident.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_targets
+
+__all__ = [
+    "EXPLAINED_MIN",
+    "T_MIN",
+    "WEAVE_EPS",
+    "Identification",
+    "select_effects",
+    "selection_frequencies",
+]
+
+EXPLAINED_MIN = 0.9
+T_MIN = 3.0
+WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter, ~2 %)
+
+
+def _scan_start(model, windows, cand: Candidate, base: list[str], start: dict) -> float:
+    best, arg = np.inf, cand.grid[0]
+    for g in cand.grid:
+        m = model.with_effects(**start, **{cand.name: g})
+        r = output_residuals(m, windows)
+        if r @ r < best:
+            best, arg = float(r @ r), g
+    return arg
+
+
+@dataclass
+class Identification:
+    """Outcome of :func:`select_effects`."""
+
+    model: ExperimentModel
+    effects: list[EffectEstimate]
+    ranking: list[EffectEstimate]
+    verdict: list[str]
+    cost_nominal: float
+    cost_final: float
+    cost_floor: float
+    explained: float
+    eq_ranking: list[dict] = field(default_factory=list)
+    rounds: list[dict] = field(default_factory=list)  # forward-selection log, per round
+    weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
+
+    def as_dict(self) -> dict:
+        """The identification's JSON record (``identification`` of a model file)."""
+        return {
+            "selection_rounds": self.rounds,
+            "verdict": self.verdict,
+            "effects": [e.as_dict() for e in self.effects],
+            "ranking": [e.as_dict() for e in self.ranking],
+            "equation_error_ranking": self.eq_ranking,
+            "cost_nominal": self.cost_nominal,
+            "cost_final": self.cost_final,
+            "cost_noise_floor": self.cost_floor,
+            "explained_fraction": self.explained,
+            "weave_weight": self.weave_weight,
+        }
+
+
+def select_effects(
+    model: ExperimentModel,
+    windows: list[Window],
+    candidates: list[str] | None = None,
+    max_effects: int = 3,
+    min_gain: float = 0.02,
+    nonlinear: bool = False,
+    weave_weight: float | str = "auto",
+) -> Identification:
+    """Greedy forward selection of library effects by output error (module docstring).
+
+    ``weave_weight``: every fit also matches the measured weave eigenvalue of each speed
+    with >= 3 decays (:class:`WeaveTerm`, targets from the windows being fitted, offsets
+    for the estimator bias re-taken at the current model with the defect correction).
+    "auto" (default) weighs it so that, at the nominal model, it carries as much cost as
+    the decay signals (w^2 chi2_weave = output-error cost); 0 fits the decay signals only.
+
+    ``nonlinear``: the model is the nonlinear plant through the per-window defect
+    correction (:func:`ident.experiment_model.attach_nonlinear_correction`), re-attached
+    at the current model after each accepted effect, at each of the three leading
+    candidates of a round before they are re-ranked (first-order corrections favoured a
+    fractional input delay over a true actuator lag), and twice in the final joint fit; the
+    windows are left corrected at the returned model.  After the joint fit, effects with
+    t <= 3 are dropped (backward pruning) and the rest are listed by their contribution
+    (increase of the cost when the effect alone is set back to absent).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model.
+    windows : list of Window
+        The decays (at least 2; every other one is held out while selecting).
+    candidates : list of str, optional
+        Library names to try (default: all of :data:`bikeid.ident.effect_library.LIBRARY`).
+    max_effects : int, optional
+        At most this many rounds.
+    min_gain : float, optional
+        Least fractional cost reduction (fit and held-out) for acceptance.
+    nonlinear : bool, optional
+        Nonlinear plant by defect correction.
+    weave_weight : float or "auto", optional
+        Weight of the weave term (see above).
+
+    Returns
+    -------
+    Identification
+        The final model, accepted effects with values [registry units], standard errors and
+        t, the first round's ranking, the verdict, costs (dimensionless) and the round log.
+    """
+    names = list(candidates or LIBRARY)
+    bad = [n for n in names if n not in LIBRARY]
+    if bad:
+        raise ValueError(f"unknown candidate effects {bad}; the library has {sorted(LIBRARY)}")
+    if len(windows) < 2:
+        raise ValueError("identification needs at least 2 windows (one is held out)")
+    fit_w, val_w = windows[0::2], windows[1::2]
+    attach_correction(windows, model, nonlinear)
+    cost0 = fit_effects(model, windows, []).cost  # decay signals only (for "explained")
+    floor = noise_floor(windows)
+    lam_all = [decay_eigenvalue(w) for w in windows]  # measured weave of each decay
+    lam_val = lam_all[1::2]
+    unit = WeaveTerm(1.0, weave_targets(windows, lam_all))
+    if weave_weight == "auto":
+        unit = unit.at(model, windows) if unit.targets else unit
+        chi0 = float(np.sum(unit.residuals(model) ** 2)) if unit.targets else 0.0
+        weave_weight = math.sqrt(cost0 / chi0) if chi0 > 0 else 0.0  # no weave data: off
+    weave_weight = float(weave_weight)
+    if not (weave_weight >= 0 and math.isfinite(weave_weight)):
+        raise ValueError(f"weave_weight must be 'auto' or a finite number >= 0, got {weave_weight}")
+    wv_fit = wv_all = None
+    if weave_weight > 0:
+        wv_fit = WeaveTerm(weave_weight, weave_targets(fit_w, lam_all[0::2])).at(model, fit_w)
+        wv_all = replace(unit, weight=weave_weight)  # offsets taken at the final model below
+    accepted: list[str] = []
+    cur = model
+    cur_val = fit_effects(cur, val_w, []).cost
+    cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
+    ranking: list[EffectEstimate] = []
+    rounds: list[dict] = []
+    for _round in range(max_effects):
+        trials = []
+        base_cost = fit_effects(cur, fit_w, [], weave=wv_fit).cost
+        for n in names:
+            if n in accepted:
+                continue
+            cand = LIBRARY[n]
+            start = {}
+            if cand.kind == "structural":
+                start[n] = _scan_start(cur, fit_w, cand, accepted, {})
+            res = fit_effects(cur, fit_w, accepted + [n], start, wv_fit)
+            v, sd = res.values[n], res.std[n]
+            t = abs(v - cand.absent) / sd if sd > 0 else np.inf
+            gain = (base_cost - res.cost) / max(base_cost, 1e-300)
+            trials.append((gain, n, res, EffectEstimate(n, v, sd, cand.unit, t, gain)))
+        trials.sort(key=lambda z: -z[0])
+        if nonlinear:  # re-rank the leaders with the correction re-attached at each of them
+            top = []
+            for _gain, n, res, _est in trials[:3]:
+                attach_correction(windows, res.model, True)
+                wv_n = wv_fit.at(res.model, fit_w) if wv_fit else None
+                res = fit_effects(cur, fit_w, accepted + [n], res.values, wv_n)
+                v, sd = res.values[n], res.std[n]
+                t = abs(v - LIBRARY[n].absent) / sd if sd > 0 else np.inf
+                gain = (base_cost - res.cost) / max(base_cost, 1e-300)
+                top.append((gain, n, res, EffectEstimate(n, v, sd, LIBRARY[n].unit, t, gain)))
+            trials = sorted(top, key=lambda z: -z[0]) + trials[3:]
+        if _round == 0:
+            ranking = [z[3] for z in trials]
+        passing = []  # (score, name, result, validation cost, validation weave error)
+        log = []
+        for gain, n, res, est in trials:
+            row = {"name": n, "value": est.value, "t": est.t, "fit_gain": gain}
+            log.append(row)
+            if est.t <= T_MIN or gain < min_gain:
+                continue
+            attach_correction(
+                val_w, res.model, nonlinear
+            )  # only the held-out half is simulated here
+            sims = res.model.simulate(val_w)
+            val = float(np.sum(window_errors(val_w, sims) ** 2))
+            row["heldout_cost_ratio"] = val / cur_val
+            if val >= cur_val * (1 - min_gain):
+                continue
+            wv = weave_error(val_w, sims, lam_val)
+            score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
+            row.update(heldout_weave_error=wv, heldout_weave_before=cur_wv, score=score)
+            passing.append((score, n, res, val, wv))
+        if passing:
+            _score, n, res, cur_val, cur_wv = min(passing, key=lambda z: z[0])
+            accepted.append(n)
+            cur = res.model
+        rounds.append({"accepted": n if passing else None, "candidates": log})
+        attach_correction(windows, cur, nonlinear)
+        if not passing:
+            break
+        if wv_fit:  # the estimator offsets follow the current model, like the correction
+            wv_fit = wv_fit.at(cur, fit_w)
+    if wv_all:
+        wv_all = wv_all.at(cur, windows)
+    final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all)
+
+    def tval(n):
+        sd = final.std[n]
+        return abs(final.values[n] - LIBRARY[n].absent) / sd if sd > 0 else np.inf
+
+    while accepted and min(tval(n) for n in accepted) <= T_MIN:  # backward pruning
+        accepted.remove(min(accepted, key=tval))
+        final = fit_effects(model, windows, accepted, final.values, wv_all)
+        attach_correction(windows, final.model, nonlinear and bool(accepted))
+        if nonlinear and not accepted:
+            attach_correction(windows, model, True)
+    contrib = {}  # increase of the fitted cost (signals + weave term) without the effect
+    for n in accepted:
+        without = final.model.with_effects(**{n: LIBRARY[n].absent})
+        contrib[n] = fit_effects(without, windows, [], weave=wv_all).cost - final.cost
+    accepted.sort(key=lambda n: -contrib[n])
+    r_sig = output_residuals(final.model, windows)
+    cost_sig = float(r_sig @ r_sig)  # decay signals only, as cost0 and the floor
+    effects = []
+    for n in accepted:
+        cand = LIBRARY[n]
+        v, sd = final.values[n], final.std[n]
+        effects.append(EffectEstimate(n, v, sd, cand.unit, tval(n), accepted=True))
+    explained = (cost0 - cost_sig) / max(cost0 - floor, 1e-12 * cost0)
+    verdict = [e.name for e in effects]
+    if explained < EXPLAINED_MIN or not effects:
+        verdict = ["unexplained"] + verdict
+    for e in effects:
+        e.explained = float(explained)
+    return Identification(
+        model=final.model, effects=effects, ranking=ranking, verdict=verdict,
+        cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor, explained=float(explained),
+        eq_ranking=err_ranking(model, windows), rounds=rounds, weave_weight=weave_weight,
+    )  # fmt: skip
+
+
+def selection_frequencies(
+    model: ExperimentModel,
+    windows: list[Window],
+    resamples: int = 20,
+    fraction: float = 0.75,
+    seed: int = 0,
+    **select_kw,
+) -> dict[str, float]:
+    """How stable is the verdict?  Fraction of subsamples in which each name is selected.
+
+    Stability selection (Meinshausen & Buehlmann 2010) over decays: each of ``resamples``
+    runs of :func:`select_effects` sees a random ``fraction`` of the windows of every file (drawn
+    without replacement, at least 2 per file, so every speed stays in), and each name of its
+    verdict (``"unexplained"`` included) is counted.  A name near 1 is what the data say
+    whichever decays are used; names well below 1 depend on which pushes were logged.
+    ``select_kw`` go to :func:`select_effects` (e.g. ``nonlinear=True``, ``max_effects``).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model.
+    windows : list of Window
+    resamples : int, optional
+        Number of subsamples.
+    fraction : float, optional
+        Fraction of each file's windows in a subsample.
+    seed : int, optional
+        Generator seed.
+
+    Returns
+    -------
+    dict of str to float
+        Selection frequency (0-1) of each name, highest first.
+    """
+    if int(resamples) != resamples or resamples < 1:
+        raise ValueError(f"resamples must be a positive integer, got {resamples!r}")
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction!r}")
+    rng = np.random.default_rng(seed)
+    groups: dict[str, list[int]] = {}
+    for i, w in enumerate(windows):
+        groups.setdefault(w.file, []).append(i)
+    counts: dict[str, int] = {}
+    for _ in range(int(resamples)):
+        pick = []
+        for idx in groups.values():
+            k = min(len(idx), max(2, round(fraction * len(idx))))
+            pick.extend(sorted(rng.choice(idx, size=k, replace=False)))
+        sub = [replace(windows[i], correction=None) for i in sorted(pick)]  # own copies
+        for name in select_effects(model, sub, **select_kw).verdict:
+            counts[name] = counts.get(name, 0) + 1
+    return dict(sorted(((k, v / resamples) for k, v in counts.items()), key=lambda z: -z[1]))
