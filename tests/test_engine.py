@@ -28,7 +28,8 @@ from bikeid.controllers import PID, PolePlacement, SteerIntoLean, make
 from bikeid.controllers.excitation import ChirpReference, StepReference
 from bikeid.controllers.pole_placement import SLOW_POLES
 from bikeid.dataset.linear_loop import closed_loop_matrix, simulate
-from bikeid.ident.experiment_model import ExperimentModel, Window
+from bikeid.dataset.windows import Window
+from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.sim.linear import canonical_matrices, lateral_force_vector, state_matrices
 from bikeid.sim.parameters import benchmark, steer_by_wire
 
