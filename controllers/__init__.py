@@ -20,9 +20,10 @@ from .excitation import (
     UniformDither,
     ZeroReference,
 )
-from .registry import CONTROLLER_NAMES, make
+from .registry import ALIASES, CONTROLLER_NAMES, STUDY_CONTROLLERS, canonical_name, make
 
 __all__ = [
+    "ALIASES",
     "CONTROLLER_NAMES",
     "PID",
     "ChirpReference",
@@ -33,9 +34,11 @@ __all__ = [
     "LateralForcePulses",
     "PolePlacement",
     "StepReference",
+    "STUDY_CONTROLLERS",
     "SteerIntoLean",
     "UniformDither",
     "ZeroReference",
+    "canonical_name",
     "make",
 ]
 
