@@ -84,6 +84,7 @@ def _stderr_log(msg: str) -> None:
 
 
 def default_workers() -> int:
+    """Worker processes by default: the CPU count, at most 2."""
     return max(1, min(2, os.cpu_count() or 1))
 
 
@@ -94,7 +95,27 @@ def reproduce(
     log: Callable[[str], None] = _stderr_log,
     bicycle: str = "benchmark",
 ) -> dict[str, Any]:
-    """Run everything into ``out``; returns the summary (also written as summary.json)."""
+    """Run every study into ``out``: figures, ``report.md`` and ``summary.json``.
+
+    Parameters
+    ----------
+    out : str or path-like
+        Output folder (created if missing).
+    quick : bool
+        :data:`QUICK` settings instead of :data:`FULL`.
+    workers : int, optional
+        Worker processes for the identification runs (default :func:`default_workers`).
+    log : callable
+        Progress lines (default: stderr).
+    bicycle : str
+        ``sim.parameters.by_name`` name of the simulated bicycle.
+
+    Returns
+    -------
+    dict
+        The summary (numbers; speeds [m/s], eigenvalues [1/s], times [s]) as written to
+        ``summary.json``, with private keys (``_model``) that the file leaves out.
+    """
     from bikeid.sim.linear import critical_speeds
     from bikeid.sim.parameters import by_name
 
@@ -127,9 +148,7 @@ def reproduce(
     jobs = [("fuzzy", float(v), st.id_duration, bicycle, METHODS) for v in st.fig3_speeds]
     jobs += [("fuzzy", float(v), st.id_duration, bicycle, ("pem",)) for v in zoom_speeds]
     jobs += [
-        (c, float(v), st.id_duration, bicycle, METHODS)
-        for c in SWEEP_ONLY
-        for v in st.sweep_speeds
+        (c, float(v), st.id_duration, bicycle, METHODS) for c in SWEEP_ONLY for v in st.sweep_speeds
     ]
     results = cd.run_jobs(jobs, workers)
     n3 = len(st.fig3_speeds)
@@ -182,6 +201,7 @@ def reproduce(
 
 # -- sweep summary -------------------------------------------------------------------------------
 def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
+    """Identified vs true eigenvalues per controller and method, and their figure."""
     from .plots import plt, save
 
     res: dict[str, Any] = {}

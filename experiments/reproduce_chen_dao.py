@@ -68,6 +68,7 @@ PREDICTION_HORIZON = 1.0  # s, k-step prediction used when the identified model 
 
 # -- identification runs ---------------------------------------------------------------------
 def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: str):
+    """The sweep specification of the identification runs (module doc)."""
     from .sweep import SweepSpec
 
     return SweepSpec(
@@ -86,9 +87,27 @@ def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: st
 
 
 def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.ndarray:
-    """Standard errors of Re and Im of the eigenvalues of the canonical A(theta), by first-order
-    propagation of the parameter covariance (central differences); shape (4, 2), rows in the
-    order of ``np.sort_complex(eig(A(theta)))``."""
+    """Standard errors of the eigenvalues of the canonical A(theta).
+
+    First-order propagation of the parameter covariance, the eigenvalues' derivatives by
+    central differences (perturbed eigenvalues paired with the unperturbed ones by
+    :func:`sim.linear.match_eigenvalues`).
+
+    Parameters
+    ----------
+    theta : (10,) ndarray
+        Canonical parameters a1..a8 [1/s^2, 1/s], b1, b2 [rad/(N m s^2)].
+    cov : (10, 10) ndarray
+        Their covariance (units of theta squared).
+    step : float
+        Relative difference step (absolute for |theta_j| < 1).
+
+    Returns
+    -------
+    (4, 2) ndarray
+        Standard errors of Re and Im [1/s], rows in the order of
+        ``np.sort_complex(eig(A(theta)))``.
+    """
     from bikeid.ident.canonical import canonical_ab
     from bikeid.sim.linear import match_eigenvalues
 
@@ -111,8 +130,19 @@ def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.n
 def identify_speed(args: tuple) -> dict[str, Any]:
     """One identification run: simulate, fit PEM (and the direct method); picklable worker.
 
-    ``args`` = (controller, speed, duration, bicycle, methods).  Returns eigenvalues
-    (identified, matched to the truth's order), their standard errors and run facts.
+    Parameters
+    ----------
+    args : tuple
+        (controller, speed [m/s], duration [s], bicycle name, methods), controller a
+        ``controllers.registry.STUDY_CONTROLLERS`` name, methods a subset of
+        ("pem", "direct").
+
+    Returns
+    -------
+    dict
+        ``truth`` (sorted true eigenvalues [1/s]), ``methods[m]`` with ``eig`` (identified,
+        paired with ``truth``), for PEM ``stderr`` and ``theta``, or ``error``; run facts
+        (``fell_at``, ``seconds``).
     """
     from bikeid.ident import pem
     from bikeid.sim.linear import eigenvalues, match_eigenvalues
@@ -164,7 +194,20 @@ def identify_speed(args: tuple) -> dict[str, Any]:
 
 
 def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
-    """:func:`identify_speed` for every job (one process pool for all), in job order."""
+    """:func:`identify_speed` for every job (one process pool for all), in job order.
+
+    Parameters
+    ----------
+    jobs : sequence of tuple
+        Arguments of :func:`identify_speed`.
+    workers : int
+        Worker processes (1: in this process).
+
+    Returns
+    -------
+    list of dict
+        The results, in job order.
+    """
     if workers <= 1 or len(jobs) <= 1:
         return [identify_speed(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
@@ -181,6 +224,13 @@ def paper_eq5_reading() -> dict[str, Any]:
     Whipple linearization) is taken.  Its b = (+, -): opposite to the Meijaard sign of b
     (b2 = (M^-1)_dd > 0), i.e. the paper's torque (or angles) have the other sign; poles and
     zeros do not depend on that.
+
+    Returns
+    -------
+    dict
+        ``theta`` (the reading), ``candidates`` (sign patterns that fit), the characteristic
+        polynomial and numerators, poles and zeros [1/s] and the polynomial's largest
+        relative error against eq. 6.
     """
     from scipy.signal import ss2tf
 
@@ -221,8 +271,23 @@ def paper_eq5_reading() -> dict[str, Any]:
 
 
 def transfer_functions(A: np.ndarray, B: np.ndarray) -> dict[str, Any]:
-    """G_phi = phi/T_delta and G_delta = delta/T_delta of a canonical model (python-control
-    ``TransferFunction`` plus numerator/denominator coefficients and zeros)."""
+    """G_phi = phi/T_delta and G_delta = delta/T_delta of a canonical model.
+
+    Parameters
+    ----------
+    A : (4, 4) ndarray
+        Canonical state matrix, Chen & Dao's state order [phi, phidot, delta, deltadot]
+        (as :attr:`ident.pem.CanonicalModel.A`) [1/s, 1/s^2].
+    B : (4, 1) ndarray
+        Input column of T_delta in the same order [rad/(N m s^2)].
+
+    Returns
+    -------
+    dict
+        Per output ("phi", "delta"): ``tf`` (python-control ``TransferFunction``
+        [rad/(N m)]), ``num``/``den`` coefficients (descending powers of s) and ``zeros``
+        [1/s].  Transfer functions do not depend on the state order.
+    """
     import control
 
     C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
@@ -371,6 +436,18 @@ def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float 
     v_w where the largest real eigenvalue of the real ones changes sign from - to + (the
     capsize root); v_d: midpoint between the last grid speed with only real eigenvalues and
     the next speed (None if a complex pair exists at the first speed).
+
+    Parameters
+    ----------
+    speeds : (K,) ndarray
+        Increasing speeds [m/s].
+    eigs : (K, 4) ndarray of complex
+        Eigenvalues at each speed [1/s].
+
+    Returns
+    -------
+    dict
+        ``v_d``, ``v_w``, ``v_c`` [m/s] or None where not found.
     """
     speeds = np.asarray(speeds, float)
     has_pair = np.array([np.any(np.abs(e.imag) > 1e-9) for e in eigs])

@@ -260,7 +260,26 @@ def fig7(
 def limit_cycle_study(
     p: BicycleParameters, out: Path, duration: float, log: Callable[[str], None] = lambda s: None
 ) -> dict[str, Any]:
-    """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check."""
+    """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The simulated bicycle.
+    out : Path
+        Folder for the phase-portrait and energy/speed PNGs.
+    duration : float
+        Length of each coasting run [s].
+    log : callable
+        Progress lines.
+
+    Returns
+    -------
+    dict
+        Per figure the periodicity verdicts of :func:`experiments.limit_cycles.periodicity`,
+        the linear eigenvalues at 3.5 m/s [1/s], the true critical speeds [m/s] and the
+        figure file names.
+    """
     from bikeid.sim.linear import critical_speeds, eigenvalues
 
     from . import limit_cycles as lc

@@ -36,8 +36,6 @@ def _complex(rows):
     return np.array([complex(e["re"], e["im"]) for e in rows])
 
 
-
-
 def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
     """PEM on 30 s of noisy closed-loop data per speed. Tolerances: the issue's accuracy goal
     (2 %, or 0.05 1/s where |lambda| < 2.5) met by ``bikeid accuracy`` from 50 s runs; here
