@@ -13,7 +13,11 @@ judge positive lags, or use the dither as the input.
 
 Models: a :class:`ident.pem.CanonicalModel` (its innovation gain K is used for
 prediction), or any continuous python-control ``StateSpace`` whose outputs are
-named after run signals and whose inputs are run signals (K = 0 then).
+named after run signals and whose inputs are run signals (K = 0 then), sampled
+exactly (``sim.sampling.zoh``).  The computations behind ``compare`` take discrete
+matrices and arrays and are public: :func:`simulation` (open-loop simulation, initial
+state by least squares) and :func:`k_step_prediction` (innovations predictor, then k
+open-loop steps); the reproductions of Chen & Dao and Moore & Hubbard use them.
 """
 
 from __future__ import annotations
