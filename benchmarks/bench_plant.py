@@ -40,12 +40,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from bikeid.sim.integrate import simulate, simulate_reference
+from bikeid.sim.nonlinear import WhippleBicycle, rhs
+from bikeid.sim.parameters import benchmark
 
-from bikeid.sim.integrate import simulate, simulate_reference  # noqa: E402
-from bikeid.sim.nonlinear import WhippleBicycle, rhs  # noqa: E402
-from bikeid.sim.parameters import benchmark  # noqa: E402
+#: The repository, for the symbolic derivation (``scripts/derive_whipple.py``), which is a
+#: development tool and not part of the installed package; the plant is always imported
+#: from the installed ``bikeid``.
+ROOT = Path(__file__).resolve().parents[1]
 
 V, K = 5.0, 10.0
 
@@ -57,8 +59,8 @@ def controller(t, y):
 def compile_times() -> tuple[float, float]:
     code = (
         "import time; t0 = time.perf_counter();"
-        "from sim.nonlinear import WhippleBicycle; from sim.integrate import simulate;"
-        "from sim.parameters import benchmark; b = WhippleBicycle(benchmark());"
+        "from bikeid.sim.nonlinear import WhippleBicycle; from bikeid.sim.integrate import "
+        "simulate; from bikeid.sim.parameters import benchmark; b = WhippleBicycle(benchmark());"
         "simulate(b, b.state(5.0), 0.1, controller=lambda t, y: 0.0);"
         "print(time.perf_counter() - t0)"
     )
@@ -67,7 +69,7 @@ def compile_times() -> tuple[float, float]:
         out = []
         for _ in range(2):  # cold, then warm from the cache just written
             res = subprocess.run(
-                [sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True
+                [sys.executable, "-c", code], env=env, capture_output=True, text=True
             )
             if res.returncode:
                 raise RuntimeError(res.stderr)

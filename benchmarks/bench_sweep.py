@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bikeid.experiments.sweep import SweepSpec, Task, run_sweep, simulate_task
+from bikeid.experiments.sweep import CONTROLLERS, SweepSpec, Task, run_sweep, simulate_task
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--controller", default="pid", choices=("fuzzy", "pid", "pole"))
+    ap.add_argument("--controller", default="pid", choices=CONTROLLERS)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--duration", type=float, default=50.0)

@@ -21,9 +21,10 @@ from .excitation import (
     UniformDither,
     ZeroReference,
 )
-from .registry import CONTROLLER_NAMES, make
+from .registry import ALIASES, CONTROLLER_NAMES, STUDY_CONTROLLERS, canonical_name, make
 
 __all__ = [
+    "ALIASES",
     "CONTROLLER_NAMES",
     "DEFAULT_SAMPLE_TIME",
     "PID",
@@ -36,9 +37,11 @@ __all__ = [
     "LinearLaw",
     "PolePlacement",
     "StepReference",
+    "STUDY_CONTROLLERS",
     "SteerIntoLean",
     "UniformDither",
     "ZeroReference",
+    "canonical_name",
     "make",
 ]
 

@@ -1,9 +1,12 @@
-"""Controller names for the CLI: ``make(name, parameters, **options)`` builds the default.
+"""Controller names, the one list in bikeid; ``make(name, parameters, **options)`` builds one.
 
 Names: ``pid``, ``pole-placement``, ``fuzzy``, ``steer-into-lean`` (underscores are
-accepted too).  ``parameters`` (a :class:`sim.parameters.BicycleParameters`) is used by
-the model-based design (pole placement); the others ignore it.  ``options`` go to the
-controller's constructor (e.g. ``reference=``, ``saturation=``, ``design_speed=``).
+accepted too), and the alias ``pole`` for ``pole-placement``: the short name the sweeps,
+``bikeid accuracy`` and ``bikeid reproduce`` use on their command lines, in the sweep
+specification stored in their HDF5 files and as keys of their JSON summaries (so those
+keep their meaning).  ``parameters`` (a :class:`sim.parameters.BicycleParameters`) is
+used by the model-based design (pole placement); the others ignore it.  ``options`` go to
+the controller's constructor (e.g. ``reference=``, ``saturation=``, ``design_speed=``).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from bikeid.sim.parameters import BicycleParameters
 
 from .base import Controller
 
-__all__ = ["CONTROLLER_NAMES", "make"]
+__all__ = ["ALIASES", "CONTROLLER_NAMES", "STUDY_CONTROLLERS", "canonical_name", "make"]
 
 
 def _pid(parameters: BicycleParameters | None, **kw: Any) -> Controller:
@@ -49,15 +52,60 @@ _FACTORIES: dict[str, Callable[..., Controller]] = {
     "steer-into-lean": _steer_into_lean,
 }
 
-#: The names ``make`` accepts.
+#: The canonical controller names.
 CONTROLLER_NAMES = tuple(_FACTORIES)
+
+#: Other accepted names -> canonical name.
+ALIASES: dict[str, str] = {"pole": "pole-placement"}
+
+#: The closed-loop identification designs that the sweeps, ``bikeid accuracy`` and
+#: ``bikeid reproduce`` run, by the names they store (``pole`` = ``pole-placement``).
+STUDY_CONTROLLERS: tuple[str, ...] = ("fuzzy", "pid", "pole")
+
+
+def canonical_name(name: str) -> str:
+    """The canonical controller name of ``name`` (case, ``_``/``-`` and aliases resolved).
+
+    Parameters
+    ----------
+    name : str
+        A name of :data:`CONTROLLER_NAMES` or :data:`ALIASES`.
+
+    Returns
+    -------
+    str
+        The :data:`CONTROLLER_NAMES` entry.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name.
+    """
+    key = str(name).strip().lower().replace("_", "-")
+    key = ALIASES.get(key, key)
+    if key not in _FACTORIES:
+        raise ValueError(f"unknown controller {name!r}; choose from {', '.join(CONTROLLER_NAMES)}")
+    return key
 
 
 def make(name: str, parameters: BicycleParameters | None = None, **options: Any) -> Controller:
-    """A controller with default gains by name; unknown names or options raise ``ValueError``."""
-    key = str(name).strip().lower().replace("_", "-")
-    if key not in _FACTORIES:
-        raise ValueError(f"unknown controller {name!r}; choose from {', '.join(CONTROLLER_NAMES)}")
+    """A controller with default gains by name; unknown names or options raise ``ValueError``.
+
+    Parameters
+    ----------
+    name : str
+        A controller name (:func:`canonical_name`).
+    parameters : BicycleParameters, optional
+        The bicycle, for the model-based pole placement.
+    **options
+        Keywords of the controller's constructor.
+
+    Returns
+    -------
+    Controller
+        The controller.
+    """
+    key = canonical_name(name)
     try:
         return _FACTORIES[key](parameters, **options)
     except TypeError as exc:

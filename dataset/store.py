@@ -15,21 +15,20 @@ the file uses the HDF5 1.10+ format whose object headers carry checksums; the me
 (a variable-length string, kept in the unchecksummed global heap) carries its own CRC-32.
 So flipped bytes in data or metadata are detected on reading.  Runs keep their insertion order.
 
-Writes are atomic: a temporary file in the target folder is written, flushed and fsynced,
-then renamed over the target with :func:`os.replace` (and the folder fsynced); an
-interrupted write leaves the old file untouched.  The reader validates everything (format
-and version, required datasets, equal lengths, finite values, checksums, metadata JSON)
-and raises a :class:`ValueError` naming the file, the run group and the problem.
+Writes are atomic (:func:`dataset.files.atomic_path`, re-exported here): a temporary file
+in the target folder is written, flushed and fsynced, then renamed over the target with
+:func:`os.replace` (and the folder fsynced); an interrupted write leaves the old file
+untouched, and a symlink or device at the target is refused.  The reader validates
+everything (format and version, required datasets, equal lengths, finite values,
+checksums, metadata JSON) and raises a :class:`ValueError` naming the file, the run
+group and the problem.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import tempfile
 import zlib
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +36,7 @@ import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED, UNITS
 
+from .files import atomic_path
 from .run import REQUIRED, Run
 
 __all__ = [
@@ -67,35 +67,6 @@ def package_version() -> str:
 
 def _units(name: str) -> str:
     return UNITS.get(name, "")
-
-
-# -- atomic files ---------------------------------------------------------------------
-@contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success fsync it and rename it over ``path``.
-
-    On any exception (or KeyboardInterrupt) the temporary file is removed and ``path`` is
-    left as it was.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    tmp = Path(tmp)
-    try:
-        yield tmp
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    with contextlib.suppress(OSError):  # make the rename durable (not possible everywhere)
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
 
 
 def _h5():

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.dataset.run import Run
 
 from .sweep import EXCITATION_BANDS
@@ -64,7 +65,8 @@ __all__ = [
     "table_text",
 ]
 
-CONTROLLERS = ("fuzzy", "pid", "pole")
+#: Controllers studied, by their stored names (``controllers.registry``).
+CONTROLLERS = STUDY_CONTROLLERS
 METHODS = ("direct", "pem")
 FULL_SPEEDS = tuple(float(v) for v in np.round(np.arange(1.0, 15.0 + 1e-9, 0.5), 6))
 #: One speed below v_w (4.29), one between v_w and v_c (6.02), one above v_c (benchmark).
@@ -120,17 +122,14 @@ def true_modes(parameters, speeds: Sequence[float]) -> dict[float, dict[str, com
 def eigen_errors(identified: Sequence[complex], truth: dict[str, complex]) -> dict[str, dict]:
     """Match the 4 identified eigenvalues to the true modes (minimum total distance,
     weave counted as its pair) and report identified, true, |error|, tolerance, pass."""
-    from scipy.optimize import linear_sum_assignment
+    from bikeid.sim.linear import match_eigenvalues
 
-    ident = np.asarray(identified, complex)
     targets = [truth["weave"], np.conj(truth["weave"]), truth["capsize"], truth["caster"]]
     names = ["weave", "weave", "capsize", "caster"]
-    cost = np.abs(np.asarray(targets)[:, None] - ident[None, :])
-    rows, cols = linear_sum_assignment(cost)
+    matched = match_eigenvalues(identified, targets)
     out: dict[str, dict] = {}
-    for r, c in zip(rows, cols, strict=True):
-        name = names[r]
-        z = ident[c] if r != 1 else np.conj(ident[c])
+    for r, name in enumerate(names):
+        z = matched[r] if r != 1 else np.conj(matched[r])
         err = float(abs(z - truth[name]))
         if name in out and out[name]["error"] >= err:
             continue

@@ -1,15 +1,25 @@
-"""Small helpers shared by the command modules: ranges, JSON output, bicycles."""
+"""Small helpers shared by the command modules: ranges, JSON output, bicycles.
+
+``atomic_write_text`` is :func:`dataset.files.atomic_write_text` (re-exported for the
+command modules)."""
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from bikeid.dataset.files import atomic_write_text
+
+__all__ = [
+    "MAX_POINTS",
+    "atomic_write_text",
+    "dump_json",
+    "parse_range",
+    "to_jsonable",
+]
 
 #: Largest number of values a range may expand to.
 MAX_POINTS = 1_000_000
@@ -69,19 +79,3 @@ def to_jsonable(obj: Any) -> Any:
 
 def dump_json(obj: Any) -> str:
     return json.dumps(to_jsonable(obj), indent=2)
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write a text file atomically (temporary file in the same folder, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

@@ -8,9 +8,14 @@ import math
 import sys
 from pathlib import Path
 
+from bikeid.controllers.registry import STUDY_CONTROLLERS
+
 from .cliutil import atomic_write_text, dump_json, parse_range
 
-CONTROLLER_HELP = "fuzzy, pid or pole (pole placement with integral action)"
+CONTROLLER_HELP = (  # "fuzzy, pid or pole (...)", from controllers.registry
+    f"{', '.join(STUDY_CONTROLLERS[:-1])} or {STUDY_CONTROLLERS[-1]} "
+    "(pole placement with integral action)"
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,7 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speeds", default="1:15:0.5", help="start:stop:step [m/s], stop included")
     p.add_argument("--duration", type=float, default=50.0, help="run length [s]")
     p.add_argument(
-        "--controllers", default="fuzzy,pid,pole", help=f"comma list of: {CONTROLLER_HELP}"
+        "--controllers",
+        default=",".join(STUDY_CONTROLLERS),
+        help=f"comma list of: {CONTROLLER_HELP}",
     )
     p.add_argument("--out", default="stabilization", help="writes OUT.json and OUT.md")
     _common(p)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from bikeid.controllers.registry import STUDY_CONTROLLERS
+
 from .cliutil import dump_json
 
 
@@ -55,8 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--controllers",
-        default="fuzzy,pid,pole",
-        help="comma-separated subset of fuzzy,pid,pole (default all)",
+        default=",".join(STUDY_CONTROLLERS),
+        help=f"comma-separated subset of {','.join(STUDY_CONTROLLERS)} (default all)",
     )
     a.add_argument(
         "--methods",

@@ -10,17 +10,33 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bikeid.dataset.files import atomic_path  # noqa: E402
+
 MODE_STYLE = {"weave": "tab:blue", "capsize": "tab:red", "caster": "tab:green"}
 
 
 def save(fig, path: str | Path) -> Path:
-    """Save a figure as PNG (atomic: temporary name, then rename) and close it."""
+    """Save a figure as PNG atomically (:func:`dataset.files.atomic_path`) and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure (closed afterwards, also on error).
+    path : str or path-like
+        The PNG file; its folder is created if missing.  A symlink or device there is
+        refused (ValueError).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=130, bbox_inches="tight")
-    plt.close(fig)
-    tmp.replace(path)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=130, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path
 
 

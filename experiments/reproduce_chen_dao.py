@@ -9,21 +9,21 @@ Identification: :func:`ident.pem.fit` (canonical PEM, innovations predictor, sub
 and, for the sweep summary, :func:`ident.direct.identify` (Moore & Hubbard's least squares
 with the Whipple values for the fixed entries).
 
-Every function returns plain dicts of numbers (for ``summary.json``) and writes its figures
-into the output folder; :mod:`experiments.reproduce` assembles the report.
+Every function returns plain dicts of numbers (for ``summary.json``); the figures are drawn
+by :mod:`experiments.reproduce_chen_dao_figures`, and :mod:`experiments.reproduce` runs the
+study and :mod:`experiments.reproduce_report` renders the report.  Model-vs-data comparison
+(open-loop simulation, k-step prediction) is :mod:`ident.validate`'s.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from bikeid.sim.parameters import BicycleParameters
 
@@ -31,14 +31,12 @@ __all__ = [
     "PAPER",
     "critical_from_grid",
     "eigen_stderr",
-    "fig2",
-    "fig3",
-    "fig7",
+    "fig2_identification",
+    "fig3_summary",
+    "fig7_tracking",
     "identify_speed",
-    "k_step_prediction",
-    "match_eigenvalues",
-    "open_loop_simulation",
     "paper_eq5_reading",
+    "run_jobs",
     "transfer_functions",
 ]
 
@@ -70,6 +68,7 @@ PREDICTION_HORIZON = 1.0  # s, k-step prediction used when the identified model 
 
 # -- identification runs ---------------------------------------------------------------------
 def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: str):
+    """The sweep specification of the identification runs (module doc)."""
     from .sweep import SweepSpec
 
     return SweepSpec(
@@ -88,10 +87,29 @@ def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: st
 
 
 def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.ndarray:
-    """Standard errors of Re and Im of the eigenvalues of the canonical A(theta), by first-order
-    propagation of the parameter covariance (central differences); shape (4, 2), rows in the
-    order of ``np.sort_complex(eig(A(theta)))``."""
+    """Standard errors of the eigenvalues of the canonical A(theta).
+
+    First-order propagation of the parameter covariance, the eigenvalues' derivatives by
+    central differences (perturbed eigenvalues paired with the unperturbed ones by
+    :func:`sim.linear.match_eigenvalues`).
+
+    Parameters
+    ----------
+    theta : (10,) ndarray
+        Canonical parameters a1..a8 [1/s^2, 1/s], b1, b2 [rad/(N m s^2)].
+    cov : (10, 10) ndarray
+        Their covariance (units of theta squared).
+    step : float
+        Relative difference step (absolute for |theta_j| < 1).
+
+    Returns
+    -------
+    (4, 2) ndarray
+        Standard errors of Re and Im [1/s], rows in the order of
+        ``np.sort_complex(eig(A(theta)))``.
+    """
     from bikeid.ident.canonical import canonical_ab
+    from bikeid.sim.linear import match_eigenvalues
 
     base = np.sort_complex(np.linalg.eigvals(canonical_ab(theta)[0]))
     J = np.zeros((8, theta.size))
@@ -101,30 +119,33 @@ def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.n
         for s in (1, -1):
             th = theta.copy()
             th[j] += s * h
-            ev = np.linalg.eigvals(canonical_ab(th)[0])
-            _, col = linear_sum_assignment(np.abs(base[:, None] - ev[None, :]))
-            cols.append(ev[col])
+            ev = np.linalg.eigvals(canonical_ab(th)[0])  # real dtype when all roots are real
+            cols.append(ev[match_eigenvalues(ev, base, return_index=True)[1]])
         d = (cols[0] - cols[1]) / (2 * h)
         J[:, j] = np.concatenate([d.real, d.imag])
     var = np.einsum("ij,jk,ik->i", J, cov, J)
     return np.sqrt(np.maximum(var, 0)).reshape(2, 4).T
 
 
-def match_eigenvalues(ident: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """``ident`` reordered to pair with ``truth`` (minimum total distance)."""
-    ident = np.asarray(ident, complex)
-    _, col = linear_sum_assignment(np.abs(np.asarray(truth)[:, None] - ident[None, :]))
-    return ident[col]
-
-
 def identify_speed(args: tuple) -> dict[str, Any]:
     """One identification run: simulate, fit PEM (and the direct method); picklable worker.
 
-    ``args`` = (controller, speed, duration, bicycle, methods).  Returns eigenvalues
-    (identified, matched to the truth's order), their standard errors and run facts.
+    Parameters
+    ----------
+    args : tuple
+        (controller, speed [m/s], duration [s], bicycle name, methods), controller a
+        ``controllers.registry.STUDY_CONTROLLERS`` name, methods a subset of
+        ("pem", "direct").
+
+    Returns
+    -------
+    dict
+        ``truth`` (sorted true eigenvalues [1/s]), ``methods[m]`` with ``eig`` (identified,
+        paired with ``truth``), for PEM ``stderr`` and ``theta``, or ``error``; run facts
+        (``fell_at``, ``seconds``).
     """
     from bikeid.ident import pem
-    from bikeid.sim.linear import eigenvalues
+    from bikeid.sim.linear import eigenvalues, match_eigenvalues
     from bikeid.sim.parameters import by_name
 
     from .sweep import Task, simulate_task
@@ -148,9 +169,9 @@ def identify_speed(args: tuple) -> dict[str, Any]:
             m = pem.fit(run, outputs=OUTPUTS)
             ev = np.sort_complex(m.eigenvalues())
             se = eigen_stderr(m.theta, m.covariance)
-            _, col = linear_sum_assignment(np.abs(truth[:, None] - ev[None, :]))
+            ev, col = match_eigenvalues(ev, truth, return_index=True)
             out["methods"]["pem"] = {
-                "eig": ev[col],
+                "eig": ev,
                 "stderr": se[col],
                 "theta": m.theta,
                 "error": None,
@@ -173,7 +194,20 @@ def identify_speed(args: tuple) -> dict[str, Any]:
 
 
 def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
-    """:func:`identify_speed` for every job (one process pool for all), in job order."""
+    """:func:`identify_speed` for every job (one process pool for all), in job order.
+
+    Parameters
+    ----------
+    jobs : sequence of tuple
+        Arguments of :func:`identify_speed`.
+    workers : int
+        Worker processes (1: in this process).
+
+    Returns
+    -------
+    list of dict
+        The results, in job order.
+    """
     if workers <= 1 or len(jobs) <= 1:
         return [identify_speed(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
@@ -190,6 +224,13 @@ def paper_eq5_reading() -> dict[str, Any]:
     Whipple linearization) is taken.  Its b = (+, -): opposite to the Meijaard sign of b
     (b2 = (M^-1)_dd > 0), i.e. the paper's torque (or angles) have the other sign; poles and
     zeros do not depend on that.
+
+    Returns
+    -------
+    dict
+        ``theta`` (the reading), ``candidates`` (sign patterns that fit), the characteristic
+        polynomial and numerators, poles and zeros [1/s] and the polynomial's largest
+        relative error against eq. 6.
     """
     from scipy.signal import ss2tf
 
@@ -230,8 +271,23 @@ def paper_eq5_reading() -> dict[str, Any]:
 
 
 def transfer_functions(A: np.ndarray, B: np.ndarray) -> dict[str, Any]:
-    """G_phi = phi/T_delta and G_delta = delta/T_delta of a canonical model (python-control
-    ``TransferFunction`` plus numerator/denominator coefficients and zeros)."""
+    """G_phi = phi/T_delta and G_delta = delta/T_delta of a canonical model.
+
+    Parameters
+    ----------
+    A : (4, 4) ndarray
+        Canonical state matrix, Chen & Dao's state order [phi, phidot, delta, deltadot]
+        (as :attr:`ident.pem.CanonicalModel.A`) [1/s, 1/s^2].
+    B : (4, 1) ndarray
+        Input column of T_delta in the same order [rad/(N m s^2)].
+
+    Returns
+    -------
+    dict
+        Per output ("phi", "delta"): ``tf`` (python-control ``TransferFunction``
+        [rad/(N m)]), ``num``/``den`` coefficients (descending powers of s) and ``zeros``
+        [1/s].  Transfer functions do not depend on the state order.
+    """
     import control
 
     C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
@@ -248,49 +304,34 @@ def transfer_functions(A: np.ndarray, B: np.ndarray) -> dict[str, Any]:
     return out
 
 
-def open_loop_simulation(Ad, Bd, C, u, y) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop simulation driven by ``u`` with the initial state fitted by least squares to
-    all of ``y`` (output error is affine in x0).  Returns (y_sim (N, 2), x0)."""
-    N = u.size
-    xf = np.zeros(4)
-    forced = np.empty((N, C.shape[0]))
-    Phi = np.empty((N, C.shape[0], 4))
-    Ak = np.eye(4)
-    for k in range(N):
-        forced[k] = C @ xf
-        Phi[k] = C @ Ak
-        xf = Ad @ xf + Bd[:, 0] * u[k]
-        Ak = Ad @ Ak
-    x0, *_ = np.linalg.lstsq(Phi.reshape(-1, 4), (y - forced).ravel(), rcond=None)
-    return forced + Phi @ x0, x0
+def fig2_identification(p: BicycleParameters, duration: float = 50.0) -> dict[str, Any]:
+    """Identification at 4.2 m/s (Fig. 2, eqs. 5-6): the numbers, paper | identified | truth.
 
+    Parameters
+    ----------
+    p : BicycleParameters
+        The simulated bicycle (ground truth = its linearization).
+    duration : float
+        Length of the identification run [s].
 
-def k_step_prediction(Ad, Bd, C, K, u, y, k: int) -> np.ndarray:
-    """k-step-ahead prediction: the innovations predictor (a stabilizing observer) estimates
-    the state up to t_{j-k}, then the model runs open loop on the measured torque for k
-    samples.  The first k samples repeat the one-step prediction.  Returns (N, 2)."""
-    N = u.size
-    xh = np.zeros((N, 4))
-    x = np.zeros(4)
-    for j in range(N):
-        xh[j] = x
-        e = y[j] - C @ x
-        x = Ad @ x + Bd[:, 0] * u[j] + K @ e
-    pred = (xh @ C.T).copy()
-    X = xh[: N - k].copy()
-    for i in range(k):
-        X = X @ Ad.T + np.outer(u[i : N - k + i], Bd[:, 0])
-    pred[k:] = X @ C.T
-    return pred
-
-
-def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, Any]:
-    """Identification at 4.2 m/s: data, model simulation, errors; eqs. 5-6 side by side."""
+    Returns
+    -------
+    dict
+        theta (identified, standard errors, true, paper's reading), poles [1/s] matched to the
+        truth, transfer-function coefficients and zeros [1/s], maximum model errors [deg];
+        private keys ``_model`` (the :class:`ident.pem.CanonicalModel`) and ``_series`` (time
+        series for the figure: t [s], u [N m], y and the model's y [rad]).
+    """
     from bikeid.ident import pem
     from bikeid.ident.canonical import theta_from_matrices
-    from bikeid.sim.linear import canonical_matrices, eigenvalues, transfer_function
+    from bikeid.ident.validate import k_step_prediction, simulation
+    from bikeid.sim.linear import (
+        canonical_matrices,
+        eigenvalues,
+        match_eigenvalues,
+        transfer_function,
+    )
 
-    from .plots import plt, save
     from .sweep import Task, simulate_task
 
     v = FIG2_SPEED
@@ -303,7 +344,7 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
     sel = [outs.index("phi"), outs.index("delta")]
     y = ya[:, sel]
     stable = bool(np.all(model.eigenvalues().real < 0))
-    y_ol = open_loop_simulation(Ad, Bd, C, u, ya)[0][:, sel]
+    y_ol = simulation(Ad, Bd, C, u, ya)[0][:, sel]
     k = int(round(PREDICTION_HORIZON / run.dt))
     y_kp = k_step_prediction(Ad, Bd, C, K, u, ya, k)[:, sel]
     shown = y_ol if stable else y_kp
@@ -316,46 +357,6 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
         "the measured torque"
     )
     err = y - shown
-    fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
-    ax[0].plot(run.t, u, lw=0.6, color="k", label="steer torque T_delta (incl. dither)")
-    ax[0].set_ylabel("torque [N m]")
-    ax[1].plot(run.t, np.degrees(y[:, 0]), color="tab:blue", lw=0.8, label="roll angle data")
-    ax[1].plot(run.t, np.degrees(y[:, 1]), color="tab:red", lw=0.8, label="steer angle data")
-    ax[1].plot(
-        run.t,
-        np.degrees(shown[:, 0]),
-        "--",
-        color="tab:cyan",
-        lw=0.8,
-        label="identified model, roll",
-    )
-    ax[1].plot(
-        run.t,
-        np.degrees(shown[:, 1]),
-        "--",
-        color="tab:orange",
-        lw=0.8,
-        label="identified model, steer",
-    )
-    ax[1].set_ylabel("angle [deg]")
-    ax[2].plot(run.t, np.degrees(err[:, 0]), color="tab:blue", lw=0.6, label="roll angle error")
-    ax[2].plot(run.t, np.degrees(err[:, 1]), color="tab:red", lw=0.6, label="steer angle error")
-    ax[2].set_ylabel("error [deg]")
-    ax[2].set_xlabel("time [s]")
-    for a in ax:
-        a.grid(alpha=0.3)
-        a.legend(fontsize=7, loc="upper right", ncol=2)
-    ax[0].set_title(
-        f"Chen & Dao Fig. 2 analogue: identification at {v} m/s (fuzzy control, "
-        "chirp + 1 N m dither)\nmodel: "
-        + (
-            "open-loop simulation"
-            if stable
-            else f"{PREDICTION_HORIZON:g} s-ahead prediction (identified model unstable)"
-        ),
-        fontsize=9,
-    )
-    save(fig, out / "cd_fig2_identification.png")
 
     cm = canonical_matrices(p)
     th_true = theta_from_matrices(cm, v)
@@ -368,7 +369,7 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
     ev_true = np.sort_complex(eigenvalues(p, v))
     se = eigen_stderr(model.theta, model.covariance)
     ev_id = np.sort_complex(model.eigenvalues())
-    _, col = linear_sum_assignment(np.abs(ev_true[:, None] - ev_id[None, :]))
+    ev_id, col = match_eigenvalues(ev_id, ev_true, return_index=True)
     return {
         "speed": v,
         "duration": float(run.t[-1]),
@@ -379,7 +380,7 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
         "theta_true": th_true,
         "theta_paper": paper["theta"],
         "paper_reading": {k: paper[k] for k in ("candidates", "char_poly_rel_error")},
-        "poles_identified": ev_id[col],
+        "poles_identified": ev_id,
         "poles_stderr": se[col],
         "poles_true": ev_true,
         "poles_paper": paper["poles"],
@@ -413,8 +414,16 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
             "true": rhp_true[0] if rhp_true else None,
             "paper": float(max(paper["zeros_delta"])),
         },
-        "figure": "cd_fig2_identification.png",
         "_model": model,
+        "_series": {
+            "t": run.t,
+            "u": u,
+            "y": y,
+            "shown": shown,
+            "err": err,
+            "stable": stable,
+            "speed": v,
+        },
     }
 
 
@@ -427,6 +436,18 @@ def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float 
     v_w where the largest real eigenvalue of the real ones changes sign from - to + (the
     capsize root); v_d: midpoint between the last grid speed with only real eigenvalues and
     the next speed (None if a complex pair exists at the first speed).
+
+    Parameters
+    ----------
+    speeds : (K,) ndarray
+        Increasing speeds [m/s].
+    eigs : (K, 4) ndarray of complex
+        Eigenvalues at each speed [1/s].
+
+    Returns
+    -------
+    dict
+        ``v_d``, ``v_w``, ``v_c`` [m/s] or None where not found.
     """
     speeds = np.asarray(speeds, float)
     has_pair = np.array([np.any(np.abs(e.imag) > 1e-9) for e in eigs])
@@ -458,111 +479,42 @@ def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float 
     return out
 
 
-def fig3(
+def fig3_summary(
     p: BicycleParameters,
     grid: list[dict[str, Any]],
-    out: Path,
     zoom: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """Identified eigenvalues (PEM) against speed over the true linearization, ranges marked."""
-    from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
+    """Fig. 3 numbers: PEM eigenvalues against speed, critical speeds identified and true.
 
-    from .plots import MODE_STYLE, plt, save
+    Parameters
+    ----------
+    p : BicycleParameters
+        The simulated bicycle.
+    grid : list of dict
+        :func:`identify_speed` results over the Fig. 3 speeds.
+    zoom : list of dict, optional
+        Extra results for the 3-4.2 m/s zoom (Fig. 3(b)).
+
+    Returns
+    -------
+    dict
+        ``critical_true``/``critical_identified``/``critical_paper`` [m/s], ``rows`` (per
+        speed: identified and true eigenvalues [1/s], standard errors), ``failed``; private
+        ``_ok`` and ``_zoom``, the successful fits of the main grid and of the zoom range.
+    """
+    from bikeid.sim.linear import critical_speeds
 
     ok = [g for g in grid if g["methods"].get("pem", {}).get("error") is None]
     speeds = np.array([g["speed"] for g in ok])
     eig = np.array([g["methods"]["pem"]["eig"] for g in ok])
     crit_true = critical_speeds(p)
     crit_id = critical_from_grid(speeds, eig)
-    fine = np.linspace(min(1.0, speeds.min()), max(15.0, speeds.max()), 600)
-    sw = eigenvalues_vs_speed(p, fine)
-
-    def panel(axs, lo, hi, runs_sel, title):
-        a1, a2 = axs
-        seen = set()
-        for j, lab in enumerate(sw.labels):
-            c = MODE_STYLE.get(lab, "0.4")
-            nm = f"true {lab}" if lab not in seen else None
-            seen.add(lab)
-            a1.plot(sw.speeds, sw.values[:, j].real, color=c, lw=1.0, label=nm)
-            a2.plot(sw.speeds, np.abs(sw.values[:, j].imag), color=c, lw=1.0, label=nm)
-        sp = np.array([g["speed"] for g in runs_sel])
-        ev = np.array([g["methods"]["pem"]["eig"] for g in runs_sel])
-        a1.plot(np.repeat(sp, 4), ev.real.ravel(), "kx", ms=4, label="identified (PEM), real part")
-        a2.plot(
-            np.repeat(sp, 4),
-            np.abs(ev.imag).ravel(),
-            "k*",
-            ms=4,
-            label="identified (PEM), |imag part|",
-        )
-        for a in (a1, a2):
-            a.axhline(0, color="k", lw=0.5)
-            a.set_xlim(lo - 0.02 * (hi - lo), hi + 0.02 * (hi - lo))
-            a.grid(alpha=0.3)
-            for key in ("v_d", "v_w", "v_c"):
-                val = crit_true[key]
-                if val is not None and lo <= val <= hi:
-                    a.axvline(val, color="0.4", ls="--", lw=0.8)
-            for val in crit_id.values():
-                if val is not None and lo <= val <= hi:
-                    a.axvline(val, color="m", ls=":", lw=1.0)
-        ymin = max(-40.0, float(np.nanmin(ev.real)) - 2)
-        a1.set_ylim(ymin, 8)
-        a2.set_ylim(0, max(20.0, float(np.nanmax(np.abs(ev.imag))) + 1))
-        for key in ("v_d", "v_w", "v_c"):
-            val = crit_true[key]
-            if val is not None and lo <= val <= hi:
-                a1.annotate(
-                    f"{key}={val:.3f}",
-                    (val, 8),
-                    fontsize=7,
-                    ha="left",
-                    va="top",
-                    rotation=90,
-                    color="0.3",
-                )
-        # ranges A-D of the truth
-        edges = [lo] + [crit_true[k] for k in ("v_d", "v_w", "v_c")] + [hi]
-        for name, a_, b_ in zip("ABCD", edges[:-1], edges[1:], strict=True):
-            a_, b_ = max(a_, lo), min(b_, hi)
-            if b_ > a_:
-                a2.annotate(
-                    name,
-                    (0.5 * (a_ + b_), a2.get_ylim()[1] * 0.93),
-                    ha="center",
-                    fontsize=9,
-                    color="0.3",
-                )
-        a1.set_ylabel("real part [1/s]")
-        a2.set_ylabel("|imag part| [rad/s]")
-        a2.set_xlabel(
-            "speed v [m/s]   (grey dashed: true v_d, v_w, v_c; magenta dotted: identified)"
-        )
-        a1.set_title(title, fontsize=9)
-        a1.legend(fontsize=6, loc="lower left", ncol=2)
-
-    fig, axs = plt.subplots(2, 1, figsize=(9, 7.5), sharex=True)
-    panel(
-        axs,
-        float(min(1.0, speeds.min())),
-        float(max(15.0, speeds.max())),
-        ok,
-        "Chen & Dao Fig. 3(a) analogue: identified eigenvalues vs the true linearization "
-        "(benchmark)",
-    )
-    save(fig, out / "cd_fig3a_eigenvalues.png")
     zoom_ok = [
         g
         for g in (zoom or []) + ok
         if 3.0 - 1e-9 <= g["speed"] <= 4.2 + 1e-9
         and g["methods"].get("pem", {}).get("error") is None
     ]
-    if zoom_ok:
-        fig, axs = plt.subplots(2, 1, figsize=(9, 7.5), sharex=True)
-        panel(axs, 3.0, 4.2, zoom_ok, "Chen & Dao Fig. 3(b) analogue: zoom 3-4.2 m/s")
-        axs[0].set_ylim(-16, 4)
-        save(fig, out / "cd_fig3b_zoom.png")
     rows = []
     for g in sorted(ok + [z for z in zoom_ok if z not in ok], key=lambda g: g["speed"]):
         rows.append(
@@ -585,15 +537,15 @@ def fig3(
             for g in grid
             if g["methods"].get("pem", {}).get("error")
         ],
-        "figures": ["cd_fig3a_eigenvalues.png"] + (["cd_fig3b_zoom.png"] if zoom_ok else []),
+        "_ok": ok,
+        "_zoom": zoom_ok,
     }
 
 
 # -- Fig. 7 ------------------------------------------------------------------------------------
-def fig7(
+def fig7_tracking(
     p: BicycleParameters,
     model,
-    out: Path,
     duration: float = 50.0,
     poles: Sequence[complex] | None = None,
 ) -> dict[str, Any]:
@@ -601,7 +553,25 @@ def fig7(
     gains placed on the identified model.  The paper does not give its poles; by default two
     poles sit on the identified model's roll zeros and three at -6, -8, -10 1/s
     (``controllers.pole_placement.tracking_poles``), so roll follows the same third-order
-    response at every speed and the paper's "delay time" is the only tracking error."""
+    response at every speed and the paper's "delay time" is the only tracking error.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The simulated bicycle (nonlinear plant).
+    model : ident.pem.CanonicalModel
+        The identified model the gains are placed on.
+    duration : float
+        Length of the tracking run [s].
+    poles : sequence of complex, optional
+        Closed-loop poles [1/s] (5: the 4 states and the integral of the roll error).
+
+    Returns
+    -------
+    dict
+        Poles requested and achieved on the true linearization [1/s], gains, tracking errors
+        [deg], peak torque [N m] and steer [deg]; private ``_run`` (the simulated run).
+    """
     from bikeid.controllers.excitation import ChirpReference
     from bikeid.controllers.pole_placement import (
         PolePlacement,
@@ -613,10 +583,8 @@ def fig7(
     from bikeid.dataset.sensors import Sensors
     from bikeid.sim.linear import state_matrices
 
-    from .plots import plt, save
-
     v = FIG7_SPEED
-    sys_id = model.state_space()
+    sys_id = model.state_space(order="chen-dao")
     if poles is None:
         A_id, B_id = to_bikeid_order(sys_id.A, sys_id.B, "chen_dao")
         poles = tracking_poles(A_id, B_id)
@@ -635,26 +603,6 @@ def fig7(
     achieved = np.sort_complex(np.linalg.eigvals(Aa - Ba @ Ka))
     phi, r = run.true("phi"), run.reference
     e = r - phi
-    fig, ax = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
-    ax[0].plot(run.t, np.degrees(r), "k--", lw=0.9, label="reference")
-    ax[0].plot(run.t, np.degrees(phi), color="tab:blue", lw=0.9, label="response (roll angle)")
-    ax[0].plot(run.t, np.degrees(e), color="tab:red", lw=0.7, label="error")
-    ax[0].set_ylabel("roll angle [deg]")
-    ax[1].plot(run.t, np.degrees(run.true("delta")), color="tab:green", lw=0.8)
-    ax[1].set_ylabel("steer angle [deg]")
-    ax[2].plot(run.t, run.true("T_delta"), color="k", lw=0.7)
-    ax[2].set_ylabel("steer torque [N m]")
-    ax[2].set_xlabel("time [s]")
-    for a in ax:
-        a.grid(alpha=0.3)
-    ax[0].legend(fontsize=7, loc="upper left", ncol=3)
-    ax[0].set_title(
-        f"Chen & Dao Fig. 7 analogue: roll tracking at 15 km/h, nonlinear plant, "
-        f"poles {[round(float(np.real(z)), 2) for z in poles]} placed on the model identified at "
-        f"{model.speed} m/s",
-        fontsize=9,
-    )
-    save(fig, out / "cd_fig7_tracking.png")
     return {
         "speed": v,
         "poles_requested": list(poles),
@@ -667,41 +615,5 @@ def fig7(
         "max_torque": float(np.abs(run.true("T_delta")).max()),
         "max_steer_deg": float(np.degrees(np.abs(run.true("delta")).max())),
         "reference": ref.describe(),
-        "figure": "cd_fig7_tracking.png",
+        "_run": run,
     }
-
-
-def limit_cycle_study(
-    p: BicycleParameters, out: Path, duration: float, log: Callable[[str], None] = lambda s: None
-) -> dict[str, Any]:
-    """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check."""
-    from bikeid.sim.linear import critical_speeds, eigenvalues
-
-    from . import limit_cycles as lc
-
-    res: dict[str, Any] = {"speed": lc.SPEED, "duration": duration, "figures": []}
-    for name, conds in (("fig4", lc.FIG4_CONDITIONS), ("fig5", lc.FIG5_CONDITIONS)):
-        trajs = [lc.coast(p, ic, duration) for ic in conds]
-        labels = [ic.label for ic in conds]
-        res[name] = [
-            lc.periodicity(tr, ic.label).as_dict() for tr, ic in zip(trajs, conds, strict=True)
-        ]
-        lc.plot_phase_portraits(
-            trajs,
-            labels,
-            out / f"cd_{name}_phase.png",
-            f"Chen & Dao {name[:3].title()}. {name[3]} analogue: coasting at "
-            f"3.5 m/s, no steer torque, {duration:g} s (benchmark)",
-        )
-        lc.plot_energy_speed(
-            trajs,
-            labels,
-            out / f"cd_{name}_energy_speed.png",
-            f"{name[:3].title()}. {name[3]} runs: energy conservation and speed",
-        )
-        res["figures"] += [f"cd_{name}_phase.png", f"cd_{name}_energy_speed.png"]
-        log(f"  {name}: " + ", ".join(f"{r['label']}: {r['verdict']}" for r in res[name]))
-    ev = np.sort_complex(eigenvalues(p, lc.SPEED))
-    res["linear_eigenvalues"] = ev
-    res["critical_true"] = {k: critical_speeds(p)[k] for k in ("v_d", "v_w", "v_c")}
-    return res

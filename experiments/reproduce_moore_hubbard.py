@@ -235,12 +235,9 @@ def _model_matrices(rider: str, model: dict[str, float] | None):
 
 def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
     """Eq.-6 VAF of phi, delta, phidot, deltadot for a windowed simulation (module doc)."""
-    from scipy.linalg import expm
-
     from bikeid.ident.direct import vaf_moore
     from bikeid.sim.linear import state_matrices
-
-    from .reproduce_chen_dao import open_loop_simulation
+    from bikeid.sim.sampling import zoh
 
     cm, H = _model_matrices(run.meta["rider"], model)
     v = float(np.mean(run["v"]))
@@ -248,10 +245,7 @@ def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WIND
     Bf = np.vstack([np.zeros((2, 1)), (np.linalg.inv(cm.M) @ H)[:, None]])
     Bu = np.hstack([B[:, 1:2], Bf])  # inputs T_delta, F
     dt = run.dt
-    Z = np.zeros((6, 6))
-    Z[:4, :4], Z[:4, 4:] = A * dt, Bu * dt
-    E = expm(Z)
-    Ad, Bd = E[:4, :4], E[:4, 4:]
+    Ad, Bd = zoh(A, Bu, dt)
     names = ("phi", "delta", "phidot", "deltadot")
     y = np.column_stack([run[n] for n in names])
     u = np.column_stack([run["T_delta"], run["F"]])
@@ -260,20 +254,23 @@ def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WIND
     for i0 in range(0, y.shape[0], n):
         sl = slice(i0, min(i0 + n, y.shape[0]))
         # fold the two inputs into one by simulating the forced part with both
-        sim[sl] = _window_sim(Ad, Bd, u[sl], y[sl], open_loop_simulation)
+        sim[sl] = _window_sim(Ad, Bd, u[sl], y[sl])
     return {nm: vaf_moore(y[:, i], sim[:, i]) for i, nm in enumerate(names)}
 
 
-def _window_sim(Ad, Bd, u, y, ols):
-    """Open-loop window simulation with two inputs: the forced response of F is added to
-    ``y``'s fit by running the single-input least-squares routine on a combined input."""
+def _window_sim(Ad, Bd, u, y):
+    """Open-loop window simulation with two inputs (T_delta, F), initial state by least
+    squares (:func:`ident.validate.simulation`): the response to F from rest is taken out of
+    ``y`` first and added back, so the fit sees the T_delta-driven part."""
+    from bikeid.ident.validate import simulation
+
     N = u.shape[0]
     xf = np.zeros(4)
     forced_F = np.empty((N, 4))
     for k in range(N):
         forced_F[k] = xf
         xf = Ad @ xf + Bd[:, 1] * u[k, 1]
-    ysim, _ = ols(Ad, Bd[:, :1], np.eye(4), u[:, 0], y - forced_F)
+    ysim, _ = simulation(Ad, Bd[:, :1], np.eye(4), u[:, 0], y - forced_F)
     return ysim + forced_F
 
 

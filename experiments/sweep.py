@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from bikeid.controllers.registry import STUDY_CONTROLLERS, canonical_name
 from bikeid.dataset.run import Run
 from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
 
@@ -53,8 +54,8 @@ __all__ = [
     "simulate_task",
 ]
 
-CONTROLLERS = ("fuzzy", "pid", "pole")
-REGISTRY_NAMES = {"fuzzy": "fuzzy", "pid": "pid", "pole": "pole-placement"}
+#: Controllers a sweep runs, by the names stored in its files (``controllers.registry``).
+CONTROLLERS = STUDY_CONTROLLERS
 REFERENCES = ("chirp", "zero")
 SENSORS = ("default", "ideal")
 
@@ -190,9 +191,9 @@ def simulate_task(spec: SweepSpec, task: Task) -> Run:
         sensors = Sensors.ideal(rate=spec.sensor_rate)
     bicycle = by_name(spec.bicycle)
     options: dict[str, Any] = {"sample_time": spec.sample_time}
-    if spec.controller == "pole":  # placed on the linear model at the run's speed
+    if canonical_name(spec.controller) == "pole-placement":  # placed at the run's speed
         options["design_speed"] = task.speed
-    controller = make(REGISTRY_NAMES[spec.controller], bicycle, **options)
+    controller = make(spec.controller, bicycle, **options)
     run = simulate_run(
         bicycle,
         controller,

@@ -58,6 +58,7 @@ from scipy.optimize import least_squares
 from bikeid.dataset.run import Run
 from bikeid.sim.conventions import CANONICAL_STATE
 from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
+from bikeid.sim.sampling import zoh
 
 from .canonical import (
     A_POS,
@@ -165,13 +166,9 @@ def _discretize_with_derivatives(theta: np.ndarray, dt: float):
 
 
 def _discretize(theta: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    from scipy.linalg import expm
-
-    A, B = canonical_ab(theta)
-    Z = np.zeros((5, 5))
-    Z[:4, :4], Z[:4, 4:] = A * dt, B * dt
-    E = expm(Z)
-    return E[:4, :4], E[:4, 4]
+    """Ad (4x4) and Bd (4,) of the canonical model ``theta`` sampled with a ZOH at dt [s]."""
+    Ad, Bd = zoh(*canonical_ab(theta), dt)
+    return Ad, Bd[:, 0]
 
 
 def _out_matrix(outputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -213,7 +210,11 @@ def _run_data(runs: Sequence[Run], outputs: Sequence[str]) -> list[_Data]:
 
 @dataclass(frozen=True)
 class CanonicalModel:
-    """A fixed-speed canonical model (states [phi, phidot, delta, deltadot]).
+    """A fixed-speed canonical model.
+
+    ``theta``, ``A``, ``B``, ``C``, ``K`` and :meth:`predictor` are in Chen & Dao's state
+    order [phi, phidot, delta, deltadot] (the canonical form's); :meth:`state_space`
+    returns bikeid's order [phi, delta, phidot, deltadot] unless ``order="chen-dao"``.
 
     ``theta`` = [a1..a8, b1, b2] (:data:`ident.canonical.THETA_NAMES`), ``covariance``
     (10x10), ``outputs`` the measured states used, ``K`` the discrete innovation gain
@@ -252,15 +253,34 @@ class CanonicalModel:
     def params(self) -> dict[str, float]:
         return dict(zip(THETA_NAMES, self.theta, strict=True))
 
-    def state_space(self) -> control.StateSpace:
-        """Continuous-time model, states in Chen & Dao's order [phi, phidot, delta, deltadot]
-        (``ident.canonical.to_bikeid_order`` permutes), outputs ``self.outputs``."""
+    def state_space(self, order: str = "bikeid") -> control.StateSpace:
+        """Continuous-time model with input ``T_delta`` [N m] and outputs ``self.outputs``.
+
+        Parameters
+        ----------
+        order : {"bikeid", "chen-dao"}
+            State order: bikeid's [phi, delta, phidot, deltadot] (rad, rad/s; the default,
+            as every bikeid model) or Chen & Dao's canonical [phi, phidot, delta, deltadot]
+            (the order of ``theta``, ``A``, ``B``, ``C`` and ``K``).
+
+        Returns
+        -------
+        control.StateSpace
+            The model with its states labelled in the chosen order (A [1/s], B [rad/(N m s^2)]
+            rows of the accelerations, C selecting the outputs, D = 0).
+        """
         C = self.C
-        return control.ss(self.A, self.B, C, np.zeros((C.shape[0], 1)), inputs=[INPUT],
-                          outputs=list(self.outputs), states=list(CANONICAL_STATE))  # fmt: skip
+        sys = control.ss(self.A, self.B, C, np.zeros((C.shape[0], 1)), inputs=[INPUT],
+                         outputs=list(self.outputs), states=list(CANONICAL_STATE))  # fmt: skip
+        if order == "chen-dao":
+            return sys
+        if order == "bikeid":
+            return to_bikeid_order(sys)
+        raise ValueError(f"order={order!r}: use 'bikeid' or 'chen-dao'")
 
     def state_space_bikeid(self) -> control.StateSpace:
-        return to_bikeid_order(self.state_space())
+        """Same as ``state_space(order="bikeid")`` (kept for existing callers)."""
+        return self.state_space(order="bikeid")
 
     def predictor(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Ad, Bd, C, K) of the discrete innovations predictor at ``dt``."""
@@ -306,8 +326,10 @@ class SpeedCanonicalModel:
             noise_covariance=self.per_speed[near].noise_covariance, outputs=self.outputs,
         )  # fmt: skip
 
-    def state_space(self, v: float) -> control.StateSpace:
-        return self.at(v).state_space()
+    def state_space(self, v: float, order: str = "bikeid") -> control.StateSpace:
+        """The fixed-speed model at ``v`` [m/s] (:meth:`CanonicalModel.state_space`; ``order``
+        "bikeid" [phi, delta, phidot, deltadot] by default, or "chen-dao")."""
+        return self.at(v).state_space(order=order)
 
     def eigenvalues(self, v: float) -> np.ndarray:
         return np.linalg.eigvals(canonical_ab(self.theta(v))[0])

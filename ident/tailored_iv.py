@@ -38,10 +38,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import expm
 
 from bikeid.dataset.run import Run
 from bikeid.sim.linear import CanonicalMatrices, state_matrices
+from bikeid.sim.sampling import zoh
 
 from .direct import DirectResult, identify
 from .signals import check_sampling
@@ -109,10 +109,8 @@ def fit_controller(run: Run, na: int = 1, nb: int = 1) -> ControllerFit:
 def _discretize(cm: CanonicalMatrices, v: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold A_d, B_d (T_delta column) of the canonical model at speed v."""
     A, B = state_matrices(cm, v)
-    E = np.zeros((5, 5))
-    E[:4, :4], E[:4, 4] = A * dt, B[:, 1] * dt
-    F = expm(E)
-    return F[:4, :4], F[:4, 4]
+    Ad, Bd = zoh(A, B[:, 1:2], dt)
+    return Ad, Bd[:, 0]
 
 
 def simulate_instruments(

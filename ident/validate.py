@@ -13,7 +13,11 @@ judge positive lags, or use the dither as the input.
 
 Models: a :class:`ident.pem.CanonicalModel` (its innovation gain K is used for
 prediction), or any continuous python-control ``StateSpace`` whose outputs are
-named after run signals and whose inputs are run signals (K = 0 then).
+named after run signals and whose inputs are run signals (K = 0 then), sampled
+exactly (``sim.sampling.zoh``).  The computations behind ``compare`` take discrete
+matrices and arrays and are public: :func:`simulation` (open-loop simulation, initial
+state by least squares) and :func:`k_step_prediction` (innovations predictor, then k
+open-loop steps); the reproductions of Chen & Dao and Moore & Hubbard use them.
 """
 
 from __future__ import annotations
@@ -23,9 +27,9 @@ from dataclasses import dataclass
 
 import control
 import numpy as np
-from scipy.linalg import expm
 
 from bikeid.dataset.run import Run
+from bikeid.sim.sampling import zoh
 
 from .direct import vaf_variance
 
@@ -34,8 +38,10 @@ __all__ = [
     "ResidResult",
     "compare",
     "goodness_of_fit",
+    "k_step_prediction",
     "poles",
     "resid",
+    "simulation",
     "transfer_functions",
     "zeros",
 ]
@@ -67,12 +73,9 @@ def _sampled(model, dt: float):
         A, B, C = (np.asarray(m, float) for m in (model.A, model.B, model.C))
         if np.any(np.asarray(model.D)):
             raise ValueError("models with direct feedthrough (D != 0) are not supported")
-        n, m = B.shape
-        Z = np.zeros((n + m, n + m))
-        Z[:n, :n], Z[:n, n:] = A * dt, B * dt
-        E = expm(Z)
-        K = np.zeros((n, C.shape[0]))
-        return E[:n, :n], E[:n, n:], C, K, tuple(model.output_labels), tuple(model.input_labels)
+        Ad, Bd = zoh(A, B, dt)
+        K = np.zeros((A.shape[0], C.shape[0]))
+        return Ad, Bd, C, K, tuple(model.output_labels), tuple(model.input_labels)
     raise ValueError("model must be an ident.pem.CanonicalModel or a control.StateSpace")
 
 
@@ -89,15 +92,140 @@ class CompareResult:
     horizon: int | None
 
 
-def _forced(Ad, Bd, C, U, F):
-    """Response with x0 = 0 of x+ = F x + Bd u (+ K y terms folded in U)."""
-    n = Ad.shape[0]
-    x = np.zeros(n)
-    out = np.empty((U.shape[0], C.shape[0]))
-    for k in range(U.shape[0]):
-        out[k] = C @ x
-        x = F @ x + U[k]
-    return out
+def _as_columns(u: np.ndarray) -> np.ndarray:
+    """Inputs as an (N, m) array (a 1-D signal is one column)."""
+    u = np.asarray(u, dtype=float)
+    return u.reshape(u.shape[0], -1)
+
+
+def simulation(
+    Ad: np.ndarray,
+    Bd: np.ndarray,
+    C: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray | None = None,
+    ic: str | np.ndarray = "estimate",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop simulation of x[k+1] = Ad x[k] + Bd u[k], y[k] = C x[k].
+
+    The output is affine in the initial state, yhat = forced + Phi x0, so ``ic="estimate"``
+    fits x0 by linear least squares to all of ``y`` (MATLAB ``compare`` with
+    ``InitialCondition 'e'``).
+
+    Parameters
+    ----------
+    Ad : (n, n) ndarray
+        Discrete state matrix [-] (one sample of the model's period).
+    Bd : (n, m) ndarray
+        Discrete input matrix [state units per input unit].
+    C : (p, n) ndarray
+        Output matrix [-] (selects/combines states; outputs in state units).
+    u : (N,) or (N, m) ndarray
+        Input samples (units of the model's inputs, e.g. N m for T_delta).
+    y : (N, p) ndarray, optional
+        Measured outputs (units of the outputs, e.g. rad, rad/s); needed for
+        ``ic="estimate"``.
+    ic : {"estimate", "zero"} or (n,) array_like
+        Initial state: least squares on ``y``, zero, or the given state (state units).
+
+    Returns
+    -------
+    yhat : (N, p) ndarray
+        Simulated outputs (units of ``y``).
+    x0 : (n,) ndarray
+        The initial state used (state units).
+    """
+    U = _as_columns(u)
+    N, n, ny = U.shape[0], Ad.shape[0], C.shape[0]
+    xf = np.zeros(n)
+    forced = np.empty((N, ny))
+    Phi = np.empty((N, ny, n))  # response to each unit initial state
+    Ak = np.eye(n)
+    for k in range(N):
+        forced[k] = C @ xf
+        Phi[k] = C @ Ak
+        xf = Ad @ xf + Bd @ U[k]
+        Ak = Ad @ Ak
+    if isinstance(ic, str):
+        if ic == "estimate":
+            if y is None:
+                raise ValueError("ic='estimate' needs the measured outputs y")
+            x0, *_ = np.linalg.lstsq(Phi.reshape(-1, n), (y - forced).ravel(), rcond=None)
+        elif ic == "zero":
+            x0 = np.zeros(n)
+        else:
+            raise ValueError(f"ic={ic!r}: use 'estimate', 'zero' or a state vector")
+    else:
+        x0 = np.asarray(ic, float).reshape(n)
+    return forced + Phi @ x0, x0
+
+
+def k_step_prediction(
+    Ad: np.ndarray,
+    Bd: np.ndarray,
+    C: np.ndarray,
+    K: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    k: int,
+    x0: np.ndarray | None = None,
+    head: str = "one-step",
+) -> np.ndarray:
+    """Prediction k samples beyond the innovations predictor's one-step state estimate.
+
+    The predictor xhat[j+1] = Ad xhat[j] + Bd u[j] + K (y[j] - C xhat[j]) (a stabilizing
+    observer when Ad - K C is stable) gives xhat[j] from the data up to j - 1; the model
+    then runs open loop on the measured input for k samples, so yhat[j] = C (state at j
+    predicted from xhat[j - k]).  ``k = 0`` is the one-step prediction; MATLAB's
+    ``compare(..., h)`` is ``k = h - 1`` with ``head="open-loop"``.
+
+    Parameters
+    ----------
+    Ad, Bd, C : ndarray
+        Discrete model, as in :func:`simulation`.
+    K : (n, p) ndarray
+        Discrete innovation (observer) gain [state units per output unit].
+    u : (N,) or (N, m) ndarray
+        Input samples (model input units).
+    y : (N, p) ndarray
+        Measured outputs (output units).
+    k : int
+        Open-loop steps after the state estimate, >= 0 [samples].
+    x0 : (n,) ndarray, optional
+        Initial state of the predictor (state units); zero by default.
+    head : {"one-step", "open-loop"}
+        The first k samples, which have no estimate k samples back: the one-step
+        prediction, or ``x0`` run open loop.
+
+    Returns
+    -------
+    (N, p) ndarray
+        Predicted outputs (units of ``y``).
+    """
+    if k < 0:
+        raise ValueError(f"k={k}: need k >= 0")
+    if head not in ("one-step", "open-loop"):
+        raise ValueError(f"head={head!r}: use 'one-step' or 'open-loop'")
+    U = _as_columns(u)
+    N, n = U.shape[0], Ad.shape[0]
+    xh = np.zeros((N, n))
+    x = np.zeros(n) if x0 is None else np.asarray(x0, float).reshape(n).copy()
+    for j in range(N):
+        xh[j] = x
+        e = y[j] - C @ x
+        x = Ad @ x + Bd @ U[j] + K @ e
+    pred = (xh @ C.T).copy()
+    if k < N:
+        X = xh[: N - k].copy()
+        for i in range(k):
+            X = X @ Ad.T + U[i : N - k + i] @ Bd.T
+        pred[k:] = X @ C.T
+    if head == "open-loop":
+        z = xh[0].copy()
+        for j in range(min(k, N)):
+            pred[j] = C @ z
+            z = Ad @ z + Bd @ U[j]
+    return pred
 
 
 def compare(
@@ -108,9 +236,31 @@ def compare(
 ) -> CompareResult:
     """Simulation (``horizon=None``) or ``horizon``-step prediction of each run.
 
-    ``ic``: "estimate" (least squares on the run, per run), "zero", or a state vector.
-    A simulation of an unstable model over a long run raises ValueError: use a
-    finite horizon or a shorter window (``Run.window``), as Moore's 8 s windows.
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        The data (signals named after the model's inputs and outputs).
+    model : ident.pem.CanonicalModel or control.StateSpace
+        The model (a continuous ``StateSpace`` is sampled exactly at the run's dt).
+    horizon : int or None
+        None: simulation (:func:`simulation`); h >= 1: h-step-ahead prediction by the
+        model's innovations predictor (:func:`k_step_prediction` with k = h - 1 and the
+        first samples run open loop from the initial state, as MATLAB).
+    ic : {"estimate", "zero"} or (n,) array_like
+        Initial state: least squares per run (of the simulation, or of the one-step
+        predictor), zero, or the given state vector (state units).
+
+    Returns
+    -------
+    CompareResult
+        Predictions per run and NRMSE fit and VAF per output (fractions).
+
+    Raises
+    ------
+    ValueError
+        A simulation of an unstable model over a long run (growth of the largest discrete
+        eigenvalue over the run above 1e12): use a finite horizon or a shorter window
+        (``Run.window``), as Moore's 8 s windows.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if horizon is not None and horizon < 1:
@@ -119,7 +269,6 @@ def compare(
     outputs = None
     for run in runs:
         Ad, Bd, C, K, outputs, inputs = _sampled(model, run.dt)
-        n = Ad.shape[0]
         U = np.column_stack([run[i] for i in inputs])
         Y = np.column_stack([run[o] for o in outputs])
         N = run.n
@@ -130,41 +279,11 @@ def compare(
                     f"the model is unstable and the run has {N} samples (growth {growth:.2g}): "
                     "use horizon=k (k-step prediction) or a shorter window (Run.window)"
                 )
-            F, drive = Ad, U @ Bd.T
+            yhat, x0 = simulation(Ad, Bd, C, U, Y, ic)
         else:
-            F, drive = Ad - K @ C, U @ Bd.T + Y @ K.T
-        base = _forced(Ad, Bd, C, drive, F)
-        Phi = np.empty((N, C.shape[0], n))  # response to each unit initial state
-        Fk = np.eye(n)
-        for k in range(N):
-            Phi[k] = C @ Fk
-            Fk = F @ Fk
-        if isinstance(ic, str):
-            if ic == "estimate":
-                x0, *_ = np.linalg.lstsq(Phi.reshape(-1, n), (Y - base).ravel(), rcond=None)
-            elif ic == "zero":
-                x0 = np.zeros(n)
-            else:
-                raise ValueError(f"ic={ic!r}: use 'estimate', 'zero' or a state vector")
-        else:
-            x0 = np.asarray(ic, float).reshape(n)
-        if horizon is None:
-            yhat = base + (Phi.reshape(-1, n) @ x0).reshape(N, -1)
-        else:
-            # one-step predictor states, then horizon-1 open-loop steps
-            xs = np.empty((N, n))
-            x = x0.copy()
-            for k in range(N):
-                xs[k] = x
-                x = F @ x + drive[k]
-            Xp = xs.copy()
-            Ub = U @ Bd.T
-            for _ in range(horizon - 1):
-                Xn = np.empty_like(Xp)
-                Xn[1:] = Xp[:-1] @ Ad.T + Ub[:-1]
-                Xn[0] = Xp[0]
-                Xp = Xn
-            yhat = Xp @ C.T
+            # the one-step predictor is a simulation of x+ = (Ad - K C) x + [Bd K] [u; y]
+            _, x0 = simulation(Ad - K @ C, np.hstack([Bd, K]), C, np.hstack([U, Y]), Y, ic)
+            yhat = k_step_prediction(Ad, Bd, C, K, U, Y, horizon - 1, x0, head="open-loop")
         yh_all.append(yhat)
         x0_all.append(x0)
         ys.append(Y)
@@ -243,6 +362,10 @@ def resid(
 
 
 def _ss(model) -> control.StateSpace:
+    # poles, zeros and transfer functions do not depend on the state order; the canonical
+    # model's own (Chen & Dao) order is used, as the identification computed it
+    if hasattr(model, "predictor") and hasattr(model, "theta"):
+        return model.state_space(order="chen-dao")
     return model.state_space() if hasattr(model, "state_space") else model
 
 

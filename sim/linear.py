@@ -454,7 +454,7 @@ def _track(values: np.ndarray) -> np.ndarray:
     return out
 
 
-def match_eigenvalues(found, truth) -> np.ndarray:
+def match_eigenvalues(found, truth, *, return_index: bool = False):
     """``found`` reordered to pair with ``truth`` (minimum total distance |found - truth|).
 
     Parameters
@@ -463,6 +463,9 @@ def match_eigenvalues(found, truth) -> np.ndarray:
         Eigenvalues to reorder (identified, say) [1/s].
     truth : (n,) array_like of complex
         Reference eigenvalues [1/s], in the order wanted.
+    return_index : bool, optional
+        Also return the permutation, to reorder quantities attached to ``found`` (their
+        standard errors, say) the same way.
 
     Returns
     -------
@@ -470,6 +473,8 @@ def match_eigenvalues(found, truth) -> np.ndarray:
         ``found[col]`` with ``col`` the optimal assignment (Hungarian algorithm,
         ``scipy.optimize.linear_sum_assignment``), so element i pairs with ``truth[i]``.
         Both inputs are flattened.
+    col : (n,) ndarray of int
+        Only with ``return_index=True``: the permutation ``col``.
 
     Raises
     ------
@@ -481,7 +486,7 @@ def match_eigenvalues(found, truth) -> np.ndarray:
     if found.size != truth.size:
         raise ValueError(f"cannot pair {found.size} eigenvalues with {truth.size}")
     _, col = linear_sum_assignment(np.abs(truth[:, None] - found[None, :]))
-    return found[col]
+    return (found[col], col) if return_index else found[col]
 
 
 def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> EigenSweep:

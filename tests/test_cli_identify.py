@@ -11,7 +11,7 @@ import pytest
 
 from bikeid.experiments.cli import main
 from bikeid.experiments.sweep import SweepSpec, run_sweep
-from bikeid.sim.linear import critical_speeds, eigenvalues
+from bikeid.sim.linear import critical_speeds, eigenvalues, match_eigenvalues
 from bikeid.sim.parameters import benchmark
 
 SPEEDS = (3.0, 4.5, 6.0, 8.0)
@@ -36,16 +36,6 @@ def _complex(rows):
     return np.array([complex(e["re"], e["im"]) for e in rows])
 
 
-def _match(ident, truth):
-    """Pair each true eigenvalue with the nearest identified one (distinct)."""
-    ident = list(ident)
-    out = []
-    for z in truth:
-        k = int(np.argmin([abs(z - w) for w in ident]))
-        out.append(ident.pop(k))
-    return np.array(out)
-
-
 def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
     """PEM on 30 s of noisy closed-loop data per speed. Tolerances: the issue's accuracy goal
     (2 %, or 0.05 1/s where |lambda| < 2.5) met by ``bikeid accuracy`` from 50 s runs; here
@@ -58,7 +48,7 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
     for row in out["per_speed"]:
         truth = np.sort_complex(eigenvalues(p, row["speed"]))
         np.testing.assert_allclose(_complex(row["true_eigenvalues"]), truth, atol=1e-12)
-        ident = _match(_complex(row["eigenvalues"]), truth)
+        ident = match_eigenvalues(_complex(row["eigenvalues"]), truth)
         tol = 1.5 * np.maximum(0.02 * np.abs(truth), np.where(np.abs(truth) < 2.5, 0.05, 0))
         assert np.all(np.abs(ident - truth) <= tol), (row["speed"], ident, truth)
     cs, true_cs = out["critical_speeds"], critical_speeds(p)
@@ -77,7 +67,7 @@ def test_direct_on_noise_free_sweep_matches_truth(sweeps, capsys):
     assert max(out["condition"].values()) < 1e6  # roll and steer rows
     for row in out["per_speed"]:
         truth = np.sort_complex(eigenvalues(p, row["speed"]))
-        ident = _match(_complex(row["eigenvalues"]), truth)
+        ident = match_eigenvalues(_complex(row["eigenvalues"]), truth)
         tol = np.maximum(0.05 * np.abs(truth), 0.1)
         assert np.all(np.abs(ident - truth) <= tol), (row["speed"], ident, truth)
 
@@ -91,7 +81,7 @@ def test_moore_hubbard_recipe_is_biased_by_held_torque(sweeps, capsys):
                     "--cutoff", "15")  # fmt: skip
     row = next(r for r in out["per_speed"] if r["speed"] == 3.0)
     truth = np.sort_complex(eigenvalues(benchmark(), 3.0))
-    ident = _match(_complex(row["eigenvalues"]), truth)
+    ident = match_eigenvalues(_complex(row["eigenvalues"]), truth)
     assert abs(ident[0] - truth[0]) > 0.10 * abs(truth[0])  # caster, -10.35 1/s
 
 

@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from bikeid.experiments import reproduce_chen_dao as cd
-from bikeid.sim.linear import canonical_matrices, critical_speeds, eigenvalues
+from bikeid.sim.linear import (
+    canonical_matrices,
+    critical_speeds,
+    eigenvalues,
+    match_eigenvalues,
+)
 from bikeid.sim.parameters import benchmark
 
 
@@ -51,16 +56,13 @@ def test_open_loop_and_k_step_prediction_are_exact_for_the_true_model():
     round-off by the open-loop simulation (least-squares x0 recovers the true x0) and by the
     k-step prediction with any observer gain (the state estimate is exact once the initial
     transient of the observer is over: the data start from x0 = 0)."""
-    from scipy.linalg import expm
-
     from bikeid.ident.canonical import canonical_ab, theta_from_matrices
+    from bikeid.ident.validate import k_step_prediction, simulation
+    from bikeid.sim.sampling import zoh
 
     A, B = canonical_ab(theta_from_matrices(canonical_matrices(benchmark()), 5.0))
     dt = 0.01
-    Z = np.zeros((5, 5))
-    Z[:4, :4], Z[:4, 4:] = A * dt, B * dt
-    E = expm(Z)
-    Ad, Bd = E[:4, :4], E[:4, 4:]
+    Ad, Bd = zoh(A, B, dt)
     C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
     rng = np.random.default_rng(3)
     u = rng.uniform(-1, 1, 800)
@@ -70,16 +72,43 @@ def test_open_loop_and_k_step_prediction_are_exact_for_the_true_model():
     for k in range(u.size):
         y[k] = C @ x
         x = Ad @ x + Bd[:, 0] * u[k]
-    ysim, x0 = cd.open_loop_simulation(Ad, Bd, C, u, y)
-    np.testing.assert_allclose(x0, x_start, atol=1e-10)
-    np.testing.assert_allclose(ysim, y, atol=1e-10)
+    ysim, x0 = simulation(Ad, Bd, C, u, y)
+    # Tolerances from the computation (any BLAS, platform or summation order): every
+    # recursion step x+ = Ad x + Bd u rounds like a relative perturbation of (Ad, Bd) of at
+    # most n eps (n-term dot products, n = 4), in the data's loop and in the routine's, so
+    # |dy[k]| <= 2 n eps sum_j ||C Ad^(k-1-j)|| (||Ad|| ||x_j|| + ||Bd|| |u_j|) <= dy_max
+    # (the model is stable at 5 m/s, so the sum stays bounded); x0 moves by at most
+    # ||dy|| / sigma_min(Phi) plus the least-squares solve's own eps cond(Phi) ||x0||.
+    eps, n, N = np.finfo(float).eps, 4, u.size
+    Phi = np.empty((N, 2, n))
+    Ak = np.eye(n)
+    for k in range(N):
+        Phi[k], Ak = C @ Ak, Ad @ Ak
+    gain = np.linalg.norm(Phi, ord=2, axis=(1, 2)).sum()
+    xs = np.empty((N, n))
+    xx = x_start.copy()
+    for k in range(N):
+        xs[k], xx = xx, Ad @ xx + Bd[:, 0] * u[k]
+    source = np.linalg.norm(Ad, 2) * np.linalg.norm(xs, axis=1) + np.linalg.norm(Bd) * np.abs(u)
+    dy_max = 2 * n * eps * gain * source.max()
+    sv = np.linalg.svd(Phi.reshape(-1, n), compute_uv=False)
+    solve = eps * (sv[0] / sv[-1]) * np.linalg.norm(x_start)  # least-squares rounding in x0
+    dx0_max = dy_max * np.sqrt(y.size) / sv[-1] + solve
+    # the least-squares x0 leaves a residual no larger than the true x0's (<= sqrt(2N) dy_max
+    # in 2-norm, which bounds every sample), plus the solve's rounding through Phi
+    dysim_max = dy_max * np.sqrt(y.size) + sv[0] * solve
+    assert dysim_max < 1e-10 and dx0_max < 1e-9  # bounds this small: "exact" means something
+    np.testing.assert_allclose(x0, x_start, rtol=0, atol=dx0_max)
+    np.testing.assert_allclose(ysim, y, rtol=0, atol=dysim_max)
     K = np.zeros((4, 2))  # zero gain: the "observer" is the model started at 0
     y0 = np.zeros_like(y)  # data of the model started at x0 = 0
     xx = np.zeros(4)
     for k in range(u.size):
         y0[k] = C @ xx
         xx = Ad @ xx + Bd[:, 0] * u[k]
-    np.testing.assert_allclose(cd.k_step_prediction(Ad, Bd, C, K, u, y0, 50), y0, atol=1e-12)
+    # same bound: the k-step routine regroups the same recursion (started from the exact
+    # one-step state), so its rounding is again at most 2 n eps per step through Ad^j
+    np.testing.assert_allclose(k_step_prediction(Ad, Bd, C, K, u, y0, 50), y0, rtol=0, atol=dy_max)
 
 
 def test_moore_hubbard_stacked_fit_equals_ident_direct_for_one_rider():
@@ -139,7 +168,7 @@ def test_quick_reproduction_end_to_end(tmp_path):
     for v in (3.0, 5.0, 10.0):
         ident = np.array([complex(z["re"], z["im"]) for z in rows[v]["identified"]])
         true = eigenvalues(p, v)
-        matched = cd.match_eigenvalues(ident, true)
+        matched = match_eigenvalues(ident, true)
         tol = np.maximum(0.15, 0.05 * np.abs(true))
         caster = np.argmin(np.where(np.abs(true.imag) < 1e-9, true.real, np.inf))
         tol[caster] = 0.10 * abs(true[caster])
@@ -148,7 +177,7 @@ def test_quick_reproduction_end_to_end(tmp_path):
     ident = np.array([complex(z["re"], z["im"]) for z in s["chen_dao"]["fig2"]["poles_identified"]])
     true = eigenvalues(p, 4.2)
     assert np.all(
-        np.abs(cd.match_eigenvalues(ident, true) - true) < np.maximum(0.15, 0.05 * abs(true))
+        np.abs(match_eigenvalues(ident, true) - true) < np.maximum(0.15, 0.05 * abs(true))
     )
     # Figs. 4-5: energy is conserved by the coasting runs (no inputs, no dissipation)
     for r in s["chen_dao"]["figs4_5"]["fig4"] + s["chen_dao"]["figs4_5"]["fig5"]:

@@ -20,6 +20,7 @@ import pytest
 
 from bikeid.controllers.excitation import ChirpReference, UniformDither
 from bikeid.controllers.pid import PID
+from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.sensors import Channel, Sensors
 from bikeid.dataset.store import list_runs, read_run, read_runs, write_runs
@@ -223,7 +224,7 @@ def test_stabilization_table_analytic_cases():
         [3.0, 6.0], duration=2.0, progress=False, reference="zero", dither=0.0, sensors="ideal"
     )
     assert [(r["controller"], r["speed"]) for r in rows] == [
-        (c, v) for c in ("fuzzy", "pid", "pole") for v in (3.0, 6.0)
+        (c, v) for c in STUDY_CONTROLLERS for v in (3.0, 6.0)
     ]
     for r in rows:
         assert r["upright"] and r["error"] is None
