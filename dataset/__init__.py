@@ -9,10 +9,19 @@ Modules:
 - :mod:`~bikeid.dataset.run`: :class:`Run`, one experiment's time series plus metadata.
 - :mod:`~bikeid.dataset.closed_loop`: closed-loop runs on the nonlinear plant (controller,
   reference, dither, sensors, effects) -> :class:`Run`.
+- :mod:`~bikeid.dataset.linear_loop`: the exact (zero-order-hold) closed loop of the linear
+  bicycle with the same controllers -> :class:`Run`, where every identified quantity is known
+  exactly.
 - :mod:`~bikeid.dataset.sensors`: sensor models (scale, low-pass, bias, noise,
   quantization of each channel).
-- :mod:`~bikeid.dataset.measured`: loader for the TU Delft steer-by-wire treadmill logs
-  (``tudelft-sbw``).
+- :mod:`~bikeid.dataset.sbw_logs`: parser of the TU Delft steer-by-wire treadmill logs
+  (``tudelft-sbw``), despiking, the treadmill speed calibration.
+- :mod:`~bikeid.dataset.decays`: free-decay segments of those logs (transcribed or detected
+  from the roll rate).
+- :mod:`~bikeid.dataset.windows`: :class:`Window`, one free decay or Bode record cut from a
+  run, with its measured initial state and command history.
+- :mod:`~bikeid.dataset.download`: fetching the measured data from its upstream repository
+  at a pinned commit, checksummed.
 - :mod:`~bikeid.dataset.store`: runs on disk (HDF5, one group per run) and CSV export.
 - :mod:`~bikeid.dataset.files`: safe atomic file writing used by every output of bikeid.
 

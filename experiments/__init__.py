@@ -18,13 +18,17 @@ Modules:
 - :mod:`~bikeid.experiments.accuracy`: identification accuracy on the nonlinear closed-loop
   testbed (``bikeid accuracy``).
 - :mod:`~bikeid.experiments.reproduce`: both papers redone (``bikeid reproduce``), built on
-  :mod:`~bikeid.experiments.reproduce_chen_dao` (Chen & Dao 2010, Figs. 2-5, 7, eqs. 5-6)
+  :mod:`~bikeid.experiments.reproduce_chen_dao` (Chen & Dao 2010, Figs. 2-5, 7, eqs. 5-6;
+  numerics) with its figures in :mod:`~bikeid.experiments.reproduce_chen_dao_figures`,
   and :mod:`~bikeid.experiments.reproduce_moore_hubbard` (Moore & Hubbard, Tables 2-5,
-  Figs. 2-4 analogues).
+  Figs. 2-4 analogues); :mod:`~bikeid.experiments.reproduce_report` renders the Markdown
+  report.
 - :mod:`~bikeid.experiments.limit_cycles`: Chen & Dao Figs. 4-5, uncontrolled coasting at
   3.5 m/s and whether the motion is periodic.
 - :mod:`~bikeid.experiments.effect_trials`: randomized undeclared-effect trials on the
   nonlinear plant (``bikeid measured trials``).
+- :mod:`~bikeid.experiments.measured_study`: the measured-data pipeline as a library
+  (fit a model with the effect library, save/load it, evaluate it on held-out decays).
 - :mod:`~bikeid.experiments.measured_report`: before/after report on the measured data
   (``bikeid measured report``).
 - :mod:`~bikeid.experiments.report`: Markdown reports (paper | identified | truth tables)

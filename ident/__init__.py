@@ -1,12 +1,36 @@
-"""Identification: Moore & Hubbard direct least squares, Chen & Dao canonical PEM.
+"""Stage 4, identification: Moore & Hubbard direct least squares, Chen & Dao canonical PEM,
+validation, and the effect-library analysis of measured data.
 
-- :mod:`ident.signals`: mean removal, zero-phase Butterworth, differentiation.
-- :mod:`ident.direct`: ``identify`` (LS/IV on the canonical rows), ``vaf_moore``,
+The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
+
+- :mod:`~bikeid.ident.signals`: mean removal, zero-phase Butterworth, differentiation, and
+  the sampling contract every estimator checks (``check_sampling``).
+- :mod:`~bikeid.ident.direct`: Moore & Hubbard's direct method, ``identify`` (least
+  squares / IV on the rows of M q'' + v C1 q' + (g K0 + v^2 K2) q = T + H F), ``vaf_moore``,
   ``vaf_variance``.
-- :mod:`ident.canonical`: Chen & Dao's canonical form and speed parameterization.
-- :mod:`ident.subspace`: PBSID (closed-loop safe) and PO-MOESP (open loop).
-- :mod:`ident.pem`: ``fit`` (fixed speed) and ``fit_speed_model`` (speed-parameterized).
-- :mod:`ident.validate`: ``compare``, ``resid``, ``goodness_of_fit``, poles, zeros.
+- :mod:`~bikeid.ident.tailored_iv`: instrumental variables built from a fitted controller.
+- :mod:`~bikeid.ident.canonical`: Chen & Dao's canonical form and its speed
+  parameterization.
+- :mod:`~bikeid.ident.subspace`: PBSID (closed-loop safe) and PO-MOESP (open loop) start
+  values.
+- :mod:`~bikeid.ident.pem`: ``fit`` (one speed) and ``fit_speed_model``
+  (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
+- :mod:`~bikeid.ident.validate`: ``compare`` (simulation and k-step prediction),
+  ``resid`` (whiteness, input cross-correlation), ``goodness_of_fit``, poles, zeros.
+
+The measured-data analysis (an experiment model plus a library of candidate effects):
+
+- :mod:`~bikeid.ident.experiment_model`: the steer-by-wire treadmill experiment (Whipple
+  plant, its controller, the effects of :mod:`bikeid.sim.effect_registry`).
+- :mod:`~bikeid.ident.effect_library`: the effects the selection may add, with their fit
+  settings.
+- :mod:`~bikeid.ident.effect_fit`: fitting effect values to free decays, standard errors.
+- :mod:`~bikeid.ident.weave`: the measured weave eigenvalue of decays and its fit term.
+- :mod:`~bikeid.ident.effect_selection`: ``select_effects``, greedy selection with
+  significance and out-of-sample checks, ending in a named set or ``unexplained``.
+- :mod:`~bikeid.ident.discrepancy_diagnostics`: equation error, error ranking, residual
+  spectra, push asymmetry, ``evaluate`` (before/after errors).
+- :mod:`~bikeid.ident.synthetic_decays`: free decays of a known model, for tests.
 """
 
 from .direct import DirectResult, identify, vaf_moore, vaf_variance

@@ -17,8 +17,6 @@ Modules:
   (:class:`WhippleBicycle`), built on the generated equations.
 - :mod:`~bikeid.sim.integrate`: fixed-step (RK4, numba) and reference (DOP853) simulation
   of the nonlinear bicycle under a sampled controller (:func:`simulate`).
-- :mod:`~bikeid.sim.linear_sim`: exact zero-order-hold simulation of the linear bicycle in
-  closed loop.
 - :mod:`~bikeid.sim.effects`: optional physical effects the Whipple model lacks (steer
   friction, actuator lag, ...), injected by the simulator.
 - :mod:`~bikeid.sim.effect_registry`: every such effect declared once (name, unit,
