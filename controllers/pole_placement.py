@@ -46,7 +46,7 @@ third-order low-pass (its Fig. 7 "delay time", here sum(1/|p|) = 0.39 s); the se
 is 2-10 % of the reference over 0.16-0.5 Hz.  ``poles=[...]`` (five values) gives a fixed-pole
 design (e.g. :data:`SLOW_POLES`, the earlier default -2..-6).
 
-Model: by default the true linearization ``sim.linear.state_space(parameters, v)``
+Model: by default the true linearization ``sim.linear.state_space(p, v)``
 (T_delta column).  Alternatively a user model: a ``control.StateSpace`` with 4 states
 (one input T_delta, or an input labelled "T_delta"), or a callable ``v -> StateSpace``
 for scheduling.  State order: bikeid's [phi, delta, phidot, deltadot] is used as is.
@@ -324,7 +324,7 @@ class PolePlacement(Controller):
         self,
         poles: Sequence[complex] | None = None,
         *,
-        parameters: BicycleParameters | None = None,
+        p: BicycleParameters | None = None,
         model: control.StateSpace | Callable[[float], control.StateSpace] | None = None,
         state_order: str | None = None,
         design_speed: float | None = None,
@@ -349,7 +349,7 @@ class PolePlacement(Controller):
         self.zero_cap = float(zero_cap)
         if poles is None:
             tracking_poles(np.zeros((4, 4)), np.r_[0, 0, 1.0, 1.0], self.free_poles, zero_cap)
-        self.parameters = parameters if parameters is not None else benchmark()
+        self.p = p if p is not None else benchmark()
         self._user_model = model
         if isinstance(model, control.StateSpace):
             if design_speed is None:
@@ -387,7 +387,7 @@ class PolePlacement(Controller):
         """(A, B) in bikeid order with B the T_delta column, at speed v [m/s]."""
         model = self._user_model
         if model is None:
-            A, B = state_matrices(self.parameters, v)
+            A, B = state_matrices(self.p, v)
             return A, B[:, 1:2]
         sys = model if isinstance(model, control.StateSpace) else model(v)
         return _model_matrices(sys, self.state_order)
@@ -479,7 +479,7 @@ class PolePlacement(Controller):
             out["free_poles"] = [[p.real, p.imag] for p in self.free_poles]
             out["zero_cap"] = self.zero_cap
         if self._user_model is None:
-            out["parameters"] = getattr(self.parameters, "name", None) or "custom"
+            out["parameters"] = getattr(self.p, "name", None) or "custom"
         if self.schedule is None:
             out["K"] = list(self._fixed[:4])
             out["kI"] = self._fixed[4]

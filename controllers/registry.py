@@ -21,25 +21,25 @@ from .base import Controller
 __all__ = ["ALIASES", "CONTROLLER_NAMES", "STUDY_CONTROLLERS", "canonical_name", "make"]
 
 
-def _pid(parameters: BicycleParameters | None, **kw: Any) -> Controller:
+def _pid(p: BicycleParameters | None, **kw: Any) -> Controller:
     from .pid import PID
 
     return PID(**kw)
 
 
-def _pole_placement(parameters: BicycleParameters | None, **kw: Any) -> Controller:
+def _pole_placement(p: BicycleParameters | None, **kw: Any) -> Controller:
     from .pole_placement import PolePlacement
 
-    return PolePlacement(parameters=parameters, **kw)
+    return PolePlacement(p=p, **kw)
 
 
-def _fuzzy(parameters: BicycleParameters | None, **kw: Any) -> Controller:
+def _fuzzy(p: BicycleParameters | None, **kw: Any) -> Controller:
     from .fuzzy import FuzzyController
 
     return FuzzyController(**kw)
 
 
-def _steer_into_lean(parameters: BicycleParameters | None, **kw: Any) -> Controller:
+def _steer_into_lean(p: BicycleParameters | None, **kw: Any) -> Controller:
     from .steer_into_lean import SteerIntoLean
 
     return SteerIntoLean(**kw)
@@ -88,15 +88,15 @@ def canonical_name(name: str) -> str:
     return key
 
 
-def make(name: str, parameters: BicycleParameters | None = None, **options: Any) -> Controller:
+def make(name: str, p: BicycleParameters | None = None, **options: Any) -> Controller:
     """A controller with default gains by name; unknown names or options raise ``ValueError``.
 
     Parameters
     ----------
     name : str
         A controller name (:func:`canonical_name`).
-    parameters : BicycleParameters, optional
-        The bicycle, for the model-based pole placement.
+    p : BicycleParameters, optional
+        The bicycle (Meijaard 2007 notation), for the model-based pole placement.
     **options
         Keywords of the controller's constructor.
 
@@ -107,6 +107,6 @@ def make(name: str, parameters: BicycleParameters | None = None, **options: Any)
     """
     key = canonical_name(name)
     try:
-        return _FACTORIES[key](parameters, **options)
+        return _FACTORIES[key](p, **options)
     except TypeError as exc:
         raise ValueError(f"bad option for controller {key!r}: {exc}") from None

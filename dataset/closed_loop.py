@@ -118,7 +118,7 @@ class SampledLoop:
 
 
 def simulate_run(
-    bicycle: BicycleParameters,
+    p: BicycleParameters,
     controller,
     speed: float,
     duration: float = 50.0,
@@ -134,7 +134,7 @@ def simulate_run(
 ) -> Run:
     """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
 
-    bicycle: parameters; controller: a ``controllers`` controller (``sample_time``,
+    p: the bicycle's parameters; controller: a ``controllers`` controller (``sample_time``,
     ``reset()``, ``__call__(t, y)``, ``describe()``; its ``sample_time`` should be the
     sensor period, the default, for the run to be identifiable, see the module docstring);
     reference: roll reference [rad]
@@ -166,7 +166,7 @@ def simulate_run(
     n_sensor = int(round(duration * sensors.rate)) + 1
     loop = SampledLoop(controller, sensors, seed, ctrl_dt, n_sensor, dither)
     traj = _integrate(
-        bicycle, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force,
+        p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force,
         integrator_options,
     )  # fmt: skip
     n = loop.n_rec
@@ -194,7 +194,7 @@ def simulate_run(
         "duration": duration,
         "seed": int(seed),
         "fell_at": fell_at,
-        "bicycle": {"name": getattr(bicycle, "name", "custom"), "parameters": bicycle.as_dict()},
+        "bicycle": {"name": getattr(p, "name", "custom"), "parameters": p.as_dict()},
         "controller": controller.describe(),
         "reference": _describe(ref),
         "dither": _describe(dither),
@@ -219,13 +219,13 @@ def simulate_run(
 
 
 def _integrate(
-    bicycle, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options
+    p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options
 ):
     """Run ``sim.integrate.simulate`` with ``loop`` as the controller; returns its Trajectory."""
     from bikeid.sim.integrate import simulate
     from bikeid.sim.nonlinear import WhippleBicycle
 
-    bike = WhippleBicycle(bicycle)
+    bike = WhippleBicycle(p)
     init = dict(initial or {})
     unknown = set(init) - {"phi", "delta", "phidot", "deltadot"}
     if unknown:

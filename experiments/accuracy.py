@@ -101,11 +101,11 @@ def eigen_tolerance(lam: complex) -> float:
     return max(REL_TOL * abs(lam), ABS_TOL)
 
 
-def true_modes(parameters, speeds: Sequence[float]) -> dict[float, dict[str, complex]]:
+def true_modes(p, speeds: Sequence[float]) -> dict[float, dict[str, complex]]:
     """True weave (positive imaginary part), capsize and caster eigenvalues per speed."""
     from bikeid.sim.linear import eigenvalues_vs_speed
 
-    es = eigenvalues_vs_speed(parameters, np.asarray(speeds, float))
+    es = eigenvalues_vs_speed(p, np.asarray(speeds, float))
     out = {}
     for v, row in zip(es.speeds, es.values, strict=True):
         modes: dict[str, complex] = {}
@@ -190,7 +190,7 @@ DIRECT_ROLL = ("Mpd", "C1pd", "K0pd", "K0pp")
 DIRECT_STEER = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd")
 
 
-def _direct(runs: Sequence[Run], parameters, cutoff: float, lags: int, instruments: str):
+def _direct(runs: Sequence[Run], p, cutoff: float, lags: int, instruments: str):
     """``instruments="external"``: IV on the dither and reference lags 0..``lags`` (the
     default; docs/accuracy.md).  ``"tailored"``: tailor-made IV
     (``ident.tailored_iv``), instruments simulated through the fitted controller and the
@@ -202,20 +202,20 @@ def _direct(runs: Sequence[Run], parameters, cutoff: float, lags: int, instrumen
 
     if instruments == "external":
         return identify(
-            [direct_prepare(r, cutoff) for r in runs], parameters, DIRECT_ROLL, DIRECT_STEER,
+            [direct_prepare(r, cutoff) for r in runs], p, DIRECT_ROLL, DIRECT_STEER,
             method="iv", instruments="external", lags=lags, covariance="run",
         )  # fmt: skip
     if instruments != "tailored":
         raise ValueError(f"direct instruments {instruments!r}: choose 'tailored' or 'external'")
     return identify_tailored(
-        runs, parameters, DIRECT_ROLL, DIRECT_STEER, prepare=lambda r: direct_prepare(r, cutoff),
-        start=canonical_matrices(parameters), iterations=3, covariance="run",
+        runs, p, DIRECT_ROLL, DIRECT_STEER, prepare=lambda r: direct_prepare(r, cutoff),
+        start=canonical_matrices(p), iterations=3, covariance="run",
     )  # fmt: skip
 
 
 def identify_controller(
     runs: Sequence[Run],
-    parameters,
+    p,
     methods: Sequence[str] = METHODS,
     direct_cutoff: float = 3.0,
     direct_lags: int = 40,
@@ -233,9 +233,9 @@ def identify_controller(
     ok = [r for r in runs if r.meta.get("fell_at") is None]
     fell = {round(r.speed, 6): r.meta["fell_at"] for r in runs if r.meta.get("fell_at")}
     speeds = [round(r.speed, 6) for r in ok]
-    truth = true_modes(parameters, speeds) if speeds else {}
-    true_cs = critical_speeds(parameters)
-    true_zero = float(np.max(steer_zeros_true(parameters).real))
+    truth = true_modes(p, speeds) if speeds else {}
+    true_cs = critical_speeds(p)
+    true_zero = float(np.max(steer_zeros_true(p).real))
     out: dict[str, Any] = {"fell": fell, "methods": {}}
     with threadpool_limits(1):
         for method in methods:
@@ -255,7 +255,7 @@ def identify_controller(
                     glob["critical_speeds"] = sm.critical_speeds()
             elif method == "direct" and ok:
                 try:
-                    res = _direct(ok, parameters, direct_cutoff, direct_lags,
+                    res = _direct(ok, p, direct_cutoff, direct_lags,
                                   direct_instruments)  # fmt: skip
                 except ValueError as exc:
                     glob["error"] = str(exc).splitlines()[0]
@@ -282,11 +282,11 @@ def identify_controller(
     return out
 
 
-def steer_zeros_true(parameters) -> np.ndarray:
+def steer_zeros_true(p) -> np.ndarray:
     from bikeid.ident.canonical import steer_zeros, theta_from_matrices
     from bikeid.sim.linear import canonical_matrices
 
-    return steer_zeros(theta_from_matrices(canonical_matrices(parameters), 5.0))
+    return steer_zeros(theta_from_matrices(canonical_matrices(p), 5.0))
 
 
 def _row(v, eig, truth, zeros, true_zero) -> dict[str, Any]:
@@ -322,7 +322,7 @@ def run_accuracy(
     if bad or not methods:
         raise ValueError(f"methods {bad or '(none)'}: choose from {', '.join(METHODS)}")
     t0 = time.perf_counter()
-    parameters = by_name(bicycle)
+    p = by_name(bicycle)
     result: dict[str, Any] = {
         "bicycle": bicycle, "speeds": list(speeds), "controllers": {},
         "design": [b.__dict__ for b in DESIGN],
@@ -335,7 +335,7 @@ def run_accuracy(
         runs = generate(out_dir, c, speeds, workers=workers, bicycle=bicycle, log=log)
         gen = time.perf_counter() - tg
         log(f"{c}: {len(runs)} runs ready in {gen:.1f} s; identifying")
-        res = identify_controller(runs, parameters, methods, log=log)
+        res = identify_controller(runs, p, methods, log=log)
         res["data_seconds"] = gen
         result["controllers"][c] = res
     result["seconds"] = time.perf_counter() - t0

@@ -97,7 +97,7 @@ COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
 class ExperimentModel:
     """The treadmill experiment: Whipple plant + steer-into-lean loop + effects."""
 
-    params: BicycleParameters = field(default_factory=steer_by_wire)
+    p: BicycleParameters = field(default_factory=steer_by_wire)
     effects: dict = field(default_factory=dict)
     K: float = 2.0
     V: float = 6.5
@@ -142,7 +142,7 @@ class ExperimentModel:
         Raises ValueError (from the parameter validation) if a correction makes the
         bicycle unphysical, e.g. a negative rear-frame mass.
         """
-        p = self.params
+        p = self.p
         ch: dict[str, float] = {}
         if self.e("trail_correction"):
             ch["c"] = p.c + self.e("trail_correction")
@@ -572,7 +572,7 @@ def attach_nonlinear_correction(
         v = model.true_speed(vs)
         fx, eq = nonlinear_effects(model.effects, v, DT, COULOMB_EPS)
         keep = {k: model.e(k) for k in model.effects if EFFECTS[k].layer == "parameter"}
-        lin_m = ExperimentModel(params=model.params, effects={**eq, **keep}, K=model.K, V=model.V)
+        lin_m = ExperimentModel(p=model.p, effects={**eq, **keep}, K=model.K, V=model.V)
         w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
         sl = lin_m.simulate([w0])[0]
         ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)

@@ -146,7 +146,7 @@ def test_parameter_corrections_match_meijaard_mass_matrix():
     from bikeid.sim.linear import canonical_matrices
 
     m0 = ExperimentModel()
-    p = m0.params
+    p = m0.p
     M0 = canonical_matrices(p).M
     sl, cl = np.sin(p.lam), np.cos(p.lam)
     M = ExperimentModel(effects={"front_inertia_scale": 3.0}).canonical().M

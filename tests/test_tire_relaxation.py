@@ -69,7 +69,7 @@ def test_sigma_zero_is_the_whipple_model(v, bike):
     infinite and four finite generalized eigenvalues, equal to sim.linear's eigenvalues to
     round-off (1e-9 absolute, eigenvalues of size <= 20 1/s)."""
     p = benchmark() if bike == "benchmark" else steer_by_wire()
-    E, A, _ = ExperimentModel(params=p).descriptor(v, relax=True)
+    E, A, _ = ExperimentModel(p=p).descriptor(v, relax=True)
     w = sla.eig(A, E, right=False)
     fin = w[np.isfinite(w)]
     assert fin.size == 4
@@ -83,7 +83,7 @@ def test_small_sigma_converges_first_order(v):
     halving sigma halves the error (ratio 2 within 5 %: the O(sigma^2) term at sigma = 1e-3
     m), and the extra eigenvalue is the heading relaxation -v / sigma (within 1 %)."""
     m = ExperimentModel()
-    ref = np.linalg.eigvals(state_matrices(m.params, v)[0])
+    ref = np.linalg.eigvals(state_matrices(m.p, v)[0])
     errs = []
     for sig in (1e-3, 5e-4):
         ev = np.linalg.eigvals(m.with_effects(tire_relaxation=sig).continuous(v)[0])
@@ -129,7 +129,7 @@ def test_matches_absolute_heading_formulation(sigma, v):
     formulation minus its zero (heading invariance).  Tolerance 1e-9: round-off of two
     different eliminations."""
     p = steer_by_wire()
-    ev = np.linalg.eigvals(ExperimentModel(params=p, effects={"tire_relaxation": sigma})
+    ev = np.linalg.eigvals(ExperimentModel(p=p, effects={"tire_relaxation": sigma})
                            .continuous(v)[0])  # fmt: skip
     ev6 = np.linalg.eigvals(_absolute_heading_model(p, v, sigma))
     zero = np.argmin(np.abs(ev6))
@@ -144,7 +144,7 @@ def test_steady_turn_unchanged():
     p = steer_by_wire()
     A0, B0 = state_matrices(p, 7.0)  # any speed with A invertible (a static solve)
     g0 = -np.linalg.solve(A0, B0[:, 1])[:2]
-    A, B = ExperimentModel(params=p, effects={"tire_relaxation": 0.3}).continuous(7.0)
+    A, B = ExperimentModel(p=p, effects={"tire_relaxation": 0.3}).continuous(7.0)
     g = -np.linalg.solve(A, B[:, 1])[:2]
     np.testing.assert_allclose(g, g0, rtol=1e-10)
 
