@@ -25,7 +25,7 @@ bicycle at the run's speed):
   closed-loop correlation of sensor noise between regressors and torque (default), or
   tailor-made instruments (``direct_instruments="tailored"``, ``ident.tailored_iv``).
 
-Goals (issue "Identification", item 6): weave, capsize and caster eigenvalues within 2 %
+Goals: weave, capsize and caster eigenvalues within 2 %
 (0.05 1/s absolute where |lambda| < 2.5), i.e. |error| <= max(0.02 |lambda|, 0.05);
 v_w and v_c within 0.05 m/s; the right-half-plane zero of delta/T_delta within 2 %.
 """
