@@ -34,6 +34,7 @@ STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
 #: Modules whose public API must comply (sorted; extend when a module is converted).
 DOCUMENTED_MODULES = (
     "bikeid.controllers.base",
+    "bikeid.controllers.excitation",
     "bikeid.controllers.pid",
     "bikeid.controllers.registry",
     "bikeid.controllers.steer_into_lean",
@@ -62,6 +63,7 @@ DOCUMENTED_MODULES = (
 _BASELINE = frozenset(
     {
         "bikeid.controllers.base",
+        "bikeid.controllers.excitation",
         "bikeid.controllers.pid",
         "bikeid.controllers.registry",
         "bikeid.controllers.steer_into_lean",
