@@ -35,6 +35,7 @@ STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
 DOCUMENTED_MODULES = (
     "bikeid.controllers.base",
     "bikeid.controllers.excitation",
+    "bikeid.controllers.fuzzy",
     "bikeid.controllers.pid",
     "bikeid.controllers.registry",
     "bikeid.controllers.steer_into_lean",
@@ -64,6 +65,7 @@ _BASELINE = frozenset(
     {
         "bikeid.controllers.base",
         "bikeid.controllers.excitation",
+        "bikeid.controllers.fuzzy",
         "bikeid.controllers.pid",
         "bikeid.controllers.registry",
         "bikeid.controllers.steer_into_lean",
