@@ -96,7 +96,7 @@ _BASELINE = frozenset(
 )
 
 #: Stage packages whose docstring must list their modules.
-DOCUMENTED_PACKAGES = ("bikeid.dataset", "bikeid.experiments", "bikeid.sim")
+DOCUMENTED_PACKAGES = ("bikeid.controllers", "bikeid.dataset", "bikeid.experiments", "bikeid.sim")
 
 
 def _section(doc: str, title: str) -> bool:
