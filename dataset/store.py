@@ -172,7 +172,8 @@ def write_runs(
     ------
     ValueError
         If an entry of ``runs`` is not a :class:`Run`, a name is invalid or duplicated,
-        the numbers of runs and names differ, or an attribute name is reserved.
+        the numbers of runs and names differ, an attribute name is reserved, or ``path``
+        is not a regular file (a symlink or device; :func:`atomic_path`).
     """
     runs = list(runs)
     names = _names_for(runs, names)
@@ -216,8 +217,9 @@ def copy_runs(
     KeyError
         If a source file has no run of that name.
     ValueError
-        If a name repeats, an attribute name is reserved, or a source run fails
-        validation (:func:`read_run`); the target is then left as it was.
+        If a name repeats, an attribute name is reserved, a source run fails
+        validation (:func:`read_run`), or ``path`` is not a regular file; the target is
+        then left as it was.
     """
     h5py = _h5()
     path = Path(path)
@@ -515,6 +517,11 @@ def export_csv(run: Run, path: str | Path) -> Path:
     -------
     pathlib.Path
         ``path``.
+
+    Raises
+    ------
+    ValueError
+        If ``path`` is not a regular file (a symlink or device; :func:`atomic_path`).
     """
     cols = _columns(run)
     header = ",".join(f"{name} [{units}]" if units else name for name, _, units in cols)
