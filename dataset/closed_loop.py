@@ -134,18 +134,71 @@ def simulate_run(
 ) -> Run:
     """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
 
-    p: the bicycle's parameters; controller: a ``controllers`` controller (``sample_time``,
-    ``reset()``, ``__call__(t, y)``, ``describe()``; its ``sample_time`` should be the
-    sensor period, the default, for the run to be identifiable, see the module docstring);
-    reference: roll reference [rad]
-    installed as ``controller.reference`` (None keeps the controller's own); dither:
-    steer-torque dither t -> N m added to the command (None: none); sensors: the
-    instruments (default :meth:`Sensors.default`, 100 Hz); effects: ``sim.effects``
-    objects; seed: sensor-noise seed (the dither carries its own seed); mode: ``held``
-    or ``coast`` speed; initial: initial roll/steer values in rad, rad/s (keys phi, delta,
-    phidot, deltadot; default upright); lateral_force: t -> F [N] (None: none);
-    integrator_options go to ``sim.integrate.simulate`` (``substeps``, ``fall_limit``,
-    ``method``, ``energy``).
+    The nonlinear Whipple plant (``sim.nonlinear.WhippleBicycle``) is integrated by
+    ``sim.integrate.simulate`` under the controller, sampled as described in the module
+    docstring.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle's parameters (Meijaard 2007 notation, SI units).
+    controller : controllers.base.ControllerLike
+        A ``controllers`` controller (``sample_time`` [s], ``reset()``,
+        ``__call__(t, y)`` -> T_delta [N m], ``describe()``); its ``sample_time`` should
+        be the sensor period, the default, for the run to be identifiable (module
+        docstring).  It is reset before the run.
+    speed : float
+        Forward speed [m/s], positive; held by the rear drive (``mode="held"``) or the
+        initial speed (``mode="coast"``).
+    duration : float, optional
+        Run length [s], positive (default 50).
+    reference : callable, optional
+        Roll reference t [s] -> phi_ref [rad], installed as ``controller.reference``
+        (the controller keeps it after the run); None keeps the controller's own.
+    dither : callable, optional
+        Steer-torque dither t [s] -> [N m] added to the command (positive to the right);
+        None for none.
+    sensors : Sensors, optional
+        The instruments (default :meth:`Sensors.default`, 100 Hz); their period must be a
+        whole multiple of the controller period.
+    effects : sequence, optional
+        ``sim.effects`` objects acting on the plant or its steer-torque input.
+    seed : int, optional
+        Sensor-noise seed (the dither carries its own seed).
+    mode : {"held", "coast"}, optional
+        Speed held by the ideal rear drive (default) or coasting.
+    initial : dict of str to float, optional
+        Initial values with keys ``phi``, ``delta`` [rad], ``phidot``, ``deltadot``
+        [rad/s]; default upright at rest in roll and steer.
+    lateral_force : callable, optional
+        Lateral force t [s] -> F [N] (positive to the right) on the rear frame, sampled on
+        the controller grid; None for none.
+    **integrator_options
+        Passed to ``sim.integrate.simulate`` (``substeps``, ``fall_limit``, ``method``,
+        ``energy``); ``controller``, ``dt``, ``inputs``, ``measure``, ``effects`` and
+        ``mode`` are set here and may not be passed.
+
+    Returns
+    -------
+    Run
+        Sampled at the sensor instants t_k [s] (length n, truncated at a fall):
+        ``signals`` has the measured :data:`sim.conventions.MEASURED` channels exactly as
+        the controller received them, the logged ``T_delta`` [N m] and, with a lateral
+        force, the load cell's ``F`` [N]; ``truth`` has the true MEASURED channels, the
+        applied ``T_delta`` [N m] (and ``F`` [N]), pitch ``theta`` [rad] and contact
+        points ``x``, ``y``, ``xF``, ``yF`` [m]; ``dither`` [N m] and ``reference`` [rad]
+        at t_k; ``meta`` with the speed, seed, ``fell_at`` [s] (None if upright), the
+        bicycle, the descriptions of controller, reference, dither, lateral force,
+        sensors and effects, ``sampling`` (``controller_period``, ``logging_period``,
+        ``dither_hold`` [s]) and ``plant``.
+
+    Raises
+    ------
+    ValueError
+        If ``speed`` or ``duration`` is not positive and finite, the sensors are faster
+        than the controller or their period is not a whole multiple of it, ``initial``
+        has an unknown key, an integrator option set here is passed, or the run ended
+        (fell) before its second sensor sample.
     """
     speed = float(speed)
     if not (math.isfinite(speed) and speed > 0):

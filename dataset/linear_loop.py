@@ -289,7 +289,9 @@ def simulate(
     lateral_force : float
         Amplitude [N] of a uniform lateral force F (positive right, logged).
     lateral_force_point : (float, float)
-        (x_F, z_F) [m] of the force on the rear frame (``sim.linear.lateral_force_vector``).
+        (x_F, z_F) [m] of the force on the rear frame in benchmark axes (x forward from
+        the rear contact, z down, so the default acts 1 m above the ground;
+        ``sim.linear.lateral_force_vector``).
     angle_noise, rate_noise : float
         Standard deviations of white measurement noise on phi, delta, psi [rad] and
         phidot, deltadot, psidot [rad/s]; the controller sees it.
@@ -492,5 +494,11 @@ def sweep(p: BicycleParameters, speeds: Sequence[float], seed: int = 0, **kwargs
     Returns
     -------
     list of Run
+        One run per speed, in the order of ``speeds``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`simulate`, for the first run that fails.
     """
     return [simulate(p, float(v), seed=seed + i, **kwargs) for i, v in enumerate(speeds)]

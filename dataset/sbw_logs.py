@@ -98,12 +98,13 @@ def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
     Parameters
     ----------
     sensor : float or ndarray
-        Sensor speed [m/s].
+        Rear-wheel sensor speed [m/s] (the logs' ``speed`` column).
 
     Returns
     -------
     float or ndarray
-        [m/s].
+        Treadmill speed (sensor - b) / a [m/s] with (a, b) = :data:`SPEED_CALIBRATION`,
+        same shape as ``sensor``.
     """
     a, b = SPEED_CALIBRATION
     return (np.asarray(sensor) - b) / a
@@ -117,10 +118,18 @@ def data_dir(path: str | os.PathLike | None = None) -> Path:
     Parameters
     ----------
     path : str or path-like, optional
+        The ``tudelft-sbw`` folder or its parent; None (default) uses ``$BIKEID_DATA``.
 
     Returns
     -------
     pathlib.Path
+        The folder holding the logs (``*/*.log*`` or ``*.log*``).
+
+    Raises
+    ------
+    ValueError
+        If neither ``path`` nor ``$BIKEID_DATA`` is given, or the folder holds no logs
+        (the message says how to get them).
     """
     src = path if path is not None else os.environ.get("BIKEID_DATA")
     if not src:
@@ -141,6 +150,7 @@ def find_logs(root: str | os.PathLike, kind: str | None = None) -> list[Path]:
     Parameters
     ----------
     root : str or path-like
+        Folder searched recursively.
     kind : str, optional
         File-name prefix (``"eigen"``, ``"bode"``).
 
@@ -174,7 +184,8 @@ def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray
 
     Parameters
     ----------
-    x : ndarray
+    x : (n,) ndarray
+        Signal (any unit; n < 5 is returned unchanged).
     floor : float
         Least deviation counted as a spike [unit of x].
     k : float, optional
@@ -213,11 +224,25 @@ def load_log(path: str | os.PathLike) -> Run:
     Parameters
     ----------
     path : str or path-like
+        A ``*.log`` or ``*.log.gz`` file.
 
     Returns
     -------
     Run
-        Signals in SI units (module docstring) and ``meta``.
+        ``t`` = row index * 0.01 s [s] (leading rows with an empty ``sil_command`` cut);
+        ``signals`` phi, delta [rad], phidot, deltadot [rad/s], v (sensor speed) [m/s],
+        T_delta (``command_fork``) and T_ext [N m], plus the extras of the module
+        docstring; ``meta`` with ``file``, ``speed`` (treadmill) and ``speed_sensor``
+        [m/s], ``first_index``, ``ramp_end_index``, ``settled_end_index`` (file rows),
+        ``spikes`` (count per despiked column) and ``dt`` [s].
+
+    Raises
+    ------
+    ValueError
+        If the file does not exist, is empty, corrupt or truncated, lacks a column of
+        :data:`COLUMNS`, has fewer than 10 data rows, a row with the wrong number of
+        fields or a non-numeric or non-finite value (the message names the file, and the
+        row and column where there is one), or ``sil_command`` is empty in every row.
     """
     path = Path(path)
     if not path.is_file():

@@ -33,12 +33,28 @@ STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
 
 #: Modules whose public API must comply (sorted; extend when a module is converted).
 DOCUMENTED_MODULES = (
+    "bikeid.controllers.base",
+    "bikeid.controllers.excitation",
+    "bikeid.controllers.fuzzy",
+    "bikeid.controllers.pid",
+    "bikeid.controllers.pole_placement",
+    "bikeid.controllers.registry",
+    "bikeid.controllers.steer_into_lean",
+    "bikeid.dataset.closed_loop",
+    "bikeid.dataset.decays",
+    "bikeid.dataset.download",
     "bikeid.dataset.files",
+    "bikeid.dataset.linear_loop",
     "bikeid.dataset.run",
+    "bikeid.dataset.sbw_logs",
+    "bikeid.dataset.sensors",
+    "bikeid.dataset.store",
+    "bikeid.dataset.windows",
     "bikeid.ident.canonical",
     "bikeid.ident.subspace",
     "bikeid.sim.conventions",
     "bikeid.sim.effect_registry",
+    "bikeid.sim.effects",
     "bikeid.sim.integrate",
     "bikeid.sim.linear",
     "bikeid.sim.nonlinear",
@@ -49,12 +65,28 @@ DOCUMENTED_MODULES = (
 #: DOCUMENTED_MODULES may only grow: it must always contain these (never remove one).
 _BASELINE = frozenset(
     {
+        "bikeid.controllers.base",
+        "bikeid.controllers.excitation",
+        "bikeid.controllers.fuzzy",
+        "bikeid.controllers.pid",
+        "bikeid.controllers.pole_placement",
+        "bikeid.controllers.registry",
+        "bikeid.controllers.steer_into_lean",
+        "bikeid.dataset.closed_loop",
+        "bikeid.dataset.decays",
+        "bikeid.dataset.download",
         "bikeid.dataset.files",
+        "bikeid.dataset.linear_loop",
         "bikeid.dataset.run",
+        "bikeid.dataset.sbw_logs",
+        "bikeid.dataset.sensors",
+        "bikeid.dataset.store",
+        "bikeid.dataset.windows",
         "bikeid.ident.canonical",
         "bikeid.ident.subspace",
         "bikeid.sim.conventions",
         "bikeid.sim.effect_registry",
+        "bikeid.sim.effects",
         "bikeid.sim.integrate",
         "bikeid.sim.linear",
         "bikeid.sim.nonlinear",
@@ -64,7 +96,7 @@ _BASELINE = frozenset(
 )
 
 #: Stage packages whose docstring must list their modules.
-DOCUMENTED_PACKAGES = ("bikeid.dataset", "bikeid.experiments", "bikeid.sim")
+DOCUMENTED_PACKAGES = ("bikeid.controllers", "bikeid.dataset", "bikeid.experiments", "bikeid.sim")
 
 
 def _section(doc: str, title: str) -> bool:
