@@ -341,9 +341,12 @@ class Controller(ABC):
         else:
             dt = self.sample_time
         u = self._control(t, y, dt)
-        if u != u:  # NaN
+        if not math.isfinite(u):  # NaN or +-inf: never hand a non-finite torque to a plant
             check_measurement(y)
-            raise ValueError(f"{self.name} produced NaN torque at t={t}")
+            raise ValueError(
+                f"{self.name} produced a non-finite steer torque ({u}) at t={t} s; check its "
+                "gains (overflow) and the measurement"
+            )
         s = self.saturation
         if u > s:
             u = s
