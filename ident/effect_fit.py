@@ -93,6 +93,23 @@ class EffectEstimate:
 
     ``value`` and ``std`` (clustered standard error) in ``unit``; ``t`` = |value - absent| /
     std; ``explained``: fraction of the nominal cost removed; ``accepted``: selected.
+
+    Attributes
+    ----------
+    name : str
+        Effect name (a key of :data:`bikeid.ident.effect_library.LIBRARY`).
+    value : float
+        Estimated value, in ``unit``.
+    std : float
+        Window-clustered standard error, in ``unit``.
+    unit : str
+        The effect's SI unit as text (e.g. ``"N m s/rad"``).
+    t : float
+        |value - absent value| / std (dimensionless).
+    explained : float
+        Fraction of the nominal model's cost removed when the effect is added.
+    accepted : bool
+        Whether the selection kept the effect.
     """
 
     name: str
@@ -104,7 +121,13 @@ class EffectEstimate:
     accepted: bool = False
 
     def as_dict(self) -> dict:
-        """The estimate as a JSON-able dict (the keys of the attributes)."""
+        """The estimate as a JSON-able dict (the keys of the attributes).
+
+        Returns
+        -------
+        dict
+            ``name``, ``value``, ``std``, ``unit``, ``t``, ``explained``, ``accepted``.
+        """
         return {
             "name": self.name, "value": self.value, "std": self.std, "unit": self.unit,
             "t": self.t, "explained": self.explained, "accepted": self.accepted,
@@ -115,7 +138,19 @@ class EffectEstimate:
 class FitResult:
     """A fit: the fitted ``model``, the fitted ``values`` and their standard errors ``std``
     (effect units) and the final ``cost`` (sum of squared normalized residuals, with the
-    weave term when one was given)."""
+    weave term when one was given).
+
+    Attributes
+    ----------
+    model : ExperimentModel
+        The model with the fitted effect values.
+    values : dict of str to float
+        Fitted value of each named effect (the effect's unit).
+    std : dict of str to float
+        Window-clustered standard error of each value (same unit).
+    cost : float
+        Final sum of squared normalized residuals (dimensionless).
+    """
 
     model: ExperimentModel
     values: dict[str, float]
