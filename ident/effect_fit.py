@@ -107,7 +107,10 @@ class EffectEstimate:
     t : float
         |value - absent value| / std (dimensionless).
     explained : float
-        Fraction of the nominal model's cost removed when the effect is added.
+        Fraction of the cost removed when the effect is added: in a selection round's
+        ranking, of that round's starting cost on the fit windows (weave term included);
+        for the accepted effects of :class:`bikeid.ident.effect_selection.Identification`,
+        the final model's explained fraction (the same for all of them).
     accepted : bool
         Whether the selection kept the effect.
     """
