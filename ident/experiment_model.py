@@ -95,7 +95,28 @@ COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
 
 @dataclass(frozen=True)
 class ExperimentModel:
-    """The treadmill experiment: Whipple plant + steer-into-lean loop + effects."""
+    """The treadmill experiment: Whipple plant + steer-into-lean loop + effects.
+
+    Parameters
+    ----------
+    p : BicycleParameters, optional
+        The bicycle (Meijaard 2007 benchmark parameter set); default the steer-by-wire
+        bicycle (:func:`bikeid.sim.parameters.steer_by_wire`).
+    effects : dict of str to float, optional
+        Effect values by registry name (:data:`bikeid.sim.effect_registry.EFFECTS`), in
+        each effect's registry unit; unset effects are absent.
+    K : float, optional
+        Steer-into-lean gain [N s^2/rad]: T_cmd = K (V - v_s) phidot_m (positive
+        stabilizes, roll and steer positive to the right).
+    V : float, optional
+        Speed [m/s] at which the controller's gain vanishes.
+
+    Raises
+    ------
+    ValueError
+        If an effect name is unknown, a value is not a finite number, ``input_delay`` or
+        ``actuator_lag`` is negative [s], or ``tire_relaxation`` is negative [m].
+    """
 
     p: BicycleParameters = field(default_factory=steer_by_wire)
     effects: dict = field(default_factory=dict)
@@ -132,15 +153,44 @@ class ExperimentModel:
         return float(effect(name).absent if v is None else v)
 
     def with_effects(self, **values: float) -> ExperimentModel:
-        """A copy with the effects ``values`` (registry names) set or replaced."""
+        """A copy with the effects ``values`` (registry names) set or replaced.
+
+        Parameters
+        ----------
+        **values : float
+            Effect values by registry name, each in its registry unit.
+
+        Returns
+        -------
+        ExperimentModel
+            The new model (this one is unchanged).
+
+        Raises
+        ------
+        ValueError
+            If a name is unknown or a value invalid (as the constructor).
+        """
         return replace(self, effects={**self.effects, **values})
 
     # -- matrices ---------------------------------------------------------------------
     def plant_params(self) -> BicycleParameters:
-        """``params`` with the parameter corrections applied (module docstring).
+        """``p`` with the parameter corrections applied (module docstring).
 
         Raises ValueError (from the parameter validation) if a correction makes the
         bicycle unphysical, e.g. a negative rear-frame mass.
+
+        Returns
+        -------
+        BicycleParameters
+            ``p`` with trail_correction [m] added to c, front_inertia_scale and
+            rear_inertia_scale applied to the H and B inertia tensors [kg m^2] and
+            front_mass_shift [kg] moved from B to H; ``p`` itself when none is set.
+
+        Raises
+        ------
+        ValueError
+            If ``front_mass_shift`` leaves a frame without mass, or the corrected
+            parameters fail validation.
         """
         p = self.p
         ch: dict[str, float] = {}
@@ -167,7 +217,18 @@ class ExperimentModel:
 
     def canonical(self) -> CanonicalMatrices:
         """Canonical matrices M, C1, K0, K2 of :meth:`plant_params`, steer_inertia added to
-        M[delta, delta] [kg m^2]."""
+        M[delta, delta] [kg m^2].
+
+        Returns
+        -------
+        CanonicalMatrices
+            M [kg m^2], C1 [kg m], K0 [kg m], K2 [kg], rows/columns [phi, delta], and g.
+
+        Raises
+        ------
+        ValueError
+            If the parameter corrections are invalid (:meth:`plant_params`).
+        """
         cm = canonical_matrices(self.plant_params())
         M = cm.M.copy()
         M[1, 1] += self.e("steer_inertia")
@@ -287,7 +348,18 @@ class ExperimentModel:
         return zoh(A, B, h, small=True)
 
     def true_speed(self, v_sensor: float) -> float:
-        """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale."""
+        """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale.
+
+        Parameters
+        ----------
+        v_sensor : float
+            Speed reported by the treadmill sensor [m/s].
+
+        Returns
+        -------
+        float
+            speed_scale * :func:`bikeid.dataset.sbw_logs.treadmill_speed` (v_sensor) [m/s].
+        """
         return float(self.e("speed_scale") * treadmill_speed(v_sensor))
 
     def _delay(self) -> tuple[int, float]:
