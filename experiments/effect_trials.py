@@ -217,7 +217,26 @@ OUTSIDE_EFFECTS = tuple(k for k, e in EFFECTS.items() if not e.in_library)
 
 @dataclass(frozen=True)
 class TrialSpec:
-    """Everything that defines one trial (JSON-friendly)."""
+    """Everything that defines one trial (JSON-friendly).
+
+    Attributes
+    ----------
+    index : int
+        Trial number.
+    seed : int
+        Seed of the simulated decays of the fit windows (``seed + 1`` for the held-out
+        ones).
+    effect : str
+        Name of the hidden effect (a key of ``EFFECTS`` of this module).
+    value : float
+        Its true value, in the effect's registry unit.
+    fit_speeds : (float, float)
+        Treadmill speeds [m/s] of the decays the pipeline fits.
+    eval_speeds : (float, float)
+        Held-out treadmill speeds [m/s] of the evaluation.
+    noise : float
+        Roll-rate sensor noise standard deviation [rad/s].
+    """
 
     index: int
     seed: int
