@@ -148,6 +148,13 @@ class ExperimentModel:
         Returns
         -------
         float
+            The value in the effect's registry unit
+            (:data:`bikeid.sim.effect_registry.EFFECTS`).
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not a registered effect.
         """
         v = self.effects.get(name)
         return float(effect(name).absent if v is None else v)
@@ -274,14 +281,20 @@ class ExperimentModel:
         v : float
             True speed [m/s].
         cm : CanonicalMatrices, optional
+            :meth:`canonical` (computed when not given).
         relax : bool, optional
             Keep the delta_k state when sigma = 0.
 
         Returns
         -------
         E : (n, n) ndarray or None
+            Descriptor matrix (None: identity; with delta_k its last diagonal entry is
+            sigma [m] and the acceleration rows couple to delta_k').
         A : (n, n) ndarray
+            State matrix for [phi, delta, phidot, deltadot(, Ta)(, delta_k)] (the delta_k
+            row in m/s units: v (delta - delta_k)).
         B : (n, 3) ndarray
+            Input matrix for [u, w, T_phi] [N m] (as :meth:`continuous`).
         """
         cm = cm or self.canonical()
         Minv = np.linalg.inv(cm.M)
@@ -338,11 +351,14 @@ class ExperimentModel:
         h : float, optional
             Step [s].
         cm : CanonicalMatrices, optional
+            :meth:`canonical` (computed when not given).
 
         Returns
         -------
         Ad : (n, n) ndarray
+            Sampled state matrix, states as :meth:`continuous`.
         Bd : (n, 3) ndarray
+            Sampled input matrix for [u, w, T_phi] held over h [state units per N m].
         """
         A, B = self.continuous(v, cm)
         return zoh(A, B, h, small=True)
@@ -380,11 +396,13 @@ class ExperimentModel:
         Returns
         -------
         Phi : (nz, nz) ndarray
+            One-loop (10 ms) transition matrix of z.
         G : (nz,) ndarray
             Per N m of T_ext.
         c : (nz,) ndarray
             Constant terms (biases).
         n_plant : int
+            Number of plant states at the head of z (4, plus Ta and delta_k when present).
         """
         v = self.true_speed(v_sensor)
         Ad, Bd = self.discrete(v)
@@ -439,6 +457,7 @@ class ExperimentModel:
         Returns
         -------
         ndarray of complex
+            Closed-loop eigenvalues [1/s], decreasing real part.
         """
         Phi = self.closed_loop(v_sensor)[0]
         z = np.linalg.eigvals(Phi)
@@ -457,6 +476,8 @@ class ExperimentModel:
         Returns
         -------
         ndarray of complex
+            Roots [1/s] with positive imaginary part below 0.8 pi / DT rad/s, decreasing
+            real part.
         """
         lam = self.eigenvalues(v_sensor)
         return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
@@ -523,6 +544,7 @@ class ExperimentModel:
         Parameters
         ----------
         windows : list of Window
+            Measured windows (initial state, sensor speed, external torque T_ext).
         nsub : int, optional
             Substeps per loop.
 
@@ -669,6 +691,8 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
     Parameters
     ----------
     p : BicycleParameters
+        The bicycle (Meijaard 2007 parameters: lam [rad], c, w [m], masses [kg],
+        inertias [kg m^2]).
 
     Returns
     -------
@@ -699,9 +723,11 @@ def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> 
     Parameters
     ----------
     windows : list of Window
+        Measured windows.
     sims : list of dict
         :meth:`ExperimentModel.simulate` of each window.
     channels : tuple of str, optional
+        Window signals compared (default roll rate [rad/s] and steer angle [rad]).
 
     Returns
     -------
