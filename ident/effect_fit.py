@@ -47,7 +47,9 @@ def output_residuals(model: ExperimentModel, windows: list[Window], norms=None) 
     Parameters
     ----------
     model : ExperimentModel
+        The model simulated on each window (:meth:`ExperimentModel.simulate`).
     windows : list of Window
+        Measured free decays.
     norms : list of [float, float], optional
         ||y - mean y|| of roll rate [rad/s] and steer angle [rad] per window (computed when
         not given).
@@ -189,6 +191,8 @@ def fit_effects(
     Returns
     -------
     FitResult
+        Fitted model, values and window-clustered standard errors [effect units], final
+        cost (dimensionless).
     """
     extra = weave is not None and weave.weight > 0 and bool(weave.targets)
     if not names:
@@ -254,6 +258,7 @@ def joint_fit(
     Returns
     -------
     FitResult
+        As :func:`fit_effects`, of the last refit.
     """
     if nonlinear and all(w.correction is None for w in windows):
         attach_correction(windows, model, True)

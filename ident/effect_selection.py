@@ -352,6 +352,7 @@ def selection_frequencies(
     model : ExperimentModel
         The nominal model.
     windows : list of Window
+        The decays to subsample.
     resamples : int, optional
         Number of subsamples.
     fraction : float, optional

@@ -64,6 +64,7 @@ class WeaveTerm:
         Parameters
         ----------
         model : ExperimentModel
+            The model whose loop roots (:meth:`ExperimentModel.weave`) are compared.
 
         Returns
         -------
