@@ -238,38 +238,36 @@ def identify_tailored(
 ) -> DirectResult:
     """Direct identification with tailor-made instruments, iterated.
 
-    runs : *raw* closed-loop runs with a logged dither and reference (the controller fit and
-        the simulation need the signals the controller saw); ``prepare`` maps a raw run to
-        the signals the regression uses (e.g. ``experiments.accuracy.direct_prepare``) and
-        is applied alike to data and simulated instruments.
-    start : first model for the instruments: "external" (default: ``identify(...,
-        method="iv", instruments="external", lags=40)`` on the prepared runs), "ls" (least
-        squares), or a model (e.g. the Whipple model of the reference,
-        ``canonical_matrices(reference)``).  It only shapes the first instruments: the
-        estimate stays consistent, and the iterations remove its influence.
-    iterations : instrument/model refinements (>= 1); ``na``, ``nb``: controller ARX orders.
-    Other keywords go to :func:`ident.direct.identify`.  The result's ``notes`` record the
-    iterations and the worst controller-fit VAF.  Runs that break the sampling contract
-    (``ident.signals.check_sampling``) raise ValueError.
+    Each iteration simulates noise-free instruments through each run's fitted controller
+    and the current model (:func:`simulate_instruments`), prepares them like the data and
+    solves :func:`ident.direct.identify` with ``instruments="simulated"``.  The result's
+    ``notes`` record the iterations and the worst controller-fit VAF.
 
     Parameters
     ----------
     runs : sequence of Run
-        Raw closed-loop runs with a logged dither and reference.
+        *Raw* closed-loop runs with a logged dither [N m] and roll reference [rad] (the
+        controller fit and the simulation need the signals the controller saw).
     reference : BicycleParameters or CanonicalMatrices
         Values of the fixed entries (as :func:`ident.direct.identify`).
     free_roll, free_steer : sequence of str, optional
         Entries to estimate (default Moore & Hubbard's sets).
     prepare : callable
-        Maps a raw run to the run the regression uses (filtering, accelerations).
+        Maps a raw run to the signals the regression uses (e.g.
+        ``experiments.accuracy.direct_prepare``); applied alike to data and simulated
+        instruments.
     start : {"external", "ls"} or DirectResult or CanonicalMatrices, optional
-        First model for the instruments.
+        First model for the instruments: "external" (default: ``identify(...,
+        method="iv", instruments="external", lags=40)`` on the prepared runs), "ls" (least
+        squares), or a model (e.g. the Whipple model of the reference,
+        ``canonical_matrices(reference)``).  It only shapes the first instruments: the
+        estimate stays consistent, and the iterations remove its influence.
     iterations : int, optional
         Instrument/model refinements, >= 1.
     na, nb : int, optional
         Controller ARX orders (:func:`fit_controller`).
     **kwargs
-        Further keywords of :func:`ident.direct.identify` (not ``method``,
+        Other keywords go to :func:`ident.direct.identify` (not ``method``,
         ``instruments``, ``instrument_runs``).
 
     Returns
@@ -281,9 +279,9 @@ def identify_tailored(
     Raises
     ------
     ValueError
-        If ``iterations`` < 1, no runs are given, a run breaks the sampling contract,
-        ``start`` is an unknown string, or a controller fit, instrument simulation or
-        :func:`ident.direct.identify` raises.
+        If ``iterations`` < 1, no runs are given, a run breaks the sampling contract
+        (``ident.signals.check_sampling``), ``start`` is an unknown string, or a
+        controller fit, instrument simulation or :func:`ident.direct.identify` raises.
     """
     if iterations < 1:
         raise ValueError(f"iterations={iterations}: need at least 1")
