@@ -222,7 +222,8 @@ class DirectResult:
     n_samples : int
         Number of samples stacked per row (after any IV lag cut).
     method : str
-        ``"ls"`` or ``"iv (<instruments>, lags=<n>)"``.
+        ``"ls"``, ``"iv (<instruments>, lags=<n>)"``, ``"iv (simulated)"``, or
+        ``"iv (tailor-made)"`` from :func:`ident.tailored_iv.identify_tailored`.
     notes : tuple of str
         Remarks on the fit, e.g. why HdF was not estimated.
     """

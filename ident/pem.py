@@ -671,8 +671,10 @@ def subspace_start(
     Raises
     ------
     ValueError
-        If ``T_delta`` is zero in a run, or the subspace step or its conversion to
-        continuous time fails (e.g. a negative real discrete pole).
+        If ``T_delta`` is zero in a run or the subspace step (:func:`ident.subspace.pbsid`,
+        :func:`ident.canonical.to_canonical_form`) refuses the data.  A discrete model
+        without a real logarithm is not refused: the real part of the logarithm is used
+        (``d2c(strict=False)``, good enough as a start).
     """
     data = _run_data(runs, ("phi", "delta"))
     dt = data[0].dt
