@@ -54,7 +54,17 @@ CLOSURE_TOL = 0.05  # deg (and cm/s): section points closer than this count as t
 
 @dataclass(frozen=True)
 class InitialCondition:
-    """Initial roll, steer [deg] and their rates [deg/s]; ``label`` names it in figures."""
+    """Initial roll, steer [deg] and their rates [deg/s]; ``label`` names it in figures.
+
+    Attributes
+    ----------
+    label : str
+        Name of the condition in figures and tables.
+    phi, delta : float
+        Initial roll and steer angles [deg], positive to the right (Meijaard 2007).
+    phidot, deltadot : float
+        Initial roll and steer rates [deg/s].
+    """
 
     label: str
     phi: float = 0.0
@@ -63,6 +73,13 @@ class InitialCondition:
     deltadot: float = 0.0
 
     def radians(self) -> dict[str, float]:
+        """The condition in SI units.
+
+        Returns
+        -------
+        dict of str to float
+            ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s].
+        """
         return {k: math.radians(getattr(self, k)) for k in ("phi", "delta", "phidot", "deltadot")}
 
 
@@ -92,6 +109,25 @@ def coast(
     """Uncontrolled coasting run (no inputs, speed free) with total energy recorded.
 
     Returns a :class:`sim.integrate.Trajectory`; it ends early at a fall (|roll| > 60 deg).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle.
+    ic : InitialCondition
+        Initial roll, steer and rates (upright otherwise).
+    duration : float
+        Length of the run [s].
+    speed : float, optional
+        Initial forward speed [m/s] (3.5, Chen & Dao Figs. 4-5).
+    dt : float, optional
+        Output sample period [s].
+
+    Returns
+    -------
+    Trajectory
+        The run (``mode="coast"``: rear wheel free, speed a state) with total energy
+        ``energy`` [J] per sample.
     """
     from bikeid.sim.integrate import simulate
     from bikeid.sim.nonlinear import WhippleBicycle
@@ -103,7 +139,26 @@ def coast(
 
 def section_points(t, phi, phidot, delta, deltadot, v) -> tuple[np.ndarray, np.ndarray]:
     """Crossings of phidot = 0 downward (roll maxima): times [s] and points
-    (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]), linearly interpolated."""
+    (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]), linearly interpolated.
+
+    Parameters
+    ----------
+    t : (N,) array_like
+        Sample times [s].
+    phi, phidot : (N,) array_like
+        Roll angle [rad] and rate [rad/s].
+    delta, deltadot : (N,) array_like
+        Steer angle [rad] and rate [rad/s].
+    v : (N,) array_like
+        Forward speed [m/s].
+
+    Returns
+    -------
+    times : (n,) ndarray
+        Crossing times [s].
+    points : (n, 4) ndarray
+        Section points (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]).
+    """
     t, phi, phidot, delta, deltadot, v = (
         np.asarray(a, float) for a in (t, phi, phidot, delta, deltadot, v)
     )
@@ -128,6 +183,45 @@ class Periodicity:
     found); ``closure`` = max |x_{n+p} - x_n| over the last half of the returns;
     ``contraction`` = factor by which d_n shrinks per period (NaN when not measurable);
     ``energy_drift`` = (max - min) / |mean| of the total energy.
+
+    Attributes
+    ----------
+    label : str
+        The initial condition's label.
+    verdict : {"fell", "periodic", "not closed"}
+        Outcome of the section analysis.
+    fell_at : float or None
+        Time of the fall [s] (None if the bicycle stayed up).
+    duration : float
+        Simulated time [s].
+    n_returns : int
+        Number of section crossings.
+    returns_per_period : int or None
+        Returns p after which the orbit closes best (1..4).
+    period : float or None
+        Mean time of p returns [s].
+    closure : float or None
+        max |x_{n+p} - x_n| over the last half of the returns [deg, deg/s, cm/s mixed].
+    closure_tol : float
+        Tolerance of the closure test, same units.
+    contraction : float or None
+        Factor by which d_n shrinks per period (dimensionless).
+    roll_range : (float, float)
+        Minimum and maximum roll [deg].
+    roll_mean : float
+        Mean roll over the second half [deg].
+    speed_range : (float, float)
+        Minimum and maximum forward speed [m/s].
+    speed_mean : float
+        Mean forward speed over the second half [m/s].
+    yaw_rate_mean : float
+        Mean yaw rate over the second half [rad/s].
+    turn_radius : float or None
+        |speed / yaw rate| over the second half [m] (None without a mean turn).
+    energy : float
+        Initial total energy [J].
+    energy_drift : float
+        (max - min) / |mean| of the total energy (dimensionless; NaN without energy).
     """
 
     label: str
@@ -150,11 +244,33 @@ class Periodicity:
     energy_drift: float
 
     def as_dict(self) -> dict:
+        """The outcome as a JSON-able dict.
+
+        Returns
+        -------
+        dict
+            The attributes by name (tuples as tuples).
+        """
         return asdict(self)
 
 
 def periodicity(traj, label: str = "", closure_tol: float = CLOSURE_TOL) -> Periodicity:
-    """Poincare-section analysis of a coasting trajectory (see the module docstring)."""
+    """Poincare-section analysis of a coasting trajectory (see the module docstring).
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A run of :func:`coast` (with energy).
+    label : str, optional
+        Label stored in the result.
+    closure_tol : float, optional
+        Closure tolerance [deg, deg/s, cm/s] of the section points.
+
+    Returns
+    -------
+    Periodicity
+        The verdict and the run's statistics.
+    """
     t = traj.t
     phi, phidot = traj.signal("phi"), traj.signal("phidot")
     delta, deltadot, v = traj.signal("delta"), traj.signal("deltadot"), traj.signal("v")
@@ -231,7 +347,24 @@ def _contraction(dn: np.ndarray, p: int) -> float | None:
 
 # -- figures ---------------------------------------------------------------------------------
 def plot_phase_portraits(trajs, labels, path, title: str):
-    """Roll angle vs roll rate and steer angle vs steer rate [deg, deg/s], one colour per run."""
+    """Roll angle vs roll rate and steer angle vs steer rate [deg, deg/s], one colour per run.
+
+    Parameters
+    ----------
+    trajs : sequence of Trajectory
+        The runs; a run that falls is drawn until |roll| first exceeds 45 deg.
+    labels : sequence of str
+        Legend label per run.
+    path : str or Path
+        PNG file to write (atomically, :func:`experiments.plots.save`).
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from .plots import plt, save
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.6))
@@ -272,7 +405,24 @@ def plot_phase_portraits(trajs, labels, path, title: str):
 
 
 def plot_energy_speed(trajs, labels, path, title: str):
-    """Total energy minus its initial value [J] and forward speed [m/s] against time."""
+    """Total energy minus its initial value [J] and forward speed [m/s] against time.
+
+    Parameters
+    ----------
+    trajs : sequence of Trajectory
+        The runs, with energy recorded (:func:`coast`).
+    labels : sequence of str
+        Legend label per run.
+    path : str or Path
+        PNG file to write (atomically).
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from .plots import plt, save
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)

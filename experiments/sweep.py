@@ -62,7 +62,17 @@ SENSORS = ("default", "ideal")
 
 @dataclass(frozen=True)
 class Task:
-    """One run of a sweep: its group name, speed [m/s] and user seed."""
+    """One run of a sweep: its group name, speed [m/s] and user seed.
+
+    Attributes
+    ----------
+    name : str
+        Run (HDF5 group) name, ``<controller>_v<speed, 3 decimals>_s<seed>``.
+    speed : float
+        Forward speed [m/s].
+    seed : int
+        User seed (non-negative); the run's random streams come from :func:`run_seed`.
+    """
 
     name: str
     speed: float
@@ -102,6 +112,42 @@ class SweepSpec:
     extra: keywords for :func:`dataset.closed_loop.simulate_run` (e.g. ``mode``).
     Controllers are ``controllers.registry`` defaults; pole placement is designed at the
     run's speed (``design_speed``), PID and fuzzy schedule on the measured speed.
+
+    Parameters
+    ----------
+    controller : {"fuzzy", "pid", "pole"}
+        Controller name (:data:`CONTROLLERS`).
+    speeds : tuple of float
+        Forward speeds [m/s], positive, at least 1 mm/s apart.
+    seeds : tuple of int, optional
+        Non-negative user seeds.
+    duration : float, optional
+        Length of each run [s].
+    bicycle : str, optional
+        Bicycle parameter set, a name for ``sim.parameters.by_name``.
+    reference : {"chirp", "zero"}, optional
+        Roll reference.
+    chirp_amplitude : float or None, optional
+        Roll chirp amplitude [rad]; None: by speed band.
+    dither : float, optional
+        Uniform steer-torque dither amplitude [N m] (0 = none).
+    dither_hold : float or None, optional
+        Dither hold [s]; None: by speed band.
+    sensors : {"default", "ideal"}, optional
+        Sensor model.
+    sensor_rate : float, optional
+        Sensor sample rate [Hz].
+    sample_time : float, optional
+        Controller period [s].
+    extra : dict, optional
+        Further keywords for :func:`dataset.closed_loop.simulate_run`.
+
+    Raises
+    ------
+    ValueError
+        If the controller, reference or sensors is unknown, a speed is not positive and
+        finite, a seed is not a non-negative integer, the duration is not positive, the
+        dither amplitude is negative, or two speeds give the same run name.
     """
 
     controller: str
@@ -145,7 +191,13 @@ class SweepSpec:
             raise ValueError("sweep speeds must differ by at least 1 mm/s (run names collide)")
 
     def tasks(self) -> list[Task]:
-        """The grid, speed-major then seed, in file order."""
+        """The grid, speed-major then seed, in file order.
+
+        Returns
+        -------
+        list of Task
+            One task per (speed, seed).
+        """
         return [
             Task(f"{self.controller}_v{v:07.3f}_s{s}", v, s)
             for v in self.speeds
@@ -153,20 +205,62 @@ class SweepSpec:
         ]
 
     def settings(self) -> dict[str, Any]:
-        """What must match for runs to be reused (everything but the grid)."""
+        """What must match for runs to be reused (everything but the grid).
+
+        Returns
+        -------
+        dict
+            The fields of the spec without ``speeds`` and ``seeds`` (JSON-able).
+        """
         d = asdict(self)
         del d["speeds"], d["seeds"]
         return d
 
 
 def run_seed(seed: int, speed: float, controller: str) -> int:
-    """The 32-bit seed of run (seed, speed, controller), independent of worker order."""
+    """The 32-bit seed of run (seed, speed, controller), independent of worker order.
+
+    Parameters
+    ----------
+    seed : int
+        User seed, non-negative.
+    speed : float
+        Forward speed [m/s] (enters rounded to 1e-6 m/s).
+    controller : str
+        Controller name (enters by its CRC-32).
+
+    Returns
+    -------
+    int
+        First word of ``numpy.random.SeedSequence([seed, round(speed * 1e6),
+        crc32(controller)])``, in [0, 2^32).
+    """
     ss = np.random.SeedSequence([int(seed), round(speed * 1e6), zlib.crc32(controller.encode())])
     return int(ss.generate_state(1)[0])
 
 
 def simulate_task(spec: SweepSpec, task: Task) -> Run:
-    """Simulate one run of ``spec`` (runs in a worker process)."""
+    """Simulate one run of ``spec`` (runs in a worker process).
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    task : Task
+        The run's speed and seed.
+
+    Returns
+    -------
+    Run
+        The closed-loop run on the nonlinear plant; ``meta["sweep"]`` records the
+        settings, the user seed and the derived run seed; ``meta["fell_at"]`` [s] or None.
+
+    Raises
+    ------
+    ValueError
+        If the controller cannot be designed at this speed or the simulation refuses its
+        options.
+    """
     from bikeid.controllers.excitation import ChirpReference, UniformDither, ZeroReference
     from bikeid.controllers.registry import make
     from bikeid.dataset.closed_loop import simulate_run
@@ -211,7 +305,23 @@ def simulate_task(spec: SweepSpec, task: Task) -> Run:
 
 @dataclass
 class SweepReport:
-    """What a sweep did: file, counts, fallen runs (name -> time [s]), wall time [s]."""
+    """What a sweep did: file, counts, fallen runs (name -> time [s]), wall time [s].
+
+    Attributes
+    ----------
+    out : Path
+        The HDF5 file written.
+    total : int
+        Runs of the grid.
+    computed : int
+        Runs simulated by this call.
+    reused : int
+        Runs taken from the file or its parts folder.
+    fell : dict of str to float
+        Runs in which the bicycle fell, name -> time of the fall [s].
+    elapsed : float
+        Wall time [s].
+    """
 
     out: Path
     total: int
@@ -221,6 +331,13 @@ class SweepReport:
     elapsed: float
 
     def summary(self) -> str:
+        """Human-readable summary of the sweep.
+
+        Returns
+        -------
+        str
+            A line with the file, counts and time, then the fallen runs (or "no run fell").
+        """
         lines = [
             f"wrote {self.out}: {self.total} runs (computed {self.computed}, reused "
             f"{self.reused}) in {self.elapsed:.1f} s"
@@ -372,7 +489,35 @@ def run_sweep(
     progress: bool = True,
     log: Callable[[str], None] | None = None,
 ) -> SweepReport:
-    """Run (or finish) the sweep ``spec`` into the HDF5 file ``out``; see the module doc."""
+    """Run (or finish) the sweep ``spec`` into the HDF5 file ``out``; see the module doc.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    out : str or Path
+        Output file, ending in ``.h5`` or ``.hdf5``.
+    workers : int, optional
+        Local worker processes (or the size of a local Dask cluster).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address; None: local processes.
+    progress : bool, optional
+        Show a progress bar on stderr.
+    log : callable, optional
+        Receives messages (default: stderr).
+
+    Returns
+    -------
+    SweepReport
+        Counts, fallen runs and wall time.
+
+    Raises
+    ------
+    ValueError
+        If ``workers`` is not a positive integer, ``out`` has another suffix, another
+        sweep holds the lock on ``out``, ``out`` or a part was made with different
+        settings, Dask is missing or unreachable, or a run's simulation raises.
+    """
     t0 = time.perf_counter()
     if int(workers) != workers or workers < 1:
         raise ValueError(f"--workers must be a positive integer, got {workers}")
@@ -451,7 +596,39 @@ def stabilization_table(
 ) -> list[dict[str, Any]]:
     """Run every controller at every speed (chirp reference, dither, default sensors) on the
     nonlinear model; one row per (controller, speed), in that order.  A tracking test: the
-    chirp is 3 deg and the dither hold 10 ms at every speed unless given."""
+    chirp is 3 deg and the dither hold 10 ms at every speed unless given.
+
+    Parameters
+    ----------
+    speeds : sequence of float
+        Forward speeds [m/s].
+    duration : float, optional
+        Length of each run [s].
+    controllers : sequence of str, optional
+        Controller names (:data:`CONTROLLERS`).
+    workers : int, optional
+        Local worker processes.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address.
+    progress : bool, optional
+        Show a progress bar on stderr.
+    **spec_options
+        Further :class:`SweepSpec` fields (``chirp_amplitude`` [rad] defaults to 3 deg,
+        ``dither_hold`` [s] to 0.01).
+
+    Returns
+    -------
+    list of dict
+        Per (controller, speed): ``controller``, ``speed`` [m/s], ``upright``,
+        ``fell_at`` [s] or None, ``error`` (a failed design's message) or None,
+        ``rms_error_deg`` (RMS of reference - true roll [deg]) and ``peak_torque`` (peak
+        |T_delta| [N m]), the last two None after a failed design.
+
+    Raises
+    ------
+    ValueError
+        If a :class:`SweepSpec` is invalid.
+    """
     from tqdm import tqdm
 
     spec_options.setdefault("chirp_amplitude", math.radians(3.0))
@@ -470,7 +647,19 @@ def stabilization_table(
 
 
 def stabilization_markdown(rows: Sequence[dict[str, Any]]) -> str:
-    """The table as markdown: one line per (controller, speed)."""
+    """The table as markdown: one line per (controller, speed).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of :func:`stabilization_table`.
+
+    Returns
+    -------
+    str
+        A markdown table (controller, speed [m/s], upright, RMS roll tracking error
+        [deg], peak steer torque [N m]).
+    """
     lines = [
         "| controller | speed [m/s] | upright | RMS roll tracking error [deg] "
         "| peak steer torque [N m] |",

@@ -145,6 +145,28 @@ def lowpass(x: np.ndarray, dt: float, cutoff: float = 15.0, order: int = 2) -> n
 
     ``cutoff`` [Hz] must lie below the Nyquist frequency 1 / (2 dt).  Forward-backward
     filtering squares the magnitude response (-6 dB at ``cutoff``) and has no phase lag.
+
+    Parameters
+    ----------
+    x : (..., N) array_like
+        Uniformly sampled signal(s), any unit; filtered along the last axis.
+    dt : float
+        Sample period [s].
+    cutoff : float, optional
+        Cut-off frequency [Hz] of the Butterworth design (-3 dB one way, -6 dB after
+        forward-backward filtering); default 15 Hz (Moore & Hubbard).
+    order : int, optional
+        Butterworth order of the one-way filter (the zero-phase result has twice it).
+
+    Returns
+    -------
+    (..., N) ndarray
+        The filtered signal, same shape and unit as ``x``.
+
+    Raises
+    ------
+    ValueError
+        If ``cutoff`` is not in (0, 1 / (2 dt)) Hz or ``order`` < 1.
     """
     nyq = 0.5 / dt
     if not (0 < cutoff < nyq):
@@ -164,6 +186,26 @@ def differentiate(x: np.ndarray, dt: float, method: str = "central") -> np.ndarr
     ``forward``: (x[k+1] - x[k]) / dt, backward at the last sample;
     ``backward``: (x[k] - x[k-1]) / dt, forward at the first sample.
     See the module docstring for which to choose.
+
+    Parameters
+    ----------
+    x : (..., N) array_like
+        Uniformly sampled signal(s), differentiated along the last axis; at least 3
+        samples.
+    dt : float
+        Sample period [s].
+    method : {"central", "forward", "backward"}, optional
+        Difference scheme.
+
+    Returns
+    -------
+    (..., N) ndarray
+        The derivative, unit of ``x`` per second (e.g. rad/s -> rad/s^2), same shape.
+
+    Raises
+    ------
+    ValueError
+        If ``x`` has fewer than 3 samples or ``method`` is unknown.
     """
     x = np.asarray(x, dtype=float)
     if x.shape[-1] < 3:
@@ -179,7 +221,21 @@ def differentiate(x: np.ndarray, dt: float, method: str = "central") -> np.ndarr
 
 
 def remove_means(signals: dict[str, np.ndarray], keep=NO_MEAN_REMOVAL) -> dict[str, np.ndarray]:
-    """A copy with each signal's time mean subtracted, except those named in ``keep``."""
+    """A copy with each signal's time mean subtracted, except those named in ``keep``.
+
+    Parameters
+    ----------
+    signals : dict of str to (N,) ndarray
+        Named signals (any units).
+    keep : collection of str, optional
+        Names whose mean is physical and is kept; default :data:`NO_MEAN_REMOVAL`
+        (speed ``v``, lateral force ``F``, rear wheel rate ``thetaRdot``).
+
+    Returns
+    -------
+    dict of str to (N,) ndarray
+        New arrays, same keys and units; the inputs are not modified.
+    """
     return {k: (v.copy() if k in keep else v - v.mean()) for k, v in signals.items()}
 
 
@@ -199,6 +255,37 @@ def prepare(
     the low-pass (module docstring); the run loses its last sample.  ``source="truth"``
     processes the noise-free signals of a simulated run instead of the measured ones.  The
     dither and reference are kept.
+
+    Parameters
+    ----------
+    run : Run
+        The run to process (not modified).
+    cutoff : float or None, optional
+        Low-pass cut-off [Hz] of :func:`lowpass` (default 15 Hz, Moore & Hubbard's);
+        ``None`` or 0 skips filtering.
+    order : int, optional
+        Butterworth order of :func:`lowpass`.
+    subtract_mean : bool, optional
+        Remove each signal's time mean, except :data:`NO_MEAN_REMOVAL`.
+    derivative : {"central", "forward", "backward", "interval"}, optional
+        How the accelerations are formed (module docstring).
+    source : {"signals", "truth"}, optional
+        Process the measured signals or the simulator's noise-free ones.
+
+    Returns
+    -------
+    Run
+        A new run whose signals are the processed ones plus ``phiddot`` and ``deltaddot``
+        [rad/s^2]; ``meta["preprocessing"]`` records the options.  With
+        ``derivative="interval"`` it has one sample fewer and its signals are interval
+        means (held inputs T_phi, T_delta, F at their value over the interval).
+
+    Raises
+    ------
+    ValueError
+        If ``source`` or ``derivative`` is not one of its choices, ``source="truth"`` for
+        a run without noise-free signals, or the filter settings are invalid
+        (:func:`lowpass`).
     """
     if source not in ("signals", "truth"):
         raise ValueError(f"source {source!r}: choose 'signals' or 'truth'")
