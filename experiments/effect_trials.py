@@ -46,7 +46,8 @@ from functools import partial
 
 import numpy as np
 
-from bikeid.sim.effect_registry import Effect, effect, nonlinear_effects
+from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+from bikeid.sim.effect_registry import RegistryFacts, effect, nonlinear_effects
 
 __all__ = [
     "EFFECTS",
@@ -74,7 +75,7 @@ TRIAL_COULOMB_SMOOTHING = 0.01  # rad/s, tanh smoothing of the injected steer Co
 
 
 @dataclass(frozen=True)
-class EffectSpec:
+class EffectSpec(RegistryFacts):
     """How the trials draw one injected effect (its facts are the registry's).
 
     Attributes
@@ -104,26 +105,6 @@ class EffectSpec:
         if e.plant_term is None or e.per_speed:
             raise ValueError(f"trial effect {self.name}: the nonlinear plant must carry it "
                              "at every speed alike")  # fmt: skip
-
-    @property
-    def entry(self) -> Effect:
-        """The registry entry."""
-        return effect(self.name)
-
-    @property
-    def unit(self) -> str:
-        """Unit of the value (registry)."""
-        return self.entry.unit
-
-    @property
-    def absent(self) -> float:
-        """The value that means "absent" (registry)."""
-        return self.entry.absent
-
-    @property
-    def in_library(self) -> bool:
-        """Whether the identification library may select it (registry)."""
-        return self.entry.in_library
 
     def draw(self, rng: np.random.Generator) -> float:
         """One magnitude [unit] from the generator ``rng``.
@@ -264,7 +245,7 @@ def _stable(name: str, value: float, speeds) -> bool:
 
     m = ExperimentModel(effects={name: value})
     for v in speeds:
-        vs = 1.066 * v - 0.128
+        vs = SPEED_CALIBRATION[0] * v + SPEED_CALIBRATION[1]
         if m.eigenvalues(vs)[0].real >= 0 or m.weave(vs).real >= -MIN_DECAY:
             return False
     return True
@@ -332,7 +313,7 @@ def _sensors(noise: float):
 
     return Sensors(
         {
-            "v": Channel(scale=1.066, bias=-0.128),  # the logs' speed calibration
+            "v": Channel(scale=SPEED_CALIBRATION[0], bias=SPEED_CALIBRATION[1]),
             "phi": Channel(std=noise / 5),
             "phidot": Channel(std=noise),
             "delta": Channel(std=3e-4, step=STEER_STEP),
