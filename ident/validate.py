@@ -434,41 +434,58 @@ def resid(
     return ResidResult(tuple(res), lags, auto, cross, band, frac, xfrac)
 
 
-def _ss(model) -> control.StateSpace:
+def _ss(model, v: float | None = None) -> control.StateSpace:
     # poles, zeros and transfer functions do not depend on the state order; the canonical
     # model's own (Chen & Dao) order is used, as the identification computed it
     if hasattr(model, "predictor") and hasattr(model, "theta"):
         return model.state_space(order="chen-dao")
-    return model.state_space() if hasattr(model, "state_space") else model
+    if not hasattr(model, "state_space"):
+        return model
+    import inspect
+
+    if "v" in inspect.signature(model.state_space).parameters:  # defined over speed
+        if v is None:
+            raise ValueError(
+                f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
+            )
+        return model.state_space(v)
+    return model.state_space()
 
 
-def poles(model) -> np.ndarray:
+def poles(model, v: float | None = None) -> np.ndarray:
     """Poles [1/s] of an identified model (``CanonicalModel`` or ``StateSpace``).
 
     Parameters
     ----------
-    model : ident.pem.CanonicalModel or control.StateSpace
+    model : ident.pem.CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
         Continuous-time model.
+    v : float, optional
+        Speed [m/s], required for models defined over speed (``SpeedCanonicalModel``,
+        ``DirectResult``).
 
     Returns
     -------
     (n,) complex ndarray
         Poles [1/s] (independent of the state order).
     """
-    return np.asarray(control.poles(_ss(model)))
+    return np.asarray(control.poles(_ss(model, v)))
 
 
-def zeros(model, output: str = "phi", input: str = "T_delta") -> np.ndarray:
+def zeros(
+    model, output: str = "phi", input: str = "T_delta", v: float | None = None
+) -> np.ndarray:
     """Transmission zeros [1/s] of one SISO channel.
 
     Parameters
     ----------
-    model : ident.pem.CanonicalModel or control.StateSpace
+    model : ident.pem.CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
         Continuous-time model.
     output : str, optional
         Output name, e.g. ``"phi"`` or ``"delta"``.
     input : str, optional
         Input name, e.g. ``"T_delta"``.
+    v : float, optional
+        Speed [m/s], required for models defined over speed.
 
     Returns
     -------
@@ -480,16 +497,20 @@ def zeros(model, output: str = "phi", input: str = "T_delta") -> np.ndarray:
     KeyError
         If the model has no such (output, input) channel.
     """
-    return np.asarray(control.zeros(transfer_functions(model)[(output, input)]))
+    return np.asarray(control.zeros(transfer_functions(model, v)[(output, input)]))
 
 
-def transfer_functions(model) -> dict[tuple[str, str], control.TransferFunction]:
+def transfer_functions(
+    model, v: float | None = None
+) -> dict[tuple[str, str], control.TransferFunction]:
     """SISO transfer functions keyed by (output, input).
 
     Parameters
     ----------
-    model : ident.pem.CanonicalModel or control.StateSpace
+    model : ident.pem.CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
         Continuous-time model.
+    v : float, optional
+        Speed [m/s], required for models defined over speed.
 
     Returns
     -------
@@ -498,7 +519,7 @@ def transfer_functions(model) -> dict[tuple[str, str], control.TransferFunction]
         rad/(N m)), numerator leading coefficients below 1e-9 of its largest dropped as
         round-off.
     """
-    sys = _ss(model)
+    sys = _ss(model, v)
     out = {}
     for i, o in enumerate(sys.output_labels):
         for j, u in enumerate(sys.input_labels):
