@@ -34,6 +34,7 @@ STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
 #: Modules whose public API must comply (sorted; extend when a module is converted).
 DOCUMENTED_MODULES = (
     "bikeid.dataset.files",
+    "bikeid.dataset.importers",
     "bikeid.dataset.run",
     "bikeid.ident.canonical",
     "bikeid.ident.subspace",
@@ -50,6 +51,7 @@ DOCUMENTED_MODULES = (
 _BASELINE = frozenset(
     {
         "bikeid.dataset.files",
+        "bikeid.dataset.importers",
         "bikeid.dataset.run",
         "bikeid.ident.canonical",
         "bikeid.ident.subspace",
