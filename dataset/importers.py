@@ -213,6 +213,7 @@ def _build(
         )
     h = float(np.median(step))
     dev = np.abs(step - h) / h
+    dev[~np.isfinite(dev)] = np.inf  # a step that overflows float64 is irregular too
     worst = int(np.argmax(dev))
     if dev[worst] > jitter:
         raise ValueError(
@@ -250,10 +251,10 @@ def _build(
     if "v" in signals:
         v = signals["v"]
         mean = float(np.mean(v))
-        if not mean > 0:
+        if not (math.isfinite(mean) and mean > 0):
             raise ValueError(
                 f"{label}: column {columns['v']!r}: mean speed {mean:.6g} m/s is not "
-                "positive; check the column, its unit or flip"
+                "positive and finite; check the column, its unit or flip"
             )
         spread = float(np.ptp(v))
         if spread > speed_range * mean:
@@ -333,6 +334,12 @@ def _read_csv(path: Path, wanted: list[str], delimiter: str) -> tuple[dict, list
             raise ValueError(
                 f"{label}: row {header_line}: duplicated column names {dup}; rename them "
                 "so each column is unique"
+            )
+        if len(header) == 1 and any(d in header[0] for d in ";\t|" if d != delimiter):
+            raise ValueError(
+                f"{label}: row {header_line}: the header is one column {header[0]!r}; the "
+                "file is not separated by "
+                f"{delimiter!r}: pass delimiter=';' (or the separator it uses)"
             )
         _missing(label, wanted, header, "column")
         idx = {c: header.index(c) for c in wanted}
