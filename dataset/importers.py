@@ -578,6 +578,11 @@ def from_dataframe(
 
 
 # -- HDF5 -------------------------------------------------------------------------------
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip("'\" ")
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def _h5_datasets(f) -> list[str]:
     import h5py
 
@@ -591,20 +596,25 @@ def _h5_datasets(f) -> list[str]:
     return names
 
 
+#: What h5py raises on damaged objects (besides its own messages): caught and reported.
+_H5_DAMAGE = (OSError, RuntimeError, KeyError, TypeError, ValueError)
+
+
 def _h5_read(label: str, f, key: str) -> np.ndarray:
-    ds = f[key]
     where = f"{label}: dataset {key!r}"
-    if ds.dtype.kind not in "fiub":
-        raise ValueError(f"{where} has dtype {ds.dtype}, not numbers")
-    shape = ds.shape
-    if len(shape) == 2 and 1 in shape:
-        pass
-    elif len(shape) != 1:
+    try:
+        ds = f[key]
+        kind, shape, dtype = ds.dtype.kind, ds.shape, ds.dtype
+    except _H5_DAMAGE as exc:
+        raise ValueError(f"{where} cannot be opened ({_first_line(exc)}); corrupt file") from None
+    if kind not in "fiub":
+        raise ValueError(f"{where} has dtype {dtype}, not numbers")
+    if len(shape) != 1 and not (len(shape) == 2 and 1 in shape):
         raise ValueError(f"{where} has shape {shape}, expected 1-D (one value per sample)")
     try:
         return np.asarray(ds[()], dtype=float).reshape(-1)
-    except (OSError, RuntimeError) as exc:
-        raise ValueError(f"{where} cannot be read ({str(exc).splitlines()[0]})") from None
+    except _H5_DAMAGE as exc:
+        raise ValueError(f"{where} cannot be read ({_first_line(exc)}); corrupt file") from None
 
 
 def from_hdf5(
@@ -680,16 +690,16 @@ def from_hdf5(
         raise ValueError(f"{label}: is a folder, not an HDF5 file")
     try:
         f = h5py.File(path, "r")
-    except OSError as exc:
-        raise ValueError(
-            f"{label}: not a readable HDF5 file ({str(exc).splitlines()[0]})"
-        ) from None
+    except _H5_DAMAGE as exc:
+        raise ValueError(f"{label}: not a readable HDF5 file ({_first_line(exc)})") from None
     wanted = list(dict.fromkeys([time] + list(columns.values())))
     with f:
         try:
             have = _h5_datasets(f)
-        except (OSError, RuntimeError) as exc:
-            raise ValueError(f"{label}: cannot list its datasets ({exc}); corrupt file") from None
+        except _H5_DAMAGE as exc:
+            raise ValueError(
+                f"{label}: cannot list its datasets ({_first_line(exc)}); corrupt file"
+            ) from None
         _missing(label, [w.strip("/") for w in wanted], have, "dataset")
         data = {w: _h5_read(label, f, w) for w in wanted}
     sizes = {c: a.size for c, a in data.items()}

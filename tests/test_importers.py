@@ -451,7 +451,7 @@ def test_damaged_csv_never_a_traceback(data):
         try:
             read(path)
         except (ValueError, OSError) as exc:
-            assert str(exc) and "\n" not in str(exc)
+            assert str(path) in str(exc) and "\n" not in str(exc), str(exc)
 
 
 def test_semicolon_file(tmp_path):
@@ -481,3 +481,22 @@ def test_reserved_meta_keys(tmp_path):
     with pytest.raises(ValueError, match=r"\['source'\]"):
         read(path, meta={"source": "mine"})
     assert read(path, meta={"rider": "Jason"}).meta["rider"] == "Jason"
+
+
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_damaged_hdf5_never_a_traceback(data):
+    """Flipped bytes in an HDF5 log: a Run (flip in unused bytes), a ValueError or OSError."""
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "log.h5"
+        with h5py.File(path, "w") as f:
+            for k, v in good_table().items():
+                f[f"data/{k}"] = v
+        raw = bytearray(path.read_bytes())
+        for _ in range(data.draw(st.integers(1, 8))):
+            raw[data.draw(st.integers(0, len(raw) - 1))] = data.draw(st.integers(0, 255))
+        path.write_bytes(bytes(raw))
+        try:
+            from_hdf5(path, {k: f"data/{c}" for k, c in MAP.items()}, time="data/time")
+        except (ValueError, OSError) as exc:
+            assert str(path) in str(exc) and "\n" not in str(exc), str(exc)
