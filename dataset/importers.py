@@ -167,7 +167,7 @@ def _check_request(
         if not isinstance(u, str) or u.strip() not in allowed:
             raise ValueError(f"unit {u!r} for {k!r} is not supported; allowed: {list(allowed)}")
         units[k] = u.strip()
-    flip = set(flip)
+    flip = {flip} if isinstance(flip, str) else set(flip)
     bad = sorted(k for k in flip if k not in columns)
     if bad:
         raise ValueError(f"flip names signals {bad} that are not in {what} ({list(columns)})")
@@ -189,6 +189,9 @@ def _build(
 ) -> Run:
     """Check the table's data and convert it into a Run."""
     label, data, row = table.label, table.data, table.row
+    for key, tol in (("jitter", jitter), ("speed_range", speed_range)):
+        if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
+            raise ValueError(f"{key} must be a positive relative tolerance, got {tol!r}")
     n = data[time].size
     if n == 0:
         raise ValueError(f"{label}: the file holds no data rows; nothing to import")
@@ -312,7 +315,7 @@ def _read_csv(path: Path, wanted: list[str], delimiter: str) -> tuple[dict, list
     try:
         raw = path.read_bytes()
     except OSError as exc:
-        raise OSError(f"{label}: cannot read ({exc.strerror})") from None
+        raise type(exc)(exc.errno, f"cannot read {label} ({exc.strerror})") from None
     digest = hashlib.sha256(raw).hexdigest()
     try:
         text = raw.decode("utf-8-sig")

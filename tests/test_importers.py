@@ -171,6 +171,8 @@ def test_flip_and_nominal_speed(sim_run, tmp_path):
     # without flip the roll angle comes back with the opposite sign: the option is live
     plain = from_csv(path, cols, time="time", speed=4.5)
     assert np.array_equal(plain.signals["phi"], -sim_run.signals["phi"])
+    one = from_csv(path, cols, time="time", speed=4.5, flip="phi")  # one name as a string
+    assert np.array_equal(one.signals["phi"], sim_run.signals["phi"])
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -392,6 +394,11 @@ def test_unknown_unit_names_allowed():
 def test_speed_column_and_nominal_speed_conflict():
     with pytest.raises(ValueError, match="not both"):
         from_csv("unused.csv", MAP, time="time", speed=4.5)
+    no_v = {k: c for k, c in MAP.items() if k != "v"}
+    with pytest.raises(ValueError, match="positive finite number"):
+        from_csv("unused.csv", no_v, time="time", speed=-4.5)
+    with pytest.raises(ValueError, match=r"required signals \['v'\]"):
+        from_csv("unused.csv", no_v, time="time")
 
 
 def test_hdf5_errors(tmp_path):
