@@ -467,14 +467,21 @@ def _frame_column(label: str, df: Any, col: str) -> np.ndarray:
     try:
         raw = df[col]
     except Exception as exc:  # noqa: BLE001 - any table type; report, never a traceback
-        raise ValueError(f"{label}: column {col!r} cannot be read ({exc})") from None
+        raise ValueError(f"{label}: column {col!r} cannot be read ({_first_line(exc)})") from None
     values = getattr(raw, "to_numpy", None)
     try:
-        obj = np.asarray(values() if callable(values) else raw, dtype=object)
+        src = values() if callable(values) else raw
+        obj = np.asarray(src)
+        if obj.dtype.kind not in "fiu":  # mixed cells: look at each as the user wrote it
+            obj = np.asarray(src, dtype=object)
     except Exception as exc:  # noqa: BLE001
-        raise ValueError(f"{label}: column {col!r} is not array-like ({exc})") from None
+        raise ValueError(
+            f"{label}: column {col!r} is not array-like ({_first_line(exc)})"
+        ) from None
     if obj.ndim != 1:
         raise ValueError(f"{label}: column {col!r} has shape {obj.shape}, expected 1-D")
+    if obj.dtype.kind in "fiu":  # numbers already: no per-cell check needed
+        return obj.astype(float)
     out = np.empty(obj.size)
     for i, cell in enumerate(obj):
         try:
