@@ -12,13 +12,14 @@ integrator's event root finder (dense output, to the tolerance).
 
 A period-p orbit is a fixed point z* = P^p(z*).  Coasting conserves energy, so the orbits
 form a one-parameter family (one per energy level) and DP^p - I is singular along the
-family: Newton's step is the minimum-norm least-squares solution, which moves z within
-(nearly) its energy level.  The multipliers are the eigenvalues of the Jacobian DP^p(z*),
-by central differences with step :data:`FD_STEP` in every coordinate; one of them is 1
-(the energy direction), a check of the computation.  They are the nontrivial Floquet
-multipliers of the orbit (the monodromy matrix's eigenvalues without the trivial one along
-the flow), independent of the section chosen.  Error budget of the Jacobian: truncation
-O(h^2 |P'''|) ~ 1e-10, integration error / h ~ 1e-12 / 1e-5 = 1e-7.
+family: Newton solves P^p(z) = z together with E(z) = E0 (the initial condition's energy)
+by least squares, which picks the orbit on that level.  The multipliers are the
+eigenvalues of the Jacobian DP^p(z*), by central differences with step :data:`FD_STEP` in
+every coordinate; one of them is 1 (the energy direction), a check of the computation.
+They are the nontrivial Floquet multipliers of the orbit (the monodromy matrix's
+eigenvalues without the trivial one along the flow), independent of the section chosen.
+Error budget of the Jacobian: truncation O(h^2 |P'''|) ~ 1e-10, integration error / h
+~ 1e-12 / 1e-5 = 1e-7.
 """
 
 from __future__ import annotations
@@ -133,10 +134,16 @@ def _jacobian(bike: WhippleBicycle, z: np.ndarray, p: int, h: float) -> np.ndarr
     return J
 
 
+def _energy(bike: WhippleBicycle, z: np.ndarray) -> float:
+    ke, pe = bike.energy(_start(bike, z))
+    return ke + pe
+
+
 def orbit_stability(
     p: BicycleParameters,
     z0_deg: np.ndarray,
     returns: int,
+    energy: float | None = None,
     tol: float = 1e-10,
     max_iter: int = 8,
 ) -> OrbitStability:
@@ -151,6 +158,11 @@ def orbit_stability(
         units of :func:`experiments.limit_cycles.section_points`.
     returns : int
         Returns to the section per period (p >= 1).
+    energy : float, optional
+        Total energy [J] of the wanted orbit (the initial condition's: coasting conserves
+        it).  Newton then solves P^p(z) = z together with E(z) = energy, which picks the
+        one orbit of the family on that level (so mirrored initial conditions give exactly
+        mirrored orbits).  None: the minimum-norm step, the level near the start.
     tol : float, optional
         Stop when max |P^p(z) - z| < tol [rad, rad/s, m/s]. Default 1e-10.
     max_iter : int, optional
@@ -174,7 +186,8 @@ def orbit_stability(
     while True:
         zn, _ = poincare_map(bike, z, returns)
         res = float(np.max(np.abs(zn - z)))
-        if res < tol:
+        de = 0.0 if energy is None else _energy(bike, z) - energy
+        if res < tol and abs(de) < tol * max(1.0, abs(energy or 0.0)):
             break
         if it >= max_iter:
             raise RuntimeError(
@@ -183,13 +196,22 @@ def orbit_stability(
                 f"{z0_deg}; run the coasting motion longer"
             )
         J = _jacobian(bike, z, returns, FD_STEP)
-        z = z + np.linalg.lstsq(J - np.eye(4), -(zn - z), rcond=1e-8)[0]
+        A, r = J - np.eye(4), -(zn - z)
+        if energy is not None:
+            g = np.empty(4)
+            for j in range(4):
+                e = np.zeros(4)
+                e[j] = FD_STEP
+                g[j] = (_energy(bike, z + e) - _energy(bike, z - e)) / (2 * FD_STEP)
+            # energy row scaled to the size of the map rows (E ~ 1e3 J, dE/dz ~ 1e3)
+            w = 1.0 / np.linalg.norm(g)
+            A, r = np.vstack([A, w * g]), np.append(r, -w * de)
+        z = z + np.linalg.lstsq(A, r, rcond=1e-10)[0]
         it += 1
     J = _jacobian(bike, z, returns, FD_STEP)
     mu = np.linalg.eigvals(J)
     mu = mu[np.argsort(-np.abs(mu))]
     _, period = poincare_map(bike, z, returns)
-    ke, pe = bike.energy(_start(bike, z))
     return OrbitStability(
         returns_per_period=returns,
         period=period,
@@ -203,6 +225,6 @@ def orbit_stability(
         newton_iterations=it,
         multipliers=tuple(complex(m) for m in mu),
         unit_multiplier_error=float(np.min(np.abs(mu - 1.0))),
-        energy=ke + pe,
+        energy=_energy(bike, z),
         seconds=time.perf_counter() - t0,
     )

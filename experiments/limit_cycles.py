@@ -162,7 +162,12 @@ def _slope(y: np.ndarray) -> tuple[float, float]:
     return float(b), se
 
 
-def classify(pts: np.ndarray, fell: bool, closure_rel: float = CLOSURE_REL) -> Classification:
+def classify(
+    pts: np.ndarray,
+    fell: bool,
+    closure_rel: float = CLOSURE_REL,
+    final_rel: float | None = None,
+) -> Classification:
     """Classify a coasting run as ``decays``, ``periodic``, ``irregular`` or ``falls``.
 
     Rules (on the last half of the section points, at least 8 returns there):
@@ -181,6 +186,11 @@ def classify(pts: np.ndarray, fell: bool, closure_rel: float = CLOSURE_REL) -> C
         Whether the run ended in a fall (or another integrator stop).
     closure_rel : float, optional
         Relative closure tolerance. Default :data:`CLOSURE_REL`.
+    final_rel : float, optional
+        |(phi, delta, phidot, deltadot)| at the end of the run divided by its maximum over
+        the run.  When the section has fewer than 8 returns on its last half (a decay
+        whose last phase is the non-oscillatory capsize mode stops returning) and
+        ``final_rel`` < ``closure_rel``, the run ``decays``.
 
     Returns
     -------
@@ -198,6 +208,11 @@ def classify(pts: np.ndarray, fell: bool, closure_rel: float = CLOSURE_REL) -> C
         return Classification("falls", None, None, None, None)
     tail = pts[pts.shape[0] // 2 :]
     if tail.shape[0] < 8:
+        if final_rel is not None and final_rel < closure_rel:
+            b = se = None
+            if pts.shape[0] >= 3 and np.all(np.linalg.norm(pts[:, :3], axis=1) > 0):
+                b, se = _slope(np.log(np.linalg.norm(pts[:, :3], axis=1)))
+            return Classification("decays", None, None, b, se)
         return Classification("irregular", None, None, None, None)
     amp = np.linalg.norm(tail[:, :3], axis=1)
     b = se = None
@@ -294,7 +309,9 @@ def periodicity(traj, label: str = "", closure_rel: float = CLOSURE_REL) -> Peri
     fell_at, cause = stop_info(traj)
     tc, pts = section_points(t, phi, phidot, delta, deltadot, v)
     n = len(tc)
-    cl = classify(pts, fell_at is not None, closure_rel)
+    size = np.sqrt(phi**2 + delta**2 + phidot**2 + deltadot**2)
+    final_rel = float(size[-1] / size.max()) if size.max() > 0 else 0.0
+    cl = classify(pts, fell_at is not None, closure_rel, final_rel)
     period = None
     if cl.period_n is not None:
         k, p = n // 2, cl.period_n
@@ -336,9 +353,7 @@ def mirrored(ic: InitialCondition) -> InitialCondition:
     InitialCondition
         Label suffixed with ``" (mirrored)"``.
     """
-    return InitialCondition(
-        ic.label + " (mirrored)", -ic.phi, -ic.delta, -ic.phidot, -ic.deltadot
-    )
+    return InitialCondition(ic.label + " (mirrored)", -ic.phi, -ic.delta, -ic.phidot, -ic.deltadot)
 
 
 def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) -> dict:
@@ -386,7 +401,9 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
         "floquet_seconds": None,
     }
     if res.verdict == "periodic":
-        o = orbit_stability(p, np.asarray(res.last_section_point), res.returns_per_period)
+        o = orbit_stability(
+            p, np.asarray(res.last_section_point), res.returns_per_period, energy=res.energy
+        )
         e.update(
             period_s=o.period,
             floquet_multipliers=[[m.real, m.imag] for m in o.multipliers],

@@ -299,8 +299,7 @@ def limit_cycle_study(
         per = [lc.periodicity(tr, ic.label) for tr, ic in zip(trajs, conds, strict=True)]
         res[name] = [r.as_dict() for r in per]
         res["limit_cycles"] += [
-            dict(lc.summary_entry(p, ic, r), figure=name)
-            for ic, r in zip(conds, per, strict=True)
+            dict(lc.summary_entry(p, ic, r), figure=name) for ic, r in zip(conds, per, strict=True)
         ]
         lc.plot_phase_portraits(
             trajs,

@@ -264,6 +264,7 @@ def _report_limit_cycles(rep: Report, lc: dict) -> None:
     )
     for f in lc["figures"]:
         rep.figure(f, f.replace("_", " ").replace(".png", ""))
+
     def mults(e):
         if e["floquet_multipliers"] is None:
             return "-"
