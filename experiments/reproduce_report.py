@@ -355,6 +355,18 @@ def _report_limit_cycles(rep: Report, lc: dict) -> None:
             )
             + "."
         )
+    pair = {e["label"]: e for e in lc["limit_cycles"] if e["outcome"] == "periodic"}
+    a, b = pair.get("delta0=0.1, phidot0=0"), pair.get("phi0=0.1")
+    if a and b:
+        ma = np.array([complex(*z) for z in a["floquet_multipliers"]])
+        mb = np.array([complex(*z) for z in b["floquet_multipliers"]])
+        rep.para(
+            "Fig. 4's delta0 = 0.1 deg and Fig. 5's phi0 = 0.1 deg start on energy levels "
+            f"{fmt(abs(a['orbit_energy_J'] - b['orbit_energy_J']), 2)} J apart and reach "
+            "mirror-image orbits (turns of opposite sense): periods differ by "
+            f"{fmt(abs(a['period_s'] - b['period_s']), 2)} s, multipliers by at most "
+            f"{fmt(float(np.max(np.abs(ma - mb))), 2)}."
+        )
 
 
 def _report_fig7(rep: Report, f7: dict) -> None:
