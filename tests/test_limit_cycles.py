@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bikeid.experiments import limit_cycles as lc
 
@@ -77,6 +79,26 @@ def test_classify_geometric_decay_vs_convergence_to_an_orbit():
     assert c.decay_rate == pytest.approx(math.log(lam), rel=1e-9)
     c = lc.classify(_sequence(10 + 5 * 0.5**n), fell=False)
     assert c.outcome == "periodic" and c.period_n == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    lam=st.floats(0.5, 0.99),
+    a0=st.floats(0.01, 30.0),
+    pattern=st.lists(st.floats(5.0, 30.0), min_size=1, max_size=4),
+)
+def test_classify_property_decay_and_period(lam, a0, pattern):
+    """Any geometric decay A_n = a0 lam^n (1 % to 50 % loss per return, 60 returns) is
+    ``decays`` with slope log(lam) (exact fit); any exactly repeating pattern of 1..4
+    amplitudes is ``periodic`` with a period n dividing the pattern length (n is the
+    smallest repeat, e.g. a pattern [a, a] has n = 1)."""
+    n = np.arange(60)
+    c = lc.classify(_sequence(a0 * lam**n), fell=False)
+    assert c.outcome == "decays"
+    assert c.decay_rate == pytest.approx(math.log(lam), rel=1e-6)
+    rep = np.resize(np.array(pattern), 60)
+    c = lc.classify(_sequence(rep), fell=False)
+    assert c.outcome == "periodic" and len(pattern) % c.period_n == 0
 
 
 def test_classify_a_slow_decay_is_not_periodic():
