@@ -214,6 +214,7 @@ def reproduce(
             "weave_frequency_at_v_w": crit["weave_frequency"],
         },
         "chen_dao": {"fig2": f2, "fig3": f3, "figs4_5": lc, "fig7": f7},
+        "limit_cycles": lc["limit_cycles"],
         "moore_hubbard": mhr,
         "sweep": sw,
     }
