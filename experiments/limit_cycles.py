@@ -123,9 +123,11 @@ def section_points(t, phi, phidot, delta, deltadot, v) -> tuple[np.ndarray, np.n
 class Periodicity:
     """Outcome of one coasting run (angles deg, rates deg/s, speed m/s, energy J).
 
-    ``verdict`` is one of ``fell``, ``periodic`` (closes after ``returns_per_period``
-    returns to the section within ``closure_tol``), ``not closed`` (bounded but no period
-    found); ``closure`` = max |x_{n+p} - x_n| over the last half of the returns;
+    ``verdict`` is one of ``fell`` (a physical stop), ``numerical failure`` (the run
+    ended for a numerical reason, not a fall), ``periodic`` (closes after
+    ``returns_per_period`` returns to the section within ``closure_tol``), ``not closed``
+    (bounded but no period found); ``stop_cause`` is the run's stop cause
+    (``sim.integrate.STOP_CAUSES``) or None; ``closure`` = max |x_{n+p} - x_n| over the last half of the returns;
     ``contraction`` = factor by which d_n shrinks per period (NaN when not measurable);
     ``energy_drift`` = (max - min) / |mean| of the total energy.
     """
@@ -148,6 +150,7 @@ class Periodicity:
     turn_radius: float | None
     energy: float
     energy_drift: float
+    stop_cause: str | None = None
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -180,8 +183,12 @@ def periodicity(traj, label: str = "", closure_tol: float = CLOSURE_TOL) -> Peri
     n = len(tc)
     common["n_returns"] = n
     no_period = dict(returns_per_period=None, period=None, closure=None, contraction=None)
+    stop = getattr(traj, "stop", None)
     if traj.fell_at is not None or traj.stop_reason is not None:
-        return Periodicity(verdict="fell", **no_period, **common)
+        numerical = stop is not None and not stop.physical
+        verdict = "numerical failure" if numerical else "fell"
+        cause = stop.cause if stop is not None else None
+        return Periodicity(verdict=verdict, **no_period, **common, stop_cause=cause)
     best = None
     tail0 = n // 2
     for p in range(1, 5):
@@ -243,7 +250,11 @@ def plot_phase_portraits(trajs, labels, path, title: str):
             # run until |roll| first exceeds 45 deg
             big = np.nonzero(np.abs(tr.signal("phi")) > math.radians(45.0))[0]
             n = int(big[0]) + 1 if big.size else n
-            fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
+            stop = getattr(tr, "stop", None)
+            if stop is not None and not stop.physical:
+                fell = f" (numerical failure, {stop.cause}, at {stop.time:.1f} s)"
+            else:
+                fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
         kw = dict(lw=0.6, label=lab + fell)
         a1.plot(np.degrees(tr.signal("phi")[:n]), np.degrees(tr.signal("phidot")[:n]), **kw)
         a2.plot(np.degrees(tr.signal("delta")[:n]), np.degrees(tr.signal("deltadot")[:n]), **kw)
