@@ -127,7 +127,8 @@ class Periodicity:
     ended for a numerical reason, not a fall), ``periodic`` (closes after
     ``returns_per_period`` returns to the section within ``closure_tol``), ``not closed``
     (bounded but no period found); ``stop_cause`` is the run's stop cause
-    (``sim.integrate.STOP_CAUSES``) or None; ``closure`` = max |x_{n+p} - x_n| over the last half of the returns;
+    (``sim.integrate.STOP_CAUSES``) or None; ``closure`` = max |x_{n+p} - x_n| over the
+    last half of the returns;
     ``contraction`` = factor by which d_n shrinks per period (NaN when not measurable);
     ``energy_drift`` = (max - min) / |mean| of the total energy.
     """
