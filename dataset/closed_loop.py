@@ -174,6 +174,8 @@ def simulate_run(
         integrator_options,
     )  # fmt: skip
     n = loop.n_rec
+    while n > 0 and not math.isfinite(loop.u[n - 1]):  # the sample where the controller failed
+        n -= 1
     if n < 2:
         raise ValueError(
             f"the run at {speed:g} m/s ended after {n} sensor sample(s): {traj.stop_reason}"

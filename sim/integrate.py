@@ -62,8 +62,9 @@ DEFAULT_FALL_LIMIT = math.radians(60.0)
 #: |steer| [rad] beyond which a run stops (``steer_limit``): the front wheel is across
 #: the frame, no longer a bicycle being ridden.
 STEER_LIMIT = math.pi / 2
-#: RK4's stability limit on the negative real axis, |lambda h| <= 2.785 (the real root of
-#: 1 + z + z^2/2 + z^3/6 + z^4/24 = -1; Hairer & Wanner, Solving ODEs II, Fig. IV.2.1).
+#: RK4's stability limit on the negative real axis, |lambda h| <= 2.785 (the negative real
+#: root of R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 = 1; Hairer & Wanner, Solving ODEs II,
+#: Fig. IV.2.1).
 #: The imaginary-axis limit is 2.828, so 2.78 bounds every eigenvalue direction of the
 #: bicycle's lightly damped modes.
 RK4_STABILITY = 2.78
