@@ -140,8 +140,13 @@ class Stop:
         object.__setattr__(self, "time", float(self.time))
 
     def as_dict(self) -> dict[str, Any]:
-        """The stop as a JSON-serializable dict (``cause``, ``time`` [s], ``message``,
-        ``physical``)."""
+        """The stop as a JSON-serializable dict.
+
+        Returns
+        -------
+        dict
+            ``cause``, ``time`` [s], ``message``, ``physical``.
+        """
         return {
             "cause": self.cause,
             "time": self.time,
