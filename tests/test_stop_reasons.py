@@ -14,6 +14,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import bikeid.sim.integrate as integrate
 from bikeid.controllers.pid import PID
@@ -63,6 +65,21 @@ def test_stop_record_validates_and_round_trips():
         Stop("tipped", 1.0, "x")
     with pytest.raises(ValueError, match="physical=True"):
         Stop("roll_limit", 1.0, "x", physical=False)
+
+
+@given(
+    cause=st.sampled_from(sorted(STOP_CAUSES)),
+    t=st.floats(0.0, 1e6, allow_nan=False),
+    msg=st.text(max_size=40),
+)
+def test_stop_round_trips_through_json(cause, t, msg):
+    """What a run stores (meta["stop"], JSON) rebuilds the same stop, with ``physical`` taken
+    from the cause table whatever the caller passed."""
+    import json
+
+    s = Stop(cause, t, msg)
+    back = Stop.from_dict(json.loads(json.dumps(s.as_dict())))
+    assert back == s and back.physical is STOP_CAUSES[cause].physical
 
 
 def test_rk4_stability_limit_is_the_real_axis_root():
