@@ -40,6 +40,7 @@ runs (``ident.signals.check_complete``).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -250,10 +251,16 @@ def _integrate(
     for key in ("controller", "dt", "inputs", "measure", "effects", "mode"):
         if key in options:
             raise ValueError(f"integrator option {key!r} is set by simulate_run; do not pass it")
-    return simulate(
-        bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
-        effects=list(effects) or None, **options,
-    )  # fmt: skip
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        traj = simulate(
+            bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
+            effects=list(effects) or None, **options,
+        )  # fmt: skip
+    for w in caught:  # the stop's own warning is recorded in meta["stop"]; pass on the rest
+        if traj.stop is None or str(w.message) != traj.stop.message:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return traj
 
 
 def _trajectory_extras(traj, t: np.ndarray) -> dict[str, np.ndarray]:
