@@ -305,7 +305,7 @@ def _check_settings(where: Path, found: Any, spec: SweepSpec) -> None:
 def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None]):
     """Runs already done: name -> source file, after validation."""
     done: dict[str, Path] = {}
-    for tmp in parts.glob(".*.tmp"):  # left by a killed atomic write (we hold the lock)
+    for tmp in parts.glob(".*.h5.*.tmp"):  # left by a killed atomic write (we hold the lock)
         tmp.unlink(missing_ok=True)
     for tmp in out.parent.glob(f".{out.name}.*.tmp"):
         tmp.unlink(missing_ok=True)
@@ -319,7 +319,7 @@ def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None
                 extra.append(name)
     for part in sorted(parts.glob("*.h5")):
         name = part.stem
-        if name in done:
+        if name in done or name not in wanted:  # not a part of this grid: leave it alone
             continue
         try:
             run = read_run(part, name)

@@ -255,10 +255,12 @@ def test_sweep_deletes_only_its_own_files(tmp_path):
     parts = parts_dir(out)
     parts.mkdir()
     (parts / "notes.txt").write_text("mine")
+    (parts / "other.h5").write_bytes(b"not a run of this sweep")
     spec = SweepSpec("pid", speeds=(5.0,), seeds=(0,), duration=1.0)
     run_sweep(spec, out, progress=False)
-    assert sorted(p.name for p in parts.iterdir()) == ["notes.txt"]
+    assert sorted(p.name for p in parts.iterdir()) == ["notes.txt", "other.h5"]
     (parts / "notes.txt").unlink()
+    (parts / "other.h5").unlink()
     run_sweep(SweepSpec("pid", speeds=(5.0, 6.0), seeds=(0,), duration=1.0), out,
               progress=False)  # fmt: skip
     assert not parts.exists()  # empty after the sweep: removed
