@@ -29,13 +29,18 @@ faster controller can be asked for explicitly (e.g. to study the loop at 1 kHz);
 record both periods and the estimators refuse them (``ident.signals.check_sampling``).
 
 The speed is held by the plant's ideal rear drive (``mode="held"``, the default) or
-coasts (``mode="coast"``).  A fall (|roll| above the plant's limit) ends the run early;
-the run is kept, truncated at the fall, with ``meta["fell_at"]`` [s] (None if upright).
+coasts (``mode="coast"``).  A run that ends early (``sim.integrate.STOP_CAUSES``: a fall,
+|steer| over 90 deg, or a numerical failure such as a step too coarse for the dynamics)
+is kept, truncated before the stop, with ``meta["stop"]`` = ``{cause, time, message,
+physical}`` (None if the run is complete) and ``meta["fell_at"]`` [s] set for physical
+stops only (None if upright or if the run failed numerically).  Estimators refuse such
+runs (``ident.signals.check_complete``).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -223,8 +228,12 @@ def simulate_run(
         integrator_options,
     )  # fmt: skip
     n = loop.n_rec
+    while n > 0 and not math.isfinite(loop.u[n - 1]):  # the sample where the controller failed
+        n -= 1
     if n < 2:
-        raise ValueError(f"the run ended after {n} sensor sample(s) (fell at {traj.fell_at} s)")
+        raise ValueError(
+            f"the run at {speed:g} m/s ended after {n} sensor sample(s): {traj.stop_reason}"
+        )
     t = loop.t[:n].copy()  # the instants the controller was called at
     signals = {name: loop.y_meas[:n, i].copy() for i, name in enumerate(MEASURED)}
     truth = {name: loop.y_true[:n, i].copy() for i, name in enumerate(MEASURED)}
@@ -239,7 +248,7 @@ def simulate_run(
         )
     ref = controller.reference
     reference_arr = np.array([float(ref(tk)) for tk in t])
-    fell_at = None if traj.fell_at is None else float(traj.fell_at)
+    fell_at = None if traj.fell_at is None else float(traj.fell_at)  # physical stops only
     meta = {
         "source": "simulated",
         "bikeid_version": package_version(),
@@ -247,6 +256,7 @@ def simulate_run(
         "duration": duration,
         "seed": int(seed),
         "fell_at": fell_at,
+        "stop": None if traj.stop is None else traj.stop.as_dict(),
         "bicycle": {"name": getattr(p, "name", "custom"), "parameters": p.as_dict()},
         "controller": controller.describe(),
         "reference": _describe(ref),
@@ -294,10 +304,16 @@ def _integrate(
     for key in ("controller", "dt", "inputs", "measure", "effects", "mode"):
         if key in options:
             raise ValueError(f"integrator option {key!r} is set by simulate_run; do not pass it")
-    return simulate(
-        bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
-        effects=list(effects) or None, **options,
-    )  # fmt: skip
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        traj = simulate(
+            bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
+            effects=list(effects) or None, **options,
+        )  # fmt: skip
+    for w in caught:  # the stop's own warning is recorded in meta["stop"]; pass on the rest
+        if traj.stop is None or str(w.message) != traj.stop.message:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return traj
 
 
 def _trajectory_extras(traj, t: np.ndarray) -> dict[str, np.ndarray]:

@@ -15,7 +15,7 @@ import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED
 
-__all__ = ["Run"]
+__all__ = ["Run", "run_stop"]
 
 REQUIRED = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
 
@@ -47,7 +47,8 @@ class Run:
     meta : dict
         JSON-serializable metadata: bicycle parameters, controller and gains,
         effects, noise, seed, speed, source ("simulated" or "measured"),
-        ``fell_at`` [s] if the bicycle fell, package version, ...
+        ``fell_at`` [s] if the bicycle fell, ``stop`` (why a simulated run ended
+        early, see :func:`run_stop`), package version, ...
 
     Raises
     ------
@@ -208,3 +209,33 @@ class Run:
             reference=None if self.reference is None else self.reference[sel],
             meta=dict(self.meta),
         )
+
+
+def run_stop(run: Run) -> dict[str, Any] | None:
+    """Why a run ended early, from its metadata, or None if it is complete.
+
+    Parameters
+    ----------
+    run : Run
+        Any run.  Simulated runs record ``meta["stop"]`` (``dataset.closed_loop``);
+        runs written before that field existed record only ``meta["fell_at"]``, read
+        here as a ``roll_limit`` stop.
+
+    Returns
+    -------
+    dict or None
+        ``{"cause", "time" [s], "message", "physical"}`` (``sim.integrate.STOP_CAUSES``),
+        or None for a complete run (and for measured data).
+    """
+    stop = run.meta.get("stop")
+    if stop:
+        return dict(stop)
+    fell = run.meta.get("fell_at")
+    if fell is not None:
+        return {
+            "cause": "roll_limit",
+            "time": float(fell),
+            "message": f"fell at t={float(fell):.3f} s",
+            "physical": True,
+        }
+    return None

@@ -370,13 +370,37 @@ def identify_controller(
     from bikeid.sim.linear import critical_speeds
 
     log = log or (lambda msg: None)
-    ok = [r for r in runs if r.meta.get("fell_at") is None]
-    fell = {round(r.speed, 6): r.meta["fell_at"] for r in runs if r.meta.get("fell_at")}
+    from bikeid.dataset.run import run_stop
+
+    stops = [run_stop(r) for r in runs]
+    ok = [r for r, st in zip(runs, stops, strict=True) if st is None]
+    fell = {
+        round(r.speed, 6): float(st["time"])
+        for r, st in zip(runs, stops, strict=True)
+        if st is not None and st["physical"]
+    }
+    failed = {
+        round(r.speed, 6): st
+        for r, st in zip(runs, stops, strict=True)
+        if st is not None and not st["physical"]
+    }
+    if len(ok) < len(runs):
+        log(
+            f"skipping {len(runs) - len(ok)} of {len(runs)} run(s) that ended early: "
+            + "; ".join(
+                f"{round(r.speed, 6):g} m/s seed {r.meta.get('seed', '?')}: {st['cause']} at "
+                f"{st['time']:.2f} s"
+                for r, st in zip(runs, stops, strict=True)
+                if st is not None
+            )
+        )
     speeds = [round(r.speed, 6) for r in ok]
     truth = true_modes(p, speeds) if speeds else {}
     true_cs = critical_speeds(p)
     true_zero = float(np.max(steer_zeros_true(p).real))
     out: dict[str, Any] = {"fell": fell, "methods": {}}
+    if failed:  # only when present, so earlier results keep their exact form
+        out["failed"] = failed
     with threadpool_limits(1):
         for method in methods:
             t0 = time.perf_counter()
@@ -579,6 +603,9 @@ def _lines(result: dict[str, Any]) -> list[tuple[str, ...]]:
     for c, res in result["controllers"].items():
         for v, t in res["fell"].items():
             rows.append((c, "-", f"{v:g}", "run", f"fell at {t:.2f} s", "", "", "FAIL"))
+        for v, st in res.get("failed", {}).items():
+            rows.append((c, "-", f"{v:g}", "run", f"numerical failure ({st['cause']}) at "
+                         f"{st['time']:.2f} s", "", "", "FAIL"))  # fmt: skip
         for m, mres in res["methods"].items():
             if "error" in mres:
                 rows.append((c, m, "all", "-", mres["error"], "", "", "FAIL"))

@@ -129,7 +129,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_stabilization(args: argparse.Namespace) -> int:
-    from .sweep import CONTROLLERS, stabilization_markdown, stabilization_table
+    from .sweep import (
+        CONTROLLERS,
+        stabilization_counts,
+        stabilization_markdown,
+        stabilization_table,
+    )
 
     speeds = parse_range(args.speeds, "--speeds", minimum=1e-6)
     controllers = [c.strip() for c in args.controllers.split(",") if c.strip()]
@@ -148,8 +153,16 @@ def cmd_stabilization(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         **options,
     )
-    table = stabilization_markdown(rows)
+    c = stabilization_counts(rows)
+    table = stabilization_markdown(rows) + (
+        f"\n{c['upright']} upright, {c['fell']} fell, {c['failed']} failed numerically (not a "
+        f"fall: no verdict on the controller), {c['error']} design failed\n"
+    )
     print(table, end="")
+    for r in rows:
+        if r.get("stop") and not r["stop"]["physical"]:
+            print(f"{r['controller']} at {r['speed']:g} m/s: {r['stop']['message']}",
+                  file=sys.stderr)  # fmt: skip
     out = Path(args.out)
     if out.suffix in (".json", ".md"):
         out = out.with_suffix("")

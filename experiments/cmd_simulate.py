@@ -2,8 +2,9 @@
 
 Initial angles and rates are given in degrees (and deg/s); the file holds SI
 units (rad, rad/s, m/s, N m) in the columns of :meth:`sim.integrate.Trajectory.columns`.
-A fall ends the run early; it is reported in one line and the run up to the fall
-is still written.
+A run that ends early (a fall, or a numerical failure such as a step too coarse for
+the dynamics: ``sim.integrate.STOP_CAUSES``) is reported in one line naming the cause;
+the samples before the stop are written, nothing after it.
 """
 
 from __future__ import annotations
@@ -106,6 +107,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "control": control,
         "fell_at": tr.fell_at,
         "stop_reason": tr.stop_reason,
+        "stop": None if tr.stop is None else tr.stop.as_dict(),
     }
     if out.suffix.lower() == ".csv":
         names = list(cols)
@@ -115,10 +117,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         atomic_write_text(out, "\n".join(lines) + "\n")
     else:
         atomic_write_text(out, dump_json({"meta": meta, "signals": cols}) + "\n")
-    if tr.fell_at is not None:
-        print(f"bikeid: {tr.stop_reason}; wrote {len(tr.t)} samples to {out}")
-    elif tr.stop_reason:
-        print(f"bikeid: stopped early: {tr.stop_reason}; wrote {len(tr.t)} samples to {out}")
+    if tr.stop is not None and tr.stop.physical:
+        print(f"bikeid: {tr.stop.message} [{tr.stop.cause}]; wrote {len(tr.t)} samples to {out}")
+    elif tr.stop is not None:
+        print(
+            f"bikeid: stopped early, not a fall [{tr.stop.cause}]: {tr.stop.message}; wrote "
+            f"{len(tr.t)} samples (to t={tr.t[-1]:.3f} s) to {out}"
+        )
     else:
         print(f"wrote {len(tr.t)} samples ({tr.t[-1]:.3f} s) to {out}")
     return 0

@@ -393,8 +393,9 @@ class Periodicity:
 def stop_info(traj) -> tuple[float | None, str | None]:
     """Fall time [s] and cause of a run that ended early, else (None, None).
 
-    The one place that reads the integrator's stop fields (``Trajectory.fell_at``,
-    ``Trajectory.stop_reason``); the cause is the integrator's stop-reason text.
+    The one place that reads the integrator's stop record (``Trajectory.stop``: the cause
+    is its code in ``sim.integrate.STOP_CAUSES``, e.g. ``roll_limit``, ``steer_limit``).
+    A numerical stop (step too coarse, non-finite state) is refused, not called a fall.
 
     Parameters
     ----------
@@ -408,6 +409,13 @@ def stop_info(traj) -> tuple[float | None, str | None]:
     cause : str or None
         Why (the integrator's stop reason).
     """
+    stop = getattr(traj, "stop", None)
+    if stop is not None:
+        if not stop.physical:  # a numerical failure is not a fall: never classify it
+            raise ValueError(
+                f"coasting run stopped for a numerical reason, not a fall: {stop.message}"
+            )
+        return float(stop.time), stop.cause
     if traj.fell_at is None and traj.stop_reason is None:
         return None, None
     t = traj.fell_at if traj.fell_at is not None else float(traj.t[-1])
@@ -577,7 +585,11 @@ def plot_phase_portraits(trajs, labels, path, title: str):
             # run until |roll| first exceeds 45 deg
             big = np.nonzero(np.abs(tr.signal("phi")) > math.radians(45.0))[0]
             n = int(big[0]) + 1 if big.size else n
-            fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
+            stop = getattr(tr, "stop", None)
+            if stop is not None and not stop.physical:
+                fell = f" (numerical failure, {stop.cause}, at {stop.time:.1f} s)"
+            else:
+                fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
         kw = dict(lw=0.6, label=lab + fell)
         a1.plot(np.degrees(tr.signal("phi")[:n]), np.degrees(tr.signal("phidot")[:n]), **kw)
         a2.plot(np.degrees(tr.signal("delta")[:n]), np.degrees(tr.signal("deltadot")[:n]), **kw)

@@ -8,12 +8,17 @@ A sweep is one controller run at every (speed, seed) of a grid.  Guarantees:
   or Dask cluster computed them (the file is consolidated in grid order).
 - **Resumable.**  Every finished run is written atomically as its own file
   ``FILE.h5.parts/<run>.h5`` (HDF5, see :mod:`dataset.store`); when all are done they
-  are copied into ``FILE.h5`` by one atomic replace and the parts folder is removed.
+  are copied into ``FILE.h5`` by one atomic replace, and the part files of this sweep and
+  its lock are deleted (the folder too if nothing else is left in it: files a sweep did
+  not write are never touched).
   Killed at any moment (even SIGKILL) and started again with the same arguments, a sweep
   reuses every valid part and every run already in ``FILE.h5`` and computes only the
   missing ones; ``FILE.h5`` is at all times either absent, the previous complete file,
   or the new complete file.  Runs already in ``FILE.h5`` that the new grid does not
-  list are kept.  A lock file (``flock``) refuses a second sweep on the same output.
+  list are kept.  A lock file (``flock``) refuses a second sweep on the same output; it is
+  removed when the sweep ends or is refused.
+- **Honest.**  A run that ended early keeps its stop (``meta["stop"]``, see
+  :mod:`dataset.closed_loop`); the report counts falls and numerical failures apart.
 - **Parallel.**  ``workers`` local processes (:class:`concurrent.futures.ProcessPoolExecutor`),
   or a Dask cluster (``dask="local"`` starts a ``LocalCluster`` of ``workers`` processes;
   otherwise a scheduler address).  Results travel back to this process, which alone
@@ -26,7 +31,6 @@ import contextlib
 import fcntl
 import math
 import os
-import shutil
 import sys
 import time
 import zlib
@@ -39,11 +43,12 @@ from typing import Any
 import numpy as np
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS, canonical_name
-from bikeid.dataset.run import Run
+from bikeid.dataset.run import Run, run_stop
 from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
 
 __all__ = [
     "CONTROLLERS",
+    "stabilization_counts",
     "stabilization_markdown",
     "stabilization_table",
     "SweepReport",
@@ -318,9 +323,13 @@ class SweepReport:
     reused : int
         Runs taken from the file or its parts folder.
     fell : dict of str to float
-        Runs in which the bicycle fell, name -> time of the fall [s].
+        Runs in which the bicycle fell (a physical stop), name -> time of the fall [s].
     elapsed : float
         Wall time [s].
+    failed : dict of str to dict
+        Runs that ended early for a numerical reason (not a fall), name -> ``meta["stop"]``.
+    causes : dict of str to str
+        Stop cause of each fallen run (``sim.integrate.STOP_CAUSES``), by name.
     """
 
     out: Path
@@ -329,6 +338,8 @@ class SweepReport:
     reused: int
     fell: dict[str, float]
     elapsed: float
+    failed: dict[str, dict[str, Any]] = field(default_factory=dict)
+    causes: dict[str, str] = field(default_factory=dict)
 
     def summary(self) -> str:
         """Human-readable summary of the sweep.
@@ -344,9 +355,21 @@ class SweepReport:
         ]
         if self.fell:
             lines.append(f"{len(self.fell)} run(s) fell (kept, flagged in meta['fell_at']):")
-            lines += [f"  {name}: fell at {t:.2f} s" for name, t in self.fell.items()]
+            lines += [
+                f"  {name}: fell at {t:.2f} s ({self.causes.get(name, 'roll_limit')})"
+                for name, t in self.fell.items()
+            ]
         else:
             lines.append("no run fell")
+        if self.failed:
+            lines.append(
+                f"{len(self.failed)} run(s) ended early for a numerical reason, not a fall "
+                "(kept truncated, flagged in meta['stop']; estimators refuse them):"
+            )
+            lines += [
+                f"  {name}: {st['cause']} at {st['time']:.2f} s: {st['message']}"
+                for name, st in self.failed.items()
+            ]
         return "\n".join(lines)
 
 
@@ -356,17 +379,33 @@ def parts_dir(out: Path) -> Path:
 
 @contextlib.contextmanager
 def _lock(parts: Path) -> Iterator[None]:
+    """Hold ``parts/.lock`` for the sweep; on exit (done, refused or failed) delete the
+    lock while still holding it, and the folder if it is then empty."""
     parts.mkdir(parents=True, exist_ok=True)
-    fh = open(parts / ".lock", "w")  # noqa: SIM115 - held for the whole sweep
+    lock = parts / ".lock"
+    busy = ValueError(
+        f"another sweep is writing {parts.name[: -len('.parts')]}; wait for it or use "
+        "another --out"
+    )
+    fh = open(lock, "w")  # noqa: SIM115 - held for the whole sweep
     try:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise ValueError(
-                f"another sweep is writing {parts.name[: -len('.parts')]}; wait for it or use "
-                "another --out"
-            ) from None
-        yield
+            raise busy from None
+        try:
+            # a sweep that just finished may have deleted the file we opened: then the
+            # lock we hold is on an orphan and a third sweep could lock a new file
+            if os.stat(lock).st_ino != os.fstat(fh.fileno()).st_ino:
+                raise busy
+        except FileNotFoundError:
+            raise busy from None
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # not empty: someone else's files
+                parts.rmdir()
     finally:
         fh.close()
 
@@ -386,7 +425,7 @@ def _check_settings(where: Path, found: Any, spec: SweepSpec) -> None:
 def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None]):
     """Runs already done: name -> source file, after validation."""
     done: dict[str, Path] = {}
-    for tmp in parts.glob(".*.tmp"):  # left by a killed atomic write (we hold the lock)
+    for tmp in parts.glob(".*.h5.*.tmp"):  # left by a killed atomic write (we hold the lock)
         tmp.unlink(missing_ok=True)
     for tmp in out.parent.glob(f".{out.name}.*.tmp"):
         tmp.unlink(missing_ok=True)
@@ -400,7 +439,7 @@ def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None
                 extra.append(name)
     for part in sorted(parts.glob("*.h5")):
         name = part.stem
-        if name in done:
+        if name in done or name not in wanted:  # not a part of this grid: leave it alone
             continue
         try:
             run = read_run(part, name)
@@ -551,14 +590,26 @@ def run_sweep(
         names = [t.name for t in tasks] + extra
         if any(done[n] != out for n in names) or not out.exists():
             copy_runs(out, [(done[n], n) for n in names], attrs={"sweep": spec.settings()})
-    shutil.rmtree(parts, ignore_errors=True)
-    fell = {}
+        for n in names:  # only this sweep's parts, now in ``out``; other files stay
+            if done[n] != out:
+                done[n].unlink(missing_ok=True)
+    fell: dict[str, float] = {}
+    causes: dict[str, str] = {}
+    failed: dict[str, dict[str, Any]] = {}
     from bikeid.dataset.store import read_runs
 
     for name, run in zip(names, read_runs(out, names), strict=True):
-        if run.meta.get("fell_at") is not None:
-            fell[name] = float(run.meta["fell_at"])
-    return SweepReport(out, len(tasks), len(todo), reused, fell, time.perf_counter() - t0)
+        stop = run_stop(run)
+        if stop is None:
+            continue
+        if stop["physical"]:
+            fell[name] = float(stop["time"])
+            causes[name] = stop["cause"]
+        else:
+            failed[name] = stop
+    return SweepReport(
+        out, len(tasks), len(todo), reused, fell, time.perf_counter() - t0, failed, causes
+    )
 
 
 def default_workers() -> int:
@@ -572,13 +623,19 @@ def stabilization_task(spec: SweepSpec, task: Task) -> dict[str, Any]:
     try:
         run = simulate_task(spec, task)
     except ValueError as exc:  # e.g. pole placement at an uncontrollable speed
-        return {**row, "upright": False, "fell_at": None, "error": str(exc).splitlines()[0],
+        return {**row, "upright": False, "fell_at": None, "stop": None,
+                "error": str(exc).splitlines()[0], "rms_error_deg": None,
+                "peak_torque": None}  # fmt: skip
+    stop = run_stop(run)
+    if stop is not None and not stop["physical"]:  # numbers up to a blow-up mean nothing
+        return {**row, "upright": False, "fell_at": None, "stop": stop, "error": None,
                 "rms_error_deg": None, "peak_torque": None}  # fmt: skip
     err = run.reference - run.true("phi")
     return {
         **row,
-        "upright": run.meta["fell_at"] is None,
-        "fell_at": run.meta["fell_at"],
+        "upright": stop is None,
+        "fell_at": None if stop is None else stop["time"],
+        "stop": stop,
         "error": None,
         "rms_error_deg": math.degrees(float(np.sqrt(np.mean(err**2)))),
         "peak_torque": float(np.max(np.abs(run.true("T_delta")))),
@@ -646,6 +703,34 @@ def stabilization_table(
     return [rows[(spec.controller, t.name)] for spec, t in todo]
 
 
+def stabilization_counts(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """How many rows stayed ``upright``, ``fell`` (physical stop), ``failed`` numerically
+    (``meta["stop"]`` not physical: no verdict on the controller) or had a design ``error``.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of :func:`stabilization_table`.
+
+    Returns
+    -------
+    dict of str to int
+        Counts under ``upright``, ``fell``, ``failed`` and ``error``.
+    """
+    counts = {"upright": 0, "fell": 0, "failed": 0, "error": 0}
+    for r in rows:
+        stop = r.get("stop")
+        if r["error"]:
+            counts["error"] += 1
+        elif r["upright"]:
+            counts["upright"] += 1
+        elif stop is not None and not stop["physical"]:
+            counts["failed"] += 1
+        else:
+            counts["fell"] += 1
+    return counts
+
+
 def stabilization_markdown(rows: Sequence[dict[str, Any]]) -> str:
     """The table as markdown: one line per (controller, speed).
 
@@ -666,10 +751,15 @@ def stabilization_markdown(rows: Sequence[dict[str, Any]]) -> str:
         "|---|---:|---|---:|---:|",
     ]
     for r in rows:
+        stop = r.get("stop")
         if r["error"]:
             status = f"design failed: {r['error']}"
         elif r["upright"]:
             status = "yes"
+        elif stop is not None and not stop["physical"]:
+            status = f"numerical failure ({stop['cause']}) at {stop['time']:.2f} s"
+        elif stop is not None and stop["cause"] != "roll_limit":
+            status = f"fell ({stop['cause']}) at {r['fell_at']:.2f} s"
         else:
             status = f"fell at {r['fell_at']:.2f} s"
         rms = "" if r["rms_error_deg"] is None else f"{r['rms_error_deg']:.3f}"

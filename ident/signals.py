@@ -39,6 +39,12 @@ the sample instants: its period must be a whole multiple of the run's sample per
 1 ms controller logged at 100 Hz breaks it (the applied torque changes 10 times per
 logged value) and gave PEM an unstable weave (+0.066 +- 4.313j 1/s) for the benchmark's
 stable one (-0.775 +- 4.465j) at 5 m/s, without a warning; such runs are refused.
+
+Complete runs only (:func:`check_complete`, called by :func:`check_sampling`, so by every
+estimator above).  A simulated run that ended early (``meta["stop"]``: a fall, |steer|
+over 90 deg, or a numerical failure such as a step too coarse) is refused with its name
+and cause: its last samples run into the limit or the blow-up, far outside the linear
+model the estimators fit.
 """
 
 from __future__ import annotations
@@ -49,10 +55,11 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from bikeid.dataset.run import Run
+from bikeid.dataset.run import Run, run_stop
 
 __all__ = [
     "NO_MEAN_REMOVAL",
+    "check_complete",
     "check_sampling",
     "differentiate",
     "input_periods",
@@ -101,6 +108,46 @@ def input_periods(run: Run) -> dict[str, float]:
     return out
 
 
+def _run_label(run: Run, i: int) -> str:
+    name = run.meta.get("name") or run.meta.get("run")
+    if name:
+        return f"run {i} ({name})"
+    if "speed" in run.meta:
+        return f"run {i} ({run.meta['speed']:g} m/s, seed {run.meta.get('seed', '?')})"
+    return f"run {i}"
+
+
+def check_complete(runs: Run | Sequence[Run], estimator: str) -> None:
+    """Refuse runs that ended early (``meta["stop"]``, :func:`dataset.run.run_stop`).
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        The estimator's runs.
+    estimator : str
+        The estimator's name, for the message.
+
+    Raises
+    ------
+    ValueError
+        If a run records a stop (physical or numerical); the message names the run, the
+        cause, the time and the fix.  Measured runs and complete simulated runs pass.
+    """
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    for i, run in enumerate(runs):
+        stop = run_stop(run)
+        if stop is None:
+            continue
+        kind = "a fall" if stop.get("physical") else "a numerical failure, not a fall"
+        raise ValueError(
+            f"{estimator}: {_run_label(run, i)} ended early at t={float(stop['time']):.3f} s "
+            f"on {stop['cause']} ({kind}: {stop['message']}); its last samples are not "
+            f"the upright bicycle the estimator models.  Fix: leave the run out (or "
+            f"re-simulate it so it completes: a stabilizing controller, or a smaller step "
+            f"for a numerical cause)"
+        )
+
+
 def check_sampling(runs: Run | Sequence[Run], estimator: str) -> None:
     """Refuse runs whose logged steer torque is not what the plant held (module docstring).
 
@@ -117,9 +164,11 @@ def check_sampling(runs: Run | Sequence[Run], estimator: str) -> None:
         If a run's controller period or dither hold [s] (from :func:`input_periods`) is
         not a whole multiple (>= 1, to 1e-6 relative) of the run's sample period
         ``run.dt``.  The message names both periods and the fix.  Runs without that
-        metadata (measured data) pass.
+        metadata (measured data) pass.  Also if a run ended early
+        (:func:`check_complete`).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
+    check_complete(runs, estimator)
     for i, run in enumerate(runs):
         dt = run.dt
         for what, period in input_periods(run).items():
