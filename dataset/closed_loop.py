@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from bikeid.sim.conventions import MEASURED
+from bikeid.sim.errors import check_memory
 from bikeid.sim.parameters import BicycleParameters
 
 from .run import Run
@@ -163,6 +164,8 @@ def simulate_run(
     if reference is not None:
         controller.reference = reference
     controller.reset()
+    check_memory(duration / ctrl_dt + 1, 45, f"a {duration:g} s closed-loop run at "
+                 f"{1 / ctrl_dt:g} Hz", "shorten the duration")  # loop records + trajectory
     n_sensor = int(round(duration * sensors.rate)) + 1
     loop = SampledLoop(controller, sensors, seed, ctrl_dt, n_sensor, dither)
     traj = _integrate(

@@ -10,7 +10,15 @@ from pathlib import Path
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
-from .cliutil import atomic_write_text, dump_json, parse_range
+from .cliutil import (
+    MAX_WORKERS,
+    atomic_write_text,
+    dump_json,
+    duration_value,
+    integer,
+    number,
+    parse_range,
+)
 
 CONTROLLER_HELP = (  # "fuzzy, pid or pole (...)", from controllers.registry
     f"{', '.join(STUDY_CONTROLLERS[:-1])} or {STUDY_CONTROLLERS[-1]} "
@@ -29,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--controller", required=True, help=CONTROLLER_HELP)
     p.add_argument("--speeds", default="1:15:0.5", help="start:stop:step [m/s], stop included")
-    p.add_argument("--duration", type=float, default=50.0, help="run length [s]")
+    p.add_argument("--duration", type=duration_value, default=50.0, help="run length [s]")
     p.add_argument("--seeds", default="0:4", help="seeds: a:b (b included), a:b:step or a list")
     p.add_argument("--out", required=True, help="output HDF5 file (.h5)")
     _common(p)
@@ -43,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "FILE.md (upright?, RMS roll tracking error, peak steer torque).",
     )
     p.add_argument("--speeds", default="1:15:0.5", help="start:stop:step [m/s], stop included")
-    p.add_argument("--duration", type=float, default=50.0, help="run length [s]")
+    p.add_argument("--duration", type=duration_value, default=50.0, help="run length [s]")
     p.add_argument(
         "--controllers",
         default=",".join(STUDY_CONTROLLERS),
@@ -57,18 +65,27 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bicycle", default="benchmark", help="bicycle name (see `bikeid eig -h`)")
     p.add_argument(
-        "--dither", type=float, default=1.0, help="uniform dither amplitude [N m] (0 = none)"
+        "--dither",
+        type=number(0.0, 1e3, unit="N m"),
+        default=1.0,
+        help="uniform dither amplitude [N m] (0 = none)",
     )
     p.add_argument(
         "--chirp-deg",
+        type=number(0.0, 45.0, unit="deg"),
         default=None,
         help="roll chirp amplitude [deg] (0.05-0.5 Hz), 0 = no reference; default: sweep "
         "0.5/1.5/3 deg below 3 / 3-6 / above 6 m/s (the identification design), "
         "stabilization 3 deg",
     )
     p.add_argument("--sensors", choices=("default", "ideal"), default="default")
-    p.add_argument("--rate", type=float, default=100.0, help="sensor sample rate [Hz]")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes")
+    p.add_argument(
+        "--rate", type=number(0.0, 1e4, lo_open=True, unit="Hz"), default=100.0,
+        help="sensor sample rate [Hz]",
+    )  # fmt: skip
+    p.add_argument(
+        "--workers", type=integer(1, MAX_WORKERS), default=1, help="local worker processes"
+    )
     p.add_argument(
         "--dask", metavar="ADDRESS", help="run on a Dask cluster ('local' for a LocalCluster)"
     )
@@ -76,23 +93,15 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _options(args: argparse.Namespace) -> dict:
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise ValueError(f"--duration must be > 0 s, got {args.duration}")
-    if not (math.isfinite(args.rate) and args.rate > 0):
-        raise ValueError(f"--rate must be > 0 Hz, got {args.rate}")
-    if args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    from bikeid.sim.errors import check_memory
     from bikeid.sim.parameters import by_name
+
+    # before any file or folder is made: one run's records must fit in memory
+    check_memory(args.duration * args.rate + 1, 45, f"a {args.duration:g} s run at "
+                 f"{args.rate:g} Hz", "shorten --duration or lower --rate")  # fmt: skip
 
     by_name(args.bicycle)  # fail early on a bad name
     chirp = args.chirp_deg
-    if chirp is not None:
-        try:
-            chirp = float(chirp)
-        except ValueError:
-            raise ValueError(f"--chirp-deg {args.chirp_deg!r} is not a number") from None
-        if not (math.isfinite(chirp) and chirp >= 0):
-            raise ValueError(f"--chirp-deg must be >= 0 deg, got {args.chirp_deg}")
     return {
         "bicycle": args.bicycle,
         "dither": args.dither,

@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from .cliutil import atomic_write_text, dump_json, parse_range, to_jsonable
+from .cliutil import MAX_WORKERS, atomic_write_text, dump_json, integer, parse_range, to_jsonable
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 DECAYS_HELP = (
@@ -23,11 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--data", help=DATA_HELP)
     f.add_argument("--out", required=True, help="model JSON to write")
     f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
-    f.add_argument("--max-effects", type=int, default=3)
+    f.add_argument("--max-effects", type=integer(0, 100), default=3)
     f.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     f.add_argument(
         "--stability",
-        type=int,
+        type=integer(0, 100_000),
         default=0,
         metavar="N",
         help="also refit on N random 75 %% subsamples of the decays and report how often each "
@@ -41,6 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--weave-weight",
+        type=_weave_weight_arg,
         default="auto",
         metavar="W",
         help="weight of the measured weave eigenvalue of each speed (>= 3 decays) in every "
@@ -58,9 +59,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
     )
-    t.add_argument("--n", type=int, default=32, help="number of trials (default 32: 4 per effect)")
-    t.add_argument("--seed", type=int, default=1, help="grid seed (default 1)")
-    t.add_argument("--processes", type=int, default=2, help="worker processes (default 2)")
+    t.add_argument(
+        "--n",
+        type=integer(1, 100_000),
+        default=32,
+        help="number of trials (default 32: 4 per effect)",
+    )
+    t.add_argument("--seed", type=integer(0, 2**32 - 1), default=1, help="grid seed (default 1)")
+    t.add_argument(
+        "--processes", type=integer(1, MAX_WORKERS), default=2, help="worker processes (default 2)"
+    )
     t.add_argument("--effects", help="comma list of injected effects (default: all)")
     t.add_argument("--linear", action="store_true", help="linear nominal model (for comparison)")
     t.add_argument("--json", action="store_true", help="print all trials and the summary as JSON")
@@ -100,6 +108,13 @@ def parse_weave_weight(text: str) -> float | str:
     return w
 
 
+def _weave_weight_arg(text: str) -> float | str:
+    try:
+        return parse_weave_weight(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--weave-weight ")) from None
+
+
 def _speeds(text: str | None):
     return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
 
@@ -108,11 +123,7 @@ def cmd_fit(args) -> int:
     from bikeid.dataset.decays import load_decays
     from bikeid.experiments.measured_study import fit_model
 
-    if args.max_effects < 0:
-        raise ValueError("--max-effects must be >= 0")
-    if args.stability < 0:
-        raise ValueError("--stability must be >= 0 (number of subsamples)")
-    ww = parse_weave_weight(args.weave_weight)
+    ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
     out["decays"] = args.decays

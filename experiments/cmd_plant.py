@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .cliutil import atomic_write_text, dump_json, parse_range
+from .cliutil import atomic_write_text, dump_json, parse_range, speed_value
 
 BICYCLE_HELP = (
     "bicycle: 'benchmark' (Meijaard 2007), 'steer-by-wire', a bicycleparameters name "
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("linearize", help="M, C1, K0, K2, A, B and eigenvalues at one speed")
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
-    p.add_argument("--speed", type=float, required=True, help="forward speed [m/s]")
+    p.add_argument("--speed", type=speed_value, required=True, help="forward speed [m/s], 0-100")
     p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=cmd_linearize)
 
@@ -70,8 +70,6 @@ def cmd_linearize(args: argparse.Namespace) -> int:
 
     from bikeid.sim.linear import canonical_matrices, state_matrices
 
-    if not np.isfinite(args.speed) or args.speed < 0:
-        raise ValueError(f"--speed {args.speed}: need a finite speed >= 0 m/s")
     p = _bicycle(args.bicycle)
     cm = canonical_matrices(p)
     A, B = state_matrices(cm, args.speed)
