@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 from .cliutil import MAX_WORKERS, atomic_write_text, dump_json, integer, parse_range, to_jsonable
@@ -143,6 +144,12 @@ def cmd_evaluate(args) -> int:
     from bikeid.experiments.measured_study import evaluate_json, model_from_json
 
     model, obj = model_from_json(args.model)
+    if obj.get("plant_defaulted"):
+        print(
+            f"bikeid measured evaluate: {args.model} names no plant; using "
+            f"{obj['plant']!r}, the default of 'measured fit'",
+            file=sys.stderr,
+        )
     sp = _speeds(args.speeds)
     ws = load_decays(
         args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
