@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from bikeid.sim.conventions import MEASURED
-from bikeid.sim.errors import check_memory
+from bikeid.sim.errors import UntrustworthyResult, check_memory
 from bikeid.sim.parameters import BicycleParameters
 
 from .run import Run
@@ -174,7 +174,10 @@ def simulate_run(
     )  # fmt: skip
     n = loop.n_rec
     if n < 2:
-        raise ValueError(f"the run ended after {n} sensor sample(s) (fell at {traj.fell_at} s)")
+        raise UntrustworthyResult(
+            f"the run ended after {n} sensor sample(s) (fell at {traj.fell_at} s): no data to "
+            "record; start closer to upright or use a controller that stabilizes this speed"
+        )
     t = loop.t[:n].copy()  # the instants the controller was called at
     signals = {name: loop.y_meas[:n, i].copy() for i, name in enumerate(MEASURED)}
     truth = {name: loop.y_true[:n, i].copy() for i, name in enumerate(MEASURED)}
