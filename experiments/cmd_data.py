@@ -126,6 +126,17 @@ def _seeds(text: str) -> tuple[int, ...]:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import SweepSpec, run_sweep
 
+    out = Path(args.out)
+    if out.suffix not in (".h5", ".hdf5"):
+        raise ValueError(f"--out {args.out!r}: a sweep's output must end in .h5 or .hdf5")
+    if out.exists():  # checked before the sweep makes its OUT.parts folder
+        import h5py
+
+        if not out.is_file() or not h5py.is_hdf5(out):
+            raise ValueError(
+                f"--out {args.out!r} exists and is not an HDF5 file; a sweep resumes only its "
+                "own output: give another name, or delete or rename the file"
+            )
     speeds = parse_range(args.speeds, "--speeds", minimum=1e-6)
     spec = SweepSpec(
         args.controller, tuple(speeds), _seeds(args.seeds), args.duration, **_options(args)
