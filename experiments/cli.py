@@ -45,8 +45,15 @@ Errors are one line on stderr, "bikeid COMMAND: error: MESSAGE"; --debug (anywhe
 the command line) prints the traceback as well."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line usage error: ``bikeid sweep: error: ... (see --help)``."""
+
+    def error(self, message: str):  # noqa: D102 - argparse's hook
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="bikeid",
         description="Whipple bicycle dynamics and closed-loop identification testbed.",
         epilog=EXIT_CODES,

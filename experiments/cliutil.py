@@ -28,6 +28,7 @@ __all__ = [
     "integer",
     "number",
     "parse_range",
+    "range_text",
     "speed_value",
     "to_jsonable",
 ]
@@ -187,6 +188,37 @@ def parse_range(
     if maximum is not None and values.max() > maximum:
         raise InputError(f"{name} {text!r}: values must be <= {maximum:g}")
     return np.round(values, 12)
+
+
+def range_text(
+    name: str, minimum: float | None = None, maximum: float | None = MAX_SPEED
+) -> Callable[[str], str]:
+    """An argparse ``type=`` that checks a range with :func:`parse_range` and keeps the text.
+
+    Parameters
+    ----------
+    name : str
+        The option (e.g. ``"--speeds"``).
+    minimum, maximum : float, optional
+        Bounds passed to :func:`parse_range`.
+
+    Returns
+    -------
+    callable
+        ``check(text) -> text`` raising :class:`argparse.ArgumentTypeError` with
+        :func:`parse_range`'s message (a usage error, exit status 2); the handler parses
+        the returned text again.
+    """
+
+    def check(text: str) -> str:
+        try:
+            parse_range(text, name, minimum, maximum)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{name} ")) from None
+        return text
+
+    check.__name__ = "range"
+    return check
 
 
 def to_jsonable(obj: Any) -> Any:

@@ -18,12 +18,17 @@ from .cliutil import (
     integer,
     number,
     parse_range,
+    range_text,
 )
 
 CONTROLLER_HELP = (  # "fuzzy, pid or pole (...)", from controllers.registry
     f"{', '.join(STUDY_CONTROLLERS[:-1])} or {STUDY_CONTROLLERS[-1]} "
     "(pole placement with integral action)"
 )
+
+
+SPEEDS = range_text("--speeds", 1e-6)
+SPEEDS_HELP = "start:stop:step [m/s], stop included (speeds in (0, 100] m/s)"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,9 +41,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Results are bit-identical for any --workers.",
     )
     p.add_argument("--controller", required=True, help=CONTROLLER_HELP)
-    p.add_argument("--speeds", default="1:15:0.5", help="start:stop:step [m/s], stop included")
+    p.add_argument("--speeds", type=SPEEDS, default="1:15:0.5", help=SPEEDS_HELP)
     p.add_argument("--duration", type=duration_value, default=50.0, help="run length [s]")
-    p.add_argument("--seeds", default="0:4", help="seeds: a:b (b included), a:b:step or a list")
+    p.add_argument(
+        "--seeds",
+        type=_seeds_arg,
+        default="0:4",
+        help="seeds: a:b (b included), a:b:step or a list",
+    )
     p.add_argument("--out", required=True, help="output HDF5 file (.h5)")
     _common(p)
     p.set_defaults(func=cmd_sweep)
@@ -50,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "dither on the nonlinear model; print a markdown table and write FILE.json and "
         "FILE.md (upright?, RMS roll tracking error, peak steer torque).",
     )
-    p.add_argument("--speeds", default="1:15:0.5", help="start:stop:step [m/s], stop included")
+    p.add_argument("--speeds", type=SPEEDS, default="1:15:0.5", help=SPEEDS_HELP)
     p.add_argument("--duration", type=duration_value, default=50.0, help="run length [s]")
     p.add_argument(
         "--controllers",
@@ -117,10 +127,18 @@ def _seeds(text: str) -> tuple[int, ...]:
     """``a:b`` (step 1, b included), ``a:b:step``, a comma list or one seed."""
     if text.count(":") == 1:
         text = text + ":1"
-    values = parse_range(text, "--seeds", minimum=0)
+    values = parse_range(text, "--seeds", minimum=0, maximum=2**32 - 1)
     if any(v != int(v) for v in values):
         raise ValueError(f"--seeds {text!r}: seeds must be integers")
     return tuple(int(v) for v in values)
+
+
+def _seeds_arg(text: str) -> str:
+    try:
+        _seeds(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--seeds ")) from None
+    return text
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

@@ -10,7 +10,7 @@ import argparse
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
-from .cliutil import MAX_WORKERS, dump_json, integer, number
+from .cliutil import MAX_WORKERS, dump_json, integer, number, range_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,6 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--speeds",
+        type=range_text("--speeds", 0.1),
         default=None,
         metavar="A:B:STEP",
         help="speeds [m/s] (default 1:15:0.5; stop included)",

@@ -8,7 +8,15 @@ import math
 import sys
 from pathlib import Path
 
-from .cliutil import MAX_WORKERS, atomic_write_text, dump_json, integer, parse_range, to_jsonable
+from .cliutil import (
+    MAX_WORKERS,
+    atomic_write_text,
+    dump_json,
+    integer,
+    parse_range,
+    range_text,
+    to_jsonable,
+)
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 DECAYS_HELP = (
@@ -23,7 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     f = msub.add_parser("fit", help="identify missing effects on some speeds, write MODEL.json")
     f.add_argument("--data", help=DATA_HELP)
     f.add_argument("--out", required=True, help="model JSON to write")
-    f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
+    f.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)",
+    )
     f.add_argument("--max-effects", type=integer(0, 100), default=3)
     f.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     f.add_argument(
@@ -53,7 +65,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
     e.add_argument("--data", help=DATA_HELP)
-    e.add_argument("--speeds", help="speeds to evaluate (default: those not used in the fit)")
+    e.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        help="speeds to evaluate (default: those not used in the fit)",
+    )
     e.add_argument("--json", action="store_true", help="print JSON")
     e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     e.set_defaults(func=cmd_evaluate)

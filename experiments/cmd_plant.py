@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .cliutil import atomic_write_text, dump_json, parse_range, speed_value
+from .cliutil import atomic_write_text, dump_json, parse_range, range_text, speed_value
 
 BICYCLE_HELP = (
     "bicycle: 'benchmark' (Meijaard 2007), 'steer-by-wire', a bicycleparameters name "
@@ -15,7 +15,12 @@ BICYCLE_HELP = (
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eig", help="eigenvalues against speed (weave, capsize, caster)")
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
-    p.add_argument("--speeds", default="0:10:0.1", help="start:stop:step [m/s], stop included")
+    p.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        default="0:10:0.1",
+        help="start:stop:step [m/s], stop included (at most 100 m/s)",
+    )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--plot", metavar="FILE", help="write a PNG of real/imaginary parts")
     p.set_defaults(func=cmd_eig)
