@@ -341,10 +341,9 @@ def test_log_with_a_huge_field(capsys, tmp_path, field, phrases):
 def test_short_runs_name_the_filter_not_padlen(tmp_path):
     """scipy's 'padlen' message became one naming the run length and the fix."""
     import numpy as np
+    from scipy.signal import butter, sosfiltfilt
 
     from bikeid.ident.signals import lowpass
-
-    from scipy.signal import butter, sosfiltfilt
 
     with pytest.raises(InputError, match=r"a run of 9 samples is too short .*\(cutoff 0\)"):
         lowpass(np.zeros(9), 0.01, 3.0)
