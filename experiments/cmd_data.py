@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the runs in FILE.h5. Interrupted, the same command finishes only the missing runs. "
         "Results are bit-identical for any --workers.",
     )
-    p.add_argument("--controller", required=True, help=CONTROLLER_HELP)
+    p.add_argument("--controller", type=_controller_arg, required=True, help=CONTROLLER_HELP)
     p.add_argument("--speeds", type=SPEEDS, default="1:15:0.5", help=SPEEDS_HELP)
     p.add_argument("--duration", type=duration_value, default=50.0, help="run length [s]")
     p.add_argument(
@@ -64,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=duration_value, default=50.0, help="run length [s]")
     p.add_argument(
         "--controllers",
+        type=_controllers_arg,
         default=",".join(STUDY_CONTROLLERS),
         help=f"comma list of: {CONTROLLER_HELP}",
     )
@@ -131,6 +132,24 @@ def _seeds(text: str) -> tuple[int, ...]:
     if any(v != int(v) for v in values):
         raise ValueError(f"--seeds {text!r}: seeds must be integers")
     return tuple(int(v) for v in values)
+
+
+def _controller_arg(text: str) -> str:
+    if text not in STUDY_CONTROLLERS:
+        raise argparse.ArgumentTypeError(
+            f"unknown controller {text!r}; choose one of {', '.join(STUDY_CONTROLLERS)}"
+        )
+    return text
+
+
+def _controllers_arg(text: str) -> str:
+    names = [c.strip() for c in text.split(",") if c.strip()]
+    bad = [c for c in names if c not in STUDY_CONTROLLERS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown {bad}; give a comma list of {', '.join(STUDY_CONTROLLERS)}"
+        )
+    return text
 
 
 def _seeds_arg(text: str) -> str:

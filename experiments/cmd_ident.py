@@ -57,11 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--controllers",
+        type=_names_arg(STUDY_CONTROLLERS, "controllers"),
         default=",".join(STUDY_CONTROLLERS),
         help=f"comma-separated subset of {','.join(STUDY_CONTROLLERS)} (default all)",
     )
     a.add_argument(
         "--methods",
+        type=_names_arg(("direct", "pem"), "methods"),
         default="direct,pem",
         help="comma-separated subset of direct,pem (default both)",
     )
@@ -198,6 +200,18 @@ def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
     if bad or not names:
         raise ValueError(f"--{what} {text!r}: give a comma-separated subset of {','.join(allowed)}")
     return list(dict.fromkeys(names))
+
+
+def _names_arg(allowed: tuple[str, ...], what: str):
+    def check(text: str) -> str:
+        try:
+            _names(text, allowed, what)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--{what} ")) from None
+        return text
+
+    check.__name__ = what
+    return check
 
 
 def cmd_accuracy(args: argparse.Namespace) -> int:

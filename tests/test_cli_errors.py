@@ -80,8 +80,11 @@ def test_error_types_stay_value_errors():
         (MemoryError(), EXIT_INPUT, "out of memory"),
         (OverflowError("math range error"), EXIT_INPUT, "too large"),
         (UntrustworthyResult("row is unidentifiable"), EXIT_UNTRUSTWORTHY, "unidentifiable"),
-        (RuntimeError("boom"), EXIT_INTERNAL, "internal error (RuntimeError): boom; rerun "
-         "with --debug and report it"),
+        (
+            RuntimeError("boom"),
+            EXIT_INTERNAL,
+            "internal error (RuntimeError): boom; rerun with --debug and report it",
+        ),
     ],
 )
 def test_exception_to_exit_code(monkeypatch, capsys, exc, code, phrase):
