@@ -215,6 +215,10 @@ def cmd_trials(args) -> int:
 def cmd_report(args) -> int:
     from bikeid.experiments.measured_report import write_report
 
+    if args.model:  # refuse a bad model before the report folder is made
+        from bikeid.experiments.measured_study import model_from_json
+
+        model_from_json(args.model)
     path = write_report(args.out, args.data, args.model)
     print(path)
     return 0

@@ -379,3 +379,11 @@ def test_unidentifiable_is_exit_4(monkeypatch, capsys, tmp_path):
 class _FakeRun:
     speed = 5.0
     meta: dict = {}
+
+
+def test_report_refuses_a_bad_model_before_making_its_folder(capsys, tmp_path):
+    model = tmp_path / "m.json"
+    model.write_text(json.dumps({"effects": {}, "plant": "quantum"}))
+    argv = ["measured", "report", "--model", str(model), "--out", str(tmp_path / "rep")]
+    fails(capsys, tmp_path, argv, EXIT_INPUT, "'plant' is 'quantum'")
+    assert not (tmp_path / "rep").exists()
