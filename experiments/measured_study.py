@@ -101,7 +101,7 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
             f"{where}: 'plant' is {plant!r}; use one of {', '.join(map(repr, PLANTS))}"
         )
     speeds = obj.get("fit_speeds")
-    if speeds is not None and not (
+    if "fit_speeds" in obj and not (
         isinstance(speeds, list) and all(_is_number(v) and 0 < v <= 100 for v in speeds)
     ):
         raise InputError(

@@ -271,6 +271,7 @@ def test_strict_readers_accept_what_bikeid_writes():
     [
         ({"effects": {}, "fit_speeds": "abc"}, ("'fit_speeds' must be a list",)),
         ({"effects": {}, "fit_speeds": [True]}, ("'fit_speeds' must be a list",)),
+        ({"effects": {}, "fit_speeds": None}, ("'fit_speeds' must be a list",)),
         ({"effects": {}, "plant": "quantum"}, ("'plant' is 'quantum'", "'nonlinear', 'linear'")),
         ({"effects": {"steer_stiffness": True}}, ("'steer_stiffness' must be a finite number",)),
         ({"effects": {"warp_drive": 1.0}}, ("unknown effect 'warp_drive'",)),
