@@ -16,6 +16,8 @@ import math
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bikeid.experiments.cli import main
 from bikeid.sim.errors import (
@@ -388,3 +390,42 @@ def test_report_refuses_a_bad_model_before_making_its_folder(capsys, tmp_path):
     argv = ["measured", "report", "--model", str(model), "--out", str(tmp_path / "rep")]
     fails(capsys, tmp_path, argv, EXIT_INPUT, "'plant' is 'quantum'")
     assert not (tmp_path / "rep").exists()
+
+
+# -- property: arbitrary text never escapes as anything but the documented errors -------
+
+_TEXT = st.one_of(
+    st.text(max_size=40),
+    st.from_regex(r"-?[0-9e.:,+-]{0,30}|nan|inf|-inf|1e3\d\d", fullmatch=True),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_TEXT)
+def test_argument_types_raise_only_usage_errors(text):
+    """Every argument type either returns a finite value in its range or raises
+    ArgumentTypeError (argparse turns it into exit status 2)."""
+    import argparse
+
+    from bikeid.experiments.cliutil import MAX_SPEED, integer, range_text, speed_value
+
+    for parse in (speed_value, integer(1, 1024), range_text("--speeds", 0.0)):
+        try:
+            value = parse(text)
+        except argparse.ArgumentTypeError:
+            continue
+        if parse is speed_value:
+            assert math.isfinite(value) and 0 <= value <= MAX_SPEED
+        elif isinstance(value, int):
+            assert 1 <= value <= 1024
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet='{}[]":,1aN\\ \n-', max_size=200))
+def test_strict_readers_raise_only_input_errors(text):
+    """Any text: JSON and YAML readers return a value or raise InputError (exit 3)."""
+    for load in (loads_json, loads_yaml):
+        try:
+            load(text, "f")
+        except InputError:
+            pass
