@@ -118,7 +118,20 @@ def _message(exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``bikeid``; return the exit status (see :data:`EXIT_CODES`)."""
+    """Run ``bikeid`` and return its exit status; never raises, never prints a traceback
+    unless ``--debug`` is given.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default ``sys.argv[1:]``); ``--debug`` anywhere before ``--``.
+
+    Returns
+    -------
+    int
+        0 success, 1 internal failure, 2 usage error, 3 invalid input data or parameters,
+        4 no trustworthy answer, 130 interrupted (:data:`EXIT_CODES`).
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv
     if debug:
