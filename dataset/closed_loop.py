@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from bikeid.sim.conventions import MEASURED
+from bikeid.sim.errors import UntrustworthyResult, check_memory
 from bikeid.sim.parameters import BicycleParameters
 
 from .run import Run
@@ -221,6 +222,8 @@ def simulate_run(
     if reference is not None:
         controller.reference = reference
     controller.reset()
+    check_memory(duration / ctrl_dt + 1, 45, f"a {duration:g} s closed-loop run at "
+                 f"{1 / ctrl_dt:g} Hz", "shorten the duration")  # loop records + trajectory
     n_sensor = int(round(duration * sensors.rate)) + 1
     loop = SampledLoop(controller, sensors, seed, ctrl_dt, n_sensor, dither)
     traj = _integrate(
@@ -231,8 +234,10 @@ def simulate_run(
     while n > 0 and not math.isfinite(loop.u[n - 1]):  # the sample where the controller failed
         n -= 1
     if n < 2:
-        raise ValueError(
-            f"the run at {speed:g} m/s ended after {n} sensor sample(s): {traj.stop_reason}"
+        raise UntrustworthyResult(
+            f"the run at {speed:g} m/s ended after {n} sensor sample(s): {traj.stop_reason}; "
+            "no data to record: start closer to upright or use a controller that stabilizes "
+            "this speed"
         )
     t = loop.t[:n].copy()  # the instants the controller was called at
     signals = {name: loop.y_meas[:n, i].copy() for i, name in enumerate(MEASURED)}

@@ -13,6 +13,7 @@ Row indices are those of the log file (t = index * 0.01 s, :mod:`bikeid.dataset.
 from __future__ import annotations
 
 import csv
+import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -86,21 +87,35 @@ def read_segments(path: str | os.PathLike, available: set[str] | None = None) ->
     path = Path(path)
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        need = {"file", "speed_mps", "start_idx", "end_idx"}
-        if not reader.fieldnames or not need <= set(reader.fieldnames):
-            raise ValueError(f"{path.name}: need columns {sorted(need)}")
-        out = []
-        for i, r in enumerate(reader):
-            try:
-                seg = Segment(
-                    r["file"].strip(), float(r["speed_mps"]), int(r["start_idx"]), int(r["end_idx"])
-                )
-            except (TypeError, ValueError):
-                raise ValueError(f"{path.name}: row {i + 2} is malformed: {r}") from None
-            if seg.end <= seg.start + 10:
-                raise ValueError(f"{path.name}: row {i + 2} has end <= start + 10")
-            if available is None or seg.file in available:
-                out.append(seg)
+        try:
+            return _segments(path, reader, available)
+        except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+            raise ValueError(
+                f"{path.name}: line {reader.line_num} is not valid CSV ({exc}); restore the file"
+            ) from None
+
+
+def _segments(path: Path, reader: csv.DictReader, available: set[str] | None) -> list[Segment]:
+    need = {"file", "speed_mps", "start_idx", "end_idx"}
+    if not reader.fieldnames or not need <= set(reader.fieldnames):
+        raise ValueError(f"{path.name}: need columns {sorted(need)}")
+    out = []
+    for i, r in enumerate(reader):
+        try:
+            seg = Segment(
+                r["file"].strip(), float(r["speed_mps"]), int(r["start_idx"]), int(r["end_idx"])
+            )
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{path.name}: row {i + 2} is malformed ({str(r)[:80]}); need file, "
+                "speed_mps, start_idx, end_idx"
+            ) from None
+        if not (math.isfinite(seg.speed) and seg.speed > 0):
+            raise ValueError(f"{path.name}: row {i + 2}: speed_mps {seg.speed} must be > 0")
+        if seg.end <= seg.start + 10:
+            raise ValueError(f"{path.name}: row {i + 2} has end <= start + 10")
+        if available is None or seg.file in available:
+            out.append(seg)
     return out
 
 

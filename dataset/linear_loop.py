@@ -53,6 +53,7 @@ import numpy as np
 
 from bikeid.controllers.base import DEFAULT_SAMPLE_TIME, Controller, LinearLaw
 from bikeid.controllers.pid import PID
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import lateral_force_vector, state_matrices, yaw_rate
 from bikeid.sim.parameters import BicycleParameters
 from bikeid.sim.sampling import zoh
@@ -429,7 +430,7 @@ def simulate(
             psi_noise, yaw_noise, 1.0,
         )  # fmt: skip
     if not np.all(np.isfinite(X)) or np.abs(X[:, :2]).max() > 1.0:
-        raise ValueError(
+        raise UntrustworthyResult(
             f"the linear loop left the small-angle range (max |angle| "
             f"{np.nanmax(np.abs(X[:, :2])):.3g} rad) at v={speed} m/s; reduce dither, noise or "
             "speed variation, or check that the controller stabilizes this bicycle"

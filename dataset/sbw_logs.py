@@ -215,6 +215,11 @@ def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray
     return out, nbad
 
 
+def _clip(text: str, n: int = 40) -> str:
+    """``repr(text)`` for a message, at most about ``n`` characters."""
+    return repr(text) if len(text) <= n else f"{text[:n]!r}... ({len(text):,} characters)"
+
+
 def load_log(path: str | os.PathLike) -> Run:
     """Read one steer-by-wire log into a :class:`dataset.run.Run` (see module docstring).
 
@@ -251,13 +256,18 @@ def load_log(path: str | os.PathLike) -> Run:
     reader = csv.reader(io.StringIO(text))
     try:
         header = [h.strip() for h in next(reader)]
+        rows = [r for r in reader if r and any(f.strip() for f in r)]
     except StopIteration:
         raise ValueError(f"{path.name}: empty file, expected a CSV header") from None
+    except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+        raise ValueError(
+            f"{path.name}: line {reader.line_num} is not CSV a log can hold ({exc}); the file "
+            "is corrupt or not a steer-by-wire log: fetch it again"
+        ) from None
     missing = [c for c in COLUMNS if c not in header]
     if missing:
         raise ValueError(f"{path.name}: missing columns {missing}; expected {list(COLUMNS)}")
     col = {c: header.index(c) for c in COLUMNS}
-    rows = [r for r in reader if r and any(f.strip() for f in r)]
     if len(rows) < 10:
         raise ValueError(f"{path.name}: only {len(rows)} data rows; need at least 10")
     # leading rows with an empty sil_command: controller not yet running
@@ -281,10 +291,14 @@ def load_log(path: str | os.PathLike) -> Run:
             except ValueError:
                 raise ValueError(
                     f"{path.name}: row {first + i + 2}, column {c!r}: non-numeric value "
-                    f"{r[col[c]]!r}"
+                    f"{_clip(r[col[c]])}"
                 ) from None
     if not np.all(np.isfinite(data)):
-        raise ValueError(f"{path.name}: non-finite values in the data")
+        i, j = np.argwhere(~np.isfinite(data))[0]
+        raise ValueError(
+            f"{path.name}: row {first + i + 2}, column {COLUMNS[j]!r}: non-finite value "
+            f"{data[i, j]}; every field must be a finite number"
+        )
     raw = {c: data[:, j] for j, c in enumerate(COLUMNS)}
     spikes = {}
     for c, floor in SPIKE_FLOOR.items():

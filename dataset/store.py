@@ -247,7 +247,8 @@ def _open(path: str | Path):
     except OSError as exc:
         raise ValueError(
             f"{path}: not a readable HDF5 file, probably truncated or corrupt "
-            f"({str(exc).splitlines()[0]}); rewrite it (a sweep rerun rebuilds it)"
+            f"({str(exc).splitlines()[0]}); if it is a sweep's output, delete or rename it "
+            "and rerun the sweep (a sweep never overwrites a file it cannot read)"
         ) from None
     try:
         fmt = f.attrs.get("format")

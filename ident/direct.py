@@ -49,6 +49,7 @@ import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
 from bikeid.sim.parameters import BicycleParameters, from_mapping
 
@@ -364,7 +365,7 @@ def _solve_row(
     if not np.isfinite(cond) or cond > max_condition:
         involved = [n for n, c in zip(names, null, strict=True) if abs(c) > 0.1]
         hint = "".join(h for key, h in hints if len(set(key) & set(involved)) >= 2)
-        raise ValueError(
+        raise UntrustworthyResult(
             f"{row} row is unidentifiable: condition number {cond:.3g} of the column-scaled "
             f"regressor matrix exceeds {max_condition:g}; free entries {involved} are "
             f"(nearly) collinear.{hint} Fix one of them at a known value (reference/fixed=) "
@@ -568,7 +569,7 @@ def identify(
                 if all(n in names for n in pair):
                     G = np.column_stack([np.concatenate([k[n] for k in cols]) for n in pair])
                     cond_now, _ = _condition(G)
-                    raise ValueError(
+                    raise UntrustworthyResult(
                         f"{row} row is unidentifiable: {pair[0]} and {pair[1]} are both free "
                         f"but the runs cover one speed ({means.min():.3f}-{means.max():.3f} "
                         f"m/s, within-run std {wobble:.3g} m/s); a single constant speed cannot "

@@ -57,6 +57,7 @@ from scipy.optimize import least_squares
 
 from bikeid.dataset.run import Run
 from bikeid.sim.conventions import CANONICAL_STATE
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
 from bikeid.sim.sampling import zoh
 
@@ -713,7 +714,7 @@ def _lm(problem: _Problem, x: np.ndarray, max_nfev: int, ftol: float = 1e-3) -> 
     """
     r, J = problem.jacobian(x)
     if r is None:
-        raise ValueError("the start model gives an unstable predictor; give another start")
+        raise UntrustworthyResult("the start model gives an unstable predictor; give another start")
     cost = float(r @ r)
     m = max(r.size, 1)
     H, g = J.T @ J, J.T @ r
@@ -763,7 +764,7 @@ def _solve(problem: _Problem, x0: np.ndarray, max_nfev: int, method: str):
                         max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)  # fmt: skip
     problem.evaluate(sol.x)
     if problem._J is None:
-        raise ValueError("the prediction-error fit ended at an unstable predictor")
+        raise UntrustworthyResult("the prediction-error fit ended at an unstable predictor")
     return sol
 
 

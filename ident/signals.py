@@ -56,6 +56,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from bikeid.dataset.run import Run, run_stop
+from bikeid.sim.errors import InputError
 
 __all__ = [
     "NO_MEAN_REMOVAL",
@@ -225,7 +226,16 @@ def lowpass(x: np.ndarray, dt: float, cutoff: float = 15.0, order: int = 2) -> n
     if order < 1:
         raise ValueError(f"filter order {order}: need an integer >= 1")
     sos = butter(order, cutoff / nyq, output="sos")
-    return sosfiltfilt(sos, np.asarray(x, dtype=float), axis=-1)
+    x = np.asarray(x, dtype=float)
+    # sosfiltfilt's default edge padding (its "padlen"), which the signal must exceed
+    pad = 3 * (2 * len(sos) + 1 - min((sos[:, 2] == 0).sum(), (sos[:, 5] == 0).sum()))
+    if x.shape[-1] <= pad:
+        raise InputError(
+            f"a run of {x.shape[-1]} samples is too short to low-pass filter at {cutoff:g} Hz "
+            f"(zero-phase filtering needs more than {pad}); use longer runs or no filter "
+            "(cutoff 0)"
+        )
+    return sosfiltfilt(sos, x, axis=-1)
 
 
 def differentiate(x: np.ndarray, dt: float, method: str = "central") -> np.ndarray:

@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, state_matrices
 from bikeid.sim.sampling import zoh
 
@@ -205,7 +206,7 @@ def simulate_instruments(
         xk = Ad @ xk + Bd * (uk + d[k])
     scale = np.abs(x).max(axis=0)
     if not np.all(np.isfinite(x)) or scale[0] > 10.0 or scale[1] > 10.0:
-        raise ValueError(
+        raise UntrustworthyResult(
             f"closed-loop simulation for the instruments diverges at {v:.3g} m/s: the model and "
             "the fitted controller do not form a stable loop; start from a better model"
         )

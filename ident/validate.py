@@ -29,6 +29,7 @@ import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
 from .direct import vaf_variance
@@ -307,7 +308,7 @@ def compare(
         if horizon is None:
             growth = np.max(np.abs(np.linalg.eigvals(Ad))) ** N
             if growth > 1e12:
-                raise ValueError(
+                raise UntrustworthyResult(
                     f"the model is unstable and the run has {N} samples (growth {growth:.2g}): "
                     "use horizon=k (k-step prediction) or a shorter window (Run.window)"
                 )

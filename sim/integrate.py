@@ -44,6 +44,7 @@ from numba import njit
 
 from .conventions import MEASURED
 from .effects import InputChain, input_chain, plant_vector
+from .errors import check_memory
 from .nonlinear import INPUTS, WhippleBicycle, invalidate_stale_caches, outputs, rhs
 from .parameters import BicycleParameters
 
@@ -566,6 +567,8 @@ def simulate(
         raise ValueError(f"sample time dt={dt!r} must be a positive number of seconds")
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration={duration!r} must be a positive number of seconds")
+    check_memory(duration / dt + 1, 37, f"a {duration:g} s run at dt={dt:g} s",
+                 "shorten the duration or raise the sample time")  # the arrays below
     nsteps = int(round(duration / dt))
     if nsteps < 1 or abs(nsteps * dt - duration) > 1e-9 * max(1.0, duration):
         raise ValueError(f"duration {duration} s is not a whole number of samples of dt={dt} s")

@@ -124,14 +124,15 @@ def test_quick_experiment_meets_goals(tmp_path):
 
 
 def test_cli_rejects_bad_lists(tmp_path):
-    """Bad --controllers/--methods: one-line error naming the choices, exit 2."""
+    """Bad --controllers/--methods: one-line usage error naming the choices, exit 2."""
     for opt in (["--controllers", "pid,lqr"], ["--methods", "ls"]):
         p = subprocess.run(
             [sys.executable, "-m", "bikeid.experiments.cli", "accuracy",
              "--out", str(tmp_path), *opt],
             capture_output=True, text=True, check=False,
         )  # fmt: skip
-        assert p.returncode == 2 and "bikeid: error:" in p.stderr
+        assert p.returncode == 2 and "bikeid accuracy: error:" in p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1
         assert "subset of" in p.stderr
 
 
