@@ -346,12 +346,35 @@ def _read_group(path, g, gname: str) -> Run:
         raise ValueError(f"{where}: {exc}") from None
 
 
+def _read_damaged(path, f, name: str) -> Run:
+    """:func:`_read_group` of run ``name``, with h5py's errors on damaged objects (KeyError,
+    RuntimeError, OSError, TypeError, UnicodeDecodeError) turned into a ValueError naming the
+    file and the run."""
+    g = _group(path, f, name)
+    try:
+        return _read_group(path, g, name)
+    except ValueError:
+        raise
+    except (OSError, RuntimeError, KeyError, TypeError, UnicodeDecodeError) as exc:
+        raise ValueError(
+            f"{path}: run {name!r} cannot be read ({type(exc).__name__}: "
+            f"{str(exc).splitlines()[0] if str(exc) else ''}); the file is corrupt"
+        ) from None
+
+
 def _group(path, f, name: str):
     try:
+        present = name in f["runs"]
+    except (OSError, RuntimeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(
+            f"{path}: the run index cannot be read ({str(exc).splitlines()[0]}); the file is "
+            "corrupt"
+        ) from None
+    if not present:
+        raise KeyError(f"{path}: no run named {name!r}")
+    try:
         return f["runs"][name]
-    except KeyError:
-        raise KeyError(f"{path}: no run named {name!r}") from None
-    except (OSError, RuntimeError) as exc:
+    except (OSError, RuntimeError, KeyError, TypeError, ValueError) as exc:  # damaged header
         raise ValueError(
             f"{path}: run {name!r} cannot be opened ({str(exc).splitlines()[0]}); the file is "
             "corrupt"
@@ -382,7 +405,7 @@ def list_runs(path: str | Path) -> list[str]:
     with _open(path) as f:
         try:
             return list(f["runs"].keys())
-        except (OSError, RuntimeError) as exc:
+        except (OSError, RuntimeError, KeyError, TypeError, UnicodeDecodeError) as exc:
             raise ValueError(f"{path}: run index cannot be read ({exc}); corrupt file") from None
 
 
@@ -447,7 +470,7 @@ def read_run(path: str | Path, name: str) -> Run:
         If the file has no run called ``name``.
     """
     with _open(path) as f:
-        return _read_group(path, _group(path, f, name), name)
+        return _read_damaged(path, f, name)
 
 
 def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]:
@@ -478,7 +501,7 @@ def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]
     with _open(path) as f:
         if names is None:
             names = list_runs(path)
-        return [_read_group(path, _group(path, f, n), n) for n in names]
+        return [_read_damaged(path, f, n) for n in names]
 
 
 # -- CSV ------------------------------------------------------------------------------

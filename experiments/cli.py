@@ -95,13 +95,20 @@ def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace):
 
 
 def _check_empty_values(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """``--opt=--`` hands a single-valued option an empty list, bypassing ``type=``."""
+    """``--opt=--`` hands a single-valued option an empty list, bypassing ``type=``; and
+    ``--opt=`` an empty string (a file or folder named "" would mean the current folder)."""
     for action in parser._actions:
         if action.nargs is None and action.option_strings:
-            if getattr(args, action.dest, None) == []:
+            value = getattr(args, action.dest, None)
+            if value == []:
                 parser.error(
                     f"argument {'/'.join(action.option_strings)}: expected one value, got "
                     f"'--' (write {action.option_strings[-1]} VALUE)"
+                )
+            if value == "" and action.default != "":
+                parser.error(
+                    f"argument {'/'.join(action.option_strings)}: expected a value, got an "
+                    f"empty string (write {action.option_strings[-1]} VALUE)"
                 )
 
 

@@ -213,9 +213,11 @@ def cmd_trials(args) -> int:
 
 
 def cmd_report(args) -> int:
+    from bikeid.dataset.sbw_logs import data_dir
     from bikeid.experiments.measured_report import write_report
 
-    if args.model:  # refuse a bad model before the report folder is made
+    data_dir(args.data)  # refuse a missing data folder before the report folder is made
+    if args.model:  # and a bad model
         from bikeid.experiments.measured_study import model_from_json
 
         model_from_json(args.model)
