@@ -13,11 +13,24 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.sim.conventions import INPUTS, MEASURED
+from bikeid.sim.conventions import INPUTS, MEASURED, NOMINAL_SPEED, PLAUSIBLE, UNITS
 
-__all__ = ["Run"]
+__all__ = ["CONSTANT_CHECKED", "SPEED_TOLERANCE", "Run", "check_finite", "check_plausible"]
 
 REQUIRED = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
+
+#: Signals that must not be constant over a run: the states and the steer torque of a
+#: closed loop move whenever anything is measured (v may be constant: a treadmill or a
+#: simulated ideal drive; other extras, e.g. a locked handlebar angle, may be too).
+CONSTANT_CHECKED = ("phi", "delta", "phidot", "deltadot", "T_delta")
+
+#: Largest accepted |mean(v) - meta speed| [m/s]: max(absolute, relative * speed).  A run's
+#: own speed signal must agree with its nominal speed.  The simulated speed sensor has
+#: 0.01 m/s noise on a held (exact) or coasting (drifting by centimetres per second) speed;
+#: the TU Delft sensor speed is compared with its own plateau (``meta["speed_sensor"]``) over
+#: the settled rows, which lie within 5 % of it by construction.  0.5 m/s or 15 % is 10x above
+#: those and catches metadata of another run or a mistyped speed (e.g. 4.5 for 2.5 m/s).
+SPEED_TOLERANCE = (0.5, 0.15)
 
 
 @dataclass
@@ -91,13 +104,7 @@ class Run:
         arr = np.asarray(arr, dtype=float)
         if arr.shape != (n,):
             raise ValueError(f"signal {name!r} has shape {arr.shape}, expected ({n},)")
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            first = int(np.argmax(bad))
-            raise ValueError(
-                f"signal {name!r} has {int(bad.sum())} non-finite samples (first at index "
-                f"{first}); clean or cut the data before building a Run"
-            )
+        check_finite(arr, "run", name)
         return arr
 
     # -- convenience ---------------------------------------------------------------
@@ -208,3 +215,154 @@ class Run:
             reference=None if self.reference is None else self.reference[sel],
             meta=dict(self.meta),
         )
+
+
+def _where(i: int, rows, t) -> str:
+    """'row R (t = ... s)' when file rows are known, else 'sample i (t = ... s)'."""
+    if rows is not None:
+        return f"row {int(rows[i])}" + ("" if t is None else f" (t = {float(t[i]):.3f} s)")
+    if t is not None:
+        return f"sample {i} (t = {float(t[i]):.3f} s)"
+    return f"sample {i}"
+
+
+def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -> None:
+    """Refuse NaN or infinite samples, naming the source, column and first bad row.
+
+    Parameters
+    ----------
+    arr : (N,) array_like
+        The samples.
+    source : str
+        What the samples came from (a file name, ``file: run 'name'``), for the message.
+    column : str
+        The column or dataset name, for the message.
+    rows : (N,) array_like of int, optional
+        The file row (line number) of each sample, for the message.
+    t : (N,) array_like, optional
+        Time of each sample [s], for the message when ``rows`` is not given.
+
+    Raises
+    ------
+    ValueError
+        ``<source>: column '<column>', row R: non-finite value nan (k such samples);
+        ...`` at the first non-finite sample.
+    """
+    arr = np.asarray(arr, dtype=float)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"{source}: column {column!r}, {_where(i, rows, t)}: non-finite value {arr[i]!r} "
+            f"({int(bad.sum())} such samples); clean or cut the data"
+        )
+
+
+def check_plausible(
+    run: Run,
+    source: str,
+    rows=None,
+    columns: dict[str, str] | None = None,
+    bounds_as: dict[str, str] | None = None,
+) -> Run:
+    """Refuse a run whose numbers are not physical: the one check every loader runs.
+
+    Checks, in this order:
+
+    1. every measured (and noise-free) signal with a bound in
+       ``sim.conventions.PLAUSIBLE`` lies inside it (or inside the bound of the name
+       ``bounds_as`` maps it to);
+    2. none of :data:`CONSTANT_CHECKED` is constant over the run (an all-zero or dead
+       channel);
+    3. ``meta["speed"]``, if present, is a number in ``sim.conventions.NOMINAL_SPEED``
+       (0 < speed <= 30 m/s), and the mean of the run's own ``v`` over its settled rows
+       (``meta["ramp_end_index"]`` .. ``meta["settled_end_index"]`` when known) agrees with
+       ``meta["speed_sensor"]`` (measured logs) or ``meta["speed"]`` within
+       :data:`SPEED_TOLERANCE`.
+
+    Non-finite samples cannot occur: :class:`Run` refuses them (:func:`check_finite`).
+
+    Parameters
+    ----------
+    run : Run
+        The run to check.
+    source : str
+        What the run came from (file name, ``file: run 'name'``), for the messages.
+    rows : (N,) array_like of int, optional
+        File row (line number) of each sample, for the messages; default: sample index
+        and time.
+    columns : dict of str to str, optional
+        Column name in the source of each signal name, for the messages (default: the
+        signal name).
+    bounds_as : dict of str to str, optional
+        Signal names checked against the bound of another name (e.g. a logged handlebar
+        torque against ``T_delta``).
+
+    Returns
+    -------
+    Run
+        ``run`` itself, unchanged.
+
+    Raises
+    ------
+    ValueError
+        Naming the source, column and row of the first sample out of bounds, the constant
+        channel, or the nominal and the measured speed.
+    """
+    columns = columns or {}
+    bounds_as = bounds_as or {}
+    groups = [("", run.signals)] + ([("truth/", run.truth)] if run.truth is not None else [])
+    for prefix, sig in groups:
+        for name, arr in sig.items():
+            key = bounds_as.get(name, name)
+            if key not in PLAUSIBLE:
+                continue
+            lo, hi = PLAUSIBLE[key]
+            bad = (arr < lo) | (arr > hi)
+            if bad.any():
+                i = int(np.argmax(bad))
+                col = prefix + columns.get(name, name)
+                label = f"{col!r}" if col == prefix + name else f"{col!r} ({name})"
+                unit = UNITS.get(key, "")
+                raise ValueError(
+                    f"{source}: column {label}, {_where(i, rows, run.t)}: value {arr[i]:.6g} "
+                    f"{unit} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
+                    f"(sim.conventions.PLAUSIBLE; {int(bad.sum())} such samples); "
+                    "the data is corrupt: fix or cut these rows"
+                )
+    for name in CONSTANT_CHECKED:
+        if name in run.signals and np.ptp(run.signals[name]) == 0.0:
+            col = columns.get(name, name)
+            raise ValueError(
+                f"{source}: column {col!r} ({name}) is constant ({run.signals[name][0]:g}) over "
+                f"all {run.n} samples: a dead sensor or an empty record; drop this run"
+            )
+    if "speed" in run.meta:
+        speed = run.meta["speed"]
+        lo, hi = NOMINAL_SPEED
+        if (
+            not isinstance(speed, (int, float))
+            or isinstance(speed, bool)
+            or not (np.isfinite(speed) and lo < speed <= hi)
+        ):
+            raise ValueError(
+                f"{source}: nominal speed meta['speed'] = {speed!r} is not a speed in "
+                f"({lo:g}, {hi:g}] m/s; fix the run's metadata"
+            )
+        ref_key = "speed_sensor" if "speed_sensor" in run.meta else "speed"
+        ref = float(run.meta[ref_key])
+        first = int(run.meta.get("first_index", 0))
+        a = max(int(run.meta.get("ramp_end_index", first)) - first, 0)
+        b = min(int(run.meta.get("settled_end_index", first + run.n)) - first, run.n)
+        if b - a < 1:
+            a, b = 0, run.n
+        mean_v = float(np.mean(run.signals["v"][a:b]))
+        tol = max(SPEED_TOLERANCE[0], SPEED_TOLERANCE[1] * abs(ref))
+        if abs(mean_v - ref) > tol:
+            where = "" if (a, b) == (0, run.n) else f" over samples {a}..{b}"
+            raise ValueError(
+                f"{source}: meta[{ref_key!r}] = {ref:g} m/s but the mean of its own speed signal "
+                f"{columns.get('v', 'v')!r}{where} is {mean_v:.4g} m/s (tolerance {tol:.3g} m/s, "
+                "dataset.run.SPEED_TOLERANCE); the metadata belongs to another run or is wrong"
+            )
+    return run

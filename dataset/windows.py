@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bikeid.dataset.run import Run
-from bikeid.dataset.sbw_logs import DT, treadmill_speed
+from bikeid.dataset.run import Run, check_plausible
+from bikeid.dataset.sbw_logs import BOUNDS_AS, DT, SIGNAL_COLUMNS, treadmill_speed
 
 __all__ = ["Window", "bode_window", "decay_windows"]
 
@@ -115,6 +115,13 @@ def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20
     )
 
 
+def _check_run(run: Run) -> None:
+    """The loaders' plausibility check (bounds, dead channels, speed against v)."""
+    check_plausible(
+        run, str(run.meta.get("file", "run")), columns=SIGNAL_COLUMNS, bounds_as=BOUNDS_AS
+    )
+
+
 def decay_windows(run: Run, segments) -> list[Window]:
     """Free-decay windows of a run from ``bikeid.dataset.decays.Segment`` rows.
 
@@ -129,7 +136,28 @@ def decay_windows(run: Run, segments) -> list[Window]:
     -------
     list of Window
         With the file's settled treadmill speed [m/s] when the run knows it.
+
+    Raises
+    ------
+    ValueError
+        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`), or a
+        window starts before the speed settled (``meta["ramp_end_index"]``: inside the
+        start-up ramp) or ends after it stopped being settled (``meta["settled_end_index"]``),
+        naming the file and the window's rows.
     """
+    _check_run(run)
+    segments = list(segments)
+    first = int(run.meta.get("first_index", 0))
+    lo = int(run.meta.get("ramp_end_index", first))
+    hi = int(run.meta.get("settled_end_index", first + run.n))
+    for s in segments:
+        if s.start < lo or s.end > hi:
+            part = "start-up speed ramp" if s.start < lo else "run-down after the settled speed"
+            raise ValueError(
+                f"{run.meta.get('file', 'run')}: decay window rows {s.start}..{s.end} lies in the "
+                f"{part} (speed settled over rows {lo}..{hi}): the model assumes a constant "
+                "speed; drop or move this window (eigen/segments.csv)"
+            )
     out = [_window(run, s.start, s.end, "decay") for s in segments]
     if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
         for w in out:
@@ -153,7 +181,14 @@ def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> W
     -------
     Window
         ``kind="bode"``.
+
+    Raises
+    ------
+    ValueError
+        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`) or the
+        frequency cannot be read from the file name.
     """
+    _check_run(run)
     first = int(run.meta.get("first_index", 0))
     i0 = int(run.meta.get("ramp_end_index", first)) + 100
     i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))
