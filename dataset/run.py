@@ -253,7 +253,8 @@ def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -
     if bad.any():
         i = int(np.argmax(bad))
         raise ValueError(
-            f"{source}: column {column!r}, {_where(i, rows, t)}: non-finite value {arr[i]!r} "
+            f"{source}: column {column!r}, {_where(i, rows, t)}: non-finite value "
+            f"{float(arr[i])!r} "
             f"({int(bad.sum())} such samples); clean or cut the data"
         )
 
@@ -321,7 +322,7 @@ def check_plausible(
             bad = (arr < lo) | (arr > hi)
             if bad.any():
                 i = int(np.argmax(bad))
-                col = prefix + columns.get(name, name)
+                col = prefix + name if prefix else columns.get(name, name)
                 label = f"{col!r}" if col == prefix + name else f"{col!r} ({name})"
                 unit = UNITS.get(key, "")
                 raise ValueError(
@@ -361,8 +362,8 @@ def check_plausible(
         if abs(mean_v - ref) > tol:
             where = "" if (a, b) == (0, run.n) else f" over samples {a}..{b}"
             raise ValueError(
-                f"{source}: meta[{ref_key!r}] = {ref:g} m/s but the mean of its own speed signal "
-                f"{columns.get('v', 'v')!r}{where} is {mean_v:.4g} m/s (tolerance {tol:.3g} m/s, "
+                f"{source}: meta[{ref_key!r}] = {ref:.3f} m/s but the mean of its own speed signal "
+                f"{columns.get('v', 'v')!r}{where} is {mean_v:.3f} m/s (tolerance {tol:.3g} m/s, "
                 "dataset.run.SPEED_TOLERANCE); the metadata belongs to another run or is wrong"
             )
     return run

@@ -248,7 +248,7 @@ def _read_array(path, gname: str, ds, n: int | None) -> np.ndarray:
     if bad.any():
         i = int(np.argmax(bad))
         raise ValueError(
-            f"{where} holds non-finite values (first {arr[i]!r} at row {i}, "
+            f"{where} holds non-finite values (first {float(arr[i])!r} at row {i}, "
             f"{int(bad.sum())} in all); the file is corrupt"
         )
     return arr
