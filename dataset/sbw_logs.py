@@ -13,6 +13,14 @@ What the loader does, and why
 - **Empty sil_command rows**: some logs open with rows whose ``sil_command`` field is
   empty (controller not running yet).  Those leading rows are cut; an empty field later
   in the file is a malformed file.
+- **Plausibility** (:func:`bikeid.dataset.run.check_plausible`): a NaN/Inf field, or a
+  raw value outside the physical bound of its signal (``sim.conventions.PLAUSIBLE``:
+  e.g. |lean_rate| <= 20 rad/s, |fork_rate| <= 30 rad/s, speed -0.5..30 m/s, torques
+  <= 200 N m), or a constant lean_angle, fork_angle, lean_rate, fork_rate or
+  command_fork, makes the file refused with its row (line number, header = row 1) and
+  column.  The bounds are checked *before* despiking: the despiker below is for the
+  documented encoder quirk (spikes of a few rad/s, < 5.4 rad/s in every log), not for
+  values no bicycle produces, which mean a corrupt file and must not be averaged in.
 - **Spikes** in ``fork_rate``, ``x_acceleration`` and ``y_acceleration``: a sample is a
   spike when its distance from the 5-sample running median exceeds
   ``SPIKE_K`` = 8 times the robust scale (1.4826 * median absolute deviation of that

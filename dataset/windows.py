@@ -3,8 +3,10 @@
 A :class:`Window` is a free decay (:func:`decay_windows`, from the rows of
 :mod:`bikeid.dataset.decays`) or the settled stretch of a Bode run (:func:`bode_window`),
 with the measured signals, the sensor and treadmill speeds and the logged steer commands
-before its start (for a model's delay buffer).  Sample time 0.01 s (one control loop,
-:data:`bikeid.dataset.sbw_logs.DT`); units SI (rad, rad/s, m/s, N m).
+before its start (for a model's delay buffer).  Both builders check the run first
+(:func:`bikeid.dataset.run.check_plausible`), and a decay window outside the settled speed
+(inside the start-up ramp or in the run-down) is refused by name.  Sample time 0.01 s (one
+control loop, :data:`bikeid.dataset.sbw_logs.DT`); units SI (rad, rad/s, m/s, N m).
 """
 
 from __future__ import annotations
