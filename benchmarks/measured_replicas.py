@@ -1,4 +1,4 @@
-"""Could the pipeline meet issue 6's goal on data like ours if the truth were in the library?
+"""Could the pipeline halve both held-out errors on data like ours if the truth were in the library?
 
 A parametric bootstrap of the whole pipeline on replicas of the real experiment:
 

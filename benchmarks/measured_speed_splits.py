@@ -1,4 +1,4 @@
-"""Issue 6 point 5 on every speed split: fit on some speeds, evaluate on the others.
+"""The held-out goal on every speed split: fit on some speeds, evaluate on the others.
 
 Runs the pipeline of ``bikeid measured fit`` (nonlinear nominal, greedy selection) on the
 free decays of the fit speeds and ``bikeid measured evaluate`` on the remaining ones, for

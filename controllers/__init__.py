@@ -6,6 +6,26 @@ on the measured vector ``y`` (``sim.conventions.MEASURED`` order), with
 ``saturation``, ``reset()``, ``reference(t)`` and ``describe()``;
 see :mod:`controllers.base`.  Heavy modules (scikit-fuzzy, python-control) load
 lazily through the attributes below.
+
+Sign convention (Meijaard et al. 2007): roll phi, steer delta and steer torque T_delta
+positive to the right; stabilizing roll feedback steers into the lean.  Units SI (rad,
+rad/s, m/s, N m, s).
+
+Modules:
+
+- :mod:`~bikeid.controllers.base`: the interface (:class:`Controller`,
+  :class:`ControllerLike`), gain schedules and the :class:`LinearLaw` form of laws that
+  are linear in the measurement.
+- :mod:`~bikeid.controllers.pid`: roll-angle PID with anti-windup.
+- :mod:`~bikeid.controllers.pole_placement`: state feedback with integral action by pole
+  placement (Chen & Dao 2010, eqs. 7-17), speed scheduled.
+- :mod:`~bikeid.controllers.fuzzy`: speed-adaptive Mamdani fuzzy-PD controller (a
+  reconstruction of Chen & Dao's).
+- :mod:`~bikeid.controllers.steer_into_lean`: the TU Delft steer-by-wire bicycle's
+  balance law T = K (V - v) phidot.
+- :mod:`~bikeid.controllers.excitation`: roll references, steer-torque dither and
+  lateral-force pulses.
+- :mod:`~bikeid.controllers.registry`: controller names and :func:`make`.
 """
 
 from __future__ import annotations

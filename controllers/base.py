@@ -65,17 +65,50 @@ I_V, I_PHI, I_DELTA, I_PHIDOT, I_DELTADOT = (
 
 @runtime_checkable
 class ControllerLike(Protocol):
-    """What a simulator needs from a controller."""
+    """What a simulator needs from a controller.
+
+    Any object with these members can drive ``dataset.closed_loop.simulate_run``;
+    :class:`Controller` is the implementation every bikeid controller derives from.
+
+    Attributes
+    ----------
+    sample_time : float
+        Controller period [s]; the simulator calls the controller once per period and
+        holds the returned steer torque (zero-order hold) in between.
+
+    Notes
+    -----
+    ``controller(t, y)`` returns the steer torque T_delta [N m] (positive to the right,
+    Meijaard 2007) for time ``t`` [s] and the measurement ``y``, an (8,) sequence in
+    :data:`sim.conventions.MEASURED` order ``(v, phi, delta, psi, phidot, deltadot,
+    psidot, thetaRdot)`` [m/s, rad, rad, rad, rad/s, rad/s, rad/s, rad/s].
+    """
 
     sample_time: float
 
-    def reset(self) -> None: ...
+    def reset(self) -> None:
+        """Forget all internal state before a new run (integrators, held output)."""
+        ...
 
     def __call__(self, t: float, y: Sequence[float]) -> float: ...
 
 
 class Reference(Protocol):
-    """A roll reference: ``ref(t)`` [rad] and optionally ``ref.rate(t)`` [rad/s]."""
+    """A roll reference: ``ref(t)`` [rad] and optionally ``ref.rate(t)`` [rad/s].
+
+    Any callable of time qualifies; :mod:`controllers.excitation` has the standard ones.
+    A reference without ``rate`` gets its rate from a backward difference over the
+    controller period (:class:`Controller`).
+
+    Parameters
+    ----------
+    t : float
+        Time [s] (argument of the call).
+
+    Notes
+    -----
+    The call returns the roll-angle reference phi_ref [rad], positive leaning right.
+    """
 
     def __call__(self, t: float) -> float: ...
 
@@ -85,7 +118,21 @@ def _zero(t: float) -> float:
 
 
 def check_measurement(y: Sequence[float]) -> None:
-    """Raise ``ValueError`` unless ``y`` is a finite vector in ``MEASURED`` order."""
+    """Raise ``ValueError`` unless ``y`` is a finite vector in ``MEASURED`` order.
+
+    Parameters
+    ----------
+    y : sequence of float, length 8
+        Measurement in :data:`sim.conventions.MEASURED` order ``(v, phi, delta, psi,
+        phidot, deltadot, psidot, thetaRdot)`` [m/s, rad, rad, rad, rad/s, rad/s, rad/s,
+        rad/s].
+
+    Raises
+    ------
+    ValueError
+        If ``y`` does not have 8 entries (the message gives the expected order), or if
+        an entry is not finite (the message names the channels).
+    """
     if len(y) != len(MEASURED):
         raise ValueError(
             f"measurement has {len(y)} entries; expected {len(MEASURED)} in the order {MEASURED}"
@@ -108,6 +155,29 @@ class GainSchedule:
 
     ``speeds`` [m/s] strictly increasing; ``gains[k]`` is the gain tuple at
     ``speeds[k]``.  Evaluation is pure Python (bisection), a few hundred ns.
+    Calling the schedule, ``schedule(v)`` with the speed v [m/s], returns the gain
+    tuple at v (same length and units as a row of ``gains``).
+
+    Parameters
+    ----------
+    speeds : sequence of float, length n
+        Grid speeds [m/s], finite and strictly increasing.
+    gains : sequence of sequence of float, shape (n, m)
+        ``gains[k]`` is the gain tuple at ``speeds[k]``, all rows of the same length m;
+        units are those of the controller using the schedule.
+
+    Attributes
+    ----------
+    speeds : list of float
+        The grid speeds [m/s].
+    gains : list of tuple of float
+        The gain rows, one per speed.
+
+    Raises
+    ------
+    ValueError
+        If ``speeds`` is empty or has a different length from ``gains``, is not strictly
+        increasing, the rows differ in length, or a speed or gain is not finite.
     """
 
     def __init__(self, speeds: Sequence[float], gains: Sequence[Sequence[float]]):
@@ -145,6 +215,14 @@ class GainSchedule:
         return tuple(x + w * (z - x) for x, z in zip(a, b, strict=True))
 
     def as_dict(self) -> dict[str, Any]:
+        """The schedule as a JSON-serializable dictionary.
+
+        Returns
+        -------
+        dict
+            ``{"speeds": [...], "gains": [[...], ...]}``, speeds in m/s, one gain list
+            per speed.
+        """
         return {"speeds": list(self.speeds), "gains": [list(g) for g in self.gains]}
 
 
@@ -159,6 +237,18 @@ class LinearLaw(NamedTuple):
 
     Signs as in the benchmark convention (module docstring): stabilizing roll gains
     are negative in ``-L``, i.e. ``L[0]`` > 0 for a controller that steers into the lean.
+
+    Attributes
+    ----------
+    L : (4,) ndarray
+        Gains on y_x = [phi, delta, phidot, deltadot] (bikeid state order)
+        [N m/rad, N m/rad, N m s/rad, N m s/rad].
+    l_i : float
+        Gain on the roll-error integral xi [N m/(rad s)].
+    l_r : float
+        Gain on the roll reference r [N m/rad].
+    l_rd : float
+        Gain on the roll-reference rate r' [N m s/rad].
     """
 
     L: np.ndarray  #: (4,) [N m/rad, N m/rad, N m s/rad, N m s/rad]
@@ -172,6 +262,45 @@ class Controller(ABC):
 
     Subclasses implement :meth:`_control` (the unsaturated law, may update state)
     and :meth:`_reset_state`, and set ``name``.
+
+    Calling the controller, ``controller(t, y)`` with time ``t`` [s] and the
+    measurement ``y`` ((8,) in :data:`sim.conventions.MEASURED` order), returns the
+    steer torque T_delta [N m] (positive to the right), clipped to ``+-saturation``.
+    A repeated call at the same ``t`` returns the held output; a call at an earlier
+    ``t`` than the previous one raises ``ValueError`` (call :meth:`reset` first).
+
+    Parameters
+    ----------
+    sample_time : float, optional
+        Controller period [s], positive and finite (default
+        :data:`DEFAULT_SAMPLE_TIME` = 0.01 s).
+    saturation : float, optional
+        Steer-torque limit [N m], positive; ``inf`` (default) for none.
+    reference : callable, optional
+        Roll reference ``reference(t)`` [rad] of time [s] (see :class:`Reference`);
+        None (default) for zero.
+    design_speed : float or None, optional
+        Speed [m/s] at which the gains are fixed; None (default) schedules them on the
+        measured speed ``y[0]`` at every call.
+
+    Attributes
+    ----------
+    name : str
+        Controller name recorded in run metadata.
+    sample_time : float
+        Controller period [s].
+    saturation : float
+        Steer-torque limit [N m] (``inf`` for none).
+    design_speed : float or None
+        Fixed design speed [m/s], or None when scheduled on the measured speed.
+    reference : callable
+        Roll reference [rad] as a function of time [s].
+
+    Raises
+    ------
+    ValueError
+        If ``sample_time``, ``saturation`` or ``design_speed`` is not positive (or
+        ``sample_time``/``design_speed`` is infinite).
     """
 
     name = "controller"
@@ -212,9 +341,12 @@ class Controller(ABC):
         else:
             dt = self.sample_time
         u = self._control(t, y, dt)
-        if u != u:  # NaN
+        if not math.isfinite(u):  # NaN or +-inf: never hand a non-finite torque to a plant
             check_measurement(y)
-            raise ValueError(f"{self.name} produced NaN torque at t={t}")
+            raise ValueError(
+                f"{self.name} produced a non-finite steer torque ({u}) at t={t} s; check its "
+                "gains (overflow) and the measurement"
+            )
         s = self.saturation
         if u > s:
             u = s
@@ -230,6 +362,16 @@ class Controller(ABC):
         None (the default) means the law is not linear in the measurement (or saturates),
         so a simulator must call the controller itself.  Subclasses whose law is linear
         override this; the law must equal :meth:`__call__` to round-off on every sample.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s] at which the gains are evaluated.
+
+        Returns
+        -------
+        LinearLaw or None
+            The linear law at ``v``, or None if the law is not linear.
         """
         return None
 
@@ -239,11 +381,32 @@ class Controller(ABC):
         return False
 
     def speed(self, y: Sequence[float]) -> float:
-        """The speed the gains are scheduled on: ``design_speed`` or the measured ``y[0]``."""
+        """The speed the gains are scheduled on: ``design_speed`` or the measured ``y[0]``.
+
+        Parameters
+        ----------
+        y : sequence of float, length 8
+            Measurement in :data:`sim.conventions.MEASURED` order (``y[0]`` is the
+            measured speed v [m/s]).
+
+        Returns
+        -------
+        float
+            Scheduling speed [m/s].
+        """
         return self.design_speed if self.design_speed is not None else float(y[I_V])
 
     def describe(self) -> dict[str, Any]:
-        """JSON-serializable summary for run metadata."""
+        """JSON-serializable summary for run metadata.
+
+        Returns
+        -------
+        dict
+            Keys ``name``, ``sample_time`` [s], ``saturation`` [N m] (None if
+            unlimited), ``design_speed`` [m/s] (None if scheduled), ``speed_source``
+            (``"design"`` or ``"measured"``), ``reference`` (the reference's own
+            ``describe()`` or its name) and ``gains`` (subclass-specific).
+        """
         ref = self.reference
         ref_desc = (
             ref.describe()

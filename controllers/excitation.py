@@ -61,24 +61,85 @@ def _seed(seed: int) -> int:
 
 # -- references ----------------------------------------------------------------------------
 class ZeroReference:
-    """phi_ref = 0 (pure balancing)."""
+    """phi_ref = 0 (pure balancing).
+
+    ``ZeroReference()(t)`` returns 0.0 rad for every time t [s].
+
+    Attributes
+    ----------
+    None
+        The reference has no parameters or state.
+    """
 
     def __call__(self, t: float) -> float:
         return 0.0
 
     def rate(self, t: float) -> float:
+        """Reference rate at ``t``: zero.
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+
+        Returns
+        -------
+        float
+            d phi_ref / dt [rad/s].
+        """
         return 0.0
 
     def sample(self, t) -> np.ndarray:
+        """The reference at the times ``t``: zeros.
+
+        Parameters
+        ----------
+        t : array_like
+            Times [s], any shape.
+
+        Returns
+        -------
+        ndarray
+            Values [rad], the shape of ``t``, equal to calling the object at each time.
+        """
         return np.zeros_like(np.asarray(t, dtype=float))
 
     def describe(self) -> dict[str, Any]:
+        """JSON-serializable description (goes into run metadata).
+
+        Returns
+        -------
+        dict
+            ``{"name": "zero"}``.
+        """
         return {"name": "zero"}
 
 
 class StepReference:
     """Piecewise-constant roll reference: ``values[k]`` [rad] from ``times[k]`` [s] on,
-    zero before ``times[0]``.  ``rate`` is zero (the steps are not differentiated)."""
+    zero before ``times[0]``.  ``rate`` is zero (the steps are not differentiated).
+
+    Parameters
+    ----------
+    times : sequence of float
+        Step times [s], finite, strictly increasing, at least one.
+    values : sequence of float
+        Roll reference [rad] (positive leaning right) from each step time on, one per
+        time.
+
+    Attributes
+    ----------
+    times : list of float
+        Step times [s].
+    values : list of float
+        Step values [rad].
+
+    Raises
+    ------
+    ValueError
+        If a time or value is not finite, the lengths differ or are zero, or the times
+        are not strictly increasing.
+    """
 
     def __init__(self, times: Sequence[float], values: Sequence[float]):
         tt = [_finite("step time", x) for x in times]
@@ -94,15 +155,46 @@ class StepReference:
         return self.values[k - 1] if k else 0.0
 
     def rate(self, t: float) -> float:
+        """Reference rate at ``t``: zero (the steps are not differentiated).
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+
+        Returns
+        -------
+        float
+            d phi_ref / dt [rad/s].
+        """
         return 0.0
 
     def sample(self, t) -> np.ndarray:
+        """The reference at the times ``t`` (0 before the first step).
+
+        Parameters
+        ----------
+        t : array_like
+            Times [s], any shape.
+
+        Returns
+        -------
+        ndarray
+            Values [rad], the shape of ``t``, equal to calling the object at each time.
+        """
         t = np.asarray(t, dtype=float)
         k = np.searchsorted(np.asarray(self.times), t, side="right")
         vals = np.concatenate([[0.0], self.values])
         return vals[k]
 
     def describe(self) -> dict[str, Any]:
+        """JSON-serializable description (goes into run metadata).
+
+        Returns
+        -------
+        dict
+            ``name`` ("step"), ``times`` [s] and ``values`` [rad].
+        """
         return {"name": "step", "times": self.times, "values": self.values}
 
 
@@ -115,6 +207,30 @@ class ChirpReference:
     a linear sweep from ``f0`` to ``f1`` [Hz] over ``duration`` D [s] with amplitude
     ``amplitude`` A [rad].  It starts at sin(0) = 0, so there is no step at ``start``;
     it ends wherever the phase is (a jump of at most A at the end).
+
+    Parameters
+    ----------
+    amplitude : float, optional
+        A [rad] (default 5 deg = 0.0873 rad), finite.
+    f0 : float, optional
+        Start frequency [Hz] (default 0.05), >= 0.
+    f1 : float, optional
+        End frequency [Hz] (default 0.5), >= 0.
+    duration : float, optional
+        Sweep length D [s] (default 50), positive.
+    start : float, optional
+        Sweep start time [s] (default 0).
+
+    Attributes
+    ----------
+    amplitude, f0, f1, duration, start : float
+        As the parameters [rad, Hz, Hz, s, s].
+
+    Raises
+    ------
+    ValueError
+        If a parameter is not finite, a frequency is negative or ``duration`` is not
+        positive.
     """
 
     def __init__(
@@ -141,6 +257,18 @@ class ChirpReference:
         return self.amplitude * math.sin(2 * math.pi * (self.f0 * tau + 0.5 * self._k * tau * tau))
 
     def rate(self, t: float) -> float:
+        """Exact reference rate at ``t`` (0 outside the sweep).
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+
+        Returns
+        -------
+        float
+            d phi_ref / dt [rad/s].
+        """
         tau = t - self.start
         if tau < 0 or tau > self.duration:
             return 0.0
@@ -148,16 +276,47 @@ class ChirpReference:
         return self.amplitude * 2 * math.pi * (self.f0 + self._k * tau) * math.cos(ph)
 
     def frequency(self, t: float) -> float:
-        """Instantaneous frequency [Hz] at time t (inside the sweep)."""
+        """Instantaneous frequency [Hz] at time t (inside the sweep).
+
+        Parameters
+        ----------
+        t : float
+            Time [s]; outside [start, start + duration] the linear law is extrapolated.
+
+        Returns
+        -------
+        float
+            f0 + (f1 - f0) (t - start) / D [Hz].
+        """
         return self.f0 + self._k * (t - self.start)
 
     def sample(self, t) -> np.ndarray:
+        """The reference at the times ``t`` (0 outside the sweep).
+
+        Parameters
+        ----------
+        t : array_like
+            Times [s], any shape.
+
+        Returns
+        -------
+        ndarray
+            Values [rad], the shape of ``t``, equal to calling the object at each time.
+        """
         tau = np.asarray(t, dtype=float) - self.start
         inside = (tau >= 0) & (tau <= self.duration)
         ph = 2 * np.pi * (self.f0 * tau + 0.5 * self._k * tau * tau)
         return np.where(inside, self.amplitude * np.sin(ph), 0.0)
 
     def describe(self) -> dict[str, Any]:
+        """JSON-serializable description (goes into run metadata).
+
+        Returns
+        -------
+        dict
+            ``name`` ("chirp"), ``amplitude`` [rad], ``f0``, ``f1`` [Hz], ``duration``
+            and ``start`` [s].
+        """
         return {
             "name": "chirp", "amplitude": self.amplitude, "f0": self.f0, "f1": self.f1,
             "duration": self.duration, "start": self.start,
@@ -172,6 +331,32 @@ class UniformDither:
     ``default_rng(seed).uniform(-a, a)``; negative times give 0.  Uniform on [-a, a]
     has mean 0 and variance a^2 / 3.  ``amplitude`` above ``max_amplitude`` (1 N m,
     Chen & Dao's bound) raises unless ``max_amplitude`` is raised explicitly.
+
+    Parameters
+    ----------
+    amplitude : float, optional
+        a [N m] (default 1.0), >= 0 and <= ``max_amplitude``.
+    hold : float, optional
+        Hold time of each value [s] (default 0.01, the default logging period), positive.
+    seed : int, optional
+        Seed of the stream, a non-negative integer (default 0).
+    max_amplitude : float, optional
+        Largest allowed ``amplitude`` [N m] (default 1.0).
+
+    Attributes
+    ----------
+    amplitude : float
+        a [N m].
+    hold : float
+        Hold time [s].
+    seed : int
+        Seed.
+
+    Raises
+    ------
+    ValueError
+        If ``amplitude`` is negative, not finite or above ``max_amplitude``, ``hold`` is
+        not positive and finite, or ``seed`` is not a non-negative integer.
     """
 
     def __init__(
@@ -200,7 +385,18 @@ class UniformDither:
             self._values.extend(self._rng.uniform(-a, a, _BLOCK).tolist())
 
     def values(self, n: int) -> np.ndarray:
-        """The first ``n`` held values."""
+        """The first ``n`` held values.
+
+        Parameters
+        ----------
+        n : int
+            Number of values.
+
+        Returns
+        -------
+        (n,) ndarray
+            Values [N m]; value k is held on [k hold, (k+1) hold).
+        """
         self._extend(n)
         return np.array(self._values[:n])
 
@@ -215,6 +411,18 @@ class UniformDither:
         return vals[k]
 
     def sample(self, t) -> np.ndarray:
+        """The dither at the times ``t`` (0 at negative times).
+
+        Parameters
+        ----------
+        t : array_like
+            Times [s], any shape.
+
+        Returns
+        -------
+        ndarray
+            Values [N m], the shape of ``t``, equal to calling the object at each time.
+        """
         t = np.asarray(t, dtype=float)
         k = np.floor(t / self.hold + 1e-9).astype(np.int64)
         n = int(k.max()) + 1 if k.size else 0
@@ -222,6 +430,13 @@ class UniformDither:
         return np.where(t < 0, 0.0, vals[np.clip(k, 0, None)])
 
     def describe(self) -> dict[str, Any]:
+        """JSON-serializable description (goes into run metadata).
+
+        Returns
+        -------
+        dict
+            ``name`` ("uniform"), ``amplitude`` [N m], ``hold`` [s] and ``seed``.
+        """
         return {"name": "uniform", "amplitude": self.amplitude, "hold": self.hold,
                 "seed": self.seed}  # fmt: skip
 
@@ -236,6 +451,39 @@ class LateralForcePulses:
     ``min_gap + Exponential(mean_gap - min_gap)`` [s]; the first pulse starts after
     ``first`` + one such gap.  Moore & Hubbard perturbed the bicycle by hand with
     lateral pushes at irregular intervals; peak and duration are the user's choice.
+
+    Parameters
+    ----------
+    peak : float, optional
+        Peak force [N] (default 50), >= 0.
+    duration : float, optional
+        Pulse length [s] (default 0.2), positive.
+    mean_gap : float, optional
+        Mean gap between a pulse's end and the next start [s] (default 3), > ``min_gap``.
+    min_gap : float, optional
+        Least gap [s] (default 1), >= 0.
+    seed : int, optional
+        Seed of the stream, a non-negative integer (default 0).
+    first : float, optional
+        Time [s] after which the first gap starts (default 0).
+
+    Attributes
+    ----------
+    peak, duration, mean_gap, min_gap, first : float
+        As the parameters [N, s, s, s, s].
+    seed : int
+        Seed.
+    times : list of float
+        Start times [s] of the pulses drawn so far (extended on demand).
+    directions : list of float
+        Their directions, +1 (right) or -1 (left).
+
+    Raises
+    ------
+    ValueError
+        If a parameter is not finite, ``peak`` is negative, ``duration`` is not
+        positive, not 0 <= ``min_gap`` < ``mean_gap``, or ``seed`` is not a non-negative
+        integer.
     """
 
     def __init__(
@@ -275,7 +523,18 @@ class LateralForcePulses:
                 self._next_start = start + self.duration
 
     def pulses_until(self, t_end: float) -> list[tuple[float, float]]:
-        """(start time [s], direction) of every pulse that starts before ``t_end``."""
+        """(start time [s], direction) of every pulse that starts before ``t_end``.
+
+        Parameters
+        ----------
+        t_end : float
+            End time [s] (exclusive).
+
+        Returns
+        -------
+        list of (float, float)
+            (start time [s], direction +1 or -1) per pulse, in time order.
+        """
         self._extend_to(t_end)
         k = bisect.bisect_left(self.times, t_end)
         return list(zip(self.times[:k], self.directions[:k], strict=True))
@@ -291,6 +550,18 @@ class LateralForcePulses:
         return self.directions[k] * self.peak * math.sin(math.pi * tau / self.duration)
 
     def sample(self, t) -> np.ndarray:
+        """The lateral force at the times ``t`` (positive to the right).
+
+        Parameters
+        ----------
+        t : array_like
+            Times [s], any shape.
+
+        Returns
+        -------
+        ndarray
+            Values [N], the shape of ``t``, equal to calling the object at each time.
+        """
         t = np.asarray(t, dtype=float)
         if t.size == 0:
             return np.zeros_like(t)
@@ -305,6 +576,14 @@ class LateralForcePulses:
         )
 
     def describe(self) -> dict[str, Any]:
+        """JSON-serializable description (goes into run metadata).
+
+        Returns
+        -------
+        dict
+            ``name`` ("half-sine pulses"), ``peak`` [N], ``duration``, ``mean_gap``,
+            ``min_gap`` [s], ``seed`` and ``first`` [s].
+        """
         return {
             "name": "half-sine pulses", "peak": self.peak, "duration": self.duration,
             "mean_gap": self.mean_gap, "min_gap": self.min_gap, "seed": self.seed,

@@ -62,7 +62,14 @@ TERMS = ("NB", "NM", "NS", "ZE", "PS", "PM", "PB")
 
 
 def rule_table() -> list[list[int]]:
-    """Output MF index for (E index i, CE index j): the diagonal table clip(i + j - 3, 0, 6)."""
+    """Output MF index for (E index i, CE index j): the diagonal table clip(i + j - 3, 0, 6).
+
+    Returns
+    -------
+    list of list of int, shape (7, 7)
+        ``table[i][j]`` is the index into :data:`MF_CENTRES` (terms NB, NM, NS, ZE, PS,
+        PM, PB) of the output MF fired by E term i and CE term j.
+    """
     return [[min(max(i + j - 3, 0), N_MF - 1) for j in range(N_MF)] for i in range(N_MF)]
 
 
@@ -73,7 +80,28 @@ def _memberships(x: np.ndarray) -> np.ndarray:
 
 
 def mamdani(e_n, ce_n, chunk: int = 8192) -> np.ndarray:
-    """Exact Mamdani output U in [-8/9, 8/9] for normalized inputs (clipped to [-1, 1])."""
+    """Exact Mamdani output U in [-8/9, 8/9] for normalized inputs (clipped to [-1, 1]).
+
+    Min AND, min implication, max aggregation and centroid defuzzification over the
+    universe [-1, 1]; the centroid of the piecewise-linear aggregated set is computed
+    exactly (module docstring).
+
+    Parameters
+    ----------
+    e_n : array_like
+        Normalized roll error E = G_E (phi_ref - phi) [-]; clipped to [-1, 1].
+    ce_n : array_like
+        Normalized error rate CE = G_CE (phi_ref' - phidot) [-], broadcastable with
+        ``e_n``; clipped to [-1, 1].
+    chunk : int, optional
+        Number of points evaluated per vectorized block (memory bound only; default 8192).
+
+    Returns
+    -------
+    ndarray
+        Normalized output U [-], the broadcast shape of ``e_n`` and ``ce_n``; the torque
+        is G_U(v) U [N m].
+    """
     e_n = np.clip(np.asarray(e_n, dtype=float), -1.0, 1.0)
     ce_n = np.clip(np.asarray(ce_n, dtype=float), -1.0, 1.0)
     shape = np.broadcast_shapes(e_n.shape, ce_n.shape)
@@ -122,6 +150,27 @@ class ControlSurface:
     lookup (inputs outside [-1, 1] are clipped, like scikit-fuzzy's ``clip_to_bounds``).
 
     ``n - 1`` must be a multiple of 6 so that every MF vertex is a grid node.
+
+    ``surface(e, ce)`` with normalized inputs E, CE [-] returns the interpolated
+    normalized output U [-].
+
+    Parameters
+    ----------
+    n : int, optional
+        Grid size per axis (default 301), n >= 7 and (n - 1) % 6 == 0.
+
+    Attributes
+    ----------
+    n : int
+        Grid size per axis.
+    values : (n, n) ndarray
+        Exact :func:`mamdani` values at the nodes, rows indexed by E and columns by CE
+        (read-only).
+
+    Raises
+    ------
+    ValueError
+        If ``n`` violates the conditions above.
     """
 
     def __init__(self, n: int = 301):
@@ -159,7 +208,18 @@ class ControlSurface:
 
 @functools.lru_cache(maxsize=4)
 def control_surface(n: int = 301) -> np.ndarray:
-    """(n, n) exact surface values at the grid nodes; cached per process (read-only)."""
+    """(n, n) exact surface values at the grid nodes; cached per process (read-only).
+
+    Parameters
+    ----------
+    n : int, optional
+        Number of nodes per axis on [-1, 1] (default 301).
+
+    Returns
+    -------
+    (n, n) ndarray
+        U(E_i, CE_j) [-] with E_i = CE_i = ``linspace(-1, 1, n)[i]``; read-only.
+    """
     g = np.linspace(-1.0, 1.0, n)
     E, CE = np.meshgrid(g, g, indexing="ij")
     vals = mamdani(E, CE)
@@ -170,7 +230,26 @@ def control_surface(n: int = 301) -> np.ndarray:
 def skfuzzy_simulation(n_universe: int = 301):
     """A scikit-fuzzy ``ControlSystemSimulation`` of the same design (inputs "E", "CE",
     output "U"), with the rule order cached so that a ``compute()`` costs ms, not tens
-    of ms.  For reference checks only; never call it in a simulation loop."""
+    of ms.  For reference checks only; never call it in a simulation loop.
+
+    Parameters
+    ----------
+    n_universe : int, optional
+        Points of the discretized universe [-1, 1] (default 301); ``n_universe - 1``
+        must be a multiple of 6.
+
+    Returns
+    -------
+    skfuzzy.control.ControlSystemSimulation
+        Set ``sim.input["E"]``, ``sim.input["CE"]`` (normalized [-]), call
+        ``sim.compute()`` and read ``sim.output["U"]`` [-]; inputs are clipped to the
+        universe.
+
+    Raises
+    ------
+    ValueError
+        If ``n_universe - 1`` is not a multiple of 6.
+    """
     import skfuzzy as fuzz
     from skfuzzy import control as ctrl
     from skfuzzy.control.controlsystem import RuleOrderGenerator
@@ -218,6 +297,44 @@ class FuzzyController(Controller):
     ``adapt_speed`` v_a [m/s] of s(v) (``None`` disables adaptation, s = 1);
     ``surface_size`` the table size n; ``exact=True`` evaluates :func:`mamdani` per call
     instead of the table (about 100x slower).
+
+    Parameters
+    ----------
+    e_max : float, optional
+        Roll-error range [rad] (default 0.25), positive; G_E = 1 / e_max.
+    ce_max : float, optional
+        Error-rate range [rad/s] (default 0.625), positive; G_CE = 1 / ce_max.
+    torque_scale : float, optional
+        G_U0 [N m] (default -200 * 0.25 / 1.5 = -33.3), finite and non-zero; negative
+        steers into the lean (benchmark signs).
+    adapt_speed : float or None, optional
+        v_a [m/s] of s(v) = min(1, sqrt(v_a / v)) (default 3.0); None for s = 1.
+    surface_size : int, optional
+        Table size n of :class:`ControlSurface` (default 301).
+    exact : bool, optional
+        Evaluate :func:`mamdani` at every call instead of the table (default False).
+    sample_time, saturation, reference, design_speed
+        As in :class:`~controllers.base.Controller` ([s], [N m], [rad] of t [s], [m/s]).
+
+    Attributes
+    ----------
+    e_max, ce_max : float
+        Input ranges [rad, rad/s].
+    torque_scale : float
+        G_U0 [N m].
+    adapt_speed : float or None
+        v_a [m/s].
+    exact : bool
+        Whether the exact inference is used.
+    surface : ControlSurface
+        The tabulated surface.
+
+    Raises
+    ------
+    ValueError
+        If ``e_max`` or ``ce_max`` is not positive and finite, ``torque_scale`` is zero
+        or not finite, ``adapt_speed`` is not positive (and not None), or
+        ``surface_size`` is invalid.
     """
 
     name = "fuzzy"
@@ -251,7 +368,18 @@ class FuzzyController(Controller):
         super().__init__(sample_time, saturation, reference, design_speed)
 
     def scale(self, v: float) -> float:
-        """s(v) = min(1, sqrt(v_a / v)); 1 without adaptation or at v <= 0."""
+        """s(v) = min(1, sqrt(v_a / v)); 1 without adaptation or at v <= 0.
+
+        Parameters
+        ----------
+        v : float
+            Scheduling speed [m/s].
+
+        Returns
+        -------
+        float
+            Torque-scale factor s(v) in (0, 1] [-].
+        """
         va = self.adapt_speed
         if va is None or v <= va:
             return 1.0

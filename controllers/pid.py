@@ -40,7 +40,45 @@ DEFAULT_PID_GAINS = (-200.0, -500.0, -80.0)
 
 
 class PID(Controller):
-    """Roll-angle PID; see the module docstring for the law, signs and anti-windup."""
+    """Roll-angle PID; see the module docstring for the law, signs and anti-windup.
+
+    Parameters
+    ----------
+    kp : float, optional
+        Proportional gain Kp on e = phi_ref - phi [N m/rad] (default -200).
+    ki : float, optional
+        Integral gain Ki on int e dt [N m/(rad s)] (default -500).
+    kd : float, optional
+        Derivative gain Kd on the roll rate (or on de/dt) [N m s/rad] (default -80).
+    schedule : GainSchedule or None, optional
+        Rows (Kp, Ki, Kd) over speed [m/s]; when given it replaces ``kp``, ``ki``,
+        ``kd`` and is evaluated at the measured speed (or at ``design_speed``).
+    derivative : {"measurement", "error"}, optional
+        ``"measurement"`` (default): D = -Kd phidot; ``"error"``: D = Kd (phi_ref' - phidot).
+    anti_windup : {"clamp", "backcalc"}, optional
+        Conditional integration (default) or back-calculation.
+    tracking_time : float, optional
+        Back-calculation tracking time Tt [s] (default 0.1), positive; used only with
+        ``anti_windup="backcalc"``.
+    sample_time, saturation, reference, design_speed
+        As in :class:`~controllers.base.Controller` ([s], [N m], [rad] of t [s], [m/s]).
+
+    Attributes
+    ----------
+    gains : tuple of float
+        The fixed (Kp, Ki, Kd) [N m/rad, N m/(rad s), N m s/rad].
+    schedule : GainSchedule or None
+        The gain schedule, if any.
+    integral : float
+        The roll-error integral I [rad s] (reset to 0 by ``reset()``).
+
+    Raises
+    ------
+    ValueError
+        If ``derivative`` or ``anti_windup`` is not one of the allowed names, a gain is
+        not finite, a schedule row is not (Kp, Ki, Kd), or ``tracking_time`` is not
+        positive and finite.
+    """
 
     name = "pid"
 
@@ -83,11 +121,24 @@ class PID(Controller):
         self.integral = 0.0
 
     def current_gains(self, v: float) -> tuple[float, float, float]:
-        """(Kp, Ki, Kd) at speed v [m/s]."""
+        """(Kp, Ki, Kd) at speed v [m/s].
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s] at which the schedule is evaluated (ignored without a
+            schedule).
+
+        Returns
+        -------
+        tuple of float
+            (Kp [N m/rad], Ki [N m/(rad s)], Kd [N m s/rad]).
+        """
         return self.gains if self.schedule is None else self.schedule(v)  # type: ignore[return-value]
 
     @property
     def speed_scheduled(self) -> bool:
+        """True if a gain schedule is evaluated at the measured speed (no ``design_speed``)."""
         return self.schedule is not None and self.design_speed is None
 
     def linear_law(self, v: float) -> LinearLaw | None:

@@ -132,7 +132,31 @@ def _default_grid() -> list[float]:
 def to_bikeid_order(
     A: np.ndarray, B: np.ndarray, state_order: str = "bikeid"
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(A, B) in bikeid state order from a model in ``state_order`` ("bikeid"|"chen_dao")."""
+    """(A, B) in bikeid state order from a model in ``state_order`` ("bikeid"|"chen_dao").
+
+    Parameters
+    ----------
+    A : (4, 4) array_like
+        State matrix in ``state_order``.
+    B : array_like, 4 x m
+        Input matrix in ``state_order`` (reshaped to (4, m)).
+    state_order : {"bikeid", "chen_dao"}, optional
+        ``"bikeid"`` (default): [phi, delta, phidot, deltadot], returned as is;
+        ``"chen_dao"``: [phi, phidot, delta, deltadot] (``sim.conventions.CANONICAL_STATE``),
+        permuted by x_b = P x_cd (A_b = P A P^T, B_b = P B).
+
+    Returns
+    -------
+    A : (4, 4) ndarray
+        State matrix in bikeid order.
+    B : (4, m) ndarray
+        Input matrix in bikeid order.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``state_order``.
+    """
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float).reshape(A.shape[0], -1)
     if state_order == "bikeid":
@@ -174,7 +198,25 @@ def _model_matrices(sys: control.StateSpace, state_order: str | None) -> tuple[n
 
 
 def augmented_system(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Chen & Dao eq. (15): Aa = [[A, 0], [-C*, 0]], Ba = [B; 0] with C* = [1, 0, 0, 0]."""
+    """Chen & Dao eq. (15): Aa = [[A, 0], [-C*, 0]], Ba = [B; 0] with C* = [1, 0, 0, 0].
+
+    The fifth state is the integral xi of phi_ref - phi [rad s] (eq. 8).
+
+    Parameters
+    ----------
+    A : (4, 4) array_like
+        State matrix in bikeid order x = [phi, delta, phidot, deltadot] (kinematic
+        rows [0 I]; acceleration rows in 1/s^2 on the angles, 1/s on the rates).
+    B : (4,) or (4, 1) array_like
+        T_delta input column [rad/(N m s^2) in the acceleration rows, 0 above].
+
+    Returns
+    -------
+    Aa : (5, 5) ndarray
+        Augmented state matrix of [x, xi].
+    Ba : (5, 1) ndarray
+        Augmented T_delta column (zero in the xi row).
+    """
     Aa = np.zeros((5, 5))
     Aa[:4, :4] = A
     Aa[4, 0] = -1.0
@@ -188,6 +230,20 @@ def pbh_measure(A: np.ndarray, B: np.ndarray) -> tuple[float, complex]:
 
     min over eigenvalues lambda of A of sigma_min([A - lambda I, B]) / ||[A, B]||_2;
     zero exactly when the mode lambda is uncontrollable.
+
+    Parameters
+    ----------
+    A : (n, n) ndarray
+        State matrix.
+    B : (n, m) ndarray
+        Input matrix.
+
+    Returns
+    -------
+    measure : float
+        The relative PBH measure [-], >= 0.
+    mode : complex
+        The eigenvalue of A [1/s] where it is attained.
     """
     n = A.shape[0]
     scale = np.linalg.norm(np.hstack([A, B]), 2)
@@ -213,6 +269,36 @@ def place_with_integral(
     or when the relative PBH measure of the augmented system is below ``pbh_tol`` (gains
     that place the poles but are hypersensitive: the benchmark gives PBH 4e-8 and a sign
     flip of the roll-rate gain at 1.411 m/s, and PBH >= 1.7e-6 at 1.410 and 1.412 m/s).
+
+    Parameters
+    ----------
+    A : (4, 4) array_like
+        State matrix in bikeid order x = [phi, delta, phidot, deltadot] (kinematic
+        rows [0 I]; acceleration rows in 1/s^2 on the angles, 1/s on the rates).
+    B : (4,) or (4, 1) array_like
+        T_delta input column [rad/(N m s^2) in the acceleration rows, 0 above].
+    poles : sequence of complex, length 5, optional
+        Requested closed-loop poles [1/s], distinct, in the open left half plane
+        (default :data:`SLOW_POLES`).
+    rtol : float, optional
+        Largest accepted |achieved - requested| / (|requested| + 1) (default 1e-4).
+    pbh_tol : float, optional
+        Smallest accepted relative PBH measure of (Aa, Ba) (default 1e-6).
+
+    Returns
+    -------
+    K : (4,) ndarray
+        State gains [K_phi, K_delta, K_phidot, K_deltadot] [N m/rad, N m/rad, N m s/rad,
+        N m s/rad].
+    kI : float
+        Integral gain [N m/(rad s)].
+
+    Raises
+    ------
+    ValueError
+        If ``poles`` are not 5 distinct left-half-plane values, ``control.place`` fails,
+        or the placement is inaccurate (pole error above ``rtol``, non-finite gains or
+        PBH measure below ``pbh_tol``; the message gives the measure and the mode).
     """
     poles = np.asarray(poles, dtype=complex)
     if poles.shape != (5,):
@@ -256,6 +342,24 @@ def roll_zeros(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     deltadot rows gives b_delta phi'' - b_phi delta'' = c x, c = b_delta A[2] - b_phi A[3],
     which at phi = 0 is the second-order ODE  -b_phi delta'' = c_delta delta + c_deltadot
     delta'  in delta.  Needs b_phi != 0 (relative degree 2, as for every Whipple model).
+
+    Parameters
+    ----------
+    A : (4, 4) array_like
+        State matrix in bikeid order x = [phi, delta, phidot, deltadot] (kinematic
+        rows [0 I]; acceleration rows in 1/s^2 on the angles, 1/s on the rates).
+    B : (4,) or (4, 1) array_like
+        T_delta input column [rad/(N m s^2) in the acceleration rows, 0 above].
+
+    Returns
+    -------
+    (2,) complex ndarray
+        The two zeros [1/s].
+
+    Raises
+    ------
+    ValueError
+        If b_phi = B[2] is zero (relative to max |B|).
     """
     A = np.asarray(A, dtype=float)
     b = np.asarray(B, dtype=float).reshape(4)
@@ -283,6 +387,30 @@ def tracking_poles(
     right-half-plane zero gets its mirror image -max(|Re z|, 0.5) + j Im z.  A cancelling
     pole within 2 % of a free pole is moved to 2 % from it (on its own side), so ``place``
     never sees repeated poles.
+
+    Parameters
+    ----------
+    A : (4, 4) array_like
+        State matrix in bikeid order x = [phi, delta, phidot, deltadot] (kinematic
+        rows [0 I]; acceleration rows in 1/s^2 on the angles, 1/s on the rates).
+    B : (4,) or (4, 1) array_like
+        T_delta input column [rad/(N m s^2) in the acceleration rows, 0 above].
+    free : sequence of complex, length 3, optional
+        The poles not placed on the zeros [1/s] (default :data:`TRACKING_POLES`).
+    cap : float, optional
+        Fastest cancelled zero [1/s] (default :data:`ZERO_CAP` = 30), positive.
+
+    Returns
+    -------
+    (5,) complex ndarray
+        The two poles derived from the roll zeros (in order of increasing |zero|), then
+        ``free`` [1/s].
+
+    Raises
+    ------
+    ValueError
+        If ``free`` does not have 3 entries, ``cap`` is not positive and finite, or the
+        roll zeros are undefined (:func:`roll_zeros`).
     """
     free = [complex(p) for p in free]
     if len(free) != 3:
@@ -316,6 +444,63 @@ class PolePlacement(Controller):
     (default) picks ``"servo"`` with the default poles and ``"chen_dao"`` with explicit
     ``poles`` (the feedforward x_ref = [phi_ref, 0, phidot_ref, 0] assumes the steer modes
     are cancelled from roll; with slow fixed poles it hurts: -2..-6 at 15 m/s falls).
+
+    Parameters
+    ----------
+    poles : sequence of complex, length 5, optional
+        Fixed closed-loop poles [1/s]; None (default) for :func:`tracking_poles`.
+    p : BicycleParameters, optional
+        Bicycle (Meijaard 2007 notation) of the design model when ``model`` is None
+        (default: the benchmark bicycle).
+    model : control.StateSpace or callable, optional
+        User design model: a continuous-time 4-state ``StateSpace`` (needs
+        ``design_speed``) or a callable v [m/s] -> ``StateSpace``; one input, or one
+        labelled ``"T_delta"``.  None (default): ``sim.linear`` at ``p``.
+    state_order : {"bikeid", "chen_dao"} or None, optional
+        State order of ``model``; None (default) infers it from the state labels.
+    design_speed : float, optional
+        Speed [m/s] at which the gains are placed once; None (default) schedules them
+        over ``speed_grid`` on the measured speed.
+    speed_grid : sequence of float, optional
+        Scheduling speeds [m/s] (default 0.8-16 m/s in steps of 0.2).
+    sample_time, saturation, reference
+        As in :class:`~controllers.base.Controller` ([s], [N m], [rad] of t [s]).
+    law : {"servo", "chen_dao"} or None, optional
+        Control law (module docstring); None picks as described above.
+    free_poles : sequence of complex, length 3, optional
+        Free poles of :func:`tracking_poles` [1/s] (default (-6, -8, -10)).
+    zero_cap : float, optional
+        ``cap`` of :func:`tracking_poles` [1/s] (default 30).
+
+    Attributes
+    ----------
+    law : str
+        ``"servo"`` or ``"chen_dao"``.
+    poles : list of complex or None
+        The fixed poles [1/s], or None for the tracking design.
+    free_poles : list of complex
+        Free poles [1/s].
+    zero_cap : float
+        Zero cap [1/s].
+    p : BicycleParameters
+        The design bicycle.
+    state_order : str or None
+        State order of the user model.
+    schedule : GainSchedule or None
+        Rows (K_phi, K_delta, K_phidot, K_deltadot, kI) over speed; None with
+        ``design_speed``.
+    skipped_speeds : list of float
+        Grid speeds [m/s] where placement was inaccurate and which were left out.
+    xi : float
+        Integral of phi_ref - phi [rad s] (reset to 0 by ``reset()``).
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``law``, invalid ``free_poles``/``zero_cap``, a ``StateSpace``
+        model without ``design_speed``, a model that is neither, a bad model
+        (:func:`to_bikeid_order`, 4 states, continuous time, T_delta input), an
+        inaccurate placement at ``design_speed``, or placement failing at every grid speed.
     """
 
     name = "pole_placement"
@@ -384,7 +569,25 @@ class PolePlacement(Controller):
             self._fixed = None
 
     def linear_model(self, v: float) -> tuple[np.ndarray, np.ndarray]:
-        """(A, B) in bikeid order with B the T_delta column, at speed v [m/s]."""
+        """(A, B) in bikeid order with B the T_delta column, at speed v [m/s].
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s] (ignored by a fixed ``StateSpace`` model).
+
+        Returns
+        -------
+        A : (4, 4) ndarray
+            State matrix, x = [phi, delta, phidot, deltadot].
+        B : (4, 1) ndarray
+            T_delta column.
+
+        Raises
+        ------
+        ValueError
+            If a user model is not a usable 4-state continuous-time ``StateSpace``.
+        """
         model = self._user_model
         if model is None:
             A, B = state_matrices(self.p, v)
@@ -393,13 +596,44 @@ class PolePlacement(Controller):
         return _model_matrices(sys, self.state_order)
 
     def poles_at(self, v: float) -> np.ndarray:
-        """The five requested closed-loop poles [1/s] of the design at speed v [m/s]."""
+        """The five requested closed-loop poles [1/s] of the design at speed v [m/s].
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (5,) complex ndarray
+            ``poles``, or :func:`tracking_poles` of the design model at ``v`` [1/s].
+        """
         if self.poles is not None:
             return np.array(self.poles, dtype=complex)
         return tracking_poles(*self.linear_model(v), self.free_poles, self.zero_cap)
 
     def design(self, v: float) -> tuple[np.ndarray, float]:
-        """(K, kI) at speed v; raises ValueError where placement is inaccurate."""
+        """(K, kI) at speed v; raises ValueError where placement is inaccurate.
+
+        Parameters
+        ----------
+        v : float
+            Design speed [m/s].
+
+        Returns
+        -------
+        K : (4,) ndarray
+            [K_phi, K_delta, K_phidot, K_deltadot] [N m/rad, N m/rad, N m s/rad,
+            N m s/rad].
+        kI : float
+            Integral gain [N m/(rad s)].
+
+        Raises
+        ------
+        ValueError
+            If placement fails or is inaccurate at ``v`` (:func:`place_with_integral`;
+            the message names the speed).
+        """
         A, B = self.linear_model(v)
         try:
             return place_with_integral(A, B, self.poles_at(v))
@@ -407,11 +641,24 @@ class PolePlacement(Controller):
             raise ValueError(f"at v = {v} m/s: {exc}") from None
 
     def current_gains(self, v: float) -> tuple[float, ...]:
-        """(K_phi, K_delta, K_phidot, K_deltadot, kI) at speed v [m/s]."""
+        """(K_phi, K_delta, K_phidot, K_deltadot, kI) at speed v [m/s].
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s] at which the schedule is interpolated (ignored with
+            ``design_speed``).
+
+        Returns
+        -------
+        tuple of float
+            [N m/rad, N m/rad, N m s/rad, N m s/rad, N m/(rad s)].
+        """
         return self._fixed if self.schedule is None else self.schedule(v)
 
     @property
     def speed_scheduled(self) -> bool:
+        """True if the gains are interpolated at the measured speed (no ``design_speed``)."""
         return self.schedule is not None
 
     def linear_law(self, v: float) -> LinearLaw | None:

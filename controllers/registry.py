@@ -104,6 +104,12 @@ def make(name: str, p: BicycleParameters | None = None, **options: Any) -> Contr
     -------
     Controller
         The controller.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name (:func:`canonical_name`) or an option the controller's
+        constructor does not accept (the message names the controller).
     """
     key = canonical_name(name)
     try:

@@ -3,7 +3,7 @@
     T_delta = K (V - v) phidot   for v < V,   0 for v >= V,
 
 with the measured speed v = y[0] [m/s] and roll rate phidot = y[4] [rad/s];
-K = 2 N m s^2/rad, V = 6.5 m/s (``/work/shared/data/tudelft-sbw/README.md``).
+K = 2 N s^2/rad, V = 6.5 m/s (``/work/shared/data/tudelft-sbw/README.md``).
 
 Sign: in the logs ``sil_command`` equals +2 (6.5 - speed) lean_rate to 5e-7 relative
 (least-squares slope 1.0000 on the 1.5 and 4.5 m/s ``eigen`` runs), and lean and fork
@@ -32,7 +32,30 @@ __all__ = ["SteerIntoLean"]
 
 class SteerIntoLean(Controller):
     """T = K (V - v) phidot below V, zero above; gains scheduled on the measured speed
-    (or on ``design_speed`` if given)."""
+    (or on ``design_speed`` if given).
+
+    Parameters
+    ----------
+    gain : float, optional
+        K [N s^2/rad] (default 2.0), so that K (V - v) phidot is in N m; finite.
+    max_speed : float, optional
+        V [m/s] (default 6.5) above which the torque is zero; positive and finite.
+    sample_time, saturation, reference, design_speed
+        As in :class:`~controllers.base.Controller` ([s], [N m], [rad] of t [s], [m/s]);
+        the reference is not used by the law.
+
+    Attributes
+    ----------
+    gain : float
+        K [N s^2/rad].
+    max_speed : float
+        V [m/s].
+
+    Raises
+    ------
+    ValueError
+        If ``gain`` is not finite or ``max_speed`` is not positive and finite.
+    """
 
     name = "steer_into_lean"
 
@@ -64,6 +87,7 @@ class SteerIntoLean(Controller):
 
     @property
     def speed_scheduled(self) -> bool:
+        """True unless a ``design_speed`` fixes the gain."""
         return self.design_speed is None
 
     def linear_law(self, v: float) -> LinearLaw | None:
@@ -87,7 +111,18 @@ class SteerIntoLean(Controller):
         return LinearLaw(np.array([0.0, 0.0, k, 0.0]), 0.0, 0.0, 0.0)
 
     def roll_rate_gain(self, v: float) -> float:
-        """The equivalent Kd(v) in T = -Kd phidot [N m s/rad] (negative below V)."""
+        """The equivalent Kd(v) in T = -Kd phidot [N m s/rad] (negative below V).
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s] (``design_speed`` is not applied here).
+
+        Returns
+        -------
+        float
+            Kd(v) = -K max(V - v, 0) [N m s/rad].
+        """
         return -self.gain * max(self.max_speed - v, 0.0)
 
     def _gains_description(self) -> dict[str, Any]:

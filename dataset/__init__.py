@@ -23,6 +23,8 @@ Modules:
 - :mod:`~bikeid.dataset.download`: fetching the measured data from its upstream repository
   at a pinned commit, checksummed.
 - :mod:`~bikeid.dataset.store`: runs on disk (HDF5, one group per run) and CSV export.
+- :mod:`~bikeid.dataset.importers`: a user's own logs (CSV, any HDF5 file, a data frame)
+  -> :class:`Run`, with a column mapping, unit conversion, sign flips and checked data.
 - :mod:`~bikeid.dataset.files`: safe atomic file writing used by every output of bikeid.
 
 Nothing is imported here; import the modules.

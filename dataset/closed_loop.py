@@ -29,19 +29,25 @@ faster controller can be asked for explicitly (e.g. to study the loop at 1 kHz);
 record both periods and the estimators refuse them (``ident.signals.check_sampling``).
 
 The speed is held by the plant's ideal rear drive (``mode="held"``, the default) or
-coasts (``mode="coast"``).  A fall (|roll| above the plant's limit) ends the run early;
-the run is kept, truncated at the fall, with ``meta["fell_at"]`` [s] (None if upright).
+coasts (``mode="coast"``).  A run that ends early (``sim.integrate.STOP_CAUSES``: a fall,
+|steer| over 90 deg, or a numerical failure such as a step too coarse for the dynamics)
+is kept, truncated before the stop, with ``meta["stop"]`` = ``{cause, time, message,
+physical}`` (None if the run is complete) and ``meta["fell_at"]`` [s] set for physical
+stops only (None if upright or if the run failed numerically).  Estimators refuse such
+runs (``ident.signals.check_complete``).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from bikeid.sim.conventions import MEASURED
+from bikeid.sim.errors import UntrustworthyResult, check_memory
 from bikeid.sim.parameters import BicycleParameters
 
 from .run import Run
@@ -134,18 +140,71 @@ def simulate_run(
 ) -> Run:
     """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
 
-    p: the bicycle's parameters; controller: a ``controllers`` controller (``sample_time``,
-    ``reset()``, ``__call__(t, y)``, ``describe()``; its ``sample_time`` should be the
-    sensor period, the default, for the run to be identifiable, see the module docstring);
-    reference: roll reference [rad]
-    installed as ``controller.reference`` (None keeps the controller's own); dither:
-    steer-torque dither t -> N m added to the command (None: none); sensors: the
-    instruments (default :meth:`Sensors.default`, 100 Hz); effects: ``sim.effects``
-    objects; seed: sensor-noise seed (the dither carries its own seed); mode: ``held``
-    or ``coast`` speed; initial: initial roll/steer values in rad, rad/s (keys phi, delta,
-    phidot, deltadot; default upright); lateral_force: t -> F [N] (None: none);
-    integrator_options go to ``sim.integrate.simulate`` (``substeps``, ``fall_limit``,
-    ``method``, ``energy``).
+    The nonlinear Whipple plant (``sim.nonlinear.WhippleBicycle``) is integrated by
+    ``sim.integrate.simulate`` under the controller, sampled as described in the module
+    docstring.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle's parameters (Meijaard 2007 notation, SI units).
+    controller : controllers.base.ControllerLike
+        A ``controllers`` controller (``sample_time`` [s], ``reset()``,
+        ``__call__(t, y)`` -> T_delta [N m], ``describe()``); its ``sample_time`` should
+        be the sensor period, the default, for the run to be identifiable (module
+        docstring).  It is reset before the run.
+    speed : float
+        Forward speed [m/s], positive; held by the rear drive (``mode="held"``) or the
+        initial speed (``mode="coast"``).
+    duration : float, optional
+        Run length [s], positive (default 50).
+    reference : callable, optional
+        Roll reference t [s] -> phi_ref [rad], installed as ``controller.reference``
+        (the controller keeps it after the run); None keeps the controller's own.
+    dither : callable, optional
+        Steer-torque dither t [s] -> [N m] added to the command (positive to the right);
+        None for none.
+    sensors : Sensors, optional
+        The instruments (default :meth:`Sensors.default`, 100 Hz); their period must be a
+        whole multiple of the controller period.
+    effects : sequence, optional
+        ``sim.effects`` objects acting on the plant or its steer-torque input.
+    seed : int, optional
+        Sensor-noise seed (the dither carries its own seed).
+    mode : {"held", "coast"}, optional
+        Speed held by the ideal rear drive (default) or coasting.
+    initial : dict of str to float, optional
+        Initial values with keys ``phi``, ``delta`` [rad], ``phidot``, ``deltadot``
+        [rad/s]; default upright at rest in roll and steer.
+    lateral_force : callable, optional
+        Lateral force t [s] -> F [N] (positive to the right) on the rear frame, sampled on
+        the controller grid; None for none.
+    **integrator_options
+        Passed to ``sim.integrate.simulate`` (``substeps``, ``fall_limit``, ``method``,
+        ``energy``); ``controller``, ``dt``, ``inputs``, ``measure``, ``effects`` and
+        ``mode`` are set here and may not be passed.
+
+    Returns
+    -------
+    Run
+        Sampled at the sensor instants t_k [s] (length n, truncated at a fall):
+        ``signals`` has the measured :data:`sim.conventions.MEASURED` channels exactly as
+        the controller received them, the logged ``T_delta`` [N m] and, with a lateral
+        force, the load cell's ``F`` [N]; ``truth`` has the true MEASURED channels, the
+        applied ``T_delta`` [N m] (and ``F`` [N]), pitch ``theta`` [rad] and contact
+        points ``x``, ``y``, ``xF``, ``yF`` [m]; ``dither`` [N m] and ``reference`` [rad]
+        at t_k; ``meta`` with the speed, seed, ``fell_at`` [s] (None if upright), the
+        bicycle, the descriptions of controller, reference, dither, lateral force,
+        sensors and effects, ``sampling`` (``controller_period``, ``logging_period``,
+        ``dither_hold`` [s]) and ``plant``.
+
+    Raises
+    ------
+    ValueError
+        If ``speed`` or ``duration`` is not positive and finite, the sensors are faster
+        than the controller or their period is not a whole multiple of it, ``initial``
+        has an unknown key, an integrator option set here is passed, or the run ended
+        (fell) before its second sensor sample.
     """
     speed = float(speed)
     if not (math.isfinite(speed) and speed > 0):
@@ -163,6 +222,8 @@ def simulate_run(
     if reference is not None:
         controller.reference = reference
     controller.reset()
+    check_memory(duration / ctrl_dt + 1, 45, f"a {duration:g} s closed-loop run at "
+                 f"{1 / ctrl_dt:g} Hz", "shorten the duration")  # loop records + trajectory
     n_sensor = int(round(duration * sensors.rate)) + 1
     loop = SampledLoop(controller, sensors, seed, ctrl_dt, n_sensor, dither)
     traj = _integrate(
@@ -170,8 +231,14 @@ def simulate_run(
         integrator_options,
     )  # fmt: skip
     n = loop.n_rec
+    while n > 0 and not math.isfinite(loop.u[n - 1]):  # the sample where the controller failed
+        n -= 1
     if n < 2:
-        raise ValueError(f"the run ended after {n} sensor sample(s) (fell at {traj.fell_at} s)")
+        raise UntrustworthyResult(
+            f"the run at {speed:g} m/s ended after {n} sensor sample(s): {traj.stop_reason}; "
+            "no data to record: start closer to upright or use a controller that stabilizes "
+            "this speed"
+        )
     t = loop.t[:n].copy()  # the instants the controller was called at
     signals = {name: loop.y_meas[:n, i].copy() for i, name in enumerate(MEASURED)}
     truth = {name: loop.y_true[:n, i].copy() for i, name in enumerate(MEASURED)}
@@ -186,7 +253,7 @@ def simulate_run(
         )
     ref = controller.reference
     reference_arr = np.array([float(ref(tk)) for tk in t])
-    fell_at = None if traj.fell_at is None else float(traj.fell_at)
+    fell_at = None if traj.fell_at is None else float(traj.fell_at)  # physical stops only
     meta = {
         "source": "simulated",
         "bikeid_version": package_version(),
@@ -194,6 +261,7 @@ def simulate_run(
         "duration": duration,
         "seed": int(seed),
         "fell_at": fell_at,
+        "stop": None if traj.stop is None else traj.stop.as_dict(),
         "bicycle": {"name": getattr(p, "name", "custom"), "parameters": p.as_dict()},
         "controller": controller.describe(),
         "reference": _describe(ref),
@@ -241,10 +309,16 @@ def _integrate(
     for key in ("controller", "dt", "inputs", "measure", "effects", "mode"):
         if key in options:
             raise ValueError(f"integrator option {key!r} is set by simulate_run; do not pass it")
-    return simulate(
-        bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
-        effects=list(effects) or None, **options,
-    )  # fmt: skip
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        traj = simulate(
+            bike, x0, duration, controller=loop, dt=ctrl_dt, mode=mode, inputs=inputs,
+            effects=list(effects) or None, **options,
+        )  # fmt: skip
+    for w in caught:  # the stop's own warning is recorded in meta["stop"]; pass on the rest
+        if traj.stop is None or str(w.message) != traj.stop.message:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return traj
 
 
 def _trajectory_extras(traj, t: np.ndarray) -> dict[str, np.ndarray]:

@@ -13,6 +13,7 @@ Row indices are those of the log file (t = index * 0.01 s, :mod:`bikeid.dataset.
 from __future__ import annotations
 
 import csv
+import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -40,7 +41,19 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Segment:
-    """A free-decay window: rows start..end-1 of ``file`` (indices in file rows)."""
+    """A free-decay window: rows start..end-1 of ``file`` (indices in file rows).
+
+    Attributes
+    ----------
+    file : str
+        Log file name (no folder), e.g. ``eigen_normal_...log``.
+    speed : float
+        Treadmill speed of the log [m/s] (NaN when a detected window's run has none).
+    start : int
+        First row of the window (file row index; t = row * 0.01 s).
+    end : int
+        One past the last row (file row index).
+    """
 
     file: str
     speed: float
@@ -61,25 +74,48 @@ def read_segments(path: str | os.PathLike, available: set[str] | None = None) ->
     Returns
     -------
     list of Segment
+        One per kept row, in file order.
+
+    Raises
+    ------
+    ValueError
+        If a column is missing, a row does not parse (the message gives the file's line
+        number and the row), or a row has ``end_idx <= start_idx + 10``.
+    OSError
+        If the file cannot be read.
     """
     path = Path(path)
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        need = {"file", "speed_mps", "start_idx", "end_idx"}
-        if not reader.fieldnames or not need <= set(reader.fieldnames):
-            raise ValueError(f"{path.name}: need columns {sorted(need)}")
-        out = []
-        for i, r in enumerate(reader):
-            try:
-                seg = Segment(
-                    r["file"].strip(), float(r["speed_mps"]), int(r["start_idx"]), int(r["end_idx"])
-                )
-            except (TypeError, ValueError):
-                raise ValueError(f"{path.name}: row {i + 2} is malformed: {r}") from None
-            if seg.end <= seg.start + 10:
-                raise ValueError(f"{path.name}: row {i + 2} has end <= start + 10")
-            if available is None or seg.file in available:
-                out.append(seg)
+        try:
+            return _segments(path, reader, available)
+        except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+            raise ValueError(
+                f"{path.name}: line {reader.line_num} is not valid CSV ({exc}); restore the file"
+            ) from None
+
+
+def _segments(path: Path, reader: csv.DictReader, available: set[str] | None) -> list[Segment]:
+    need = {"file", "speed_mps", "start_idx", "end_idx"}
+    if not reader.fieldnames or not need <= set(reader.fieldnames):
+        raise ValueError(f"{path.name}: need columns {sorted(need)}")
+    out = []
+    for i, r in enumerate(reader):
+        try:
+            seg = Segment(
+                r["file"].strip(), float(r["speed_mps"]), int(r["start_idx"]), int(r["end_idx"])
+            )
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{path.name}: row {i + 2} is malformed ({str(r)[:80]}); need file, "
+                "speed_mps, start_idx, end_idx"
+            ) from None
+        if not (math.isfinite(seg.speed) and seg.speed > 0):
+            raise ValueError(f"{path.name}: row {i + 2}: speed_mps {seg.speed} must be > 0")
+        if seg.end <= seg.start + 10:
+            raise ValueError(f"{path.name}: row {i + 2} has end <= start + 10")
+        if available is None or seg.file in available:
+            out.append(seg)
     return out
 
 
@@ -112,11 +148,18 @@ def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
     run : Run
         An eigen log.
     length : float, optional
-        Window length [s].
+        Window length [s] (default :data:`DECAY_LENGTH` = 1 s).
 
     Returns
     -------
     list of Segment
+        The clean decays in time order, rows in file row indices, ``speed`` the run's
+        treadmill speed [m/s] (NaN if the run has none).
+
+    Raises
+    ------
+    ValueError
+        If ``length`` is shorter than 0.2 s (20 samples).
     """
     pr = np.asarray(run.signals["phidot"], dtype=float)
     first = int(run.meta.get("first_index", 0))
@@ -172,6 +215,14 @@ def iter_decays(
     Yields
     ------
     (Run, list of Segment)
+        Each eigen log (:func:`bikeid.dataset.sbw_logs.load_log`) with its non-empty
+        list of windows; logs without a window are skipped.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``source``, or a malformed ``segments.csv``
+        (:func:`read_segments`).
     """
     if source not in ("listed", "detected"):
         raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
@@ -208,7 +259,13 @@ def load_decays(
     Returns
     -------
     list of Window
-        Raises ValueError when no window is left, naming the speeds the data has.
+        The free-decay windows (:func:`bikeid.dataset.windows.decay_windows`).
+
+    Raises
+    ------
+    ValueError
+        When the data has no free-decay window at all, or none is left after the speed
+        selection (the message names the speeds the data has).
     """
     root = data_dir(data)
     out = []

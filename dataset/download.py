@@ -78,19 +78,20 @@ def fetch(
     Each file is fetched from ``url_pattern`` (upstream raw GitHub at the pinned
     commit), gzip-compressed and written atomically (:mod:`bikeid.dataset.files`).  The SHA-256
     of the upstream bytes is recorded in ``checksums.json`` on first download and
-    checked on every later one (a mismatch raises ValueError and writes nothing).
+    checked on every later one (a mismatch raises ValueError and writes nothing for that
+    file; files fetched before it in the same call stay written).
     ``segments.csv`` is not an upstream file (it was transcribed from the source's
     analysis script) and is not fetched: in a fetched folder the decay windows are
-    detected (:func:`detect_decays`).  Returns {local path: sha256}.
+    detected (:func:`bikeid.dataset.decays.detect_decays`).  Returns {local path: sha256}.
 
     Parameters
     ----------
     dest : str or path-like
         Folder to create ``tudelft-sbw/`` in.
     commit : str, optional
-        Upstream commit.
+        Upstream commit (default :data:`UPSTREAM_COMMIT`).
     opener : callable, optional
-        url -> bytes (default: HTTP download).
+        url -> bytes (default: HTTP download with a 60 s timeout).
     url_pattern : str, optional
         With ``{repo}``, ``{commit}``, ``{path}``.
     files : dict of str to str, optional
@@ -100,6 +101,13 @@ def fetch(
     -------
     dict of str to str
         Local path -> SHA-256 of the upstream bytes.
+
+    Raises
+    ------
+    ValueError
+        On a checksum mismatch with ``checksums.json`` (the message names the file and
+        when to delete the record), or when a download fails (the message gives the URL
+        and the ``--data`` / ``BIKEID_DATA`` alternative).
     """
     opener = opener or _urlopen
     files = PINNED if files is None else files

@@ -53,6 +53,7 @@ import numpy as np
 
 from bikeid.controllers.base import DEFAULT_SAMPLE_TIME, Controller, LinearLaw
 from bikeid.controllers.pid import PID
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import lateral_force_vector, state_matrices, yaw_rate
 from bikeid.sim.parameters import BicycleParameters
 from bikeid.sim.sampling import zoh
@@ -289,7 +290,9 @@ def simulate(
     lateral_force : float
         Amplitude [N] of a uniform lateral force F (positive right, logged).
     lateral_force_point : (float, float)
-        (x_F, z_F) [m] of the force on the rear frame (``sim.linear.lateral_force_vector``).
+        (x_F, z_F) [m] of the force on the rear frame in benchmark axes (x forward from
+        the rear contact, z down, so the default acts 1 m above the ground;
+        ``sim.linear.lateral_force_vector``).
     angle_noise, rate_noise : float
         Standard deviations of white measurement noise on phi, delta, psi [rad] and
         phidot, deltadot, psidot [rad/s]; the controller sees it.
@@ -427,7 +430,7 @@ def simulate(
             psi_noise, yaw_noise, 1.0,
         )  # fmt: skip
     if not np.all(np.isfinite(X)) or np.abs(X[:, :2]).max() > 1.0:
-        raise ValueError(
+        raise UntrustworthyResult(
             f"the linear loop left the small-angle range (max |angle| "
             f"{np.nanmax(np.abs(X[:, :2])):.3g} rad) at v={speed} m/s; reduce dither, noise or "
             "speed variation, or check that the controller stabilizes this bicycle"
@@ -492,5 +495,11 @@ def sweep(p: BicycleParameters, speeds: Sequence[float], seed: int = 0, **kwargs
     Returns
     -------
     list of Run
+        One run per speed, in the order of ``speeds``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`simulate`, for the first run that fails.
     """
     return [simulate(p, float(v), seed=seed + i, **kwargs) for i, v in enumerate(speeds)]

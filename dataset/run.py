@@ -15,7 +15,14 @@ import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED, NOMINAL_SPEED, PLAUSIBLE, UNITS
 
-__all__ = ["CONSTANT_CHECKED", "SPEED_TOLERANCE", "Run", "check_finite", "check_plausible"]
+__all__ = [
+    "CONSTANT_CHECKED",
+    "SPEED_TOLERANCE",
+    "Run",
+    "check_finite",
+    "check_plausible",
+    "run_stop",
+]
 
 REQUIRED = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
 
@@ -60,7 +67,8 @@ class Run:
     meta : dict
         JSON-serializable metadata: bicycle parameters, controller and gains,
         effects, noise, seed, speed, source ("simulated" or "measured"),
-        ``fell_at`` [s] if the bicycle fell, package version, ...
+        ``fell_at`` [s] if the bicycle fell, ``stop`` (why a simulated run ended
+        early, see :func:`run_stop`), package version, ...
 
     Raises
     ------
@@ -217,13 +225,14 @@ class Run:
         )
 
 
-def _where(i: int, rows, t) -> str:
-    """'row R (t = ... s)' when file rows are known, else 'sample i (t = ... s)'."""
-    if rows is not None:
-        return f"row {int(rows[i])}" + ("" if t is None else f" (t = {float(t[i]):.3f} s)")
-    if t is not None:
-        return f"sample {i} (t = {float(t[i]):.3f} s)"
-    return f"sample {i}"
+def _where(i: int, rows) -> str:
+    """'row R' when file rows are known, else 'sample i'."""
+    return f"row {int(rows[i])}" if rows is not None else f"sample {i}"
+
+
+def _at(i: int, t) -> str:
+    """' at t = ... s' when the time base is known."""
+    return "" if t is None else f" at t = {float(t[i]):.3f} s"
 
 
 def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -> None:
@@ -245,17 +254,16 @@ def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -
     Raises
     ------
     ValueError
-        ``<source>: column '<column>', row R: non-finite value nan (k such samples);
-        ...`` at the first non-finite sample.
+        ``<source>: row R, column '<column>': non-finite value nan at t = ... s (k such
+        samples); ...`` at the first non-finite sample.
     """
     arr = np.asarray(arr, dtype=float)
     bad = ~np.isfinite(arr)
     if bad.any():
         i = int(np.argmax(bad))
         raise ValueError(
-            f"{source}: column {column!r}, {_where(i, rows, t)}: non-finite value "
-            f"{float(arr[i])!r} "
-            f"({int(bad.sum())} such samples); clean or cut the data"
+            f"{source}: {_where(i, rows)}, column {column!r}: non-finite value "
+            f"{float(arr[i])!r}{_at(i, t)} ({int(bad.sum())} such samples); clean or cut the data"
         )
 
 
@@ -326,8 +334,8 @@ def check_plausible(
                 label = f"{col!r}" if col == prefix + name else f"{col!r} ({name})"
                 unit = UNITS.get(key, "")
                 raise ValueError(
-                    f"{source}: column {label}, {_where(i, rows, run.t)}: value {arr[i]:.6g} "
-                    f"{unit} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
+                    f"{source}: {_where(i, rows)}, column {label}: value {arr[i]:.6g} {unit}"
+                    f"{_at(i, run.t)} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
                     f"(sim.conventions.PLAUSIBLE; {int(bad.sum())} such samples); "
                     "the data is corrupt: fix or cut these rows"
                 )
@@ -367,3 +375,33 @@ def check_plausible(
                 "dataset.run.SPEED_TOLERANCE); the metadata belongs to another run or is wrong"
             )
     return run
+
+
+def run_stop(run: Run) -> dict[str, Any] | None:
+    """Why a run ended early, from its metadata, or None if it is complete.
+
+    Parameters
+    ----------
+    run : Run
+        Any run.  Simulated runs record ``meta["stop"]`` (``dataset.closed_loop``);
+        runs written before that field existed record only ``meta["fell_at"]``, read
+        here as a ``roll_limit`` stop.
+
+    Returns
+    -------
+    dict or None
+        ``{"cause", "time" [s], "message", "physical"}`` (``sim.integrate.STOP_CAUSES``),
+        or None for a complete run (and for measured data).
+    """
+    stop = run.meta.get("stop")
+    if stop:
+        return dict(stop)
+    fell = run.meta.get("fell_at")
+    if fell is not None:
+        return {
+            "cause": "roll_limit",
+            "time": float(fell),
+            "message": f"fell at t={float(fell):.3f} s",
+            "physical": True,
+        }
+    return None

@@ -106,12 +106,13 @@ def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
     Parameters
     ----------
     sensor : float or ndarray
-        Sensor speed [m/s].
+        Rear-wheel sensor speed [m/s] (the logs' ``speed`` column).
 
     Returns
     -------
     float or ndarray
-        [m/s].
+        Treadmill speed (sensor - b) / a [m/s] with (a, b) = :data:`SPEED_CALIBRATION`,
+        same shape as ``sensor``.
     """
     a, b = SPEED_CALIBRATION
     return (np.asarray(sensor) - b) / a
@@ -125,10 +126,18 @@ def data_dir(path: str | os.PathLike | None = None) -> Path:
     Parameters
     ----------
     path : str or path-like, optional
+        The ``tudelft-sbw`` folder or its parent; None (default) uses ``$BIKEID_DATA``.
 
     Returns
     -------
     pathlib.Path
+        The folder holding the logs (``*/*.log*`` or ``*.log*``).
+
+    Raises
+    ------
+    ValueError
+        If neither ``path`` nor ``$BIKEID_DATA`` is given, or the folder holds no logs
+        (the message says how to get them).
     """
     src = path if path is not None else os.environ.get("BIKEID_DATA")
     if not src:
@@ -149,6 +158,7 @@ def find_logs(root: str | os.PathLike, kind: str | None = None) -> list[Path]:
     Parameters
     ----------
     root : str or path-like
+        Folder searched recursively.
     kind : str, optional
         File-name prefix (``"eigen"``, ``"bode"``).
 
@@ -182,7 +192,8 @@ def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray
 
     Parameters
     ----------
-    x : ndarray
+    x : (n,) ndarray
+        Signal (any unit; n < 5 is returned unchanged).
     floor : float
         Least deviation counted as a spike [unit of x].
     k : float, optional
@@ -212,6 +223,11 @@ def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray
     return out, nbad
 
 
+def _clip(text: str, n: int = 40) -> str:
+    """``repr(text)`` for a message, at most about ``n`` characters."""
+    return repr(text) if len(text) <= n else f"{text[:n]!r}... ({len(text):,} characters)"
+
+
 def load_log(path: str | os.PathLike) -> Run:
     """Read one steer-by-wire log into a :class:`dataset.run.Run` (see module docstring).
 
@@ -221,11 +237,28 @@ def load_log(path: str | os.PathLike) -> Run:
     Parameters
     ----------
     path : str or path-like
+        A ``*.log`` or ``*.log.gz`` file.
 
     Returns
     -------
     Run
-        Signals in SI units (module docstring) and ``meta``.
+        ``t`` = row index * 0.01 s [s] (leading rows with an empty ``sil_command`` cut);
+        ``signals`` phi, delta [rad], phidot, deltadot [rad/s], v (sensor speed) [m/s],
+        T_delta (``command_fork``) and T_ext [N m], plus the extras of the module
+        docstring; ``meta`` with ``file``, ``speed`` (treadmill) and ``speed_sensor``
+        [m/s], ``first_index``, ``ramp_end_index``, ``settled_end_index`` (file rows),
+        ``spikes`` (count per despiked column) and ``dt`` [s].
+
+    Raises
+    ------
+    ValueError
+        If the file does not exist, is empty, corrupt or truncated, lacks a column of
+        :data:`COLUMNS`, has fewer than 10 data rows, a row with the wrong number of
+        fields or a non-numeric or non-finite value (the message names the file, and the
+        row and column where there is one), ``sil_command`` is empty in every row, or the
+        values are not physical (:func:`bikeid.dataset.run.check_plausible`: a value beyond
+        ``sim.conventions.PLAUSIBLE`` or a constant state or command column, named by
+        file row and column).
     """
     path = Path(path)
     if not path.is_file():
@@ -234,17 +267,22 @@ def load_log(path: str | os.PathLike) -> Run:
     reader = csv.reader(io.StringIO(text))
     try:
         header = [h.strip() for h in next(reader)]
+        rows, lines = [], []  # data rows and their line numbers in the file (header: line 1)
+        for r in reader:
+            if r and any(f.strip() for f in r):
+                rows.append(r)
+                lines.append(reader.line_num)
     except StopIteration:
         raise ValueError(f"{path.name}: empty file, expected a CSV header") from None
+    except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+        raise ValueError(
+            f"{path.name}: line {reader.line_num} is not CSV a log can hold ({exc}); the file "
+            "is corrupt or not a steer-by-wire log: fetch it again"
+        ) from None
     missing = [c for c in COLUMNS if c not in header]
     if missing:
         raise ValueError(f"{path.name}: missing columns {missing}; expected {list(COLUMNS)}")
     col = {c: header.index(c) for c in COLUMNS}
-    rows, lines = [], []  # data rows and their line numbers in the file (header: line 1)
-    for r in reader:
-        if r and any(f.strip() for f in r):
-            rows.append(r)
-            lines.append(reader.line_num)
     if len(rows) < 10:
         raise ValueError(f"{path.name}: only {len(rows)} data rows; need at least 10")
     # leading rows with an empty sil_command: controller not yet running
@@ -268,7 +306,7 @@ def load_log(path: str | os.PathLike) -> Run:
             except ValueError:
                 raise ValueError(
                     f"{path.name}: row {lines[first + i]}, column {c!r}: non-numeric value "
-                    f"{r[col[c]]!r}"
+                    f"{_clip(r[col[c]])}"
                 ) from None
     lines_kept = np.asarray(lines[first:])
     n = data.shape[0]

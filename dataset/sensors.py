@@ -65,6 +65,26 @@ class Channel:
 
     std: white-noise standard deviation (>= 0); bias: constant offset; scale: gain (> 0,
     1 = exact); step: quantization step (>= 0, 0 = no quantization).
+
+    measured = Q(scale * true + bias + std * w), w ~ N(0, 1) (module docstring).
+
+    Parameters
+    ----------
+    std : float, optional
+        White-noise standard deviation, >= 0 [channel unit, e.g. rad, rad/s, m/s, N m]
+        (default 0).
+    bias : float, optional
+        Constant offset [channel unit] (default 0).
+    scale : float, optional
+        Gain, > 0 [-] (default 1, exact); a sign flip is refused.
+    step : float, optional
+        Quantization step, >= 0 [channel unit] (default 0, none).
+
+    Raises
+    ------
+    ValueError
+        If a field is not a finite number, ``std`` or ``step`` is negative, or ``scale``
+        is not positive.
     """
 
     std: float = 0.0
@@ -86,10 +106,25 @@ class Channel:
 
     @property
     def ideal(self) -> bool:
+        """True if the channel reports the true value exactly (no noise, bias, gain, step)."""
         return self.std == 0 and self.bias == 0 and self.scale == 1 and self.step == 0
 
     def apply(self, x: np.ndarray, w: np.ndarray | float = 0.0) -> np.ndarray:
-        """Measured value for true (filtered) value ``x`` and standard-normal draws ``w``."""
+        """Measured value for true (filtered) value ``x`` and standard-normal draws ``w``.
+
+        Parameters
+        ----------
+        x : ndarray or float
+            True (anti-alias filtered) values [channel unit], any shape.
+        w : ndarray or float, optional
+            Standard-normal draws [-], broadcastable to ``x`` (default 0, no noise).
+
+        Returns
+        -------
+        ndarray
+            Q(scale * x + (w * std + bias)) [channel unit], the shape of ``x`` and ``w``
+            broadcast.
+        """
         # Same operation order as SensorChain, so both give bit-identical values.
         y = self.scale * np.asarray(x, dtype=float) + (np.asarray(w) * self.std + self.bias)
         if self.step > 0:
@@ -99,7 +134,21 @@ class Channel:
 
 @dataclass(frozen=True)
 class AntiAlias:
-    """Butterworth low-pass of ``order`` 1 or 2 with -3 dB ``cutoff`` [Hz]."""
+    """Butterworth low-pass of ``order`` 1 or 2 with -3 dB ``cutoff`` [Hz].
+
+    Parameters
+    ----------
+    cutoff : float
+        -3 dB frequency [Hz], positive and finite; must lie below the Nyquist frequency
+        of the grid it runs on.
+    order : {1, 2}, optional
+        Filter order (default 2).
+
+    Raises
+    ------
+    ValueError
+        If ``cutoff`` is not a positive finite number or ``order`` is not 1 or 2.
+    """
 
     cutoff: float
     order: int = 2
@@ -112,7 +161,23 @@ class AntiAlias:
             raise ValueError(f"anti-alias order must be 1 or 2, got {self.order!r}")
 
     def sos(self, fs: float) -> np.ndarray:
-        """Second-order sections for sample rate ``fs`` [Hz] (bilinear, pre-warped)."""
+        """Second-order sections for sample rate ``fs`` [Hz] (bilinear, pre-warped).
+
+        Parameters
+        ----------
+        fs : float
+            Sample rate of the grid the filter runs on [Hz].
+
+        Returns
+        -------
+        (1, 6) ndarray
+            ``scipy.signal`` second-order sections [b0, b1, b2, a0, a1, a2].
+
+        Raises
+        ------
+        ValueError
+            If ``cutoff`` is not below ``fs / 2``.
+        """
         from scipy.signal import butter
 
         if self.cutoff >= fs / 2:
@@ -123,7 +188,25 @@ class AntiAlias:
         return butter(self.order, self.cutoff, btype="low", fs=fs, output="sos")
 
     def filter(self, x: np.ndarray, fs: float) -> np.ndarray:
-        """Filter ``x`` sampled at ``fs`` [Hz], starting in steady state at ``x[0]``."""
+        """Filter ``x`` sampled at ``fs`` [Hz], starting in steady state at ``x[0]``.
+
+        Parameters
+        ----------
+        x : (n,) ndarray
+            Uniformly sampled signal [any unit], n >= 1.
+        fs : float
+            Its sample rate [Hz].
+
+        Returns
+        -------
+        (n,) ndarray
+            The filtered signal [unit of ``x``].
+
+        Raises
+        ------
+        ValueError
+            If ``cutoff`` is not below ``fs / 2``.
+        """
         from scipy.signal import sosfilt, sosfilt_zi
 
         sos = self.sos(fs)
@@ -133,7 +216,30 @@ class AntiAlias:
 
 
 def channel_noise(seed: int, name: str, n: int) -> np.ndarray:
-    """``n`` standard-normal draws for channel ``name`` of a run seeded ``seed``."""
+    """``n`` standard-normal draws for channel ``name`` of a run seeded ``seed``.
+
+    Drawn from ``SeedSequence(seed, spawn_key=(crc32(name),))``, so the draws of one
+    channel do not depend on the other channels, and the first k draws not on ``n``.
+
+    Parameters
+    ----------
+    seed : int
+        Run seed, a non-negative integer.
+    name : str
+        Channel name (e.g. ``"phi"``, ``"T_delta"``).
+    n : int
+        Number of draws.
+
+    Returns
+    -------
+    (n,) ndarray
+        Standard-normal draws [-].
+
+    Raises
+    ------
+    ValueError
+        If ``seed`` is not a non-negative integer.
+    """
     if int(seed) != seed or seed < 0:
         raise ValueError(f"sensor seed must be a non-negative integer, got {seed!r}")
     ss = np.random.SeedSequence(int(seed), spawn_key=(zlib.crc32(name.encode()),))
@@ -145,6 +251,24 @@ class Sensors:
     """The instruments of a run: per-channel models, sample rate [Hz], anti-alias filter.
 
     Channels not listed are ideal (reported exactly).
+
+    Parameters
+    ----------
+    channels : mapping of str to Channel or dict, optional
+        Instrument model per channel name (:data:`sim.conventions.MEASURED` or
+        ``INPUTS`` names); a dict is converted with ``Channel(**d)``.
+    rate : float, optional
+        Sample rate [Hz], positive (default 100).
+    antialias : AntiAlias or dict or None, optional
+        Anti-alias filter applied to every channel before sampling, with cutoff below
+        ``rate / 2``; None (default) for none.
+
+    Raises
+    ------
+    ValueError
+        If ``rate`` is not positive and finite, a channel name is empty, not a string or
+        contains ``/``, a channel is not a Channel or dict, or the anti-alias cutoff is
+        not below the sensor Nyquist frequency.
     """
 
     channels: Mapping[str, Channel] = field(default_factory=dict)
@@ -180,12 +304,37 @@ class Sensors:
     # -- constructors ---------------------------------------------------------------
     @classmethod
     def ideal(cls, rate: float = 100.0) -> Sensors:
-        """Exact instruments sampled at ``rate`` [Hz]."""
+        """Exact instruments sampled at ``rate`` [Hz].
+
+        Parameters
+        ----------
+        rate : float, optional
+            Sample rate [Hz] (default 100).
+
+        Returns
+        -------
+        Sensors
+            No channel models (every channel ideal), no filter.
+        """
         return cls({}, rate)
 
     @classmethod
     def default(cls, rate: float = 100.0, antialias: AntiAlias | None = None) -> Sensors:
-        """The stated default noise levels (see the module docstring)."""
+        """The stated default noise levels (see the module docstring).
+
+        Parameters
+        ----------
+        rate : float, optional
+            Sample rate [Hz] (default 100).
+        antialias : AntiAlias or None, optional
+            Anti-alias filter (default none).
+
+        Returns
+        -------
+        Sensors
+            White noise of std 1e-3 rad on phi, delta, psi, 1e-2 rad/s on phidot,
+            deltadot, psidot, thetaRdot and 1e-2 m/s on v; inputs exact.
+        """
         chans = {name: Channel(std=1e-3) for name in ANGLES}
         chans.update({name: Channel(std=1e-2) for name in RATES})
         chans["v"] = Channel(std=1e-2)
@@ -193,7 +342,25 @@ class Sensors:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Sensors:
-        """Inverse of :meth:`describe`."""
+        """Inverse of :meth:`describe`.
+
+        Parameters
+        ----------
+        d : mapping
+            With optional keys ``rate`` [Hz], ``channels`` (name -> dict of ``std``,
+            ``bias``, ``scale``, ``step``) and ``antialias`` (dict of ``cutoff`` [Hz],
+            ``order``, or None).
+
+        Returns
+        -------
+        Sensors
+            The instruments described.
+
+        Raises
+        ------
+        ValueError
+            For an unknown top-level key or an invalid value (as the constructors).
+        """
         unknown = set(d) - {"rate", "channels", "antialias"}
         if unknown:
             raise ValueError(f"unknown sensor settings {sorted(unknown)}")
@@ -205,7 +372,14 @@ class Sensors:
         )
 
     def describe(self) -> dict[str, Any]:
-        """JSON-serializable description (goes into run metadata)."""
+        """JSON-serializable description (goes into run metadata).
+
+        Returns
+        -------
+        dict
+            ``rate`` [Hz], ``channels`` (name -> ``std``, ``bias``, ``scale``, ``step`` in
+            the channel's units) and ``antialias`` (``cutoff`` [Hz], ``order``) or None.
+        """
         return {
             "rate": self.rate,
             "channels": {
@@ -253,10 +427,39 @@ class Sensors:
         return 1.0 / self.rate
 
     def channel(self, name: str) -> Channel:
+        """The instrument model of channel ``name``.
+
+        Parameters
+        ----------
+        name : str
+            Channel name.
+
+        Returns
+        -------
+        Channel
+            Its model, or an ideal :class:`Channel` if none is listed.
+        """
         return self.channels.get(name, _IDEAL)
 
     def decimation(self, fine_dt: float) -> int:
-        """Fine-grid steps per sensor sample; ValueError unless an integer."""
+        """Fine-grid steps per sensor sample; ValueError unless an integer.
+
+        Parameters
+        ----------
+        fine_dt : float
+            Fine (simulation or controller) step [s].
+
+        Returns
+        -------
+        int
+            m = sensor period / ``fine_dt``, >= 1.
+
+        Raises
+        ------
+        ValueError
+            If the sensor period is not a whole multiple of ``fine_dt`` (to 1e-9
+            relative).
+        """
         m = self.dt / fine_dt
         k = round(m)
         if k < 1 or abs(m - k) > 1e-9 * max(1.0, m):
@@ -274,6 +477,32 @@ class Sensors:
         Returns (t_s, measured, truth_s) at the sensor rate: the time base (every m-th fine
         sample, m = fine steps per sensor period, starting at t[0]), the measured signals
         (filtered, sampled, then corrupted) and the true signals sampled without filtering.
+
+        Parameters
+        ----------
+        t : (N,) ndarray
+            Uniform fine time grid [s], N >= 2.
+        truth : mapping of str to (N,) ndarray
+            True signals on ``t`` by channel name [SI units of the channel].
+        seed : int
+            Noise seed (:func:`channel_noise`).
+
+        Returns
+        -------
+        t_s : (n,) ndarray
+            Sensor instants [s], every m-th entry of ``t``.
+        measured : dict of str to (n,) ndarray
+            Measured signals [channel units].
+        truth_s : dict of str to (n,) ndarray
+            True signals at ``t_s``, unfiltered.
+
+        Raises
+        ------
+        ValueError
+            If ``t`` is not a uniform 1-D grid of at least 2 samples, the sensor period is
+            not a whole multiple of its step, a signal's shape differs from ``t``'s, the
+            anti-alias cutoff is not below the grid's Nyquist frequency, or ``seed`` is
+            not a non-negative integer.
         """
         t = np.asarray(t, dtype=float)
         if t.ndim != 1 or t.size < 2:
@@ -301,7 +530,31 @@ class Sensors:
     def chain(
         self, seed: int, n: int, names: tuple[str, ...] = MEASURED, fine_dt: float | None = None
     ) -> SensorChain:
-        """A per-sample corrupter for use inside a control loop (see :class:`SensorChain`)."""
+        """A per-sample corrupter for use inside a control loop (see :class:`SensorChain`).
+
+        Parameters
+        ----------
+        seed : int
+            Noise seed (:func:`channel_noise`).
+        n : int
+            Number of sensor samples the chain can produce.
+        names : tuple of str, optional
+            Channel order of the vectors (default :data:`sim.conventions.MEASURED`).
+        fine_dt : float, optional
+            Step [s] at which :meth:`SensorChain.filter` is called; required with an
+            anti-alias filter.
+
+        Returns
+        -------
+        SensorChain
+            The chain.
+
+        Raises
+        ------
+        ValueError
+            With an anti-alias filter: if ``fine_dt`` is missing, does not divide the
+            sensor period, or puts the cutoff above its Nyquist frequency.
+        """
         return SensorChain(self, seed, n, names, fine_dt)
 
 
@@ -319,6 +572,39 @@ class SensorChain:
     result to ``chain(k, ...)`` at the sensor instants; the filter is the same
     Butterworth as in :meth:`Sensors.measure`, run sample by sample (direct form II
     transposed), so it agrees with it to round-off, not bit for bit.
+
+    Parameters
+    ----------
+    sensors : Sensors
+        The instruments.
+    seed : int
+        Noise seed (:func:`channel_noise`), a non-negative integer.
+    n : int
+        Number of sensor samples k = 0..n-1 whose noise is drawn up front.
+    names : tuple of str, optional
+        Channel order of the vectors (default :data:`sim.conventions.MEASURED`).
+    fine_dt : float, optional
+        Fine step [s] of the :meth:`filter` calls; required with an anti-alias filter.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Channel order.
+    scale, bias, step : (m,) ndarray
+        Per-channel gain [-], offset and quantization step [channel units].
+    offset : (n, m) ndarray
+        bias + std * w for every sensor sample [channel units].
+    quantized : bool
+        True if any channel quantizes.
+    filtered : bool
+        True if an anti-alias filter runs.
+
+    Raises
+    ------
+    ValueError
+        With an anti-alias filter: if ``fine_dt`` is missing, does not divide the sensor
+        period, or puts the cutoff above its Nyquist frequency; or, when a channel is
+        noisy, if ``seed`` is not a non-negative integer.
     """
 
     def __init__(
@@ -351,7 +637,20 @@ class SensorChain:
             self._z = None
 
     def filter(self, y_true: np.ndarray) -> np.ndarray:
-        """Advance the anti-alias filter by one fine step; returns the filtered vector."""
+        """Advance the anti-alias filter by one fine step; returns the filtered vector.
+
+        The first call initializes the filter in steady state at its input.
+
+        Parameters
+        ----------
+        y_true : (m,) ndarray
+            True vector at this fine step, in ``names`` order [channel units].
+
+        Returns
+        -------
+        (m,) ndarray
+            Filtered vector (``y_true`` itself when there is no filter).
+        """
         x = np.asarray(y_true, dtype=float)
         if not self.filtered:
             return x

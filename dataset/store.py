@@ -152,6 +152,32 @@ def write_runs(
 
     ``names`` are the group names (default ``run_0000``, ``run_0001``, ...); ``attrs`` are
     extra JSON-serializable file attributes (e.g. the sweep settings).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Target file; any old file there is replaced only once the new one is complete
+        (:func:`atomic_path`; a symlink or device at the target is refused).
+    runs : iterable of Run
+        The runs to store (time [s], signals in the SI units of
+        :data:`sim.conventions.UNITS`, recorded as each dataset's ``units`` attribute).
+    names : sequence of str, optional
+        One group name per run, unique, non-empty, without ``/``.
+    attrs : mapping of str to object, optional
+        Extra file attributes, each stored as JSON text; ``format``, ``format_version``
+        and ``bikeid_version`` are reserved.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If an entry of ``runs`` is not a :class:`Run`, a name is invalid or duplicated,
+        the numbers of runs and names differ, an attribute name is reserved, or ``path``
+        is not a regular file (a symlink or device; :func:`atomic_path`).
     """
     runs = list(runs)
     names = _names_for(runs, names)
@@ -172,6 +198,32 @@ def copy_runs(
 
     ``sources`` is a list of (file, run name); each source group is validated (read as a
     :class:`Run`) before it is copied byte for byte with HDF5's object copy.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Target file, written atomically (:func:`atomic_path`).
+    sources : sequence of (str or pathlib.Path, str)
+        (source run file, run name) pairs; the run keeps its name, so names must be
+        unique.
+    attrs : mapping of str to object, optional
+        Extra file attributes stored as JSON text (as in :func:`write_runs`).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If a source file does not exist.
+    KeyError
+        If a source file has no run of that name.
+    ValueError
+        If a name repeats, an attribute name is reserved, a source run fails
+        validation (:func:`read_run`), or ``path`` is not a regular file; the target is
+        then left as it was.
     """
     h5py = _h5()
     path = Path(path)
@@ -199,7 +251,8 @@ def _open(path: str | Path):
     except OSError as exc:
         raise ValueError(
             f"{path}: not a readable HDF5 file, probably truncated or corrupt "
-            f"({str(exc).splitlines()[0]}); rewrite it (a sweep rerun rebuilds it)"
+            f"({str(exc).splitlines()[0]}); if it is a sweep's output, delete or rename it "
+            "and rerun the sweep (a sweep never overwrites a file it cannot read)"
         ) from None
     try:
         fmt = f.attrs.get("format")
@@ -317,7 +370,26 @@ def _group(path, f, name: str):
 
 
 def list_runs(path: str | Path) -> list[str]:
-    """Names of the runs in ``path``, in the order they were written."""
+    """Names of the runs in ``path``, in the order they were written.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A run file written by :func:`write_runs` or :func:`copy_runs`.
+
+    Returns
+    -------
+    list of str
+        Run group names in insertion order.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not a readable ``bikeid-runs`` file of a supported version, or is
+        corrupt or malformed (the message names the file, the run group and the problem).
+    """
     with _open(path) as f:
         try:
             return list(f["runs"].keys())
@@ -326,7 +398,27 @@ def list_runs(path: str | Path) -> list[str]:
 
 
 def file_attrs(path: str | Path) -> dict[str, Any]:
-    """The extra (JSON) file attributes given to :func:`write_runs`."""
+    """The extra (JSON) file attributes given to :func:`write_runs`.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A run file written by :func:`write_runs` or :func:`copy_runs`.
+
+    Returns
+    -------
+    dict of str to object
+        Attribute name -> decoded JSON value (``format``, ``format_version`` and
+        ``bikeid_version`` excluded).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not a readable ``bikeid-runs`` file of a supported version, or is
+        corrupt or malformed (the message names the file, the run group and the problem).
+    """
     with _open(path) as f:
         out = {}
         for key, value in f.attrs.items():
@@ -340,13 +432,60 @@ def file_attrs(path: str | Path) -> dict[str, Any]:
 
 
 def read_run(path: str | Path, name: str) -> Run:
-    """The run called ``name`` in ``path``, validated."""
+    """The run called ``name`` in ``path``, validated.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A run file written by :func:`write_runs` or :func:`copy_runs`.
+    name : str
+        Run group name (:func:`list_runs`).
+
+    Returns
+    -------
+    Run
+        Time [s], signals and truth in SI units, optional dither [N m] and reference
+        [rad], and the metadata.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not a readable ``bikeid-runs`` file of a supported version, or is
+        corrupt or malformed (the message names the file, the run group and the problem).
+    KeyError
+        If the file has no run called ``name``.
+    """
     with _open(path) as f:
         return _read_group(path, _group(path, f, name), name)
 
 
 def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]:
-    """All runs in ``path`` (or those in ``names``), in file order, each validated."""
+    """All runs in ``path`` (or those in ``names``), in file order, each validated.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A run file written by :func:`write_runs` or :func:`copy_runs`.
+    names : sequence of str, optional
+        Runs to read, in this order; default all, in file order.
+
+    Returns
+    -------
+    list of Run
+        As :func:`read_run`, one per name.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not a readable ``bikeid-runs`` file of a supported version, or is
+        corrupt or malformed (the message names the file, the run group and the problem).
+    KeyError
+        If a name is not in the file.
+    """
     with _open(path) as f:
         if names is None:
             names = list_runs(path)
@@ -377,6 +516,24 @@ def export_csv(run: Run, path: str | Path) -> Path:
     columns, dither, reference); then one row per sample with 17 significant digits, which
     round-trips float64 exactly.  Read back with ``numpy.loadtxt(path, delimiter=",",
     skiprows=2)`` or ``pandas.read_csv(path, comment="#")``.
+
+    Parameters
+    ----------
+    run : Run
+        The run to export.
+    path : str or pathlib.Path
+        Target CSV file, written atomically (:func:`atomic_path`; an old file is replaced
+        only once the new one is complete, a symlink or device is refused).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If ``path`` is not a regular file (a symlink or device; :func:`atomic_path`).
     """
     cols = _columns(run)
     header = ",".join(f"{name} [{units}]" if units else name for name, _, units in cols)

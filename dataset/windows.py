@@ -30,6 +30,36 @@ class Window:
     v_sensor, T_ext (external steer torque relayed to the motor), T_phi (roll torque,
     simulation only).  ``hist`` holds the logged steer commands before the window
     start (oldest first) for the delay buffer.  ``speed`` is the treadmill speed [m/s].
+
+    Attributes
+    ----------
+    file : str
+        Log file name.
+    speed : float
+        Treadmill speed [m/s].
+    start : int
+        File row index of the first sample.
+    phi, delta : (n,) ndarray
+        Measured roll and steer angles [rad] (positive to the right).
+    phidot, deltadot : (n,) ndarray
+        Measured roll and steer rates [rad/s].
+    v_sensor : (n,) ndarray
+        Speed from the bicycle's own sensor [m/s].
+    T_ext : (n,) ndarray
+        External steer torque relayed to the motor [N m] (zero if the log has none).
+    hist : (m,) ndarray
+        Logged steer commands T_delta [N m] before ``start``, oldest first (m = 20 from
+        :func:`decay_windows` and :func:`bode_window`).
+    kind : str
+        ``"decay"`` or ``"bode"``.
+    freq : float or None
+        Excitation frequency of a Bode window [Hz]; None for a decay.
+    T_phi : (n,) ndarray or None
+        Roll torque [N m] (simulation only; None for measured data).
+    meta : dict
+        Free-form metadata.
+    correction : dict or None
+        Nonlinear minus linear nominal outputs (``ident.experiment_model``), or None.
     """
 
     file: str
@@ -142,10 +172,11 @@ def decay_windows(run: Run, segments) -> list[Window]:
     Raises
     ------
     ValueError
-        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`), or a
+        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`); a
         window starts before the speed settled (``meta["ramp_end_index"]``: inside the
         start-up ramp) or ends after it stopped being settled (``meta["settled_end_index"]``),
-        naming the file and the window's rows.
+        naming the file and the window's rows; or a segment's rows fall outside the log or
+        span fewer than 10 samples.
     """
     _check_run(run)
     segments = list(segments)
@@ -182,13 +213,15 @@ def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> W
     Returns
     -------
     Window
-        ``kind="bode"``.
+        ``kind="bode"``, rows from the end of the speed ramp + 100 (1 s) to the end of the
+        settled plateau or ``max_len`` s later, whichever is first.
 
     Raises
     ------
     ValueError
-        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`) or the
-        frequency cannot be read from the file name.
+        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`), ``freq``
+        is None and the file name has no ``_<f>Hz``, or the window rows fall outside the log
+        or span fewer than 10 samples.
     """
     _check_run(run)
     first = int(run.meta.get("first_index", 0))

@@ -24,7 +24,8 @@ Modules:
   Figs. 2-4 analogues); :mod:`~bikeid.experiments.reproduce_report` renders the Markdown
   report.
 - :mod:`~bikeid.experiments.limit_cycles`: Chen & Dao Figs. 4-5, uncontrolled coasting at
-  3.5 m/s and whether the motion is periodic.
+  3.5 m/s and whether the motion is periodic; :mod:`~bikeid.experiments.floquet` converges
+  a periodic orbit on the Poincare map and computes its Floquet multipliers.
 - :mod:`~bikeid.experiments.effect_trials`: randomized undeclared-effect trials on the
   nonlinear plant (``bikeid measured trials``).
 - :mod:`~bikeid.experiments.measured_study`: the measured-data pipeline as a library

@@ -7,7 +7,7 @@ rates, 1e-2 m/s on speed, logged torque exact, 100 Hz).  The excitation follows
 :data:`DESIGN` (speed bands): small chirps and a slow dither at low speed, where a 3 deg
 roll chirp drives the steer angle to ~0.5 rad and the linearization no longer holds;
 larger chirps at high speed, where the steer angle is small.  The data are cached in
-``OUT/data/<controller>_band<i>.h5`` (resumable sweeps), so reruns only identify.
+``OUT/data/<controller>_<bicycle>_band<i>.h5`` (resumable sweeps), so reruns only identify.
 
 Methods, each compared with the true linearization (``sim.linear`` of the simulated
 bicycle at the run's speed):
@@ -25,7 +25,7 @@ bicycle at the run's speed):
   closed-loop correlation of sensor noise between regressors and torque (default), or
   tailor-made instruments (``direct_instruments="tailored"``, ``ident.tailored_iv``).
 
-Goals (issue "Identification", item 6): weave, capsize and caster eigenvalues within 2 %
+Goals: weave, capsize and caster eigenvalues within 2 %
 (0.05 1/s absolute where |lambda| < 2.5), i.e. |error| <= max(0.02 |lambda|, 0.05);
 v_w and v_c within 0.05 m/s; the right-half-plane zero of delta/T_delta within 2 %.
 """
@@ -80,7 +80,19 @@ ZERO_TOL = 0.02  # RHP zero of delta/T_delta, relative
 @dataclass(frozen=True)
 class Band:
     """Excitation for speeds below ``vmax`` [m/s]: roll chirp amplitude [deg] (0.05 ->
-    0.5 Hz over the run, ``experiments.sweep``), dither amplitude [N m] and hold [s]."""
+    0.5 Hz over the run, ``experiments.sweep``), dither amplitude [N m] and hold [s].
+
+    Attributes
+    ----------
+    vmax : float
+        Upper speed of the band [m/s] (exclusive).
+    chirp_deg : float
+        Amplitude of the roll reference chirp [deg].
+    dither : float
+        Amplitude of the uniform steer-torque dither [N m].
+    dither_hold : float
+        Hold time of each dither value [s].
+    """
 
     vmax: float
     chirp_deg: float
@@ -97,12 +109,39 @@ def _band(v: float) -> int:
 
 
 def eigen_tolerance(lam: complex) -> float:
-    """Allowed |error| [1/s]: 2 % of |lambda|, at least 0.05 1/s (|lambda| < 2.5)."""
+    """Allowed |error| [1/s]: 2 % of |lambda|, at least 0.05 1/s (|lambda| < 2.5).
+
+    Parameters
+    ----------
+    lam : complex
+        True eigenvalue [1/s].
+
+    Returns
+    -------
+    float
+        max(0.02 |lam|, 0.05) [1/s].
+    """
     return max(REL_TOL * abs(lam), ABS_TOL)
 
 
 def true_modes(p, speeds: Sequence[float]) -> dict[float, dict[str, complex]]:
-    """True weave (positive imaginary part), capsize and caster eigenvalues per speed."""
+    """True weave (positive imaginary part), capsize and caster eigenvalues per speed.
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The simulated bicycle.
+    speeds : sequence of float
+        Forward speeds [m/s].
+
+    Returns
+    -------
+    dict of float to dict of str to complex
+        Per speed (rounded to 1e-6 m/s): the eigenvalues [1/s] of the modes labelled
+        ``"weave"``, ``"capsize"`` and ``"caster"`` by
+        :func:`bikeid.sim.linear.eigenvalues_vs_speed` (a mode missing at a speed is
+        absent from its dict).
+    """
     from bikeid.sim.linear import eigenvalues_vs_speed
 
     es = eigenvalues_vs_speed(p, np.asarray(speeds, float))
@@ -121,7 +160,28 @@ def true_modes(p, speeds: Sequence[float]) -> dict[float, dict[str, complex]]:
 
 def eigen_errors(identified: Sequence[complex], truth: dict[str, complex]) -> dict[str, dict]:
     """Match the 4 identified eigenvalues to the true modes (minimum total distance,
-    weave counted as its pair) and report identified, true, |error|, tolerance, pass."""
+    weave counted as its pair) and report identified, true, |error|, tolerance, pass.
+
+    Parameters
+    ----------
+    identified : sequence of complex
+        The 4 identified eigenvalues [1/s].
+    truth : dict of str to complex
+        True ``"weave"`` (positive imaginary part), ``"capsize"`` and ``"caster"``
+        eigenvalues [1/s] (:func:`true_modes`).
+
+    Returns
+    -------
+    dict of str to dict
+        Per mode: ``identified`` and ``true`` [1/s] (weave with positive imaginary
+        part, the better of the pair), ``error`` = |identified - true| [1/s],
+        ``tolerance`` (:func:`eigen_tolerance`) [1/s] and ``pass`` (error <= tolerance).
+
+    Raises
+    ------
+    KeyError
+        If ``truth`` lacks one of the three modes.
+    """
     from bikeid.sim.linear import match_eigenvalues
 
     targets = [truth["weave"], np.conj(truth["weave"]), truth["capsize"], truth["caster"]]
@@ -149,7 +209,37 @@ def generate(
     log: Callable[[str], None] | None = None,
 ) -> list[Run]:
     """Closed-loop runs of ``controller`` at ``speeds`` by :data:`DESIGN`, cached in
-    ``out_dir/data`` (one resumable sweep file per band); returned in speed order."""
+    ``out_dir/data`` (one resumable sweep file per band); returned in speed order.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output directory; the data go to ``out_dir/data/<controller>_<bicycle>_band<i>.h5``.
+    controller : str
+        Controller name (:data:`CONTROLLERS`).
+    speeds : sequence of float
+        Forward speeds [m/s] (duplicates to 1e-6 m/s merged); each must lie below the
+        last band's ``vmax``.
+    workers : int, optional
+        Worker processes of the sweep.
+    duration : float, optional
+        Length of each run [s].
+    bicycle : str, optional
+        Bicycle parameter set by name (``sim.parameters.by_name``).
+    log : callable, optional
+        Receives progress lines.
+
+    Returns
+    -------
+    list of Run
+        One run per speed (seed 0), sorted by speed; runs where the bicycle fell carry
+        ``meta["fell_at"]`` [s].
+
+    Raises
+    ------
+    StopIteration
+        If a speed is not below any band's ``vmax``.
+    """
     from bikeid.dataset.store import read_runs
     from bikeid.experiments.sweep import SweepSpec, run_sweep
 
@@ -180,7 +270,21 @@ def direct_prepare(run: Run, cutoff: float = 3.0) -> Run:
     differences of the measured rates, angles and rates = trapezoid means, torque = the
     held value), then every sequence through the same zero-phase 2nd-order Butterworth at
     ``cutoff`` [Hz], means removed.  One linear filter on every sequence keeps the
-    (constant-speed) averaged equation exact, while sensor noise falls with the bandwidth."""
+    (constant-speed) averaged equation exact, while sensor noise falls with the bandwidth.
+
+    Parameters
+    ----------
+    run : Run
+        Raw run (held torque logged once per sample).
+    cutoff : float, optional
+        Low-pass cut-off [Hz].
+
+    Returns
+    -------
+    Run
+        :func:`bikeid.ident.signals.prepare` result: one sample shorter, with ``phiddot``
+        and ``deltaddot`` [rad/s^2].
+    """
     from bikeid.ident.signals import prepare
 
     return prepare(run, cutoff=cutoff, derivative="interval")
@@ -222,7 +326,43 @@ def identify_controller(
     direct_instruments: str = "external",
     log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """Identify one controller's runs with ``methods``; per speed and global results."""
+    """Identify one controller's runs with ``methods``; per speed and global results.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        The controller's runs, one per speed, in increasing speed (runs with
+        ``meta["fell_at"]`` are reported, not identified).
+    p : BicycleParameters
+        The simulated bicycle (truth, and fixed entries of the direct method).
+    methods : sequence of str, optional
+        Subset of :data:`METHODS`.
+    direct_cutoff : float, optional
+        Low-pass cut-off [Hz] of :func:`direct_prepare`.
+    direct_lags : int, optional
+        Lags [samples] of the external instruments (40 = 0.4 s at 100 Hz).
+    direct_instruments : {"external", "tailored"}, optional
+        Instruments of the direct method.
+    log : callable, optional
+        Receives one timing line per method.
+
+    Returns
+    -------
+    dict
+        ``fell`` (speed [m/s] -> fall time [s]) and ``methods``: per method ``rows`` (per
+        speed: ``speed``, ``modes`` from :func:`eigen_errors`, ``zero`` the RHP zero of
+        delta/T_delta [1/s] with its relative error), ``critical_speeds`` (v_w, v_c
+        [m/s] identified, true, error, pass), ``seconds``; the direct method adds
+        ``free`` and ``stderr`` (entry values, matrix units) or ``error`` (the first line
+        of the message when it raised ValueError).
+
+    Raises
+    ------
+    ValueError
+        If a PEM fit raises.  A ValueError of the direct method (an unidentifiable
+        setup, but also an unknown ``direct_instruments``) is recorded in ``error``
+        instead of raised.
+    """
     from threadpoolctl import threadpool_limits
 
     from bikeid.ident import pem
@@ -230,13 +370,37 @@ def identify_controller(
     from bikeid.sim.linear import critical_speeds
 
     log = log or (lambda msg: None)
-    ok = [r for r in runs if r.meta.get("fell_at") is None]
-    fell = {round(r.speed, 6): r.meta["fell_at"] for r in runs if r.meta.get("fell_at")}
+    from bikeid.dataset.run import run_stop
+
+    stops = [run_stop(r) for r in runs]
+    ok = [r for r, st in zip(runs, stops, strict=True) if st is None]
+    fell = {
+        round(r.speed, 6): float(st["time"])
+        for r, st in zip(runs, stops, strict=True)
+        if st is not None and st["physical"]
+    }
+    failed = {
+        round(r.speed, 6): st
+        for r, st in zip(runs, stops, strict=True)
+        if st is not None and not st["physical"]
+    }
+    if len(ok) < len(runs):
+        log(
+            f"skipping {len(runs) - len(ok)} of {len(runs)} run(s) that ended early: "
+            + "; ".join(
+                f"{round(r.speed, 6):g} m/s seed {r.meta.get('seed', '?')}: {st['cause']} at "
+                f"{st['time']:.2f} s"
+                for r, st in zip(runs, stops, strict=True)
+                if st is not None
+            )
+        )
     speeds = [round(r.speed, 6) for r in ok]
     truth = true_modes(p, speeds) if speeds else {}
     true_cs = critical_speeds(p)
     true_zero = float(np.max(steer_zeros_true(p).real))
     out: dict[str, Any] = {"fell": fell, "methods": {}}
+    if failed:  # only when present, so earlier results keep their exact form
+        out["failed"] = failed
     with threadpool_limits(1):
         for method in methods:
             t0 = time.perf_counter()
@@ -283,6 +447,18 @@ def identify_controller(
 
 
 def steer_zeros_true(p) -> np.ndarray:
+    """Zeros of delta/T_delta of the true linear model (speed-independent; taken at 5 m/s).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle.
+
+    Returns
+    -------
+    ndarray
+        Zeros [1/s] (:func:`bikeid.ident.canonical.steer_zeros`).
+    """
     from bikeid.ident.canonical import steer_zeros, theta_from_matrices
     from bikeid.sim.linear import canonical_matrices
 
@@ -311,7 +487,37 @@ def run_accuracy(
     bicycle: str = "benchmark",
     log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """The whole experiment; returns the JSON-able result (also written by the CLI)."""
+    """The whole experiment; returns the JSON-able result (also written by the CLI).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output directory (simulated data cached in ``out_dir/data``).
+    controllers : sequence of str, optional
+        Subset of :data:`CONTROLLERS`.
+    methods : sequence of str, optional
+        Subset of :data:`METHODS`.
+    speeds : sequence of float, optional
+        Forward speeds [m/s].
+    workers : int, optional
+        Worker processes of the simulation.
+    bicycle : str, optional
+        Bicycle parameter set by name.
+    log : callable, optional
+        Receives progress lines (default: stderr).
+
+    Returns
+    -------
+    dict
+        ``bicycle``, ``speeds``, ``controllers`` (per controller the
+        :func:`identify_controller` result plus ``data_seconds``), ``design``,
+        ``sensors``, ``tolerances``, ``seconds`` [s] and ``summary`` (:func:`summarize`).
+
+    Raises
+    ------
+    ValueError
+        If a controller or method is unknown or none is given.
+    """
     from bikeid.sim.parameters import by_name
 
     log = log or (lambda msg: print(msg, file=sys.stderr))
@@ -344,7 +550,20 @@ def run_accuracy(
 
 
 def summarize(result: dict[str, Any]) -> dict[str, Any]:
-    """Pass counts and worst errors per (controller, method)."""
+    """Pass counts and worst errors per (controller, method).
+
+    Parameters
+    ----------
+    result : dict
+        The result of :func:`run_accuracy` (its ``controllers``).
+
+    Returns
+    -------
+    dict
+        Keyed ``"<controller>/<method>"``: ``checks``, ``passed``, ``worst`` (per mode the
+        speed [m/s], error [1/s, relative for the zero] and error/tolerance ratio) and
+        ``seconds``.
+    """
     summary = {}
     for c, res in result["controllers"].items():
         for m, mres in res["methods"].items():
@@ -384,6 +603,9 @@ def _lines(result: dict[str, Any]) -> list[tuple[str, ...]]:
     for c, res in result["controllers"].items():
         for v, t in res["fell"].items():
             rows.append((c, "-", f"{v:g}", "run", f"fell at {t:.2f} s", "", "", "FAIL"))
+        for v, st in res.get("failed", {}).items():
+            rows.append((c, "-", f"{v:g}", "run", f"numerical failure ({st['cause']}) at "
+                         f"{st['time']:.2f} s", "", "", "FAIL"))  # fmt: skip
         for m, mres in res["methods"].items():
             if "error" in mres:
                 rows.append((c, m, "all", "-", mres["error"], "", "", "FAIL"))
@@ -409,7 +631,19 @@ HEADER = ("controller", "method", "speed", "quantity", "identified", "true", "er
 
 
 def table_text(result: dict[str, Any]) -> str:
-    """The plain-text table and summary printed by the CLI."""
+    """The plain-text table and summary printed by the CLI.
+
+    Parameters
+    ----------
+    result : dict
+        The result of :func:`run_accuracy`.
+
+    Returns
+    -------
+    str
+        Aligned columns (controller, method, speed, quantity, identified, true, error,
+        result) and the summary lines, newline-terminated.
+    """
     rows = [HEADER] + _lines(result)
     widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
     out = ["  ".join(s.ljust(w) for s, w in zip(r, widths, strict=True)) for r in rows]
@@ -432,7 +666,18 @@ def _summary_lines(result: dict[str, Any]) -> list[str]:
 
 
 def markdown(result: dict[str, Any]) -> str:
-    """The table and summary as markdown."""
+    """The table and summary as markdown.
+
+    Parameters
+    ----------
+    result : dict
+        The result of :func:`run_accuracy`.
+
+    Returns
+    -------
+    str
+        A markdown document: heading, settings, the table and the summary list.
+    """
     lines = ["# Identification accuracy on the nonlinear testbed", "",
              f"Bicycle `{result['bicycle']}`, sensors {result['sensors']}; tolerances: "
              f"eigenvalues {result['tolerances']['eigenvalue']}, v_w and v_c "

@@ -2,8 +2,9 @@
 
 Each group of subcommands lives in its own ``experiments.cmd_*`` module with a
 ``register(subparsers)`` function; handlers import heavy modules lazily so that
-``bikeid --help`` stays fast.  Bad input ends in a one-line ``bikeid: error: ...``
-(exit status 2), never a traceback.
+``bikeid --help`` stays fast.  Any failure ends in one line on stderr, never a
+traceback (unless ``--debug``), and a documented exit status (:data:`EXIT_CODES`,
+:mod:`bikeid.sim.errors`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import traceback
+
+from bikeid.sim.errors import (
+    EXIT_INPUT,
+    EXIT_INTERNAL,
+    EXIT_UNTRUSTWORTHY,
+    EXIT_USAGE,
+    UntrustworthyResult,
+)
 
 COMMAND_MODULES = (
     "bikeid.experiments.cmd_plant",  # eig, linearize, critical-speeds
@@ -21,13 +31,38 @@ COMMAND_MODULES = (
     "bikeid.experiments.cmd_measured",  # measured fit/evaluate, data fetch
 )
 
+#: The exit statuses of ``bikeid`` (also in ``bikeid --help``).
+EXIT_CODES = """\
+exit status:
+  0  success
+  1  internal failure (a bug): rerun with --debug and report the traceback
+  2  usage error: unknown option, missing or bad option value
+  3  invalid input data or parameters (a file, a field, a value out of range)
+  4  no trustworthy answer: unidentifiable or ill-conditioned fit, unstable model,
+     diverged simulation, or the run fell where that is an error
+  130 interrupted (Ctrl-C)
+Errors are one line on stderr, "bikeid COMMAND: error: MESSAGE"; --debug (anywhere on
+the command line) prints the traceback as well."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line usage error: ``bikeid sweep: error: ... (see --help)``."""
+
+    def error(self, message: str):  # noqa: D102 - argparse's hook
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="bikeid",
         description="Whipple bicycle dynamics and closed-loop identification testbed.",
+        epilog=EXIT_CODES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument(
+        "--debug", action="store_true", help="print the traceback of an error (anywhere)"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         try:
@@ -49,24 +84,99 @@ def _version() -> str:
         return "bikeid (not installed)"
 
 
+def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace):
+    """The innermost subparser the arguments selected, and its prog ("bikeid sweep")."""
+    while True:
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        name = getattr(args, subs[0].dest, None) if subs else None
+        if not name or name not in subs[0].choices:
+            return parser
+        parser = subs[0].choices[name]
+
+
+def _check_empty_values(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """``--opt=--`` hands a single-valued option an empty list, bypassing ``type=``."""
+    for action in parser._actions:
+        if action.nargs is None and action.option_strings:
+            if getattr(args, action.dest, None) == []:
+                parser.error(
+                    f"argument {'/'.join(action.option_strings)}: expected one value, got "
+                    f"'--' (write {action.option_strings[-1]} VALUE)"
+                )
+
+
+def _message(exc: BaseException) -> str:
+    text = str(exc).strip()
+    if isinstance(exc, OSError) and exc.strerror:  # "[Errno 2] No such file ...: 'x'"
+        text = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
+    elif isinstance(exc, MemoryError):
+        text = f"out of memory ({text or 'MemoryError'}); use a smaller problem"
+    elif isinstance(exc, OverflowError):
+        text = f"a value is too large ({text}); use values of a physical size"
+    lines = text.splitlines()
+    return lines[0] if lines else type(exc).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run ``bikeid`` and return its exit status; never raises, never prints a traceback
+    unless ``--debug`` is given.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default ``sys.argv[1:]``); ``--debug`` anywhere before ``--``.
+
+    Returns
+    -------
+    int
+        0 success, 1 internal failure, 2 usage error, 3 invalid input data or parameters,
+        4 no trustworthy answer, 130 interrupted (:data:`EXIT_CODES`).
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv
+    if debug:
+        argv.remove("--debug")
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+        chosen = _chosen(parser, args)
+        _check_empty_values(chosen, args)
+    except SystemExit as exc:  # argparse: --help/--version (0) or a usage error (2)
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    prog = chosen.prog
     if not getattr(args, "func", None):
         parser.print_help()
-        return 2
+        return EXIT_USAGE
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into head & co.: stop quietly
         sys.stderr.close()
         return 0
-    except (ValueError, OSError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"bikeid: error: {msg}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
-        print("bikeid: interrupted", file=sys.stderr)
+        print(f"{prog}: interrupted", file=sys.stderr)
         return 130
+    except UntrustworthyResult as exc:
+        return _report(prog, exc, EXIT_UNTRUSTWORTHY, debug)
+    except (ValueError, OSError, MemoryError, OverflowError) as exc:
+        return _report(prog, exc, EXIT_INPUT, debug)
+    except RecursionError as exc:  # a reader recursed: the input is nested too deeply
+        return _report(prog, exc, EXIT_INPUT, debug, "input nested too deeply; flatten it")
+    except Exception as exc:  # noqa: BLE001 - the last resort: no traceback by default
+        if debug:
+            traceback.print_exc()
+        print(
+            f"{prog}: internal error ({type(exc).__name__}): {_message(exc)}; rerun with "
+            "--debug and report it",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
+
+
+def _report(prog: str, exc: BaseException, code: int, debug: bool, text: str = "") -> int:
+    if debug:
+        traceback.print_exc()
+    print(f"{prog}: error: {text or _message(exc)}", file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,7 @@ import argparse
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
-from .cliutil import dump_json
+from .cliutil import MAX_WORKERS, dump_json, integer, number, range_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the torque steps of a sampled controller (docs/accuracy.md)",
     )  # fmt: skip
     p.add_argument(
-        "--cutoff", type=float, default=None,
+        "--cutoff", type=number(0.0, 1e4, unit="Hz"), default=None,
         help="direct: zero-phase low-pass [Hz], 0 = none (default 3 Hz with 'interval', "
         "else 15 Hz as Moore & Hubbard)",
     )  # fmt: skip
@@ -57,21 +57,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--controllers",
+        type=_names_arg(STUDY_CONTROLLERS, "controllers"),
         default=",".join(STUDY_CONTROLLERS),
         help=f"comma-separated subset of {','.join(STUDY_CONTROLLERS)} (default all)",
     )
     a.add_argument(
         "--methods",
+        type=_names_arg(("direct", "pem"), "methods"),
         default="direct,pem",
         help="comma-separated subset of direct,pem (default both)",
     )
     a.add_argument(
         "--speeds",
+        type=range_text("--speeds", 0.1),
         default=None,
         metavar="A:B:STEP",
         help="speeds [m/s] (default 1:15:0.5; stop included)",
     )
-    a.add_argument("--workers", type=int, default=2, help="simulation processes (default 2)")
+    a.add_argument(
+        "--workers",
+        type=integer(1, MAX_WORKERS),
+        default=2,
+        help="simulation processes (default 2)",
+    )
     a.add_argument("--out", default="accuracy", metavar="DIR", help="output folder")
     a.add_argument("--json", action="store_true", help="print JSON instead of the table")
     a.set_defaults(func=cmd_accuracy)  # fmt: skip
@@ -118,8 +126,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
         cutoff = args.cutoff
         if cutoff is None:
             cutoff = 3.0 if args.derivative == "interval" else 15.0
-        if not (cutoff >= 0 and cutoff == cutoff):
-            raise ValueError(f"--cutoff must be >= 0 Hz, got {args.cutoff}")
         prepared = [prepare(r, cutoff=cutoff or None, derivative=args.derivative) for r in runs]
         res = identify(prepared, reference, method="iv" if args.iv else "ls")
         out.update(
@@ -196,6 +202,18 @@ def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def _names_arg(allowed: tuple[str, ...], what: str):
+    def check(text: str) -> str:
+        try:
+            _names(text, allowed, what)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--{what} ")) from None
+        return text
+
+    check.__name__ = what
+    return check
+
+
 def cmd_accuracy(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -206,8 +224,6 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     methods = _names(args.methods, acc.METHODS, "methods")
     if args.quick and args.speeds:
         raise ValueError("--quick fixes the speeds; drop --speeds or --quick")
-    if args.workers < 1:
-        raise ValueError(f"--workers {args.workers}: give at least 1")
     if args.speeds:
         speeds = tuple(float(v) for v in parse_range(args.speeds, "--speeds", minimum=0.1))
     else:

@@ -5,9 +5,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
-from .cliutil import atomic_write_text, dump_json, parse_range, to_jsonable
+from .cliutil import (
+    MAX_WORKERS,
+    atomic_write_text,
+    dump_json,
+    integer,
+    parse_range,
+    range_text,
+    to_jsonable,
+)
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 DECAYS_HELP = (
@@ -22,12 +31,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     f = msub.add_parser("fit", help="identify missing effects on some speeds, write MODEL.json")
     f.add_argument("--data", help=DATA_HELP)
     f.add_argument("--out", required=True, help="model JSON to write")
-    f.add_argument("--speeds", help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)")
-    f.add_argument("--max-effects", type=int, default=3)
+    f.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)",
+    )
+    f.add_argument("--max-effects", type=integer(0, 100), default=3)
     f.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     f.add_argument(
         "--stability",
-        type=int,
+        type=integer(0, 100_000),
         default=0,
         metavar="N",
         help="also refit on N random 75 %% subsamples of the decays and report how often each "
@@ -41,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--weave-weight",
+        type=_weave_weight_arg,
         default="auto",
         metavar="W",
         help="weight of the measured weave eigenvalue of each speed (>= 3 decays) in every "
@@ -51,16 +65,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
     e.add_argument("--data", help=DATA_HELP)
-    e.add_argument("--speeds", help="speeds to evaluate (default: those not used in the fit)")
+    e.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        help="speeds to evaluate (default: those not used in the fit)",
+    )
     e.add_argument("--json", action="store_true", help="print JSON")
     e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
     e.set_defaults(func=cmd_evaluate)
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
     )
-    t.add_argument("--n", type=int, default=32, help="number of trials (default 32: 4 per effect)")
-    t.add_argument("--seed", type=int, default=1, help="grid seed (default 1)")
-    t.add_argument("--processes", type=int, default=2, help="worker processes (default 2)")
+    t.add_argument(
+        "--n",
+        type=integer(1, 100_000),
+        default=32,
+        help="number of trials (default 32: 4 per effect)",
+    )
+    t.add_argument("--seed", type=integer(0, 2**32 - 1), default=1, help="grid seed (default 1)")
+    t.add_argument(
+        "--processes", type=integer(1, MAX_WORKERS), default=2, help="worker processes (default 2)"
+    )
     t.add_argument("--effects", help="comma list of injected effects (default: all)")
     t.add_argument("--linear", action="store_true", help="linear nominal model (for comparison)")
     t.add_argument("--json", action="store_true", help="print all trials and the summary as JSON")
@@ -100,6 +125,13 @@ def parse_weave_weight(text: str) -> float | str:
     return w
 
 
+def _weave_weight_arg(text: str) -> float | str:
+    try:
+        return parse_weave_weight(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--weave-weight ")) from None
+
+
 def _speeds(text: str | None):
     return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
 
@@ -108,11 +140,7 @@ def cmd_fit(args) -> int:
     from bikeid.dataset.decays import load_decays
     from bikeid.experiments.measured_study import fit_model
 
-    if args.max_effects < 0:
-        raise ValueError("--max-effects must be >= 0")
-    if args.stability < 0:
-        raise ValueError("--stability must be >= 0 (number of subsamples)")
-    ww = parse_weave_weight(args.weave_weight)
+    ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
     out["decays"] = args.decays
@@ -132,6 +160,12 @@ def cmd_evaluate(args) -> int:
     from bikeid.experiments.measured_study import evaluate_json, model_from_json
 
     model, obj = model_from_json(args.model)
+    if obj.get("plant_defaulted"):
+        print(
+            f"bikeid measured evaluate: {args.model} names no plant; using "
+            f"{obj['plant']!r}, the default of 'measured fit'",
+            file=sys.stderr,
+        )
     sp = _speeds(args.speeds)
     ws = load_decays(
         args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
@@ -181,6 +215,10 @@ def cmd_trials(args) -> int:
 def cmd_report(args) -> int:
     from bikeid.experiments.measured_report import write_report
 
+    if args.model:  # refuse a bad model before the report folder is made
+        from bikeid.experiments.measured_study import model_from_json
+
+        model_from_json(args.model)
     path = write_report(args.out, args.data, args.model)
     print(path)
     return 0

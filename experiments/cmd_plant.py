@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .cliutil import atomic_write_text, dump_json, parse_range
+from .cliutil import atomic_write_text, dump_json, parse_range, range_text, speed_value
 
 BICYCLE_HELP = (
     "bicycle: 'benchmark' (Meijaard 2007), 'steer-by-wire', a bicycleparameters name "
@@ -15,14 +15,19 @@ BICYCLE_HELP = (
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eig", help="eigenvalues against speed (weave, capsize, caster)")
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
-    p.add_argument("--speeds", default="0:10:0.1", help="start:stop:step [m/s], stop included")
+    p.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        default="0:10:0.1",
+        help="start:stop:step [m/s], stop included (at most 100 m/s)",
+    )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--plot", metavar="FILE", help="write a PNG of real/imaginary parts")
     p.set_defaults(func=cmd_eig)
 
     p = sub.add_parser("linearize", help="M, C1, K0, K2, A, B and eigenvalues at one speed")
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
-    p.add_argument("--speed", type=float, required=True, help="forward speed [m/s]")
+    p.add_argument("--speed", type=speed_value, required=True, help="forward speed [m/s], 0-100")
     p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=cmd_linearize)
 
@@ -70,8 +75,6 @@ def cmd_linearize(args: argparse.Namespace) -> int:
 
     from bikeid.sim.linear import canonical_matrices, state_matrices
 
-    if not np.isfinite(args.speed) or args.speed < 0:
-        raise ValueError(f"--speed {args.speed}: need a finite speed >= 0 m/s")
     p = _bicycle(args.bicycle)
     cm = canonical_matrices(p)
     A, B = state_matrices(cm, args.speed)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .cliutil import MAX_WORKERS, integer
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -28,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=integer(1, MAX_WORKERS),
         default=None,
         metavar="N",
         help="worker processes for the identification runs (default min(2, cores))",
@@ -44,7 +46,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from .reproduce import reproduce
 
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers {args.workers}: give at least 1")
     reproduce(args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle)
     return 0

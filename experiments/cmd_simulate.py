@@ -2,8 +2,9 @@
 
 Initial angles and rates are given in degrees (and deg/s); the file holds SI
 units (rad, rad/s, m/s, N m) in the columns of :meth:`sim.integrate.Trajectory.columns`.
-A fall ends the run early; it is reported in one line and the run up to the fall
-is still written.
+A run that ends early (a fall, or a numerical failure such as a step too coarse for
+the dynamics: ``sim.integrate.STOP_CAUSES``) is reported in one line naming the cause;
+the samples before the stop are written, nothing after it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,22 @@ import json
 import math
 from pathlib import Path
 
-from .cliutil import atomic_write_text, dump_json, to_jsonable
+from bikeid.sim.errors import InputError
+
+from .cliutil import (
+    atomic_write_text,
+    dump_json,
+    duration_value,
+    integer,
+    number,
+    speed_value,
+    to_jsonable,
+)
+
+#: Initial angles [deg], initial rates [deg/s], steer torque [N m]: finite, bounded.
+ANGLE = number(-90.0, 90.0, unit="deg")
+RATE = number(-1e4, 1e4, unit="deg/s")
+TORQUE = number(-1e3, 1e3, unit="N m")
 
 BICYCLE_HELP = (
     "bicycle: 'benchmark' (Meijaard 2007), 'steer-by-wire', a bicycleparameters name "
@@ -33,32 +49,38 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
-    p.add_argument("--speed", type=float, required=True, help="initial forward speed [m/s]")
-    p.add_argument("--duration", type=float, required=True, help="simulated time [s]")
-    p.add_argument("--phi0", type=float, default=0.0, help="initial roll [deg]")
-    p.add_argument("--delta0", type=float, default=0.0, help="initial steer [deg]")
-    p.add_argument("--phidot0", type=float, default=0.0, help="initial roll rate [deg/s]")
-    p.add_argument("--deltadot0", type=float, default=0.0, help="initial steer rate [deg/s]")
+    p.add_argument(
+        "--speed", type=speed_value, required=True, help="initial forward speed [m/s], 0-100"
+    )
+    p.add_argument("--duration", type=duration_value, required=True, help="simulated time [s]")
+    p.add_argument("--phi0", type=ANGLE, default=0.0, help="initial roll [deg]")
+    p.add_argument("--delta0", type=ANGLE, default=0.0, help="initial steer [deg]")
+    p.add_argument("--phidot0", type=RATE, default=0.0, help="initial roll rate [deg/s]")
+    p.add_argument("--deltadot0", type=RATE, default=0.0, help="initial steer rate [deg/s]")
     p.add_argument(
         "--mode", choices=("coast", "held"), default="coast",
         help="coast: free rear wheel; held: ideal drive holds the speed (default coast)",
     )  # fmt: skip
     ctl = p.add_mutually_exclusive_group()
-    ctl.add_argument("--steer-torque", type=float, metavar="CONST", help="constant T_delta [N m]")
+    ctl.add_argument("--steer-torque", type=TORQUE, metavar="CONST", help="constant T_delta [N m]")
     ctl.add_argument(
-        "--roll-rate-gain", type=float, metavar="K", help="T_delta = K * phidot [N m s/rad]"
+        "--roll-rate-gain", type=number(-1e4, 1e4, unit="N m s/rad"), metavar="K",
+        help="T_delta = K * phidot [N m s/rad]",
+    )  # fmt: skip
+    p.add_argument(
+        "--dt", type=number(0.0, 1.0, lo_open=True, unit="s"), default=0.01,
+        help="controller sample time [s]",
+    )  # fmt: skip
+    p.add_argument(
+        "--substeps", type=integer(1, 1000), default=2, help="RK4 steps per sample (default 2)"
     )
-    p.add_argument("--dt", type=float, default=0.01, help="controller sample time [s]")
-    p.add_argument("--substeps", type=int, default=2, help="RK4 steps per sample (default 2)")
-    p.add_argument("--fall-limit", type=float, default=60.0, help="|roll| fall limit [deg]")
+    p.add_argument(
+        "--fall-limit", type=number(0.0, 90.0, lo_open=True, unit="deg"), default=60.0,
+        help="|roll| fall limit [deg], in (0, 90]",
+    )  # fmt: skip
     p.add_argument("--energy", action="store_true", help="add the total energy column [J]")
     p.add_argument("--out", required=True, help="output file, .csv or .json")
     p.set_defaults(func=cmd_simulate)
-
-
-def _finite(name: str, value: float | None) -> None:
-    if value is not None and not math.isfinite(value):
-        raise ValueError(f"{name} {value}: must be a finite number")
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -71,13 +93,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"--out {args.out!r}: use a .csv or .json file (HDF5: bikeid sweep)")
-    for name in ("speed", "duration", "phi0", "delta0", "phidot0", "deltadot0", "dt",
-                 "steer_torque", "roll_rate_gain", "fall_limit"):  # fmt: skip
-        _finite("--" + name.replace("_", "-"), getattr(args, name))
-    if args.speed < 0:
-        raise ValueError(f"--speed {args.speed}: need a forward speed >= 0 m/s")
     if abs(args.phi0) >= args.fall_limit:
-        raise ValueError(f"--phi0 {args.phi0} deg is beyond the fall limit {args.fall_limit} deg")
+        raise InputError(
+            f"--phi0 {args.phi0} deg is at or beyond the fall limit {args.fall_limit} deg; "
+            "start inside it or raise --fall-limit"
+        )
     bike = WhippleBicycle(by_name(args.bicycle))
     x0 = bike.state(
         args.speed,
@@ -106,6 +126,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "control": control,
         "fell_at": tr.fell_at,
         "stop_reason": tr.stop_reason,
+        "stop": None if tr.stop is None else tr.stop.as_dict(),
     }
     if out.suffix.lower() == ".csv":
         names = list(cols)
@@ -115,10 +136,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         atomic_write_text(out, "\n".join(lines) + "\n")
     else:
         atomic_write_text(out, dump_json({"meta": meta, "signals": cols}) + "\n")
-    if tr.fell_at is not None:
-        print(f"bikeid: {tr.stop_reason}; wrote {len(tr.t)} samples to {out}")
-    elif tr.stop_reason:
-        print(f"bikeid: stopped early: {tr.stop_reason}; wrote {len(tr.t)} samples to {out}")
+    if tr.stop is not None and tr.stop.physical:
+        print(f"bikeid: {tr.stop.message} [{tr.stop.cause}]; wrote {len(tr.t)} samples to {out}")
+    elif tr.stop is not None:
+        print(
+            f"bikeid: stopped early, not a fall [{tr.stop.cause}]: {tr.stop.message}; wrote "
+            f"{len(tr.t)} samples (to t={tr.t[-1]:.3f} s) to {out}"
+        )
     else:
         print(f"wrote {len(tr.t)} samples ({tr.t[-1]:.3f} s) to {out}")
     return 0

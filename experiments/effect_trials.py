@@ -46,7 +46,8 @@ from functools import partial
 
 import numpy as np
 
-from bikeid.sim.effect_registry import Effect, effect, nonlinear_effects
+from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+from bikeid.sim.effect_registry import RegistryFacts, effect, nonlinear_effects
 
 __all__ = [
     "EFFECTS",
@@ -74,7 +75,7 @@ TRIAL_COULOMB_SMOOTHING = 0.01  # rad/s, tanh smoothing of the injected steer Co
 
 
 @dataclass(frozen=True)
-class EffectSpec:
+class EffectSpec(RegistryFacts):
     """How the trials draw one injected effect (its facts are the registry's).
 
     Attributes
@@ -105,36 +106,19 @@ class EffectSpec:
             raise ValueError(f"trial effect {self.name}: the nonlinear plant must carry it "
                              "at every speed alike")  # fmt: skip
 
-    @property
-    def entry(self) -> Effect:
-        """The registry entry."""
-        return effect(self.name)
-
-    @property
-    def unit(self) -> str:
-        """Unit of the value (registry)."""
-        return self.entry.unit
-
-    @property
-    def absent(self) -> float:
-        """The value that means "absent" (registry)."""
-        return self.entry.absent
-
-    @property
-    def in_library(self) -> bool:
-        """Whether the identification library may select it (registry)."""
-        return self.entry.in_library
-
     def draw(self, rng: np.random.Generator) -> float:
         """One magnitude [unit] from the generator ``rng``.
 
         Parameters
         ----------
         rng : numpy.random.Generator
+            Source of the draw (advanced by one or two draws).
 
         Returns
         -------
         float
+            One of ``choices``, or uniform in [low, high] (mirrored about ``absent`` with
+            probability 1/2 when ``two_sided``), in the effect's unit.
         """
         if self.choices:
             return float(rng.choice(self.choices))
@@ -217,7 +201,26 @@ OUTSIDE_EFFECTS = tuple(k for k, e in EFFECTS.items() if not e.in_library)
 
 @dataclass(frozen=True)
 class TrialSpec:
-    """Everything that defines one trial (JSON-friendly)."""
+    """Everything that defines one trial (JSON-friendly).
+
+    Attributes
+    ----------
+    index : int
+        Trial number.
+    seed : int
+        Seed of the simulated decays of the fit windows (``seed + 1`` for the held-out
+        ones).
+    effect : str
+        Name of the hidden effect (a key of ``EFFECTS`` of this module).
+    value : float
+        Its true value, in the effect's registry unit.
+    fit_speeds : (float, float)
+        Treadmill speeds [m/s] of the decays the pipeline fits.
+    eval_speeds : (float, float)
+        Held-out treadmill speeds [m/s] of the evaluation.
+    noise : float
+        Roll-rate sensor noise standard deviation [rad/s].
+    """
 
     index: int
     seed: int
@@ -242,7 +245,7 @@ def _stable(name: str, value: float, speeds) -> bool:
 
     m = ExperimentModel(effects={name: value})
     for v in speeds:
-        vs = 1.066 * v - 0.128
+        vs = SPEED_CALIBRATION[0] * v + SPEED_CALIBRATION[1]
         if m.eigenvalues(vs)[0].real >= 0 or m.weave(vs).real >= -MIN_DECAY:
             return False
     return True
@@ -276,6 +279,14 @@ def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -
     Returns
     -------
     list of TrialSpec
+        Trials 0..n-1 with their effect, value [effect unit], fit and held-out speeds
+        [m/s], roll-rate noise [rad/s] and simulation seed.
+
+    Raises
+    ------
+    ValueError
+        If ``n`` is not a positive integer, ``seed`` not a non-negative integer, or an
+        effect name is unknown.
     """
     if int(n) != n or n < 1:
         raise ValueError(f"number of trials must be a positive integer, got {n!r}")
@@ -302,7 +313,7 @@ def _sensors(noise: float):
 
     return Sensors(
         {
-            "v": Channel(scale=1.066, bias=-0.128),  # the logs' speed calibration
+            "v": Channel(scale=SPEED_CALIBRATION[0], bias=SPEED_CALIBRATION[1]),
             "phi": Channel(std=noise / 5),
             "phidot": Channel(std=noise),
             "delta": Channel(std=3e-4, step=STEER_STEP),
@@ -337,6 +348,9 @@ def decay_windows(
     Returns
     -------
     list of Window
+        ``len(speeds) * per_speed`` windows of :data:`N_SAMPLES` samples (1 s): measured
+        roll and steer angles [rad] and rates [rad/s], sensor speed [m/s], zero external
+        torque.
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.dataset.closed_loop import simulate_run
@@ -398,9 +412,13 @@ def run_trial(
     Parameters
     ----------
     spec : TrialSpec
+        The trial.
     max_effects : int, optional
+        Selection rounds allowed (:func:`bikeid.ident.effect_selection.select_effects`).
     nonlinear : bool, optional
+        Nominal model is the nonlinear plant by defect correction.
     weave_weight : float or "auto", optional
+        Weight of the weave-eigenvalue term.
 
     Returns
     -------
@@ -464,6 +482,7 @@ def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     Returns
     -------
     (float, float)
+        Lower and upper bounds of the success probability ((0, 1) when ``n`` is 0).
     """
     from scipy.stats import binomtest
 
@@ -491,6 +510,10 @@ def summarize(rows: list[dict]) -> dict:
     Returns
     -------
     dict
+        ``trials``; ``library`` (rates of ranked_first, magnitude_ok, error_halved,
+        success) and ``outside`` (rate of unexplained), each ``{k, n, rate, ci95}``;
+        ``per_effect`` (rates, names ranked first, median error ratio);
+        ``seconds_per_trial`` [s].
     """
     lib = [r for r in rows if r["in_library"]]
     out_ = [r for r in rows if not r["in_library"]]
@@ -529,6 +552,7 @@ def format_summary(s: dict) -> str:
     Returns
     -------
     str
+        One line per rate, then one per effect (no trailing newline).
     """
     lines = []
     for k, r in s.get("library", {}).items():
@@ -563,16 +587,30 @@ def run_trials(
     n : int
         Number of trials.
     seed : int, optional
+        Grid seed (:func:`draw_trials`).
     processes : int, optional
+        Worker processes.
     effects : tuple of str, optional
+        Effects to cycle through (default all of :data:`EFFECTS`).
     nonlinear : bool, optional
+        Nominal model is the nonlinear plant (:func:`run_trial`).
     progress : callable, optional
+        Called with each finished trial's dict.
     weave_weight : float or "auto", optional
+        Weight of the weave-eigenvalue term.
 
     Returns
     -------
     dict
-        ``trials`` (list of dict) and ``summary``.
+        ``trials`` (list of dict) and ``summary`` (:func:`summarize` plus
+        ``wall_seconds`` [s], ``seed``, ``processes``, ``nominal_plant``,
+        ``weave_weight``).
+
+    Raises
+    ------
+    ValueError
+        If ``processes`` is not a positive integer or :func:`draw_trials` refuses its
+        arguments.
     """
     if int(processes) != processes or processes < 1:
         raise ValueError(f"processes must be a positive integer, got {processes!r}")

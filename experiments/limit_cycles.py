@@ -8,15 +8,20 @@ lost the minus signs, so the Fig. 4 roll rates (55.236, 27.291 deg/s with steer 
 run in both readings: same sign as the steer angle (``+``) and opposite sign (``-``).  Mirror
 symmetry (phi, delta, phidot) -> -(phi, delta, phidot) makes the overall sign irrelevant.
 
-Periodicity check (a Poincare section).  The section is phidot = 0 with phidot decreasing
+Classification (a Poincare section).  The section is phidot = 0 with phidot decreasing
 (every local maximum of roll); each crossing is located by linear interpolation between
-samples and gives the section point x_n = (phi, delta, deltadot, v).  On the last half of
-the returns we look for the smallest p in 1..4 with max_n |x_{n+p} - x_n| (angles in deg,
-speed in cm/s) below ``closure_tol``: the orbit then closes after p returns (period = the
-time of p returns).  The distance d_n = |x_{n+p} - x_n| over all returns measures how the
-motion approaches that orbit; a straight-line fit of log d_n against n gives the
-contraction factor per p returns (< 1: nearby motions on the same energy level are
-attracted; = 1: a neutral family).  Falls (|roll| > 60 deg) end the run and are reported.
+samples and gives the section point x_n = (phi, delta, deltadot, v).  :func:`classify`
+calls a run ``falls`` (the integrator stopped it: |roll| > 60 deg), ``decays`` (the
+amplitude |(phi, delta, deltadot)| of the section points shrinks geometrically towards
+zero, at a rate distinguishable from zero), ``periodic`` with period n (the smallest p in
+1..4 with max |x_{n+p} - x_n| below :data:`CLOSURE_REL` of the points' amplitude, per
+component, on the last half of the returns) or ``irregular`` (none of these).  Tolerances
+are relative to the motion's amplitude, so a motion dying out is not called periodic.
+
+Stability of a periodic orbit: :mod:`experiments.floquet` converges the orbit by Newton
+on the Poincare map's fixed point (DOP853 at rtol = atol = 1e-12) and takes the
+multipliers of the map (its Jacobian by central differences); one multiplier is 1, the
+energy direction, which checks the computation.
 
 On the word "limit cycle".  The system conserves energy but is nonholonomic: it is not
 Hamiltonian, phase volume is not conserved, and asymptotically stable motions exist (the
@@ -39,22 +44,36 @@ from bikeid.sim.parameters import BicycleParameters
 __all__ = [
     "FIG4_CONDITIONS",
     "FIG5_CONDITIONS",
+    "Classification",
     "InitialCondition",
     "Periodicity",
+    "classify",
     "coast",
     "periodicity",
+    "mirrored",
     "plot_energy_speed",
     "plot_phase_portraits",
     "section_points",
+    "stop_info",
+    "summary_entry",
 ]
 
 SPEED = 3.5  # m/s, Chen & Dao Figs. 4-5
-CLOSURE_TOL = 0.05  # deg (and cm/s): section points closer than this count as the same
 
 
 @dataclass(frozen=True)
 class InitialCondition:
-    """Initial roll, steer [deg] and their rates [deg/s]; ``label`` names it in figures."""
+    """Initial roll, steer [deg] and their rates [deg/s]; ``label`` names it in figures.
+
+    Attributes
+    ----------
+    label : str
+        Name of the condition in figures and tables.
+    phi, delta : float
+        Initial roll and steer angles [deg], positive to the right (Meijaard 2007).
+    phidot, deltadot : float
+        Initial roll and steer rates [deg/s].
+    """
 
     label: str
     phi: float = 0.0
@@ -63,6 +82,13 @@ class InitialCondition:
     deltadot: float = 0.0
 
     def radians(self) -> dict[str, float]:
+        """The condition in SI units.
+
+        Returns
+        -------
+        dict of str to float
+            ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s].
+        """
         return {k: math.radians(getattr(self, k)) for k in ("phi", "delta", "phidot", "deltadot")}
 
 
@@ -92,6 +118,25 @@ def coast(
     """Uncontrolled coasting run (no inputs, speed free) with total energy recorded.
 
     Returns a :class:`sim.integrate.Trajectory`; it ends early at a fall (|roll| > 60 deg).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle.
+    ic : InitialCondition
+        Initial roll, steer and rates (upright otherwise).
+    duration : float
+        Length of the run [s].
+    speed : float, optional
+        Initial forward speed [m/s] (3.5, Chen & Dao Figs. 4-5).
+    dt : float, optional
+        Output sample period [s].
+
+    Returns
+    -------
+    Trajectory
+        The run (``mode="coast"``: rear wheel free, speed a state) with total energy
+        ``energy`` [J] per sample.
     """
     from bikeid.sim.integrate import simulate
     from bikeid.sim.nonlinear import WhippleBicycle
@@ -103,7 +148,26 @@ def coast(
 
 def section_points(t, phi, phidot, delta, deltadot, v) -> tuple[np.ndarray, np.ndarray]:
     """Crossings of phidot = 0 downward (roll maxima): times [s] and points
-    (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]), linearly interpolated."""
+    (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]), linearly interpolated.
+
+    Parameters
+    ----------
+    t : (N,) array_like
+        Sample times [s].
+    phi, phidot : (N,) array_like
+        Roll angle [rad] and rate [rad/s].
+    delta, deltadot : (N,) array_like
+        Steer angle [rad] and rate [rad/s].
+    v : (N,) array_like
+        Forward speed [m/s].
+
+    Returns
+    -------
+    times : (n,) ndarray
+        Crossing times [s].
+    points : (n, 4) ndarray
+        Section points (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]).
+    """
     t, phi, phidot, delta, deltadot, v = (
         np.asarray(a, float) for a in (t, phi, phidot, delta, deltadot, v)
     )
@@ -119,27 +183,193 @@ def section_points(t, phi, phidot, delta, deltadot, v) -> tuple[np.ndarray, np.n
     return at(t), pts
 
 
+#: closure |x_{n+p} - x_n| below this fraction of the amplitude: periodic.  The section points
+#: of a 10 ms run are linearly interpolated; on the converged 3.5 m/s orbits (Newton residual
+#: 1e-10, multipliers |mu| < 0.2) that leaves closures of 5e-5 .. 1.4e-3, hence 1e-2.
+CLOSURE_REL = 1e-2
+OUTCOMES = ("decays", "periodic", "irregular", "falls")
+
+
+@dataclass(frozen=True)
+class Classification:
+    """Class of a coasting run from its Poincare section points.
+
+    ``outcome`` is one of :data:`OUTCOMES`; ``period_n`` the returns per period (periodic
+    only); ``closure_rel`` = max over the last half of the returns and the components j of
+    |x_{n+p,j} - x_{n,j}| / s_j, s_j = max |x_{n,j}| on that half (for the smallest p <= 4,
+    or the best p when none closes); ``decay_rate`` = slope of log amplitude per return
+    over the last half (amplitude = |(phi, delta, deltadot)| of the section point) and
+    ``decay_rate_se`` its standard error.
+
+    Attributes
+    ----------
+    outcome : str
+        ``decays``, ``periodic``, ``irregular`` or ``falls``.
+    period_n : int or None
+        Returns per period (periodic only).
+    closure_rel : float or None
+        Relative closure [-] as defined above.
+    decay_rate : float or None
+        Slope of the log amplitude per return [-].
+    decay_rate_se : float or None
+        Its standard error [-].
+    """
+
+    outcome: str
+    period_n: int | None
+    closure_rel: float | None
+    decay_rate: float | None
+    decay_rate_se: float | None
+
+
+def _slope(y: np.ndarray) -> tuple[float, float]:
+    n = np.arange(y.size, dtype=float)
+    (b, a), res, *_ = np.polyfit(n, y, 1, full=True)
+    r = y - (a + b * n)
+    se = math.sqrt(float(r @ r) / max(y.size - 2, 1) / float(((n - n.mean()) ** 2).sum()))
+    return float(b), se
+
+
+def classify(
+    pts: np.ndarray,
+    fell: bool,
+    closure_rel: float = CLOSURE_REL,
+    final_rel: float | None = None,
+) -> Classification:
+    """Classify a coasting run as ``decays``, ``periodic``, ``irregular`` or ``falls``.
+
+    Rules (on the last half of the section points, at least 8 returns there):
+    ``falls`` if the run fell; ``decays`` if the log amplitude shrinks at a rate
+    distinguishable from zero (slope + 3 standard errors < 0), by more than ``closure_rel``
+    over the tail, and geometrically (the slope over the second half of the tail is at
+    least half the slope over the first half: the amplitude heads to zero, not to a
+    nonzero orbit); ``periodic`` (period n = smallest p in 1..4) if the relative closure
+    is below ``closure_rel``; otherwise ``irregular``.
+
+    Parameters
+    ----------
+    pts : (N, 4) ndarray
+        Section points (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]).
+    fell : bool
+        Whether the run ended in a fall (or another integrator stop).
+    closure_rel : float, optional
+        Relative closure tolerance. Default :data:`CLOSURE_REL`.
+    final_rel : float, optional
+        |(phi, delta, phidot, deltadot)| at the end of the run divided by its maximum over
+        the run.  When the section has fewer than 8 returns on its last half (a decay
+        whose last phase is the non-oscillatory capsize mode stops returning) and
+        ``final_rel`` < ``closure_rel``, the run ``decays``.
+
+    Returns
+    -------
+    Classification
+
+    Raises
+    ------
+    ValueError
+        If ``pts`` is not an (N, 4) array.
+    """
+    pts = np.asarray(pts, float)
+    if pts.ndim != 2 or pts.shape[1] != 4:
+        raise ValueError(f"section points must be an (N, 4) array, got shape {pts.shape}")
+    if fell:
+        return Classification("falls", None, None, None, None)
+    tail = pts[pts.shape[0] // 2 :]
+    if tail.shape[0] < 8:
+        if final_rel is not None and final_rel < closure_rel:
+            b = se = None
+            if pts.shape[0] >= 3 and np.all(np.linalg.norm(pts[:, :3], axis=1) > 0):
+                b, se = _slope(np.log(np.linalg.norm(pts[:, :3], axis=1)))
+            return Classification("decays", None, None, b, se)
+        return Classification("irregular", None, None, None, None)
+    amp = np.linalg.norm(tail[:, :3], axis=1)
+    b = se = None
+    if np.all(amp > 0):
+        la = np.log(amp)
+        b, se = _slope(la)
+        h = la.size // 2
+        b1, _ = _slope(la[:h])
+        b2, _ = _slope(la[h:])
+        if b + 3 * se < 0 and -b * la.size > closure_rel and b2 < 0.5 * b1 < 0:
+            return Classification("decays", None, None, b, se)
+    s = np.max(np.abs(tail), axis=0)
+    s[s == 0] = 1.0
+    best = None
+    for p in range(1, 5):
+        c = float(np.max(np.abs(tail[p:] - tail[:-p]) / s))
+        if best is None or c < best[1]:
+            best = (p, c)
+        if c < closure_rel:
+            return Classification("periodic", p, c, b, se)
+    return Classification("irregular", None, best[1], b, se)
+
+
 @dataclass(frozen=True)
 class Periodicity:
     """Outcome of one coasting run (angles deg, rates deg/s, speed m/s, energy J).
 
-    ``verdict`` is one of ``fell``, ``periodic`` (closes after ``returns_per_period``
-    returns to the section within ``closure_tol``), ``not closed`` (bounded but no period
-    found); ``closure`` = max |x_{n+p} - x_n| over the last half of the returns;
-    ``contraction`` = factor by which d_n shrinks per period (NaN when not measurable);
-    ``energy_drift`` = (max - min) / |mean| of the total energy.
+    ``verdict`` is the :func:`classify` outcome (``decays``, ``periodic``, ``irregular``,
+    ``falls``); ``returns_per_period`` its period n; ``period`` the mean time of n returns
+    over the last half [s]; ``closure`` the relative closure of :class:`Classification`;
+    ``decay_rate`` the log-amplitude slope per return; ``fall_cause`` the integrator's
+    stop reason; ``energy_drift`` = (max - min) / |mean| of the total energy.
+
+    Attributes
+    ----------
+    label : str
+        The initial condition's label.
+    verdict : {"decays", "periodic", "irregular", "falls"}
+        Outcome of :func:`classify`.
+    fell_at : float or None
+        Time the run ended early [s] (None if it ran to the end).
+    fall_cause : str or None
+        Why it ended (the integrator's stop reason), None if it ran to the end.
+    duration : float
+        Simulated time [s].
+    n_returns : int
+        Number of section crossings.
+    returns_per_period : int or None
+        Period n in returns (periodic runs), else None.
+    period : float or None
+        Mean time of n returns over the last half [s].
+    closure : float or None
+        Relative closure max |x_{n+p} - x_n| / amplitude over the last half [-].
+    closure_tol : float
+        Relative closure tolerance used [-].
+    decay_rate : float or None
+        Slope of the log section amplitude per return [-] (negative: shrinking).
+    last_section_point : tuple of 4 float or None
+        Last section point (phi [deg], delta [deg], deltadot [deg/s], v [cm/s]).
+    roll_range : (float, float)
+        Minimum and maximum roll [deg].
+    roll_mean : float
+        Mean roll over the second half [deg].
+    speed_range : (float, float)
+        Minimum and maximum forward speed [m/s].
+    speed_mean : float
+        Mean forward speed over the second half [m/s].
+    yaw_rate_mean : float
+        Mean yaw rate over the second half [rad/s].
+    turn_radius : float or None
+        |speed / yaw rate| over the second half [m] (None without a mean turn).
+    energy : float
+        Initial total energy [J].
+    energy_drift : float
+        (max - min) / |mean| of the total energy (dimensionless; NaN without energy).
     """
 
     label: str
     verdict: str
     fell_at: float | None
+    fall_cause: str | None
     duration: float
     n_returns: int
     returns_per_period: int | None
     period: float | None
     closure: float | None
     closure_tol: float
-    contraction: float | None
+    decay_rate: float | None
+    last_section_point: tuple[float, float, float, float] | None
     roll_range: tuple[float, float]
     roll_mean: float
     speed_range: tuple[float, float]
@@ -150,88 +380,200 @@ class Periodicity:
     energy_drift: float
 
     def as_dict(self) -> dict:
+        """The outcome as a JSON-able dict.
+
+        Returns
+        -------
+        dict
+            The attributes by name (tuples as tuples).
+        """
         return asdict(self)
 
 
-def periodicity(traj, label: str = "", closure_tol: float = CLOSURE_TOL) -> Periodicity:
-    """Poincare-section analysis of a coasting trajectory (see the module docstring)."""
+def stop_info(traj) -> tuple[float | None, str | None]:
+    """Fall time [s] and cause of a run that ended early, else (None, None).
+
+    The one place that reads the integrator's stop record (``Trajectory.stop``: the cause
+    is its code in ``sim.integrate.STOP_CAUSES``, e.g. ``roll_limit``, ``steer_limit``).
+    A numerical stop (step too coarse, non-finite state) is refused, not called a fall.
+
+    Parameters
+    ----------
+    traj : sim.integrate.Trajectory
+        A finished run.
+
+    Returns
+    -------
+    time : float or None
+        When the run ended early [s].
+    cause : str or None
+        Why (the integrator's stop reason).
+    """
+    stop = getattr(traj, "stop", None)
+    if stop is not None:
+        if not stop.physical:  # a numerical failure is not a fall: never classify it
+            raise ValueError(
+                f"coasting run stopped for a numerical reason, not a fall: {stop.message}"
+            )
+        return float(stop.time), stop.cause
+    if traj.fell_at is None and traj.stop_reason is None:
+        return None, None
+    t = traj.fell_at if traj.fell_at is not None else float(traj.t[-1])
+    return float(t), traj.stop_reason
+
+
+def periodicity(traj, label: str = "", closure_rel: float = CLOSURE_REL) -> Periodicity:
+    """Poincare-section analysis and :func:`classify` verdict of a coasting trajectory.
+
+    Parameters
+    ----------
+    traj : sim.integrate.Trajectory
+        A coasting run (``energy=True`` for the energy statistics).
+    label : str, optional
+        Name of the run.
+    closure_rel : float, optional
+        Relative closure tolerance of :func:`classify`.
+
+    Returns
+    -------
+    Periodicity
+        The verdict and the run's statistics.
+    """
     t = traj.t
     phi, phidot = traj.signal("phi"), traj.signal("phidot")
     delta, deltadot, v = traj.signal("delta"), traj.signal("deltadot"), traj.signal("v")
     psidot = traj.signal("psidot")
     E = traj.energy if traj.energy is not None else np.full(t.size, np.nan)
     half = slice(t.size // 2, None)  # statistics of the settled second half
-    common = dict(
+    fell_at, cause = stop_info(traj)
+    tc, pts = section_points(t, phi, phidot, delta, deltadot, v)
+    n = len(tc)
+    size = np.sqrt(phi**2 + delta**2 + phidot**2 + deltadot**2)
+    final_rel = float(size[-1] / size.max()) if size.max() > 0 else 0.0
+    cl = classify(pts, fell_at is not None, closure_rel, final_rel)
+    period = None
+    if cl.period_n is not None:
+        k, p = n // 2, cl.period_n
+        period = float(np.mean(tc[k + p :] - tc[k : n - p]))
+    r = float(np.mean(v[half]) / psidot[half].mean()) if abs(psidot[half].mean()) > 1e-6 else None
+    return Periodicity(
         label=label,
-        fell_at=traj.fell_at,
+        verdict=cl.outcome,
+        fell_at=fell_at,
+        fall_cause=cause,
         duration=float(t[-1]),
-        closure_tol=closure_tol,
+        n_returns=n,
+        returns_per_period=cl.period_n,
+        period=period,
+        closure=cl.closure_rel,
+        closure_tol=closure_rel,
+        decay_rate=cl.decay_rate,
+        last_section_point=tuple(float(x) for x in pts[-1]) if n else None,
         roll_range=(float(np.degrees(phi.min())), float(np.degrees(phi.max()))),
         roll_mean=float(np.degrees(phi[half].mean())),
         speed_range=(float(v.min()), float(v.max())),
         speed_mean=float(v[half].mean()),
         yaw_rate_mean=float(psidot[half].mean()),
+        turn_radius=None if r is None else abs(r),
         energy=float(E[0]),
         energy_drift=float(np.ptp(E) / abs(np.mean(E))),
     )
-    r = float(np.mean(v[half]) / psidot[half].mean()) if abs(psidot[half].mean()) > 1e-6 else None
-    common["turn_radius"] = None if r is None else abs(r)
-    tc, pts = section_points(t, phi, phidot, delta, deltadot, v)
-    n = len(tc)
-    common["n_returns"] = n
-    no_period = dict(returns_per_period=None, period=None, closure=None, contraction=None)
-    if traj.fell_at is not None or traj.stop_reason is not None:
-        return Periodicity(verdict="fell", **no_period, **common)
-    best = None
-    tail0 = n // 2
-    for p in range(1, 5):
-        if n - tail0 - p < 4:
-            break
-        d = np.max(np.abs(pts[tail0 + p :] - pts[tail0 : n - p]))
-        if best is None or d < best[1] - 1e-12:
-            best = (p, d)
-        if d < closure_tol:
-            best = (p, d)
-            break
-    if best is None:
-        return Periodicity(verdict="not closed", **no_period, **common)
-    p, closure = best
-    period = float(np.mean(tc[tail0 + p :] - tc[tail0 : n - p]))
-    dn = np.linalg.norm(pts[p:] - pts[:-p], axis=1)
-    contraction = _contraction(dn, p)
-    verdict = "periodic" if closure < closure_tol else "not closed"
-    return Periodicity(
-        verdict=verdict,
-        returns_per_period=p,
-        period=period,
-        closure=float(closure),
-        contraction=contraction,
-        **common,
-    )
 
 
-def _contraction(dn: np.ndarray, p: int) -> float | None:
-    """Factor per period by which d_n decays (fit of log d_n while above round-off)."""
-    ok = dn > 1e-6
-    idx = np.arange(dn.size)[ok]
-    if idx.size < 4 or idx[-1] - idx[0] < 3:
-        return None
-    # fit only the decaying part: from the first return to the point d_n stops shrinking
-    stop = idx.size
-    floor = np.median(dn[-max(3, dn.size // 10) :])
-    above = np.where(dn[idx] > 3 * floor)[0] if floor > 0 else np.arange(idx.size)
-    if above.size >= 4:
-        stop = above[-1] + 1
-    sel = idx[:stop]
-    if sel.size < 4:
-        return None
-    slope = np.polyfit(sel, np.log(dn[sel]), 1)[0]
-    return float(math.exp(slope * p))
+def mirrored(ic: InitialCondition) -> InitialCondition:
+    """Mirror image of an initial condition: every angle and rate negated.
+
+    Parameters
+    ----------
+    ic : InitialCondition
+
+    Returns
+    -------
+    InitialCondition
+        Label suffixed with ``" (mirrored)"``.
+    """
+    return InitialCondition(ic.label + " (mirrored)", -ic.phi, -ic.delta, -ic.phidot, -ic.deltadot)
+
+
+def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) -> dict:
+    """One ``limit_cycles`` entry of summary.json: class, period and Floquet multipliers.
+
+    For a periodic run the orbit is Newton-converged from the run's last section point and
+    its multipliers computed (:func:`experiments.floquet.orbit_stability`).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle.
+    ic : InitialCondition
+        The run's initial condition.
+    res : Periodicity
+        The run's analysis.
+
+    Returns
+    -------
+    dict
+        ``phi0_deg``, ``delta0_deg``, ``phidot0_deg_s``, ``outcome``, ``period_n``,
+        ``fall_time_s``, ``fall_cause``, ``period_s``, ``floquet_multipliers`` ([re, im]
+        pairs), ``unit_multiplier_error``, ``orbit_energy_J``, ``orbit_section_point``
+        (deg, deg, deg/s, m/s), ``closure_rel``, ``decay_rate_per_return``,
+        ``floquet_seconds`` [s]; null where not applicable.
+    """
+    from .floquet import orbit_stability
+
+    e = {
+        "label": ic.label,
+        "phi0_deg": ic.phi,
+        "delta0_deg": ic.delta,
+        "phidot0_deg_s": ic.phidot,
+        "outcome": res.verdict,
+        "period_n": res.returns_per_period,
+        "fall_time_s": res.fell_at,
+        "fall_cause": res.fall_cause,
+        "period_s": None,
+        "floquet_multipliers": None,
+        "unit_multiplier_error": None,
+        "orbit_energy_J": None,
+        "orbit_section_point": None,
+        "closure_rel": res.closure,
+        "decay_rate_per_return": res.decay_rate,
+        "floquet_seconds": None,
+    }
+    if res.verdict == "periodic":
+        o = orbit_stability(
+            p, np.asarray(res.last_section_point), res.returns_per_period, energy=res.energy
+        )
+        e.update(
+            period_s=o.period,
+            floquet_multipliers=[[m.real, m.imag] for m in o.multipliers],
+            unit_multiplier_error=o.unit_multiplier_error,
+            orbit_energy_J=o.energy,
+            orbit_section_point=list(o.section_point),
+            floquet_seconds=o.seconds,
+        )
+    return e
 
 
 # -- figures ---------------------------------------------------------------------------------
 def plot_phase_portraits(trajs, labels, path, title: str):
-    """Roll angle vs roll rate and steer angle vs steer rate [deg, deg/s], one colour per run."""
+    """Roll angle vs roll rate and steer angle vs steer rate [deg, deg/s], one colour per run.
+
+    Parameters
+    ----------
+    trajs : sequence of Trajectory
+        The runs; a run that falls is drawn until |roll| first exceeds 45 deg.
+    labels : sequence of str
+        Legend label per run.
+    path : str or Path
+        PNG file to write (atomically, :func:`experiments.plots.save`).
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from .plots import plt, save
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.6))
@@ -243,7 +585,11 @@ def plot_phase_portraits(trajs, labels, path, title: str):
             # run until |roll| first exceeds 45 deg
             big = np.nonzero(np.abs(tr.signal("phi")) > math.radians(45.0))[0]
             n = int(big[0]) + 1 if big.size else n
-            fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
+            stop = getattr(tr, "stop", None)
+            if stop is not None and not stop.physical:
+                fell = f" (numerical failure, {stop.cause}, at {stop.time:.1f} s)"
+            else:
+                fell = f" (falls at {tr.fell_at or tr.t[-1]:.1f} s; leaves the axes)"
         kw = dict(lw=0.6, label=lab + fell)
         a1.plot(np.degrees(tr.signal("phi")[:n]), np.degrees(tr.signal("phidot")[:n]), **kw)
         a2.plot(np.degrees(tr.signal("delta")[:n]), np.degrees(tr.signal("deltadot")[:n]), **kw)
@@ -272,7 +618,24 @@ def plot_phase_portraits(trajs, labels, path, title: str):
 
 
 def plot_energy_speed(trajs, labels, path, title: str):
-    """Total energy minus its initial value [J] and forward speed [m/s] against time."""
+    """Total energy minus its initial value [J] and forward speed [m/s] against time.
+
+    Parameters
+    ----------
+    trajs : sequence of Trajectory
+        The runs, with energy recorded (:func:`coast`).
+    labels : sequence of str
+        Legend label per run.
+    path : str or Path
+        PNG file to write (atomically).
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from .plots import plt, save
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)

@@ -114,7 +114,12 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
 
     from bikeid.dataset.decays import load_decays
     from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir
-    from bikeid.experiments.measured_study import evaluate_json, fit_model, model_from_json
+    from bikeid.experiments.measured_study import (
+        DEFAULT_PLANT,
+        evaluate_json,
+        fit_model,
+        model_from_json,
+    )
     from bikeid.experiments.plots import save
     from bikeid.ident.experiment_model import ExperimentModel, attach_nonlinear_correction
     from bikeid.ident.weave import decay_eigenvalue
@@ -135,7 +140,7 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     # 1. decay overlays: first window of each speed
     firsts = [next(w for w in allw if round(w.speed, 1) == s) for s in speeds]
     fig, axes = plt.subplots(2, len(firsts), figsize=(3.2 * len(firsts), 5), squeeze=False)
-    nonlinear = obj.get("plant", "linear") == "nonlinear"
+    nonlinear = obj.get("plant", DEFAULT_PLANT) == "nonlinear"  # as measured fit
     for w in firsts:
         w.correction = None
     if nonlinear:

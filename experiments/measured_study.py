@@ -10,6 +10,7 @@ speeds [m/s]; the identification's log).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from bikeid.dataset.windows import Window
@@ -19,12 +20,26 @@ from bikeid.ident.effect_library import LIBRARY
 from bikeid.ident.effect_selection import select_effects, selection_frequencies
 from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.sim.effect_registry import effect
+from bikeid.sim.errors import InputError
+from bikeid.sim.textformats import loads_json
 
 __all__ = ["evaluate_json", "fit_effect_set", "fit_model", "model_from_json"]
 
 
+#: Plants a model file may name (``measured fit --plant``); a file without ``plant`` gets
+#: :data:`DEFAULT_PLANT`, the default of ``measured fit``.
+PLANTS = ("nonlinear", "linear")
+DEFAULT_PLANT = "nonlinear"
+#: Largest model file read [bytes] (a fitted model is a few kB; a stability run ~100 kB).
+MAX_MODEL_BYTES = 20_000_000
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
-    """Read a model file written by ``bikeid measured fit``.
+    """Read and validate a model file written by ``bikeid measured fit``.
 
     Parameters
     ----------
@@ -36,13 +51,77 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
     model : ExperimentModel
         The nominal experiment with the file's effects.
     obj : dict
-        The whole file.  ValueError when it cannot be read or lacks ``effects``.
+        The whole file; ``plant`` is filled in with :data:`DEFAULT_PLANT` (and
+        ``plant_defaulted`` set True) when the file has none.
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        A ValueError naming the file and the field: if the file cannot be read or is not
+        strict JSON (:func:`bikeid.sim.textformats.loads_json`: duplicate keys, NaN and
+        deep nesting are refused), is not an object, lacks ``effects`` or has an effect
+        that is unknown or not a finite number, names a plant other than
+        :data:`PLANTS`, or has ``fit_speeds`` that are not a list of speeds in (0, 100]
+        m/s, or an ``identification`` that is not an object.
     """
+    path = Path(path)
+    where = f"model file {str(path)!r}"
     try:
-        obj = json.loads(Path(path).read_text())
-        return ExperimentModel(effects=dict(obj["effects"])), obj
-    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise ValueError(f"cannot read model {path}: {exc}") from None
+        size = path.stat().st_size
+        if size > MAX_MODEL_BYTES:
+            raise InputError(
+                f"{where} is {size:,} bytes, more than a model file's {MAX_MODEL_BYTES:,}; "
+                "give the MODEL.json written by 'bikeid measured fit'"
+            )
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{where} does not exist; write one with 'bikeid measured fit'") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {where}: {exc}") from None
+    obj = loads_json(text, where)
+    if not isinstance(obj, dict):
+        raise InputError(f"{where} must hold a JSON object, got {type(obj).__name__}")
+    effects = obj.get("effects")
+    if not isinstance(effects, dict):
+        raise InputError(
+            f"{where}: 'effects' must be an object of effect name: value, got "
+            f"{type(effects).__name__ if 'effects' in obj else 'nothing'}"
+        )
+    for name, value in effects.items():
+        if not _is_number(value):
+            unit = effect(name).unit  # an unknown name: ValueError naming the known ones
+            raise InputError(
+                f"{where}: effect {name!r} must be a finite number [{unit}], got {value!r}"
+            )
+    plant = obj.get("plant")
+    if plant is None and "plant" not in obj:
+        obj["plant"], obj["plant_defaulted"] = DEFAULT_PLANT, True
+    elif plant not in PLANTS:
+        raise InputError(
+            f"{where}: 'plant' is {plant!r}; use one of {', '.join(map(repr, PLANTS))}"
+        )
+    speeds = obj.get("fit_speeds")
+    if "fit_speeds" in obj and not (
+        isinstance(speeds, list) and all(_is_number(v) and 0 < v <= 100 for v in speeds)
+    ):
+        raise InputError(
+            f"{where}: 'fit_speeds' must be a list of treadmill speeds in (0, 100] m/s, got "
+            f"{json.dumps(speeds)[:60]}"
+        )
+    ident = obj.get("identification")
+    if ident is not None and not (
+        isinstance(ident, dict)
+        and isinstance(ident.get("effects", []), list)
+        and all(isinstance(e, dict) and "name" in e for e in ident.get("effects", []))
+    ):
+        raise InputError(
+            f"{where}: 'identification' must be the object 'measured fit' writes (its "
+            "'effects' a list of objects with a 'name'); delete the key or refit"
+        )
+    try:
+        return ExperimentModel(effects=dict(effects)), obj
+    except ValueError as exc:
+        raise InputError(f"{where}: {exc}") from None
 
 
 def fit_model(
@@ -114,7 +193,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         (NRMSE, dimensionless; weave eigenvalues [1/s]).
     """
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
-    plant = model_obj.get("plant", "linear")
+    plant = model_obj.get("plant", DEFAULT_PLANT)  # as model_from_json and measured fit
     ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
     ident = model_obj.get("identification", {})
     std = {e["name"]: e for e in ident.get("effects", [])}

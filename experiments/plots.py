@@ -41,7 +41,26 @@ def save(fig, path: str | Path) -> Path:
 
 
 def plot_eigenvalues(sweep, path: str | Path, title: str = "", critical: dict | None = None):
-    """Real and imaginary parts of tracked eigenvalues against speed."""
+    """Real and imaginary parts of tracked eigenvalues against speed.
+
+    Parameters
+    ----------
+    sweep : EigenSweep
+        Eigenvalues [1/s] against speed [m/s] with mode labels
+        (:func:`bikeid.sim.linear.eigenvalues_vs_speed`).
+    path : str or Path
+        PNG file to write (atomically, :func:`save`).
+    title : str, optional
+        Figure title.
+    critical : dict of str to float or None, optional
+        Speeds [m/s] to mark with a dashed line and their names (e.g. ``v_w``, ``v_c``);
+        None values are skipped.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     seen = set()
     for j, lab in enumerate(sweep.labels):

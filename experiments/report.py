@@ -17,7 +17,26 @@ __all__ = ["Report", "fmt", "fmt_complex", "write"]
 
 
 def fmt(x: Any, digits: int = 4) -> str:
-    """A number for a table: ``digits`` significant figures; '-' for None/NaN."""
+    """A number for a table: ``digits`` significant figures; '-' for None/NaN.
+
+    Parameters
+    ----------
+    x : object
+        A real or complex number (complex as :func:`fmt_complex`), a string (returned
+        as is) or None.
+    digits : int, optional
+        Significant figures.
+
+    Returns
+    -------
+    str
+        The formatted number (``"0"`` for zero; ``"-"`` for None, NaN or infinity).
+
+    Raises
+    ------
+    TypeError, ValueError
+        If ``x`` is none of these and does not convert to float.
+    """
     if x is None:
         return "-"
     if isinstance(x, (complex, np.complexfloating)):
@@ -33,7 +52,20 @@ def fmt(x: Any, digits: int = 4) -> str:
 
 
 def fmt_complex(z: complex, digits: int = 4) -> str:
-    """``a ± bi`` style for one member of a conjugate pair, plain real otherwise."""
+    """``a ± bi`` style for one member of a conjugate pair, plain real otherwise.
+
+    Parameters
+    ----------
+    z : complex
+        The number.
+    digits : int, optional
+        Significant figures of the real and imaginary parts.
+
+    Returns
+    -------
+    str
+        ``"a + bi"`` or ``"a - bi"`` (|imaginary part| below 1e-9: the real part alone).
+    """
     z = complex(z)
     if abs(z.imag) < 1e-9:
         return fmt(z.real, digits)
@@ -42,18 +74,54 @@ def fmt_complex(z: complex, digits: int = 4) -> str:
 
 
 class Report:
-    """An ordered list of markdown blocks."""
+    """An ordered list of markdown blocks.
+
+    Parameters
+    ----------
+    title : str
+        The report's level-1 heading.
+
+    Attributes
+    ----------
+    blocks : list of str
+        The markdown blocks in order, the title first.
+    """
 
     def __init__(self, title: str) -> None:
         self.blocks: list[str] = [f"# {title}\n"]
 
     def heading(self, text: str, level: int = 2) -> None:
+        """Append a heading.
+
+        Parameters
+        ----------
+        text : str
+            Heading text.
+        level : int, optional
+            Markdown level (number of ``#``).
+        """
         self.blocks.append(f"{'#' * level} {text}\n")
 
     def para(self, text: str) -> None:
+        """Append a paragraph.
+
+        Parameters
+        ----------
+        text : str
+            Markdown text (surrounding whitespace stripped).
+        """
         self.blocks.append(text.strip() + "\n")
 
     def table(self, headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
+        """Append a markdown table.
+
+        Parameters
+        ----------
+        headers : sequence of str
+            Column headings.
+        rows : sequence of sequence
+            Cells; numbers are formatted by :func:`fmt`, ``|`` and newlines escaped.
+        """
         def cell(x):
             return str(x if isinstance(x, str) else fmt(x)).replace("|", "\\|").replace("\n", " ")
 
@@ -62,9 +130,25 @@ class Report:
         self.blocks.append("\n".join(lines) + "\n")
 
     def figure(self, path: str, caption: str) -> None:
+        """Append an image with its caption.
+
+        Parameters
+        ----------
+        path : str
+            Image path, relative to the report.
+        caption : str
+            Caption (also the alt text).
+        """
         self.blocks.append(f"![{caption}]({path})\n\n*{caption}* (`{path}`)\n")
 
     def markdown(self) -> str:
+        """The report as one markdown document.
+
+        Returns
+        -------
+        str
+            The blocks joined by blank lines.
+        """
         return "\n".join(self.blocks)
 
 
@@ -78,7 +162,29 @@ def _strip_private(obj: Any) -> Any:
 
 def write(out: Path, report: Report, summary: dict[str, Any]) -> tuple[Path, Path]:
     """Write ``report.md`` and ``summary.json`` (keys starting with '_' are left out; complex
-    numbers become {"re", "im"}; NaN becomes null)."""
+    numbers become {"re", "im"}; NaN becomes null).
+
+    Parameters
+    ----------
+    out : Path
+        Existing output folder.
+    report : Report
+        The report.
+    summary : dict
+        The numbers behind it.
+
+    Returns
+    -------
+    md : Path
+        ``out/report.md``.
+    js : Path
+        ``out/summary.json``.
+
+    Raises
+    ------
+    ValueError
+        If a target path is unsafe to replace (a symlink or device; atomic writes).
+    """
     out = Path(out)
     md, js = out / "report.md", out / "summary.json"
     atomic_write_text(md, report.markdown())

@@ -33,7 +33,31 @@ __all__ = ["FULL", "QUICK", "Settings", "reproduce"]
 
 @dataclass(frozen=True)
 class Settings:
-    """What a reproduction computes (speeds in m/s, durations in s)."""
+    """What a reproduction computes (speeds in m/s, durations in s).
+
+    Attributes
+    ----------
+    name : str
+        ``"full"`` or ``"quick"``.
+    fig3_speeds : tuple of float
+        Speeds [m/s] of the fuzzy-controller identifications for Chen & Dao Fig. 3.
+    zoom_speeds : tuple of float
+        Extra PEM-only speeds [m/s] near the weave/capsize crossing of Fig. 3.
+    sweep_speeds : tuple of float
+        Speeds [m/s] of the controller sweep summary.
+    id_duration : float
+        Length of each identification run [s].
+    fig2_duration : float
+        Length of the Fig. 2 run at 4.2 m/s [s].
+    fig7_duration : float
+        Length of the Fig. 7 roll-tracking run [s].
+    limit_cycle_duration : float
+        Length of each coasting run of Figs. 4-5 [s].
+    mh_speeds : tuple of float
+        Speeds [m/s] of the Moore & Hubbard reproduction.
+    mh_duration : float
+        Length of each Moore & Hubbard run [s].
+    """
 
     name: str
     fig3_speeds: tuple[float, ...]
@@ -190,6 +214,7 @@ def reproduce(
             "weave_frequency_at_v_w": crit["weave_frequency"],
         },
         "chen_dao": {"fig2": f2, "fig3": f3, "figs4_5": lc, "fig7": f7},
+        "limit_cycles": lc["limit_cycles"],
         "moore_hubbard": mhr,
         "sweep": sw,
     }

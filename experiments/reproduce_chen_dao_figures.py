@@ -276,7 +276,10 @@ def limit_cycle_study(
     Returns
     -------
     dict
-        Per figure the periodicity verdicts of :func:`experiments.limit_cycles.periodicity`,
+        Per figure the verdicts of :func:`experiments.limit_cycles.periodicity`;
+        ``limit_cycles``: one :func:`experiments.limit_cycles.summary_entry` per initial
+        condition (class, period, Floquet multipliers); ``mirror_checks``: the exactly
+        mirrored runs of the periodic cases and their multipliers;
         the linear eigenvalues at 3.5 m/s [1/s], the true critical speeds [m/s] and the
         figure file names.
     """
@@ -284,12 +287,19 @@ def limit_cycle_study(
 
     from . import limit_cycles as lc
 
-    res: dict[str, Any] = {"speed": lc.SPEED, "duration": duration, "figures": []}
+    res: dict[str, Any] = {
+        "speed": lc.SPEED,
+        "duration": duration,
+        "figures": [],
+        "limit_cycles": [],
+    }
     for name, conds in (("fig4", lc.FIG4_CONDITIONS), ("fig5", lc.FIG5_CONDITIONS)):
         trajs = [lc.coast(p, ic, duration) for ic in conds]
         labels = [ic.label for ic in conds]
-        res[name] = [
-            lc.periodicity(tr, ic.label).as_dict() for tr, ic in zip(trajs, conds, strict=True)
+        per = [lc.periodicity(tr, ic.label) for tr, ic in zip(trajs, conds, strict=True)]
+        res[name] = [r.as_dict() for r in per]
+        res["limit_cycles"] += [
+            dict(lc.summary_entry(p, ic, r), figure=name) for ic, r in zip(conds, per, strict=True)
         ]
         lc.plot_phase_portraits(
             trajs,
@@ -306,7 +316,28 @@ def limit_cycle_study(
         )
         res["figures"] += [f"cd_{name}_phase.png", f"cd_{name}_energy_speed.png"]
         log(f"  {name}: " + ", ".join(f"{r['label']}: {r['verdict']}" for r in res[name]))
+    res["mirror_checks"] = _mirror_checks(p, duration, res["limit_cycles"])
     ev = np.sort_complex(eigenvalues(p, lc.SPEED))
     res["linear_eigenvalues"] = ev
     res["critical_true"] = {k: critical_speeds(p)[k] for k in ("v_d", "v_w", "v_c")}
     return res
+
+
+def _mirror_checks(p: BicycleParameters, duration: float, entries: list[dict]) -> list[dict]:
+    """Run the exact mirror image of every periodic case; its multipliers must agree."""
+    from . import limit_cycles as lc
+
+    conds = {ic.label: ic for ic in lc.FIG4_CONDITIONS + lc.FIG5_CONDITIONS}
+    out = []
+    for e in entries:
+        if e["outcome"] != "periodic":
+            continue
+        ic = lc.mirrored(conds[e["label"]])
+        m = lc.summary_entry(p, ic, lc.periodicity(lc.coast(p, ic, duration), ic.label))
+        d = None
+        if m["floquet_multipliers"] is not None and e["floquet_multipliers"] is not None:
+            a = np.array([complex(*z) for z in e["floquet_multipliers"]])
+            b = np.array([complex(*z) for z in m["floquet_multipliers"]])
+            d = float(np.max(np.abs(a - b))) if a.size == b.size else None
+        out.append({"of": e["label"], "mirror": m, "max_multiplier_difference": d})
+    return out

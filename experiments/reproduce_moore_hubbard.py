@@ -112,7 +112,25 @@ def _one_run(args: tuple) -> Any:
 
 
 def make_runs(speeds: Sequence[float], duration: float, workers: int = 1) -> list:
-    """One run per rider x environment x speed (seeded by their position)."""
+    """One run per rider x environment x speed (seeded by their position).
+
+    Parameters
+    ----------
+    speeds : sequence of float
+        Forward speeds [m/s].
+    duration : float
+        Length of each run [s].
+    workers : int, optional
+        Worker processes (1: in this process).
+
+    Returns
+    -------
+    list of Run
+        Prepared runs (15 Hz low-pass, forward-difference accelerations ``phiddot``,
+        ``deltaddot`` [rad/s^2]; lateral force ``F`` [N] logged exactly), in the order
+        rider, environment, speed; ``meta["rider"]`` and ``meta["environment"]`` name
+        the cell.
+    """
     jobs = []
     for i, r in enumerate(RIDERS):
         for j, e in enumerate(ENVIRONMENTS):
@@ -182,7 +200,19 @@ def _row_parts(run, free_names: Sequence[str], row: int, model: dict[str, float]
 
 
 def fit_subset(runs: Sequence) -> dict[str, float]:
-    """Two-stage least squares over ``runs`` (see the module docstring); free entry -> value."""
+    """Two-stage least squares over ``runs`` (see the module docstring); free entry -> value.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        Runs of :func:`make_runs` (their ``meta["rider"]`` selects the fixed entries).
+
+    Returns
+    -------
+    dict of str to float
+        Roll {Mpd, C1pd, K0pd} then steer {Mdd, C1dp, C1dd, K0dd, K2dd, HdF} estimates, in
+        their matrix units (M kg m^2, C1 kg m, K0 kg m, K2 kg, H m).
+    """
     est: dict[str, float] = {}
     parts = [_row_parts(r, ROLL_FREE, 0, None) for r in runs]
     G = np.vstack([p[0] for p in parts])
@@ -202,7 +232,21 @@ def _whipple_free(rider: str) -> dict[str, float]:
 
 def row_vaf(runs: Sequence, model: dict[str, float] | None) -> dict[str, float]:
     """Eq.-6 VAF of the roll and steer rows on ``runs`` for ``model`` (free entries; None =
-    each run's own Whipple model)."""
+    each run's own Whipple model).
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        Runs of :func:`make_runs`.
+    model : dict of str to float or None
+        Free-entry values (:func:`fit_subset`), or None for each run's Whipple values.
+
+    Returns
+    -------
+    dict of str to float
+        ``"roll"`` and ``"steer"``: Moore's eq. 6 (:func:`bikeid.ident.direct.vaf_moore`)
+        of the row's torque [N m] over all runs stacked (dimensionless).
+    """
     from bikeid.ident.direct import vaf_moore
 
     out = {}
@@ -234,7 +278,23 @@ def _model_matrices(rider: str, model: dict[str, float] | None):
 
 
 def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
-    """Eq.-6 VAF of phi, delta, phidot, deltadot for a windowed simulation (module doc)."""
+    """Eq.-6 VAF of phi, delta, phidot, deltadot for a windowed simulation (module doc).
+
+    Parameters
+    ----------
+    run : Run
+        A run of :func:`make_runs`.
+    model : dict of str to float or None
+        Free-entry values, or None for the run's rider's Whipple model.
+    window : float, optional
+        Window length [s]; the initial state of each window is fitted by least squares.
+
+    Returns
+    -------
+    dict of str to float
+        Moore's eq. 6 fit per state ``phi``, ``delta``, ``phidot``, ``deltadot``
+        (dimensionless).
+    """
     from bikeid.ident.direct import vaf_moore
     from bikeid.sim.linear import state_matrices
     from bikeid.sim.sampling import zoh
@@ -282,7 +342,31 @@ def reproduce(
     workers: int = 1,
     log: Callable[[str], None] = lambda s: None,
 ) -> dict[str, Any]:
-    """Runs, 12 identified models, Tables 2-5 and Figs. 2-4 analogues."""
+    """Runs, 12 identified models, Tables 2-5 and Figs. 2-4 analogues.
+
+    Parameters
+    ----------
+    out : Path
+        Existing output folder for the three figures (PNG).
+    speeds : sequence of float
+        Forward speeds [m/s] of the runs.
+    duration : float
+        Length of each run [s].
+    workers : int, optional
+        Worker processes of the simulation.
+    log : callable, optional
+        Receives progress lines.
+
+    Returns
+    -------
+    dict
+        ``riders``, ``environments``, ``speeds`` [m/s], ``duration`` [s], ``n_runs``,
+        ``fell`` (runs whose bicycle fell), ``models`` (subset -> free entries),
+        ``table2_roll_vaf`` and ``table3_steer_vaf`` (data subset -> model -> eq.-6 VAF),
+        ``table4_simulation_vaf`` (model -> median VAF per state and their mean),
+        ``table5`` (M, C1, K0, K2, H of B-N, B-S, A-A and the benchmark Whipple model),
+        ``figures`` (file names) and ``sim_window`` [s].
+    """
     runs = make_runs(speeds, duration, workers)
     fell = [
         f"{r.meta['rider']}-{r.meta['environment']} at {r.speed} m/s"

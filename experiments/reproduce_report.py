@@ -264,79 +264,109 @@ def _report_limit_cycles(rep: Report, lc: dict) -> None:
     )
     for f in lc["figures"]:
         rep.figure(f, f.replace("_", " ").replace(".png", ""))
+
+    def mults(e):
+        if e["floquet_multipliers"] is None:
+            return "-"
+        ms = [complex(*z) for z in e["floquet_multipliers"]]
+        return ", ".join(fmt_complex(m, 7) if abs(m) > 1e-6 else "<1e-6" for m in ms)
+
     rows = []
-    for name in ("fig4", "fig5"):
-        for r in lc[name]:
-            rows.append(
-                [
-                    f"Fig. {name[3]}: {r['label']}",
-                    r["verdict"]
-                    + (f" at {r['fell_at']:.2f} s" if r["fell_at"] is not None else ""),
-                    fmt(r["period"]),
-                    str(r["returns_per_period"] or "-"),
-                    fmt(r["closure"], 2),
-                    fmt(r["contraction"], 3),
-                    f"{fmt(r['roll_range'][0], 3)} .. {fmt(r['roll_range'][1], 3)}",
-                    fmt(r["roll_mean"], 3),
-                    f"{fmt(r['speed_range'][0], 3)} .. {fmt(r['speed_range'][1], 3)}",
-                    fmt(r["turn_radius"], 3),
-                    fmt(r["energy_drift"], 2),
-                ]
-            )
+    for e in lc["limit_cycles"]:
+        r = next(x for x in lc[e["figure"]] if x["label"] == e["label"])
+        rows.append(
+            [
+                f"Fig. {e['figure'][3]}: {e['label']}",
+                e["outcome"]
+                + (f" at {e['fall_time_s']:.2f} s" if e["fall_time_s"] is not None else ""),
+                str(e["period_n"] or "-"),
+                fmt(e["period_s"], 6),
+                fmt(e["closure_rel"], 2),
+                mults(e),
+                fmt(e["unit_multiplier_error"], 2),
+                fmt(e["orbit_energy_J"], 7),
+                f"{fmt(r['speed_range'][0], 3)} .. {fmt(r['speed_range'][1], 3)}",
+                fmt(r["energy_drift"], 2),
+            ]
+        )
     rep.table(
         [
             "initial condition",
-            "outcome",
-            "period [s]",
+            "class",
             "returns/period",
-            "closure [deg]",
-            "contraction/period",
-            "roll range [deg]",
-            "mean roll [deg]",
+            "period [s]",
+            "closure (rel.)",
+            "Poincare-map multipliers",
+            "min |mu - 1|",
+            "orbit energy [J]",
             "speed range [m/s]",
-            "turn radius [m]",
             "energy drift (rel.)",
         ],
         rows,
     )
     rep.para(
-        "Periodicity check: Poincare section phidot = 0 (roll maxima), section point (phi, "
-        "delta, deltadot, v); 'periodic' = the section points repeat after p returns within "
-        "0.05 deg (0.05 cm/s) over the second half of the run; contraction = factor per period "
-        "by which the distance |x_{n+p} - x_n| shrinks (< 1: the motion is attracted to the "
-        "orbit). Paper: all Fig. 4-5 cases approach periodic orbits. For runs that fall, the "
-        "energy drift shows that the fixed 5 ms RK4 step is too coarse in the last, fast phase "
-        "of the fall: that the bicycle leaves the upright neighbourhood is robust, the fall "
-        "time and the statistics of those rows are approximate."
+        "Classes (`experiments.limit_cycles.classify`, Poincare section phidot = 0 at roll "
+        "maxima, section point (phi, delta, deltadot, v), last half of the returns): falls = "
+        "the integrator stopped the run at |roll| > 60 deg (cause: its stop reason); decays = "
+        "the section amplitude shrinks geometrically towards zero at a rate 3 standard errors "
+        "from zero; periodic (n returns) = |x_{n+p} - x_n| below 1 % of each component's "
+        "amplitude; irregular otherwise. For each periodic run the orbit is converged by "
+        "Newton on the Poincare map's fixed point (DOP853, rtol = atol = 1e-12, residual < "
+        "1e-10) and the multipliers are the eigenvalues of the map's Jacobian (central "
+        "differences, step 1e-5). Coasting conserves energy, so one multiplier is 1 (the "
+        "energy direction): min |mu - 1| checks the computation (expected ~1e-7 from the "
+        "integration error over the difference step). The other multipliers, all inside the "
+        "unit circle, say that within its energy level the orbit attracts nearby motions: "
+        "a limit cycle of the flow restricted to that level, one orbit per energy level. "
+        "For runs that fall, the fixed 5 ms RK4 step is coarse in the last, fast phase of the "
+        "fall: the fall is robust, its time approximate."
     )
-    per = [r for n in ("fig4", "fig5") for r in lc[n] if r["verdict"] == "periodic"]
-    fell = [r for n in ("fig4", "fig5") for r in lc[n] if r["verdict"] == "fell"]
+    counts = {}
+    for e in lc["limit_cycles"]:
+        counts[e["outcome"]] = counts.get(e["outcome"], 0) + 1
+    per = [
+        next(x for x in lc[e["figure"]] if x["label"] == e["label"])
+        for e in lc["limit_cycles"]
+        if e["outcome"] == "periodic"
+    ]
     rep.para(
-        f"Measured: {len(per)} of {len(per) + len(fell)} runs settle on a closed orbit; "
-        f"{len(fell)} fall. The closed orbits are not oscillations about upright: the bicycle "
-        "leans into a steady turn (mean roll about "
+        "Measured: "
+        + ", ".join(f"{n} {k}" for k, n in sorted(counts.items()))
+        + ". The periodic orbits are not oscillations about upright: the bicycle leans into "
+        "a turn (mean roll "
         + (", ".join(f"{r['roll_mean']:.1f}" for r in per) if per else "-")
-        + " deg, turn radius "
-        + (", ".join(f"{r['turn_radius']:.1f}" for r in per if r["turn_radius"]) if per else "-")
-        + " m) and oscillates about it, with the coasting speed rising from 3.5 m/s as potential "
-        "energy is released (Basu-Mandal et al. 2007 describe such hands-free circular motions "
-        "of the benchmark). Energy is conserved to the listed drift (integration error), so the "
-        "orbits are not sustained by an energy balance as in a dissipative limit cycle."
+        + " deg) and oscillates about it, the speed rising from 3.5 m/s as potential energy "
+        "is released (Basu-Mandal et al. 2007 describe such hands-free circular motions of "
+        "the benchmark). Energy is conserved, so these are not limit cycles of the full "
+        "state space (there each energy level carries its own orbit, a one-parameter "
+        "family); the Whipple bicycle is nonholonomic, not Hamiltonian, and with the "
+        "nontrivial multipliers inside the unit circle each orbit is an attracting limit "
+        "cycle of the flow restricted to its energy level."
     )
-    rep.para(
-        "Is 'limit cycle' the right word? Strictly, a limit cycle is an isolated periodic orbit "
-        "that attracts or repels its neighbours. The bicycle conserves energy, so there is no "
-        "isolated orbit in the full state space: each energy level carries its own orbit (the "
-        "runs above start at different energies and end on different orbits), a one-parameter "
-        "family. But the Whipple bicycle is nonholonomic, not Hamiltonian: phase volume is not "
-        "conserved, and motions can be asymptotically stable at fixed energy (the self-stable "
-        "weave above v_w is an example). A contraction factor below 1 means that within its "
-        "energy level the orbit does attract nearby motions, i.e. it is a limit cycle of the "
-        "flow restricted to that energy level. 'Limit cycle' without that qualification "
-        "overstates it; 'stable periodic orbits (one per energy level)' is accurate where the "
-        "contraction is below 1, and the paper's Fig. 5 cases that fall here are not periodic "
-        "at all."
-    )
+    checks = lc.get("mirror_checks", [])
+    if checks:
+        rep.para(
+            "Mirror checks (every initial angle and rate negated; the mirror orbit must have "
+            "the same multipliers): "
+            + "; ".join(
+                f"{c['of']}: mirror {c['mirror']['outcome']}, max |mu - mu_mirror| = "
+                f"{fmt(c['max_multiplier_difference'], 2)}"
+                for c in checks
+            )
+            + "."
+        )
+    pair = {e["label"]: e for e in lc["limit_cycles"] if e["outcome"] == "periodic"}
+    a, b = pair.get("delta0=0.1, phidot0=0"), pair.get("phi0=0.1")
+    if a and b:
+        ma = np.array([complex(*z) for z in a["floquet_multipliers"]])
+        mb = np.array([complex(*z) for z in b["floquet_multipliers"]])
+        rep.para(
+            "Fig. 4's delta0 = 0.1 deg and Fig. 5's phi0 = 0.1 deg start on energy levels "
+            f"{fmt(abs(a['orbit_energy_J'] - b['orbit_energy_J']), 2)} J apart and reach "
+            "mirror-image orbits (turns of opposite sense): periods differ by "
+            f"{fmt(abs(a['period_s'] - b['period_s']), 2)} s, multipliers by at most "
+            f"{fmt(float(np.max(np.abs(ma - mb))), 2)}."
+        )
 
 
 def _report_fig7(rep: Report, f7: dict) -> None:

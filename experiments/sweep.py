@@ -8,12 +8,17 @@ A sweep is one controller run at every (speed, seed) of a grid.  Guarantees:
   or Dask cluster computed them (the file is consolidated in grid order).
 - **Resumable.**  Every finished run is written atomically as its own file
   ``FILE.h5.parts/<run>.h5`` (HDF5, see :mod:`dataset.store`); when all are done they
-  are copied into ``FILE.h5`` by one atomic replace and the parts folder is removed.
+  are copied into ``FILE.h5`` by one atomic replace, and the part files of this sweep and
+  its lock are deleted (the folder too if nothing else is left in it: files a sweep did
+  not write are never touched).
   Killed at any moment (even SIGKILL) and started again with the same arguments, a sweep
   reuses every valid part and every run already in ``FILE.h5`` and computes only the
   missing ones; ``FILE.h5`` is at all times either absent, the previous complete file,
   or the new complete file.  Runs already in ``FILE.h5`` that the new grid does not
-  list are kept.  A lock file (``flock``) refuses a second sweep on the same output.
+  list are kept.  A lock file (``flock``) refuses a second sweep on the same output; it is
+  removed when the sweep ends or is refused.
+- **Honest.**  A run that ended early keeps its stop (``meta["stop"]``, see
+  :mod:`dataset.closed_loop`); the report counts falls and numerical failures apart.
 - **Parallel.**  ``workers`` local processes (:class:`concurrent.futures.ProcessPoolExecutor`),
   or a Dask cluster (``dask="local"`` starts a ``LocalCluster`` of ``workers`` processes;
   otherwise a scheduler address).  Results travel back to this process, which alone
@@ -26,7 +31,6 @@ import contextlib
 import fcntl
 import math
 import os
-import shutil
 import sys
 import time
 import zlib
@@ -39,11 +43,12 @@ from typing import Any
 import numpy as np
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS, canonical_name
-from bikeid.dataset.run import Run
+from bikeid.dataset.run import Run, run_stop
 from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
 
 __all__ = [
     "CONTROLLERS",
+    "stabilization_counts",
     "stabilization_markdown",
     "stabilization_table",
     "SweepReport",
@@ -62,7 +67,17 @@ SENSORS = ("default", "ideal")
 
 @dataclass(frozen=True)
 class Task:
-    """One run of a sweep: its group name, speed [m/s] and user seed."""
+    """One run of a sweep: its group name, speed [m/s] and user seed.
+
+    Attributes
+    ----------
+    name : str
+        Run (HDF5 group) name, ``<controller>_v<speed, 3 decimals>_s<seed>``.
+    speed : float
+        Forward speed [m/s].
+    seed : int
+        User seed (non-negative); the run's random streams come from :func:`run_seed`.
+    """
 
     name: str
     speed: float
@@ -102,6 +117,42 @@ class SweepSpec:
     extra: keywords for :func:`dataset.closed_loop.simulate_run` (e.g. ``mode``).
     Controllers are ``controllers.registry`` defaults; pole placement is designed at the
     run's speed (``design_speed``), PID and fuzzy schedule on the measured speed.
+
+    Parameters
+    ----------
+    controller : {"fuzzy", "pid", "pole"}
+        Controller name (:data:`CONTROLLERS`).
+    speeds : tuple of float
+        Forward speeds [m/s], positive, at least 1 mm/s apart.
+    seeds : tuple of int, optional
+        Non-negative user seeds.
+    duration : float, optional
+        Length of each run [s].
+    bicycle : str, optional
+        Bicycle parameter set, a name for ``sim.parameters.by_name``.
+    reference : {"chirp", "zero"}, optional
+        Roll reference.
+    chirp_amplitude : float or None, optional
+        Roll chirp amplitude [rad]; None: by speed band.
+    dither : float, optional
+        Uniform steer-torque dither amplitude [N m] (0 = none).
+    dither_hold : float or None, optional
+        Dither hold [s]; None: by speed band.
+    sensors : {"default", "ideal"}, optional
+        Sensor model.
+    sensor_rate : float, optional
+        Sensor sample rate [Hz].
+    sample_time : float, optional
+        Controller period [s].
+    extra : dict, optional
+        Further keywords for :func:`dataset.closed_loop.simulate_run`.
+
+    Raises
+    ------
+    ValueError
+        If the controller, reference or sensors is unknown, a speed is not positive and
+        finite, a seed is not a non-negative integer, the duration is not positive, the
+        dither amplitude is negative, or two speeds give the same run name.
     """
 
     controller: str
@@ -145,7 +196,13 @@ class SweepSpec:
             raise ValueError("sweep speeds must differ by at least 1 mm/s (run names collide)")
 
     def tasks(self) -> list[Task]:
-        """The grid, speed-major then seed, in file order."""
+        """The grid, speed-major then seed, in file order.
+
+        Returns
+        -------
+        list of Task
+            One task per (speed, seed).
+        """
         return [
             Task(f"{self.controller}_v{v:07.3f}_s{s}", v, s)
             for v in self.speeds
@@ -153,20 +210,62 @@ class SweepSpec:
         ]
 
     def settings(self) -> dict[str, Any]:
-        """What must match for runs to be reused (everything but the grid)."""
+        """What must match for runs to be reused (everything but the grid).
+
+        Returns
+        -------
+        dict
+            The fields of the spec without ``speeds`` and ``seeds`` (JSON-able).
+        """
         d = asdict(self)
         del d["speeds"], d["seeds"]
         return d
 
 
 def run_seed(seed: int, speed: float, controller: str) -> int:
-    """The 32-bit seed of run (seed, speed, controller), independent of worker order."""
+    """The 32-bit seed of run (seed, speed, controller), independent of worker order.
+
+    Parameters
+    ----------
+    seed : int
+        User seed, non-negative.
+    speed : float
+        Forward speed [m/s] (enters rounded to 1e-6 m/s).
+    controller : str
+        Controller name (enters by its CRC-32).
+
+    Returns
+    -------
+    int
+        First word of ``numpy.random.SeedSequence([seed, round(speed * 1e6),
+        crc32(controller)])``, in [0, 2^32).
+    """
     ss = np.random.SeedSequence([int(seed), round(speed * 1e6), zlib.crc32(controller.encode())])
     return int(ss.generate_state(1)[0])
 
 
 def simulate_task(spec: SweepSpec, task: Task) -> Run:
-    """Simulate one run of ``spec`` (runs in a worker process)."""
+    """Simulate one run of ``spec`` (runs in a worker process).
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    task : Task
+        The run's speed and seed.
+
+    Returns
+    -------
+    Run
+        The closed-loop run on the nonlinear plant; ``meta["sweep"]`` records the
+        settings, the user seed and the derived run seed; ``meta["fell_at"]`` [s] or None.
+
+    Raises
+    ------
+    ValueError
+        If the controller cannot be designed at this speed or the simulation refuses its
+        options.
+    """
     from bikeid.controllers.excitation import ChirpReference, UniformDither, ZeroReference
     from bikeid.controllers.registry import make
     from bikeid.dataset.closed_loop import simulate_run
@@ -211,7 +310,27 @@ def simulate_task(spec: SweepSpec, task: Task) -> Run:
 
 @dataclass
 class SweepReport:
-    """What a sweep did: file, counts, fallen runs (name -> time [s]), wall time [s]."""
+    """What a sweep did: file, counts, fallen runs (name -> time [s]), wall time [s].
+
+    Attributes
+    ----------
+    out : Path
+        The HDF5 file written.
+    total : int
+        Runs of the grid.
+    computed : int
+        Runs simulated by this call.
+    reused : int
+        Runs taken from the file or its parts folder.
+    fell : dict of str to float
+        Runs in which the bicycle fell (a physical stop), name -> time of the fall [s].
+    elapsed : float
+        Wall time [s].
+    failed : dict of str to dict
+        Runs that ended early for a numerical reason (not a fall), name -> ``meta["stop"]``.
+    causes : dict of str to str
+        Stop cause of each fallen run (``sim.integrate.STOP_CAUSES``), by name.
+    """
 
     out: Path
     total: int
@@ -219,17 +338,38 @@ class SweepReport:
     reused: int
     fell: dict[str, float]
     elapsed: float
+    failed: dict[str, dict[str, Any]] = field(default_factory=dict)
+    causes: dict[str, str] = field(default_factory=dict)
 
     def summary(self) -> str:
+        """Human-readable summary of the sweep.
+
+        Returns
+        -------
+        str
+            A line with the file, counts and time, then the fallen runs (or "no run fell").
+        """
         lines = [
             f"wrote {self.out}: {self.total} runs (computed {self.computed}, reused "
             f"{self.reused}) in {self.elapsed:.1f} s"
         ]
         if self.fell:
             lines.append(f"{len(self.fell)} run(s) fell (kept, flagged in meta['fell_at']):")
-            lines += [f"  {name}: fell at {t:.2f} s" for name, t in self.fell.items()]
+            lines += [
+                f"  {name}: fell at {t:.2f} s ({self.causes.get(name, 'roll_limit')})"
+                for name, t in self.fell.items()
+            ]
         else:
             lines.append("no run fell")
+        if self.failed:
+            lines.append(
+                f"{len(self.failed)} run(s) ended early for a numerical reason, not a fall "
+                "(kept truncated, flagged in meta['stop']; estimators refuse them):"
+            )
+            lines += [
+                f"  {name}: {st['cause']} at {st['time']:.2f} s: {st['message']}"
+                for name, st in self.failed.items()
+            ]
         return "\n".join(lines)
 
 
@@ -239,17 +379,33 @@ def parts_dir(out: Path) -> Path:
 
 @contextlib.contextmanager
 def _lock(parts: Path) -> Iterator[None]:
+    """Hold ``parts/.lock`` for the sweep; on exit (done, refused or failed) delete the
+    lock while still holding it, and the folder if it is then empty."""
     parts.mkdir(parents=True, exist_ok=True)
-    fh = open(parts / ".lock", "w")  # noqa: SIM115 - held for the whole sweep
+    lock = parts / ".lock"
+    busy = ValueError(
+        f"another sweep is writing {parts.name[: -len('.parts')]}; wait for it or use "
+        "another --out"
+    )
+    fh = open(lock, "w")  # noqa: SIM115 - held for the whole sweep
     try:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise ValueError(
-                f"another sweep is writing {parts.name[: -len('.parts')]}; wait for it or use "
-                "another --out"
-            ) from None
-        yield
+            raise busy from None
+        try:
+            # a sweep that just finished may have deleted the file we opened: then the
+            # lock we hold is on an orphan and a third sweep could lock a new file
+            if os.stat(lock).st_ino != os.fstat(fh.fileno()).st_ino:
+                raise busy
+        except FileNotFoundError:
+            raise busy from None
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # not empty: someone else's files
+                parts.rmdir()
     finally:
         fh.close()
 
@@ -269,7 +425,7 @@ def _check_settings(where: Path, found: Any, spec: SweepSpec) -> None:
 def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None]):
     """Runs already done: name -> source file, after validation."""
     done: dict[str, Path] = {}
-    for tmp in parts.glob(".*.tmp"):  # left by a killed atomic write (we hold the lock)
+    for tmp in parts.glob(".*.h5.*.tmp"):  # left by a killed atomic write (we hold the lock)
         tmp.unlink(missing_ok=True)
     for tmp in out.parent.glob(f".{out.name}.*.tmp"):
         tmp.unlink(missing_ok=True)
@@ -283,7 +439,7 @@ def _existing(out: Path, parts: Path, spec: SweepSpec, log: Callable[[str], None
                 extra.append(name)
     for part in sorted(parts.glob("*.h5")):
         name = part.stem
-        if name in done:
+        if name in done or name not in wanted:  # not a part of this grid: leave it alone
             continue
         try:
             run = read_run(part, name)
@@ -372,7 +528,35 @@ def run_sweep(
     progress: bool = True,
     log: Callable[[str], None] | None = None,
 ) -> SweepReport:
-    """Run (or finish) the sweep ``spec`` into the HDF5 file ``out``; see the module doc."""
+    """Run (or finish) the sweep ``spec`` into the HDF5 file ``out``; see the module doc.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    out : str or Path
+        Output file, ending in ``.h5`` or ``.hdf5``.
+    workers : int, optional
+        Local worker processes (or the size of a local Dask cluster).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address; None: local processes.
+    progress : bool, optional
+        Show a progress bar on stderr.
+    log : callable, optional
+        Receives messages (default: stderr).
+
+    Returns
+    -------
+    SweepReport
+        Counts, fallen runs and wall time.
+
+    Raises
+    ------
+    ValueError
+        If ``workers`` is not a positive integer, ``out`` has another suffix, another
+        sweep holds the lock on ``out``, ``out`` or a part was made with different
+        settings, Dask is missing or unreachable, or a run's simulation raises.
+    """
     t0 = time.perf_counter()
     if int(workers) != workers or workers < 1:
         raise ValueError(f"--workers must be a positive integer, got {workers}")
@@ -406,14 +590,26 @@ def run_sweep(
         names = [t.name for t in tasks] + extra
         if any(done[n] != out for n in names) or not out.exists():
             copy_runs(out, [(done[n], n) for n in names], attrs={"sweep": spec.settings()})
-    shutil.rmtree(parts, ignore_errors=True)
-    fell = {}
+        for n in names:  # only this sweep's parts, now in ``out``; other files stay
+            if done[n] != out:
+                done[n].unlink(missing_ok=True)
+    fell: dict[str, float] = {}
+    causes: dict[str, str] = {}
+    failed: dict[str, dict[str, Any]] = {}
     from bikeid.dataset.store import read_runs
 
     for name, run in zip(names, read_runs(out, names), strict=True):
-        if run.meta.get("fell_at") is not None:
-            fell[name] = float(run.meta["fell_at"])
-    return SweepReport(out, len(tasks), len(todo), reused, fell, time.perf_counter() - t0)
+        stop = run_stop(run)
+        if stop is None:
+            continue
+        if stop["physical"]:
+            fell[name] = float(stop["time"])
+            causes[name] = stop["cause"]
+        else:
+            failed[name] = stop
+    return SweepReport(
+        out, len(tasks), len(todo), reused, fell, time.perf_counter() - t0, failed, causes
+    )
 
 
 def default_workers() -> int:
@@ -427,13 +623,19 @@ def stabilization_task(spec: SweepSpec, task: Task) -> dict[str, Any]:
     try:
         run = simulate_task(spec, task)
     except ValueError as exc:  # e.g. pole placement at an uncontrollable speed
-        return {**row, "upright": False, "fell_at": None, "error": str(exc).splitlines()[0],
+        return {**row, "upright": False, "fell_at": None, "stop": None,
+                "error": str(exc).splitlines()[0], "rms_error_deg": None,
+                "peak_torque": None}  # fmt: skip
+    stop = run_stop(run)
+    if stop is not None and not stop["physical"]:  # numbers up to a blow-up mean nothing
+        return {**row, "upright": False, "fell_at": None, "stop": stop, "error": None,
                 "rms_error_deg": None, "peak_torque": None}  # fmt: skip
     err = run.reference - run.true("phi")
     return {
         **row,
-        "upright": run.meta["fell_at"] is None,
-        "fell_at": run.meta["fell_at"],
+        "upright": stop is None,
+        "fell_at": None if stop is None else stop["time"],
+        "stop": stop,
         "error": None,
         "rms_error_deg": math.degrees(float(np.sqrt(np.mean(err**2)))),
         "peak_torque": float(np.max(np.abs(run.true("T_delta")))),
@@ -451,7 +653,39 @@ def stabilization_table(
 ) -> list[dict[str, Any]]:
     """Run every controller at every speed (chirp reference, dither, default sensors) on the
     nonlinear model; one row per (controller, speed), in that order.  A tracking test: the
-    chirp is 3 deg and the dither hold 10 ms at every speed unless given."""
+    chirp is 3 deg and the dither hold 10 ms at every speed unless given.
+
+    Parameters
+    ----------
+    speeds : sequence of float
+        Forward speeds [m/s].
+    duration : float, optional
+        Length of each run [s].
+    controllers : sequence of str, optional
+        Controller names (:data:`CONTROLLERS`).
+    workers : int, optional
+        Local worker processes.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address.
+    progress : bool, optional
+        Show a progress bar on stderr.
+    **spec_options
+        Further :class:`SweepSpec` fields (``chirp_amplitude`` [rad] defaults to 3 deg,
+        ``dither_hold`` [s] to 0.01).
+
+    Returns
+    -------
+    list of dict
+        Per (controller, speed): ``controller``, ``speed`` [m/s], ``upright``,
+        ``fell_at`` [s] or None, ``error`` (a failed design's message) or None,
+        ``rms_error_deg`` (RMS of reference - true roll [deg]) and ``peak_torque`` (peak
+        |T_delta| [N m]), the last two None after a failed design.
+
+    Raises
+    ------
+    ValueError
+        If a :class:`SweepSpec` is invalid.
+    """
     from tqdm import tqdm
 
     spec_options.setdefault("chirp_amplitude", math.radians(3.0))
@@ -469,18 +703,63 @@ def stabilization_table(
     return [rows[(spec.controller, t.name)] for spec, t in todo]
 
 
+def stabilization_counts(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """How many rows stayed ``upright``, ``fell`` (physical stop), ``failed`` numerically
+    (``meta["stop"]`` not physical: no verdict on the controller) or had a design ``error``.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of :func:`stabilization_table`.
+
+    Returns
+    -------
+    dict of str to int
+        Counts under ``upright``, ``fell``, ``failed`` and ``error``.
+    """
+    counts = {"upright": 0, "fell": 0, "failed": 0, "error": 0}
+    for r in rows:
+        stop = r.get("stop")
+        if r["error"]:
+            counts["error"] += 1
+        elif r["upright"]:
+            counts["upright"] += 1
+        elif stop is not None and not stop["physical"]:
+            counts["failed"] += 1
+        else:
+            counts["fell"] += 1
+    return counts
+
+
 def stabilization_markdown(rows: Sequence[dict[str, Any]]) -> str:
-    """The table as markdown: one line per (controller, speed)."""
+    """The table as markdown: one line per (controller, speed).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of :func:`stabilization_table`.
+
+    Returns
+    -------
+    str
+        A markdown table (controller, speed [m/s], upright, RMS roll tracking error
+        [deg], peak steer torque [N m]).
+    """
     lines = [
         "| controller | speed [m/s] | upright | RMS roll tracking error [deg] "
         "| peak steer torque [N m] |",
         "|---|---:|---|---:|---:|",
     ]
     for r in rows:
+        stop = r.get("stop")
         if r["error"]:
             status = f"design failed: {r['error']}"
         elif r["upright"]:
             status = "yes"
+        elif stop is not None and not stop["physical"]:
+            status = f"numerical failure ({stop['cause']}) at {stop['time']:.2f} s"
+        elif stop is not None and stop["cause"] != "roll_limit":
+            status = f"fell ({stop['cause']}) at {r['fell_at']:.2f} s"
         else:
             status = f"fell at {r['fell_at']:.2f} s"
         rms = "" if r["rms_error_deg"] is None else f"{r['rms_error_deg']:.3f}"

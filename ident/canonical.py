@@ -23,6 +23,7 @@ import control
 import numpy as np
 
 from bikeid.sim.conventions import LINEAR_STATE
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices
 
 __all__ = [
@@ -253,7 +254,7 @@ def to_canonical_form(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray
     c1, c2 = C[0], C[1]
     T = np.vstack([c1, c1 @ A, c2, c2 @ A])
     if np.linalg.cond(T) > 1e12:
-        raise ValueError(
+        raise UntrustworthyResult(
             "the model is not observable with indices (2, 2); cannot form the canonical form"
         )
     Ti = np.linalg.inv(T)

@@ -49,6 +49,7 @@ import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
 from bikeid.sim.parameters import BicycleParameters, from_mapping
 
@@ -78,6 +79,19 @@ def vaf_moore(measured: np.ndarray, predicted: np.ndarray) -> float:
 
     A norm ratio (= MATLAB ``compare``'s NRMSE fit), *not* the variance ratio; NaN when
     the measured signal is constant.
+
+    Parameters
+    ----------
+    measured : (N,) array_like
+        Measured signal, any unit.
+    predicted : (N,) array_like
+        Predicted signal, same unit and samples as ``measured``.
+
+    Returns
+    -------
+    float
+        The fit, dimensionless; 1 for a perfect prediction, <= 1, negative when the
+        prediction is worse than the mean.  NaN when ``measured`` is constant.
     """
     y, yp = np.asarray(measured, float), np.asarray(predicted, float)
     den = np.linalg.norm(y - y.mean())
@@ -88,6 +102,19 @@ def vaf_variance(measured: np.ndarray, predicted: np.ndarray) -> float:
     """Variance accounted for, 1 - var(measured - predicted) / var(measured).
 
     For a zero-mean error, vaf_variance = 1 - (1 - vaf_moore)^2 (reference T11).
+
+    Parameters
+    ----------
+    measured : (N,) array_like
+        Measured signal, any unit.
+    predicted : (N,) array_like
+        Predicted signal, same unit and samples as ``measured``.
+
+    Returns
+    -------
+    float
+        The variance ratio, dimensionless, <= 1 (a constant offset of the error is not
+        penalised).  NaN when ``measured`` is constant.
     """
     y, yp = np.asarray(measured, float), np.asarray(predicted, float)
     den = np.var(y)
@@ -118,7 +145,24 @@ def _data(run: Run, source: str, derivative: str) -> dict[str, np.ndarray]:
 
 
 def regressors(d: dict[str, np.ndarray], g: float) -> dict[str, np.ndarray]:
-    """Regressor column of every entry name (see module docstring) from one run's data."""
+    """Regressor column of every entry name (see module docstring) from one run's data.
+
+    Parameters
+    ----------
+    d : dict of str to (N,) ndarray
+        One run's samples: ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s],
+        ``phiddot``, ``deltaddot`` [rad/s^2], ``v`` [m/s] (per sample) and ``F`` [N].
+    g : float
+        Gravitational acceleration [m/s^2].
+
+    Returns
+    -------
+    dict of str to (N,) ndarray
+        For each name of ``ALL_ENTRIES`` (``Mpp`` ... ``K2dd``, ``HpF``, ``HdF``) its
+        regressor: M_rc -> q''_c [rad/s^2], C1_rc -> v q'_c [m rad/s^2], K0_rc -> g q_c
+        [m rad/s^2], K2_rc -> v^2 q_c [m^2 rad/s^2], H_rF -> -F [N]; the column times the
+        entry is a torque [N m] on the left-hand side of row r.
+    """
     q = (d["phi"], d["delta"])
     qd = (d["phidot"], d["deltadot"])
     qdd = (d["phiddot"], d["deltaddot"])
@@ -146,6 +190,43 @@ class DirectResult:
     = (names, matrix) per row.  ``condition[row]`` is the condition number of the
     column-scaled regressor matrix; ``vaf_moore``/``vaf_variance`` are the input-side
     (torque) fits per row (NaN when the row's measured torque T + H F is zero).
+
+    Attributes
+    ----------
+    M : (2, 2) ndarray
+        Mass matrix [kg m^2], rows/columns [phi, delta].
+    C1 : (2, 2) ndarray
+        Velocity-dependent damping-like matrix [kg m]; ``v C1`` is in N m s/rad.
+    K0 : (2, 2) ndarray
+        Gravity-dependent stiffness matrix [kg m]; ``g K0`` is in N m/rad.
+    K2 : (2, 2) ndarray
+        Velocity-dependent stiffness matrix [kg]; ``v^2 K2`` is in N m/rad.
+    H : (2,) ndarray
+        Lateral-force column [HpF, HdF] [m]: torque [N m] per newton of F on the roll and
+        steer equations.
+    g : float
+        Gravitational acceleration [m/s^2] the K0 values refer to.
+    free : dict of str to float
+        Estimated entries (names as in the module docstring) and their values, in the
+        units of their matrix.
+    stderr : dict of str to float
+        Standard error of each estimated entry, same units.
+    covariance : dict of str to (tuple of str, (d, d) ndarray)
+        Per row ``"roll"``/``"steer"``: the free names and their covariance matrix
+        (``"white"`` or cluster-robust ``"run"`` formula, see :func:`identify`).
+    condition : dict of str to float
+        Per row: condition number of the column-scaled regressor matrix (dimensionless).
+    vaf_moore : dict of str to float
+        Per row: Moore's eq. 6 fit of the measured torque T + H F (dimensionless).
+    vaf_variance : dict of str to float
+        Per row: variance accounted for of the same torque (dimensionless).
+    n_samples : int
+        Number of samples stacked per row (after any IV lag cut).
+    method : str
+        ``"ls"``, ``"iv (<instruments>, lags=<n>)"``, ``"iv (simulated)"``, or
+        ``"iv (tailor-made)"`` from :func:`ident.tailored_iv.identify_tailored`.
+    notes : tuple of str
+        Remarks on the fit, e.g. why HdF was not estimated.
     """
 
     M: np.ndarray
@@ -165,12 +246,39 @@ class DirectResult:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def canonical(self) -> CanonicalMatrices:
+        """The identified matrices as a :class:`bikeid.sim.linear.CanonicalMatrices`.
+
+        Returns
+        -------
+        CanonicalMatrices
+            ``M, C1, K0, K2, g`` of this result (``H`` is not part of it).
+        """
         return CanonicalMatrices(M=self.M, C1=self.C1, K0=self.K0, K2=self.K2, g=self.g)
 
     def state_space(
         self, v: float, inputs: Sequence[str] = ("T_phi", "T_delta", "F")
     ) -> control.StateSpace:
-        """python-control model at speed v; states [phi, delta, phidot, deltadot], all output."""
+        """python-control model at speed v; states [phi, delta, phidot, deltadot], all output.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+        inputs : sequence of str, optional
+            Input columns in this order, from ``"T_phi"`` [N m], ``"T_delta"`` [N m] and
+            ``"F"`` [N] (lateral force, positive to the right, through ``H``).
+
+        Returns
+        -------
+        control.StateSpace
+            Continuous-time model; states and outputs x = [phi, delta, phidot, deltadot]
+            [rad, rad, rad/s, rad/s] (C = I, D = 0), inputs named as ``inputs``.
+
+        Raises
+        ------
+        ValueError
+            If an input name is not one of the three above.
+        """
         A, B = state_matrices(self.canonical(), v)
         Bf = np.vstack([np.zeros((2, 1)), (np.linalg.inv(self.M) @ self.H)[:, None]])
         cols = {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf[:, 0]}
@@ -183,9 +291,39 @@ class DirectResult:
                           inputs=list(inputs), outputs=names, states=names)  # fmt: skip
 
     def eigenvalues(self, v: float) -> np.ndarray:
+        """Eigenvalues of the identified state matrix A(v).
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (4,) complex ndarray
+            Eigenvalues [1/s] of A for x = [phi, delta, phidot, deltadot], in the order
+            ``numpy.linalg.eigvals`` returns them (unsorted).
+        """
         return np.linalg.eigvals(state_matrices(self.canonical(), v)[0])
 
     def entry(self, name: str) -> float:
+        """Value of one matrix entry by name.
+
+        Parameters
+        ----------
+        name : str
+            Entry name as in the module docstring, e.g. ``"Mpd"``, ``"K2dd"``, ``"HdF"``.
+
+        Returns
+        -------
+        float
+            The entry in its matrix's units (M kg m^2, C1 kg m, K0 kg m, K2 kg, H m).
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not a valid entry name.
+        """
         m, r, c = _parse(name)
         return float(self.H[r] if m == "H" else getattr(self, m)[r, c])
 
@@ -227,7 +365,7 @@ def _solve_row(
     if not np.isfinite(cond) or cond > max_condition:
         involved = [n for n, c in zip(names, null, strict=True) if abs(c) > 0.1]
         hint = "".join(h for key, h in hints if len(set(key) & set(involved)) >= 2)
-        raise ValueError(
+        raise UntrustworthyResult(
             f"{row} row is unidentifiable: condition number {cond:.3g} of the column-scaled "
             f"regressor matrix exceeds {max_condition:g}; free entries {involved} are "
             f"(nearly) collinear.{hint} Fix one of them at a known value (reference/fixed=) "
@@ -275,25 +413,70 @@ def identify(
 ) -> DirectResult:
     """Direct least-squares (or IV) identification of M, C1, K0, K2, H from runs.
 
-    runs : one or more runs, stacked row-wise.  Accelerations are taken from the
-        signals ``phiddot``/``deltaddot`` when present (e.g. ``ident.signals.prepare`` or
-        simulator truth), else from ``derivative`` differences of the rates.
-    reference : values of the fixed entries (Whipple model of the bicycle); default
-        the ``meta['parameters']`` of the first run.  ``fixed`` overrides single
-        entries, ``H`` = (HpF, HdF) [m] sets the fixed lateral-force entries (default 0).
-    free_roll, free_steer : entry names to estimate; defaults are Moore & Hubbard's
-        sets, with HdF left out when F is zero in every run.
-    symmetric : two-stage, Mdp := Mpd and K0dp := K0pd from the roll row.
-    method : "ls" or "iv"; ``instruments`` "lagged", "dither", "external" or "simulated",
-        ``lags`` >= 1 (not used by "simulated").
-    instrument_runs : for ``instruments="simulated"``, one noise-free run per run (same
-        samples, prepared the same way) whose regressors are the instruments.
-    covariance : "white" (the paper's sigma^2 (Gamma' Gamma)^-1) or "run" (cluster-robust
-        over runs, for coloured equation errors; module docstring).
-    source : "signals" (measured) or "truth" (noise-free simulated signals).
-    max_condition : an unidentifiable setup (condition number of the column-scaled
-        regressor matrix above this) raises ValueError naming the collinear entries.
-    Runs that break the sampling contract (``ident.signals.check_sampling``) raise ValueError.
+    Each row of ``M q'' + v C1 q' + (g K0 + v^2 K2) q = [T_phi, T_delta] + H F`` is
+    solved as the regression of the module docstring (Moore & Hubbard eqs. 2-5), roll
+    row first.
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        One or more runs, stacked row-wise.  Signals used: ``phi``, ``delta`` [rad],
+        ``phidot``, ``deltadot`` [rad/s], ``v`` [m/s, per sample], ``T_phi``,
+        ``T_delta`` [N m, positive to the right] and ``F`` [N].  Accelerations are taken
+        from the signals ``phiddot``/``deltaddot`` [rad/s^2] when present (e.g.
+        ``ident.signals.prepare`` or simulator truth), else from ``derivative``
+        differences of the rates.
+    reference : BicycleParameters or CanonicalMatrices, optional
+        Values of the fixed entries (Whipple model of the bicycle); default the
+        ``meta['parameters']`` of the first run.
+    free_roll, free_steer : sequence of str, optional
+        Entry names to estimate in the roll and steer rows; defaults are Moore &
+        Hubbard's sets (:data:`MOORE_ROLL`, :data:`MOORE_STEER`), with HdF left out
+        when F is zero in every run.
+    fixed : dict of str to float, optional
+        Overrides single fixed entries (units of their matrix).
+    H : (float, float), optional
+        (HpF, HdF) [m], the fixed lateral-force entries (default 0).
+    symmetric : bool, optional
+        Two-stage, Mdp := Mpd and K0dp := K0pd from the roll row (the paper's procedure).
+    method : {"ls", "iv"}, optional
+        Least squares or instrumental variables (two-stage least squares).
+    instruments : {"lagged", "dither", "external", "simulated"}, optional
+        Instrument set for ``method="iv"`` (module docstring).
+    lags : int, optional
+        Number of lags [samples], >= 1 (not used by "simulated"); the first ``lags``
+        samples of each run are dropped.
+    source : {"signals", "truth"}, optional
+        Measured signals or the noise-free simulated ones.
+    derivative : str, optional
+        Difference scheme of :func:`ident.signals.differentiate` for accelerations
+        missing from the run.
+    max_condition : float, optional
+        An unidentifiable setup (condition number of the column-scaled regressor matrix
+        above this) raises ValueError naming the collinear entries.
+    instrument_runs : sequence of Run, optional
+        For ``instruments="simulated"``, one noise-free run per run (same samples,
+        prepared the same way) whose regressors are the instruments.
+    covariance : {"white", "run"}, optional
+        "white" (the paper's sigma^2 (Gamma' Gamma)^-1) or "run" (cluster-robust over
+        runs, for coloured equation errors; module docstring).
+
+    Returns
+    -------
+    DirectResult
+        The matrices with the fixed and estimated entries, standard errors, covariances,
+        condition numbers and torque fits.
+
+    Raises
+    ------
+    ValueError
+        If no runs are given; runs break the sampling contract
+        (``ident.signals.check_sampling``); an option is not one of its choices; an entry
+        name is unknown or in the wrong row; ``instrument_runs``, a logged dither or
+        reference are missing for the chosen instruments; no reference values are
+        available; a row's right-hand side is zero; or a row is unidentifiable (K0 and
+        K2 of the same entry free at one speed, or condition number above
+        ``max_condition``), naming the collinear entries.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -386,7 +569,7 @@ def identify(
                 if all(n in names for n in pair):
                     G = np.column_stack([np.concatenate([k[n] for k in cols]) for n in pair])
                     cond_now, _ = _condition(G)
-                    raise ValueError(
+                    raise UntrustworthyResult(
                         f"{row} row is unidentifiable: {pair[0]} and {pair[1]} are both free "
                         f"but the runs cover one speed ({means.min():.3f}-{means.max():.3f} "
                         f"m/s, within-run std {wobble:.3g} m/s); a single constant speed cannot "

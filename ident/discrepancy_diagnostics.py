@@ -49,7 +49,9 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
     Parameters
     ----------
     model : ExperimentModel
+        The model whose canonical matrices, speed calibration and command law are used.
     windows : list of Window
+        Measured free decays (10 ms samples).
 
     Returns
     -------
@@ -99,7 +101,9 @@ def err_ranking(model: ExperimentModel, windows: list[Window], steps: int = 4) -
     Parameters
     ----------
     model : ExperimentModel
+        The model (:func:`equation_error`).
     windows : list of Window
+        Measured free decays.
     steps : int, optional
         Number of FROLS steps.
 
@@ -178,6 +182,7 @@ def push_asymmetry(windows: list[Window], errors) -> dict:
     Parameters
     ----------
     windows : list of Window
+        The decays; a positive initial roll rate counts as a push to the right.
     errors : array_like
         One error per window.
 
@@ -185,6 +190,11 @@ def push_asymmetry(windows: list[Window], errors) -> dict:
     -------
     dict
         ``n_right``, ``n_left``, ``error_right``, ``error_left``, ``ratio``, ``p_value``.
+
+    Raises
+    ------
+    ValueError
+        If ``errors`` does not hold one number per window.
     """
     from scipy.stats import mannwhitneyu
 
@@ -242,9 +252,11 @@ def evaluate(
     Parameters
     ----------
     nominal, augmented : ExperimentModel
+        The models before and after (e.g. the selected effects added).
     windows : list of Window
         The decays (left corrected at ``augmented`` when ``nonlinear``).
     nonlinear : bool, optional
+        Simulate both as the nonlinear plant by defect correction.
 
     Returns
     -------

@@ -47,7 +47,9 @@ def output_residuals(model: ExperimentModel, windows: list[Window], norms=None) 
     Parameters
     ----------
     model : ExperimentModel
+        The model simulated on each window (:meth:`ExperimentModel.simulate`).
     windows : list of Window
+        Measured free decays.
     norms : list of [float, float], optional
         ||y - mean y|| of roll rate [rad/s] and steer angle [rad] per window (computed when
         not given).
@@ -93,6 +95,26 @@ class EffectEstimate:
 
     ``value`` and ``std`` (clustered standard error) in ``unit``; ``t`` = |value - absent| /
     std; ``explained``: fraction of the nominal cost removed; ``accepted``: selected.
+
+    Attributes
+    ----------
+    name : str
+        Effect name (a key of :data:`bikeid.ident.effect_library.LIBRARY`).
+    value : float
+        Estimated value, in ``unit``.
+    std : float
+        Window-clustered standard error, in ``unit``.
+    unit : str
+        The effect's SI unit as text (e.g. ``"N m s/rad"``).
+    t : float
+        |value - absent value| / std (dimensionless).
+    explained : float
+        Fraction of the cost removed when the effect is added: in a selection round's
+        ranking, of that round's starting cost on the fit windows (weave term included);
+        for the accepted effects of :class:`bikeid.ident.effect_selection.Identification`,
+        the final model's explained fraction (the same for all of them).
+    accepted : bool
+        Whether the selection kept the effect.
     """
 
     name: str
@@ -104,7 +126,13 @@ class EffectEstimate:
     accepted: bool = False
 
     def as_dict(self) -> dict:
-        """The estimate as a JSON-able dict (the keys of the attributes)."""
+        """The estimate as a JSON-able dict (the keys of the attributes).
+
+        Returns
+        -------
+        dict
+            ``name``, ``value``, ``std``, ``unit``, ``t``, ``explained``, ``accepted``.
+        """
         return {
             "name": self.name, "value": self.value, "std": self.std, "unit": self.unit,
             "t": self.t, "explained": self.explained, "accepted": self.accepted,
@@ -115,7 +143,19 @@ class EffectEstimate:
 class FitResult:
     """A fit: the fitted ``model``, the fitted ``values`` and their standard errors ``std``
     (effect units) and the final ``cost`` (sum of squared normalized residuals, with the
-    weave term when one was given)."""
+    weave term when one was given).
+
+    Attributes
+    ----------
+    model : ExperimentModel
+        The model with the fitted effect values.
+    values : dict of str to float
+        Fitted value of each named effect (the effect's unit).
+    std : dict of str to float
+        Window-clustered standard error of each value (same unit).
+    cost : float
+        Final sum of squared normalized residuals (dimensionless).
+    """
 
     model: ExperimentModel
     values: dict[str, float]
@@ -151,6 +191,8 @@ def fit_effects(
     Returns
     -------
     FitResult
+        Fitted model, values and window-clustered standard errors [effect units], final
+        cost (dimensionless).
     """
     extra = weave is not None and weave.weight > 0 and bool(weave.targets)
     if not names:
@@ -216,6 +258,7 @@ def joint_fit(
     Returns
     -------
     FitResult
+        As :func:`fit_effects`, of the last refit.
     """
     if nonlinear and all(w.correction is None for w in windows):
         attach_correction(windows, model, True)

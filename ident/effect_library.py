@@ -14,13 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bikeid.sim.effect_registry import Effect, effect
+from bikeid.sim.effect_registry import RegistryFacts
 
 __all__ = ["LIBRARY", "Candidate"]
 
 
 @dataclass(frozen=True)
-class Candidate:
+class Candidate(RegistryFacts):
     """How the identification fits one effect.
 
     Attributes
@@ -44,21 +44,6 @@ class Candidate:
     lower: float = -np.inf
     upper: float = np.inf
     grid: tuple[float, ...] = ()
-
-    @property
-    def entry(self) -> Effect:
-        """The registry entry."""
-        return effect(self.name)
-
-    @property
-    def unit(self) -> str:
-        """Unit of the value (registry)."""
-        return self.entry.unit
-
-    @property
-    def absent(self) -> float:
-        """The value that means "no such effect" (registry)."""
-        return self.entry.absent
 
     @property
     def doc(self) -> str:

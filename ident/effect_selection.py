@@ -81,7 +81,36 @@ def _scan_start(model, windows, cand: Candidate, base: list[str], start: dict) -
 
 @dataclass
 class Identification:
-    """Outcome of :func:`select_effects`."""
+    """Outcome of :func:`select_effects`.
+
+    Attributes
+    ----------
+    model : ExperimentModel
+        The final model with the accepted effects.
+    effects : list of EffectEstimate
+        Accepted effects after the joint fit and pruning, by contribution.
+    ranking : list of EffectEstimate
+        The first round's candidates, by the fraction of the cost they remove.
+    verdict : list of str
+        Accepted effect names, ``"unexplained"`` first when they remove less than
+        :data:`EXPLAINED_MIN` of the nominal cost above the noise floor.
+    cost_nominal : float
+        Output-error cost of the nominal model on all windows (dimensionless, a sum of
+        NRMSE^2).
+    cost_final : float
+        Same cost of the final model.
+    cost_floor : float
+        Expected cost of a perfect model (:func:`bikeid.ident.effect_fit.noise_floor`).
+    explained : float
+        Fraction of ``cost_nominal - cost_floor`` removed by the final model.
+    eq_ranking : list of dict
+        Equation-error (ERR) ranking of the additive candidates
+        (:func:`bikeid.ident.discrepancy_diagnostics.err_ranking`).
+    rounds : list of dict
+        Forward-selection log, one entry per round.
+    weave_weight : float
+        Weight of the weave-eigenvalue term in the fits (0: decay signals only).
+    """
 
     model: ExperimentModel
     effects: list[EffectEstimate]
@@ -96,7 +125,15 @@ class Identification:
     weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
 
     def as_dict(self) -> dict:
-        """The identification's JSON record (``identification`` of a model file)."""
+        """The identification's JSON record (``identification`` of a model file).
+
+        Returns
+        -------
+        dict
+            ``selection_rounds``, ``verdict``, ``effects``, ``ranking``,
+            ``equation_error_ranking``, ``cost_nominal``, ``cost_final``,
+            ``cost_noise_floor``, ``explained_fraction``, ``weave_weight``.
+        """
         return {
             "selection_rounds": self.rounds,
             "verdict": self.verdict,
@@ -159,6 +196,12 @@ def select_effects(
     Identification
         The final model, accepted effects with values [registry units], standard errors and
         t, the first round's ranking, the verdict, costs (dimensionless) and the round log.
+
+    Raises
+    ------
+    ValueError
+        If a candidate is not in the library, fewer than 2 windows are given, or
+        ``weave_weight`` is negative or not finite.
     """
     names = list(candidates or LIBRARY)
     bad = [n for n in names if n not in LIBRARY]
@@ -309,6 +352,7 @@ def selection_frequencies(
     model : ExperimentModel
         The nominal model.
     windows : list of Window
+        The decays to subsample.
     resamples : int, optional
         Number of subsamples.
     fraction : float, optional

@@ -95,7 +95,28 @@ COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
 
 @dataclass(frozen=True)
 class ExperimentModel:
-    """The treadmill experiment: Whipple plant + steer-into-lean loop + effects."""
+    """The treadmill experiment: Whipple plant + steer-into-lean loop + effects.
+
+    Parameters
+    ----------
+    p : BicycleParameters, optional
+        The bicycle (Meijaard 2007 benchmark parameter set); default the steer-by-wire
+        bicycle (:func:`bikeid.sim.parameters.steer_by_wire`).
+    effects : dict of str to float, optional
+        Effect values by registry name (:data:`bikeid.sim.effect_registry.EFFECTS`), in
+        each effect's registry unit; unset effects are absent.
+    K : float, optional
+        Steer-into-lean gain [N s^2/rad]: T_cmd = K (V - v_s) phidot_m (positive
+        stabilizes, roll and steer positive to the right).
+    V : float, optional
+        Speed [m/s] at which the controller's gain vanishes.
+
+    Raises
+    ------
+    ValueError
+        If an effect name is unknown, a value is not a finite number, ``input_delay`` or
+        ``actuator_lag`` is negative [s], or ``tire_relaxation`` is negative [m].
+    """
 
     p: BicycleParameters = field(default_factory=steer_by_wire)
     effects: dict = field(default_factory=dict)
@@ -127,20 +148,56 @@ class ExperimentModel:
         Returns
         -------
         float
+            The value in the effect's registry unit
+            (:data:`bikeid.sim.effect_registry.EFFECTS`).
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not a registered effect.
         """
         v = self.effects.get(name)
         return float(effect(name).absent if v is None else v)
 
     def with_effects(self, **values: float) -> ExperimentModel:
-        """A copy with the effects ``values`` (registry names) set or replaced."""
+        """A copy with the effects ``values`` (registry names) set or replaced.
+
+        Parameters
+        ----------
+        **values : float
+            Effect values by registry name, each in its registry unit.
+
+        Returns
+        -------
+        ExperimentModel
+            The new model (this one is unchanged).
+
+        Raises
+        ------
+        ValueError
+            If a name is unknown or a value invalid (as the constructor).
+        """
         return replace(self, effects={**self.effects, **values})
 
     # -- matrices ---------------------------------------------------------------------
     def plant_params(self) -> BicycleParameters:
-        """``params`` with the parameter corrections applied (module docstring).
+        """``p`` with the parameter corrections applied (module docstring).
 
         Raises ValueError (from the parameter validation) if a correction makes the
         bicycle unphysical, e.g. a negative rear-frame mass.
+
+        Returns
+        -------
+        BicycleParameters
+            ``p`` with trail_correction [m] added to c, front_inertia_scale and
+            rear_inertia_scale applied to the H and B inertia tensors [kg m^2] and
+            front_mass_shift [kg] moved from B to H; ``p`` itself when none is set.
+
+        Raises
+        ------
+        ValueError
+            If ``front_mass_shift`` leaves a frame without mass, or the corrected
+            parameters fail validation.
         """
         p = self.p
         ch: dict[str, float] = {}
@@ -167,7 +224,18 @@ class ExperimentModel:
 
     def canonical(self) -> CanonicalMatrices:
         """Canonical matrices M, C1, K0, K2 of :meth:`plant_params`, steer_inertia added to
-        M[delta, delta] [kg m^2]."""
+        M[delta, delta] [kg m^2].
+
+        Returns
+        -------
+        CanonicalMatrices
+            M [kg m^2], C1 [kg m], K0 [kg m], K2 [kg], rows/columns [phi, delta], and g.
+
+        Raises
+        ------
+        ValueError
+            If the parameter corrections are invalid (:meth:`plant_params`).
+        """
         cm = canonical_matrices(self.plant_params())
         M = cm.M.copy()
         M[1, 1] += self.e("steer_inertia")
@@ -213,14 +281,20 @@ class ExperimentModel:
         v : float
             True speed [m/s].
         cm : CanonicalMatrices, optional
+            :meth:`canonical` (computed when not given).
         relax : bool, optional
             Keep the delta_k state when sigma = 0.
 
         Returns
         -------
         E : (n, n) ndarray or None
+            Descriptor matrix (None: identity; with delta_k its last diagonal entry is
+            sigma [m] and the acceleration rows couple to delta_k').
         A : (n, n) ndarray
+            State matrix for [phi, delta, phidot, deltadot(, Ta)(, delta_k)] (the delta_k
+            row in m/s units: v (delta - delta_k)).
         B : (n, 3) ndarray
+            Input matrix for [u, w, T_phi] [N m] (as :meth:`continuous`).
         """
         cm = cm or self.canonical()
         Minv = np.linalg.inv(cm.M)
@@ -277,17 +351,31 @@ class ExperimentModel:
         h : float, optional
             Step [s].
         cm : CanonicalMatrices, optional
+            :meth:`canonical` (computed when not given).
 
         Returns
         -------
         Ad : (n, n) ndarray
+            Sampled state matrix, states as :meth:`continuous`.
         Bd : (n, 3) ndarray
+            Sampled input matrix for [u, w, T_phi] held over h [state units per N m].
         """
         A, B = self.continuous(v, cm)
         return zoh(A, B, h, small=True)
 
     def true_speed(self, v_sensor: float) -> float:
-        """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale."""
+        """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale.
+
+        Parameters
+        ----------
+        v_sensor : float
+            Speed reported by the treadmill sensor [m/s].
+
+        Returns
+        -------
+        float
+            speed_scale * :func:`bikeid.dataset.sbw_logs.treadmill_speed` (v_sensor) [m/s].
+        """
         return float(self.e("speed_scale") * treadmill_speed(v_sensor))
 
     def _delay(self) -> tuple[int, float]:
@@ -308,11 +396,13 @@ class ExperimentModel:
         Returns
         -------
         Phi : (nz, nz) ndarray
+            One-loop (10 ms) transition matrix of z.
         G : (nz,) ndarray
             Per N m of T_ext.
         c : (nz,) ndarray
             Constant terms (biases).
         n_plant : int
+            Number of plant states at the head of z (4, plus Ta and delta_k when present).
         """
         v = self.true_speed(v_sensor)
         Ad, Bd = self.discrete(v)
@@ -367,6 +457,7 @@ class ExperimentModel:
         Returns
         -------
         ndarray of complex
+            Closed-loop eigenvalues [1/s], decreasing real part.
         """
         Phi = self.closed_loop(v_sensor)[0]
         z = np.linalg.eigvals(Phi)
@@ -385,6 +476,8 @@ class ExperimentModel:
         Returns
         -------
         ndarray of complex
+            Roots [1/s] with positive imaginary part below 0.8 pi / DT rad/s, decreasing
+            real part.
         """
         lam = self.eigenvalues(v_sensor)
         return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
@@ -451,6 +544,7 @@ class ExperimentModel:
         Parameters
         ----------
         windows : list of Window
+            Measured windows (initial state, sensor speed, external torque T_ext).
         nsub : int, optional
             Substeps per loop.
 
@@ -597,6 +691,8 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
     Parameters
     ----------
     p : BicycleParameters
+        The bicycle (Meijaard 2007 parameters: lam [rad], c, w [m], masses [kg],
+        inertias [kg m^2]).
 
     Returns
     -------
@@ -627,9 +723,11 @@ def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> 
     Parameters
     ----------
     windows : list of Window
+        Measured windows.
     sims : list of dict
         :meth:`ExperimentModel.simulate` of each window.
     channels : tuple of str, optional
+        Window signals compared (default roll rate [rad/s] and steer angle [rad]).
 
     Returns
     -------

@@ -57,6 +57,7 @@ from scipy.optimize import least_squares
 
 from bikeid.dataset.run import Run
 from bikeid.sim.conventions import CANONICAL_STATE
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
 from bikeid.sim.sampling import zoh
 
@@ -220,6 +221,36 @@ class CanonicalModel:
     (10x10), ``outputs`` the measured states used, ``K`` the discrete innovation gain
     at ``dt`` (4 x len(outputs)), ``noise_covariance`` of the innovations, ``x0`` per
     run, ``speed`` [m/s].
+
+    Attributes
+    ----------
+    theta : (10,) ndarray
+        [a1, ..., a8, b1, b2]: a1, a3, a5, a7 [1/s^2], a2, a4, a6, a8 [1/s], b1, b2
+        [1/(kg m^2)] = [rad/(N m s^2)] (:func:`ident.canonical.canonical_ab`).
+    covariance : (10, 10) ndarray
+        Covariance of ``theta`` (sigma^2 (J'J)^-1 of the whitened residuals), in the
+        squared units of ``theta``.
+    K : (4, L) ndarray
+        Discrete-time innovation gain at ``dt`` (L = ``len(outputs)``), canonical state
+        order; zeros for ``noise_model="none"``.
+    dt : float
+        Sample period [s] of the predictor.
+    speed : float
+        Forward speed [m/s] of the runs (their nominal ``run.speed``).
+    noise_covariance : (L, L) ndarray
+        Sample covariance of the one-step prediction errors, in the outputs' units
+        (rad^2, rad^2/s^2, ...).
+    outputs : tuple of str
+        Measured states fitted, a subset of ``("phi", "phidot", "delta", "deltadot")``
+        containing phi and delta.
+    x0 : tuple of (4,) ndarray
+        Estimated initial state of each run, canonical order [rad, rad/s, rad, rad/s].
+    cost : float
+        Sum of squared weighted prediction errors at the optimum (dimensionless).
+    nfev : int
+        Number of residual evaluations over all passes.
+    notes : tuple of str
+        Remarks, e.g. the start used and a minimizer message when it did not converge.
     """
 
     theta: np.ndarray
@@ -236,21 +267,36 @@ class CanonicalModel:
 
     @property
     def A(self) -> np.ndarray:
+        """(4, 4) ndarray: canonical state matrix for [phi, phidot, delta, deltadot].
+
+        a1, a3, a5, a7 in 1/s^2, a2, a4, a6, a8 in 1/s (:func:`ident.canonical.canonical_ab`).
+        """
         return canonical_ab(self.theta)[0]
 
     @property
     def B(self) -> np.ndarray:
+        """(4, 1) ndarray: canonical input matrix for T_delta, b1, b2 in rows 1, 3 [1/(kg m^2)]."""
         return canonical_ab(self.theta)[1]
 
     @property
     def C(self) -> np.ndarray:
+        """(L, 4) ndarray: 0/1 output matrix selecting ``outputs`` from the canonical state."""
         return _out_matrix(self.outputs)[0]
 
     @property
     def stderr(self) -> dict[str, float]:
+        """dict of str to float: standard error of each theta entry, by name (units of theta)."""
         return dict(zip(THETA_NAMES, np.sqrt(np.diag(self.covariance)), strict=True))
 
     def params(self) -> dict[str, float]:
+        """The estimated parameters by name.
+
+        Returns
+        -------
+        dict of str to float
+            ``{"a1": ..., "b2": ...}`` in :data:`ident.canonical.THETA_NAMES` order, units
+            as in ``theta``.
+        """
         return dict(zip(THETA_NAMES, self.theta, strict=True))
 
     def state_space(self, order: str = "bikeid") -> control.StateSpace:
@@ -279,15 +325,43 @@ class CanonicalModel:
         raise ValueError(f"order={order!r}: use 'bikeid' or 'chen-dao'")
 
     def state_space_bikeid(self) -> control.StateSpace:
-        """Same as ``state_space(order="bikeid")`` (kept for existing callers)."""
+        """Same as ``state_space(order="bikeid")`` (kept for existing callers).
+
+        Returns
+        -------
+        control.StateSpace
+            Continuous-time model, states [phi, delta, phidot, deltadot], input
+            ``T_delta`` [N m], outputs ``self.outputs``.
+        """
         return self.state_space(order="bikeid")
 
     def predictor(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(Ad, Bd, C, K) of the discrete innovations predictor at ``dt``."""
+        """(Ad, Bd, C, K) of the discrete innovations predictor at ``dt``.
+
+        Returns
+        -------
+        Ad : (4, 4) ndarray
+            Zero-order-hold state matrix at ``dt``, canonical order (maps xhat[k] to
+            xhat[k+1]: entries in 1, s or 1/s by position).
+        Bd : (4, 1) ndarray
+            Zero-order-hold input matrix for T_delta [rad/(N m) in rows 0, 2; rad/(N m s)
+            in rows 1, 3].
+        C : (L, 4) ndarray
+            Output matrix (:attr:`C`).
+        K : (4, L) ndarray
+            Innovation gain; xhat[k+1] = Ad xhat[k] + Bd u[k] + K (y[k] - C xhat[k]).
+        """
         Ad, Bd = _discretize(self.theta, self.dt)
         return Ad, Bd[:, None], self.C, self.K
 
     def eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of the continuous-time state matrix.
+
+        Returns
+        -------
+        (4,) complex ndarray
+            Eigenvalues [1/s] of :attr:`A` (unsorted; the same in either state order).
+        """
         return np.linalg.eigvals(self.A)
 
 
@@ -298,6 +372,27 @@ class SpeedCanonicalModel:
     ``params`` in :data:`ident.canonical.SPEED_NAMES` order with ``covariance``
     (14x14); ``per_speed`` holds the fixed-speed fits (start values and each speed's
     innovation gain K).
+
+    Attributes
+    ----------
+    params : (14,) ndarray
+        [alpha1, alpha3, alpha5, alpha7 [1/s^2], beta1 .. beta7 [1/m^2], gamma2 .. gamma8
+        [1/m], b1, b2 [1/(kg m^2)]] (Chen & Dao eq. 4; :data:`ident.canonical.SPEED_NAMES`).
+    covariance : (14, 14) ndarray
+        Covariance of ``params`` (squared units of ``params``).
+    per_speed : dict of float to CanonicalModel
+        Fixed-speed fits keyed by speed [m/s] (rounded to 1e-6 m/s).
+    dt : float
+        Sample period [s] of the first run.
+    g : float
+        Gravitational acceleration [m/s^2] used to express alpha as K0 in
+        :meth:`canonical_matrices` (does not enter the fit).
+    outputs : tuple of str
+        Measured states fitted.
+    cost : float
+        Sum of squared weighted prediction errors of the joint fit (dimensionless).
+    nfev : int
+        Number of residual evaluations of the joint fit.
     """
 
     params: np.ndarray
@@ -311,13 +406,39 @@ class SpeedCanonicalModel:
 
     @property
     def stderr(self) -> dict[str, float]:
+        """dict of str to float: standard error of each speed parameter, by name."""
         return dict(zip(SPEED_NAMES, np.sqrt(np.diag(self.covariance)), strict=True))
 
     def theta(self, v: float) -> np.ndarray:
+        """Canonical parameters at one speed, S(v) @ params.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (10,) ndarray
+            [a1, ..., a8, b1, b2] at ``v`` (units as :attr:`CanonicalModel.theta`).
+        """
         return speed_map(v) @ self.params
 
     def at(self, v: float) -> CanonicalModel:
-        """The fixed-speed model at v (covariance propagated; K of the nearest fitted speed)."""
+        """The fixed-speed model at v (covariance propagated; K of the nearest fitted speed).
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s]; need not be one of the fitted speeds.
+
+        Returns
+        -------
+        CanonicalModel
+            theta = S(v) params, covariance S(v) cov S(v)', K and ``noise_covariance``
+            of the fitted speed nearest to ``v``; ``x0``, ``cost`` and ``nfev`` are left
+            at their defaults.
+        """
         S = speed_map(v)
         near = min(self.per_speed, key=lambda s: abs(s - v))
         return CanonicalModel(
@@ -328,26 +449,97 @@ class SpeedCanonicalModel:
 
     def state_space(self, v: float, order: str = "bikeid") -> control.StateSpace:
         """The fixed-speed model at ``v`` [m/s] (:meth:`CanonicalModel.state_space`; ``order``
-        "bikeid" [phi, delta, phidot, deltadot] by default, or "chen-dao")."""
+        "bikeid" [phi, delta, phidot, deltadot] by default, or "chen-dao").
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+        order : {"bikeid", "chen-dao"}, optional
+            State order of the result.
+
+        Returns
+        -------
+        control.StateSpace
+            Continuous-time model with input ``T_delta`` [N m] and outputs ``outputs``.
+
+        Raises
+        ------
+        ValueError
+            If ``order`` is neither choice.
+        """
         return self.at(v).state_space(order=order)
 
     def eigenvalues(self, v: float) -> np.ndarray:
+        """Eigenvalues of A(v).
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s].
+
+        Returns
+        -------
+        (4,) complex ndarray
+            Eigenvalues [1/s] (unsorted).
+        """
         return np.linalg.eigvals(canonical_ab(self.theta(v))[0])
 
     def scaled_matrices(self) -> dict[str, np.ndarray]:
-        """M^-1 g K0, M^-1 K2, M^-1 C1 (2x2 each) and the second column of M^-1."""
+        """M^-1 g K0, M^-1 K2, M^-1 C1 (2x2 each) and the second column of M^-1.
+
+        Returns
+        -------
+        dict of str to ndarray
+            ``"Minv_gK0"`` (2, 2) = -alpha [1/s^2], ``"Minv_K2"`` (2, 2) = -beta [1/m^2],
+            ``"Minv_C1"`` (2, 2) = -gamma [1/m], ``"Minv_col_delta"`` (2,) = [b1, b2]
+            [1/(kg m^2)]; rows/columns [phi, delta].
+        """
         cm = matrices_from_speed_params(self.params, self.g)
         return {"Minv_gK0": cm.K0 * self.g, "Minv_K2": cm.K2, "Minv_C1": cm.C1,
                 "Minv_col_delta": self.params[12:14].copy()}  # fmt: skip
 
     def canonical_matrices(self):
-        """Equivalent ``CanonicalMatrices`` with M = I (same A(v), same eigenvalues)."""
+        """Equivalent ``CanonicalMatrices`` with M = I (same A(v), same eigenvalues).
+
+        Returns
+        -------
+        CanonicalMatrices
+            :func:`ident.canonical.matrices_from_speed_params` of ``params`` and ``g``:
+            M = I, K0 = -alpha / g, K2 = -beta, C1 = -gamma (its B is not the true one).
+        """
         return matrices_from_speed_params(self.params, self.g)
 
     def eigenvalues_vs_speed(self, speeds):
+        """Eigenvalues over a speed grid (:func:`bikeid.sim.linear.eigenvalues_vs_speed`).
+
+        Parameters
+        ----------
+        speeds : (n,) array_like
+            Forward speeds [m/s].
+
+        Returns
+        -------
+        EigenSweep
+            The sweep of :func:`bikeid.sim.linear.eigenvalues_vs_speed` on
+            :meth:`canonical_matrices` (eigenvalues [1/s]).
+        """
         return eigenvalues_vs_speed(self.canonical_matrices(), speeds)
 
     def critical_speeds(self, vmax: float = 30.0) -> dict:
+        """Weave, capsize (and other) critical speeds of the identified model.
+
+        Parameters
+        ----------
+        vmax : float, optional
+            Upper end [m/s] of the speed range searched.
+
+        Returns
+        -------
+        dict
+            :func:`bikeid.sim.linear.critical_speeds` on :meth:`canonical_matrices`
+            (speeds in m/s).
+        """
         return critical_speeds(self.canonical_matrices(), vmax)
 
 
@@ -459,6 +651,31 @@ def subspace_start(
     Uses only phi and delta as subspace outputs; the data are decimated to about
     ``coarse_dt`` (outputs subsampled, input block-averaged) and the VARX past window
     is ``p_seconds``.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        Runs at one speed and sample period with nonzero ``T_delta`` [N m] and ``phi``,
+        ``delta`` [rad].
+    outputs : sequence of str, optional
+        Not used (the subspace step always uses phi and delta).
+    p_seconds : float, optional
+        VARX past window [s] (at least 8 decimated samples).
+    coarse_dt : float, optional
+        Target sample period [s] after decimation (a whole multiple of the runs' dt).
+
+    Returns
+    -------
+    (10,) ndarray
+        Canonical start [a1, ..., a8, b1, b2] (units as :attr:`CanonicalModel.theta`).
+
+    Raises
+    ------
+    ValueError
+        If ``T_delta`` is zero in a run or the subspace step (:func:`ident.subspace.pbsid`,
+        :func:`ident.canonical.to_canonical_form`) refuses the data.  A discrete model
+        without a real logarithm is not refused: the real part of the logarithm is used
+        (``d2c(strict=False)``, good enough as a start).
     """
     data = _run_data(runs, ("phi", "delta"))
     dt = data[0].dt
@@ -497,7 +714,7 @@ def _lm(problem: _Problem, x: np.ndarray, max_nfev: int, ftol: float = 1e-3) -> 
     """
     r, J = problem.jacobian(x)
     if r is None:
-        raise ValueError("the start model gives an unstable predictor; give another start")
+        raise UntrustworthyResult("the start model gives an unstable predictor; give another start")
     cost = float(r @ r)
     m = max(r.size, 1)
     H, g = J.T @ J, J.T @ r
@@ -547,7 +764,7 @@ def _solve(problem: _Problem, x0: np.ndarray, max_nfev: int, method: str):
                         max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)  # fmt: skip
     problem.evaluate(sol.x)
     if problem._J is None:
-        raise ValueError("the prediction-error fit ended at an unstable predictor")
+        raise UntrustworthyResult("the prediction-error fit ended at an unstable predictor")
     return sol
 
 
@@ -638,6 +855,42 @@ def fit(
     variances only).  Returns a :class:`CanonicalModel` (``notes`` names the start used).
     Runs whose logged torque was not held over each sample (controller or dither faster
     than the logging, ``ident.signals.check_sampling``) raise ValueError.
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        Runs at one speed (``run.speed`` [m/s], equal to 1e-6) and one sample period,
+        with input ``T_delta`` [N m, positive to the right] and the ``outputs`` signals
+        (``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s]).
+    outputs : sequence of str, optional
+        Measured states fitted; must include phi and delta.
+    theta0 : (10,) array_like, optional
+        Start [a1, ..., a8, b1, b2]; when given, the subspace starts are not tried.
+    noise_model : {"free", "none"}, optional
+        Innovation gain K estimated, or K = 0 (output error).
+    max_nfev : int, optional
+        Residual evaluations allowed per pass.
+    method : {"lm", "scipy"}, optional
+        Minimizer (module docstring).
+    passes : int, optional
+        Number of fits with re-estimated output weights (at least 1).
+    starts : sequence of (10,) array_like, optional
+        Further candidate starts.
+    multistart : bool, optional
+        Try all :data:`SUBSPACE_STARTS` (else only the first) when ``theta0`` is None.
+
+    Returns
+    -------
+    CanonicalModel
+        The fitted model at the runs' speed and dt.
+
+    Raises
+    ------
+    ValueError
+        If no runs are given, a run breaks the sampling contract, ``noise_model``,
+        ``method`` or ``outputs`` is invalid, runs differ in sample period or speed,
+        ``T_delta`` is zero in a run, a start does not hold 10 values, or no start gives
+        a stable one-step predictor.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -717,6 +970,39 @@ def fit_speed_model(
     :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are refined
     jointly over all runs with each speed's K held fixed (``passes`` weighting passes).
     Runs that break the sampling contract (``ident.signals.check_sampling``) raise ValueError.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        Runs at two or more nominal speeds ``run.speed`` [m/s], with ``T_delta`` [N m]
+        and the ``outputs`` signals [rad, rad/s].
+    outputs : sequence of str, optional
+        Measured states fitted; must include phi and delta.
+    g : float, optional
+        Gravitational acceleration [m/s^2] stored in the result (for
+        :meth:`SpeedCanonicalModel.canonical_matrices`); does not affect the fit.
+    noise_model : {"free", "none"}, optional
+        Noise model of the per-speed fits (:func:`fit`).
+    max_nfev : int, optional
+        Residual evaluations allowed per pass of the joint fit.
+    method : {"lm", "scipy"}, optional
+        Minimizer.
+    per_speed : dict of float to CanonicalModel, optional
+        Fixed-speed fits to reuse, keyed by speed [m/s].
+    passes : int, optional
+        Weighting passes of the joint fit (at least 1).
+
+    Returns
+    -------
+    SpeedCanonicalModel
+        The jointly fitted speed parameters with the per-speed fits.
+
+    Raises
+    ------
+    ValueError
+        If a run breaks the sampling contract, the runs cover fewer than 2 distinct
+        speeds, ``per_speed`` models used other outputs, no stable predictor exists for
+        a run at the joint start, or a per-speed :func:`fit` raises.
     """
     runs = list(runs)
     check_sampling(runs, "pem.fit_speed_model")

@@ -39,6 +39,12 @@ the sample instants: its period must be a whole multiple of the run's sample per
 1 ms controller logged at 100 Hz breaks it (the applied torque changes 10 times per
 logged value) and gave PEM an unstable weave (+0.066 +- 4.313j 1/s) for the benchmark's
 stable one (-0.775 +- 4.465j) at 5 m/s, without a warning; such runs are refused.
+
+Complete runs only (:func:`check_complete`, called by :func:`check_sampling`, so by every
+estimator above).  A simulated run that ended early (``meta["stop"]``: a fall, |steer|
+over 90 deg, or a numerical failure such as a step too coarse) is refused with its name
+and cause: its last samples run into the limit or the blow-up, far outside the linear
+model the estimators fit.
 """
 
 from __future__ import annotations
@@ -49,10 +55,12 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from bikeid.dataset.run import Run
+from bikeid.dataset.run import Run, run_stop
+from bikeid.sim.errors import InputError
 
 __all__ = [
     "NO_MEAN_REMOVAL",
+    "check_complete",
     "check_sampling",
     "differentiate",
     "input_periods",
@@ -101,6 +109,46 @@ def input_periods(run: Run) -> dict[str, float]:
     return out
 
 
+def _run_label(run: Run, i: int) -> str:
+    name = run.meta.get("name") or run.meta.get("run")
+    if name:
+        return f"run {i} ({name})"
+    if "speed" in run.meta:
+        return f"run {i} ({run.meta['speed']:g} m/s, seed {run.meta.get('seed', '?')})"
+    return f"run {i}"
+
+
+def check_complete(runs: Run | Sequence[Run], estimator: str) -> None:
+    """Refuse runs that ended early (``meta["stop"]``, :func:`dataset.run.run_stop`).
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        The estimator's runs.
+    estimator : str
+        The estimator's name, for the message.
+
+    Raises
+    ------
+    ValueError
+        If a run records a stop (physical or numerical); the message names the run, the
+        cause, the time and the fix.  Measured runs and complete simulated runs pass.
+    """
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    for i, run in enumerate(runs):
+        stop = run_stop(run)
+        if stop is None:
+            continue
+        kind = "a fall" if stop.get("physical") else "a numerical failure, not a fall"
+        raise ValueError(
+            f"{estimator}: {_run_label(run, i)} ended early at t={float(stop['time']):.3f} s "
+            f"on {stop['cause']} ({kind}: {stop['message']}); its last samples are not "
+            f"the upright bicycle the estimator models.  Fix: leave the run out (or "
+            f"re-simulate it so it completes: a stabilizing controller, or a smaller step "
+            f"for a numerical cause)"
+        )
+
+
 def check_sampling(runs: Run | Sequence[Run], estimator: str) -> None:
     """Refuse runs whose logged steer torque is not what the plant held (module docstring).
 
@@ -117,9 +165,11 @@ def check_sampling(runs: Run | Sequence[Run], estimator: str) -> None:
         If a run's controller period or dither hold [s] (from :func:`input_periods`) is
         not a whole multiple (>= 1, to 1e-6 relative) of the run's sample period
         ``run.dt``.  The message names both periods and the fix.  Runs without that
-        metadata (measured data) pass.
+        metadata (measured data) pass.  Also if a run ended early
+        (:func:`check_complete`).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
+    check_complete(runs, estimator)
     for i, run in enumerate(runs):
         dt = run.dt
         for what, period in input_periods(run).items():
@@ -145,6 +195,28 @@ def lowpass(x: np.ndarray, dt: float, cutoff: float = 15.0, order: int = 2) -> n
 
     ``cutoff`` [Hz] must lie below the Nyquist frequency 1 / (2 dt).  Forward-backward
     filtering squares the magnitude response (-6 dB at ``cutoff``) and has no phase lag.
+
+    Parameters
+    ----------
+    x : (..., N) array_like
+        Uniformly sampled signal(s), any unit; filtered along the last axis.
+    dt : float
+        Sample period [s].
+    cutoff : float, optional
+        Cut-off frequency [Hz] of the Butterworth design (-3 dB one way, -6 dB after
+        forward-backward filtering); default 15 Hz (Moore & Hubbard).
+    order : int, optional
+        Butterworth order of the one-way filter (the zero-phase result has twice it).
+
+    Returns
+    -------
+    (..., N) ndarray
+        The filtered signal, same shape and unit as ``x``.
+
+    Raises
+    ------
+    ValueError
+        If ``cutoff`` is not in (0, 1 / (2 dt)) Hz or ``order`` < 1.
     """
     nyq = 0.5 / dt
     if not (0 < cutoff < nyq):
@@ -154,7 +226,16 @@ def lowpass(x: np.ndarray, dt: float, cutoff: float = 15.0, order: int = 2) -> n
     if order < 1:
         raise ValueError(f"filter order {order}: need an integer >= 1")
     sos = butter(order, cutoff / nyq, output="sos")
-    return sosfiltfilt(sos, np.asarray(x, dtype=float), axis=-1)
+    x = np.asarray(x, dtype=float)
+    # sosfiltfilt's default edge padding (its "padlen"), which the signal must exceed
+    pad = 3 * (2 * len(sos) + 1 - min((sos[:, 2] == 0).sum(), (sos[:, 5] == 0).sum()))
+    if x.shape[-1] <= pad:
+        raise InputError(
+            f"a run of {x.shape[-1]} samples is too short to low-pass filter at {cutoff:g} Hz "
+            f"(zero-phase filtering needs more than {pad}); use longer runs or no filter "
+            "(cutoff 0)"
+        )
+    return sosfiltfilt(sos, x, axis=-1)
 
 
 def differentiate(x: np.ndarray, dt: float, method: str = "central") -> np.ndarray:
@@ -164,6 +245,26 @@ def differentiate(x: np.ndarray, dt: float, method: str = "central") -> np.ndarr
     ``forward``: (x[k+1] - x[k]) / dt, backward at the last sample;
     ``backward``: (x[k] - x[k-1]) / dt, forward at the first sample.
     See the module docstring for which to choose.
+
+    Parameters
+    ----------
+    x : (..., N) array_like
+        Uniformly sampled signal(s), differentiated along the last axis; at least 3
+        samples.
+    dt : float
+        Sample period [s].
+    method : {"central", "forward", "backward"}, optional
+        Difference scheme.
+
+    Returns
+    -------
+    (..., N) ndarray
+        The derivative, unit of ``x`` per second (e.g. rad/s -> rad/s^2), same shape.
+
+    Raises
+    ------
+    ValueError
+        If ``x`` has fewer than 3 samples or ``method`` is unknown.
     """
     x = np.asarray(x, dtype=float)
     if x.shape[-1] < 3:
@@ -179,7 +280,21 @@ def differentiate(x: np.ndarray, dt: float, method: str = "central") -> np.ndarr
 
 
 def remove_means(signals: dict[str, np.ndarray], keep=NO_MEAN_REMOVAL) -> dict[str, np.ndarray]:
-    """A copy with each signal's time mean subtracted, except those named in ``keep``."""
+    """A copy with each signal's time mean subtracted, except those named in ``keep``.
+
+    Parameters
+    ----------
+    signals : dict of str to (N,) ndarray
+        Named signals (any units).
+    keep : collection of str, optional
+        Names whose mean is physical and is kept; default :data:`NO_MEAN_REMOVAL`
+        (speed ``v``, lateral force ``F``, rear wheel rate ``thetaRdot``).
+
+    Returns
+    -------
+    dict of str to (N,) ndarray
+        New arrays, same keys and units; the inputs are not modified.
+    """
     return {k: (v.copy() if k in keep else v - v.mean()) for k, v in signals.items()}
 
 
@@ -199,6 +314,37 @@ def prepare(
     the low-pass (module docstring); the run loses its last sample.  ``source="truth"``
     processes the noise-free signals of a simulated run instead of the measured ones.  The
     dither and reference are kept.
+
+    Parameters
+    ----------
+    run : Run
+        The run to process (not modified).
+    cutoff : float or None, optional
+        Low-pass cut-off [Hz] of :func:`lowpass` (default 15 Hz, Moore & Hubbard's);
+        ``None`` or 0 skips filtering.
+    order : int, optional
+        Butterworth order of :func:`lowpass`.
+    subtract_mean : bool, optional
+        Remove each signal's time mean, except :data:`NO_MEAN_REMOVAL`.
+    derivative : {"central", "forward", "backward", "interval"}, optional
+        How the accelerations are formed (module docstring).
+    source : {"signals", "truth"}, optional
+        Process the measured signals or the simulator's noise-free ones.
+
+    Returns
+    -------
+    Run
+        A new run whose signals are the processed ones plus ``phiddot`` and ``deltaddot``
+        [rad/s^2]; ``meta["preprocessing"]`` records the options.  With
+        ``derivative="interval"`` it has one sample fewer and its signals are interval
+        means (held inputs T_phi, T_delta, F at their value over the interval).
+
+    Raises
+    ------
+    ValueError
+        If ``source`` or ``derivative`` is not one of its choices, ``source="truth"`` for
+        a run without noise-free signals, or the filter settings are invalid
+        (:func:`lowpass`).
     """
     if source not in ("signals", "truth"):
         raise ValueError(f"source {source!r}: choose 'signals' or 'truth'")

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import logm
 
+from bikeid.sim.errors import UntrustworthyResult
+
 __all__ = ["d2c", "pbsid", "po_moesp", "decimate"]
 
 
@@ -240,5 +242,5 @@ def d2c(
         if not strict:
             L = L.real
             return L[:n, :n], L[:n, n:]
-        raise ValueError("the discrete model has no real continuous-time ZOH equivalent")
+        raise UntrustworthyResult("the discrete model has no real continuous-time ZOH equivalent")
     return L[:n, :n], L[:n, n:]

@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, state_matrices
 from bikeid.sim.sampling import zoh
 
@@ -60,7 +61,21 @@ class ControllerFit:
 
     y = measured [phi, delta, phidot, deltadot] (rad, rad/s), r = roll reference [rad].
     ``a`` (na,), ``b`` (nb+1, 4), ``c`` (nb+1,); ``vaf`` = 1 - var(residual)/var(u) of the
-    fit (1 for an exactly linear controller of these orders)."""
+    fit (1 for an exactly linear controller of these orders).
+
+    Attributes
+    ----------
+    a : (na,) ndarray
+        Coefficients of the past controller outputs u[k-1] .. u[k-na] (dimensionless).
+    b : (nb + 1, 4) ndarray
+        Row j: gains on y[k-j] = [phi, delta, phidot, deltadot] [N m/rad, N m s/rad].
+    c : (nb + 1,) ndarray
+        Gains on the roll reference r[k-j] [N m/rad].
+    const : float
+        Constant term [N m] (not used by :func:`simulate_instruments`).
+    vaf : float
+        Variance accounted for of the fit (dimensionless; NaN when u is constant).
+    """
 
     a: np.ndarray
     b: np.ndarray
@@ -77,7 +92,29 @@ def fit_controller(run: Run, na: int = 1, nb: int = 1) -> ControllerFit:
     """ARX fit of the run's controller (see :class:`ControllerFit`) on the *raw* run.
 
     ``na`` >= 1 past outputs (one is enough for integral action: PID, pole placement with an
-    integrator), ``nb`` >= 0 past inputs.  Needs a logged dither and reference."""
+    integrator), ``nb`` >= 0 past inputs.  Needs a logged dither and reference.
+
+    Parameters
+    ----------
+    run : Run
+        Raw closed-loop run with ``T_delta`` [N m], the measured states [rad, rad/s], a
+        logged dither [N m] and roll reference [rad].
+    na : int, optional
+        Number of past controller outputs, >= 1.
+    nb : int, optional
+        Largest lag [samples] of the measured states and reference, >= 0.
+
+    Returns
+    -------
+    ControllerFit
+        The least-squares ARX coefficients and the fit's VAF.
+
+    Raises
+    ------
+    ValueError
+        If the run has no logged dither or reference, the orders are out of range, or the
+        run is too short (fewer than 10 samples per coefficient plus the lags).
+    """
     if run.dither is None or run.reference is None:
         raise ValueError(
             "tailor-made instruments need runs with a logged dither and roll reference"
@@ -123,7 +160,31 @@ def simulate_instruments(
     Returns a run on the same time grid whose signals are the simulated phi, delta, phidot,
     deltadot, T_delta (controller output + dither), constant v, and zero T_phi, F; dither and
     reference as the data's.  Raises ValueError if the simulated loop diverges (the model
-    and controller do not form a stable loop)."""
+    and controller do not form a stable loop).
+
+    Parameters
+    ----------
+    run : Run
+        Raw closed-loop run with a logged dither [N m], roll reference [rad] and speed
+        ``v`` [m/s].
+    model : CanonicalMatrices or DirectResult
+        Linear plant (its steer-torque column is used).
+    controller : ControllerFit, optional
+        Controller of the loop; default :func:`fit_controller` of ``run``.
+
+    Returns
+    -------
+    Run
+        Simulated run on the same time grid: ``phi``, ``delta`` [rad], ``phidot``,
+        ``deltadot`` [rad/s], ``T_delta`` [N m], ``v`` [m/s], ``T_phi`` [N m] and ``F``
+        [N] zero; ``meta["instruments"]`` holds the controller VAF and the speed.
+
+    Raises
+    ------
+    ValueError
+        If the simulated loop diverges (non-finite or |phi| or |delta| above 10 rad), or
+        the controller fit fails (:func:`fit_controller`).
+    """
     cm = model.canonical() if isinstance(model, DirectResult) else model
     ctrl = controller if controller is not None else fit_controller(run)
     v = float(np.mean(run["v"]))
@@ -145,7 +206,7 @@ def simulate_instruments(
         xk = Ad @ xk + Bd * (uk + d[k])
     scale = np.abs(x).max(axis=0)
     if not np.all(np.isfinite(x)) or scale[0] > 10.0 or scale[1] > 10.0:
-        raise ValueError(
+        raise UntrustworthyResult(
             f"closed-loop simulation for the instruments diverges at {v:.3g} m/s: the model and "
             "the fitted controller do not form a stable loop; start from a better model"
         )
@@ -178,19 +239,51 @@ def identify_tailored(
 ) -> DirectResult:
     """Direct identification with tailor-made instruments, iterated.
 
-    runs : *raw* closed-loop runs with a logged dither and reference (the controller fit and
-        the simulation need the signals the controller saw); ``prepare`` maps a raw run to
-        the signals the regression uses (e.g. ``experiments.accuracy.direct_prepare``) and
-        is applied alike to data and simulated instruments.
-    start : first model for the instruments: "external" (default: ``identify(...,
+    Each iteration simulates noise-free instruments through each run's fitted controller
+    and the current model (:func:`simulate_instruments`), prepares them like the data and
+    solves :func:`ident.direct.identify` with ``instruments="simulated"``.  The result's
+    ``notes`` record the iterations and the worst controller-fit VAF.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        *Raw* closed-loop runs with a logged dither [N m] and roll reference [rad] (the
+        controller fit and the simulation need the signals the controller saw).
+    reference : BicycleParameters or CanonicalMatrices
+        Values of the fixed entries (as :func:`ident.direct.identify`).
+    free_roll, free_steer : sequence of str, optional
+        Entries to estimate (default Moore & Hubbard's sets).
+    prepare : callable
+        Maps a raw run to the signals the regression uses (e.g.
+        ``experiments.accuracy.direct_prepare``); applied alike to data and simulated
+        instruments.
+    start : {"external", "ls"} or DirectResult or CanonicalMatrices, optional
+        First model for the instruments: "external" (default: ``identify(...,
         method="iv", instruments="external", lags=40)`` on the prepared runs), "ls" (least
         squares), or a model (e.g. the Whipple model of the reference,
         ``canonical_matrices(reference)``).  It only shapes the first instruments: the
         estimate stays consistent, and the iterations remove its influence.
-    iterations : instrument/model refinements (>= 1); ``na``, ``nb``: controller ARX orders.
-    Other keywords go to :func:`ident.direct.identify`.  The result's ``notes`` record the
-    iterations and the worst controller-fit VAF.  Runs that break the sampling contract
-    (``ident.signals.check_sampling``) raise ValueError."""
+    iterations : int, optional
+        Instrument/model refinements, >= 1.
+    na, nb : int, optional
+        Controller ARX orders (:func:`fit_controller`).
+    **kwargs
+        Other keywords go to :func:`ident.direct.identify` (not ``method``,
+        ``instruments``, ``instrument_runs``).
+
+    Returns
+    -------
+    DirectResult
+        The last iteration's estimate, ``method="iv (tailor-made)"``, with a note giving
+        the relative entry change of each iteration and the worst controller VAF.
+
+    Raises
+    ------
+    ValueError
+        If ``iterations`` < 1, no runs are given, a run breaks the sampling contract
+        (``ident.signals.check_sampling``), ``start`` is an unknown string, or a
+        controller fit, instrument simulation or :func:`ident.direct.identify` raises.
+    """
     if iterations < 1:
         raise ValueError(f"iterations={iterations}: need at least 1")
     runs = list(runs)

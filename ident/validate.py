@@ -29,6 +29,7 @@ import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
 from .direct import vaf_variance
@@ -48,7 +49,23 @@ __all__ = [
 
 
 def goodness_of_fit(y: np.ndarray, yhat: np.ndarray) -> dict[str, float]:
-    """MSE, NRMSE fit (1 - ||y - yhat|| / ||y - mean y||), NMSE fit (squared ratio), VAF."""
+    """MSE, NRMSE fit (1 - ||y - yhat|| / ||y - mean y||), NMSE fit (squared ratio), VAF.
+
+    Parameters
+    ----------
+    y : array_like
+        Measured signal (any unit, any shape; norms and means over all entries).
+    yhat : array_like
+        Simulated or predicted signal, same shape and unit as ``y``.
+
+    Returns
+    -------
+    dict of str to float
+        ``"mse"`` (unit of ``y`` squared); ``"nrmse_fit"`` (MATLAB ``compare``'s fit, as a
+        fraction), ``"nmse_fit"`` = 1 - (||y - yhat|| / ||y - mean y||)^2 and ``"vaf"``
+        = 1 - var(y - yhat) / var(y) (:func:`ident.direct.vaf_variance`), all
+        dimensionless, NaN when ``y`` is constant.
+    """
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     err = np.linalg.norm(y - yhat)
     den = np.linalg.norm(y - y.mean())
@@ -82,7 +99,23 @@ def _sampled(model, dt: float):
 @dataclass(frozen=True)
 class CompareResult:
     """``yhat[i]`` (N_i, n_outputs) per run; ``fit``/``vaf`` per output over all runs;
-    ``x0[i]`` the initial state used; ``outputs`` names; ``horizon`` (None = simulation)."""
+    ``x0[i]`` the initial state used; ``outputs`` names; ``horizon`` (None = simulation).
+
+    Attributes
+    ----------
+    yhat : tuple of (N_i, p) ndarray
+        Simulated or predicted outputs per run, columns in ``outputs`` order (rad, rad/s).
+    fit : dict of str to float
+        NRMSE fit per output over all runs stacked (fraction; MATLAB prints it x100).
+    vaf : dict of str to float
+        Variance accounted for per output over all runs stacked (fraction).
+    x0 : tuple of (n,) ndarray
+        Initial state used per run (the model's state order and units).
+    outputs : tuple of str
+        Output names.
+    horizon : int or None
+        Prediction horizon [samples]; None for simulation.
+    """
 
     yhat: tuple[np.ndarray, ...]
     fit: dict[str, float]
@@ -275,7 +308,7 @@ def compare(
         if horizon is None:
             growth = np.max(np.abs(np.linalg.eigvals(Ad))) ** N
             if growth > 1e12:
-                raise ValueError(
+                raise UntrustworthyResult(
                     f"the model is unstable and the run has {N} samples (growth {growth:.2g}): "
                     "use horizon=k (k-step prediction) or a shorter window (Run.window)"
                 )
@@ -299,7 +332,25 @@ class ResidResult:
     lags 0..max_lag); ``crosscorr[o]`` with the input over ``lags`` (positive lag tau:
     residual at k vs input at k - tau); ``band`` = 2.576 / sqrt(N);
     ``fraction_outside[o]`` over lags 1..max_lag of the autocorrelation;
-    ``cross_outside[o]`` over lags 0..max_lag of the cross-correlation."""
+    ``cross_outside[o]`` over lags 0..max_lag of the cross-correlation.
+
+    Attributes
+    ----------
+    residuals : tuple of (N_i, p) ndarray
+        One-step prediction errors per run (output units: rad, rad/s).
+    lags : (2 max_lag + 1,) int ndarray
+        Lags -max_lag..max_lag [samples] of ``crosscorr``.
+    autocorr : dict of str to (max_lag + 1,) ndarray
+        Normalized residual autocorrelation per output at lags 0..max_lag (1 at lag 0).
+    crosscorr : dict of str to (2 max_lag + 1,) ndarray
+        Normalized residual-input cross-correlation per output at ``lags``.
+    band : float
+        Half-width of the confidence band, z / sqrt(N) (N all samples stacked).
+    fraction_outside : dict of str to float
+        Fraction of autocorrelation lags 1..max_lag outside +-band, per output.
+    cross_outside : dict of str to float
+        Fraction of cross-correlation lags 0..max_lag outside +-band, per output.
+    """
 
     residuals: tuple[np.ndarray, ...]
     lags: np.ndarray
@@ -330,6 +381,29 @@ def resid(
 
     ``input`` names the signal for the cross-correlation: "T_delta" or, in closed
     loop, "dither" (the run's logged dither).
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        The data; residuals of all runs are stacked for the statistics.
+    model : ident.pem.CanonicalModel or control.StateSpace
+        The model, as in :func:`compare` (one-step prediction, ``horizon=1``).
+    input : str, optional
+        Run signal for the cross-correlation, or ``"dither"``.
+    max_lag : int, optional
+        Largest lag [samples].
+    confidence : float, optional
+        Level of the band (0.99: z = 2.576).
+
+    Returns
+    -------
+    ResidResult
+        Residuals and their correlation statistics.
+
+    Raises
+    ------
+    ValueError
+        If ``input="dither"`` and a run has no logged dither, or :func:`compare` raises.
     """
     from scipy.stats import norm
 
@@ -361,27 +435,92 @@ def resid(
     return ResidResult(tuple(res), lags, auto, cross, band, frac, xfrac)
 
 
-def _ss(model) -> control.StateSpace:
+def _ss(model, v: float | None = None) -> control.StateSpace:
     # poles, zeros and transfer functions do not depend on the state order; the canonical
     # model's own (Chen & Dao) order is used, as the identification computed it
     if hasattr(model, "predictor") and hasattr(model, "theta"):
         return model.state_space(order="chen-dao")
-    return model.state_space() if hasattr(model, "state_space") else model
+    if not hasattr(model, "state_space"):
+        return model
+    import inspect
+
+    if "v" in inspect.signature(model.state_space).parameters:  # defined over speed
+        if v is None:
+            raise ValueError(
+                f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
+            )
+        return model.state_space(v)
+    return model.state_space()
 
 
-def poles(model) -> np.ndarray:
-    """Poles [1/s] of an identified model (``CanonicalModel`` or ``StateSpace``)."""
-    return np.asarray(control.poles(_ss(model)))
+def poles(model, v: float | None = None) -> np.ndarray:
+    """Poles [1/s] of an identified model (``CanonicalModel`` or ``StateSpace``).
+
+    Parameters
+    ----------
+    model : ident.pem.CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        Continuous-time model.
+    v : float, optional
+        Speed [m/s], required for models defined over speed (``SpeedCanonicalModel``,
+        ``DirectResult``).
+
+    Returns
+    -------
+    (n,) complex ndarray
+        Poles [1/s] (independent of the state order).
+    """
+    return np.asarray(control.poles(_ss(model, v)))
 
 
-def zeros(model, output: str = "phi", input: str = "T_delta") -> np.ndarray:
-    """Transmission zeros [1/s] of one SISO channel."""
-    return np.asarray(control.zeros(transfer_functions(model)[(output, input)]))
+def zeros(
+    model, output: str = "phi", input: str = "T_delta", v: float | None = None
+) -> np.ndarray:
+    """Transmission zeros [1/s] of one SISO channel.
+
+    Parameters
+    ----------
+    model : ident.pem.CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        Continuous-time model.
+    output : str, optional
+        Output name, e.g. ``"phi"`` or ``"delta"``.
+    input : str, optional
+        Input name, e.g. ``"T_delta"``.
+    v : float, optional
+        Speed [m/s], required for models defined over speed.
+
+    Returns
+    -------
+    complex ndarray
+        Zeros [1/s] of the transfer function from ``input`` to ``output``.
+
+    Raises
+    ------
+    KeyError
+        If the model has no such (output, input) channel.
+    """
+    return np.asarray(control.zeros(transfer_functions(model, v)[(output, input)]))
 
 
-def transfer_functions(model) -> dict[tuple[str, str], control.TransferFunction]:
-    """SISO transfer functions keyed by (output, input)."""
-    sys = _ss(model)
+def transfer_functions(
+    model, v: float | None = None
+) -> dict[tuple[str, str], control.TransferFunction]:
+    """SISO transfer functions keyed by (output, input).
+
+    Parameters
+    ----------
+    model : ident.pem.CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        Continuous-time model.
+    v : float, optional
+        Speed [m/s], required for models defined over speed.
+
+    Returns
+    -------
+    dict of (str, str) to control.TransferFunction
+        One transfer function per output/input pair (e.g. ``("phi", "T_delta")`` in
+        rad/(N m)), numerator leading coefficients below 1e-9 of its largest dropped as
+        round-off.
+    """
+    sys = _ss(model, v)
     out = {}
     for i, o in enumerate(sys.output_labels):
         for j, u in enumerate(sys.input_labels):

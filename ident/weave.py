@@ -42,6 +42,16 @@ class WeaveTerm:
     parts), lambda_model the loop root nearest to the data (:meth:`ExperimentModel.weave`).
     ``offsets`` (see :meth:`at`) carry the difference between the estimator used on the data
     (damped-oscillation fit of nonlinear decays) and the linear loop root.
+
+    Attributes
+    ----------
+    weight : float
+        Factor on the normalized weave residuals (dimensionless; 0 switches the term off).
+    targets : tuple of (float, float, complex, float)
+        Per speed: speed key, mean sensor speed [m/s], measured weave eigenvalue [1/s]
+        and its standard error [1/s].
+    offsets : tuple of complex
+        Per target: estimator offset [1/s] added to the model's loop root (empty: none).
     """
 
     weight: float
@@ -54,6 +64,7 @@ class WeaveTerm:
         Parameters
         ----------
         model : ExperimentModel
+            The model whose loop roots (:meth:`ExperimentModel.weave`) are compared.
 
         Returns
         -------

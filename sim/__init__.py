@@ -6,6 +6,10 @@ kg m^2, s, rad, N m, N).  Linear state order x = [phi, delta, phidot, deltadot].
 
 Modules:
 
+- :mod:`~bikeid.sim.errors`: the error types every stage raises (:class:`InputError`,
+  :class:`UntrustworthyResult`) and the command line's exit codes.
+- :mod:`~bikeid.sim.textformats`: strict JSON/YAML readers (no duplicate keys, no NaN,
+  bounded nesting) for every file a user passes.
 - :mod:`~bikeid.sim.conventions`: state orders, signal names, units and sign conventions,
   stated once for all of bikeid.
 - :mod:`~bikeid.sim.parameters`: :class:`BicycleParameters` in Meijaard notation

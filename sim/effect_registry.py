@@ -41,6 +41,7 @@ __all__ = [
     "EFFECTS",
     "LAYERS",
     "Effect",
+    "RegistryFacts",
     "check_values",
     "effect",
     "library_names",
@@ -227,6 +228,41 @@ EFFECTS: Mapping[str, Effect] = {
            "roll torque -k * phi (tether, support frame)", plant_term="roll_stiffness"),
     )  # fmt: skip
 }
+
+
+class RegistryFacts:
+    """Mixin for a higher layer's application of an effect: the registry's facts by name.
+
+    A class with a ``name`` attribute (a registry name) gains read-only ``entry``, ``unit``,
+    ``absent`` and ``in_library``, so that it never re-spells them.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (set by the subclass, e.g. a dataclass field).
+    """
+
+    name: str
+
+    @property
+    def entry(self) -> Effect:
+        """The registry entry (:func:`effect`)."""
+        return effect(self.name)
+
+    @property
+    def unit(self) -> str:
+        """Unit of the value (registry)."""
+        return self.entry.unit
+
+    @property
+    def absent(self) -> float:
+        """The value that means "no such effect" (registry)."""
+        return self.entry.absent
+
+    @property
+    def in_library(self) -> bool:
+        """Whether the identification library may select it (registry)."""
+        return self.entry.in_library
 
 
 def effect(name: str) -> Effect:

@@ -72,7 +72,23 @@ def _check(name: str, value: float, unit: str, minimum: float = 0.0, strict: boo
 
 @dataclass(frozen=True)
 class SteerDamping:
-    """Viscous steer damping: torque -c * deltadot on the front frame [c: N m s/rad]."""
+    """Viscous steer damping: torque -c * deltadot on the front frame [c: N m s/rad].
+
+    Parameters
+    ----------
+    c : float
+        Damping coefficient [N m s/rad], finite and >= 0.
+
+    Attributes
+    ----------
+    kind : str
+        ``"plant"``.
+
+    Raises
+    ------
+    ValueError
+        If ``c`` is negative or not finite.
+    """
 
     c: float
     kind = "plant"
@@ -88,6 +104,23 @@ class SteerCoulomb:
     torque [N m] is the sliding friction level; smoothing [rad/s] the steer rate
     over which the tanh rises (the smaller, the closer to a sign function and the
     stiffer the equations).
+
+    Parameters
+    ----------
+    torque : float
+        Sliding friction level [N m], finite and >= 0.
+    smoothing : float, optional
+        Steer rate scale of the tanh [rad/s], finite and > 0 (default 0.01).
+
+    Attributes
+    ----------
+    kind : str
+        ``"plant"``.
+
+    Raises
+    ------
+    ValueError
+        If ``torque`` is negative or ``smoothing`` not positive, or either is not finite.
     """
 
     torque: float
@@ -101,7 +134,23 @@ class SteerCoulomb:
 
 @dataclass(frozen=True)
 class RollDamping:
-    """Viscous roll damping: torque -c * phidot on the rear frame [c: N m s/rad]."""
+    """Viscous roll damping: torque -c * phidot on the rear frame [c: N m s/rad].
+
+    Parameters
+    ----------
+    c : float
+        Damping coefficient [N m s/rad], finite and >= 0.
+
+    Attributes
+    ----------
+    kind : str
+        ``"plant"``.
+
+    Raises
+    ------
+    ValueError
+        If ``c`` is negative or not finite.
+    """
 
     c: float
     kind = "plant"
@@ -118,6 +167,21 @@ class RollStiffness:
     or a lumped lateral compliance of a support frame); unlike :class:`RollDamping` it
     acts on the roll *angle*.  It weakens the gravity term g K0[phi, phi] of the
     linear model (Meijaard 2007 eq. A.21).
+
+    Parameters
+    ----------
+    k : float
+        Spring constant [N m/rad], finite and >= 0.
+
+    Attributes
+    ----------
+    kind : str
+        ``"plant"``.
+
+    Raises
+    ------
+    ValueError
+        If ``k`` is negative or not finite.
     """
 
     k: float
@@ -136,6 +200,21 @@ class SteerStiffness:
     the contact patch.  It adds to g K0[delta, delta] + v^2 K2[delta, delta] of the linear
     model (Meijaard 2007 eq. A.21).  Either sign is accepted (k < 0 is a destabilizing
     spring).
+
+    Parameters
+    ----------
+    k : float
+        Spring constant [N m/rad], finite (either sign).
+
+    Attributes
+    ----------
+    kind : str
+        ``"plant"``.
+
+    Raises
+    ------
+    ValueError
+        If ``k`` is not finite.
     """
 
     k: float
@@ -148,7 +227,23 @@ class SteerStiffness:
 
 @dataclass(frozen=True)
 class TorqueGain:
-    """Steer torque actually applied = gain * command [-] (actuator calibration error)."""
+    """Steer torque actually applied = gain * command [-] (actuator calibration error).
+
+    Parameters
+    ----------
+    gain : float
+        Dimensionless gain [-], finite (1 = exact; a negative gain flips the sign).
+
+    Attributes
+    ----------
+    kind : str
+        ``"input"``.
+
+    Raises
+    ------
+    ValueError
+        If ``gain`` is not finite.
+    """
 
     gain: float
     kind = "input"
@@ -160,7 +255,23 @@ class TorqueGain:
 
 @dataclass(frozen=True)
 class ActuatorLag:
-    """First-order steer-torque actuator lag tau T' = T_cmd - T [tau: s]."""
+    """First-order steer-torque actuator lag tau T' = T_cmd - T [tau: s].
+
+    Parameters
+    ----------
+    tau : float
+        Time constant [s], finite and >= 0 (0 = no lag).
+
+    Attributes
+    ----------
+    kind : str
+        ``"input"``.
+
+    Raises
+    ------
+    ValueError
+        If ``tau`` is negative or not finite.
+    """
 
     tau: float
     kind = "input"
@@ -171,7 +282,24 @@ class ActuatorLag:
 
 @dataclass(frozen=True)
 class InputDelay:
-    """Pure delay of the steer-torque command [s]; a whole number of controller samples."""
+    """Pure delay of the steer-torque command [s]; a whole number of controller samples.
+
+    Parameters
+    ----------
+    delay : float
+        Delay [s], finite and >= 0; :func:`input_chain` requires a whole multiple of the
+        controller sample time.
+
+    Attributes
+    ----------
+    kind : str
+        ``"input"``.
+
+    Raises
+    ------
+    ValueError
+        If ``delay`` is negative or not finite.
+    """
 
     delay: float
     kind = "input"
@@ -197,6 +325,24 @@ def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
 
     Effects of the same type add up (two dampers in parallel); input-side effects
     are ignored here.
+
+    Parameters
+    ----------
+    effects : iterable of effect dataclasses, optional
+        Plant- and input-side effects of this module; None or empty for none.
+
+    Returns
+    -------
+    (6,) ndarray
+        Values in :data:`PLANT_SLOTS` order: steer damping [N m s/rad], steer Coulomb
+        torque [N m], its smoothing rate [rad/s] (1.0 without Coulomb friction), roll
+        damping [N m s/rad], roll stiffness [N m/rad], steer stiffness [N m/rad].
+
+    Raises
+    ------
+    ValueError
+        For an object that is not an effect of this module, or a second
+        :class:`SteerCoulomb` (after one with a positive torque).
     """
     vec = np.zeros(len(PLANT_SLOTS))
     vec[_S["steer_coulomb_smoothing"]] = 1.0
@@ -221,7 +367,34 @@ def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
 
 @njit(cache=True)
 def plant_forces(ev, q4, q7, u4, u6, u7, out):
-    """Extra generalized forces [N m] on the (u4, u6, u7) equations; fills ``out``."""
+    """Extra generalized forces [N m] on the (u4, u6, u7) equations; fills ``out``.
+
+    Compiled with numba (called from the integrator's kernel).
+
+    Parameters
+    ----------
+    ev : (6,) ndarray
+        Plant-effect vector from :func:`plant_vector`.
+    q4 : float
+        Roll angle phi [rad].
+    q7 : float
+        Steer angle delta [rad].
+    u4 : float
+        Roll rate phidot [rad/s].
+    u6 : float
+        Rear wheel rate [rad/s] (unused: no effect acts on the wheel).
+    u7 : float
+        Steer rate deltadot [rad/s].
+    out : (3,) ndarray
+        Output, overwritten: generalized forces [N m] on the roll, rear-wheel and steer
+        equations, i.e. -c_phi phidot - k_phi phi, 0 and
+        -c_delta deltadot - T_c tanh(deltadot / s) - k_delta delta.
+
+    Returns
+    -------
+    None
+        The result is written into ``out``.
+    """
     out[0] = -ev[3] * u4 - ev[4] * q4
     out[1] = 0.0
     out[2] = -ev[0] * u7 - ev[1] * math.tanh(u7 / ev[2]) - ev[5] * q7
@@ -229,7 +402,19 @@ def plant_forces(ev, q4, q7, u4, u6, u7, out):
 
 @dataclass(frozen=True)
 class InputChain:
-    """Compiled input-side effects: gain [-], lag tau [s], delay in samples."""
+    """Compiled input-side effects: gain [-], lag tau [s], delay in samples.
+
+    Applied as command -> delay -> gain -> lag -> plant (module docstring).
+
+    Parameters
+    ----------
+    gain : float, optional
+        Product of the :class:`TorqueGain` gains [-] (default 1).
+    tau : float, optional
+        Lag time constant [s] (default 0, none).
+    delay_samples : int, optional
+        Delay in controller samples (default 0).
+    """
 
     gain: float = 1.0
     tau: float = 0.0
@@ -237,7 +422,29 @@ class InputChain:
 
 
 def input_chain(effects: Iterable[object] | None, dt: float) -> InputChain:
-    """Compile input-side effects for controller sample time ``dt`` [s]."""
+    """Compile input-side effects for controller sample time ``dt`` [s].
+
+    Gains multiply, delays add; the time constants of several :class:`ActuatorLag`
+    effects are added into one first-order lag.
+
+    Parameters
+    ----------
+    effects : iterable of effect dataclasses or None
+        Plant- and input-side effects of this module (plant-side ones are ignored).
+    dt : float
+        Controller sample time [s], positive.
+
+    Returns
+    -------
+    InputChain
+        The combined gain [-], lag [s] and delay [samples].
+
+    Raises
+    ------
+    ValueError
+        For an object that is not an effect of this module, or an :class:`InputDelay`
+        that is not a whole number of samples ``dt``.
+    """
     gain, tau, delay = 1.0, 0.0, 0
     for e in effects or ():
         if isinstance(e, TorqueGain):
@@ -258,5 +465,16 @@ def input_chain(effects: Iterable[object] | None, dt: float) -> InputChain:
 
 
 def describe(effects: Iterable[object] | None) -> list[dict]:
-    """JSON-friendly description of effects for run metadata."""
+    """JSON-friendly description of effects for run metadata.
+
+    Parameters
+    ----------
+    effects : iterable of effect dataclasses or None
+        The effects; None or empty for none.
+
+    Returns
+    -------
+    list of dict
+        One dict per effect: ``type`` (class name) and its fields in SI units.
+    """
     return [{"type": type(e).__name__, **asdict(e)} for e in effects or ()]

@@ -14,9 +14,19 @@ Open-loop inputs (T_delta, T_phi, F, T_R) are given on the sample grid and held.
 
 ``method="reference"`` integrates each sample interval with
 ``scipy.integrate.solve_ivp`` (DOP853, rtol = atol = 1e-12 by default) instead:
-the high-accuracy reference for tests.  Both methods stop cleanly when
-|roll| exceeds ``fall_limit`` (default 60 deg) and report the time
-(``Trajectory.fell_at``), and stop with a message on a non-finite state.
+the high-accuracy reference for tests.
+
+Stop reasons.  A run that ends early carries one :class:`Stop` (``Trajectory.stop``):
+its ``cause`` (a key of :data:`STOP_CAUSES`), time [s], one-line message and whether it is
+``physical``.  Physical stops: ``roll_limit`` (|roll| over ``fall_limit``, default 60 deg)
+and ``steer_limit`` (|steer| over 90 deg); ``Trajectory.fell_at`` is their time and is
+None otherwise.  Numerical stops, never reported as falls: ``controller_nonfinite``,
+``nonfinite_state`` and ``step_too_coarse``.  Every RK4 stop at a limit or a non-finite
+state is checked against the step first: if |lambda_max| h of the linearized Whipple plant
+at the current speed exceeds RK4's real-axis stability limit :data:`RK4_STABILITY` (2.785),
+or re-integrating the last sample interval with half the step moves roll or steer by more
+than :data:`STEP_CHECK_TOL`, the stop is ``step_too_coarse`` with the fix (smaller dt or
+more substeps).
 
 State order, inputs and signs: :mod:`sim.nonlinear`.
 """
@@ -34,16 +44,139 @@ from numba import njit
 
 from .conventions import MEASURED
 from .effects import InputChain, input_chain, plant_vector
+from .errors import check_memory
 from .nonlinear import INPUTS, WhippleBicycle, invalidate_stale_caches, outputs, rhs
 from .parameters import BicycleParameters
 
-__all__ = ["Trajectory", "simulate", "simulate_many", "simulate_reference"]
+__all__ = [
+    "STOP_CAUSES",
+    "Stop",
+    "Trajectory",
+    "simulate",
+    "simulate_many",
+    "simulate_reference",
+]
 
 DEFAULT_DT = 0.01
 DEFAULT_SUBSTEPS = 2
 DEFAULT_FALL_LIMIT = math.radians(60.0)
+#: |steer| [rad] beyond which a run stops (``steer_limit``): the front wheel is across
+#: the frame, no longer a bicycle being ridden.
+STEER_LIMIT = math.pi / 2
+#: RK4's stability limit on the negative real axis, |lambda h| <= 2.785 (the negative real
+#: root of R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 = 1; Hairer & Wanner, Solving ODEs II,
+#: Fig. IV.2.1).
+#: The imaginary-axis limit is 2.828, so 2.78 bounds every eigenvalue direction of the
+#: bicycle's lightly damped modes.
+RK4_STABILITY = 2.78
+#: Half-step check: a stop is ``step_too_coarse`` if re-integrating its sample interval
+#: with half the RK4 step changes roll or steer by more than this [rad].  At the default
+#: step (5 ms) the difference is ~(lambda h)^5 / 120 |x| <= 2e-6 rad at 15 m/s near a fall
+#: (|lambda| = 35.8 1/s); an unstable step gives O(1) rad; 0.01 rad (0.6 deg) lies between.
+STEP_CHECK_TOL = 0.01
 
-_OK, _FELL, _NONFINITE = 0, 1, 2
+_OK, _FELL, _NONFINITE, _STEER = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class StopCause:
+    """One kind of early end: whether it is ``physical`` and what it means."""
+
+    physical: bool
+    meaning: str
+
+
+#: Every reason a run can end early, by cause name.  Adding one (e.g. ``wheel_unloaded``,
+#: a normal contact force <= 0, physical) is one entry here plus its detection.
+STOP_CAUSES: dict[str, StopCause] = {
+    "roll_limit": StopCause(True, "|roll| exceeded the fall limit: the bicycle fell"),
+    "steer_limit": StopCause(True, "|steer| exceeded 90 deg: the front wheel folded"),
+    "nonfinite_state": StopCause(
+        False, "the state became non-finite (or the pitch had no solution)"
+    ),
+    "step_too_coarse": StopCause(
+        False, "the RK4 step is too coarse for the dynamics: a numerical blow-up"
+    ),
+    "controller_nonfinite": StopCause(False, "the controller returned a non-finite torque"),
+}
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Why and when a run ended early.
+
+    Attributes
+    ----------
+    cause : str
+        A key of :data:`STOP_CAUSES`.
+    time : float
+        Time of the stop [s] (the limit crossing, interpolated within the RK4 step, or
+        the sample at which the controller failed).
+    message : str
+        One line for the user, with the fix for numerical causes.
+    physical : bool
+        True for a physical end (a fall); False for a numerical failure.  Derived from
+        :data:`STOP_CAUSES`; given explicitly it must agree.
+
+    Raises
+    ------
+    ValueError
+        On construction, if ``cause`` is unknown or ``physical`` contradicts it.
+    """
+
+    cause: str
+    time: float
+    message: str
+    physical: bool | None = None
+
+    def __post_init__(self) -> None:
+        if self.cause not in STOP_CAUSES:
+            raise ValueError(
+                f"unknown stop cause {self.cause!r}; causes are {sorted(STOP_CAUSES)}"
+            )
+        physical = STOP_CAUSES[self.cause].physical
+        if self.physical is not None and bool(self.physical) != physical:
+            raise ValueError(f"stop cause {self.cause!r} has physical={physical}")
+        object.__setattr__(self, "physical", physical)
+        object.__setattr__(self, "time", float(self.time))
+
+    def as_dict(self) -> dict[str, Any]:
+        """The stop as a JSON-serializable dict.
+
+        Returns
+        -------
+        dict
+            ``cause``, ``time`` [s], ``message``, ``physical``.
+        """
+        return {
+            "cause": self.cause,
+            "time": self.time,
+            "message": self.message,
+            "physical": self.physical,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Stop:
+        """Rebuild a stop from :meth:`as_dict` output.
+
+        Parameters
+        ----------
+        d : mapping
+            With ``cause``, ``time`` [s] and ``message`` (``physical`` optional).
+
+        Returns
+        -------
+        Stop
+
+        Raises
+        ------
+        ValueError
+            If a key is missing or the cause is unknown.
+        """
+        try:
+            return cls(d["cause"], d["time"], d["message"], d.get("physical"))
+        except KeyError as exc:
+            raise ValueError(f"stop record lacks {exc}; need cause, time, message") from None
 
 
 @dataclass
@@ -78,15 +211,18 @@ class Trajectory:
     states : (N, 10) ndarray
         Integration states (:data:`sim.nonlinear.STATE`).
     fell_at : float or None
-        Time [s] at which |roll| first exceeded the fall limit, else None.
+        Time [s] of a physical stop (``roll_limit`` or ``steer_limit``), else None;
+        never set for a numerical failure.
     stop_reason : str or None
-        None, or why the run ended early.
+        None, or why the run ended early (``stop.message``).
     energy : (N,) ndarray or None
         Total energy (kinetic + potential) [J] if requested, else None.
     meta : dict
         Settings of the run: ``mode``, ``dt`` [s], ``substeps``, ``method``,
         ``fall_limit`` [rad], ``bicycle`` (name) and ``lateral_force_point``
         (x_F, z_F) [m].
+    stop : Stop or None
+        Why the run ended early (:class:`Stop`), None if it ran its whole duration.
     """
 
     t: np.ndarray
@@ -102,6 +238,7 @@ class Trajectory:
     stop_reason: str | None = None
     energy: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    stop: Stop | None = None
 
     def signal(self, name: str) -> np.ndarray:
         """One true signal by name.
@@ -168,12 +305,13 @@ def _lagged(T0, Tc, tau, s):
 
 
 @njit(cache=True)
-def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info):
+def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info):
     """Advance ``y`` over one sample interval with ``nsub`` RK4 steps, in place.
 
     rc = [T_delta command, T_phi, F, T_R] held over the interval; T_delta is
     lagged from T0 with time constant tau.  info <- [status, time offset of a
-    stop, T_R at the interval start].  Returns the status (0 ok, 1 fell, 2 bad).
+    stop, T_R at the interval start].  Returns the status (0 ok, 1 |roll| > phimax,
+    2 non-finite, 3 |steer| > dmax).
     """
     h = dt / nsub
     k1 = np.empty(10)
@@ -200,6 +338,7 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info):
             yt[i] = y[i] + h * k3[i]
         rhs(yt, q5g, p, r, ev, held, k4)
         phi_prev = abs(y[3])
+        del_prev = abs(y[5])
         finite = True
         for i in range(10):
             y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
@@ -209,16 +348,27 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info):
             info[0] = _NONFINITE
             info[1] = ts + h
             return _NONFINITE
-        if abs(y[3]) > phimax:  # crossing time by linear interpolation within the step
-            info[0] = _FELL
-            info[1] = ts + h * (phimax - phi_prev) / (abs(y[3]) - phi_prev)
-            return _FELL
+        # crossing times by linear interpolation within the step; the earlier one wins
+        s_roll = 2.0
+        s_steer = 2.0
+        if abs(y[3]) > phimax:
+            s_roll = (phimax - phi_prev) / (abs(y[3]) - phi_prev)
+        if abs(y[5]) > dmax:
+            s_steer = (dmax - del_prev) / (abs(y[5]) - del_prev)
+        if s_roll <= 1.0 or s_steer <= 1.0:
+            if s_roll <= s_steer:
+                info[0] = _FELL
+                info[1] = ts + h * s_roll
+                return _FELL
+            info[0] = _STEER
+            info[1] = ts + h * s_steer
+            return _STEER
     info[0] = _OK
     return _OK
 
 
 @njit(cache=True)
-def _rk4_sample(k, Tc, T0, X, OUT, OL, U, q5g, p, ev, held, tau, dt, nsub, phimax, info):
+def _rk4_sample(k, Tc, T0, X, OUT, OL, U, q5g, p, ev, held, tau, dt, nsub, phimax, dmax, info):
     """One controller sample: advance X[k] to X[k + 1], outputs into OUT[k + 1].
 
     Records the inputs acting at t_k in U[k].  Returns the status of
@@ -227,7 +377,7 @@ def _rk4_sample(k, Tc, T0, X, OUT, OL, U, q5g, p, ev, held, tau, dt, nsub, phima
     y = X[k].copy()
     rc = OL[k].copy()
     rc[0] = Tc
-    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, info)
+    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info)
     U[k, 0] = T0
     U[k, 1] = OL[k, 1]
     U[k, 2] = OL[k, 2]
@@ -284,7 +434,9 @@ def _input_array(inputs, n: int) -> np.ndarray:
     return out
 
 
-def _reference_interval(bike, y, q5g, ev, held, rc, T0, tau, dt, phimax, info, rtol, atol):
+def _reference_interval(
+    bike, y, q5g, ev, held, rc, T0, tau, dt, phimax, dmax, info, rtol, atol
+):
     from scipy.integrate import solve_ivp
 
     r = rc.copy()
@@ -298,17 +450,24 @@ def _reference_interval(bike, y, q5g, ev, held, rc, T0, tau, dt, phimax, info, r
     def fall(s, yy):
         return abs(yy[3]) - phimax
 
+    def steer(s, yy):
+        return abs(yy[5]) - dmax
+
     fall.terminal = True
+    steer.terminal = True
     r[0] = T0
     info[2] = rhs(y, q5g, bike.p, r, ev, held, ydot)
-    sol = solve_ivp(fun, (0.0, dt), y, method="DOP853", rtol=rtol, atol=atol, events=fall)
+    sol = solve_ivp(
+        fun, (0.0, dt), y, method="DOP853", rtol=rtol, atol=atol, events=(fall, steer)
+    )
     if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
         info[0], info[1] = _NONFINITE, sol.t[-1]
         return _NONFINITE
     y[:] = sol.y[:, -1]
     if sol.status == 1:
-        info[0], info[1] = _FELL, sol.t_events[0][0]
-        return _FELL
+        status = _FELL if sol.t_events[0].size else _STEER
+        info[0], info[1] = status, sol.t[-1]
+        return status
     info[0] = _OK
     return _OK
 
@@ -381,9 +540,9 @@ def simulate(
     Returns
     -------
     Trajectory
-        The run on the sample grid; shorter than N samples if the bicycle fell
-        (``fell_at``), the state became non-finite (a ``RuntimeWarning`` is issued)
-        or the controller returned a non-finite torque (see ``stop_reason``).
+        The run on the sample grid; shorter than N samples if it stopped early:
+        ``stop`` says why (:data:`STOP_CAUSES`), ``fell_at`` is set for physical
+        stops only.
 
     Raises
     ------
@@ -392,6 +551,11 @@ def simulate(
         samples), ``substeps``, ``fall_limit``, ``x0`` (shape, finiteness, roll beyond
         the fall limit) or ``inputs`` (names, shapes, finiteness, T_R in held mode) is
         invalid, or if ``measure`` returns other than 8 values.
+
+    Notes
+    -----
+    An early end is described by ``Trajectory.stop`` (:class:`Stop`); numerical
+    stops (non-finite state, step too coarse) also issue a ``RuntimeWarning``.
     """
     bike = _as_bike(bike)
     held = mode == "held"
@@ -403,6 +567,8 @@ def simulate(
         raise ValueError(f"sample time dt={dt!r} must be a positive number of seconds")
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration={duration!r} must be a positive number of seconds")
+    check_memory(duration / dt + 1, 37, f"a {duration:g} s run at dt={dt:g} s",
+                 "shorten the duration or raise the sample time")  # the arrays below
     nsteps = int(round(duration / dt))
     if nsteps < 1 or abs(nsteps * dt - duration) > 1e-9 * max(1.0, duration):
         raise ValueError(f"duration {duration} s is not a whole number of samples of dt={dt} s")
@@ -442,8 +608,7 @@ def simulate(
     ring = np.zeros(nd + 1)  # delayed command buffer
     gain, tau = chain.gain, chain.tau
     T_applied = 0.0
-    fell_at = None
-    reason = None
+    stop: Stop | None = None
     last = n - 1
     rk4 = method == "rk4"
     nsub = int(substeps)
@@ -462,7 +627,12 @@ def simulate(
         Ym[k] = ym
         c = 0.0 if controller is None else float(controller(t[k], ym))
         if not math.isfinite(c):
-            reason = f"controller returned a non-finite steer torque {c} at t={t[k]:.4f} s"
+            stop = Stop(
+                "controller_nonfinite",
+                t[k],
+                f"controller returned a non-finite steer torque {c} at t={t[k]:.4f} s "
+                "(a numerical failure of the controller, not a fall)",
+            )
             last = k
             break
         cmd[k] = c
@@ -480,9 +650,10 @@ def simulate(
                 U[k, 3] = rhs(X[k].copy(), q5g, bike.p, r_now, ev, held, np.empty(10))
             break
         if rk4:
+            q5_start = q5g.copy()
             status = _rk4_sample(
                 k, Tc, T_applied, X, OUT, ol, U, q5g, bike.p, ev, held, tau, dt, nsub,
-                fall_limit, info,
+                fall_limit, STEER_LIMIT, info,
             )  # fmt: skip
         else:
             y = X[k].copy()
@@ -491,25 +662,27 @@ def simulate(
             U[k] = ol[k]
             U[k, 0] = T_applied
             status = _reference_interval(
-                bike, y, q5g, ev, held, rc, T_applied, tau, dt, fall_limit, info, rtol, atol
-            )
+                bike, y, q5g, ev, held, rc, T_applied, tau, dt, fall_limit, STEER_LIMIT, info,
+                rtol, atol,
+            )  # fmt: skip
             U[k, 3] = info[2]
             X[k + 1] = y
             if status == _OK:
                 outputs(y, q5g, bike.p, OUT[k + 1])
-        if status == _FELL:
-            fell_at = float(t[k] + info[1])
-            reason = (
-                f"fell: |roll| exceeded {math.degrees(fall_limit):.1f} deg at t={fell_at:.3f} s"
-            )
-            last = k
-            break
-        if status == _NONFINITE:
-            reason = (
-                f"state became non-finite (or pitch had no solution) at t={t[k] + info[1]:.4f} s;"
-                " integration stopped (step too large or configuration far from upright?)"
-            )
-            warnings.warn(reason, RuntimeWarning, stacklevel=2)
+        if status != _OK:
+            t_stop = float(t[k] + info[1])
+            stop = _limit_stop(status, t_stop, fall_limit)
+            if rk4:
+                rc = ol[k].copy()
+                rc[0] = Tc
+                coarse = _coarse_step(
+                    bike, X[k], q5_start, ev, held, rc, T_applied, tau, dt, nsub,
+                    abs(float(OUT[k, 0])), f"stopped on {stop.cause} at t={t_stop:.3f} s",
+                )  # fmt: skip
+                if coarse is not None:
+                    stop = Stop("step_too_coarse", t_stop, coarse)
+            if not stop.physical:
+                warnings.warn(stop.message, RuntimeWarning, stacklevel=2)
             last = k
             break
         T_applied = _lagged(T_applied, Tc, tau, dt)
@@ -524,8 +697,8 @@ def simulate(
         inputs=U[sl],
         command=cmd[sl],
         states=X[sl],
-        fell_at=fell_at,
-        stop_reason=reason,
+        fell_at=stop.time if stop is not None and stop.physical else None,
+        stop_reason=None if stop is None else stop.message,
         energy=None if E is None else E[sl],
         meta={
             "mode": mode,
@@ -536,7 +709,74 @@ def simulate(
             "bicycle": bike.params.name,
             "lateral_force_point": list(bike.lateral_force_point),
         },
+        stop=stop,
     )
+
+
+def _limit_stop(status: int, t_stop: float, fall_limit: float) -> Stop:
+    """The stop the integrator's status code stands for, before the step check."""
+    if status == _FELL:
+        return Stop(
+            "roll_limit",
+            t_stop,
+            f"fell: |roll| exceeded {math.degrees(fall_limit):.1f} deg at t={t_stop:.3f} s",
+        )
+    if status == _STEER:
+        return Stop(
+            "steer_limit",
+            t_stop,
+            f"fell: |steer| exceeded {math.degrees(STEER_LIMIT):.0f} deg at t={t_stop:.3f} s "
+            "(front wheel folded)",
+        )
+    return Stop(
+        "nonfinite_state",
+        t_stop,
+        f"state became non-finite (or pitch had no solution) at t={t_stop:.4f} s; "
+        "integration stopped (configuration far from upright or inputs out of range?)",
+    )
+
+
+def _coarse_step(
+    bike, y0, q5_start, ev, held, rc, T0, tau, dt, nsub, speed, what
+) -> str | None:
+    """Message if the RK4 step cannot resolve the dynamics at a stop, else None.
+
+    Two tests (module docstring): |lambda_max| h of the linearized plant at ``speed``
+    against :data:`RK4_STABILITY`, and re-integration of the stop's sample interval from
+    ``y0`` with ``nsub`` and ``2 nsub`` steps, limits off, compared on roll and steer
+    against :data:`STEP_CHECK_TOL`.
+    """
+    from .linear import eigenvalues
+
+    h = dt / nsub
+    lam = float(np.max(np.abs(eigenvalues(bike.params, speed))))
+    fix = "use a smaller --dt (sample time) or more --substeps"
+    if lam * h > RK4_STABILITY:
+        return (
+            f"numerical blow-up, not a fall ({what}): the RK4 step h = {h:g} s is too "
+            f"coarse at {speed:.3g} m/s (|lambda_max| h = {lam:.1f} 1/s x {h:g} s = "
+            f"{lam * h:.2f} > {RK4_STABILITY}, RK4's stability limit); {fix} so that "
+            f"h <= {RK4_STABILITY / lam:.3g} s"
+        )
+    ends = []
+    for m in (nsub, 2 * nsub):
+        y = np.array(y0, dtype=float)
+        info = np.zeros(3)
+        _rk4_interval(
+            y, q5_start.copy(), bike.p, ev, held, rc, T0, tau, dt, m, np.inf, np.inf, info
+        )
+        ends.append(y[[3, 5]])
+    coarse, fine = ends
+    if not np.all(np.isfinite(fine)):
+        return None  # non-finite even with half the step: not the step's fault
+    diff = float(np.max(np.abs(coarse - fine))) if np.all(np.isfinite(coarse)) else math.inf
+    if diff > STEP_CHECK_TOL:
+        return (
+            f"numerical blow-up, not a fall ({what}): halving the RK4 step h = {h:g} s "
+            f"changes roll/steer over the last sample by {diff:.3g} rad (> {STEP_CHECK_TOL} "
+            f"rad); {fix}"
+        )
+    return None
 
 
 def simulate_reference(bike, x0, duration, **kwargs) -> Trajectory:

@@ -18,13 +18,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 from numpy.polynomial import polynomial as P
-from scipy.optimize import brentq, linear_sum_assignment
 
 from .parameters import BicycleParameters
+
+if TYPE_CHECKING:  # python-control and scipy.optimize load on first use (start-up time)
+    import control
 
 __all__ = [
     "INPUT_NAMES",
@@ -327,6 +329,8 @@ def state_space(
         raise ValueError("input 'F' needs lateral_force_point=(x_F, z_F) in metres")
     A, B = state_matrices(p, v, lateral_force_point)
     idx = [INPUT_NAMES.index(u) for u in inputs]
+    import control
+
     return control.ss(
         A, B[:, idx], np.eye(4), np.zeros((4, len(idx))),
         inputs=list(inputs), outputs=list(STATE_NAMES), states=list(STATE_NAMES),
@@ -374,6 +378,8 @@ def transfer_function(
     adj = [[Pm[1][1], -Pm[0][1]], [-Pm[1][0], Pm[0][0]]]
     num = np.trim_zeros(adj[i][j][::-1], "f")
     den = cm.char_poly(v)[::-1]
+    import control
+
     return control.tf(num if num.size else [0.0], den)
 
 
@@ -445,11 +451,23 @@ class EigenSweep:
         return self.values[:, idx]
 
 
+def _assignment(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``scipy.optimize.linear_sum_assignment``, imported on first use (start-up time).
+
+    (Enumerating the 24 permutations of a 4x4 problem was tried to avoid the ~0.3-0.5 s
+    import; it breaks ties between equal-cost assignments differently, which relabels
+    branches where two real roots meet, so scipy's rule is kept.)
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    return linear_sum_assignment(cost)
+
+
 def _track(values: np.ndarray) -> np.ndarray:
     out = values.copy()
     for k in range(1, len(out)):
         cost = np.abs(out[k - 1][:, None] - values[k][None, :])
-        _, col = linear_sum_assignment(cost)
+        _, col = _assignment(cost)
         out[k] = values[k][col]
     return out
 
@@ -485,7 +503,7 @@ def match_eigenvalues(found, truth, *, return_index: bool = False):
     truth = np.asarray(truth, dtype=complex).ravel()
     if found.size != truth.size:
         raise ValueError(f"cannot pair {found.size} eigenvalues with {truth.size}")
-    _, col = linear_sum_assignment(np.abs(truth[:, None] - found[None, :]))
+    _, col = _assignment(np.abs(truth[:, None] - found[None, :]))
     return (found[col], col) if return_index else found[col]
 
 
@@ -551,8 +569,27 @@ def _quartic_coeffs(cm: CanonicalMatrices, v: float) -> tuple[float, float, floa
     return c[4], c[3], c[2], c[1], c[0]
 
 
-def _discriminant(cm: CanonicalMatrices, v: float) -> float:
-    a, b, c, d, e = _quartic_coeffs(cm, v)
+def _grid_coeffs(cm: CanonicalMatrices, v: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(a, b, c, d, e) of the quartic at every speed of ``v`` at once (vectorized
+    ``_quartic_coeffs``: the same determinant expanded by hand)."""
+    v = np.asarray(v, dtype=float)[:, None, None]
+    K = cm.g * cm.K0 + v**2 * cm.K2
+    C = v * cm.C1
+    M = np.broadcast_to(cm.M, K.shape)
+
+    def cross(X, Y):  # coefficient contribution X00 Y11 - X01 Y10
+        return X[:, 0, 0] * Y[:, 1, 1] - X[:, 0, 1] * Y[:, 1, 0]
+
+    e = cross(K, K)
+    d = cross(K, C) + cross(C, K)
+    c = cross(K, M) + cross(C, C) + cross(M, K)
+    b = cross(C, M) + cross(M, C)
+    a = cross(M, M)
+    return a, b, c, d, e
+
+
+def _discriminant(a, b, c, d, e):
+    """Discriminant of a s^4 + b s^3 + c s^2 + d s + e (elementwise on arrays)."""
     return (
         256 * a**3 * e**3 - 192 * a**2 * b * d * e**2 - 128 * a**2 * c**2 * e**2
         + 144 * a**2 * c * d**2 * e - 27 * a**2 * d**4 + 144 * a * b**2 * c * e**2
@@ -562,25 +599,33 @@ def _discriminant(cm: CanonicalMatrices, v: float) -> float:
     )  # fmt: skip
 
 
-def _hurwitz3(cm: CanonicalMatrices, v: float) -> float:
+def _hurwitz3(a, b, c, d, e):
     """b c d - a d^2 - b^2 e: zero exactly when a pair of roots is +-i w."""
-    a, b, c, d, e = _quartic_coeffs(cm, v)
     return b * c * d - a * d**2 - b**2 * e
 
 
-def _const_term(cm: CanonicalMatrices, v: float) -> float:
-    return _quartic_coeffs(cm, v)[4]
+def _const_term(a, b, c, d, e):
+    return e
 
 
 def _roots(f, cm: CanonicalMatrices, vmax: float, step: float = 0.01) -> list[float]:
+    """Zeros of f(quartic coefficients at v) for v in (0, vmax]: sign changes on the grid
+    (evaluated vectorized), each refined by brentq on the exact scalar coefficients."""
     grid = np.arange(step, vmax + step / 2, step)
-    vals = np.array([f(cm, v) for v in grid])
+    vals = f(*_grid_coeffs(cm, grid))
     out = []
     for k in range(len(grid) - 1):
         if vals[k] == 0.0:
             out.append(float(grid[k]))
         elif vals[k] * vals[k + 1] < 0:
-            out.append(brentq(lambda v: f(cm, v), grid[k], grid[k + 1], xtol=1e-15, rtol=1e-15))
+            from scipy.optimize import brentq
+
+            out.append(
+                brentq(
+                    lambda v: f(*_quartic_coeffs(cm, v)), grid[k], grid[k + 1],
+                    xtol=1e-15, rtol=1e-15,
+                )
+            )  # fmt: skip
     return out
 
 

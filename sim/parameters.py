@@ -14,7 +14,6 @@ one with :func:`benchmark` (the exact Table 1 values), :func:`from_bicycleparame
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import warnings
 from collections.abc import Mapping
@@ -23,6 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .errors import InputError
+from .textformats import loads_json, loads_yaml
 
 __all__ = [
     "BicycleParameters",
@@ -63,6 +65,11 @@ PARAMETER_DOC: dict[str, tuple[str, str]] = {
     "IFxx": ("kg m^2", "front wheel diametral inertia (= IFzz)"),
     "IFyy": ("kg m^2", "front wheel spin inertia"),
 }
+
+#: Plausible magnitude of each kind of parameter: |value| below this (SI).  Beyond it a
+#: value is a typo or a unit slip (mm for m, g for kg), and e.g. ``mB: 1e308`` would print
+#: "none below 30 m/s" instead of an error.
+PLAUSIBLE_LIMIT: dict[str, float] = {"m": 10.0, "kg": 1000.0, "kg m^2": 1000.0, "m/s^2": 100.0}
 
 
 @dataclass(frozen=True)
@@ -121,9 +128,11 @@ class BicycleParameters:
 
     Raises
     ------
-    ValueError
-        If a value is not a finite real number or breaks a physical rule (the
-        message names the parameter and the rule).
+    bikeid.sim.errors.InputError
+        A ValueError: if a value is not a finite real number (booleans and text are
+        refused), lies outside its plausible range (:data:`PLAUSIBLE_LIMIT`: lengths
+        below 10 m, masses below 1000 kg, inertias below 1000 kg m^2, g below 100 m/s^2)
+        or breaks a physical rule (the message names the parameter and the rule).
 
     See Also
     --------
@@ -163,14 +172,19 @@ class BicycleParameters:
             if f.name == "name":
                 continue
             value = getattr(self, f.name)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
+                raise InputError(
+                    f"parameter {f.name!r} must be a real number [{PARAMETER_DOC[f.name][0]}], "
+                    f"got {_show(value)}"
+                )
             try:
                 fvalue = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"parameter {f.name!r} must be a real number, got {value!r}"
-                ) from None
+            except OverflowError:  # an int beyond float
+                fvalue = math.inf
             if not math.isfinite(fvalue):
-                raise ValueError(
+                raise InputError(
                     f"parameter {f.name!r} is {fvalue}: every parameter must be finite"
                 )
             object.__setattr__(self, f.name, fvalue)
@@ -276,12 +290,18 @@ class BicycleParameters:
 
 
 # -- validation --------------------------------------------------------------------------
+def _show(value: Any) -> str:
+    """A value for a message, at most 60 characters."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _fail(param: str, rule: str, value: Any) -> None:
     if isinstance(value, tuple):
         value = tuple(float(v) for v in value)
     elif isinstance(value, (int, float, np.floating)):
         value = float(value)
-    raise ValueError(f"invalid bicycle parameter {param}={value!r}: {rule}")
+    raise InputError(f"invalid bicycle parameter {param}={value!r}: {rule}")
 
 
 def _check_inertia(label: str, names: tuple[str, str, str, str], tensor: np.ndarray) -> None:
@@ -325,6 +345,15 @@ def _validate(p: BicycleParameters) -> None:
         _fail("zB", "rear body mass centre must be above the ground (z is down: zB < 0)", p.zB)
     if p.zH >= 0.0:
         _fail("zH", "front frame mass centre must be above the ground (z is down: zH < 0)", p.zH)
+    for key, (unit, meaning) in PARAMETER_DOC.items():
+        limit = PLAUSIBLE_LIMIT.get(unit)
+        if limit is not None and not abs(getattr(p, key)) < limit:
+            _fail(
+                key,
+                f"{meaning} is implausible for a bicycle: need |{key}| < {limit:g} {unit} "
+                "(SI units: m, kg, kg m^2)",
+                getattr(p, key),
+            )
     for wheel, (ixx, iyy) in {"rear": ("IRxx", "IRyy"), "front": ("IFxx", "IFyy")}.items():
         dia, spin = getattr(p, ixx), getattr(p, iyy)
         if dia <= 0.0:
@@ -368,21 +397,35 @@ def from_mapping(values: Mapping[str, Any], name: str = "custom") -> BicyclePara
         If a parameter is missing or unknown, if IRzz/IFzz differ from IRxx/IFxx, or
         if a value breaks a rule (see :class:`BicycleParameters`).
     """
+    bad_keys = [k for k in values if not isinstance(k, str)]
+    if bad_keys:
+        raise InputError(f"bicycle {name!r}: parameter names must be text, got {bad_keys[:3]}")
     missing = [k for k in _REQUIRED if k not in values]
     if missing:
-        raise ValueError(
+        raise InputError(
             f"bicycle {name!r} is missing parameters {missing}; every one of "
             f"{list(_REQUIRED)} is required (IRzz = IRxx and IFzz = IFxx are implied)"
         )
     unknown = [k for k in values if k not in _REQUIRED and k not in ("name", "IRzz", "IFzz")]
     if unknown:
-        raise ValueError(
+        raise InputError(
             f"bicycle {name!r} has unknown parameters {unknown}; known names are {list(_REQUIRED)}"
         )
     for wheel in ("R", "F"):
         zz = values.get(f"I{wheel}zz")
-        if zz is not None and not math.isclose(float(zz), float(values[f"I{wheel}xx"])):
-            raise ValueError(
+        if zz is None:
+            continue
+        xx = values[f"I{wheel}xx"]
+        for key, v in ((f"I{wheel}zz", zz), (f"I{wheel}xx", xx)):
+            if isinstance(v, (bool, np.bool_)) or not isinstance(
+                v, (int, float, np.integer, np.floating)
+            ):
+                raise InputError(
+                    f"bicycle {name!r}: parameter {key!r} must be a real number [kg m^2], "
+                    f"got {_show(v)}"
+                )
+        if not math.isclose(float(zz), float(xx)):
+            raise InputError(
                 f"I{wheel}zz={zz} differs from I{wheel}xx={values[f'I{wheel}xx']}: the "
                 "Whipple model assumes axisymmetric wheels (Izz = Ixx)"
             )
@@ -484,7 +527,7 @@ def from_bicycleparameters(name: str) -> BicycleParameters:
     names = _shipped_names()
     match = [n for n in names if n.lower() == name.lower()]
     if not match:
-        raise ValueError(
+        raise InputError(
             f"unknown bicycleparameters bicycle {name!r}; shipped bicycles are {names}"
         )
     path = _bicycleparameters_dir() / match[0] / "Parameters" / f"{match[0]}Benchmark.txt"
@@ -541,35 +584,47 @@ def from_file(path: str | Path) -> BicycleParameters:
 
     Raises
     ------
-    ValueError
-        If the file does not exist, has another extension, does not parse, does not
-        hold a mapping, or its parameters are missing, unknown or invalid
-        (:func:`from_mapping`).
+    bikeid.sim.errors.InputError
+        A ValueError: if the file does not exist, has another extension, is over
+        :data:`MAX_FILE_BYTES`, does not parse (:func:`bikeid.sim.textformats.loads_json`,
+        :func:`~bikeid.sim.textformats.loads_yaml`: duplicate keys, NaN, deep nesting are
+        refused), does not hold a mapping, or its parameters are missing, unknown or invalid
+        (:func:`from_mapping`); the message names the file and the parameter.
     """
     path = Path(path)
+    where = f"parameter file {str(path)!r}"
     if not path.exists():
-        raise ValueError(f"parameter file {str(path)!r} does not exist")
-    text = path.read_text()
-    if path.suffix.lower() in (".yml", ".yaml"):
-        import yaml
-
-        try:
-            values = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise ValueError(f"parameter file {str(path)!r} is not valid YAML: {exc}") from None
-    elif path.suffix.lower() == ".json":
-        try:
-            values = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"parameter file {str(path)!r} is not valid JSON: {exc}") from None
-    else:
-        raise ValueError(
-            f"parameter file {str(path)!r}: unknown extension {path.suffix!r}; use .yaml, .yml "
-            "or .json"
+        raise InputError(f"{where} does not exist")
+    suffix = path.suffix.lower()
+    if suffix not in (".yml", ".yaml", ".json"):
+        raise InputError(f"{where}: unknown extension {path.suffix!r}; use .yaml, .yml or .json")
+    if not path.is_file():
+        raise InputError(f"{where} is not a file")
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise InputError(
+            f"{where} is {path.stat().st_size:,} bytes, more than a parameter file's "
+            f"{MAX_FILE_BYTES:,}; is it the right file?"
         )
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"{where} is not UTF-8 text (byte {exc.start}); save it as UTF-8"
+        ) from None
+    values = loads_json(text, where) if suffix == ".json" else loads_yaml(text, where)
     if not isinstance(values, Mapping):
-        raise ValueError(f"parameter file {str(path)!r} must hold a mapping of name: value")
-    return from_mapping(values, name=str(values.get("name", path.stem)))
+        raise InputError(f"{where} must hold a mapping of name: value, got {type(values).__name__}")
+    name = values.get("name", path.stem)
+    if not isinstance(name, str):
+        raise InputError(f"{where}: 'name' must be text, got {_show(name)}")
+    try:
+        return from_mapping(values, name=name)
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+
+
+#: Largest parameter file read [bytes] (a parameter file is about 1 kB).
+MAX_FILE_BYTES = 1_000_000
 
 
 _ALIASES = {
@@ -626,6 +681,6 @@ def by_name(name: str) -> BicycleParameters:
         return from_file(name)
     if any(n.lower() == key for n in _shipped_names()):
         return from_bicycleparameters(name)
-    raise ValueError(
+    raise InputError(
         f"unknown bicycle {name!r}; choose one of {known_names()} or give a .yaml/.json file"
     )

@@ -1,4 +1,4 @@
-"""Identification accuracy on the nonlinear testbed (issue "Identification", item 6), reduced.
+"""Identification accuracy on the nonlinear testbed (the project's accuracy goal), reduced.
 
 Truth: ``sim.linear`` of the simulated bicycle at each run's speed (Meijaard 2007 benchmark:
 v_w = 4.2924, v_c = 6.0243 m/s, Table 2) and the delta/T_delta zero +-sqrt(-g K0pp / Mpp)
@@ -39,7 +39,7 @@ def test_steer_zeros_match_roll_row_formula(v):
 
 
 def test_eigen_errors_matching_and_tolerance():
-    """Matching by minimum total distance; tolerance max(0.02 |lambda|, 0.05) (issue)."""
+    """Matching by minimum total distance; tolerance max(0.02 |lambda|, 0.05) (accuracy goal)."""
     truth = acc.true_modes(P, [5.0])[5.0]
     true_all = np.sort_complex(eigenvalues(P, 5.0))
     assert truth["weave"] in true_all and truth["capsize"] in true_all
@@ -124,19 +124,20 @@ def test_quick_experiment_meets_goals(tmp_path):
 
 
 def test_cli_rejects_bad_lists(tmp_path):
-    """Bad --controllers/--methods: one-line error naming the choices, exit 2."""
+    """Bad --controllers/--methods: one-line usage error naming the choices, exit 2."""
     for opt in (["--controllers", "pid,lqr"], ["--methods", "ls"]):
         p = subprocess.run(
             [sys.executable, "-m", "bikeid.experiments.cli", "accuracy",
              "--out", str(tmp_path), *opt],
             capture_output=True, text=True, check=False,
         )  # fmt: skip
-        assert p.returncode == 2 and "bikeid: error:" in p.stderr
+        assert p.returncode == 2 and "bikeid accuracy: error:" in p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1
         assert "subset of" in p.stderr
 
 
 def test_design_covers_speeds():
-    """Every speed 1-15 m/s falls in a band; dither <= 1 N m (issue); chirp amplitudes
+    """Every speed 1-15 m/s falls in a band; dither <= 1 N m (Chen & Dao's bound); chirp amplitudes
     grow with speed (steer angle of a steady turn ~ phi g w / v^2, docs/accuracy.md)."""
     assert [acc._band(v) for v in (1.0, 2.9, 3.0, 5.9, 6.0, 15.0)] == [0, 0, 1, 1, 2, 2]
     assert all(b.dither <= 1.0 for b in acc.DESIGN)

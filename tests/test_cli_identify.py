@@ -91,7 +91,7 @@ def test_direct_single_speed_with_speed_noise_is_refused(tmp_path, capsys):
     refuse with the conditioning, not print K0dd and K2dd."""
     f = tmp_path / "one.h5"
     run_sweep(SweepSpec("pid", (5.0,), (0, 1), 10.0), f, workers=1, progress=False)
-    assert main(["identify", "--method", "direct", str(f)]) == 2
+    assert main(["identify", "--method", "direct", str(f)]) == 4  # no trustworthy answer
     err = capsys.readouterr().err
     assert "K0dd and K2dd are both free" in err and "condition number" in err
 
@@ -99,5 +99,5 @@ def test_direct_single_speed_with_speed_noise_is_refused(tmp_path, capsys):
 def test_speed_model_needs_two_speeds(tmp_path, capsys):
     f = tmp_path / "one.h5"
     run_sweep(SweepSpec("pid", (5.0,), (0,), 5.0), f, workers=1, progress=False)
-    assert main(["identify", "--method", "pem", str(f), "--speed-parameterized"]) == 2
+    assert main(["identify", "--method", "pem", str(f), "--speed-parameterized"]) == 3  # input
     assert "two or more speeds" in capsys.readouterr().err

@@ -60,19 +60,20 @@ def test_eig_json_and_plot(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("args", "message"),
+    ("args", "code", "message"),
     [
-        (("critical-speeds", "--bicycle", "Penny"), "unknown bicycle 'Penny'"),
-        (("eig", "--speeds", "10:0:1"), "need start <= stop"),
-        (("eig", "--speeds", "a:b"), "is not start:stop:step"),
-        (("eig", "--speeds", "0:1e9:1"), "at most 1,000,000"),
-        (("eig", "--speeds", "0:5000:10"), "keep the span below 1000 m/s"),
-        (("linearize", "--speed", "nan"), "need a finite speed"),
-        (("critical-speeds", "--bicycle", "missing.yaml"), "does not exist"),
+        # exit status 3: invalid input (a bicycle that does not exist); 2: a bad option value
+        (("critical-speeds", "--bicycle", "Penny"), 3, "unknown bicycle 'Penny'"),
+        (("eig", "--speeds", "10:0:1"), 2, "need start <= stop"),
+        (("eig", "--speeds", "a:b"), 2, "is not start:stop:step"),
+        (("eig", "--speeds", "0:1e9:1"), 2, "at most 1,000,000"),
+        (("eig", "--speeds", "0:5000:10"), 2, "values must be <= 100"),
+        (("linearize", "--speed", "nan"), 2, "'nan' is not finite"),
+        (("critical-speeds", "--bicycle", "missing.yaml"), 3, "does not exist"),
     ],
 )
-def test_bad_input_is_one_line_error(args, message):
+def test_bad_input_is_one_line_error(args, code, message):
     res = run(*args, check=False)
-    assert res.returncode == 2
+    assert res.returncode == code
     assert message in res.stderr
     assert "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1

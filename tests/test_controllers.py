@@ -555,3 +555,16 @@ def test_controller_tracks_on_nonlinear_plant(name, v):
     m = tr.t > SKIP
     r = REF.sample(tr.t)[m]
     assert _rms(r - tr.y[m, 1]) < BOUND[name] * _rms(r)
+
+
+def test_non_finite_torque_is_refused_not_passed_on():
+    """A gain that overflows gives +-inf torque; with no saturation it would reach the plant.
+    The controller refuses it (NaN was refused already) instead of returning -inf."""
+    from bikeid.controllers import PID
+
+    c = PID(kp=1e308)
+    y = np.array([5.0, 5.0, 0, 0, 0, 0, 0, -15.0])  # roll 5 rad: kp * e overflows
+    with np.errstate(over="ignore"), pytest.raises(ValueError, match="non-finite steer torque"):
+        c(0.0, y)
+    c.reset()
+    assert np.isfinite(c(0.0, np.array([5.0, 1e-300, 0, 0, 0, 0, 0, -15.0])))  # finite: kept

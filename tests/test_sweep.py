@@ -249,7 +249,7 @@ def test_stabilization_cli_writes_json_and_markdown(tmp_path, capsys):
 def test_cli_bad_input(capsys, tmp_path):
     assert main(["sweep", "--controller", "nope", "--out", str(tmp_path / "x.h5")]) == 2
     assert "unknown controller 'nope'" in capsys.readouterr().err
-    assert main(["sweep", "--controller", "pid", "--out", str(tmp_path / "x.csv")]) == 2
+    assert main(["sweep", "--controller", "pid", "--out", str(tmp_path / "x.csv")]) == 3
     assert "must end in .h5" in capsys.readouterr().err
     assert (
         main(["sweep", "--controller", "pid", "--seeds", "0.5,1", "--out", str(tmp_path / "y.h5")])

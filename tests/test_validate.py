@@ -135,3 +135,24 @@ def test_resid_band_and_lags():
     rr = resid(r, m, max_lag=25)
     assert rr.lags[0] == -25 and rr.lags[-1] == 25 and rr.autocorr["phi"][0] == pytest.approx(1)
     assert rr.band == pytest.approx(2.5758 / np.sqrt(r.n), rel=1e-4)
+
+
+def test_poles_of_models_defined_over_speed():
+    """poles() of a model defined over speed needs the speed (it raised TypeError before);
+    the direct method's model at v built from the true matrices has exactly the true
+    eigenvalues (sim.linear, Meijaard 2007), and without v the error names the fix."""
+    from bikeid.ident.direct import DirectResult
+    from bikeid.ident.validate import poles
+    from bikeid.sim.linear import canonical_matrices, eigenvalues, match_eigenvalues
+    from bikeid.sim.parameters import benchmark
+
+    p = benchmark()
+    cm = canonical_matrices(p)
+    res = DirectResult(
+        M=cm.M, C1=cm.C1, K0=cm.K0, K2=cm.K2, H=np.zeros(2), g=cm.g, free={}, stderr={},
+        covariance={}, condition={}, vaf_moore={}, vaf_variance={}, n_samples=0, method="ls",
+    )  # fmt: skip
+    got = match_eigenvalues(poles(res, v=5.0), eigenvalues(p, 5.0))
+    np.testing.assert_allclose(got, eigenvalues(p, 5.0), rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="v="):
+        poles(res)
