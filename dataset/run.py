@@ -226,8 +226,11 @@ class Run:
 
 
 def _where(i: int, rows) -> str:
-    """'row R' when file rows are known, else 'sample i'."""
-    return f"row {int(rows[i])}" if rows is not None else f"sample {i}"
+    """'row R' when file rows are known (array, or a function of the index giving the
+    whole phrase), else 'sample i'."""
+    if rows is None:
+        return f"sample {i}"
+    return str(rows(i)) if callable(rows) else f"row {int(rows[i])}"
 
 
 def _at(i: int, t) -> str:
@@ -246,8 +249,9 @@ def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -
         What the samples came from (a file name, ``file: run 'name'``), for the message.
     column : str
         The column or dataset name, for the message.
-    rows : (N,) array_like of int, optional
-        The file row (line number) of each sample, for the message.
+    rows : (N,) array_like of int or callable, optional
+        The file row (line number) of each sample, or a function of the sample index
+        returning the phrase naming it (e.g. ``"line 12"``), for the message.
     t : (N,) array_like, optional
         Time of each sample [s], for the message when ``rows`` is not given.
 
@@ -291,15 +295,22 @@ def check_plausible(
 
     Non-finite samples cannot occur: :class:`Run` refuses them (:func:`check_finite`).
 
+    A simulated run whose metadata records a *numerical* stop (:func:`run_stop` with
+    ``physical`` False: the integration blew up, e.g. a controller asked for 1e299 N m)
+    is flagged as non-physical by its own record: checks 1 and 2 are skipped for it (its
+    last samples are the blow-up, the sweep stores and reports it as failed) and only
+    check 3 applies.  Such a run never reaches an estimate: every estimator refuses
+    runs that stopped (``ident.signals.check_complete``).
+
     Parameters
     ----------
     run : Run
         The run to check.
     source : str
         What the run came from (file name, ``file: run 'name'``), for the messages.
-    rows : (N,) array_like of int, optional
-        File row (line number) of each sample, for the messages; default: sample index
-        and time.
+    rows : (N,) array_like of int or callable, optional
+        File row (line number) of each sample, or a function of the sample index returning
+        the phrase naming it, for the messages; default: sample index and time.
     columns : dict of str to str, optional
         Column name in the source of each signal name, for the messages (default: the
         signal name).
@@ -320,7 +331,11 @@ def check_plausible(
     """
     columns = columns or {}
     bounds_as = bounds_as or {}
+    stop = run_stop(run)
+    failed = stop is not None and not stop.get("physical", True)
     groups = [("", run.signals)] + ([("truth/", run.truth)] if run.truth is not None else [])
+    if failed:  # flagged non-physical by its own stop record: see the docstring
+        groups = []
     for prefix, sig in groups:
         for name, arr in sig.items():
             key = bounds_as.get(name, name)
@@ -339,7 +354,7 @@ def check_plausible(
                     f"(sim.conventions.PLAUSIBLE; {int(bad.sum())} such samples); "
                     "the data is corrupt: fix or cut these rows"
                 )
-    for name in CONSTANT_CHECKED:
+    for name in () if failed else CONSTANT_CHECKED:
         if name in run.signals and np.ptp(run.signals[name]) == 0.0:
             col = columns.get(name, name)
             raise ValueError(

@@ -409,3 +409,40 @@ def test_weave_helpers_refuse_nan():
     assert np.isfinite(lam) and lam.imag > 0
     with pytest.raises(ValueError, match=r"'delta' has no variation"):
         decay_eigenvalue(replace(w, delta=np.zeros(w.n)))
+
+
+def test_rows_may_be_named_by_a_function():
+    """A loader with its own row wording (e.g. dataset.importers' 'line 12') passes it."""
+    r = _run()
+    sig = dict(r.signals)
+    sig["deltadot"] = sig["deltadot"].copy()
+    sig["deltadot"][9] = -31.0
+    bad = Run(t=r.t, signals=sig, meta=r.meta)
+    with pytest.raises(ValueError, match=r"^log\.csv: line 12, column 'steer_rate' \(deltadot\): "
+                                         r"value -31 rad/s at t = 0\.090 s"):  # fmt: skip
+        check_plausible(bad, "log.csv", rows=lambda i: f"line {i + 3}",
+                        columns={"deltadot": "steer_rate"})  # fmt: skip
+    assert check_plausible(r, "log.csv", rows=lambda i: f"line {i + 3}") is r
+
+
+def test_numerically_failed_run_is_stored_flagged_not_refused(tmp_path):
+    """A sweep keeps a run that blew up (its record says so; the estimators refuse it,
+    ident.signals.check_complete).  The same numbers without that record are refused, and a
+    physical stop (a fall) does not exempt anything."""
+    t = np.array([0.0, 0.01])
+    sig = {k: np.zeros(2) for k in ("phi", "delta", "phidot", "deltadot")}
+    sig.update(v=np.full(2, 5.0), T_delta=np.array([0.0, -6.6e299]))
+    stop = {"cause": "nonfinite_state", "time": 0.015, "message": "state became non-finite",
+            "physical": False}  # fmt: skip
+    failed = Run(t=t, signals=sig, meta={"speed": 5.0, "stop": stop})
+    path = write_runs(tmp_path / "f.h5", [failed], names=["f"])
+    assert read_run(path, "f").meta["stop"]["physical"] is False
+    for meta in ({"speed": 5.0}, {"speed": 5.0, "stop": {**stop, "physical": True}}):
+        path = write_runs(tmp_path / "g.h5", [Run(t=t, signals=sig, meta=meta)], names=["g"])
+        with pytest.raises(ValueError, match=r"sample 1, column 'signals/T_delta' \(T_delta\): "
+                                             r"value -6\.6e\+299 N m"):  # fmt: skip
+            read_run(path, "g")
+    bad_speed = Run(t=t, signals=sig, meta={"speed": 50.0, "stop": stop})
+    path = write_runs(tmp_path / "h.h5", [bad_speed], names=["h"])
+    with pytest.raises(ValueError, match=r"nominal speed meta\['speed'\] = 50\.0"):
+        read_run(path, "h")
