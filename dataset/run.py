@@ -233,6 +233,12 @@ def _where(i: int, rows) -> str:
     return str(rows(i)) if callable(rows) else f"row {int(rows[i])}"
 
 
+def _count(bad: np.ndarray) -> str:
+    """'1 such sample' / 'k such samples'."""
+    k = int(bad.sum())
+    return f"{k} such sample" + ("" if k == 1 else "s")
+
+
 def _at(i: int, t) -> str:
     """' at t = ... s' when the time base is known."""
     return "" if t is None else f" at t = {float(t[i]):.3f} s"
@@ -267,7 +273,7 @@ def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -
         i = int(np.argmax(bad))
         raise ValueError(
             f"{source}: {_where(i, rows)}, column {column!r}: non-finite value "
-            f"{float(arr[i])!r}{_at(i, t)} ({int(bad.sum())} such samples); clean or cut the data"
+            f"{float(arr[i])!r}{_at(i, t)} ({_count(bad)}); clean or cut the data"
         )
 
 
@@ -351,7 +357,7 @@ def check_plausible(
                 raise ValueError(
                     f"{source}: {_where(i, rows)}, column {label}: value {arr[i]:.6g} {unit}"
                     f"{_at(i, run.t)} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
-                    f"(sim.conventions.PLAUSIBLE; {int(bad.sum())} such samples); "
+                    f"(sim.conventions.PLAUSIBLE; {_count(bad)}); "
                     "the data is corrupt: fix or cut these rows"
                 )
     for name in () if failed else CONSTANT_CHECKED:
