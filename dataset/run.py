@@ -13,11 +13,31 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.sim.conventions import INPUTS, MEASURED
+from bikeid.sim.conventions import INPUTS, MEASURED, NOMINAL_SPEED, PLAUSIBLE, UNITS
 
-__all__ = ["Run", "run_stop"]
+__all__ = [
+    "CONSTANT_CHECKED",
+    "SPEED_TOLERANCE",
+    "Run",
+    "check_finite",
+    "check_plausible",
+    "run_stop",
+]
 
 REQUIRED = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
+
+#: Signals that must not be constant over a run: the states and the steer torque of a
+#: closed loop move whenever anything is measured (v may be constant: a treadmill or a
+#: simulated ideal drive; other extras, e.g. a locked handlebar angle, may be too).
+CONSTANT_CHECKED = ("phi", "delta", "phidot", "deltadot", "T_delta")
+
+#: Largest accepted |mean(v) - meta speed| [m/s]: max(absolute, relative * speed).  A run's
+#: own speed signal must agree with its nominal speed.  The simulated speed sensor has
+#: 0.01 m/s noise on a held (exact) or coasting (drifting by centimetres per second) speed;
+#: the TU Delft sensor speed is compared with its own plateau (``meta["speed_sensor"]``) over
+#: the settled rows, which lie within 5 % of it by construction.  0.5 m/s or 15 % is 10x above
+#: those and catches metadata of another run or a mistyped speed (e.g. 4.5 for 2.5 m/s).
+SPEED_TOLERANCE = (0.5, 0.15)
 
 
 @dataclass
@@ -92,13 +112,7 @@ class Run:
         arr = np.asarray(arr, dtype=float)
         if arr.shape != (n,):
             raise ValueError(f"signal {name!r} has shape {arr.shape}, expected ({n},)")
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            first = int(np.argmax(bad))
-            raise ValueError(
-                f"signal {name!r} has {int(bad.sum())} non-finite samples (first at index "
-                f"{first}); clean or cut the data before building a Run"
-            )
+        check_finite(arr, "run", name)
         return arr
 
     # -- convenience ---------------------------------------------------------------
@@ -209,6 +223,179 @@ class Run:
             reference=None if self.reference is None else self.reference[sel],
             meta=dict(self.meta),
         )
+
+
+def _where(i: int, rows) -> str:
+    """'row R' when file rows are known (array, or a function of the index giving the
+    whole phrase), else 'sample i'."""
+    if rows is None:
+        return f"sample {i}"
+    return str(rows(i)) if callable(rows) else f"row {int(rows[i])}"
+
+
+def _count(bad: np.ndarray) -> str:
+    """'1 such sample' / 'k such samples'."""
+    k = int(bad.sum())
+    return f"{k} such sample" + ("" if k == 1 else "s")
+
+
+def _at(i: int, t) -> str:
+    """' at t = ... s' when the time base is known."""
+    return "" if t is None else f" at t = {float(t[i]):.3f} s"
+
+
+def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -> None:
+    """Refuse NaN or infinite samples, naming the source, column and first bad row.
+
+    Parameters
+    ----------
+    arr : (N,) array_like
+        The samples.
+    source : str
+        What the samples came from (a file name, ``file: run 'name'``), for the message.
+    column : str
+        The column or dataset name, for the message.
+    rows : (N,) array_like of int or callable, optional
+        The file row (line number) of each sample, or a function of the sample index
+        returning the phrase naming it (e.g. ``"line 12"``), for the message.
+    t : (N,) array_like, optional
+        Time of each sample [s], for the message when ``rows`` is not given.
+
+    Raises
+    ------
+    ValueError
+        ``<source>: row R, column '<column>': non-finite value nan at t = ... s (k such
+        samples); ...`` at the first non-finite sample.
+    """
+    arr = np.asarray(arr, dtype=float)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"{source}: {_where(i, rows)}, column {column!r}: non-finite value "
+            f"{float(arr[i])!r}{_at(i, t)} ({_count(bad)}); clean or cut the data"
+        )
+
+
+def check_plausible(
+    run: Run,
+    source: str,
+    rows=None,
+    columns: dict[str, str] | None = None,
+    bounds_as: dict[str, str] | None = None,
+) -> Run:
+    """Refuse a run whose numbers are not physical: the one check every loader runs.
+
+    Checks, in this order:
+
+    1. every measured (and noise-free) signal with a bound in
+       ``sim.conventions.PLAUSIBLE`` lies inside it (or inside the bound of the name
+       ``bounds_as`` maps it to);
+    2. none of :data:`CONSTANT_CHECKED` is constant over the run (an all-zero or dead
+       channel);
+    3. ``meta["speed"]``, if present, is a number in ``sim.conventions.NOMINAL_SPEED``
+       (0 < speed <= 30 m/s), and the mean of the run's own ``v`` over its settled rows
+       (``meta["ramp_end_index"]`` .. ``meta["settled_end_index"]`` when known) agrees with
+       ``meta["speed_sensor"]`` (measured logs) or ``meta["speed"]`` within
+       :data:`SPEED_TOLERANCE`.
+
+    Non-finite samples cannot occur: :class:`Run` refuses them (:func:`check_finite`).
+
+    A simulated run whose metadata records a *numerical* stop (:func:`run_stop` with
+    ``physical`` False: the integration blew up, e.g. a controller asked for 1e299 N m)
+    is flagged as non-physical by its own record: checks 1 and 2 are skipped for it (its
+    last samples are the blow-up, the sweep stores and reports it as failed) and only
+    check 3 applies.  Such a run never reaches an estimate: every estimator refuses
+    runs that stopped (``ident.signals.check_complete``).
+
+    Parameters
+    ----------
+    run : Run
+        The run to check.
+    source : str
+        What the run came from (file name, ``file: run 'name'``), for the messages.
+    rows : (N,) array_like of int or callable, optional
+        File row (line number) of each sample, or a function of the sample index returning
+        the phrase naming it, for the messages; default: sample index and time.
+    columns : dict of str to str, optional
+        Column name in the source of each signal name, for the messages (default: the
+        signal name).
+    bounds_as : dict of str to str, optional
+        Signal names checked against the bound of another name (e.g. a logged handlebar
+        torque against ``T_delta``).
+
+    Returns
+    -------
+    Run
+        ``run`` itself, unchanged.
+
+    Raises
+    ------
+    ValueError
+        Naming the source, column and row of the first sample out of bounds, the constant
+        channel, or the nominal and the measured speed.
+    """
+    columns = columns or {}
+    bounds_as = bounds_as or {}
+    stop = run_stop(run)
+    failed = stop is not None and not stop.get("physical", True)
+    groups = [("", run.signals)] + ([("truth/", run.truth)] if run.truth is not None else [])
+    if failed:  # flagged non-physical by its own stop record: see the docstring
+        groups = []
+    for prefix, sig in groups:
+        for name, arr in sig.items():
+            key = bounds_as.get(name, name)
+            if key not in PLAUSIBLE:
+                continue
+            lo, hi = PLAUSIBLE[key]
+            bad = (arr < lo) | (arr > hi)
+            if bad.any():
+                i = int(np.argmax(bad))
+                col = prefix + name if prefix else columns.get(name, name)
+                label = f"{col!r}" if col == prefix + name else f"{col!r} ({name})"
+                unit = UNITS.get(key, "")
+                raise ValueError(
+                    f"{source}: {_where(i, rows)}, column {label}: value {arr[i]:.6g} {unit}"
+                    f"{_at(i, run.t)} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
+                    f"(sim.conventions.PLAUSIBLE; {_count(bad)}); "
+                    "the data is corrupt: fix or cut these rows"
+                )
+    for name in () if failed else CONSTANT_CHECKED:
+        if name in run.signals and np.ptp(run.signals[name]) == 0.0:
+            col = columns.get(name, name)
+            raise ValueError(
+                f"{source}: column {col!r} ({name}) is constant ({run.signals[name][0]:g}) over "
+                f"all {run.n} samples: a dead sensor or an empty record; drop this run"
+            )
+    if "speed" in run.meta:
+        speed = run.meta["speed"]
+        lo, hi = NOMINAL_SPEED
+        if (
+            not isinstance(speed, (int, float))
+            or isinstance(speed, bool)
+            or not (np.isfinite(speed) and lo < speed <= hi)
+        ):
+            raise ValueError(
+                f"{source}: nominal speed meta['speed'] = {speed!r} is not a speed in "
+                f"({lo:g}, {hi:g}] m/s; fix the run's metadata"
+            )
+        ref_key = "speed_sensor" if "speed_sensor" in run.meta else "speed"
+        ref = float(run.meta[ref_key])
+        first = int(run.meta.get("first_index", 0))
+        a = max(int(run.meta.get("ramp_end_index", first)) - first, 0)
+        b = min(int(run.meta.get("settled_end_index", first + run.n)) - first, run.n)
+        if b - a < 1:
+            a, b = 0, run.n
+        mean_v = float(np.mean(run.signals["v"][a:b]))
+        tol = max(SPEED_TOLERANCE[0], SPEED_TOLERANCE[1] * abs(ref))
+        if abs(mean_v - ref) > tol:
+            where = "" if (a, b) == (0, run.n) else f" over samples {a}..{b}"
+            raise ValueError(
+                f"{source}: meta[{ref_key!r}] = {ref:.3f} m/s but the mean of its own speed signal "
+                f"{columns.get('v', 'v')!r}{where} is {mean_v:.3f} m/s (tolerance {tol:.3g} m/s, "
+                "dataset.run.SPEED_TOLERANCE); the metadata belongs to another run or is wrong"
+            )
+    return run
 
 
 def run_stop(run: Run) -> dict[str, Any] | None:

@@ -21,7 +21,11 @@ in the target folder is written, flushed and fsynced, then renamed over the targ
 untouched, and a symlink or device at the target is refused.  The reader validates
 everything (format and version, required datasets, equal lengths, finite values,
 checksums, metadata JSON) and raises a :class:`ValueError` naming the file, the run
-group and the problem.
+group and the problem.  Every run read is then checked by
+:func:`dataset.run.check_plausible` (physical bounds of ``sim.conventions.PLAUSIBLE``, no
+constant state or steer-torque channel, nominal speed in range and equal to the mean of the
+run's own ``v``), so a run edited to a speed of 100 m/s, or an all-zero run, is refused with
+the run, column and row named.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ import numpy as np
 from bikeid.sim.conventions import INPUTS, MEASURED, UNITS
 
 from .files import atomic_path
-from .run import REQUIRED, Run
+from .run import REQUIRED, Run, check_plausible
 
 __all__ = [
     "FORMAT",
@@ -293,8 +297,13 @@ def _read_array(path, gname: str, ds, n: int | None) -> np.ndarray:
         raise ValueError(f"{where} has shape {arr.shape}, expected 1-D")
     if n is not None and arr.size != n:
         raise ValueError(f"{where} has {arr.size} samples but t has {n}; the file is malformed")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{where} holds non-finite values; the file is corrupt")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"{where} holds non-finite values (first {float(arr[i])!r} at row {i}, "
+            f"{int(bad.sum())} in all); the file is corrupt"
+        )
     return arr
 
 
@@ -341,9 +350,11 @@ def _read_group(path, g, gname: str) -> Run:
     for k in ("dither", "reference"):
         extra[k] = _read_array(path, gname, g[k], n) if k in g else None
     try:
-        return Run(t=t, signals=signals, truth=truth, meta=meta, **extra)
+        run = Run(t=t, signals=signals, truth=truth, meta=meta, **extra)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
+    columns = {k: f"signals/{k}" for k in signals}
+    return check_plausible(run, where, columns=columns)
 
 
 def _read_damaged(path, f, name: str) -> Run:

@@ -3,8 +3,10 @@
 A :class:`Window` is a free decay (:func:`decay_windows`, from the rows of
 :mod:`bikeid.dataset.decays`) or the settled stretch of a Bode run (:func:`bode_window`),
 with the measured signals, the sensor and treadmill speeds and the logged steer commands
-before its start (for a model's delay buffer).  Sample time 0.01 s (one control loop,
-:data:`bikeid.dataset.sbw_logs.DT`); units SI (rad, rad/s, m/s, N m).
+before its start (for a model's delay buffer).  Both builders check the run first
+(:func:`bikeid.dataset.run.check_plausible`), and a decay window outside the settled speed
+(inside the start-up ramp or in the run-down) is refused by name.  Sample time 0.01 s (one
+control loop, :data:`bikeid.dataset.sbw_logs.DT`); units SI (rad, rad/s, m/s, N m).
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bikeid.dataset.run import Run
-from bikeid.dataset.sbw_logs import DT, treadmill_speed
+from bikeid.dataset.run import Run, check_plausible
+from bikeid.dataset.sbw_logs import BOUNDS_AS, DT, SIGNAL_COLUMNS, treadmill_speed
 
 __all__ = ["Window", "bode_window", "decay_windows"]
 
@@ -145,6 +147,13 @@ def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20
     )
 
 
+def _check_run(run: Run) -> None:
+    """The loaders' plausibility check (bounds, dead channels, speed against v)."""
+    check_plausible(
+        run, str(run.meta.get("file", "run")), columns=SIGNAL_COLUMNS, bounds_as=BOUNDS_AS
+    )
+
+
 def decay_windows(run: Run, segments) -> list[Window]:
     """Free-decay windows of a run from ``bikeid.dataset.decays.Segment`` rows.
 
@@ -163,8 +172,25 @@ def decay_windows(run: Run, segments) -> list[Window]:
     Raises
     ------
     ValueError
-        If a segment's rows fall outside the log or span fewer than 10 samples.
+        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`); a
+        window starts before the speed settled (``meta["ramp_end_index"]``: inside the
+        start-up ramp) or ends after it stopped being settled (``meta["settled_end_index"]``),
+        naming the file and the window's rows; or a segment's rows fall outside the log or
+        span fewer than 10 samples.
     """
+    _check_run(run)
+    segments = list(segments)
+    first = int(run.meta.get("first_index", 0))
+    lo = int(run.meta.get("ramp_end_index", first))
+    hi = int(run.meta.get("settled_end_index", first + run.n))
+    for s in segments:
+        if s.start < lo or s.end > hi:
+            part = "start-up speed ramp" if s.start < lo else "run-down after the settled speed"
+            raise ValueError(
+                f"{run.meta.get('file', 'run')}: decay window rows {s.start}..{s.end} lies in the "
+                f"{part} (speed settled over rows {lo}..{hi}): the model assumes a constant "
+                "speed; drop or move this window (eigen/segments.csv)"
+            )
     out = [_window(run, s.start, s.end, "decay") for s in segments]
     if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
         for w in out:
@@ -193,9 +219,11 @@ def bode_window(run: Run, freq: float | None = None, max_len: float = 20.0) -> W
     Raises
     ------
     ValueError
-        If ``freq`` is None and the file name has no ``_<f>Hz``, or the window rows fall
-        outside the log or span fewer than 10 samples.
+        If the run is not plausible (:func:`bikeid.dataset.run.check_plausible`), ``freq``
+        is None and the file name has no ``_<f>Hz``, or the window rows fall outside the log
+        or span fewer than 10 samples.
     """
+    _check_run(run)
     first = int(run.meta.get("first_index", 0))
     i0 = int(run.meta.get("ramp_end_index", first)) + 100
     i1 = min(int(run.meta.get("settled_end_index", first + run.n)), i0 + int(max_len / DT))

@@ -211,6 +211,23 @@ def push_asymmetry(windows: list[Window], errors) -> dict:
             "p_value": p}  # fmt: skip
 
 
+def _check_finite_windows(windows: list[Window]) -> None:
+    """Refuse windows with non-finite samples (e.g. built by hand, not by a loader)."""
+    if not windows:
+        raise ValueError("evaluate: no windows given")
+    for w in windows:
+        for name in ("phi", "delta", "phidot", "deltadot", "v_sensor", "T_ext", "hist"):
+            arr = np.asarray(getattr(w, name), dtype=float)
+            bad = ~np.isfinite(arr)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise ValueError(
+                    f"evaluate: {w.file}: window at row {w.start}, column {name!r}, sample {i}: "
+                    f"non-finite value {float(arr[i])!r}; load windows through bikeid.dataset "
+                    "(check_plausible) or clean them"
+                )
+
+
 def evaluate(
     nominal: ExperimentModel,
     augmented: ExperimentModel,
@@ -246,7 +263,15 @@ def evaluate(
     dict
         ``files``: per file its speed [m/s], window count, errors (dimensionless) and weave
         eigenvalues [1/s]; ``summary``: their means, ratios and the push asymmetry.
+
+    Raises
+    ------
+    ValueError
+        If a window holds a non-finite sample (naming the file, window and column), or an
+        error or weave value comes out non-finite (naming the file and the quantity), so that
+        no "nan" is ever reported as a result.
     """
+    _check_finite_windows(windows)
     attach_correction(windows, nominal, nonlinear)
     s0 = nominal.simulate(windows)
     e0 = window_errors(windows, s0)
@@ -291,6 +316,15 @@ def evaluate(
         )  # fmt: skip
     keys = ("error_before", "error_after", "weave_error_before", "weave_error_after",
             "weave_root_error_before", "weave_root_error_after")  # fmt: skip
+    for f in files:
+        bad = [k for k in keys if not np.isfinite(f[k])]
+        bad += [f"{k}[{c}]" for k in ("error_before_channels", "error_after_channels")
+                for c, x in f[k].items() if not np.isfinite(x)]  # fmt: skip
+        if bad:
+            raise ValueError(
+                f"evaluate: {f['file']}: {', '.join(bad)} is not finite (a simulation diverged "
+                "or a window is degenerate); check the model and the windows of this file"
+            )
     summ = {k: float(np.mean([f[k] for f in files])) for k in keys}
     summ["ratio"] = summ["error_after"] / summ["error_before"]
     summ["weave_ratio"] = summ["weave_error_after"] / max(summ["weave_error_before"], 1e-12)

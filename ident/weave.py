@@ -159,8 +159,24 @@ def decay_eigenvalue(w: Window) -> complex:
     -------
     complex
         sigma + i omega [1/s].
+
+    Raises
+    ------
+    ValueError
+        If the steer angle or roll rate of the window is non-finite, overflows in its
+        standard deviation, or is constant (the fit would be nan), naming the file and the
+        window.
     """
     t = np.arange(w.n) * 0.01
+    for name in ("delta", "phidot"):
+        y = np.asarray(getattr(w, name), dtype=float)
+        sd = float(np.std(y)) if np.all(np.isfinite(y)) else float("nan")
+        if not (np.isfinite(sd) and sd > 0):
+            what = "no variation" if sd == 0 else "non-finite samples or spread (overflow)"
+            raise ValueError(
+                f"decay_eigenvalue: {w.file}: window at row {w.start}: {name!r} has {what}; "
+                "no weave can be fitted (load windows through bikeid.dataset)"
+            )
     ys = [w.delta / np.std(w.delta), w.phidot / np.std(w.phidot)]
 
     def resid(th):
@@ -284,5 +300,16 @@ def median_complex(lams) -> complex:
     -------
     complex
         median(Re) + i median(Im) [1/s].
+
+    Raises
+    ------
+    ValueError
+        If ``lams`` is empty or holds a non-finite eigenvalue.
     """
+    lams = np.asarray(lams, dtype=complex)
+    if lams.size == 0 or not np.all(np.isfinite(lams)):
+        raise ValueError(
+            f"median_complex: need finite eigenvalues, got {lams.size} values with "
+            f"{int((~np.isfinite(lams)).sum())} non-finite"
+        )
     return complex(np.median(np.real(lams)), np.median(np.imag(lams)))

@@ -29,7 +29,11 @@ def _write(path: Path, rows: list[str], header: str = HEADER) -> Path:
 
 def test_loader_cuts_empty_sil_rows_and_time_base(tmp_path):
     """Leading empty sil_command rows are dropped; t = row index * 0.01 s (README)."""
-    rows = [",4.1,0,0,0,0,0,0,0,0,0,0,0"] * 3 + ["0.1,4.1,0.01,0.02,0,0.03,0,0,0,0,0,0.1,0"] * 20
+    # the states and the command vary (a constant channel is refused, test_plausibility.py)
+    rows = [",4.1,0,0,0,0,0,0,0,0,0,0,0"] * 3 + [
+        f"0.1,4.1,{0.01 * i},{0.02 * i},0,{0.03 * i},{0.01 * i},0,0,0,0,{0.1 * i},0"
+        for i in range(20)
+    ]
     run = load_log(_write(tmp_path / "x.log.gz", rows))
     assert run.n == 20 and run.meta["first_index"] == 3
     assert run.t[0] == pytest.approx(0.03) and run.dt == pytest.approx(0.01)
@@ -299,9 +303,11 @@ def _push_log(tmp_path: Path, name: str, pushes: dict[int, float], n: int = 3000
         pr[k - 10 : k] += a * np.sin(0.5 * np.pi * tt / 0.1)  # rising lobe, extreme at k
         t = np.arange(n - k) * 0.01
         pr[k:] += a * np.exp(-3.0 * t) * np.cos(8.0 * t)
+    phi = np.cumsum(pr) * 0.01  # roll angle and a steer following it: not constant channels
     rows = [
-        f"{2 * (6.5 - 3.0) * r:.6f},3.0,0,{r:.6f},0,0,0,0,0,0,0,{2 * (6.5 - 3.0) * r:.6f},0"
-        for r in pr
+        f"{2 * (6.5 - 3.0) * r:.6f},3.0,{a:.6f},{r:.6f},0,{0.5 * a:.6f},{0.5 * r:.6f},0,0,0,0,"
+        f"{2 * (6.5 - 3.0) * r:.6f},0"
+        for a, r in zip(phi, pr, strict=True)
     ]
     return _write(tmp_path / name, rows)
 
