@@ -50,7 +50,7 @@ import numpy as np
 
 from bikeid.sim.conventions import UNITS
 
-from .run import REQUIRED, Run
+from .run import REQUIRED, Run, check_plausible
 
 __all__ = ["CONVERSIONS", "from_csv", "from_dataframe", "from_hdf5"]
 
@@ -295,9 +295,10 @@ def _build(
         },
     }
     try:
-        return Run(t=t, signals=signals, meta=out_meta)
+        run = Run(t=t, signals=signals, meta=out_meta)
     except ValueError as exc:
         raise ValueError(f"{label}: {exc}") from None
+    return check_plausible(run, label, rows=row, columns=columns)
 
 
 def _missing(label: str, wanted: Iterable[str], have: list[str], kind: str) -> None:

@@ -184,7 +184,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
             print(f"{k} =\n{out[k]}")
         for k, d in out["free"].items():
             print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g}")
-        print(f"VAF (Moore eq. 6): {out['vaf_moore']}, condition: {out['condition']}")
+        vaf = ", ".join(
+            f"{k} {v:.4f}" if isinstance(v, float) and np.isfinite(v) else f"{k} n/a"
+            for k, v in out["vaf_moore"].items()
+        )
+        print(f"VAF (Moore eq. 6): {vaf}; condition: {out['condition']}")
     for row in per_speed:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")

@@ -183,10 +183,7 @@ def cmd_evaluate(args) -> int:
               f"measured weave is uncertain by {s['weave_data_rel_std']:.3f})")  # fmt: skip
         for when in ("before", "after"):
             a = s[f"push_asymmetry_{when}"]
-            print(
-                f"error by push direction {when}: right {a['error_right']:.3f}, left "
-                f"{a['error_left']:.3f} (ratio {a['ratio']:.2f}, p = {a['p_value']:.3g})"
-            )
+            print(f"error by push direction {when}: {_asymmetry_text(a)}")
     return 0
 
 
@@ -224,6 +221,20 @@ def cmd_report(args) -> int:
     path = write_report(args.out, args.data, args.model)
     print(path)
     return 0
+
+
+def _asymmetry_text(a: dict) -> str:
+    """Push-direction errors, saying "no pushes" where a side has none (never "nan")."""
+    import math
+
+    def num(x, fmt):
+        return format(x, fmt) if x is not None and math.isfinite(x) else "n/a"
+
+    if not all(a.get(k) is not None and math.isfinite(a[k]) for k in ("error_right", "error_left")):
+        return (f"right {num(a.get('error_right'), '.3f')}, left {num(a.get('error_left'), '.3f')}"
+                " (no comparison: one direction has no pushes)")  # fmt: skip
+    return (f"right {a['error_right']:.3f}, left {a['error_left']:.3f} (ratio "
+            f"{num(a.get('ratio'), '.2f')}, p = {num(a.get('p_value'), '.3g')})")  # fmt: skip
 
 
 def cmd_fetch(args) -> int:
