@@ -19,6 +19,7 @@ from bikeid.dataset.files import atomic_write_text
 from bikeid.sim.errors import InputError
 
 __all__ = [
+    "mapping_arg",
     "MAX_POINTS",
     "MAX_SPEED",
     "MAX_WORKERS",
@@ -219,6 +220,41 @@ def range_text(
 
     check.__name__ = "range"
     return check
+
+
+def mapping_arg(option: str) -> Callable[[str], dict[str, str]]:
+    """argparse type for ``NAME=VALUE,NAME=VALUE`` (e.g. ``--columns phi=roll,v=speed``).
+
+    Parameters
+    ----------
+    option : str
+        The option's name, for messages.
+
+    Returns
+    -------
+    callable
+        Parses the text into a dict; refuses an empty text, a pair without ``=``, an empty
+        name or value, and a repeated name (argparse turns the ValueError into a usage
+        error).
+    """
+
+    def parse(text: str) -> dict[str, str]:
+        out: dict[str, str] = {}
+        pairs = [p for p in text.split(",") if p.strip()]
+        if not pairs:
+            raise ValueError(f"{option}: give NAME=VALUE pairs separated by commas")
+        for pair in pairs:
+            name, sep, value = pair.partition("=")
+            name, value = name.strip(), value.strip()
+            if not sep or not name or not value:
+                raise ValueError(f"{option}: {pair!r} is not NAME=VALUE")
+            if name in out:
+                raise ValueError(f"{option}: {name!r} given twice")
+            out[name] = value
+        return out
+
+    parse.__name__ = "mapping"
+    return parse
 
 
 def to_jsonable(obj: Any) -> Any:

@@ -10,12 +10,44 @@ import argparse
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
-from .cliutil import MAX_WORKERS, dump_json, integer, number, range_text
+from .cliutil import MAX_WORKERS, dump_json, integer, mapping_arg, number, range_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("identify", help="identify the bicycle from runs in an HDF5 file")
-    p.add_argument("file", help="HDF5 file written by dataset.store.write_runs")
+    p = sub.add_parser(
+        "identify",
+        help="identify the bicycle from runs: bikeid HDF5 files or your own CSV/HDF5 logs",
+        description=(
+            "Identify from bikeid run files (the default format) or from your own logs: "
+            "--format csv|hdf5 with --columns mapping bikeid signals (phi, delta, phidot, "
+            "deltadot, T_delta, and v unless --speed is given) to your columns or datasets, "
+            "--units for non-SI columns (deg, deg/s, km/h, N cm, ms), --flip for signals "
+            "logged positive to the left. Each log file becomes one run."
+        ),
+    )
+    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
+    p.add_argument(
+        "--format", choices=("bikeid", "csv", "hdf5"), default="bikeid",
+        help="bikeid: files written by bikeid (sweep, store); csv / hdf5: your own logs, read "
+        "with --columns (dataset.importers)",
+    )  # fmt: skip
+    p.add_argument(
+        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
+        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
+        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
+    )  # fmt: skip
+    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
+    p.add_argument(
+        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
+        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
+    )  # fmt: skip
+    p.add_argument(
+        "--flip", default="", metavar="NAME,...",
+        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
+    )
     p.add_argument("--method", choices=("direct", "pem"), default="direct")
     p.add_argument(
         "--speed-parameterized",
@@ -39,6 +71,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
+
+    e = sub.add_parser(
+        "export",
+        help="write runs of a bikeid HDF5 file as CSV (units in the header)",
+        description=(
+            "One CSV per run: line 1 the run's metadata as JSON after '# bikeid run: ', line "
+            "2 the headers 'name [unit]', then one row per sample (17 significant digits, "
+            "exact for float64). Read back with pandas.read_csv(path, comment='#') or "
+            "bikeid identify --format csv."
+        ),
+    )
+    e.add_argument("file", help="bikeid HDF5 run file")
+    e.add_argument("--run", default=None, help="run name (default: every run)")
+    e.add_argument(
+        "--out", required=True,
+        help="CSV file (one run) or folder (one RUN.csv per run; created if missing)",
+    )  # fmt: skip
+    e.set_defaults(func=cmd_export)
 
     a = sub.add_parser(
         "accuracy",
@@ -101,18 +151,70 @@ def _sorted(z):
     return sorted(np.asarray(z, dtype=complex), key=lambda c: (c.real, c.imag))
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from bikeid.dataset.files import check_output_path
+    from bikeid.dataset.store import export_csv, list_runs, read_run
+
+    names = [args.run] if args.run else list_runs(args.file)
+    if not names:
+        raise ValueError(f"{args.file} holds no runs")
+    out = Path(args.out)
+    if out.suffix.lower() == ".csv":
+        if len(names) != 1:
+            raise ValueError(
+                f"{args.file} holds {len(names)} runs: give --run NAME, or a folder as --out"
+            )
+        targets = {names[0]: out}
+    else:
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out} is a file: give a .csv name or a folder")
+        targets = {n: out / f"{n}.csv" for n in names}
+    for target in targets.values():
+        check_output_path(target)  # refuse a link or device before writing anything
+    runs = {n: read_run(args.file, n) for n in names}  # all readable before the first write
+    for n, target in targets.items():
+        export_csv(runs[n], target)
+        print(target)
+    return 0
+
+
+def _load(args: argparse.Namespace) -> list:
+    """The runs of every file: bikeid run files, or logs through ``dataset.importers``."""
+    if args.format == "bikeid":
+        from bikeid.dataset.store import read_runs
+
+        for opt in ("columns", "units", "speed"):
+            if getattr(args, opt) is not None:
+                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
+        return [r for f in args.file for r in read_runs(f)]
+    from bikeid.dataset import importers
+
+    if not args.columns:
+        raise ValueError(
+            f"--format {args.format} needs --columns NAME=COL,... mapping phi, delta, phidot, "
+            "deltadot, T_delta (and v, or give --speed) to your columns"
+        )
+    read = importers.from_csv if args.format == "csv" else importers.from_hdf5
+    flip = [f.strip() for f in args.flip.split(",") if f.strip()]
+    return [
+        read(f, args.columns, args.units, time=args.time, speed=args.speed, flip=flip)
+        for f in args.file
+    ]
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from bikeid.dataset.store import read_runs
     from bikeid.sim.linear import eigenvalues
 
-    runs = read_runs(args.file)
+    runs = _load(args)
     if not runs:
-        raise ValueError(f"{args.file} holds no runs")
+        raise ValueError(f"{', '.join(args.file)} hold no runs")
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
-    out: dict = {"file": str(args.file), "method": args.method, "speeds": speeds}
+    out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds}
     if args.method == "direct":
         from bikeid.ident.direct import identify
         from bikeid.ident.signals import prepare
@@ -150,7 +252,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             if len(speeds) < 2:
                 raise ValueError(
                     "--speed-parameterized needs runs at two or more speeds to separate "
-                    f"alpha from beta v^2; {args.file} holds speed {speeds[0]} m/s only"
+                    f"alpha from beta v^2; the data hold speed {speeds[0]} m/s only"
                 )
             model = pem.fit_speed_model(runs, per_speed=per)
             out["params"] = dict(zip(pem.SPEED_NAMES, model.params, strict=True))
@@ -178,7 +280,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(dump_json(out))
         return 0
     np.set_printoptions(precision=5, suppress=True, linewidth=110)
-    print(f"{args.file}: {len(runs)} runs, method {args.method}")
+    print(f"{', '.join(args.file)}: {len(runs)} runs, method {args.method}")
     if args.method == "direct":
         for k in ("M", "C1", "K0", "K2", "H"):
             print(f"{k} =\n{out[k]}")
