@@ -60,6 +60,15 @@ def build_report(s: dict[str, Any]) -> Report:
     return rep
 
 
+def _b_ratio(f2: dict, i: int) -> str:
+    """|paper b_i| / |our true b_i| at Fig. 2's speed (eq. 5 input column), as text."""
+    from .reproduce_chen_dao import PAPER
+
+    ours = abs(float(f2["theta_true"][8 + i]))
+    paper = PAPER["eq5_abs"]["b"][i]
+    return f"{paper / ours:.0f}" if ours > 0 else "n/a"
+
+
 def _report_fig2(rep: Report, f2: dict) -> None:
     from bikeid.ident.canonical import THETA_NAMES
 
@@ -99,9 +108,12 @@ def _report_fig2(rep: Report, f2: dict) -> None:
         f"signs; {f2['paper_reading']['candidates']} sign patterns reproduce the paper's own "
         "eq. 6 and poles (to "
         f"{f2['paper_reading']['char_poly_rel_error']:.1e} relative); the one with the physical "
-        "sign pattern (a3, a4 < 0 < a5, a6) is shown. Its b1 > 0 > b2 is the opposite of the "
-        "Meijaard sign (b2 = (M^-1)_dd > 0): the paper's torque or angle signs differ; poles "
-        "and zeros are unaffected. The paper's b are ~50x ours: its input scaling differs."
+        "sign pattern (a3, a4 < 0 < a5, a6) is shown. Eq. 6 and the poles do not depend on "
+        "the signs of b1 and b2, and the extracted text lost every minus sign, so nothing can "
+        "be said about the paper's torque or angle sign conventions from it. The magnitudes "
+        f"of the paper's b1, b2 are {_b_ratio(f2, 0)} and {_b_ratio(f2, 1)} times ours: not "
+        "one common factor, so no single input scaling (units of the steer torque) explains "
+        "them; the paper does not state its input units."
     )
     rows = []
     for i, n in enumerate(THETA_NAMES):
@@ -443,15 +455,22 @@ def _report_mh(rep: Report, m: dict) -> None:
         (
             "table2_roll_vaf",
             "Table 2 analogue: roll-equation VAF (eq. 6), rows = data, columns = model",
-            "paper: identified 17-52 %, Whipple -5.5-48.5 %",
+            "paper: identified models 12.4-53.3 %, Whipple -5.5-48.5 %",
         ),
         (
             "table3_steer_vaf",
             "Table 3 analogue: steer-equation VAF (eq. 6)",
-            "paper: identified 38-77 %, Whipple 52-69 %",
+            "paper: identified models 38.3-77.3 %, Whipple 52.7-68.7 %",
         ),
     ):
-        rep.para(f"{title} ({comment}):")
+        rep.para(
+            f"{title} ({comment}). VAF here is Moore & Hubbard's eq. 6, "
+            "1 - ||Gamma Theta - Y|| / ||Y - mean(Y)||: a ratio of norms, not of variances "
+            "(not the 1 - var/var of system-identification texts). The steer row's free set "
+            "follows their text (M_dphi and K0_dphi fixed to the roll row's values); their "
+            "eq. 5 contradicts it by keeping g phi (K0_dphi) as a free regressor while "
+            "moving K0_dd g delta to the right-hand side:"
+        )
         rep.table(
             ["data \\ model", *cols],
             [[d, *[f"{100 * m[key][d][c]:.1f}%" for c in cols]] for d in names],
