@@ -44,7 +44,7 @@ from bikeid.experiments.cli import build_parser, main
 HOSTILE = (
     "", "--", "nan", "NaN", "inf", "-inf", "-1", "0", "1e308", "-1e308", "1e-308", "abc",
     "0:1e308:1e-308", "1:0:1", "0:1:0", "99999999999999999999", "x" * 4096, "\u00e9\u00df",
-    "1,,2", ":", "0x10", "5 m/s", "/nonexistent/dir/file.h5", "../x.yaml", "1e3", "-0",
+    "1,,2", ":", "0x10", "5 m/s", "missing/dir/file.h5", "missing.yaml", "1e3", "-0",
 )  # fmt: skip
 #: Commands that would reach the network with valid arguments: fuzzed with unknown options only.
 NETWORK = {("data", "fetch")}
@@ -93,11 +93,26 @@ def _files(folder: Path) -> dict[str, bytes]:
     return out
 
 
+@contextlib.contextmanager
+def _no_default_data():
+    """Hide $BIKEID_DATA: a fuzzed command must not fall back to the real data (it would run
+    a full computation instead of refusing)."""
+    saved = os.environ.pop("BIKEID_DATA", None)
+    try:
+        yield
+    finally:
+        if saved is not None:
+            os.environ["BIKEID_DATA"] = saved
+
+
 def _run(argv: list[str], folder: Path) -> tuple[int, str, str]:
+    """``main(argv)`` in ``folder`` (every path in the generated cases is relative to it, so
+    anything a command creates is seen by the unchanged-files check)."""
     out, err = io.StringIO(), io.StringIO()
-    with contextlib.chdir(folder), contextlib.redirect_stdout(out), contextlib.redirect_stderr(
-        err
-    ):
+    with (
+        _no_default_data(), contextlib.chdir(folder), contextlib.redirect_stdout(out),
+        contextlib.redirect_stderr(err),
+    ):  # fmt: skip
         rc = main(argv)
     return rc, out.getvalue(), err.getvalue()
 
@@ -130,20 +145,26 @@ def test_malformed_command_lines(path, acts, tmp_path_factory):
     @st.composite
     def argv(draw):
         args = list(path)
+        refused = None
         if tuple(path) in NETWORK or not (typed or others):
             args.append(draw(st.sampled_from(["--bogus", "--dest=", "-x", "--all-speeds=1"])))
         elif typed:  # one value its own parser refuses: must end in a usage error
             a = draw(st.sampled_from(typed))
             bad = [v for v in HOSTILE if _refused_by_type(a, v)]
             args.append(f"{a.option_strings[0]}={draw(st.sampled_from(bad))}")
-        else:  # no typed option: an unknown bicycle / model / data path (input error)
-            a = draw(st.sampled_from(others))
-            args.append(f"{a.option_strings[0]}=/nonexistent/{draw(st.sampled_from(HOSTILE))}")
+            refused = a.option_strings[0]
+        else:  # no typed option: a missing input (bicycle, model or data), an input error
+            inputs = [a for a in others if a.dest in ("bicycle", "model", "data")] or others
+            a = draw(st.sampled_from(inputs))
+            args.append(f"{a.option_strings[0]}=missing/{draw(st.sampled_from(HOSTILE))}")
+            refused = a.option_strings[0]
         extra = others if tuple(path) not in NETWORK else []  # nothing that could go online
         for a in draw(st.lists(st.sampled_from(extra), max_size=4)) if extra else []:
+            if a.option_strings[0] == refused:
+                continue  # never override the refused value (argparse keeps the last one)
             args.append(f"{a.option_strings[0]}={draw(st.sampled_from(HOSTILE))}")
         if positional:
-            args.append(draw(st.sampled_from(["/nonexistent/run.h5", "", "x" * 300])))
+            args.append(draw(st.sampled_from(["missing/run.h5", "", "x" * 300])))
         perm = draw(st.permutations(args[len(path) :]))
         return [*path, *perm]
 
