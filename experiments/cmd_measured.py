@@ -213,11 +213,11 @@ def cmd_report(args) -> int:
     from bikeid.dataset.sbw_logs import data_dir
     from bikeid.experiments.measured_report import write_report
 
-    data_dir(args.data)  # refuse a missing data folder before the report folder is made
-    if args.model:  # and a bad model
+    if args.model:  # refuse a bad model, then a missing data folder, before making the folder
         from bikeid.experiments.measured_study import model_from_json
 
         model_from_json(args.model)
+    data_dir(args.data)
     path = write_report(args.out, args.data, args.model)
     print(path)
     return 0

@@ -125,6 +125,14 @@ def loads_yaml(text: str, where: str) -> Any:
         keys: set = set()
         for key_node, _ in node.value:
             key = loader.construct_object(key_node, deep=True)
+            try:
+                hash(key)
+            except TypeError:
+                mark = key_node.start_mark
+                raise InputError(
+                    f"{where}: line {mark.line + 1}: a mapping key must be a name or a number, "
+                    f"got a {type(key).__name__}"
+                ) from None
             if key in keys:
                 mark = key_node.start_mark
                 raise InputError(

@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from bikeid.experiments.cli import main
@@ -422,6 +422,8 @@ def test_argument_types_raise_only_usage_errors(text):
 
 @settings(max_examples=300, deadline=None)
 @given(st.text(alphabet='{}[]":,1aN\\ \n-', max_size=200))
+@example("[]:")  # a list as a YAML mapping key: was a TypeError (found by this test in CI)
+@example("{a: 1}: 2")
 def test_strict_readers_raise_only_input_errors(text):
     """Any text: JSON and YAML readers return a value or raise InputError (exit 3)."""
     for load in (loads_json, loads_yaml):
