@@ -58,6 +58,7 @@ from bikeid.sim.linear import lateral_force_vector, state_matrices, yaw_rate
 from bikeid.sim.parameters import BicycleParameters
 from bikeid.sim.sampling import zoh
 
+from .closed_loop import _describe
 from .run import Run
 
 __all__ = ["PATHS", "closed_loop_matrix", "simulate", "sweep"]
@@ -180,12 +181,6 @@ def _python_loop(p, Ad, Bd, Ac, Bc, x0, controller, t, v, dither, w, tphi, force
         Qdd[k] = Ac[ka, 2:4] @ x + Bc[ka, 2:4] @ inp
         x = Ad[ka] @ x + Bd[ka] @ inp
     return X, U, Qdd
-
-
-def _describe(obj: Any) -> dict[str, Any]:
-    if hasattr(obj, "describe"):
-        return obj.describe()
-    return {"name": getattr(obj, "__name__", type(obj).__name__)}
 
 
 def _held(rng: np.random.Generator, n: int, amplitude: float, hold: int) -> np.ndarray:
@@ -334,8 +329,12 @@ def simulate(
     if path not in PATHS:
         raise ValueError(f"path={path!r}: choose one of {PATHS}")
     controller, dt = _resolve(controller, dt)
-    if not (dt > 0 and duration >= 2 * dt):
-        raise ValueError(f"need dt > 0 and duration >= 2 dt, got dt={dt}, duration={duration}")
+    if not (dt > 0 and math.isfinite(duration) and duration >= 2 * dt):
+        raise ValueError(
+            f"need dt > 0 and a finite duration >= 2 dt, got dt={dt}, duration={duration}"
+        )
+    if not (math.isfinite(speed_period) and speed_period > 0):
+        raise ValueError(f"speed_period={speed_period}: need a finite period > 0 s")
     if int(dither_hold) != dither_hold or dither_hold < 1:
         raise ValueError(f"dither_hold={dither_hold}: need a whole number of samples >= 1")
     dither_hold = int(dither_hold)
@@ -347,6 +346,11 @@ def simulate(
     ):  # fmt: skip
         if not (math.isfinite(val) and val >= 0):
             raise ValueError(f"{name}={val}: need a finite value >= 0")
+    if speed_variation >= speed > 0:
+        raise ValueError(
+            f"speed_variation={speed_variation} m/s reaches the speed {speed} m/s: the bicycle "
+            "would stop or reverse; use an amplitude below the speed"
+        )
     n = int(round(duration / dt))
     t = np.arange(n) * dt
     if reference is not None:

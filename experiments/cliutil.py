@@ -234,22 +234,21 @@ def mapping_arg(option: str) -> Callable[[str], dict[str, str]]:
     -------
     callable
         Parses the text into a dict; refuses an empty text, a pair without ``=``, an empty
-        name or value, and a repeated name (argparse turns the ValueError into a usage
-        error).
+        name or value, and a repeated name (argparse shows the message as a usage error).
     """
 
     def parse(text: str) -> dict[str, str]:
         out: dict[str, str] = {}
         pairs = [p for p in text.split(",") if p.strip()]
         if not pairs:
-            raise ValueError(f"{option}: give NAME=VALUE pairs separated by commas")
+            raise argparse.ArgumentTypeError(f"{option}: give NAME=VALUE pairs separated by commas")
         for pair in pairs:
             name, sep, value = pair.partition("=")
             name, value = name.strip(), value.strip()
             if not sep or not name or not value:
-                raise ValueError(f"{option}: {pair!r} is not NAME=VALUE")
+                raise argparse.ArgumentTypeError(f"{option}: {pair!r} is not NAME=VALUE")
             if name in out:
-                raise ValueError(f"{option}: {name!r} given twice")
+                raise argparse.ArgumentTypeError(f"{option}: {name!r} given twice")
             out[name] = value
         return out
 

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bikeid.sim.errors import UntrustworthyResult
+from bikeid.sim.integrate import DEFAULT_FALL_LIMIT
 from bikeid.sim.nonlinear import WhippleBicycle
 from bikeid.sim.parameters import BicycleParameters
 
@@ -37,7 +39,7 @@ __all__ = ["FD_STEP", "RTOL", "OrbitStability", "orbit_stability", "poincare_map
 
 RTOL = 1e-12  #: rtol = atol of the DOP853 integration of the Poincare map
 FD_STEP = 1e-5  #: central-difference step of the Jacobian [rad, rad/s, m/s]
-FALL = math.radians(60.0)
+FALL = DEFAULT_FALL_LIMIT  # the simulator's fall limit, so both call the same motion a fall
 
 
 def _start(bike: WhippleBicycle, z: np.ndarray) -> np.ndarray:
@@ -69,7 +71,7 @@ def poincare_map(
 
     Raises
     ------
-    RuntimeError
+    UntrustworthyResult
         If the bicycle falls (|roll| > 60 deg) or no crossing occurs within 60 s per return.
     """
     from scipy.integrate import solve_ivp
@@ -97,7 +99,7 @@ def poincare_map(
             f, (t, t + 60.0), y, method="DOP853", rtol=rtol, atol=rtol, events=(cross, fall)
         )
         if s.status != 1 or s.t_events[0].size == 0:
-            raise RuntimeError(
+            raise UntrustworthyResult(
                 f"no return to the section phidot = 0 (return {k + 1} of {returns}): the "
                 "motion fell or left the section; this is not a periodic orbit"
             )
@@ -195,7 +197,7 @@ def orbit_stability(
 
     Raises
     ------
-    RuntimeError
+    UntrustworthyResult
         If Newton does not reach ``tol`` within ``max_iter`` iterations (no periodic
         orbit near the start) or the map cannot be evaluated (fall).
     """
@@ -205,13 +207,13 @@ def orbit_stability(
     z = np.array([math.radians(z0[0]), math.radians(z0[1]), math.radians(z0[2]), z0[3] / 100])
     it = 0
     while True:
-        zn, _ = poincare_map(bike, z, returns)
+        zn, period = poincare_map(bike, z, returns)
         res = float(np.max(np.abs(zn - z)))
         de = 0.0 if energy is None else _energy(bike, z) - energy
         if res < tol and abs(de) < tol * max(1.0, abs(energy or 0.0)):
             break
         if it >= max_iter:
-            raise RuntimeError(
+            raise UntrustworthyResult(
                 f"Newton on the period-{returns} Poincare map did not converge "
                 f"(residual {res:.2e} after {it} iterations): no periodic orbit near "
                 f"{z0_deg}; run the coasting motion longer"
@@ -232,7 +234,6 @@ def orbit_stability(
     J = _jacobian(bike, z, returns, FD_STEP)
     mu = np.linalg.eigvals(J)
     mu = mu[np.argsort(-np.abs(mu))]
-    _, period = poincare_map(bike, z, returns)
     return OrbitStability(
         returns_per_period=returns,
         period=period,

@@ -19,9 +19,11 @@ from bikeid.ident.effect_fit import FitResult, joint_fit
 from bikeid.ident.effect_library import LIBRARY
 from bikeid.ident.effect_selection import select_effects, selection_frequencies
 from bikeid.ident.experiment_model import ExperimentModel
-from bikeid.sim.effect_registry import effect
+from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import loads_json
+
+from .cliutil import MAX_SPEED
 
 __all__ = ["evaluate_json", "fit_effect_set", "fit_model", "model_from_json"]
 
@@ -87,12 +89,10 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
             f"{where}: 'effects' must be an object of effect name: value, got "
             f"{type(effects).__name__ if 'effects' in obj else 'nothing'}"
         )
-    for name, value in effects.items():
-        if not _is_number(value):
-            unit = effect(name).unit  # an unknown name: ValueError naming the known ones
-            raise InputError(
-                f"{where}: effect {name!r} must be a finite number [{unit}], got {value!r}"
-            )
+    try:  # known names, numbers (not bools), finite and in the registry's plausible range
+        check_values(effects, where)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
     plant = obj.get("plant")
     if plant is None and "plant" not in obj:
         obj["plant"], obj["plant_defaulted"] = DEFAULT_PLANT, True
@@ -102,7 +102,7 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
         )
     speeds = obj.get("fit_speeds")
     if "fit_speeds" in obj and not (
-        isinstance(speeds, list) and all(_is_number(v) and 0 < v <= 100 for v in speeds)
+        isinstance(speeds, list) and all(_is_number(v) and 0 < v <= MAX_SPEED for v in speeds)
     ):
         raise InputError(
             f"{where}: 'fit_speeds' must be a list of treadmill speeds in (0, 100] m/s, got "

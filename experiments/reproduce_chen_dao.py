@@ -584,7 +584,7 @@ def fig7_tracking(
     from bikeid.sim.linear import state_matrices
 
     v = FIG7_SPEED
-    sys_id = model.state_space(order="chen-dao")
+    sys_id = model.state_space(order="chen_dao")
     if poles is None:
         A_id, B_id = to_bikeid_order(sys_id.A, sys_id.B, "chen_dao")
         poles = tracking_poles(A_id, B_id)

@@ -319,7 +319,8 @@ def limit_cycle_study(
     res["mirror_checks"] = _mirror_checks(p, duration, res["limit_cycles"])
     ev = np.sort_complex(eigenvalues(p, lc.SPEED))
     res["linear_eigenvalues"] = ev
-    res["critical_true"] = {k: critical_speeds(p)[k] for k in ("v_d", "v_w", "v_c")}
+    cs = critical_speeds(p)
+    res["critical_true"] = {k: cs[k] for k in ("v_d", "v_w", "v_c")}
     return res
 
 

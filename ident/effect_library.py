@@ -36,6 +36,9 @@ class Candidate(RegistryFacts):
         Fit bounds [the effect's unit] (infinite: none).
     grid : tuple of float
         Scan grid of a structural effect [the effect's unit].
+    bounded : bool
+        Fit within the registry's plausible range (``lower``/``upper`` are then taken from
+        :mod:`bikeid.sim.effect_registry`, not given here).
     """
 
     name: str
@@ -44,6 +47,13 @@ class Candidate(RegistryFacts):
     lower: float = -np.inf
     upper: float = np.inf
     grid: tuple[float, ...] = ()
+    bounded: bool = False
+
+    def __post_init__(self) -> None:
+        if self.bounded:  # fit within the registry's plausible range, declared there once
+            lo, hi = self.entry.plausible
+            object.__setattr__(self, "lower", lo)
+            object.__setattr__(self, "upper", hi)
 
     @property
     def doc(self) -> str:
@@ -61,31 +71,23 @@ LIBRARY: dict[str, Candidate] = {
         Candidate("command_gain", "additive", 0.2, 0.05),
         Candidate("steer_torque_bias", "additive", 0.05),
         Candidate("steer_inertia", "additive", 0.02),
-        Candidate("trail_correction", "additive", 0.01, -0.07, 0.2),
+        Candidate("trail_correction", "additive", 0.01, bounded=True),
         # front-frame (fork + motor) inertia borrowed from a similar bicycle: x0.2-20
-        Candidate("front_inertia_scale", "additive", 0.5, 0.2, 20.0),
+        Candidate("front_inertia_scale", "additive", 0.5, bounded=True),
         # estimated rear/front mass split: -0.5..5 kg to the front frame
-        Candidate("front_mass_shift", "additive", 0.5, -0.5, 5.0),
+        Candidate("front_mass_shift", "additive", 0.5, bounded=True),
         # rear-frame inertia borrowed from a similar bicycle: x0.5-2
-        Candidate("rear_inertia_scale", "additive", 0.2, 0.5, 2.0),
+        Candidate("rear_inertia_scale", "additive", 0.2, bounded=True),
         Candidate("roll_angle_bias", "additive", 0.01),
         Candidate("steer_angle_bias", "additive", 0.01),
         Candidate("roll_rate_bias", "additive", 0.01),
         Candidate("roll_rate_scale", "additive", 0.05, 0.2),
         Candidate("speed_scale", "additive", 0.05, 0.3),
-        Candidate(
-            "input_delay", "structural", 0.02, 0.0, 0.1, grid=(0.005, 0.01, 0.02, 0.03, 0.045, 0.06)
-        ),
-        Candidate(
-            "actuator_lag",
-            "structural",
-            0.02,
-            0.0,
-            0.2,
-            grid=(0.005, 0.01, 0.02, 0.035, 0.05, 0.08),
-        ),
-        Candidate(
-            "tire_relaxation", "structural", 0.1, 0.0, 0.6, grid=(0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
-        ),
+        Candidate("input_delay", "structural", 0.02, bounded=True,
+                  grid=(0.005, 0.01, 0.02, 0.03, 0.045, 0.06)),
+        Candidate("actuator_lag", "structural", 0.02, bounded=True,
+                  grid=(0.005, 0.01, 0.02, 0.035, 0.05, 0.08)),
+        Candidate("tire_relaxation", "structural", 0.1, bounded=True,
+                  grid=(0.02, 0.05, 0.1, 0.2, 0.35, 0.5)),
     )  # fmt: skip
 }

@@ -215,7 +215,7 @@ class CanonicalModel:
 
     ``theta``, ``A``, ``B``, ``C``, ``K`` and :meth:`predictor` are in Chen & Dao's state
     order [phi, phidot, delta, deltadot] (the canonical form's); :meth:`state_space`
-    returns bikeid's order [phi, delta, phidot, deltadot] unless ``order="chen-dao"``.
+    returns bikeid's order [phi, delta, phidot, deltadot] unless ``order="chen_dao"``.
 
     ``theta`` = [a1..a8, b1, b2] (:data:`ident.canonical.THETA_NAMES`), ``covariance``
     (10x10), ``outputs`` the measured states used, ``K`` the discrete innovation gain
@@ -304,7 +304,7 @@ class CanonicalModel:
 
         Parameters
         ----------
-        order : {"bikeid", "chen-dao"}
+        order : {"bikeid", "chen_dao"}
             State order: bikeid's [phi, delta, phidot, deltadot] (rad, rad/s; the default,
             as every bikeid model) or Chen & Dao's canonical [phi, phidot, delta, deltadot]
             (the order of ``theta``, ``A``, ``B``, ``C`` and ``K``).
@@ -318,22 +318,11 @@ class CanonicalModel:
         C = self.C
         sys = control.ss(self.A, self.B, C, np.zeros((C.shape[0], 1)), inputs=[INPUT],
                          outputs=list(self.outputs), states=list(CANONICAL_STATE))  # fmt: skip
-        if order == "chen-dao":
+        if order == "chen_dao":
             return sys
         if order == "bikeid":
             return to_bikeid_order(sys)
-        raise ValueError(f"order={order!r}: use 'bikeid' or 'chen-dao'")
-
-    def state_space_bikeid(self) -> control.StateSpace:
-        """Same as ``state_space(order="bikeid")`` (kept for existing callers).
-
-        Returns
-        -------
-        control.StateSpace
-            Continuous-time model, states [phi, delta, phidot, deltadot], input
-            ``T_delta`` [N m], outputs ``self.outputs``.
-        """
-        return self.state_space(order="bikeid")
+        raise ValueError(f"order={order!r}: use 'bikeid' or 'chen_dao'")
 
     def predictor(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Ad, Bd, C, K) of the discrete innovations predictor at ``dt``.
@@ -449,13 +438,13 @@ class SpeedCanonicalModel:
 
     def state_space(self, v: float, order: str = "bikeid") -> control.StateSpace:
         """The fixed-speed model at ``v`` [m/s] (:meth:`CanonicalModel.state_space`; ``order``
-        "bikeid" [phi, delta, phidot, deltadot] by default, or "chen-dao").
+        "bikeid" [phi, delta, phidot, deltadot] by default, or "chen_dao").
 
         Parameters
         ----------
         v : float
             Forward speed [m/s].
-        order : {"bikeid", "chen-dao"}, optional
+        order : {"bikeid", "chen_dao"}, optional
             State order of the result.
 
         Returns

@@ -56,7 +56,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from bikeid.dataset.run import Run, run_stop
-from bikeid.sim.errors import InputError
+from bikeid.sim.errors import InputError, UntrustworthyResult
 
 __all__ = [
     "NO_MEAN_REMOVAL",
@@ -140,7 +140,7 @@ def check_complete(runs: Run | Sequence[Run], estimator: str) -> None:
         if stop is None:
             continue
         kind = "a fall" if stop.get("physical") else "a numerical failure, not a fall"
-        raise ValueError(
+        raise UntrustworthyResult(
             f"{estimator}: {_run_label(run, i)} ended early at t={float(stop['time']):.3f} s "
             f"on {stop['cause']} ({kind}: {stop['message']}); its last samples are not "
             f"the upright bicycle the estimator models.  Fix: leave the run out (or "
@@ -178,7 +178,7 @@ def check_sampling(runs: Run | Sequence[Run], estimator: str) -> None:
             if k >= 1 and math.isclose(ratio, k, rel_tol=1e-6):
                 continue
             label = "controller period" if what == "controller" else "dither hold"
-            raise ValueError(
+            raise InputError(
                 f"{estimator}: run {i} logs T_delta every {dt * 1e3:g} ms (logging period "
                 f"{dt:g} s) but its {label} is {period * 1e3:g} ms ({period:g} s), so the "
                 f"plant's steer torque changed within the logged samples; {estimator} assumes "

@@ -439,7 +439,7 @@ def _ss(model, v: float | None = None) -> control.StateSpace:
     # poles, zeros and transfer functions do not depend on the state order; the canonical
     # model's own (Chen & Dao) order is used, as the identification computed it
     if hasattr(model, "predictor") and hasattr(model, "theta"):
-        return model.state_space(order="chen-dao")
+        return model.state_space(order="chen_dao")
     if not hasattr(model, "state_space"):
         return model
     import inspect

@@ -34,7 +34,7 @@ right): a damping c gives the torque -c * rate, a stiffness k the torque -k * an
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 __all__ = [
@@ -45,7 +45,6 @@ __all__ = [
     "check_values",
     "effect",
     "library_names",
-    "names",
     "nonlinear_effects",
 ]
 
@@ -412,25 +411,11 @@ def check_values(values: Mapping[str, object], source: str = "") -> dict[str, fl
     """
     if not isinstance(values, Mapping):
         raise ValueError(f"{source or 'effects'}: expected a mapping of effect names to numbers")
-    return {str(k): effect(k).check(v, source) for k, v in values.items()}
-
-
-def names(effects: Iterable[str]) -> tuple[str, ...]:
-    """Validate a list of effect names.
-
-    Parameters
-    ----------
-    effects : iterable of str
-        Effect names.
-
-    Returns
-    -------
-    tuple of str
-        The names, in the given order.
-
-    Raises
-    ------
-    ValueError
-        If a name is unknown.
-    """
-    return tuple(effect(n).name for n in effects)
+    out = {}
+    for k, v in values.items():
+        try:
+            entry = effect(k)
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}" if source else str(exc)) from None
+        out[str(k)] = entry.check(v, source)
+    return out

@@ -22,11 +22,11 @@ its ``cause`` (a key of :data:`STOP_CAUSES`), time [s], one-line message and whe
 and ``steer_limit`` (|steer| over 90 deg); ``Trajectory.fell_at`` is their time and is
 None otherwise.  Numerical stops, never reported as falls: ``controller_nonfinite``,
 ``nonfinite_state`` and ``step_too_coarse``.  Every RK4 stop at a limit or a non-finite
-state is checked against the step first: if |lambda_max| h of the linearized Whipple plant
-at the current speed exceeds RK4's real-axis stability limit :data:`RK4_STABILITY` (2.785),
-or re-integrating the last sample interval with half the step moves roll or steer by more
-than :data:`STEP_CHECK_TOL`, the stop is ``step_too_coarse`` with the fix (smaller dt or
-more substeps).
+state is checked against the step first: if a decaying mode lambda of the linearized
+Whipple plant at the current speed has lambda h outside RK4's stability region
+(:func:`rk4_amplification` > 1), or re-integrating the last sample interval with half the
+step moves roll or steer by more than :data:`STEP_CHECK_TOL`, the stop is
+``step_too_coarse`` with the fix (smaller dt or more substeps).
 
 State order, inputs and signs: :mod:`sim.nonlinear`.
 """
@@ -63,12 +63,25 @@ DEFAULT_FALL_LIMIT = math.radians(60.0)
 #: |steer| [rad] beyond which a run stops (``steer_limit``): the front wheel is across
 #: the frame, no longer a bicycle being ridden.
 STEER_LIMIT = math.pi / 2
-#: RK4's stability limit on the negative real axis, |lambda h| <= 2.785 (the negative real
-#: root of R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 = 1; Hairer & Wanner, Solving ODEs II,
-#: Fig. IV.2.1).
-#: The imaginary-axis limit is 2.828, so 2.78 bounds every eigenvalue direction of the
-#: bicycle's lightly damped modes.
-RK4_STABILITY = 2.78
+def rk4_amplification(z: np.ndarray) -> np.ndarray:
+    """|R(z)| of RK4, R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 (z = lambda h).
+
+    A decaying mode (Re lambda < 0) is integrated stably only where |R(z)| <= 1 (Hairer &
+    Wanner, Solving ODEs II, Fig. IV.2.1): 2.785 on the negative real axis but only about
+    2.6 at 120 deg, the direction of lightly damped modes, so the test is on R itself.
+
+    Parameters
+    ----------
+    z : array_like of complex
+        lambda h.
+
+    Returns
+    -------
+    ndarray
+        |R(z)|.
+    """
+    z = np.asarray(z, dtype=complex)
+    return np.abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)
 #: Half-step check: a stop is ``step_too_coarse`` if re-integrating its sample interval
 #: with half the RK4 step changes roll or steer by more than this [rad].  At the default
 #: step (5 ms) the difference is ~(lambda h)^5 / 120 |x| <= 2e-6 rad at 15 m/s near a fall
@@ -177,6 +190,8 @@ class Stop:
             return cls(d["cause"], d["time"], d["message"], d.get("physical"))
         except KeyError as exc:
             raise ValueError(f"stop record lacks {exc}; need cause, time, message") from None
+        except TypeError as exc:  # e.g. time None, or not a mapping
+            raise ValueError(f"malformed stop record {d!r}: {exc}") from None
 
 
 @dataclass
@@ -563,6 +578,9 @@ def simulate(
         raise ValueError(f"mode {mode!r} unknown; use 'coast' or 'held'")
     if method not in ("rk4", "reference"):
         raise ValueError(f"method {method!r} unknown; use 'rk4' or 'reference'")
+    for name, value in (("dt", dt), ("duration", duration), ("fall_limit", fall_limit)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+            raise ValueError(f"{name}={value!r} must be a number")
     if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"sample time dt={dt!r} must be a positive number of seconds")
     if not (math.isfinite(duration) and duration > 0):
@@ -650,7 +668,7 @@ def simulate(
                 U[k, 3] = rhs(X[k].copy(), q5g, bike.p, r_now, ev, held, np.empty(10))
             break
         if rk4:
-            q5_start = q5g.copy()
+            q5_start = q5g[0]
             status = _rk4_sample(
                 k, Tc, T_applied, X, OUT, ol, U, q5g, bike.p, ev, held, tau, dt, nsub,
                 fall_limit, STEER_LIMIT, info,
@@ -741,29 +759,35 @@ def _coarse_step(
 ) -> str | None:
     """Message if the RK4 step cannot resolve the dynamics at a stop, else None.
 
-    Two tests (module docstring): |lambda_max| h of the linearized plant at ``speed``
-    against :data:`RK4_STABILITY`, and re-integration of the stop's sample interval from
-    ``y0`` with ``nsub`` and ``2 nsub`` steps, limits off, compared on roll and steer
-    against :data:`STEP_CHECK_TOL`.
+    Two tests (module docstring): lambda h of each decaying mode of the linearized plant
+    at ``speed`` against RK4's stability region (:func:`rk4_amplification`), and
+    re-integration of the stop's sample interval from ``y0`` with ``nsub`` and ``2 nsub``
+    steps, limits off, compared on roll and steer against :data:`STEP_CHECK_TOL`.
     """
     from .linear import eigenvalues
 
     h = dt / nsub
-    lam = float(np.max(np.abs(eigenvalues(bike.params, speed))))
+    lams = eigenvalues(bike.params, speed)
+    decaying = lams[lams.real < 0]
     fix = "use a smaller --dt (sample time) or more --substeps"
-    if lam * h > RK4_STABILITY:
+    unstable = decaying[rk4_amplification(decaying * h) > 1.0]
+    if unstable.size:
+        lam = unstable[np.argmax(np.abs(unstable))]
+        h_ok = h
+        while np.any(rk4_amplification(decaying * h_ok) > 1.0):
+            h_ok /= 2
         return (
             f"numerical blow-up, not a fall ({what}): the RK4 step h = {h:g} s is too "
-            f"coarse at {speed:.3g} m/s (|lambda_max| h = {lam:.1f} 1/s x {h:g} s = "
-            f"{lam * h:.2f} > {RK4_STABILITY}, RK4's stability limit); {fix} so that "
-            f"h <= {RK4_STABILITY / lam:.3g} s"
+            f"coarse at {speed:.3g} m/s (the decaying mode lambda = {lam:.1f} 1/s gives "
+            f"|R(lambda h)| = {float(rk4_amplification(lam * h)):.2f} > 1, outside RK4's "
+            f"stability region); {fix} so that h <= {h_ok:.3g} s"
         )
     ends = []
     for m in (nsub, 2 * nsub):
         y = np.array(y0, dtype=float)
         info = np.zeros(3)
         _rk4_interval(
-            y, q5_start.copy(), bike.p, ev, held, rc, T0, tau, dt, m, np.inf, np.inf, info
+            y, np.array([q5_start]), bike.p, ev, held, rc, T0, tau, dt, m, np.inf, np.inf, info
         )
         ends.append(y[[3, 5]])
     coarse, fine = ends

@@ -565,8 +565,9 @@ def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> Ei
 
 # -- critical speeds -----------------------------------------------------------------------
 def _quartic_coeffs(cm: CanonicalMatrices, v: float) -> tuple[float, float, float, float, float]:
-    c = cm.char_poly(v)  # ascending: e, d, c, b, a
-    return c[4], c[3], c[2], c[1], c[0]
+    """(a, b, c, d, e) at one speed: the same expansion the grid scan uses, so that the
+    sign changes found on the grid and their brentq refinement see one function."""
+    return tuple(float(c[0]) for c in _grid_coeffs(cm, [v]))
 
 
 def _grid_coeffs(cm: CanonicalMatrices, v: np.ndarray) -> tuple[np.ndarray, ...]:

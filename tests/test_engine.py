@@ -105,7 +105,7 @@ CASES = {
                                                        reference=CHIRP)),
     "pole-servo-no-rate": (P, 3.0, lambda: PolePlacement(design_speed=3.0,
                                                          reference=lambda t: 0.02 * math.sin(t))),
-    "pole-chen-dao": (P, 6.0, lambda: PolePlacement(SLOW_POLES, design_speed=6.0)),
+    "pole-chen_dao": (P, 6.0, lambda: PolePlacement(SLOW_POLES, design_speed=6.0)),
     "sil-sbw": (steer_by_wire(), 3.0, lambda: SteerIntoLean()),
 }  # fmt: skip
 

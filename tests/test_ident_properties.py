@@ -18,6 +18,7 @@ from bikeid.ident.canonical import theta_from_matrices
 from bikeid.ident.direct import identify, vaf_moore, vaf_variance
 from bikeid.ident.subspace import po_moesp
 from bikeid.ident.validate import resid
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import canonical_matrices, eigenvalues
 from bikeid.sim.parameters import benchmark
 
@@ -77,7 +78,7 @@ def test_t2_roll_relation_makes_free_steer_row_singular(p, v, dither):
     steer regressors; freeing all seven steer entries must raise (cond >~ 1e15,
     regardless of dither), while Moore's symmetric set has cond < 100 (ref: 8.8/17.2)."""
     runs = [_sim(p, v, duration=10, seed=1, dither=dither), _sim(p, v + 2, duration=10, seed=2)]
-    with pytest.raises(ValueError, match="unidentifiable") as exc:
+    with pytest.raises(UntrustworthyResult, match="unidentifiable") as exc:  # exit status 4
         identify(runs, p, source="truth", symmetric=False,
                  free_steer=("Mdp", "Mdd", "C1dp", "C1dd", "K0dp", "K0dd", "K2dd"))  # fmt: skip
     assert "condition number" in str(exc.value)
@@ -90,7 +91,7 @@ def test_t3_single_speed_separability(p, v):
     """T3: at one constant speed g*delta and v^2*delta are collinear -> ValueError that
     names K0/K2 and asks for other speeds; per-sample speed variation fixes it."""
     run = _sim(p, v, duration=10, seed=3, dither=1.0)
-    with pytest.raises(ValueError, match="constant speed cannot separate K0 from K2"):
+    with pytest.raises(UntrustworthyResult, match="constant speed cannot separate K0 from K2"):
         identify(run, p, source="truth")
     varied = _sim(p, v, duration=20, seed=3, dither=1.0, speed_variation=0.3 * v)
     res = identify(varied, p, source="truth")

@@ -74,6 +74,14 @@ def test_pem_noise_free_exact_recovery():
     m = pem.fit(r)
     assert np.allclose(m.theta, theta_from_matrices(CM, 4.0), rtol=1e-7, atol=1e-7)
     assert m.state_space().nstates == 4 and m.state_space().ninputs == 1
+    # bikeid's state order by default: the same A as sim.linear at 4 m/s (exact data, so to
+    # the same 1e-7 as theta); Chen & Dao's order only by name
+    ref = state_space(P, 4.0, inputs=("T_delta",))
+    assert list(m.state_space().state_labels) == ["phi", "delta", "phidot", "deltadot"]
+    np.testing.assert_allclose(m.state_space().A, ref.A, rtol=1e-7, atol=1e-6)
+    assert list(m.state_space(order="chen_dao").state_labels) == [
+        "phi", "phidot", "delta", "deltadot"
+    ]
 
 
 def test_speed_model_noise_free_exact():

@@ -65,9 +65,10 @@ def test_roll_rate_bound_exceeds_the_toppling_rate(p):
 
 @needs_data
 def test_real_logs_are_inside_the_bounds():
-    """Every real log loads (no false alarm): all 20 logs are well inside the bounds."""
+    """Every real log loads (no false alarm): all 20 logs of the pinned set are inside the
+    bounds (``bikeid data fetch --all-speeds`` adds the 2-5 m/s campaign: more, never fewer)."""
     logs = find_logs(SBW)
-    assert len(logs) >= 4
+    assert len(logs) >= 20
     for path in logs:
         run = load_log(path)
         assert check_plausible(run, path.name) is run

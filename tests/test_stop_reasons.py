@@ -32,9 +32,9 @@ from bikeid.experiments.sweep import (
 )
 from bikeid.ident.signals import check_complete, check_sampling
 from bikeid.sim.integrate import (
-    RK4_STABILITY,
     STOP_CAUSES,
     Stop,
+    rk4_amplification,
     simulate,
     simulate_reference,
 )
@@ -82,24 +82,28 @@ def test_stop_round_trips_through_json(cause, t, msg):
     assert back == s and back.physical is STOP_CAUSES[cause].physical
 
 
-def test_rk4_stability_limit_is_the_real_axis_root():
-    """|R(z)| = 1 for RK4's R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 at z = -2.7853 (Hairer &
-    Wanner II, Fig. IV.2.1): R(z) = 1 there, z (z^3/24 + z^2/6 + z/2 + 1) = 0; the constant
-    2.78 lies just inside."""
+def test_rk4_amplification_matches_the_stability_region():
+    """RK4's stability region (Hairer & Wanner II, Fig. IV.2.1): on the negative real axis it
+    ends at z = -2.7853, the real root of R(z) = 1 (z (z^3/24 + z^2/6 + z/2 + 1) = 0); on
+    the imaginary axis at 2.8284 (2 sqrt 2); along 120 deg, the direction of lightly damped
+    modes, it ends before |z| = 2.7, which a test on |lambda h| alone would miss."""
     roots = np.roots([1 / 24, 1 / 6, 1 / 2, 1])  # R(z) - 1 = z * (this cubic)
     zr = min(r.real for r in roots if abs(r.imag) < 1e-9)
     assert zr == pytest.approx(-2.7853, abs=1e-4)
-    assert 2.7 < RK4_STABILITY <= -zr
+    assert rk4_amplification(-2.78) < 1 < rk4_amplification(-2.79)
+    assert rk4_amplification(2.82j) < 1 < rk4_amplification(2.83j)
+    direction = np.exp(2j * np.pi / 3)
+    assert rk4_amplification(2.7 * direction) > 1
 
 
 def test_coarse_step_is_a_numerical_blow_up_not_a_fall(bike):
     """The issue's case stopped with "fell at 0.38 s".  The fastest eigenvalue of the
     linearized benchmark at 15 m/s is the caster, -35.8 1/s (sim.linear), so one 0.1 s RK4
-    step is 3.58 > 2.785 beyond RK4's stability limit: a numerical blow-up.  At the default
+    step is -3.58, outside RK4's stability region: a numerical blow-up.  At the default
     step the same run completes its 20 s, which confirms it."""
     x0 = bike.state(15.0, phidot=math.radians(10.0))
-    lam = max(abs(eigenvalues(benchmark(), 15.0)))
-    assert lam * 0.1 > RK4_STABILITY
+    lams = eigenvalues(benchmark(), 15.0)
+    assert np.max(rk4_amplification(lams[lams.real < 0] * 0.1)) > 1
     with pytest.warns(RuntimeWarning, match="not a fall"):
         tr = simulate(bike, x0, 20.0, **COARSE)
     assert tr.stop.cause == "step_too_coarse" and not tr.stop.physical
@@ -113,7 +117,7 @@ def test_coarse_step_is_a_numerical_blow_up_not_a_fall(bike):
 def test_half_step_check_alone_catches_the_blow_up(bike, monkeypatch):
     """With the eigenvalue test switched off, re-integrating the last sample with half the
     step must still call the same run numerical (its roll/steer move by O(1) rad)."""
-    monkeypatch.setattr(integrate, "RK4_STABILITY", math.inf)
+    monkeypatch.setattr(integrate, "rk4_amplification", lambda z: np.zeros(np.shape(z)))
     tr = _quiet(simulate, bike, bike.state(15.0, phidot=math.radians(10.0)), 20.0, **COARSE)
     assert tr.stop.cause == "step_too_coarse" and "halving" in tr.stop.message
     assert tr.fell_at is None
