@@ -12,9 +12,10 @@ Generator (per trial, everything drawn from the trial's seed):
   M, C1, K0, K2 of ``bicycleparameters.bicycle.benchmark_par_to_canonical`` (Moore's
   implementation of Meijaard 2007, not :mod:`bikeid.sim.linear`) for the steer-by-wire
   bicycle's parameters *perturbed within their measurement uncertainty* (the data README
-  gives none; we use +-5 % on each body's inertia tensor and +-2 mm on the trail, uniform), integrated by
-  RK4 with 10 substeps per 10 ms sample, written here.  Otherwise bikeid's nonlinear plant
-  (:func:`bikeid.dataset.closed_loop.simulate_run`) with the same perturbed parameters.
+  gives none; we use +-5 % on each body's inertia tensor and +-2 mm on the trail, uniform),
+  integrated by RK4 with 10 substeps per 10 ms sample, written here.  Otherwise bikeid's
+  nonlinear plant (:func:`bikeid.dataset.closed_loop.simulate_run`) with the same perturbed
+  parameters.
 - **Hidden effect**: one of six library effects, one of two effects outside the library
   (roll viscous damping, roll stiffness), or none.  The linear plant applies them here:
   steer torques -c deltadot, -T_c tanh(deltadot / 0.01 rad/s), -k delta; roll torques
@@ -56,7 +57,6 @@ from bikeid.experiments.effect_trials import (
     EVAL_PER_SPEED,
     FIT_PER_SPEED,
     N_SAMPLES,
-    SPEED_RANGE,
     binomial_ci,
 )
 

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from bikeid.dataset.windows import Window
 from bikeid.experiments.blind_trials import (
     BlindTrial,
     Nuisance,
@@ -18,14 +19,16 @@ from bikeid.experiments.blind_trials import (
     score,
     summarize_blind,
 )
-from bikeid.dataset.windows import Window
+from bikeid.experiments.effect_trials import EFFECTS
 from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.sim import linear
 from bikeid.sim.parameters import benchmark, steer_by_wire
 
-QUIET = Nuisance(plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
-                 noise=0.0, colour=0.0, steer_noise=0.0, encoder_counts=2**40, gyro_bias=0.0, gyro_walk=0.0,
-                 steer_rate="gyro", speed_wander=0.0, wander_freq=0.5)  # fmt: skip
+QUIET = Nuisance(
+    plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0, noise=0.0,
+    colour=0.0, steer_noise=0.0, encoder_counts=2**40, gyro_bias=0.0, gyro_walk=0.0,
+    steer_rate="gyro", speed_wander=0.0, wander_freq=0.5,
+)
 
 
 def test_independent_matrices_match_meijaard_and_bikeid():
@@ -116,9 +119,7 @@ def test_draw_is_reproducible_and_extends():
     a = draw_blind_trials(4, 3)
     b = draw_blind_trials(9, 3)
     assert a == b[:4]
-    assert {t.effect for t in b} == {
-        "steer_viscous_damping", "steer_coulomb_friction", "steer_stiffness", "command_gain",
-        "actuator_lag", "input_delay", "roll_viscous_damping", "roll_stiffness", "none"}  # fmt: skip
+    assert {t.effect for t in b} == set(EFFECTS) | {"none"}
 
 
 @pytest.mark.slow
