@@ -86,6 +86,7 @@ def main() -> None:
     print(f"{'mean extra effects per library trial':34s} {me['mean']:.2f}{ci}")
     print(_fmt("false positive (no-effect logs)", s["false_positive"]))
     print(_fmt("outside library misattributed", s["misattributed"]))
+    print(f"{'pipeline failures (counted as misses)':34s} {s['pipeline_errors']}")
     print(dump_json(s["per_plant"]))
 
 

@@ -502,7 +502,9 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool = True, max_effects: int 
     Returns
     -------
     dict
-        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds.
+        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds;
+        ``error`` is the pipeline's message when it failed (verdict ``["error"]``, scored as
+        not right and not a false positive, and counted by :func:`summarize_blind`).
     """
     from bikeid.ident.discrepancy_diagnostics import evaluate
     from bikeid.ident.effect_selection import select_effects
@@ -512,12 +514,18 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool = True, max_effects: int 
     fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
     held = generate_windows(trial, trial.eval_speeds, EVAL_PER_SPEED, trial.seed + 1, "eval")
     nominal = ExperimentModel()
-    res = select_effects(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
-    ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
+    try:
+        res = select_effects(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
+        ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
+    except (ValueError, ArithmeticError) as exc:  # e.g. a candidate's nonlinear run fell
+        row = {**asdict(trial), "verdict": ["error"], "estimates": {}, "error": str(exc)}
+        row.update(score(trial, ["error"], {}))
+        row["seconds"] = time.perf_counter() - t0
+        return row
     est = {e.name: float(e.value) for e in res.effects}
     row = {**asdict(trial), "verdict": res.verdict, "estimates": est,
            "error_before": ev["error_before"], "error_after": ev["error_after"],
-           "explained_fraction": res.explained}  # fmt: skip
+           "explained_fraction": res.explained, "error": None}  # fmt: skip
     row.update(score(trial, res.verdict, est))
     row["seconds"] = time.perf_counter() - t0
     return row
@@ -544,7 +552,7 @@ def summarize_blind(rows: list[dict]) -> dict:
         ``right_first`` (library trials), ``with_extras`` (library trials with >= 1 extra
         effect) and ``mean_extras`` (per library trial, with a normal-approximation 95 %
         interval), ``false_positive`` (no-effect trials), ``misattributed`` (outside trials),
-        each ``{k, n, rate, ci95}``; ``per_plant`` splits the first four by plant.
+        each ``{k, n, rate, ci95}``; ``pipeline_errors`` (trials the pipeline failed on); ``per_plant`` splits the first four by plant.
     """
     lib = [r for r in rows if r["kind"] == "library"]
     none = [r for r in rows if r["kind"] == "none"]
@@ -564,6 +572,7 @@ def summarize_blind(rows: list[dict]) -> dict:
         },  # fmt: skip
         "false_positive": _rate(none, "false_positive"),
         "misattributed": _rate(outside, "misattributed"),
+        "pipeline_errors": sum(1 for r in rows if r.get("error")),
     }
     per = {}
     for plant in ("independent_linear", "bikeid_nonlinear"):
