@@ -552,7 +552,8 @@ def summarize_blind(rows: list[dict]) -> dict:
         ``right_first`` (library trials), ``with_extras`` (library trials with >= 1 extra
         effect) and ``mean_extras`` (per library trial, with a normal-approximation 95 %
         interval), ``false_positive`` (no-effect trials), ``misattributed`` (outside trials),
-        each ``{k, n, rate, ci95}``; ``pipeline_errors`` (trials the pipeline failed on); ``per_plant`` splits the first four by plant.
+        each ``{k, n, rate, ci95}``; ``pipeline_errors`` (trials the pipeline failed on);
+        ``per_plant`` splits the first four by plant.
     """
     lib = [r for r in rows if r["kind"] == "library"]
     none = [r for r in rows if r["kind"] == "none"]
