@@ -1,7 +1,7 @@
 """Benchmark: blind effect-selection trials (an independent generator; four rates).
 
     python benchmarks/bench_blind_trials.py [--n 90] [--seed 0] [--processes 2]
-        [--plant nonlinear|linear] [--log blind.jsonl] [--resume blind.jsonl]
+        [--plant nonlinear|linear|auto] [--log blind.jsonl] [--resume blind.jsonl]
 
 Draws ``n`` trials of :mod:`bikeid.experiments.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
@@ -61,7 +61,9 @@ def main() -> None:
     trials = [t for t in draw_blind_trials(args.n, args.seed) if t.index not in done]
     rows = [done[i] for i in sorted(done) if i < args.n]
     t0 = time.perf_counter()
-    job = partial(run_blind_trial, nonlinear=args.plant == "nonlinear")
+    job = partial(
+        run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear"
+    )
     with ProcessPoolExecutor(max_workers=args.processes) as pool:
         for r in pool.map(job, trials):
             r = to_jsonable(r)

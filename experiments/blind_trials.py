@@ -486,16 +486,17 @@ def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) ->
     return {"kind": "library", "extras": extras, "right_first": ok}
 
 
-def run_blind_trial(trial: BlindTrial, nonlinear: bool = True, max_effects: int = 2) -> dict:
+def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects: int = 2) -> dict:
     """Generate, select (not told), evaluate on held-out speeds, score.
 
     Parameters
     ----------
     trial : BlindTrial
         The trial.
-    nonlinear : bool, optional
-        Nominal plant of the pipeline: nonlinear (default of ``bikeid measured fit``) or
-        linear.
+    nonlinear : bool or "auto", optional
+        Nominal plant of the pipeline: nonlinear (default of ``bikeid measured fit``),
+        linear, or "auto": the one that fits the fit windows better before selection
+        (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).
     max_effects : int, optional
         Selection rounds.
 
@@ -507,13 +508,16 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool = True, max_effects: int 
         not right and not a false positive, and counted by :func:`summarize_blind`).
     """
     from bikeid.ident.discrepancy_diagnostics import evaluate
-    from bikeid.ident.effect_selection import select_effects
+    from bikeid.ident.effect_selection import compare_nominal_plants, select_effects
     from bikeid.ident.experiment_model import ExperimentModel
 
     t0 = time.perf_counter()
     fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
     held = generate_windows(trial, trial.eval_speeds, EVAL_PER_SPEED, trial.seed + 1, "eval")
     nominal = ExperimentModel()
+    plants = compare_nominal_plants(nominal, fit)
+    if nonlinear == "auto":
+        nonlinear = plants["preferred"] == "nonlinear"
     try:
         res = select_effects(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
         ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
@@ -525,7 +529,8 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool = True, max_effects: int 
     est = {e.name: float(e.value) for e in res.effects}
     row = {**asdict(trial), "verdict": res.verdict, "estimates": est,
            "error_before": ev["error_before"], "error_after": ev["error_after"],
-           "explained_fraction": res.explained, "error": None}  # fmt: skip
+           "explained_fraction": res.explained, "error": None, "nominal_costs": plants,
+           "nominal_plant": "nonlinear" if nonlinear else "linear"}  # fmt: skip
     row.update(score(trial, res.verdict, est))
     row["seconds"] = time.perf_counter() - t0
     return row
