@@ -39,9 +39,10 @@ def main() -> None:
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument(
         "--plant",
-        choices=("nonlinear", "linear"),
+        choices=("nonlinear", "linear", "auto"),
         default="nonlinear",
-        help="the pipeline's nominal plant (default: that of 'measured fit')",
+        help="the pipeline's nominal plant (default: that of 'measured fit'); auto: the "
+        "better-fitting one before selection",
     )
     ap.add_argument("--log", help="append each finished trial to this JSON-lines file")
     ap.add_argument("--resume", help="reuse the finished trials of this JSON-lines log")
