@@ -113,3 +113,59 @@ def test_export_refuses_a_link_at_the_output(folder):
     rc, _, err = _run(["export", "runs.h5", "--run", "v4", "--out", "one.csv"], folder)
     assert rc == 3 and "symbolic link" in err, err
     assert (folder / "precious.txt").read_text() == "keep"
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--method", "direct", "--bicycle", "benchmark"],
+        ["--method", "pem", "--speed-parameterized"],
+        ["--method", "pem", "--outputs", "phi,delta"],
+    ],
+)
+def test_identify_out_then_load_model(folder, extra):
+    """``identify --out``: the saved model loaded in Python has exactly the eigenvalues the
+    same command printed (JSON floats are repr round trips, so equality is exact), the
+    settings asked for, and the SHA-256 of the data file as hashlib computes it."""
+    import hashlib
+
+    from bikeid.ident import read_model_file
+
+    rc, out, err = _run(["identify", "runs.h5", *extra, "--json", "--out", "m.json"], folder)
+    assert rc == 0, err
+    res = json.loads(out)
+    printed = _eigs(out)
+    files = [folder / f for f in res["model_files"]]
+    assert len(files) == (2 if "--outputs" in extra else 1)
+    raw = (folder / "runs.h5").read_bytes()
+    for f in files:
+        mf = read_model_file(f)
+        assert mf.provenance == (
+            {"path": str((folder / "runs.h5").resolve()), "size": len(raw),
+             "sha256": hashlib.sha256(raw).hexdigest()},
+        )  # fmt: skip
+        assert mf.settings["method"] == extra[1] and mf.settings["outputs"] == res["outputs"]
+        for v in mf.speeds if mf.kind != "canonical-pem" else (mf.model.speed,):
+            eig = mf.model.eigenvalues() if mf.kind == "canonical-pem" else mf.model.eigenvalues(v)
+            got = sorted(np.asarray(eig, complex), key=lambda c: (c.real, c.imag))
+            assert np.array_equal(got, printed[v]), (got, printed[v])
+    if "--outputs" in extra:
+        assert mf.outputs == ("phi", "delta") and mf.model.K.shape == (4, 2)
+    for f in files:
+        f.unlink()
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--method", "direct", "--outputs", "phi,delta"], "direct least squares needs"),
+        (["--method", "pem", "--outputs", "phidot,deltadot"], "needs phi and delta"),
+        (["--method", "pem", "--outputs", "phi,delta,yaw"], "give measured states"),
+        (["--method", "pem", "--input", "phi"], "not a torque"),
+        (["--method", "pem", "--input", "hand_torque"], "has no signal 'hand_torque'"),
+        (["--method", "pem", "--out", "."], "is a folder"),
+    ],
+)
+def test_identify_refuses_impossible_choices(folder, extra, words):
+    rc, _, err = _run(["identify", "runs.h5", *extra], folder)
+    assert rc == 3 and words in err and len(err.strip().splitlines()) == 1, err
