@@ -184,6 +184,13 @@ def cmd_evaluate(args) -> int:
         for when in ("before", "after"):
             a = s[f"push_asymmetry_{when}"]
             print(f"error by push direction {when}: {_asymmetry_text(a)}")
+        for f in out["validation"]["files"]:  # the model's validation (bikeid validate's tests)
+            print(f"validation {f['file']}: " + "; ".join(
+                f"{c} fit {f['fit'][c]:.1f} %, residuals "
+                f"{'white' if r['white'] else 'not white'}"
+                + ("" if "independent" not in r else
+                   f", {'independent of' if r['independent'] else 'correlated with'} T_ext")
+                for c, r in f["residuals"].items()))  # fmt: skip
     return 0
 
 

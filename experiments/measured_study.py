@@ -19,6 +19,7 @@ from bikeid.ident.effect_fit import FitResult, joint_fit
 from bikeid.ident.effect_library import LIBRARY
 from bikeid.ident.effect_selection import select_effects, selection_frequencies
 from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.validation_report import validate_decays
 from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import loads_json
@@ -189,12 +190,15 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
     -------
     dict
         The metric's description, plant, verdict, effects with standard errors, fit speeds,
-        and :func:`bikeid.ident.discrepancy_diagnostics.evaluate`'s ``files`` and ``summary``
-        (NRMSE, dimensionless; weave eigenvalues [1/s]).
+        :func:`bikeid.ident.discrepancy_diagnostics.evaluate`'s ``files`` and ``summary``
+        (NRMSE, dimensionless; weave eigenvalues [1/s]), and ``validation``: the model's fit
+        [%] and residual tests per file (:func:`bikeid.ident.validation_report.validate_decays`).
     """
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
     plant = model_obj.get("plant", DEFAULT_PLANT)  # as model_from_json and measured fit
     ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
+    # the validation of `bikeid validate` on the decays (windows left corrected at `aug`)
+    validation = validate_decays(aug, windows)
     ident = model_obj.get("identification", {})
     std = {e["name"]: e for e in ident.get("effects", [])}
     effects = [
@@ -217,6 +221,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         "effects": effects,
         "fit_speeds": model_obj.get("fit_speeds"),
         **ev,
+        "validation": validation,
     }
 
 

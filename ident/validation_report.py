@@ -16,7 +16,9 @@ judge the model (MATLAB System Identification Toolbox habits, all built on
 
 The result, :class:`ValidationReport`, turns into plain JSON types with
 :meth:`ValidationReport.to_json`; the figures are drawn by
-:mod:`bikeid.experiments.validation_plots`.
+:mod:`bikeid.experiments.validation_plots`.  :func:`validate_decays` applies the same fit and
+residual tests to the steer-by-wire experiment model on measured free decays (``bikeid
+measured evaluate``).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ __all__ = [
     "frequency_response_estimate",
     "model_frequency_response",
     "residual_tests",
+    "validate_decays",
     "validate_model",
 ]
 
@@ -584,3 +587,75 @@ def validate_model(
         frequency_responses=tuple(frf),
         notes=tuple(dict.fromkeys(notes)),
     )
+
+
+def validate_decays(
+    model,
+    windows: Sequence,
+    channels: Sequence[str] = ("phidot", "delta"),
+    max_lag: int = 25,
+    confidence: float = 0.99,
+) -> dict:
+    """Compare and residual tests of an experiment model on measured free decays, per file.
+
+    The validation of :func:`validate_model` for the steer-by-wire experiment model, whose
+    simulation from each decay's measured initial state (``model.simulate(windows)``,
+    :meth:`bikeid.ident.experiment_model.ExperimentModel.simulate`, with the windows'
+    attached defect corrections) is compared with the measurements: the NRMSE fit of
+    :func:`~bikeid.ident.validate.goodness_of_fit` per window and channel, and the
+    simulation errors' whiteness and independence from the external steer torque T_ext
+    (:func:`residual_tests`, the errors of a file's windows stacked; the model has no noise
+    model, so these are output-error residuals).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The model (anything with ``simulate(windows)`` returning per window a dict of the
+        channels).
+    windows : sequence of Window
+        The decays.
+    channels : sequence of str, optional
+        Window signals compared (default roll rate [rad/s] and steer angle [rad]).
+    max_lag : int, optional
+        Largest lag of the residual tests [samples].
+    confidence : float, optional
+        Band level; the tests' level is 1 - confidence.
+
+    Returns
+    -------
+    dict
+        ``fit_definition``; ``files``: per file (sorted by name) ``file``, ``speed`` [m/s],
+        ``windows``, ``fit`` per channel [%] (the mean over its windows of 100 times the
+        NRMSE fit, so 100 - fit is 100 times the window error of
+        :func:`bikeid.ident.experiment_model.window_errors`) and ``residuals``
+        (:func:`residual_tests` per channel); ``fit`` per channel [%], the mean over files.
+    """
+    windows = list(windows)
+    if not windows:
+        raise ValueError("validate_decays: no windows given")
+    sims = model.simulate(windows)
+    files = []
+    for f in sorted({w.file for w in windows}):
+        idx = [i for i, w in enumerate(windows) if w.file == f]
+        fit, res, u = {c: [] for c in channels}, [], []
+        for i in idx:
+            w, s_ = windows[i], sims[i]
+            for c in channels:
+                fit[c].append(100 * goodness_of_fit(getattr(w, c), s_[c])["nrmse_fit"])
+            res.append(np.column_stack([getattr(w, c) - s_[c] for c in channels]))
+            u.append(np.asarray(w.T_ext, float))
+        files.append({
+            "file": f,
+            "speed": float(np.mean([windows[i].speed for i in idx])),
+            "windows": len(idx),
+            "fit": {c: float(np.mean(v)) for c, v in fit.items()},
+            "residuals": residual_tests(res, u, channels, max_lag, confidence),
+        })  # fmt: skip
+    return {
+        "fit_definition": "mean over a file's decay windows of 100 (1 - ||y - y_sim|| / "
+        "||y - mean y||) [%] (MATLAB compare's NRMSE fit; simulation from the measured "
+        "initial state); residual tests chi-squared at level 1 - confidence on the "
+        "simulation errors, input T_ext",
+        "files": files,
+        "fit": {c: float(np.mean([f_["fit"][c] for f_ in files])) for c in channels},
+    }
