@@ -17,6 +17,9 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
 - :mod:`~bikeid.ident.validate`: ``compare`` (simulation and k-step prediction),
   ``resid`` (whiteness, input cross-correlation), ``goodness_of_fit``, poles, zeros.
+- :mod:`~bikeid.ident.validation_report`: ``validate_model`` (fits, residual tests and a
+  nonparametric frequency response against a model, ``bikeid validate``) and
+  ``validate_decays`` (the same on measured decays, ``bikeid measured evaluate``).
 - :mod:`~bikeid.ident.model_file`: ``save_model`` / ``load_model``, the one JSON file
   format of every identified model (parameters bit for bit, covariance, provenance).
 

@@ -336,9 +336,10 @@ def compare(
     Raises
     ------
     ValueError
-        A simulation of an unstable model over a long run (growth of the largest discrete
-        eigenvalue over the run above 1e12): use a finite horizon or a shorter window
-        (``Run.window``), as Moore's 8 s windows.
+        UntrustworthyResult (a ValueError) for a simulation of an unstable model over a long
+        run (growth of the largest discrete eigenvalue over the run above 1e12): use a finite
+        horizon or a shorter window (``Run.window``), as Moore's 8 s windows; likewise for a
+        prediction whose predictor Ad - K C is unstable (K = 0 and an unstable model).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if horizon is not None and horizon < 1:
@@ -359,6 +360,13 @@ def compare(
                 )
             yhat, x0 = simulation(Ad, Bd, C, U, Y, ic)
         else:
+            growth = np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) ** N
+            if growth > 1e12:
+                raise UntrustworthyResult(
+                    f"the model's predictor is unstable (Ad - K C; K = 0 for a model without "
+                    f"a noise model) and the run has {N} samples (growth {growth:.2g}): use a "
+                    "shorter window (Run.window) or a model with an innovation gain (pem)"
+                )
             # the one-step predictor is a simulation of x+ = (Ad - K C) x + [Bd K] [u; y]
             _, x0 = simulation(Ad - K @ C, np.hstack([Bd, K]), C, np.hstack([U, Y]), Y, ic)
             yhat = k_step_prediction(Ad, Bd, C, K, U, Y, horizon - 1, x0, head="open-loop")

@@ -538,6 +538,10 @@ def validate_model(
     ValueError
         On bad arguments, or runs the model cannot be compared with (missing signals,
         another sample period).
+    UntrustworthyResult
+        If the model's predictor diverges over the runs (an unstable model without a noise
+        model, K = 0): validate on shorter windows.  A simulation alone that diverges is
+        not an error (``simulation`` is None, ``simulation_note`` says why).
     """
     runs = _runs(runs)
     if not (isinstance(k_step, (int, np.integer)) and k_step >= 1):
@@ -548,7 +552,12 @@ def validate_model(
         sim_note = ""
     except UntrustworthyResult as exc:
         sim, sim_note = None, f"simulation refused: {exc}"
-    pred = compare(runs, model, horizon=int(k_step), ic=ic)
+    try:
+        pred = compare(runs, model, horizon=int(k_step), ic=ic)
+    except UntrustworthyResult as exc:
+        raise UntrustworthyResult(
+            f"neither simulation nor prediction can be trusted: {exc}" if sim is None else str(exc)
+        ) from None
     outputs = pred.outputs
     if input == "auto":
         dithered = all(r.dither is not None and np.any(r.dither) for r in runs)
