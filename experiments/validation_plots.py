@@ -4,8 +4,9 @@ Three PNG figures, written atomically (:func:`bikeid.experiments.plots.save`):
 
 - :func:`plot_compare`: per output, measured, simulated and k-step-predicted signals of one
   run against time, with MATLAB ``compare``'s fit [%] in the legend;
-- :func:`plot_resid`: per output, the residual autocorrelation and the residual-input
-  cross-correlation against lag with the 99 % band and the chi-squared test verdicts;
+- :func:`plot_resid`: per output, the residual autocorrelation (lags 1..M; lag 0 is 1) and
+  the residual-input cross-correlation against lag with the 99 % band and the chi-squared
+  test verdicts;
 - :func:`plot_bode`: per output and speed, the model's Bode plot (sampled response) with
   the nonparametric estimate and its error bars at the frequencies the coherence allows,
   and the coherence itself.
@@ -87,14 +88,15 @@ def plot_resid(report: ValidationReport, path: str | Path) -> Path:
     """
     rr = report.residuals
     p = len(report.outputs)
-    fig, axes = plt.subplots(p, 2, figsize=(9, 2.2 * p + 0.6), squeeze=False)
+    fig, axes = plt.subplots(p, 2, figsize=(9, 2.4 * p + 0.6), squeeze=False,
+                             layout="constrained")  # fmt: skip
     m = int(rr.lags[-1])
     for j, o in enumerate(report.outputs):
         a, c = axes[j, 0], axes[j, 1]
         w, ind = rr.whiteness_test[o], rr.independence_test[o]
-        a.stem(np.arange(m + 1), rr.autocorr[o], basefmt=" ")
-        a.set_title(f"{o}: whiteness {'passed' if w['passed'] else 'FAILED'} "
-                    f"(p = {w['p_value']:.2g})", fontsize=8)  # fmt: skip
+        a.stem(np.arange(1, m + 1), rr.autocorr[o][1:], basefmt=" ")  # lag 0 is 1
+        a.set_title(f"{o} residual: whiteness {'passed' if w['passed'] else 'FAILED'} "
+                    f"(p = {w['p_value']:.2g}, lags 1..{m})", fontsize=8)  # fmt: skip
         c.stem(rr.lags, rr.crosscorr[o], basefmt=" ")
         c.set_title(f"{o} vs {rr.input}: independence {'passed' if ind['passed'] else 'FAILED'} "
                     f"(p = {ind['p_value']:.2g}, lags 1..{m})", fontsize=8)  # fmt: skip
