@@ -90,8 +90,9 @@ def sampled_model(model, dt: float, v: float | None = None):
     model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
         A ``CanonicalModel`` gives its own predictor (its ``dt`` must equal ``dt``); a
         ``SpeedCanonicalModel`` its fixed-speed model at ``v`` (:meth:`at`: K of the
-        nearest fitted speed); a ``DirectResult`` its state space at ``v`` with input
-        T_delta, all four states measured and K = 0; a continuous ``StateSpace`` (D = 0)
+        nearest fitted speed); a ``DirectResult`` its state space at ``v`` with inputs
+        T_phi, T_delta and F (a run without T_phi or F has them zero), all four states
+        measured and K = 0; a continuous ``StateSpace`` (D = 0)
         is sampled exactly (zero-order hold) with K = 0.
     dt : float
         Sample period of the data [s].
@@ -117,8 +118,8 @@ def sampled_model(model, dt: float, v: float | None = None):
             raise ValueError(
                 f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
             )
-        if isinstance(model, DirectResult):
-            model = model.state_space(v, inputs=("T_delta",))
+        if isinstance(model, DirectResult):  # all its inputs (zero when a run lacks them)
+            model = model.state_space(v)
         else:
             model = model.at(v)
     if hasattr(model, "predictor") and hasattr(model, "outputs"):

@@ -173,6 +173,34 @@ def test_unstable_model_simulation_refused_prediction_kept():
         validate_model(m, r)
 
 
+def test_models_over_speed_are_taken_at_each_runs_speed():
+    """A DirectResult and a SpeedCanonicalModel built from the true matrices, validated on
+    noise-free runs at 4 and 6 m/s: each run is compared with the model at its own speed, so
+    every fit is 100 % to rounding (1e-7 %, as the fixed-speed case), and the frequency
+    responses come in one group per speed."""
+    from bikeid.ident.canonical import speed_params_from_matrices
+    from bikeid.ident.direct import DirectResult
+    from bikeid.ident.pem import SpeedCanonicalModel
+
+    runs = [simulate(P, v, duration=10, seed=1, dither=1.0) for v in (4.0, 6.0)]
+    cm = canonical_matrices(P)
+    direct = DirectResult(
+        M=cm.M, C1=cm.C1, K0=cm.K0, K2=cm.K2, H=np.zeros(2), g=cm.g, free={}, stderr={},
+        covariance={}, condition={}, vaf_moore={}, vaf_variance={}, n_samples=0, method="ls",
+    )  # fmt: skip
+    dt = runs[0].dt
+    per = {v: _canonical(v, dt, outputs=("phi", "phidot", "delta", "deltadot")) for v in (4.0, 6.0)}
+    speed = SpeedCanonicalModel(params=speed_params_from_matrices(cm), per_speed=per, dt=dt,
+                                covariance=np.zeros((14, 14)), g=cm.g)  # fmt: skip
+    for model in (direct, speed):
+        rep = validate_model(model, runs)
+        for o in rep.outputs:
+            assert rep.fit[o] == pytest.approx(100.0, abs=1e-7), (type(model).__name__, o)
+            for row in rep.fit_per_run:
+                assert row["simulation"][o] == pytest.approx(100.0, abs=1e-7)
+        assert sorted({e.speed for e in rep.frequency_responses}) == [4.0, 6.0]
+
+
 def test_validate_decays_fit_is_the_evaluate_error():
     """validate_decays (measured evaluate's validation) and experiment_model.window_errors
     compute the same NRMSE by two code paths: fit = 100 (1 - error) to 1e-9 %, per file; the
