@@ -19,7 +19,6 @@ from bikeid.ident.effect_fit import FitResult, joint_fit
 from bikeid.ident.effect_library import LIBRARY
 from bikeid.ident.effect_selection import select_effects, selection_frequencies
 from bikeid.ident.experiment_model import ExperimentModel
-from bikeid.ident.validation_report import validate_decays
 from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import loads_json
@@ -194,6 +193,8 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         (NRMSE, dimensionless; weave eigenvalues [1/s]), and ``validation``: the model's fit
         [%] and residual tests per file (:func:`bikeid.ident.validation_report.validate_decays`).
     """
+    from bikeid.ident.validation_report import validate_decays
+
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
     plant = model_obj.get("plant", DEFAULT_PLANT)  # as model_from_json and measured fit
     ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
