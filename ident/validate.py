@@ -124,7 +124,10 @@ def sampled_model(model, dt: float, v: float | None = None):
             model = model.at(v)
     if hasattr(model, "predictor") and hasattr(model, "outputs"):
         if abs(model.dt - dt) > 1e-12:
-            raise ValueError(f"model identified at dt={model.dt} s, data at dt={dt} s")
+            raise ValueError(
+                f"model identified at dt={model.dt} s, data at dt={dt} s: give data logged "
+                "at the model's sample period (or identify again at the data's)"
+            )
         Ad, Bd, C, K = model.predictor()
         return Ad, Bd, C, K, tuple(model.outputs), ("T_delta",)
     if isinstance(model, control.StateSpace):

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from bikeid.dataset.run import Run
+from bikeid.dataset.run import SPEED_TOLERANCE, Run
 from bikeid.sim.errors import UntrustworthyResult
 
 from .validate import (
@@ -569,6 +569,15 @@ def validate_model(
             "the model has no noise model (K = 0): its k-step prediction and one-step "
             "residuals are those of a simulation (output error)"
         )
+    fixed = getattr(model, "speed", None) if hasattr(model, "predictor") else None
+    if fixed is not None:  # a fixed-speed model on runs at other speeds: say so
+        tol = max(SPEED_TOLERANCE[0], SPEED_TOLERANCE[1] * fixed)
+        other = sorted({round(r.speed, 3) for r in runs if abs(r.speed - fixed) > tol})
+        if other:
+            notes.append(
+                f"the model was identified at {fixed:g} m/s; runs at {other} m/s differ by "
+                f"more than {tol:g} m/s (a speed-parameterized model covers several speeds)"
+            )
     measured = tuple(np.column_stack([r[o] for o in outputs]) for r in runs)
     per_run = []
     for i, Y in enumerate(measured):

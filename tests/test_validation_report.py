@@ -109,6 +109,8 @@ def test_residual_tests_pass_for_the_true_model_and_fail_for_a_wrong_one(noisy_r
         assert not bad.residuals.whiteness_test[o]["passed"]
         assert bad.residuals.whiteness_test[o]["p_value"] < 1e-10
         assert bad.fit[o] < good.fit[o]
+    assert not any("identified at" in n for n in good.notes)
+    assert any("identified at 4 m/s" in n for n in bad.notes)  # 1 m/s > max(0.5, 15 % of 4)
     j = good.to_json()["residuals"]["outputs"]["phi"]["whiteness"]
     assert j["passed"] is True and j["dof"] == 25
 
