@@ -58,7 +58,11 @@ def _quiet(fn, *args, **kwargs):
 
 
 def test_stop_record_validates_and_round_trips():
-    assert {c for c, k in STOP_CAUSES.items() if k.physical} == {"roll_limit", "steer_limit"}
+    assert {c for c, k in STOP_CAUSES.items() if k.physical} == {
+        "roll_limit",
+        "steer_limit",
+        "wheel_unloaded",
+    }
     s = Stop("step_too_coarse", 0.5, "msg")
     assert s.physical is False and Stop.from_dict(s.as_dict()) == s
     with pytest.raises(ValueError, match="unknown stop cause"):
