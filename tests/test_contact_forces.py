@@ -216,3 +216,23 @@ def test_input_jump_unloading_the_front_wheel_stops_at_the_sample(bike):
         assert "front wheel" in run.stop.message
     ok = simulate(bike, bike.state(5.0), 1.0, inputs={"T_R": -50.0})
     assert ok.stop is None and np.all(ok.normal_forces[:, 1] > 0)
+
+
+def test_cli_simulate_reports_the_unloaded_wheel(tmp_path, capsys):
+    """``bikeid simulate`` prints the stop naming the wheel; its JSON carries cause and time
+    and the normal forces (the same run as above: rear wheel at 3.334 s)."""
+    import json
+
+    from bikeid.experiments.cli import main
+
+    out = tmp_path / "fall.json"
+    args = ["simulate", "--speed", "5", "--phi0", "25", "--duration", "5", "--out", str(out)]
+    assert main(args) == 0
+    msg = capsys.readouterr().out
+    assert "rear wheel" in msg and "[wheel_unloaded]" in msg
+    data = json.loads(out.read_text())
+    stop = data["meta"]["stop"]
+    assert stop["cause"] == "wheel_unloaded" and stop["physical"] is True
+    assert stop["time"] == pytest.approx(3.334, abs=1e-3)
+    assert data["meta"]["fell_at"] == stop["time"]
+    assert min(data["signals"]["N_rear"]) > 0
