@@ -149,8 +149,9 @@ class Stop:
     cause : str
         A key of :data:`STOP_CAUSES`.
     time : float
-        Time of the stop [s] (the limit crossing, interpolated within the RK4 step, or
-        the sample at which the controller failed).
+        Time of the stop [s] (the limit or zero-load crossing, interpolated within the
+        RK4 step; the sample at which the controller failed, or at which a jump of the
+        inputs unloaded a wheel).
     message : str
         One line for the user, with the fix for numerical causes.
     physical : bool

@@ -220,7 +220,7 @@ def rhs(y, q5g, p, r, ev, held, ydot):
     ``q5g[0]`` is the pitch warm start, updated in place.  Returns NaN (and a NaN
     ``ydot``) if the pitch Newton iteration fails.
     """
-    return _derivative(y, q5g, p, r, ev, held, ydot, np.empty(0))
+    return _derivative(y, q5g, p, r, ev, held, ydot, ydot[:0])  # no forces: empty view
 
 
 @njit(cache=True)
