@@ -270,3 +270,34 @@ def test_nullable_values_read_as_nan(models):
     obj = json.loads(model_json(m))
     assert obj["model"]["cost"] is None
     assert math.isnan(model_from_text(json.dumps(obj)).model.cost)
+
+
+def test_measured_fit_file_round_trip(models, tmp_path):
+    """``measured fit`` writes its model object as an experiment-model file; ``measured
+    evaluate``/``report`` (measured_study.model_from_json) read back the same object (the
+    effect values bit for bit), the old plain layout is still read, and a model of another
+    kind is refused naming the command that writes the right one."""
+    from bikeid.experiments.measured_study import model_from_json, save_fit
+
+    obj = {
+        "bicycle": "steer-by-wire", "plant": "linear",
+        "effects": {"steer_viscous_damping": 0.1 + 0.2, "input_delay": 5e-324},
+        "fit_speeds": [1.5, 3.5], "fit_files": ["a.log.gz"],
+        "fit_windows": [{"file": "a.log.gz", "start": 10, "end": 400}],
+        "identification": {"verdict": "explained", "effects": [{"name": "input_delay",
+                           "std": float("nan")}]},
+        "decays": "listed",
+    }  # fmt: skip
+    save_fit(obj, tmp_path / "m.json", {"max_effects": 3}, [])
+    model, back = model_from_json(tmp_path / "m.json")
+    assert back["effects"] == obj["effects"] and model.effects == obj["effects"]
+    assert back["plant"] == "linear" and back["fit_speeds"] == [1.5, 3.5]
+    assert back["decays"] == "listed" and back["fit_windows"] == obj["fit_windows"]
+    assert back["identification"]["effects"][0]["std"] is None  # NaN saved as null
+    mf = read_model_file(tmp_path / "m.json")
+    assert mf.kind == "experiment-model" and mf.settings["max_effects"] == 3
+    (tmp_path / "old.json").write_text(json.dumps({"effects": obj["effects"], "plant": "linear"}))
+    assert model_from_json(tmp_path / "old.json")[1]["effects"] == obj["effects"]
+    save_model(models["direct"], tmp_path / "d.json")
+    with pytest.raises(InputError, match="direct model.*measured fit"):
+        model_from_json(tmp_path / "d.json")
