@@ -75,6 +75,7 @@ __all__ = [
     "despike",
     "find_logs",
     "load_log",
+    "settled",
     "treadmill_speed",
 ]
 
@@ -94,6 +95,9 @@ SPIKE_K = 8.0
 SPIKE_FLOOR = {"fork_rate": 0.5, "x_acceleration": 5.0, "y_acceleration": 5.0}
 
 DATASET = "tudelft-sbw"
+
+#: Resolution of the treadmill's speed setting [m/s] (:func:`settled`).
+SETTING_STEP = 0.1
 
 
 def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
@@ -278,6 +282,44 @@ def load_log(path: str | os.PathLike) -> Run:
     for c, floor in SPIKE_FLOOR.items():
         raw[c], meta["spikes"][c] = despike(raw[c], floor)
     return Run(t=run.t, signals=_signals(raw), meta=meta)
+
+
+def settled(run: Run) -> Run:
+    """The settled part of a log's run, with ``v`` the treadmill speed: what an estimator fits.
+
+    The start-up ramp and any run-down (``meta["ramp_end_index"]`` ..
+    ``meta["settled_end_index"]``) are cut, and the sensor speed is replaced by the
+    treadmill speed through :func:`treadmill_speed` (the speed the bicycle's dynamics see).
+    ``meta["speed"]`` becomes the treadmill's setting: the settled calibrated speed rounded
+    to :data:`SETTING_STEP` (the logs' names give 1.5, 2.5, 3.5, 4.5 and 4 m/s; the
+    calibrated plateaus of the 20 logs lie within 0.05 m/s of them), so that the logs of one setting form
+    one speed for the estimators; ``meta["speed_calibrated"]`` keeps the unrounded value.
+
+    Parameters
+    ----------
+    run : Run
+        A run of :func:`load_log`.
+
+    Returns
+    -------
+    Run
+        The settled rows (same time base [s]); ``v`` [m/s] the treadmill speed,
+        ``v_sensor`` [m/s] the logged sensor speed; ``meta["v"]`` says so.
+
+    Raises
+    ------
+    ValueError
+        If the run has no settled-speed metadata (not read by :func:`load_log`) or fewer
+        than 2 settled samples.
+    """
+    if "ramp_end_index" not in run.meta:
+        raise ValueError("settled() needs a run read by sbw_logs.load_log")
+    part = run.window(run.meta["ramp_end_index"] * DT, run.meta["settled_end_index"] * DT)
+    signals = {**part.signals, "v": treadmill_speed(part["v"]), "v_sensor": part["v"]}
+    meta = {**part.meta, "v": "treadmill speed from the sensor calibration (sbw_logs.settled)",
+            "speed": round(run.meta["speed"] / SETTING_STEP) * SETTING_STEP,
+            "speed_calibrated": run.meta["speed"]}  # fmt: skip
+    return Run(t=part.t, signals=signals, meta=meta)
 
 
 #: Signal of the Run behind each column of the log (the required bikeid signals).
