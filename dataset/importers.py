@@ -30,6 +30,12 @@ constant-speed linear model does not fit: split the log), or the file is empty o
 unreadable.  Nothing else escapes from a malformed file: only :class:`ValueError` and
 :class:`OSError` with a message.
 
+A log without a time column (one row per sample period, ``time=None`` with ``dt``), with
+leading rows logged before recording began (``skip_leading``), extra columns kept as logged
+(``extra``) or a speed that ramps (``speed_range=None``) is read by the same path: the TU Delft
+steer-by-wire logs are (:func:`bikeid.dataset.sbw_logs.load_log` is a mapping onto
+:func:`from_csv`).  A ``.gz`` CSV is decompressed.
+
 The run's ``meta`` gets ``source = "imported"``, ``speed`` (mean of v) [m/s] and
 ``import``: the file name, absolute path, SHA-256 of its bytes, format, the column mapping,
 the time column, the unit conversions (user unit, SI unit, factor) and the flipped signals.

@@ -5,6 +5,10 @@ no time column, so t = i * 0.01 s.  Units are SI (rad, rad/s, N m, m/s).
 
 What the loader does, and why
 ------------------------------
+- **One reader**: :func:`load_log` maps the log's columns onto bikeid signals and reads
+  them with :func:`bikeid.dataset.importers.from_csv` (parsing, row-numbered errors,
+  plausibility, provenance in ``meta["import"]``: path and SHA-256); what follows is
+  specific to these logs.
 - **Time base**: t = i * 0.01 s from the first row of the file (row indices of
   ``eigen/segments.csv`` refer to the same numbering).
 - **Free-decay windows**: :mod:`bikeid.dataset.decays` (the listed rows of
@@ -292,8 +296,9 @@ def settled(run: Run) -> Run:
     treadmill speed through :func:`treadmill_speed` (the speed the bicycle's dynamics see).
     ``meta["speed"]`` becomes the treadmill's setting: the settled calibrated speed rounded
     to :data:`SETTING_STEP` (the logs' names give 1.5, 2.5, 3.5, 4.5 and 4 m/s; the
-    calibrated plateaus of the 20 logs lie within 0.05 m/s of them), so that the logs of one setting form
-    one speed for the estimators; ``meta["speed_calibrated"]`` keeps the unrounded value.
+    calibrated plateaus of the 20 logs lie within 0.05 m/s of them), so that the logs of
+    one setting form one speed for the estimators; ``meta["speed_calibrated"]`` keeps the
+    unrounded value.
 
     Parameters
     ----------
