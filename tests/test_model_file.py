@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bikeid.dataset import files
@@ -150,6 +150,7 @@ def test_metadata_and_provenance(models, tmp_path):
 finite = st.floats(allow_nan=False, allow_infinity=False, allow_subnormal=True)
 
 
+@settings(deadline=None)  # timing is not what is tested (a loaded machine)
 @given(
     theta=st.lists(finite, min_size=10, max_size=10),
     cov=st.lists(finite, min_size=100, max_size=100),
@@ -301,3 +302,45 @@ def test_measured_fit_file_round_trip(models, tmp_path):
     save_model(models["direct"], tmp_path / "d.json")
     with pytest.raises(InputError, match="direct model.*measured fit"):
         model_from_json(tmp_path / "d.json")
+
+
+json_values = st.recursive(
+    st.one_of(st.none(), st.booleans(), finite, st.integers(), st.text(max_size=6)),
+    lambda c: st.one_of(st.lists(c, max_size=3), st.dictionaries(st.text(max_size=6), c)),
+    max_leaves=8,
+)
+
+
+def _paths(obj, prefix=()):
+    yield prefix
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _paths(v, (*prefix, k))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _paths(v, (*prefix, i))
+
+
+_SPEED_TEXT = None
+
+
+@settings(deadline=None)  # the first example builds the file text (fixture warm-up)
+@given(data=st.data(), value=json_values)
+def test_any_damaged_field_is_a_clear_input_error(models, data, value):
+    """Replace any one field of a valid speed-model file (every nesting level) by an
+    arbitrary JSON value: the file either still reads or is refused with a one-line
+    InputError; never another exception (a traceback)."""
+    global _SPEED_TEXT
+    if _SPEED_TEXT is None:
+        _SPEED_TEXT = model_json(models["speed-canonical-pem"])
+    obj = json.loads(_SPEED_TEXT)
+    paths = list(_paths(obj))[1:]
+    path = data.draw(st.sampled_from(paths))
+    node = obj
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    try:
+        model_from_text(json.dumps(obj), "model file 'm.json'")
+    except InputError as exc:
+        assert "\n" not in str(exc) and "m.json" in str(exc)
