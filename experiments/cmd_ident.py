@@ -27,9 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
     p.add_argument(
-        "--format", choices=("bikeid", "csv", "hdf5"), default="bikeid",
+        "--format", choices=("bikeid", "csv", "hdf5", "sbw"), default="bikeid",
         help="bikeid: files written by bikeid (sweep, store); csv / hdf5: your own logs, read "
-        "with --columns (dataset.importers)",
+        "with --columns (dataset.importers); sbw: TU Delft steer-by-wire logs (files or "
+        "folders; the settled part of each, v = treadmill speed, dataset.sbw_logs)",
     )  # fmt: skip
     p.add_argument(
         "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
@@ -156,7 +157,10 @@ def _truth(runs):
     from bikeid.sim.parameters import from_mapping
 
     meta = runs[0].meta
-    values = meta.get("parameters") or (meta.get("bicycle") or {}).get("parameters")
+    bicycle = meta.get("bicycle")  # a name (measured logs) or the simulated bicycle
+    values = meta.get("parameters") or (bicycle if isinstance(bicycle, dict) else {}).get(
+        "parameters"
+    )
     return from_mapping(values, name="run meta") if values else None
 
 
@@ -204,6 +208,15 @@ def _load(args: argparse.Namespace) -> list:
             if getattr(args, opt) is not None:
                 raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
         return [r for f in args.file for r in read_runs(f)]
+    if args.format == "sbw":
+        from bikeid.dataset.sbw_logs import load_log, settled
+
+        for opt in ("columns", "units", "speed"):
+            if getattr(args, opt) is not None:
+                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
+        if args.flip:
+            raise ValueError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
+        return [settled(load_log(p)) for p in _data_files(args)]
     from bikeid.dataset import importers
 
     if not args.columns:
@@ -284,7 +297,10 @@ def _data_files(args: argparse.Namespace) -> list:
         if f.is_dir() and args.format == "sbw":
             from bikeid.dataset.sbw_logs import find_logs
 
-            files += find_logs(f)
+            logs = find_logs(f)
+            if not logs:
+                raise ValueError(f"{f} holds no steer-by-wire logs (*.log, *.log.gz)")
+            files += logs
         else:
             files.append(f)
     return files
@@ -349,7 +365,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
         if args.speed_parameterized:
             raise ValueError("--speed-parameterized applies to --method pem (direct is always)")
-        reference = by_name(args.bicycle) if args.bicycle else truth
+        bicycle = args.bicycle or (runs[0].meta.get("bicycle") if truth is None else None)
+        reference = by_name(bicycle) if isinstance(bicycle, str) else truth
         if reference is None:
             raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
         cutoff = args.cutoff

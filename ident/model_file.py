@@ -585,11 +585,14 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     outputs = r.texts(sec, "outputs", prefix)
     if any(m.outputs != outputs for m in models):
         raise r.fail(prefix + "per_speed", "must use the same outputs as the joint model")
+    dt = r.number(sec, "dt", prefix)
+    if dt <= 0:
+        raise r.fail(prefix + "dt", "must be a positive sample period [s]")
     return SpeedCanonicalModel(
         params=r.array(sec, "params", prefix, (14,)),
         covariance=r.array(sec, "covariance", prefix, (14, 14)),
         per_speed={round(m.speed, 6): m for m in models},
-        dt=r.number(sec, "dt", prefix),
+        dt=dt,
         g=r.number(sec, "g", prefix),
         outputs=outputs,
         cost=r.number(sec, "cost", prefix, nullable=True),
@@ -710,7 +713,7 @@ def model_from_text(text: str, where: str = "model file") -> ModelFile:
             f"{', '.join(map(str, READABLE_VERSIONS))}: upgrade bikeid, or {_FIX}"
         )
     kind = obj.get("kind")
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise InputError(
             f"{where}: field 'kind' is {kind!r}; known kinds are {', '.join(KINDS)}: upgrade "
             f"bikeid, or {_FIX}"

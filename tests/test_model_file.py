@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bikeid.dataset import files
@@ -150,6 +150,7 @@ def test_metadata_and_provenance(models, tmp_path):
 finite = st.floats(allow_nan=False, allow_infinity=False, allow_subnormal=True)
 
 
+@settings(deadline=None)  # timing is not what is tested (a loaded machine)
 @given(
     theta=st.lists(finite, min_size=10, max_size=10),
     cov=st.lists(finite, min_size=100, max_size=100),
@@ -270,3 +271,76 @@ def test_nullable_values_read_as_nan(models):
     obj = json.loads(model_json(m))
     assert obj["model"]["cost"] is None
     assert math.isnan(model_from_text(json.dumps(obj)).model.cost)
+
+
+def test_measured_fit_file_round_trip(models, tmp_path):
+    """``measured fit`` writes its model object as an experiment-model file; ``measured
+    evaluate``/``report`` (measured_study.model_from_json) read back the same object (the
+    effect values bit for bit), the old plain layout is still read, and a model of another
+    kind is refused naming the command that writes the right one."""
+    from bikeid.experiments.measured_study import model_from_json, save_fit
+
+    obj = {
+        "bicycle": "steer-by-wire", "plant": "linear",
+        "effects": {"steer_viscous_damping": 0.1 + 0.2, "input_delay": 5e-324},
+        "fit_speeds": [1.5, 3.5], "fit_files": ["a.log.gz"],
+        "fit_windows": [{"file": "a.log.gz", "start": 10, "end": 400}],
+        "identification": {"verdict": "explained", "effects": [{"name": "input_delay",
+                           "std": float("nan")}]},
+        "decays": "listed",
+    }  # fmt: skip
+    save_fit(obj, tmp_path / "m.json", {"max_effects": 3}, [])
+    model, back = model_from_json(tmp_path / "m.json")
+    assert back["effects"] == obj["effects"] and model.effects == obj["effects"]
+    assert back["plant"] == "linear" and back["fit_speeds"] == [1.5, 3.5]
+    assert back["decays"] == "listed" and back["fit_windows"] == obj["fit_windows"]
+    assert back["identification"]["effects"][0]["std"] is None  # NaN saved as null
+    mf = read_model_file(tmp_path / "m.json")
+    assert mf.kind == "experiment-model" and mf.settings["max_effects"] == 3
+    (tmp_path / "old.json").write_text(json.dumps({"effects": obj["effects"], "plant": "linear"}))
+    assert model_from_json(tmp_path / "old.json")[1]["effects"] == obj["effects"]
+    save_model(models["direct"], tmp_path / "d.json")
+    with pytest.raises(InputError, match="direct model.*measured fit"):
+        model_from_json(tmp_path / "d.json")
+
+
+json_values = st.recursive(
+    st.one_of(st.none(), st.booleans(), finite, st.integers(), st.text(max_size=6)),
+    lambda c: st.one_of(st.lists(c, max_size=3), st.dictionaries(st.text(max_size=6), c)),
+    max_leaves=8,
+)
+
+
+def _paths(obj, prefix=()):
+    yield prefix
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _paths(v, (*prefix, k))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _paths(v, (*prefix, i))
+
+
+_SPEED_TEXT = None
+
+
+@settings(deadline=None)  # the first example builds the file text (fixture warm-up)
+@given(data=st.data(), value=json_values)
+def test_any_damaged_field_is_a_clear_input_error(models, data, value):
+    """Replace any one field of a valid speed-model file (every nesting level) by an
+    arbitrary JSON value: the file either still reads or is refused with a one-line
+    InputError; never another exception (a traceback)."""
+    global _SPEED_TEXT
+    if _SPEED_TEXT is None:
+        _SPEED_TEXT = model_json(models["speed-canonical-pem"])
+    obj = json.loads(_SPEED_TEXT)
+    paths = list(_paths(obj))[1:]
+    path = data.draw(st.sampled_from(paths))
+    node = obj
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    try:
+        model_from_text(json.dumps(obj), "model file 'm.json'")
+    except InputError as exc:
+        assert "\n" not in str(exc) and "m.json" in str(exc)
