@@ -8,6 +8,7 @@ Modules:
   :mod:`~bikeid.experiments.cmd_simulate` (``simulate``),
   :mod:`~bikeid.experiments.cmd_data` (``sweep``, ``stabilization``),
   :mod:`~bikeid.experiments.cmd_ident` (``identify``, ``accuracy``),
+  :mod:`~bikeid.experiments.cmd_validate` (``validate``),
   :mod:`~bikeid.experiments.cmd_reproduce` (``reproduce``),
   :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials``,
   ``data fetch``).
@@ -35,6 +36,8 @@ Modules:
 - :mod:`~bikeid.experiments.report`: Markdown reports (paper | identified | truth tables)
   and ``summary.json``.
 - :mod:`~bikeid.experiments.plots`: Matplotlib figures shared by commands and reports.
+- :mod:`~bikeid.experiments.validation_plots`: the compare, resid and Bode figures of
+  ``bikeid validate``.
 
 Nothing is imported here; import the modules.
 """
