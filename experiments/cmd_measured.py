@@ -47,9 +47,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--plant",
-        choices=("nonlinear", "linear"),
+        choices=("nonlinear", "linear", "auto"),
         default="nonlinear",
-        help="nominal plant: nonlinear Whipple (defect-corrected, default) or linear",
+        help="nominal plant: nonlinear Whipple (defect-corrected, default), linear, or auto "
+        "(the one that fits the decays better before selection; both fits are printed)",
     )
     f.add_argument(
         "--weave-weight",
@@ -157,6 +158,13 @@ def cmd_fit(args) -> int:
     settings = {"max_effects": args.max_effects, "stability": args.stability,
                 "weave_weight": ww, "speeds": _speeds(args.speeds)}  # fmt: skip
     save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
+    nf = out["nominal_fit"]
+    print(f"nominal fit (summed squared NRMSE): linear {nf['linear']:.4g}, nonlinear "
+          f"{nf['nonlinear']:.4g}; the data prefer the {nf['preferred']} plant; fitted with "
+          f"the {out['plant']} plant")  # fmt: skip
+    if out["plant"] != nf["preferred"]:
+        print(f"note: the {nf['preferred']} nominal fits these decays better; a mismatch of "
+              "the nominal plant can be read as an effect (try --plant auto)")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     w = out["identification"]["weave_weight"]
     if ww == "auto" and w == 0:

@@ -17,7 +17,11 @@ from bikeid.dataset.windows import Window
 from bikeid.ident.discrepancy_diagnostics import evaluate
 from bikeid.ident.effect_fit import FitResult, joint_fit
 from bikeid.ident.effect_library import LIBRARY
-from bikeid.ident.effect_selection import select_effects, selection_frequencies
+from bikeid.ident.effect_selection import (
+    compare_nominal_plants,
+    select_effects,
+    selection_frequencies,
+)
 from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
@@ -209,7 +213,10 @@ def fit_model(
     max_effects : int, optional
         At most this many effects (:func:`bikeid.ident.effect_selection.select_effects`).
     plant : str, optional
-        ``"nonlinear"`` (defect-corrected nonlinear Whipple plant) or ``"linear"``.
+        ``"nonlinear"`` (defect-corrected nonlinear Whipple plant), ``"linear"``, or
+        ``"auto"``: the one of the two that fits the decays better before any effect is
+        selected (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).  Both
+        nominal fits are reported in every case (``nominal_fit``).
     stability : int, optional
         With N > 0, also the selection frequency of each name over N random 75 % subsamples
         (:func:`bikeid.ident.effect_selection.selection_frequencies`).
@@ -219,8 +226,13 @@ def fit_model(
     Returns
     -------
     dict
-        Effects (registry units), fit speeds [m/s], files, windows and the identification.
+        Effects (registry units), fit speeds [m/s], files, windows, the identification, the
+        nominal plant used (``plant``) and both nominal fits (``nominal_fit``: summed
+        squared NRMSE of roll rate and steer angle as linear and as nonlinear plant).
     """
+    nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
+    if plant == "auto":
+        plant = nominal_fit["preferred"]
     nl = plant == "nonlinear"
     extra = {}
     if stability:
@@ -240,6 +252,7 @@ def fit_model(
         "fit_files": sorted({w.file for w in windows}),
         "fit_windows": [{"file": w.file, "start": w.start, "end": w.start + w.n} for w in windows],
         "identification": res.as_dict(),
+        "nominal_fit": nominal_fit,
         **extra,
     }
 
