@@ -27,6 +27,8 @@ Modules:
 - :mod:`~bikeid.experiments.limit_cycles`: Chen & Dao Figs. 4-5, uncontrolled coasting at
   3.5 m/s and whether the motion is periodic; :mod:`~bikeid.experiments.floquet` converges
   a periodic orbit on the Poincare map and computes its Floquet multipliers.
+- :mod:`~bikeid.experiments.blind_trials`: effect-selection trials on logs from an
+  independent generator with randomized nuisances (four rates a user suffers).
 - :mod:`~bikeid.experiments.effect_trials`: randomized undeclared-effect trials on the
   nonlinear plant (``bikeid measured trials``).
 - :mod:`~bikeid.experiments.measured_study`: the measured-data pipeline as a library
