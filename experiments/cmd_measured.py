@@ -72,6 +72,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     e.add_argument("--json", action="store_true", help="print JSON")
     e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
+    e.add_argument(
+        "--input",
+        choices=("loop", "logged"),
+        default="loop",
+        help="what drives the model over each window: 'loop' (default) the known "
+        "steer-into-lean law closed around the model; 'logged' the logged total steer "
+        "command replayed open loop (no controller needed; unstable models grow)",
+    )
     e.set_defaults(func=cmd_evaluate)
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
@@ -190,7 +198,13 @@ def cmd_evaluate(args) -> int:
     ws = load_decays(
         args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
     )
+    if args.input == "logged":
+        from dataclasses import replace
+
+        ws = [replace(w, drive="logged") for w in ws]
     out = evaluate_json(obj, ws)
+    if out.get("note"):
+        print(f"bikeid measured evaluate: {out['note']}", file=sys.stderr)
     if args.json:
         print(dump_json(out))
     else:
