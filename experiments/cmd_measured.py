@@ -8,6 +8,8 @@ import math
 import sys
 from pathlib import Path
 
+from bikeid.sim.errors import InputError
+
 from .cliutil import (
     MAX_WORKERS,
     dump_json,
@@ -63,7 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
-    e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
+    e.add_argument(
+        "--model",
+        required=True,
+        help="MODEL.json from 'measured fit', or a model of 'bikeid identify --out' (with "
+        "--input logged)",
+    )
     e.add_argument("--data", help=DATA_HELP)
     e.add_argument(
         "--speeds",
@@ -185,8 +192,33 @@ def cmd_fit(args) -> int:
 
 def cmd_evaluate(args) -> int:
     from bikeid.dataset.decays import load_decays
-    from bikeid.experiments.measured_study import evaluate_json, model_from_json
+    from bikeid.experiments.measured_study import (
+        evaluate_json,
+        evaluate_plant_model,
+        model_from_json,
+        plant_model_file,
+    )
 
+    plant_model = plant_model_file(args.model)
+    if plant_model is not None:  # an identified plant model (bikeid identify --out)
+        if args.input != "logged":
+            raise InputError(
+                f"{args.model} holds an identified plant model, which knows no controller: "
+                "evaluate it with --input logged (the logged steer command replayed)"
+            )
+        ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
+        out = evaluate_plant_model(plant_model, ws)
+        if args.json:
+            print(dump_json(out))
+        else:
+            for f in out["files"]:
+                print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
+                      f"after {f['error_after']:.3f}")  # fmt: skip
+            s = out["summary"]
+            print(f"summary ({s['windows']} windows, logged command replayed): before "
+                  f"{s['error_before']:.3f} after {s['error_after']:.3f}; "
+                  f"{len(s['skipped'])} windows at other speeds skipped")  # fmt: skip
+        return 0
     model, obj = model_from_json(args.model)
     if obj.get("plant_defaulted"):
         print(

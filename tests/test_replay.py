@@ -112,3 +112,54 @@ def test_cli_replay_on_the_measured_logs(tmp_path):
         assert math.isfinite(res["logged"]["summary"][k])
         assert res["logged"]["summary"][k] != res["loop"]["summary"][k]
     assert {f["file"] for f in res["logged"]["files"]} == {f["file"] for f in res["loop"]["files"]}
+
+
+def test_identified_plant_model_replay_equals_the_nominal_when_it_is_the_nominal():
+    """evaluate_plant_model on a canonical model whose theta is the steer-by-wire Whipple
+    model's at the windows' speed (ident.canonical.theta_from_matrices) gives the same error
+    as the nominal (sim.linear's state space): two code paths, one model, agreement to 1e-9;
+    a perturbed model (b2 +20 %) gives a different, larger error (both ways)."""
+    from bikeid.experiments.measured_study import evaluate_plant_model
+    from bikeid.ident.canonical import theta_from_matrices
+    from bikeid.ident.pem import CanonicalModel
+    from bikeid.sim.linear import canonical_matrices
+    from bikeid.sim.parameters import steer_by_wire
+
+    v = 3.0
+    ws = []
+    for w in _windows(3, v=v, n=150):
+        t = np.arange(w.n) * 0.01
+        ws.append(replace(w, T_logged=0.8 * np.sin(2 * np.pi * 1.1 * t), drive="logged"))
+    # measured outputs from the nominal itself, so the nominal error is ~0
+    theta = theta_from_matrices(canonical_matrices(steer_by_wire()), v)
+    exact = CanonicalModel(theta, np.zeros((10, 10)), np.zeros((4, 4)), 0.01, v, np.eye(4))
+    out = evaluate_plant_model(exact, ws)
+    assert out["summary"]["error_after"] == pytest.approx(out["summary"]["error_before"],
+                                                          rel=1e-9, abs=1e-12)  # fmt: skip
+    bad = CanonicalModel(theta * np.r_[np.ones(9), 1.2], np.zeros((10, 10)), np.zeros((4, 4)),
+                         0.01, v, np.eye(4))  # fmt: skip
+    out_bad = evaluate_plant_model(bad, ws)
+    assert out_bad["summary"]["error_after"] > out_bad["summary"]["error_before"] + 0.01
+    with pytest.raises(ValueError, match="model's speed"):
+        evaluate_plant_model(replace(exact, speed=5.0), ws)
+
+
+@pytest.mark.skipif(not DATA, reason="needs the measured data ($BIKEID_DATA)")
+def test_cli_identified_model_evaluates_by_replay_only(tmp_path):
+    """A model of `bikeid identify --out` (direct, on the steer-by-wire eigen logs) evaluates
+    on the logs with --input logged (summary fields present, finite) and is refused without
+    it (exit 3, naming the fix): a plant model knows no controller."""
+    exe = Path(sys.executable).parent / "bikeid"
+    model = tmp_path / "direct.json"
+    p = subprocess.run([str(exe), "identify", str(Path(DATA) / "tudelft-sbw" / "eigen"),
+                        "--format", "sbw", "--method", "direct", "--out", str(model)],
+                       capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    base = [str(exe), "measured", "evaluate", "--model", str(model), "--data", DATA]
+    p = subprocess.run(base + ["--input", "logged", "--json"], capture_output=True, text=True,
+                       timeout=600)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    s = json.loads(p.stdout)["summary"]
+    assert math.isfinite(s["error_before"]) and math.isfinite(s["error_after"])
+    p = subprocess.run(base, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 3 and "--input logged" in p.stderr
