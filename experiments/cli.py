@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EXIT_CODES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--version", action=_Version, nargs=0, help="print the version and exit")
     parser.add_argument(
         "--debug", action="store_true", help="print the traceback of an error (anywhere)"
     )
@@ -73,6 +73,13 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module.register(sub)
     return parser
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed version, read only when asked (start-up time)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):  # noqa: D102
+        parser.exit(0, _version() + "\n")
 
 
 def _version() -> str:
