@@ -162,7 +162,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USAGE
     try:
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        finally:  # progress bars end before any error line (experiments.progress)
+            if "bikeid.experiments.progress" in sys.modules:
+                sys.modules["bikeid.experiments.progress"].close_all()
     except BrokenPipeError:  # output piped into head & co.: stop quietly
         sys.stderr.close()
         return 0

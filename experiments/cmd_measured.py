@@ -17,6 +17,7 @@ from .cliutil import (
     range_text,
     to_jsonable,
 )
+from .progress import terminal_progress
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 DECAYS_HELP = (
@@ -142,7 +143,8 @@ def cmd_fit(args) -> int:
 
     ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
-    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
+    bar = terminal_progress("measured fit", unit="fit")
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar)
     out["decays"] = args.decays
     atomic_write_text(args.out, dump_json(out) + "\n")
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
@@ -192,10 +194,16 @@ def cmd_trials(args) -> int:
 
     effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
 
+    bar = terminal_progress("trials", json_output=args.json, unit="trial")
+    finished = []
+
     def progress(row):
         if args.log:
             with open(args.log, "a") as fh:
                 fh.write(json.dumps(to_jsonable(row)) + "\n")
+        finished.append(row)
+        if bar:
+            bar(len(finished), args.n, "")
 
     out = run_trials(
         args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress
