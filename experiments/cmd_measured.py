@@ -196,6 +196,8 @@ def cmd_trials(args) -> int:
 
     bar = terminal_progress("trials", json_output=args.json, unit="trial")
     finished = []
+    if bar:
+        bar(0, args.n, "")
 
     def progress(row):
         if args.log:

@@ -1,11 +1,13 @@
 """Progress of the long commands on the terminal: one bar on stderr, only when stderr is a TTY.
 
-Library functions never print.  Those with long loops (``pem`` fits over speeds, effect
-selection, accuracy tables, trials, the reproduction) take a callback ``progress(done,
-total, label)``: ``done`` of ``total`` steps finished, ``label`` naming the current step
-(a speed, a candidate effect, a stage).  A new ``total`` starts a new stage (the bar is
-reset).  They skip the call when the callback is None, so a script or a test that passes
-nothing gets no output.
+Library functions with long loops (effect selection, the accuracy table, the reproduction)
+take a callback ``progress(done, total, label)`` instead of printing: ``done`` of ``total``
+steps finished, ``label`` naming the current step (a speed, a candidate effect, a stage).  A
+new ``total`` starts a new stage (the bar is reset).  They skip the call when the callback
+is None, so a script or a test that passes nothing gets no output.  (The sweeps,
+:func:`bikeid.experiments.sweep.run_sweep` and ``stabilization_table``, draw their own
+``tqdm`` bar when called with ``progress=True``; their commands ask for it only where
+:func:`on_terminal` is true.)
 
 The command handlers make the callback with :func:`terminal_progress`: a ``tqdm`` bar on
 stderr when stderr is a terminal and the command is not printing JSON, None otherwise
