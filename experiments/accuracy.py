@@ -544,7 +544,7 @@ def run_accuracy(
     steps = 2 * len(controllers)
     for k, c in enumerate(controllers):
         if progress:
-            progress(2 * k, steps, f"{c}: simulating {len(speeds)} speeds")
+            progress(2 * k, steps, f"{c}: simulating {len(speeds)} speed(s)")
         tg = time.perf_counter()
         runs = generate(out_dir, c, speeds, workers=workers, bicycle=bicycle, log=log)
         gen = time.perf_counter() - tg

@@ -100,3 +100,18 @@ def test_sweep_bar_on_a_terminal_only(tmp_path):
     assert "sweep pid" in err and "2/2" in err
     rc, _, err = _run([*base, "--out", "b.h5"], tmp_path, io.StringIO())
     assert rc == 0 and err == ""
+
+
+def test_accuracy_reports_its_stages(tmp_path):
+    """``run_accuracy`` for one controller and one speed: 2 stages (simulate, identify), so
+    the callback sees 0/2, 1/2 and 2/2 in order; log lines go to the given ``log``."""
+    from bikeid.experiments.accuracy import run_accuracy
+
+    calls, lines = [], []
+    run_accuracy(
+        tmp_path, ["pid"], ["pem"], [5.0], workers=1, log=lines.append,
+        progress=lambda done, total, label: calls.append((done, total, label)),
+    )  # fmt: skip
+    assert [(d, t) for d, t, _ in calls] == [(0, 2), (1, 2), (2, 2)]
+    assert calls[0][2] == "pid: simulating 1 speed(s)" and calls[1][2] == "pid: identifying"
+    assert any("pid: 1 runs ready" in line for line in lines)
