@@ -115,3 +115,26 @@ def test_accuracy_reports_its_stages(tmp_path):
     assert [(d, t) for d, t, _ in calls] == [(0, 2), (1, 2), (2, 2)]
     assert calls[0][2] == "pid: simulating 1 speed(s)" and calls[1][2] == "pid: identifying"
     assert any("pid: 1 runs ready" in line for line in lines)
+
+
+def test_effect_selection_counts_its_candidate_fits():
+    """``select_effects`` with 2 candidates and one round: 2 candidate fits, then the joint
+    fit, so the callback sees 0/2, 1/2 (labelled by candidate) and 2/2; the verdict is that
+    of the injected effect (as in tests/test_discrepancy.py, here on 2 decays per speed)."""
+    from bikeid.ident.effect_selection import select_effects
+    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.ident.synthetic_decays import synthetic_windows
+
+    truth = ExperimentModel(effects={"steer_viscous_damping": 0.4})
+    ws = synthetic_windows(truth, [1.5, 3.5], 2, seed=1)
+    calls = []
+    res = select_effects(
+        ExperimentModel(), ws, candidates=["steer_viscous_damping", "command_gain"],
+        max_effects=1, progress=lambda d, t, label: calls.append((d, t, label)),
+    )  # fmt: skip
+    assert calls == [
+        (0, 2, "round 1: steer_viscous_damping"),
+        (1, 2, "round 1: command_gain"),
+        (2, 2, "joint fit"),
+    ]
+    assert res.verdict[0] == "steer_viscous_damping"
