@@ -18,6 +18,7 @@ from .cliutil import (
     range_text,
     to_jsonable,
 )
+from .progress import terminal_progress
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 DECAYS_HELP = (
@@ -168,7 +169,8 @@ def cmd_fit(args) -> int:
 
     ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
-    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
+    bar = terminal_progress("measured fit", unit="fit")
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar)
     out["decays"] = args.decays
     settings = {"max_effects": args.max_effects, "stability": args.stability,
                 "weave_weight": ww, "speeds": _speeds(args.speeds)}  # fmt: skip
@@ -265,10 +267,18 @@ def cmd_trials(args) -> int:
 
     effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
 
+    bar = terminal_progress("trials", json_output=args.json, unit="trial")
+    finished = []
+    if bar:
+        bar(0, args.n, "")
+
     def progress(row):
         if args.log:
             with open(args.log, "a") as fh:
                 fh.write(json.dumps(to_jsonable(row)) + "\n")
+        finished.append(row)
+        if bar:
+            bar(len(finished), args.n, "")
 
     out = run_trials(
         args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -214,6 +215,7 @@ def fit_model(
     plant: str = "nonlinear",
     stability: int = 0,
     weave_weight: float | str = "auto",
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> dict:
     """Select effects on ``windows`` and return the model object ``measured fit`` writes.
 
@@ -233,6 +235,9 @@ def fit_model(
         (:func:`bikeid.ident.effect_selection.selection_frequencies`).
     weave_weight : float or "auto", optional
         Weight of the measured weave eigenvalues in every fit.
+    progress : callable, optional
+        ``progress(done, total, label)`` through the subsamples, then the candidate fits
+        (:mod:`bikeid.experiments.progress`).
 
     Returns
     -------
@@ -248,13 +253,15 @@ def fit_model(
     extra = {}
     if stability:
         freq = selection_frequencies(
-            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl
-        )
+            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl,
+            progress=progress,
+        )  # fmt: skip
         extra = {"selection_frequency": freq,
                  "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
     res = select_effects(
-        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl, weave_weight=weave_weight
-    )
+        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl,
+        weave_weight=weave_weight, progress=progress,
+    )  # fmt: skip
     return {
         "bicycle": "steer-by-wire",
         "plant": plant,
