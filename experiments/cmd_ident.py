@@ -91,15 +91,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     e = sub.add_parser(
         "export",
-        help="write runs of a bikeid HDF5 file as CSV (units in the header)",
+        help="write runs of a bikeid HDF5 file (or steer-by-wire logs) as CSV (units in the "
+        "header)",
         description=(
             "One CSV per run: line 1 the run's metadata as JSON after '# bikeid run: ', line "
             "2 the headers 'name [unit]', then one row per sample (17 significant digits, "
             "exact for float64). Read back with pandas.read_csv(path, comment='#') or "
-            "bikeid identify --format csv."
+            "bikeid identify --format csv. With --format sbw, FILE is a steer-by-wire log "
+            "or a folder of them (each log one run: its settled stretch, bikeid signals)."
         ),
     )
-    e.add_argument("file", help="bikeid HDF5 run file")
+    e.add_argument("file", help="bikeid HDF5 run file, or (--format sbw) logs or a folder")
+    e.add_argument(
+        "--format", choices=("bikeid", "sbw"), default="bikeid",
+        help="bikeid: a run file written by bikeid; sbw: the steer-by-wire logs",
+    )  # fmt: skip
     e.add_argument("--run", default=None, help="run name (default: every run)")
     e.add_argument(
         "--out", required=True,
@@ -177,7 +183,16 @@ def cmd_export(args: argparse.Namespace) -> int:
     from bikeid.dataset.files import check_output_path
     from bikeid.dataset.store import export_csv, list_runs, read_run
 
-    names = [args.run] if args.run else list_runs(args.file)
+    if args.format == "sbw":
+        from bikeid.dataset.sbw_logs import load_log, settled
+
+        if args.run is not None:
+            raise ValueError("--run applies to bikeid run files; give the log file itself")
+        ns = argparse.Namespace(file=[args.file], format="sbw")
+        logs = {Path(f).name.removesuffix(".gz").removesuffix(".log"): f for f in _data_files(ns)}
+        names = list(logs)
+    else:
+        names = [args.run] if args.run else list_runs(args.file)
     if not names:
         raise ValueError(f"{args.file} holds no runs")
     out = Path(args.out)
@@ -193,7 +208,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         targets = {n: out / f"{n}.csv" for n in names}
     for target in targets.values():
         check_output_path(target)  # refuse a link or device before writing anything
-    runs = {n: read_run(args.file, n) for n in names}  # all readable before the first write
+    if args.format == "sbw":  # all readable before the first write
+        runs = {n: settled(load_log(f)) for n, f in logs.items()}
+    else:
+        runs = {n: read_run(args.file, n) for n in names}
     for n, target in targets.items():
         export_csv(runs[n], target)
         print(target)
