@@ -48,13 +48,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--flip", default="", metavar="NAME,...",
         help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
     )
-    p.add_argument("--method", choices=("direct", "pem"), default="direct")
+    p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
+    p.add_argument(
+        "--free", default=None, metavar="NAME,...",
+        help="greybox: free matrix entries, e.g. Mpd,K0pd,Mdd,K0dd,K2dd (default Moore & "
+        "Hubbard's set, ident.greybox.DEFAULT_FREE); the rest fixed at --bicycle's values",
+    )  # fmt: skip
+    p.add_argument(
+        "--drop-unidentifiable", action="store_true",
+        help="greybox: fix the worst-determined free entries until the condition number is "
+        "below ident.greybox.MAX_CONDITION (default: refuse, exit 4)",
+    )  # fmt: skip
     p.add_argument(
         "--speed-parameterized",
         action="store_true",
         help="pem: one model over all speeds (odd a's = alpha + beta v^2, even a's = gamma v)",
     )
-    p.add_argument("--bicycle", help="fixed-entry values for direct (default: the runs' meta)")
+    p.add_argument(
+        "--bicycle", help="fixed-entry values for direct/greybox (default: the runs' meta)"
+    )
     p.add_argument("--iv", action="store_true", help="direct: instrumental variables (lagged)")
     p.add_argument(
         "--derivative", choices=("interval", "central", "forward", "backward"),
@@ -95,8 +107,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="identification accuracy on the nonlinear closed-loop testbed",
         description=(
             "Simulate 50 s of closed-loop data per speed and controller (cached in DIR/data), "
-            "identify with the direct and PEM methods and compare eigenvalues, v_w, v_c and "
-            "the RHP zero of delta/T_delta with the true linearization. Writes "
+            "identify with the direct, PEM and grey-box methods and compare eigenvalues, v_w, "
+            "v_c and the RHP zero of delta/T_delta with the true linearization. Writes "
             "DIR/accuracy.json and DIR/accuracy.md; progress on stderr."
         ),
     )
@@ -113,9 +125,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--methods",
-        type=_names_arg(("direct", "pem"), "methods"),
-        default="direct,pem",
-        help="comma-separated subset of direct,pem (default both)",
+        type=_names_arg(("direct", "pem", "greybox"), "methods"),
+        default="direct,pem,greybox",
+        help="comma-separated subset of direct,pem,greybox (default all)",
     )
     a.add_argument(
         "--speeds",
@@ -237,6 +249,24 @@ def cmd_identify(args: argparse.Namespace) -> int:
             notes=list(res.notes),
         )  # fmt: skip
         eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+    elif args.method == "greybox":
+        from bikeid.ident import greybox
+        from bikeid.sim.parameters import by_name
+
+        reference = by_name(args.bicycle) if args.bicycle else truth
+        if reference is None:
+            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
+        free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
+        res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable)
+        out.update(
+            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, condition=res.condition,
+            free={k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
+                  for k, v in res.free.items()},
+            dropped=list(res.dropped), notes=list(res.notes),
+        )  # fmt: skip
+        if len(speeds) >= 2:
+            out["critical_speeds"] = res.critical_speeds()
+        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
     else:
         from bikeid.ident import pem
 
@@ -281,6 +311,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
         return 0
     np.set_printoptions(precision=5, suppress=True, linewidth=110)
     print(f"{', '.join(args.file)}: {len(runs)} runs, method {args.method}")
+    if args.method == "greybox":
+        for k in ("M", "C1", "K0", "K2"):
+            print(f"{k} =\n{out[k]}")
+        for k, d in out["free"].items():
+            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g} (SE inflation "
+                  f"{d['inflation']:.3g})")  # fmt: skip
+        print(f"condition number {out['condition']:.3g}; fixed as poorly determined: "
+              f"{out['dropped'] or 'none'}")  # fmt: skip
     if args.method == "direct":
         for k in ("M", "C1", "K0", "K2", "H"):
             print(f"{k} =\n{out[k]}")
