@@ -318,7 +318,8 @@ class GreyboxModel:
     dropped : tuple of str
         Entries fixed by ``drop_unidentifiable`` (at their reference/start values).
     fixed : dict of str to float
-        Every entry not estimated, at its fixed value.
+        Every entry not estimated, at its fixed value (the symmetric copy of a free entry,
+        Mdp or K0dp, is not listed).
     symmetric : bool
         Whether ``Mpd``/``K0pd`` tie both off-diagonal cells.
     K : dict of float to (4, L) ndarray
@@ -723,7 +724,8 @@ def fit(
     est = prob.matrices(p)
     fixed = {n: vals[n] for n in vals if n not in names}
     for n in _SYM if symmetric else ():
-        fixed.pop(n, None)
+        if _SYM[n] in names:  # the steer-row copy of a free entry is not fixed
+            fixed.pop(n)
     se = np.sqrt(np.diag(cov))
     return GreyboxModel(
         M=est.M, C1=est.C1, K0=est.K0, K2=est.K2, g=cm.g,

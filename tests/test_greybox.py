@@ -190,3 +190,31 @@ def test_bad_input_is_refused(runs):
     forced = simulate(P, 5.0, duration=2, seed=1, lateral_force=1.0)
     with pytest.raises(InputError, match="F is nonzero"):
         greybox.fit(forced, ("Mdd",), P)
+
+
+def test_cli_identify_greybox(runs, tmp_path, capsys):
+    """``bikeid identify --method greybox``: over four speeds the JSON holds the free entries
+    within Z_MAX standard errors of the truth and the true eigenvalues beside the identified
+    ones; at one speed with K0dd and K2dd free it exits 4 with one line naming the condition
+    number, and ``--drop-unidentifiable`` fixes one of them instead (exit 0)."""
+    import json
+
+    from bikeid.dataset.store import write_runs
+    from bikeid.experiments.cli import main
+
+    path, one = tmp_path / "runs.h5", tmp_path / "one.h5"
+    write_runs(path, runs)
+    write_runs(one, runs[1:2])
+    capsys.readouterr()
+    assert main(["identify", "--method", "greybox", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for n, d in out["free"].items():
+        assert abs(d["value"] - true_entry(n)) < Z_MAX * d["stderr"], n
+    assert len(out["per_speed"]) == len(SPEEDS) and "true_eigenvalues" in out["per_speed"][0]
+    args = ["identify", "--method", "greybox", str(one), "--free", "Mdd,K0dd,K2dd"]
+    assert main(args) == 4
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "condition number" in err and "K2dd" in err
+    assert main([*args, "--drop-unidentifiable", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["dropped"]) == 1 and out["condition"] < greybox.MAX_CONDITION
