@@ -36,8 +36,13 @@ number and the entries of the weakest direction); with ``drop_unidentifiable=Tru
 entry with the largest share of the weakest direction is fixed instead, one at a time,
 until the number is below the threshold (the result's ``dropped`` names them).
 
-Lateral force ``F`` and roll torque ``T_phi``: the predictor has the single input
-T_delta, so runs where either is nonzero are refused (not yet supported).
+Lateral force ``F``: when a run logs one, the predictor gets a second input column
+M^-1 H (H = [HpF, HdF], the torque per newton of F on the roll and steer equations) and the
+entries HpF, HdF may be free (the default set then includes HdF, as Moore & Hubbard's).  The
+two inputs are handled by superposition: the innovations predictor is linear in (T_delta, F,
+y), so the prediction error is the sum of the kernel's pass over (T_delta, y) and a pass over
+(F, 0) from a zero state, and so are their sensitivities.  Runs with a nonzero roll torque
+``T_phi`` are refused (not supported).
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ from dataclasses import dataclass, field
 
 import control
 import numpy as np
+from scipy.linalg import expm, expm_frechet
 
 from bikeid.dataset.run import Run
 from bikeid.sim.errors import InputError, UntrustworthyResult
@@ -55,11 +61,12 @@ from bikeid.sim.linear import (
     canonical_matrices,
     critical_speeds,
     eigenvalues_vs_speed,
+    lateral_force_vector,
     state_matrices,
 )
 from bikeid.sim.parameters import BicycleParameters, from_mapping
 
-from .canonical import theta_from_matrices
+from .canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
 from .direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, _parse
 from .pem import (
     DEFAULT_OUTPUTS,
@@ -83,7 +90,8 @@ __all__ = [
     "theta_jacobian",
 ]
 
-#: Moore & Hubbard's free sets (roll row, then steer row) without HdF (no lateral force).
+#: Moore & Hubbard's free sets (roll row, then steer row) without HdF (added by ``fit`` when a
+#: run has a lateral force).
 DEFAULT_FREE = MOORE_ROLL + tuple(n for n in MOORE_STEER if n != "HdF")
 #: Largest accepted condition number of the column-scaled Jacobian of the free entries.
 #: A direction that badly determined has a standard error 1e4 times the best-determined
@@ -94,7 +102,11 @@ DEFAULT_FREE = MOORE_ROLL + tuple(n for n in MOORE_STEER if n != "HdF")
 MAX_CONDITION = 1e4
 _MATS = ("M", "C1", "K0", "K2")
 _SYM = {"Mdp": "Mpd", "K0dp": "K0pd"}
-_UNSUPPORTED = ("HpF", "HdF")
+_FORCE = ("HpF", "HdF")
+
+
+def _h(vals: Mapping[str, float]) -> np.ndarray:
+    return np.array([vals.get("HpF", 0.0), vals.get("HdF", 0.0)])
 
 
 def _matrices(vals: Mapping[str, float], g: float) -> CanonicalMatrices:
@@ -106,6 +118,10 @@ def _unit(name: str, symmetric: bool) -> dict[str, np.ndarray]:
     """Derivative of each matrix with respect to the entry ``name`` (both symmetric cells)."""
     m, r, c = _parse(name)
     d = {k: np.zeros((2, 2)) for k in _MATS}
+    d["H"] = np.zeros(2)
+    if m == "H":
+        d["H"][r] = 1.0
+        return d
     d[m][r, c] = 1.0
     if symmetric and name in _SYM.values():
         d[m][c, r] = 1.0
@@ -113,7 +129,11 @@ def _unit(name: str, symmetric: bool) -> dict[str, np.ndarray]:
 
 
 def theta_jacobian(
-    cm: CanonicalMatrices, v: float, free: Sequence[str], symmetric: bool = True
+    cm: CanonicalMatrices,
+    v: float,
+    free: Sequence[str],
+    symmetric: bool = True,
+    H: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Canonical parameters theta(v) of the matrices and their derivatives by the free entries.
 
@@ -127,46 +147,86 @@ def theta_jacobian(
         Entry names (:mod:`ident.direct` naming, e.g. ``"Mpd"``, ``"K2dd"``).
     symmetric : bool, optional
         ``Mpd`` and ``K0pd`` move both off-diagonal cells of their matrix.
+    H : (2,) array_like, optional
+        Lateral-force column [HpF, HdF] [m]; when given, theta is extended by the lateral-force
+        input column M^-1 H (``HpF``/``HdF`` may then be free).
 
     Returns
     -------
-    theta : (10,) ndarray
+    theta : (10,) or (12,) ndarray
         [a1, ..., a8, b1, b2] (:func:`ident.canonical.theta_from_matrices`): odd a's
-        [1/s^2], even a's [1/s], b [1/(kg m^2)].
-    jac : (10, len(free)) ndarray
+        [1/s^2], even a's [1/s], b [1/(kg m^2)]; with ``H`` also [f1, f2] = M^-1 H
+        [m/(kg m^2)] (the F column of the acceleration rows).
+    jac : (10, len(free)) or (12, len(free)) ndarray
         d theta / d entry, in theta's units per unit of the entry's matrix
         (d M^-1 = -M^-1 dM M^-1; odd a's -M^-1 (g K0 + v^2 K2), even a's -v M^-1 C1).
 
     Raises
     ------
     ValueError
-        If a name is not a matrix entry of M, C1, K0 or K2.
+        If a name is not a matrix entry, or is HpF/HdF without ``H``.
     """
     Minv = np.linalg.inv(cm.M)
     S, D = cm.stiffness(v), cm.damping(v)
-    jac = np.empty((10, len(free)))
+    n = 10 if H is None else 12
+    jac = np.empty((n, len(free)))
     for j, name in enumerate(free):
         d = _unit(name, symmetric)
+        if H is None and np.any(d["H"]):
+            raise ValueError(f"{name}: pass H= (the lateral-force column) to differentiate by it")
         dMinv = -Minv @ d["M"] @ Minv
         dAl = -dMinv @ S - Minv @ (cm.g * d["K0"] + v**2 * d["K2"])
         dAr = -dMinv @ D - v * Minv @ d["C1"]
-        jac[:, j] = [dAl[0, 0], dAr[0, 0], dAl[0, 1], dAr[0, 1], dAl[1, 0], dAr[1, 0],
-                     dAl[1, 1], dAr[1, 1], dMinv[0, 1], dMinv[1, 1]]  # fmt: skip
-    return theta_from_matrices(cm, v), jac
+        jac[:10, j] = [dAl[0, 0], dAr[0, 0], dAl[0, 1], dAr[0, 1], dAl[1, 0], dAr[1, 0],
+                       dAl[1, 1], dAr[1, 1], dMinv[0, 1], dMinv[1, 1]]  # fmt: skip
+        if H is not None:
+            jac[10:, j] = dMinv @ H + Minv @ d["H"]
+    theta = theta_from_matrices(cm, v)
+    if H is not None:
+        theta = np.concatenate([theta, Minv @ np.asarray(H, float)])
+    return theta, jac
+
+
+def _discretize_force(theta: np.ndarray, dt: float, derivatives: bool):
+    """ZOH of the two-input model (T_delta, F) of the extended theta (12,): Ad, Bd, Bfd and,
+    with ``derivatives``, their derivatives by the 12 parameters (``expm_frechet``)."""
+    A, B = canonical_ab(theta[:10])
+    Z = np.zeros((6, 6))
+    Z[:4, :4], Z[:4, 4] = A * dt, B[:, 0] * dt
+    Z[B_POS[0], 5], Z[B_POS[1], 5] = theta[10] * dt, theta[11] * dt
+    if not derivatives:
+        E = expm(Z)
+        return E[:4, :4], E[:4, 4], E[:4, 5], None, None, None
+    dAd, dBd, dBfd = np.empty((12, 4, 4)), np.empty((12, 4)), np.empty((12, 4))
+    E = None
+    for i in range(12):
+        dZ = np.zeros((6, 6))
+        if i < 8:
+            dZ[A_POS[i]] = dt
+        elif i < 10:
+            dZ[B_POS[i - 8], 4] = dt
+        else:
+            dZ[B_POS[i - 10], 5] = dt
+        E, dE = expm_frechet(Z, dZ)
+        dAd[i], dBd[i], dBfd[i] = dE[:4, :4], dE[:4, 4], dE[:4, 5]
+    return E[:4, :4], E[:4, 4], E[:4, 5], dAd, dBd, dBfd
 
 
 class _GreyProblem(_Problem):
     """Prediction errors of runs at several speeds, parameters [free entries, K per speed].
 
-    Reuses :class:`ident.pem._Problem`'s residual (x0 projected out); the Jacobian is
-    never stored whole: per run its (x0-projected) columns are accumulated into J'J and
-    J'r, whose innovation-gain blocks are per speed group.
+    Reuses :class:`ident.pem._Problem`'s residual (x0 projected out) when no run has a
+    lateral force; with ``forces`` (one F array per run) the error is the superposition of
+    the kernel's passes over (T_delta, y) and (F, 0).  The Jacobian is never stored whole:
+    per run its columns are accumulated into J'J and J'r (x0 eliminated), whose
+    innovation-gain blocks are per speed group.
     """
 
-    def __init__(self, data, groups, Ks, vals, free, symmetric, g, free_k, weights, outputs):
+    def __init__(self, data, groups, Ks, vals, free, symmetric, g, free_k, weights, outputs,
+                 forces=None):  # fmt: skip
         super().__init__(data, None, Ks, free_k, weights, outputs)
         self.groups, self.vals, self.free = groups, dict(vals), tuple(free)
-        self.symmetric, self.g = symmetric, g
+        self.symmetric, self.g, self.forces = symmetric, g, forces
         self.n_groups = max(groups) + 1
         self._H = self._gvec = None
 
@@ -174,13 +234,16 @@ class _GreyProblem(_Problem):
     def n_params(self) -> int:
         return len(self.free) + (4 * self.L * self.n_groups if self.free_k else 0)
 
-    def matrices(self, p) -> CanonicalMatrices:
+    def values(self, p) -> dict[str, float]:
         vals = dict(self.vals)
         for n, val in zip(self.free, p, strict=True):
             vals[n] = float(val)
             if self.symmetric and n in _SYM.values():
                 vals[next(k for k, s in _SYM.items() if s == n)] = float(val)
-        return _matrices(vals, self.g)
+        return vals
+
+    def matrices(self, p) -> CanonicalMatrices:
+        return _matrices(self.values(p), self.g)
 
     def split(self, x):
         P, nk = len(self.free), 4 * self.L
@@ -190,31 +253,61 @@ class _GreyProblem(_Problem):
                        for i in range(self.n_groups)]  # fmt: skip
 
     def _models(self, x, derivatives: bool):
+        """Per run (Ad, Bd, dAd, dBd, K, S), plus (Bfd, dBfd) with forces; None if unstable."""
         p, Kfree = self.split(x)
-        cm = self.matrices(p)
+        vals = self.values(p)
+        cm = _matrices(vals, self.g)
+        H = _h(vals) if self.forces is not None else None
         out, cache = [], {}
         for i, d in enumerate(self.data):
             key = (d.dt, d.v)
             if key not in cache:
                 try:
                     if derivatives:
-                        theta, S = theta_jacobian(cm, d.v, self.free, self.symmetric)
+                        theta, S = theta_jacobian(cm, d.v, self.free, self.symmetric, H)
                     else:
                         theta, S = theta_from_matrices(cm, d.v), None
+                        if H is not None:
+                            theta = np.concatenate([theta, np.linalg.solve(cm.M, H)])
                 except np.linalg.LinAlgError:  # a trial step made M singular
                     return None
                 if not np.all(np.isfinite(theta)):
                     return None
-                if derivatives:
+                if H is not None:
+                    Ad, Bd, Bfd, dAd, dBd, dBfd = _discretize_force(theta, d.dt, derivatives)
+                    cache[key] = (Ad, Bd, dAd, dBd, S, Bfd, dBfd)
+                elif derivatives:
                     cache[key] = (*_discretize_with_derivatives(theta, d.dt), S)
                 else:
                     cache[key] = (*_discretize(theta, d.dt), None, None, S)
-            Ad, Bd, dAd, dBd, S = cache[key]
+            Ad, Bd, dAd, dBd, S, *force = cache[key]
             K = Kfree[self.groups[i]] if self.free_k else self.Ks[i]
             if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
                 return None
-            out.append((Ad, Bd, dAd, dBd, K, S))
+            out.append((Ad, Bd, dAd, dBd, K, S, *force))
         return out
+
+    def residual(self, x):
+        """Weighted prediction errors (x0 projected out), or None (unstable predictor)."""
+        if self.forces is None:
+            return super().residual(x)
+        models = self._models(x, derivatives=False)
+        if models is None:
+            return None
+        res, x0s = [], []
+        empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
+        for d, F, (Ad, Bd, _, _, K, _, Bfd, _) in zip(self.data, self.forces, models,
+                                                       strict=True):  # fmt: skip
+            E0, Psi = _kernel(Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx, np.zeros(4), False)
+            Ef, _ = _kernel(Ad, Bfd, K, empty_a, empty_b, F, np.zeros_like(d.y), self.idx,
+                            np.zeros(4), False)  # fmt: skip
+            Psi = (Psi * self.w[None, :, None]).reshape(-1, 4)
+            e0 = ((E0 + Ef) * self.w).ravel()
+            x0, *_ = np.linalg.lstsq(Psi, -e0, rcond=None)
+            res.append(e0 + Psi @ x0)
+            x0s.append(x0)
+        self.x0s = x0s
+        return np.concatenate(res)
 
     def normal_equations(self, x):
         """(residual, J'J, J'r) at x with the x0 columns projected out, or (None, None, None)."""
@@ -226,23 +319,28 @@ class _GreyProblem(_Problem):
         n = self.n_params
         H, gv = np.zeros((n, n)), np.zeros(n)
         start = 0
-        for i, (d, x0, (Ad, Bd, dAd, dBd, K, S)) in enumerate(
-            zip(self.data, self.x0s, models, strict=True)
-        ):
+        for i, (d, x0, model) in enumerate(zip(self.data, self.x0s, models, strict=True)):
+            Ad, Bd, dAd, dBd, K, S = model[:6]
             _, J = _kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
+            if self.forces is not None:  # superposition: + the pass over (F, 0) from x = 0
+                Bfd, dBfd = model[6:]
+                _, Jf = _kernel(Ad, Bfd, K, dAd, dBfd, self.forces[i], np.zeros_like(d.y),
+                                self.idx, np.zeros(4), self.free_k)  # fmt: skip
+                J[:, :, :-4] += Jf[:, :, :-4]
             J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
             ri = r[start : start + J.shape[0]]
             start += J.shape[0]
             # Gram of [d e/d theta, d e/d K, d e/d x0], chained to the entries; the x0 columns
             # are eliminated by the Schur complement, which equals J'J of the Kaufman-projected
             # Jacobian (ident.pem), without forming it
-            nm = J.shape[1] - 4
-            T = np.zeros((J.shape[1], P + nm - 6))
-            T[:10, :P] = S
-            T[10:, P:] = np.eye(nm - 6)
+            nt = S.shape[0]
+            rest = J.shape[1] - nt  # K columns and the 4 x0 columns
+            T = np.zeros((J.shape[1], P + rest))
+            T[:nt, :P] = S
+            T[nt:, P:] = np.eye(rest)
             G = T.T @ (J.T @ J) @ T
             gi = T.T @ (J.T @ ri)
-            m = P + nm - 10
+            m = P + rest - 4
             Gxx = G[m:, m:]
             Gmx = G[:m, m:]
             G_proj = G[:m, :m] - Gmx @ np.linalg.solve(Gxx, Gmx.T)
@@ -298,6 +396,9 @@ class GreyboxModel:
         Velocity-dependent stiffness matrix [kg]; ``v^2 K2`` is in N m/rad.
     g : float
         Gravitational acceleration [m/s^2] of K0.
+    H : (2,) ndarray
+        Lateral-force column [HpF, HdF] [m] (N m per N of F on the roll and steer
+        equations); zeros when no run had a lateral force.
     free : dict of str to float
         Estimated entries and their values (matrix units); ``Mpd``/``K0pd`` stand for both
         off-diagonal cells when ``symmetric``.
@@ -346,6 +447,7 @@ class GreyboxModel:
     K0: np.ndarray
     K2: np.ndarray
     g: float
+    H: np.ndarray
     free: dict[str, float]
     stderr: dict[str, float]
     covariance: np.ndarray
@@ -380,22 +482,20 @@ class GreyboxModel:
         Parameters
         ----------
         name : str
-            Entry name (:mod:`ident.direct` naming) of M, C1, K0 or K2.
+            Entry name (:mod:`ident.direct` naming) of M, C1, K0, K2 or H.
 
         Returns
         -------
         float
-            The entry in its matrix's units (M kg m^2, C1 kg m, K0 kg m, K2 kg).
+            The entry in its matrix's units (M kg m^2, C1 kg m, K0 kg m, K2 kg, H m).
 
         Raises
         ------
         ValueError
-            If ``name`` is not an entry of M, C1, K0 or K2.
+            If ``name`` is not an entry name.
         """
         m, r, c = _parse(name)
-        if m == "H":
-            raise ValueError(f"{name}: the grey-box model has no lateral-force column")
-        return float(getattr(self, m)[r, c])
+        return float(self.H[r] if m == "H" else getattr(self, m)[r, c])
 
     def theta(self, v: float) -> np.ndarray:
         """Canonical parameters at speed ``v`` (:func:`ident.canonical.theta_from_matrices`).
@@ -429,25 +529,39 @@ class GreyboxModel:
         _, J = theta_jacobian(self.canonical(), v, tuple(self.free), self.symmetric)
         return J @ self.covariance @ J.T
 
-    def state_space(self, v: float) -> control.StateSpace:
-        """python-control model at speed ``v``: input T_delta, all four states output.
+    def state_space(self, v: float, inputs: Sequence[str] = ("T_delta",)) -> control.StateSpace:
+        """python-control model at speed ``v``, all four states output.
 
         Parameters
         ----------
         v : float
             Forward speed [m/s].
+        inputs : sequence of str, optional
+            Input columns in this order, from ``"T_phi"``, ``"T_delta"`` [N m, positive to
+            the right] and ``"F"`` [N, lateral force through ``H``].
 
         Returns
         -------
         control.StateSpace
             Continuous time, states and outputs [phi, delta, phidot, deltadot] [rad, rad,
-            rad/s, rad/s] (bikeid's order, C = I, D = 0), input ``T_delta`` [N m, positive
-            to the right]; A [1/s], B the T_delta column of M^-1 below zeros.
+            rad/s, rad/s] (bikeid's order, C = I, D = 0); A [1/s], B the columns of M^-1
+            (and M^-1 H) below zeros.
+
+        Raises
+        ------
+        ValueError
+            If an input name is not one of the three above.
         """
         A, B = state_matrices(self.canonical(), v)
+        Bf = np.concatenate([np.zeros(2), np.linalg.solve(self.M, self.H)])
+        cols = {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf}
+        bad = [u for u in inputs if u not in cols]
+        if bad:
+            raise ValueError(f"unknown inputs {bad}; choose from {list(cols)}")
         names = ["phi", "delta", "phidot", "deltadot"]
-        return control.ss(A, B[:, 1:2], np.eye(4), np.zeros((4, 1)),
-                          inputs=["T_delta"], outputs=names, states=names)  # fmt: skip
+        return control.ss(A, np.column_stack([cols[u] for u in inputs]), np.eye(4),
+                          np.zeros((4, len(inputs))), inputs=list(inputs), outputs=names,
+                          states=names)  # fmt: skip
 
     def eigenvalues(self, v: float) -> np.ndarray:
         """Eigenvalues of the estimated state matrix A(v).
@@ -522,17 +636,19 @@ def _reference(reference, runs) -> CanonicalMatrices:
     raise InputError("reference must be BicycleParameters or CanonicalMatrices")
 
 
-def _free_set(free, symmetric) -> tuple[str, ...]:
-    free = DEFAULT_FREE if free is None else tuple(free)
+def _free_set(free, symmetric, forced: bool) -> tuple[str, ...]:
+    if free is None:
+        free = DEFAULT_FREE + (("HdF",) if forced else ())
+    free = tuple(free)
     if not free or len(set(free)) != len(free):
         raise InputError(f"free set {free} must be non-empty without repeats")
     for n in free:
         if n not in ALL_ENTRIES:
             raise InputError(f"unknown matrix entry {n!r}; valid names are {list(ALL_ENTRIES)}")
-        if n in _UNSUPPORTED:
+        if n in _FORCE and not forced:
             raise InputError(
-                f"{n}: the grey-box predictor has the single input T_delta (no lateral force "
-                "yet); drop it from the free set"
+                f"{n} is free but F is zero in every run, so the lateral-force column is not "
+                "identifiable; drop it from the free set"
             )
     clash = [n for n in _SYM if n in free] if symmetric else []
     if clash:
@@ -541,6 +657,25 @@ def _free_set(free, symmetric) -> tuple[str, ...]:
             "pass symmetric=False"
         )
     return free
+
+
+def _force_column(H, reference, runs) -> tuple[float, float]:
+    if H is not None:
+        h = np.asarray(H, float)
+        if h.shape != (2,) or not np.all(np.isfinite(h)):
+            raise InputError(f"H={H!r}: give two finite numbers (HpF, HdF) [m]")
+        return float(h[0]), float(h[1])
+    point = runs[0].meta.get("lateral_force_point")
+    ref = reference
+    if ref is None and "parameters" in runs[0].meta:
+        ref = from_mapping(runs[0].meta["parameters"], name="run meta")
+    if point is None or not isinstance(ref, BicycleParameters):
+        raise InputError(
+            "a run has a lateral force F but no H is known: pass H=(HpF, HdF) [m], or use runs "
+            "with meta['lateral_force_point'] and a BicycleParameters reference"
+        )
+    h = lateral_force_vector(ref, *point)
+    return float(h[0]), float(h[1])
 
 
 def _refuse(cond, weak, names, max_condition, where) -> UntrustworthyResult:
@@ -568,6 +703,7 @@ def fit(
     passes: int = 2,
     max_condition: float = MAX_CONDITION,
     drop_unidentifiable: bool = False,
+    H: Sequence[float] | None = None,
 ) -> GreyboxModel:
     """Grey-box PEM of the free entries of M, C1, K0, K2 over runs at one or many speeds.
 
@@ -575,12 +711,12 @@ def fit(
     ----------
     runs : Run or sequence of Run
         Runs with one sample period, nonzero ``T_delta`` [N m, positive to the right],
-        zero ``T_phi`` and ``F``, and the ``outputs`` signals (``phi``, ``delta`` [rad],
-        ``phidot``, ``deltadot`` [rad/s]); each at its nominal ``run.speed`` [m/s] (per-sample
-        speed variation is ignored).
+        zero ``T_phi``, optionally a lateral force ``F`` [N, positive to the right], and the
+        ``outputs`` signals (``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s]);
+        each at its nominal ``run.speed`` [m/s] (per-sample speed variation is ignored).
     free : sequence of str, optional
         Entries to estimate (:mod:`ident.direct` names); default :data:`DEFAULT_FREE`
-        (Moore & Hubbard's roll and steer sets without HdF).
+        (Moore & Hubbard's roll and steer sets), plus HdF when a run has a lateral force.
     reference : BicycleParameters or CanonicalMatrices, optional
         Values of the fixed entries and start of the free ones (default: the first run's
         ``meta['parameters']``).
@@ -603,6 +739,11 @@ def fit(
         Instead of refusing, fix the worst-determined entries (largest share of the weakest
         direction) at their start values until the condition number is below
         ``max_condition``.
+    H : (float, float), optional
+        (HpF, HdF) [m], values (and starts) of the lateral-force column when a run has a
+        lateral force; default from the runs' ``meta['lateral_force_point']``
+        (:func:`bikeid.sim.linear.lateral_force_vector`) with a ``BicycleParameters``
+        reference.  Not used when F is zero in every run.
 
     Returns
     -------
@@ -613,8 +754,9 @@ def fit(
     ------
     InputError
         If no runs are given, a run breaks the sampling contract, runs differ in sample
-        period, ``T_delta`` is zero or ``T_phi``/``F`` nonzero in a run, an option or
-        entry name is invalid, or no fixed values are available.
+        period, ``T_delta`` is zero or ``T_phi`` nonzero in a run, an option or entry name
+        is invalid, HpF/HdF are free without a lateral force, or no fixed values (matrices,
+        or H with a lateral force) are available.
     UntrustworthyResult
         If the free set's condition number exceeds ``max_condition`` (and
         ``drop_unidentifiable`` is False), or no stable predictor exists at the start.
@@ -636,20 +778,22 @@ def fit(
         data = _run_data(runs, outputs)
     except ValueError as exc:
         raise InputError(str(exc)) from None
-    for r in runs:
-        for sig in ("T_phi", "F"):
-            if np.any(np.asarray(r[sig], float)):
-                raise InputError(
-                    f"{sig} is nonzero in a run: the grey-box predictor has the single input "
-                    "T_delta; use ident.direct for runs with roll torque or lateral force"
-                )
+    if any(np.any(np.asarray(r["T_phi"], float)) for r in runs):
+        raise InputError(
+            "T_phi is nonzero in a run: the grey-box predictor has the inputs T_delta and F "
+            "only; use ident.direct for runs with a roll torque"
+        )
+    forces = [np.asarray(r["F"], float) for r in runs]
+    forced = any(np.any(f) for f in forces)
     dts = {round(d.dt, 12) for d in data}
     if len(dts) > 1:
         raise InputError(f"runs have different sample periods {sorted(dts)}; resample first")
-    free = _free_set(free, symmetric)
+    free = _free_set(free, symmetric, forced)
     cm = _reference(reference, runs)
     vals = {n: float(getattr(cm, _parse(n)[0])[_parse(n)[1], _parse(n)[2]])
-            for n in ALL_ENTRIES if n not in _UNSUPPORTED}  # fmt: skip
+            for n in ALL_ENTRIES if n not in _FORCE}  # fmt: skip
+    if forced:
+        vals["HpF"], vals["HdF"] = _force_column(H, reference, runs)
     for n, val in (start or {}).items():
         if n not in free:
             raise InputError(f"start value for {n!r}, which is not free")
@@ -665,7 +809,8 @@ def fit(
     dt = data[0].dt
 
     def problem(names, Ks) -> _GreyProblem:
-        return _GreyProblem(data, groups, Ks, vals, names, symmetric, cm.g, free_k, w, outputs)
+        return _GreyProblem(data, groups, Ks, vals, names, symmetric, cm.g, free_k, w, outputs,
+                            forces if forced else None)  # fmt: skip
 
     p0 = np.array([vals[n] for n in free])
     base = problem(free, [None] * len(data)).matrices(p0)
@@ -721,14 +866,15 @@ def fit(
     dof = max(r.size - H.shape[0] - 4 * len(data), 1)
     cov = float(r @ r) / dof * np.linalg.pinv(H)[:P, :P]
     p, Kf = prob.split(x)
-    est = prob.matrices(p)
+    est_vals = prob.values(p)
+    est = _matrices(est_vals, cm.g)
     fixed = {n: vals[n] for n in vals if n not in names}
     for n in _SYM if symmetric else ():
         if _SYM[n] in names:  # the steer-row copy of a free entry is not fixed
             fixed.pop(n)
     se = np.sqrt(np.diag(cov))
     return GreyboxModel(
-        M=est.M, C1=est.C1, K0=est.K0, K2=est.K2, g=cm.g,
+        M=est.M, C1=est.C1, K0=est.K0, K2=est.K2, g=cm.g, H=_h(est_vals),
         free={n: float(v) for n, v in zip(names, p, strict=True)},
         stderr={n: float(s) for n, s in zip(names, se, strict=True)},
         covariance=cov, condition=cond,

@@ -18,7 +18,7 @@ from bikeid.ident import greybox, pem
 from bikeid.ident.canonical import theta_from_matrices
 from bikeid.ident.direct import _parse
 from bikeid.sim.errors import InputError, UntrustworthyResult
-from bikeid.sim.linear import canonical_matrices, state_space
+from bikeid.sim.linear import canonical_matrices, lateral_force_vector, state_space
 from bikeid.sim.parameters import benchmark
 
 P = benchmark()
@@ -179,17 +179,74 @@ def test_eigenvalues_agree_with_canonical_pem(runs, joint):
 
 
 def test_bad_input_is_refused(runs):
-    """Clear one-line InputErrors: unknown entry, lateral-force entry (no F input), a tied
-    symmetric cell, a run with lateral force logged."""
+    """Clear one-line InputErrors: unknown entry, lateral-force entry without a lateral force,
+    a tied symmetric cell, a run with a roll torque logged."""
     with pytest.raises(InputError, match="unknown matrix entry 'Kxx'"):
         greybox.fit(runs[0], ("Kxx",), P)
-    with pytest.raises(InputError, match="single input T_delta"):
+    with pytest.raises(InputError, match="F is zero in every run"):
         greybox.fit(runs[0], ("HdF",), P)
     with pytest.raises(InputError, match="tied to"):
         greybox.fit(runs[0], ("Mdp",), P)
-    forced = simulate(P, 5.0, duration=2, seed=1, lateral_force=1.0)
-    with pytest.raises(InputError, match="F is nonzero"):
-        greybox.fit(forced, ("Mdd",), P)
+    rolled = simulate(P, 5.0, duration=2, seed=1, roll_torque=1.0)
+    with pytest.raises(InputError, match="T_phi is nonzero"):
+        greybox.fit(rolled, ("Mdd",), P)
+
+
+@pytest.fixture(scope="module")
+def forced_runs():
+    """The same loop with a uniform lateral force of 5 N at (0.5, -1.0) m (logged)."""
+    return [
+        simulate(P, v, duration=30, seed=10 + i, dither=1.0, dither_hold=5, disturbance=0.5,
+                 lateral_force=5.0, angle_noise=1e-3, rate_noise=1e-2)
+        for i, v in enumerate(SPEEDS)
+    ]  # fmt: skip
+
+
+def test_lateral_force_gradient_matches_finite_differences():
+    """Second method for the superposed (T_delta, F) predictor: J'r from the kernel's two
+    passes equals the central-difference gradient of 0.5 |r(x)|^2 (x0 re-projected at each
+    point, which variable projection makes exact) to 1e-4 relative (difference error ~h^2)."""
+    from bikeid.ident.pem import _initial_k, _out_matrix, _run_data
+
+    rs = [simulate(P, v, duration=5, seed=3, dither=1.0, dither_hold=5, lateral_force=5.0,
+                   angle_noise=1e-3, rate_noise=1e-2) for v in (3.0, 6.0)]  # fmt: skip
+    data = _run_data(rs, greybox.DEFAULT_OUTPUTS)
+    C = _out_matrix(greybox.DEFAULT_OUTPUTS)[0]
+    free = ("Mpd", "K0dd", "K2dd", "C1dd", "HpF", "HdF")
+    vals = {n: true_entry(n) for n in greybox.ALL_ENTRIES if not n.startswith("H")}
+    vals["HpF"], vals["HdF"] = lateral_force_vector(P, 0.5, -1.0)
+    vals["Mdp"], vals["K0dp"] = vals["Mpd"], vals["K0pd"]
+    Ks = [_initial_k(theta_from_matrices(CM, d.v), d.dt, C, [d], np.var(d.y, axis=0), True)
+          for d in data]  # fmt: skip
+    w = 1 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
+    forces = [np.asarray(r["F"], float) for r in rs]
+    prob = greybox._GreyProblem(data, [0, 1], Ks, vals, free, True, CM.g, True, w,
+                                greybox.DEFAULT_OUTPUTS, forces)  # fmt: skip
+    x = np.concatenate([[vals[n] * 1.02 for n in free]] + [K.ravel() for K in Ks])
+    _, _, grad = prob.normal_equations(x)
+    for j in list(range(len(free))) + [len(free) + 5, len(free) + 16 + 9]:
+        h = 1e-6 * max(1.0, abs(x[j]))
+        e = np.zeros_like(x)
+        e[j] = h
+        fp, fm = (0.5 * float(np.sum(prob.residual(x + s * e) ** 2)) for s in (1, -1))
+        fd = (fp - fm) / (2 * h)
+        assert abs(fd - grad[j]) <= 1e-4 * max(abs(grad[j]), 1e-3 * np.max(np.abs(grad))), j
+
+
+def test_lateral_force_column_recovered(forced_runs):
+    """With a logged lateral force the default free set adds HdF (Moore & Hubbard's); HdF,
+    and HpF when also freed, are recovered within Z_MAX standard errors of
+    ``sim.linear.lateral_force_vector`` at the logged point, from a start of HdF = 0, as are
+    the matrix entries; the state space gets the F column M^-1 H."""
+    H = lateral_force_vector(P, *forced_runs[0].meta["lateral_force_point"])
+    m = greybox.fit(forced_runs, greybox.DEFAULT_FREE + ("HpF", "HdF"), P,
+                    start={"HdF": 0.0})  # fmt: skip
+    for n, val in m.free.items():
+        truth = H["pd".index(n[1])] if n.startswith("H") else true_entry(n)
+        assert abs(val - truth) < Z_MAX * m.stderr[n], (n, val, truth, m.stderr[n])
+    sys = m.state_space(5.0, inputs=("T_delta", "F"))
+    assert np.allclose(sys.B[2:, 1], np.linalg.solve(m.M, m.H))
+    assert "HdF" in greybox.fit(forced_runs[:2], reference=P).free
 
 
 def test_cli_identify_greybox(runs, tmp_path, capsys):
