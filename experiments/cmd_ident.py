@@ -1,4 +1,4 @@
-"""``bikeid identify``: direct (Moore & Hubbard) or canonical PEM (Chen & Dao) on an HDF5 file.
+"""``bikeid identify``: direct (Moore & Hubbard), canonical PEM (Chen & Dao) or grey-box PEM.
 
 For simulated runs (``meta['parameters']`` present) the true linearization is
 printed beside the estimate (``true_eigenvalues``).
@@ -259,7 +259,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
         res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable)
         out.update(
-            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, condition=res.condition,
+            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,
             free={k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
                   for k, v in res.free.items()},
             dropped=list(res.dropped), notes=list(res.notes),
@@ -312,7 +312,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     np.set_printoptions(precision=5, suppress=True, linewidth=110)
     print(f"{', '.join(args.file)}: {len(runs)} runs, method {args.method}")
     if args.method == "greybox":
-        for k in ("M", "C1", "K0", "K2"):
+        for k in ("M", "C1", "K0", "K2", "H"):
             print(f"{k} =\n{out[k]}")
         for k, d in out["free"].items():
             print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g} (SE inflation "

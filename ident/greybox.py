@@ -621,14 +621,21 @@ class GreyboxModel:
         return critical_speeds(self.canonical(), vmax)
 
 
+def _meta_bicycle(runs) -> BicycleParameters | None:
+    """The simulated bicycle of the runs' metadata (linear loop or sweep), else None."""
+    meta = runs[0].meta
+    values = meta.get("parameters") or (meta.get("bicycle") or {}).get("parameters")
+    return from_mapping(values, name="run meta") if values else None
+
+
 def _reference(reference, runs) -> CanonicalMatrices:
     if reference is None:
-        if "parameters" not in runs[0].meta:
+        reference = _meta_bicycle(runs)
+        if reference is None:
             raise InputError(
                 "no values for the fixed entries: pass reference=BicycleParameters (or use "
-                "runs whose meta holds 'parameters')"
+                "runs whose meta holds the simulated bicycle's parameters)"
             )
-        reference = from_mapping(runs[0].meta["parameters"], name="run meta")
     if isinstance(reference, BicycleParameters):
         return canonical_matrices(reference)
     if isinstance(reference, CanonicalMatrices):
@@ -666,9 +673,7 @@ def _force_column(H, reference, runs) -> tuple[float, float]:
             raise InputError(f"H={H!r}: give two finite numbers (HpF, HdF) [m]")
         return float(h[0]), float(h[1])
     point = runs[0].meta.get("lateral_force_point")
-    ref = reference
-    if ref is None and "parameters" in runs[0].meta:
-        ref = from_mapping(runs[0].meta["parameters"], name="run meta")
+    ref = _meta_bicycle(runs) if reference is None else reference
     if point is None or not isinstance(ref, BicycleParameters):
         raise InputError(
             "a run has a lateral force F but no H is known: pass H=(HpF, HdF) [m], or use runs "
