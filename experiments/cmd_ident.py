@@ -262,7 +262,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
             M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,
             free={k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
                   for k, v in res.free.items()},
-            dropped=list(res.dropped), notes=list(res.notes),
+            least_determined=list(res.least_determined), dropped=list(res.dropped),
+            notes=list(res.notes),
         )  # fmt: skip
         if len(speeds) >= 2:
             out["critical_speeds"] = res.critical_speeds()
@@ -317,7 +318,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         for k, d in out["free"].items():
             print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g} (SE inflation "
                   f"{d['inflation']:.3g})")  # fmt: skip
-        print(f"condition number {out['condition']:.3g}; fixed as poorly determined: "
+        print(f"condition number {out['condition']:.3g} (weakest direction: "
+              f"{', '.join(out['least_determined'])}); fixed as poorly determined: "
               f"{out['dropped'] or 'none'}")  # fmt: skip
     if args.method == "direct":
         for k in ("M", "C1", "K0", "K2", "H"):

@@ -466,6 +466,14 @@ class GreyboxModel:
     nfev: int = 0
     notes: tuple[str, ...] = field(default_factory=tuple)
 
+    @property
+    def least_determined(self) -> tuple[str, ...]:
+        """tuple of str: free entries with more than 20 % share (|component| > 0.2) of the
+        weakest scaled direction, largest first (the ones ``drop_unidentifiable`` would fix
+        first; poorly determined only if :attr:`condition` is large)."""
+        order = sorted(self.weakest, key=lambda n: -abs(self.weakest[n]))
+        return tuple(n for n in order if abs(self.weakest[n]) > 0.2)
+
     def canonical(self) -> CanonicalMatrices:
         """The estimated matrices as :class:`bikeid.sim.linear.CanonicalMatrices`.
 

@@ -87,6 +87,12 @@ def test_joint_fit_recovers_free_entries(joint):
     assert joint.M[1, 0] == joint.M[0, 1] and joint.K0[1, 0] == joint.K0[0, 1]  # symmetric
     assert 1.0 <= joint.condition < greybox.MAX_CONDITION
     assert joint.dropped == ()
+    # the weakest direction is a unit vector over the free entries; its main entries listed
+    w = np.array([joint.weakest[n] for n in joint.free])
+    assert np.linalg.norm(w) == pytest.approx(1.0)
+    assert joint.least_determined and all(abs(joint.weakest[n]) > 0.2
+                                          for n in joint.least_determined)  # fmt: skip
+    assert all(f >= 1.0 - 1e-9 for f in joint.inflation.values())  # VIF >= 1 by definition
 
 
 def test_state_space_matches_the_linear_model(joint):
