@@ -227,6 +227,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
     out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds}
+    if args.method != "greybox" and (args.free or args.drop_unidentifiable):
+        raise ValueError("--free and --drop-unidentifiable apply to --method greybox")
     if args.method == "direct":
         from bikeid.ident.direct import identify
         from bikeid.ident.signals import prepare
@@ -253,6 +255,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         from bikeid.ident import greybox
         from bikeid.sim.parameters import by_name
 
+        if args.speed_parameterized:
+            raise ValueError("--speed-parameterized applies to --method pem (greybox is always)")
         reference = by_name(args.bicycle) if args.bicycle else truth
         if reference is None:
             raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
