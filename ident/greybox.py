@@ -2,13 +2,14 @@
 
 Model (Moore & Hubbard eq. 1, Meijaard notation, q = [phi, delta])::
 
-    M q'' + v C1 q' + (g K0 + v^2 K2) q = [0, T_delta]
+    M q'' + v C1 q' + (g K0 + v^2 K2) q = [0, T_delta] + H F
 
-The parameters are entries of M, C1, K0, K2, named as in :mod:`ident.direct` (``Mpd`` =
+The parameters are entries of M, C1, K0, K2 (and H), named as in :mod:`ident.direct` (``Mpd`` =
 M[phi, delta], ``K2dd``, ...); any subset is free, the others stay at a bicycle's Whipple
 values (default free set: Moore & Hubbard's, :data:`ident.direct.MOORE_ROLL` +
-:data:`ident.direct.MOORE_STEER`, HdF left out).  With ``symmetric=True`` (default) ``Mpd``
-stands for M[phi, delta] = M[delta, phi] and ``K0pd`` for K0[phi, delta] = K0[delta, phi].
+:data:`ident.direct.MOORE_STEER`, HdF only when a run has a lateral force).  With
+``symmetric=True`` (default) ``Mpd`` stands for M[phi, delta] = M[delta, phi] and ``K0pd``
+for K0[phi, delta] = K0[delta, phi].
 The matrices do not depend on speed, so one parameter vector fits runs at any number of
 speeds jointly; runs at one speed give a per-speed fit (where, e.g., K0dd and K2dd are not
 separable).
@@ -96,9 +97,9 @@ DEFAULT_FREE = MOORE_ROLL + tuple(n for n in MOORE_STEER if n != "HdF")
 #: Largest accepted condition number of the column-scaled Jacobian of the free entries.
 #: A direction that badly determined has a standard error 1e4 times the best-determined
 #: one's (relative units): with the per-entry errors of ~0.1-1 % typical of the testbed's
-#: 50 s runs it is undetermined.  Measured: Moore & Hubbard's set over several speeds
-#: ~40-300; K0dd and K2dd both free at one speed ~1e7-1e8 (exactly collinear, the number
-#: is round-off).
+#: 50 s runs it is undetermined.  Measured: Moore & Hubbard's set over 2-8 m/s 10
+#: (tests/test_greybox.py), with K0pp over the 29 speeds of ``bikeid accuracy`` 475-518;
+#: K0dd and K2dd both free at one speed 7.7e7 (exactly collinear, the number is round-off).
 MAX_CONDITION = 1e4
 _MATS = ("M", "C1", "K0", "K2")
 _SYM = {"Mdp": "Mpd", "K0dp": "K0pd"}
