@@ -28,11 +28,33 @@ Conventions (state order, signal names, units, signs) are stated once in
 y right, z down; roll, steer and steer torque positive to the right).
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("bikeid")
-except PackageNotFoundError:  # imported from a source tree that is not installed
-    __version__ = "0+unknown"
-
 __all__ = ["__version__"]
+
+
+def __getattr__(name: str) -> str:
+    """``bikeid.__version__``, read from the installed metadata on first use
+    (``importlib.metadata`` costs ~30 ms of every command's start-up otherwise).
+
+    Parameters
+    ----------
+    name : str
+        The attribute asked for.
+
+    Returns
+    -------
+    str
+        The installed version, or ``"0+unknown"`` in a source tree that is not installed.
+
+    Raises
+    ------
+    AttributeError
+        For any other name.
+    """
+    if name != "__version__":
+        raise AttributeError(f"module 'bikeid' has no attribute {name!r}")
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("bikeid")
+    except PackageNotFoundError:  # imported from a source tree that is not installed
+        return "0+unknown"

@@ -60,6 +60,13 @@ class Window:
         Free-form metadata.
     correction : dict or None
         Nonlinear minus linear nominal outputs (``ident.experiment_model``), or None.
+    T_logged : (n,) ndarray or None
+        Logged total steer-motor command over the window [N m] (the plant input; None when
+        unknown).
+    drive : str
+        What drives a model simulated over the window: ``"loop"`` (default: the known
+        steer-into-lean law on the simulated roll rate, plus ``T_ext``) or ``"logged"``
+        (``T_logged`` replayed open loop: no controller needed).
     """
 
     file: str
@@ -77,6 +84,8 @@ class Window:
     T_phi: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     correction: dict | None = None  # nonlinear - linear nominal outputs (ident.experiment_model)
+    T_logged: np.ndarray | None = None
+    drive: str = "loop"
 
     @property
     def n(self) -> int:
@@ -144,6 +153,7 @@ def _window(run: Run, i0: int, i1: int, kind: str, freq=None, hist_len: int = 20
         hist=h,
         kind=kind,
         freq=freq,
+        T_logged=run["T_delta"][sl].copy(),
     )
 
 

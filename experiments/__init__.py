@@ -12,6 +12,8 @@ Modules:
   :mod:`~bikeid.experiments.cmd_reproduce` (``reproduce``),
   :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials``,
   ``data fetch``).
+- :mod:`~bikeid.experiments.progress`: progress bars of the long commands (stderr, only on a
+  terminal and without ``--json``); library loops report through a callback.
 - :mod:`~bikeid.experiments.cliutil`: helpers shared by the command modules (ranges, JSON
   output, bicycles).
 - :mod:`~bikeid.experiments.sweep`: resumable, deterministic, parallel sweeps of

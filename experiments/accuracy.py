@@ -523,6 +523,7 @@ def run_accuracy(
     workers: int = 2,
     bicycle: str = "benchmark",
     log: Callable[[str], None] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> dict[str, Any]:
     """The whole experiment; returns the JSON-able result (also written by the CLI).
 
@@ -542,6 +543,10 @@ def run_accuracy(
         Bicycle parameter set by name.
     log : callable, optional
         Receives progress lines (default: stderr).
+    progress : callable, optional
+        ``progress(done, total, label)`` before each stage (simulating, then identifying,
+        per controller: ``total`` = 2 x controllers) and at the end
+        (:mod:`bikeid.experiments.progress`).
 
     Returns
     -------
@@ -573,14 +578,21 @@ def run_accuracy(
         "tolerances": {"eigenvalue": "max(0.02 |lambda|, 0.05 1/s)", "critical_speed": SPEED_TOL,
                        "rhp_zero": ZERO_TOL},
     }  # fmt: skip
-    for c in controllers:
+    steps = 2 * len(controllers)
+    for k, c in enumerate(controllers):
+        if progress:
+            progress(2 * k, steps, f"{c}: simulating {len(speeds)} speed(s)")
         tg = time.perf_counter()
         runs = generate(out_dir, c, speeds, workers=workers, bicycle=bicycle, log=log)
         gen = time.perf_counter() - tg
         log(f"{c}: {len(runs)} runs ready in {gen:.1f} s; identifying")
+        if progress:
+            progress(2 * k + 1, steps, f"{c}: identifying")
         res = identify_controller(runs, p, methods, log=log)
         res["data_seconds"] = gen
         result["controllers"][c] = res
+    if progress:
+        progress(steps, steps, "done")
     result["seconds"] = time.perf_counter() - t0
     result["summary"] = summarize(result)
     return result

@@ -60,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EXIT_CODES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--version", action=_Version, nargs=0, help="print the version and exit")
     parser.add_argument(
         "--debug", action="store_true", help="print the traceback of an error (anywhere)"
     )
@@ -74,6 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module.register(sub)
     return parser
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed version, read only when asked (start-up time)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):  # noqa: D102
+        parser.exit(0, _version() + "\n")
 
 
 def _version() -> str:
@@ -156,7 +163,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USAGE
     try:
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        finally:  # progress bars end before any error line (experiments.progress)
+            if "bikeid.experiments.progress" in sys.modules:
+                sys.modules["bikeid.experiments.progress"].close_all()
     except BrokenPipeError:  # output piped into head & co.: stop quietly
         sys.stderr.close()
         return 0

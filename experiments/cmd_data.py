@@ -20,6 +20,7 @@ from .cliutil import (
     parse_range,
     range_text,
 )
+from .progress import on_terminal
 
 CONTROLLER_HELP = (  # "fuzzy, pid or pole (...)", from controllers.registry
     f"{', '.join(STUDY_CONTROLLERS[:-1])} or {STUDY_CONTROLLERS[-1]} "
@@ -100,7 +101,11 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--dask", metavar="ADDRESS", help="run on a Dask cluster ('local' for a LocalCluster)"
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar on stderr (there is one only when stderr is a terminal)",
+    )
 
 
 def _options(args: argparse.Namespace) -> dict:
@@ -179,8 +184,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         args.controller, tuple(speeds), _seeds(args.seeds), args.duration, **_options(args)
     )
     report = run_sweep(
-        spec, args.out, workers=args.workers, dask=args.dask, progress=not args.no_progress
-    )
+        spec, args.out, workers=args.workers, dask=args.dask,
+        progress=not args.no_progress and on_terminal(),
+    )  # fmt: skip
     print(report.summary())
     return 0
 
@@ -207,7 +213,7 @@ def cmd_stabilization(args: argparse.Namespace) -> int:
         controllers,
         workers=args.workers,
         dask=args.dask,
-        progress=not args.no_progress,
+        progress=not args.no_progress and on_terminal(),
         **options,
     )
     c = stabilization_counts(rows)

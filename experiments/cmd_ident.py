@@ -11,6 +11,7 @@ import argparse
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
 from .cliutil import MAX_WORKERS, dump_json, integer, mapping_arg, number, range_text
+from .progress import quiet, terminal_progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -125,7 +126,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "Simulate 50 s of closed-loop data per speed and controller (cached in DIR/data), "
             "identify with the direct, PEM and grey-box methods and compare eigenvalues, v_w, "
             "v_c and the RHP zero of delta/T_delta with the true linearization. Writes "
-            "DIR/accuracy.json and DIR/accuracy.md; progress on stderr."
+            "DIR/accuracy.json and DIR/accuracy.md; progress on stderr when it is a terminal."
         ),
     )
     a.add_argument(
@@ -435,7 +436,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
         # reuses them as its start, as in ``bikeid accuracy``.
         per: dict = {}
         prev = None
-        for v in speeds:
+        bar = terminal_progress("identify", json_output=args.json, unit="fit")
+        steps = len(speeds) + bool(args.speed_parameterized)
+        for k, v in enumerate(speeds):
+            if bar:
+                bar(k, steps, f"PEM at {v:g} m/s")
             at_v = [r for r in runs if round(r.speed, 6) == v]
             prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,),
                                     **({"outputs": outputs} if outputs else {}))  # fmt: skip
@@ -445,6 +450,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
                     "--speed-parameterized needs runs at two or more speeds to separate "
                     f"alpha from beta v^2; the data hold speed {speeds[0]} m/s only"
                 )
+            if bar:
+                bar(len(speeds), steps, "speed-parameterized model")
             model = pem.fit_speed_model(runs, per_speed=per,
                                         **({"outputs": outputs} if outputs else {}))  # fmt: skip
             saved = [(model, targets[0])] if targets else []
@@ -460,6 +467,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
             eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
             saved = list(zip(per.values(), targets, strict=True)) if targets else []
         out["outputs"] = list(next(iter(per.values())).outputs)
+        if bar:
+            bar(steps, steps, "done")
     settings["outputs"] = out["outputs"]  # as fitted (the method's default when not given)
     for model, target in saved:
         save_model(model, target, provenance=provenance, settings=settings, speeds=speeds)
@@ -546,7 +555,11 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
         speeds = acc.QUICK_SPEEDS if args.quick else acc.FULL_SPEEDS
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    result = acc.run_accuracy(out, controllers, methods, speeds, workers=args.workers)
+    bar = terminal_progress("accuracy", json_output=args.json, unit="stage")
+    result = acc.run_accuracy(
+        out, controllers, methods, speeds, workers=args.workers,
+        log=bar.write if bar else quiet, progress=bar,
+    )  # fmt: skip
     atomic_write_text(out / "accuracy.json", dump_json(result))
     atomic_write_text(out / "accuracy.md", acc.markdown(result))
     if args.json:

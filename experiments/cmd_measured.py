@@ -8,6 +8,8 @@ import math
 import sys
 from pathlib import Path
 
+from bikeid.sim.errors import InputError
+
 from .cliutil import (
     MAX_WORKERS,
     dump_json,
@@ -16,6 +18,7 @@ from .cliutil import (
     range_text,
     to_jsonable,
 )
+from .progress import terminal_progress
 
 DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
 DECAYS_HELP = (
@@ -63,7 +66,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
-    e.add_argument("--model", required=True, help="MODEL.json from 'measured fit'")
+    e.add_argument(
+        "--model",
+        required=True,
+        help="MODEL.json from 'measured fit', or a model of 'bikeid identify --out' (with "
+        "--input logged)",
+    )
     e.add_argument("--data", help=DATA_HELP)
     e.add_argument(
         "--speeds",
@@ -72,6 +80,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     e.add_argument("--json", action="store_true", help="print JSON")
     e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
+    e.add_argument(
+        "--input",
+        choices=("loop", "logged"),
+        default="loop",
+        help="what drives the model over each window: 'loop' (default) the known "
+        "steer-into-lean law closed around the model; 'logged' the logged total steer "
+        "command replayed open loop (no controller needed; unstable models grow)",
+    )
     e.set_defaults(func=cmd_evaluate)
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
@@ -153,7 +169,8 @@ def cmd_fit(args) -> int:
 
     ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
-    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
+    bar = terminal_progress("measured fit", unit="fit")
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar)
     out["decays"] = args.decays
     settings = {"max_effects": args.max_effects, "stability": args.stability,
                 "weave_weight": ww, "speeds": _speeds(args.speeds)}  # fmt: skip
@@ -177,8 +194,33 @@ def cmd_fit(args) -> int:
 
 def cmd_evaluate(args) -> int:
     from bikeid.dataset.decays import load_decays
-    from bikeid.experiments.measured_study import evaluate_json, model_from_json
+    from bikeid.experiments.measured_study import (
+        evaluate_json,
+        evaluate_plant_model,
+        model_from_json,
+        plant_model_file,
+    )
 
+    plant_model = plant_model_file(args.model)
+    if plant_model is not None:  # an identified plant model (bikeid identify --out)
+        if args.input != "logged":
+            raise InputError(
+                f"{args.model} holds an identified plant model, which knows no controller: "
+                "evaluate it with --input logged (the logged steer command replayed)"
+            )
+        ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
+        out = evaluate_plant_model(plant_model, ws)
+        if args.json:
+            print(dump_json(out))
+        else:
+            for f in out["files"]:
+                print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
+                      f"after {f['error_after']:.3f}")  # fmt: skip
+            s = out["summary"]
+            print(f"summary ({s['windows']} windows, logged command replayed): before "
+                  f"{s['error_before']:.3f} after {s['error_after']:.3f}; "
+                  f"{len(s['skipped'])} windows at other speeds skipped")  # fmt: skip
+        return 0
     model, obj = model_from_json(args.model)
     if obj.get("plant_defaulted"):
         print(
@@ -190,7 +232,13 @@ def cmd_evaluate(args) -> int:
     ws = load_decays(
         args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
     )
+    if args.input == "logged":
+        from dataclasses import replace
+
+        ws = [replace(w, drive="logged") for w in ws]
     out = evaluate_json(obj, ws)
+    if out.get("note"):
+        print(f"bikeid measured evaluate: {out['note']}", file=sys.stderr)
     if args.json:
         print(dump_json(out))
     else:
@@ -219,10 +267,18 @@ def cmd_trials(args) -> int:
 
     effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
 
+    bar = terminal_progress("trials", json_output=args.json, unit="trial")
+    finished = []
+    if bar:
+        bar(0, args.n, "")
+
     def progress(row):
         if args.log:
             with open(args.log, "a") as fh:
                 fh.write(json.dumps(to_jsonable(row)) + "\n")
+        finished.append(row)
+        if bar:
+            bar(len(finished), args.n, "")
 
     out = run_trials(
         args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress

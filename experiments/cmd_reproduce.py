@@ -14,7 +14,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Redo the figures and tables of Chen & Dao (2010) and Moore & Hubbard on the "
             "testbed: paper | bikeid identified | ground truth side by side in DIR/report.md, "
-            "DIR/summary.json and PNG figures. Progress goes to stderr."
+            "DIR/summary.json and PNG figures. Progress goes to stderr when it is a terminal."
         ),
     )
     p.add_argument(
@@ -44,7 +44,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from .progress import quiet, terminal_progress
     from .reproduce import reproduce
 
-    reproduce(args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle)
+    bar = terminal_progress("reproduce", unit="stage")
+    reproduce(
+        args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
+        log=bar.write if bar else quiet, progress=bar,
+    )  # fmt: skip
     return 0

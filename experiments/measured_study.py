@@ -11,8 +11,12 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
+from bikeid.dataset.sbw_logs import DT
 from bikeid.dataset.windows import Window
 from bikeid.ident.discrepancy_diagnostics import evaluate
 from bikeid.ident.effect_fit import FitResult, joint_fit
@@ -29,7 +33,15 @@ from bikeid.sim.textformats import loads_json
 
 from .cliutil import MAX_SPEED
 
-__all__ = ["evaluate_json", "fit_effect_set", "fit_model", "model_from_json", "save_fit"]
+__all__ = [
+    "evaluate_json",
+    "evaluate_plant_model",
+    "fit_effect_set",
+    "fit_model",
+    "model_from_json",
+    "plant_model_file",
+    "save_fit",
+]
 
 
 #: Plants a model file may name (``measured fit --plant``); a file without ``plant`` gets
@@ -203,6 +215,7 @@ def fit_model(
     plant: str = "nonlinear",
     stability: int = 0,
     weave_weight: float | str = "auto",
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> dict:
     """Select effects on ``windows`` and return the model object ``measured fit`` writes.
 
@@ -222,6 +235,9 @@ def fit_model(
         (:func:`bikeid.ident.effect_selection.selection_frequencies`).
     weave_weight : float or "auto", optional
         Weight of the measured weave eigenvalues in every fit.
+    progress : callable, optional
+        ``progress(done, total, label)`` through the subsamples, then the candidate fits
+        (:mod:`bikeid.experiments.progress`).
 
     Returns
     -------
@@ -237,13 +253,15 @@ def fit_model(
     extra = {}
     if stability:
         freq = selection_frequencies(
-            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl
-        )
+            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl,
+            progress=progress,
+        )  # fmt: skip
         extra = {"selection_frequency": freq,
                  "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
     res = select_effects(
-        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl, weave_weight=weave_weight
-    )
+        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl,
+        weave_weight=weave_weight, progress=progress,
+    )  # fmt: skip
     return {
         "bicycle": "steer-by-wire",
         "plant": plant,
@@ -272,13 +290,24 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
     dict
         The metric's description, plant, verdict, effects with standard errors, fit speeds,
         :func:`bikeid.ident.discrepancy_diagnostics.evaluate`'s ``files`` and ``summary``
-        (NRMSE, dimensionless; weave eigenvalues [1/s]), and ``validation``: the model's fit
+        (NRMSE, dimensionless; weave eigenvalues [1/s]), ``input`` (``"loop"`` or
+        ``"logged"``: what drove the model, :attr:`bikeid.dataset.windows.Window.drive`;
+        a nonlinear-plant model is replayed with the linear plant, and ``note`` says so),
+        and ``validation``: the model's fit
         [%] and residual tests per file (:func:`bikeid.ident.validation_report.validate_decays`).
     """
     from bikeid.ident.validation_report import validate_decays
 
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
     plant = model_obj.get("plant", DEFAULT_PLANT)  # as model_from_json and measured fit
+    replay = bool(windows) and all(w.drive == "logged" for w in windows)
+    note = None
+    if replay and plant == "nonlinear":
+        # Open loop, the nonlinear plant leaves its domain inside some windows (measured: a
+        # 3.5 m/s decay unloads a wheel after 0.92 s), so replay runs the linear plant.
+        plant = "linear"
+        note = ("replayed with the linear plant: open loop, the nonlinear plant falls inside "
+                "some windows (the model's effects are kept)")  # fmt: skip
     ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
     # the validation of `bikeid validate` on the decays (windows left corrected at `aug`)
     validation = validate_decays(aug, windows)
@@ -300,6 +329,8 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         "fits to the decays (measured; simulated from the same initial states); "
         "weave_root_error: lambda_model = nearest root of the sampled linear loop",
         "plant": plant,
+        "input": "logged" if replay else "loop",
+        "note": note,
         "verdict": ident.get("verdict"),
         "effects": effects,
         "fit_speeds": model_obj.get("fit_speeds"),
@@ -331,3 +362,135 @@ def fit_effect_set(windows: list[Window], names: list[str], nonlinear: bool = Tr
     for w in windows:  # start from the nominal's defect correction
         w.correction = None
     return joint_fit(ExperimentModel(), windows, names, start, nonlinear)
+
+
+def plant_model_file(path: str | Path):
+    """The identified plant model in ``path``, or None for a ``measured fit`` model file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A JSON model file.
+
+    Returns
+    -------
+    object or None
+        The model of a bikeid model file of a kind other than ``experiment-model`` (a
+        :class:`bikeid.ident.pem.CanonicalModel`, ``SpeedCanonicalModel`` or
+        :class:`bikeid.ident.direct.DirectResult` from ``bikeid identify --out``); None when
+        the file is a ``measured fit`` model (either layout) or cannot be read as JSON (the
+        caller's reader then names the problem).
+    """
+    from bikeid.ident.model_file import FORMAT, load_model
+
+    try:
+        obj = loads_json(Path(path).read_text(encoding="utf-8"), str(path))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    if not (isinstance(obj, dict) and obj.get("format") == FORMAT):
+        return None
+    if obj.get("kind") == "experiment-model":
+        return None
+    return load_model(path)
+
+
+def _plant_state_space(model, v: float) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous (A, b) of a plant model at ``v`` [m/s]: states [phi, delta, phidot,
+    deltadot], the steer-torque input column."""
+    from bikeid.ident.direct import DirectResult
+
+    if isinstance(model, DirectResult):
+        ss = model.state_space(v, inputs=("T_delta",))
+    elif hasattr(model, "at"):  # speed-parameterized canonical model
+        ss = model.state_space(v)
+    else:  # fixed-speed canonical model (input T_delta only)
+        ss = model.state_space()
+    return np.asarray(ss.A, dtype=float), np.asarray(ss.B, dtype=float)[:, 0]
+
+
+def evaluate_plant_model(model, windows: list[Window], speed_tolerance: float = 0.1) -> dict:
+    """Error before (Whipple nominal) and after (an identified plant model) on ``windows``,
+    each driven open loop by its logged steer command from its measured start state.
+
+    The model needs no controller: each window is simulated x[k+1] = Ad x[k] + bd T[k]
+    (exact zero-order hold of the model at the window's treadmill speed, T the logged
+    ``command_fork``) from :meth:`bikeid.dataset.windows.Window.state0`; the nominal is the
+    linear Whipple model of the steer-by-wire bicycle, simulated the same way.  The error is
+    that of ``measured evaluate`` (:func:`bikeid.ident.experiment_model.window_errors`: NRMSE
+    of roll rate and steer angle, mean over windows).
+
+    Parameters
+    ----------
+    model : CanonicalModel, SpeedCanonicalModel or DirectResult
+        An identified model (``bikeid identify --out``).  A fixed-speed model is evaluated
+        only on windows within ``speed_tolerance`` of its speed.
+    windows : list of Window
+        Decays with ``T_logged``.
+    speed_tolerance : float, optional
+        [m/s].
+
+    Returns
+    -------
+    dict
+        ``input`` ("logged"), ``model_kind``, ``files`` (file, speed [m/s], windows,
+        error_before, error_after: means over the file's windows) and ``summary``
+        (error_before, error_after: means over files, as ``measured evaluate``; windows;
+        the skipped windows).
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        If no window is at the model's speed or a window has no logged command.
+    """
+    from bikeid.ident.experiment_model import window_errors
+    from bikeid.sim.linear import state_space
+    from bikeid.sim.parameters import steer_by_wire
+    from bikeid.sim.sampling import zoh
+
+    p = steer_by_wire()
+    fixed = getattr(model, "speed", None) if not hasattr(model, "at") else None
+    use, skipped = [], []
+    for w in windows:
+        if w.T_logged is None:
+            raise InputError(f"{w.file}@{w.start}: the window has no logged steer command")
+        if fixed is not None and abs(w.speed - fixed) > speed_tolerance:
+            skipped.append(f"{w.file}@{w.start} at {w.speed:.2f} m/s")
+            continue
+        use.append(w)
+    if not use:
+        raise InputError(f"no decay window at the model's speed {fixed} m/s (+-{speed_tolerance}); "
+                         "give --speeds near it or a model defined over speed")  # fmt: skip
+    sims = {"before": [], "after": []}
+    for w in use:
+        nom = state_space(p, w.speed, inputs=("T_delta",))
+        for key, (A, b) in (("before", (np.asarray(nom.A), np.asarray(nom.B)[:, 0])),
+                            ("after", _plant_state_space(model, w.speed))):  # fmt: skip
+            Ad, Bd = zoh(A, b[:, None], DT)
+            x = w.state0()
+            Y = np.empty((w.n, 4))
+            for k in range(w.n):
+                Y[k] = x
+                x = Ad @ x + Bd[:, 0] * w.T_logged[k]
+            sims[key].append({"phi": Y[:, 0], "delta": Y[:, 1], "phidot": Y[:, 2],
+                              "deltadot": Y[:, 3]})  # fmt: skip
+    e0 = window_errors(use, sims["before"]).mean(axis=1)
+    e1 = window_errors(use, sims["after"]).mean(axis=1)
+    files = []
+    for f in dict.fromkeys(w.file for w in use):
+        idx = [i for i, w in enumerate(use) if w.file == f]
+        files.append({"file": f, "speed": float(use[idx[0]].speed), "windows": len(idx),
+                      "error_before": float(e0[idx].mean()),
+                      "error_after": float(e1[idx].mean())})  # fmt: skip
+    return {
+        "input": "logged",
+        "model_kind": type(model).__name__,
+        "metric": "mean over decay windows of the mean NRMSE of roll rate and steer angle; "
+        "open-loop replay of the logged steer command from the measured start state",
+        "files": files,
+        "summary": {
+            "error_before": float(np.mean([f["error_before"] for f in files])),
+            "error_after": float(np.mean([f["error_after"] for f in files])),
+            "windows": len(use),
+            "skipped": skipped,
+        },
+    }

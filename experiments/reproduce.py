@@ -118,6 +118,7 @@ def reproduce(
     workers: int | None = None,
     log: Callable[[str], None] = _stderr_log,
     bicycle: str = "benchmark",
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> dict[str, Any]:
     """Run every study into ``out``: figures, ``report.md`` and ``summary.json``.
 
@@ -133,6 +134,9 @@ def reproduce(
         Progress lines (default: stderr).
     bicycle : str
         ``sim.parameters.by_name`` name of the simulated bicycle.
+    progress : callable, optional
+        ``progress(done, 7, label)`` before each of the 7 stages and at the end
+        (:mod:`bikeid.experiments.progress`).
 
     Returns
     -------
@@ -157,8 +161,14 @@ def reproduce(
     times: dict[str, float] = {}
     t_all = time.perf_counter()
 
+    stages_done = 0
+
     def stage(name: str):
+        nonlocal stages_done
         log(f"[reproduce] {name} ...")
+        if progress:
+            progress(stages_done, 7, name.split(":")[0].split(" (")[0])
+        stages_done += 1
         return time.perf_counter()
 
     t0 = stage("Chen & Dao Fig. 2 / eqs. 5-6 (identification at 4.2 m/s)")
@@ -202,6 +212,8 @@ def reproduce(
         sweep[c] = [g for g in rest if g["controller"] == c]
     sw = _sweep_summary(sweep, out)
     times["sweep"] = time.perf_counter() - t0
+    if progress:
+        progress(7, 7, "report")
     times["total"] = time.perf_counter() - t_all
     crit = critical_speeds(p)
     summary = {

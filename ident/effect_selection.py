@@ -37,6 +37,7 @@ output-error fits in :mod:`bikeid.ident.effect_fit`, the weave eigenvalue in
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -157,6 +158,7 @@ def select_effects(
     min_gain: float = 0.02,
     nonlinear: bool = False,
     weave_weight: float | str = "auto",
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> Identification:
     """Greedy forward selection of library effects by output error (module docstring).
 
@@ -191,6 +193,9 @@ def select_effects(
         Nonlinear plant by defect correction.
     weave_weight : float or "auto", optional
         Weight of the weave term (see above).
+    progress : callable, optional
+        ``progress(done, total, label)`` before each candidate fit; ``total`` counts the
+        candidate fits of ``max_effects`` full rounds (an early stop jumps to the end).
 
     Returns
     -------
@@ -234,12 +239,16 @@ def select_effects(
     cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
     ranking: list[EffectEstimate] = []
     rounds: list[dict] = []
+    steps, done = sum(max(len(names) - r, 0) for r in range(max_effects)), 0
     for _round in range(max_effects):
         trials = []
         base_cost = fit_effects(cur, fit_w, [], weave=wv_fit).cost
         for n in names:
             if n in accepted:
                 continue
+            if progress:
+                progress(done, steps, f"round {_round + 1}: {n}")
+                done += 1
             cand = LIBRARY[n]
             start = {}
             if cand.kind == "structural":
@@ -292,6 +301,8 @@ def select_effects(
             break
         if wv_fit:  # the estimator offsets follow the current model, like the correction
             wv_fit = wv_fit.at(cur, fit_w)
+    if progress:
+        progress(steps, steps, "joint fit")
     if wv_all:
         wv_all = wv_all.at(cur, windows)
     final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all)
@@ -368,6 +379,7 @@ def selection_frequencies(
     resamples: int = 20,
     fraction: float = 0.75,
     seed: int = 0,
+    progress: Callable[[int, int, str], None] | None = None,
     **select_kw,
 ) -> dict[str, float]:
     """How stable is the verdict?  Fraction of subsamples in which each name is selected.
@@ -391,6 +403,8 @@ def selection_frequencies(
         Fraction of each file's windows in a subsample.
     seed : int, optional
         Generator seed.
+    progress : callable, optional
+        ``progress(done, resamples, label)`` before each subsample.
 
     Returns
     -------
@@ -406,7 +420,9 @@ def selection_frequencies(
     for i, w in enumerate(windows):
         groups.setdefault(w.file, []).append(i)
     counts: dict[str, int] = {}
-    for _ in range(int(resamples)):
+    for i_sub in range(int(resamples)):
+        if progress:
+            progress(i_sub, int(resamples), f"subsample {i_sub + 1}")
         pick = []
         for idx in groups.values():
             k = min(len(idx), max(2, round(fraction * len(idx))))

@@ -537,7 +537,10 @@ class ExperimentModel:
         """Simulate each window from its measured initial state (vectorized over windows).
 
         Returns per window the *measured-equivalent* outputs phi, delta, phidot,
-        deltadot (sensor biases/scale applied), and the applied command T.
+        deltadot (sensor biases/scale applied), and the applied command T.  A window with
+        ``drive == "logged"`` is driven open loop by its logged command ``T_logged`` (the
+        input-path effects, delay, gain and lag, still act on it; an unstable model simply
+        grows over the window); the others by the steer-into-lean law.
         ``nsub`` substeps per 10 ms loop re-evaluate the Coulomb friction (the
         controller is still sampled every 10 ms).
 
@@ -588,7 +591,17 @@ class ExperimentModel:
             x[:, -1] = x[:, 1] - self.e("tire_relaxation") / vt * x[:, 3]
         text = np.zeros((nw, nmax))
         tphi = np.zeros((nw, nmax))
+        tlog = np.zeros((nw, nmax))
+        logged = np.array([w.drive == "logged" for w in windows])
         for i, w in enumerate(windows):
+            if w.drive not in ("loop", "logged"):
+                raise ValueError(f"{w.file}@{w.start}: drive must be 'loop' or 'logged', "
+                                 f"got {w.drive!r}")  # fmt: skip
+            if logged[i]:
+                if w.T_logged is None or np.size(w.T_logged) != w.n:
+                    raise ValueError(f"{w.file}@{w.start}: drive 'logged' needs the logged "
+                                     "steer command over the window (T_logged)")  # fmt: skip
+                tlog[i, : w.n] = w.T_logged
             text[i, : w.n] = w.T_ext
             if w.T_phi is not None:
                 tphi[i, : w.n] = w.T_phi
@@ -597,7 +610,7 @@ class ExperimentModel:
         buf = hist  # Tc_{k-H} .. Tc_{k-1}
         for k in range(nmax):
             X[:, k] = x
-            tc_k = Kc * (s * x[:, 2] + brr) + text[:, k]
+            tc_k = np.where(logged, tlog[:, k], Kc * (s * x[:, 2] + brr) + text[:, k])
             seq = np.concatenate([buf, tc_k[:, None]], axis=1)  # ..., Tc_{k-1}, Tc_k
             u = g * ((1 - f) * seq[:, -1 - m] + f * seq[:, -2 - m])
             U[:, k] = u
@@ -634,7 +647,8 @@ def attach_nonlinear_correction(
     (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms, speed held at the true
     speed) and the linear model are both run with m' from the window's measured initial
     state, zero command history, and the same sampled loop ``T = K (V - v_s) phidot``
-    (v_s the window's mean sensor speed).  Their difference is added to every later
+    (v_s the window's mean sensor speed), or, for a window with ``drive == "logged"``, the
+    same logged command replayed open loop.  Their difference is added to every later
     :meth:`ExperimentModel.simulate` of the window, so a model m simulates as
     y_lin(m) + y_nl(m') - y_lin(m'): exactly the nonlinear plant at m = m', and to first
     order in (m - m') near it (defect correction;
@@ -669,7 +683,13 @@ def attach_nonlinear_correction(
         lin_m = ExperimentModel(p=model.p, effects={**eq, **keep}, K=model.K, V=model.V)
         w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
         sl = lin_m.simulate([w0])[0]
-        ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)
+        if w.drive == "logged":  # replay the logged command, sample by sample
+            cmd = np.asarray(w.T_logged, dtype=float)
+
+            def ctrl(t, y, cmd=cmd):
+                return cmd[min(int(round(t / DT)), cmd.size - 1)]
+        else:
+            ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)
         tr = simulate(
             bike, bike.state(v, *map(float, w.state0())), (w.n - 1) * DT, controller=ctrl,
             mode="held", substeps=4, effects=fx or None,

@@ -16,6 +16,7 @@ handled in :mod:`ident`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -451,13 +452,30 @@ class EigenSweep:
         return self.values[:, idx]
 
 
-def _assignment(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``scipy.optimize.linear_sum_assignment``, imported on first use (start-up time).
+#: Every permutation of 4 columns (the 4x4 assignments of :func:`_assignment`), in
+#: lexicographic order.
+_PERMUTATIONS_4 = np.array(list(itertools.permutations(range(4))))
 
-    (Enumerating the 24 permutations of a 4x4 problem was tried to avoid the ~0.3-0.5 s
-    import; it breaks ties between equal-cost assignments differently, which relabels
-    branches where two real roots meet, so scipy's rule is kept.)
+
+def _assignment(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of the minimum-total-cost assignment of a square cost matrix.
+
+    Up to 4x4 (every eigenvalue problem of the bicycle) all at most 24 assignments are
+    summed and the smallest total taken: exact, and it keeps ``bikeid eig`` and
+    ``critical-speeds`` free of the ~0.4 s ``scipy.optimize`` import (start-up time).
+    Exact ties go to the lexicographically first permutation (the identity first).  Ties
+    happen where a complex pair splits into two real roots (the two assignments are mirror
+    images, so the data do not say which real root continues which branch);
+    ``scipy.optimize.linear_sum_assignment``, used for larger problems, breaks them by its
+    own rule.  For one shipped bicycle ('Browser', whose caster and capsize roots pass
+    through a complex pair near 1-1.5 m/s) the two rules label those two roots oppositely
+    below that speed; the values at every speed are the same either way.
     """
+    n = cost.shape[0]
+    if cost.shape == (n, n) and n <= 4:
+        perms = _PERMUTATIONS_4 if n == 4 else np.array(list(itertools.permutations(range(n))))
+        totals = cost[np.arange(n), perms].sum(axis=1)
+        return np.arange(n), perms[int(np.argmin(totals))]
     from scipy.optimize import linear_sum_assignment
 
     return linear_sum_assignment(cost)
@@ -564,15 +582,10 @@ def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> Ei
 
 
 # -- critical speeds -----------------------------------------------------------------------
-def _quartic_coeffs(cm: CanonicalMatrices, v: float) -> tuple[float, float, float, float, float]:
-    """(a, b, c, d, e) at one speed: the same expansion the grid scan uses, so that the
-    sign changes found on the grid and their brentq refinement see one function."""
-    return tuple(float(c[0]) for c in _grid_coeffs(cm, [v]))
-
-
 def _grid_coeffs(cm: CanonicalMatrices, v: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(a, b, c, d, e) of the quartic at every speed of ``v`` at once (vectorized
-    ``_quartic_coeffs``: the same determinant expanded by hand)."""
+    """(a, b, c, d, e) of the quartic det(M s^2 + v C1 s + g K0 + v^2 K2) at every speed of
+    ``v`` at once (the determinant expanded by hand); the grid scan and the bisection of
+    :func:`_roots` both use it, so they see one function."""
     v = np.asarray(v, dtype=float)[:, None, None]
     K = cm.g * cm.K0 + v**2 * cm.K2
     C = v * cm.C1
@@ -610,24 +623,33 @@ def _const_term(a, b, c, d, e):
 
 
 def _roots(f, cm: CanonicalMatrices, vmax: float, step: float = 0.01) -> list[float]:
-    """Zeros of f(quartic coefficients at v) for v in (0, vmax]: sign changes on the grid
-    (evaluated vectorized), each refined by brentq on the exact scalar coefficients."""
+    """Zeros of f(quartic coefficients at v) for v in (0, vmax]: sign changes on the grid,
+    each refined by bisection until its bracket is two adjacent doubles.
+
+    All brackets are halved together (vectorized, at most ~60 halvings for a 0.01 m/s
+    bracket), so the root is the sign change of the computed function to the last bit,
+    without ``scipy.optimize`` (its import is ~0.4 s of ``bikeid critical-speeds``).
+    """
     grid = np.arange(step, vmax + step / 2, step)
     vals = f(*_grid_coeffs(cm, grid))
-    out = []
-    for k in range(len(grid) - 1):
-        if vals[k] == 0.0:
-            out.append(float(grid[k]))
-        elif vals[k] * vals[k + 1] < 0:
-            from scipy.optimize import brentq
-
-            out.append(
-                brentq(
-                    lambda v: f(*_quartic_coeffs(cm, v)), grid[k], grid[k + 1],
-                    xtol=1e-15, rtol=1e-15,
-                )
-            )  # fmt: skip
-    return out
+    exact = [float(v) for v, fv in zip(grid[:-1], vals[:-1], strict=True) if fv == 0.0]
+    k = np.nonzero(vals[:-1] * vals[1:] < 0)[0]
+    lo, hi, flo = grid[k], grid[k + 1], vals[k]
+    for _ in range(200):  # each pass halves every bracket; 200 is far beyond 64-bit floats
+        mid = 0.5 * (lo + hi)
+        open_ = (mid > lo) & (mid < hi)
+        if not open_.any():
+            break
+        fmid = f(*_grid_coeffs(cm, mid))
+        hit = open_ & (fmid == 0.0)
+        lo, hi = np.where(hit, mid, lo), np.where(hit, mid, hi)
+        right = open_ & ~hit & (np.sign(fmid) == np.sign(flo))  # the zero is in (mid, hi)
+        left = open_ & ~hit & ~right
+        lo, flo = np.where(right, mid, lo), np.where(right, fmid, flo)
+        hi = np.where(left, mid, hi)
+    fhi = f(*_grid_coeffs(cm, hi)) if hi.size else hi
+    best = np.where(np.abs(flo) <= np.abs(fhi), lo, hi)
+    return sorted(exact + [float(v) for v in best])
 
 
 def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0) -> dict:
@@ -635,7 +657,7 @@ def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0
 
     The quartic a s^4 + b s^3 + c s^2 + d s + e = det(M s^2 + v C1 s + g K0 + v^2 K2)
     is scanned on a 0.01 m/s grid from 0.01 m/s to vmax and each sign change refined
-    with ``scipy.optimize.brentq`` (xtol = rtol = 1e-15).
+    by bisection to adjacent doubles (the last bit of the computed coefficients).
 
     Parameters
     ----------
