@@ -274,6 +274,10 @@ def test_cli_identify_greybox(runs, tmp_path, capsys):
     for n, d in out["free"].items():
         assert abs(d["value"] - true_entry(n)) < Z_MAX * d["stderr"], n
     assert len(out["per_speed"]) == len(SPEEDS) and "true_eigenvalues" in out["per_speed"][0]
+    # saving a grey-box model is not supported: refused before fitting, nothing written
+    target = tmp_path / "model.json"
+    assert main(["identify", "--method", "greybox", str(path), "--out", str(target)]) == 3
+    assert "grey-box models cannot be saved" in capsys.readouterr().err and not target.exists()
     args = ["identify", "--method", "greybox", str(one), "--free", "Mdd,K0dd,K2dd"]
     assert main(args) == 4
     err = capsys.readouterr().err.strip()
