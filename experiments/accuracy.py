@@ -24,6 +24,10 @@ bicycle at the run's speed):
   with the external signals (dither and roll reference, lags 0..0.4 s) against the
   closed-loop correlation of sensor noise between regressors and torque (default), or
   tailor-made instruments (``direct_instruments="tailored"``, ``ident.tailored_iv``).
+- ``greybox``: grey-box PEM of the matrix entries (``ident.greybox.fit``) on all runs of the
+  controller jointly (one innovation gain per speed), the direct method's free set, fixed
+  entries at the Whipple values and start at them; ``greybox_mode="per_speed"`` fits each
+  speed alone instead (K2dd then fixed, K0dd and K2dd not being separable at one speed).
 
 Goals: weave, capsize and caster eigenvalues within 2 %
 (0.05 1/s absolute where |lambda| < 2.5), i.e. |error| <= max(0.02 |lambda|, 0.05);
@@ -67,7 +71,7 @@ __all__ = [
 
 #: Controllers studied, by their stored names (``controllers.registry``).
 CONTROLLERS = STUDY_CONTROLLERS
-METHODS = ("direct", "pem")
+METHODS = ("direct", "pem", "greybox")
 FULL_SPEEDS = tuple(float(v) for v in np.round(np.arange(1.0, 15.0 + 1e-9, 0.5), 6))
 #: One speed below v_w (4.29), one between v_w and v_c (6.02), one above v_c (benchmark).
 QUICK_SPEEDS = (2.0, 5.0, 10.0)
@@ -317,6 +321,19 @@ def _direct(runs: Sequence[Run], p, cutoff: float, lags: int, instruments: str):
     )  # fmt: skip
 
 
+def _greybox(runs: Sequence[Run], p, mode: str) -> list[tuple[Any, list[Run]]]:
+    """Grey-box fits: ``"joint"`` one over all runs, ``"per_speed"`` one per run (K2dd fixed)."""
+    from bikeid.ident import greybox
+
+    free = DIRECT_ROLL + DIRECT_STEER
+    if mode == "joint":
+        return [(greybox.fit(runs, free, p), list(runs))]
+    if mode != "per_speed":
+        raise ValueError(f"greybox mode {mode!r}: choose 'joint' or 'per_speed'")
+    one = tuple(n for n in free if n != "K2dd")
+    return [(greybox.fit(r, one, p), [r]) for r in runs]
+
+
 def identify_controller(
     runs: Sequence[Run],
     p,
@@ -325,6 +342,7 @@ def identify_controller(
     direct_lags: int = 40,
     direct_instruments: str = "external",
     log: Callable[[str], None] | None = None,
+    greybox_mode: str = "joint",
 ) -> dict[str, Any]:
     """Identify one controller's runs with ``methods``; per speed and global results.
 
@@ -345,6 +363,8 @@ def identify_controller(
         Instruments of the direct method.
     log : callable, optional
         Receives one timing line per method.
+    greybox_mode : {"joint", "per_speed"}, optional
+        The grey-box method over all speeds at once (default) or per speed.
 
     Returns
     -------
@@ -352,9 +372,10 @@ def identify_controller(
         ``fell`` (speed [m/s] -> fall time [s]) and ``methods``: per method ``rows`` (per
         speed: ``speed``, ``modes`` from :func:`eigen_errors`, ``zero`` the RHP zero of
         delta/T_delta [1/s] with its relative error), ``critical_speeds`` (v_w, v_c
-        [m/s] identified, true, error, pass), ``seconds``; the direct method adds
-        ``free`` and ``stderr`` (entry values, matrix units) or ``error`` (the first line
-        of the message when it raised ValueError).
+        [m/s] identified, true, error, pass), ``seconds``; the direct and grey-box methods
+        add ``free`` and ``stderr`` (entry values, matrix units; per-speed grey-box: of the
+        last speed) or ``error`` (the first line of the message when it raised ValueError);
+        the grey-box method adds ``condition`` (column-scaled Jacobian, largest over fits).
 
     Raises
     ------
@@ -432,6 +453,22 @@ def identify_controller(
                     glob["critical_speeds"] = critical_speeds(res.canonical())
                     glob["free"] = res.free
                     glob["stderr"] = res.stderr
+            elif method == "greybox" and ok:
+                try:
+                    fits = _greybox(ok, p, greybox_mode)
+                except ValueError as exc:
+                    glob["error"] = str(exc).splitlines()[0]
+                else:
+                    for gm, group in fits:
+                        for r in group:
+                            v = round(r.speed, 6)
+                            rows.append(_row(v, gm.eigenvalues(v), truth[v], gm.steer_zeros(),
+                                             true_zero))  # fmt: skip
+                    if len(fits) == 1:
+                        glob["critical_speeds"] = fits[0][0].critical_speeds()
+                    glob["free"] = fits[-1][0].free
+                    glob["stderr"] = fits[-1][0].stderr
+                    glob["condition"] = max(gm.condition for gm, _ in fits)
             if "critical_speeds" in glob:
                 cs = {}
                 for k in ("v_w", "v_c"):

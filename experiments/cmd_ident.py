@@ -1,4 +1,4 @@
-"""``bikeid identify``: direct (Moore & Hubbard) or canonical PEM (Chen & Dao) on an HDF5 file.
+"""``bikeid identify``: direct (Moore & Hubbard), canonical PEM (Chen & Dao) or grey-box PEM.
 
 For simulated runs (``meta['parameters']`` present) the true linearization is
 printed beside the estimate (``true_eigenvalues``).
@@ -50,13 +50,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--flip", default="", metavar="NAME,...",
         help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
     )
-    p.add_argument("--method", choices=("direct", "pem"), default="direct")
+    p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
+    p.add_argument(
+        "--free", default=None, metavar="NAME,...",
+        help="greybox: free matrix entries, e.g. Mpd,K0pd,Mdd,K0dd,K2dd (default Moore & "
+        "Hubbard's set, ident.greybox.DEFAULT_FREE); the rest fixed at --bicycle's values",
+    )  # fmt: skip
+    p.add_argument(
+        "--drop-unidentifiable", action="store_true",
+        help="greybox: fix the worst-determined free entries until the condition number is "
+        "below ident.greybox.MAX_CONDITION (default: refuse, exit 4)",
+    )  # fmt: skip
     p.add_argument(
         "--speed-parameterized",
         action="store_true",
         help="pem: one model over all speeds (odd a's = alpha + beta v^2, even a's = gamma v)",
     )
-    p.add_argument("--bicycle", help="fixed-entry values for direct (default: the runs' meta)")
+    p.add_argument(
+        "--bicycle", help="fixed-entry values for direct/greybox (default: the runs' meta)"
+    )
     p.add_argument("--iv", action="store_true", help="direct: instrumental variables (lagged)")
     p.add_argument(
         "--derivative", choices=("interval", "central", "forward", "backward"),
@@ -118,8 +130,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="identification accuracy on the nonlinear closed-loop testbed",
         description=(
             "Simulate 50 s of closed-loop data per speed and controller (cached in DIR/data), "
-            "identify with the direct and PEM methods and compare eigenvalues, v_w, v_c and "
-            "the RHP zero of delta/T_delta with the true linearization. Writes "
+            "identify with the direct, PEM and grey-box methods and compare eigenvalues, v_w, "
+            "v_c and the RHP zero of delta/T_delta with the true linearization. Writes "
             "DIR/accuracy.json and DIR/accuracy.md; progress on stderr when it is a terminal."
         ),
     )
@@ -136,9 +148,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--methods",
-        type=_names_arg(("direct", "pem"), "methods"),
-        default="direct,pem",
-        help="comma-separated subset of direct,pem (default both)",
+        type=_names_arg(("direct", "pem", "greybox"), "methods"),
+        default="direct,pem,greybox",
+        help="comma-separated subset of direct,pem,greybox (default all)",
     )
     a.add_argument(
         "--speeds",
@@ -369,6 +381,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
     runs = _with_input(runs, args.input)
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
+    if args.method != "greybox" and (args.free or args.drop_unidentifiable):
+        raise ValueError("--free and --drop-unidentifiable apply to --method greybox")
+    if args.method == "greybox" and args.out:
+        raise ValueError(
+            "--out: grey-box models cannot be saved yet (ident.model_file stores direct, PEM "
+            "and experiment models); drop --out"
+        )
     targets, provenance, settings = [], [], {}
     if args.out:
         per_speed_pem = args.method == "pem" and not args.speed_parameterized
@@ -402,6 +421,30 @@ def cmd_identify(args: argparse.Namespace) -> int:
             condition=res.condition, vaf_moore=res.vaf_moore, vaf_variance=res.vaf_variance,
             notes=list(res.notes),
         )  # fmt: skip
+        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+    elif args.method == "greybox":
+        from bikeid.ident import greybox
+        from bikeid.sim.parameters import by_name
+
+        if args.speed_parameterized:
+            raise ValueError("--speed-parameterized applies to --method pem (greybox is always)")
+        reference = by_name(args.bicycle) if args.bicycle else truth
+        if reference is None:
+            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
+        free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
+        res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable,
+                          **({"outputs": outputs} if outputs else {}))  # fmt: skip
+        saved = []
+        out["outputs"] = list(res.outputs)
+        out.update(
+            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,
+            free={k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
+                  for k, v in res.free.items()},
+            least_determined=list(res.least_determined), dropped=list(res.dropped),
+            notes=list(res.notes),
+        )  # fmt: skip
+        if len(speeds) >= 2:
+            out["critical_speeds"] = res.critical_speeds()
         eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
     else:
         from bikeid.ident import pem
@@ -464,6 +507,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
         return 0
     np.set_printoptions(precision=5, suppress=True, linewidth=110)
     print(f"{', '.join(args.file)}: {len(runs)} runs, method {args.method}")
+    if args.method == "greybox":
+        for k in ("M", "C1", "K0", "K2", "H"):
+            print(f"{k} =\n{out[k]}")
+        for k, d in out["free"].items():
+            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g} (SE inflation "
+                  f"{d['inflation']:.3g})")  # fmt: skip
+        print(f"condition number {out['condition']:.3g} (weakest direction: "
+              f"{', '.join(out['least_determined'])}); fixed as poorly determined: "
+              f"{out['dropped'] or 'none'}")  # fmt: skip
     if args.method == "direct":
         for k in ("M", "C1", "K0", "K2", "H"):
             print(f"{k} =\n{out[k]}")

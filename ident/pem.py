@@ -609,6 +609,13 @@ class _Problem:
         self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
         return r, self._J
 
+    def normal_equations(self, x):
+        """(residual, J'J, J'r) at x (the Levenberg-Marquardt inputs), or (None, None, None)."""
+        r, J = self.jacobian(x)
+        if r is None:
+            return None, None, None
+        return r, J.T @ J, J.T @ r
+
     # scipy.optimize.least_squares interface (method="scipy")
     def fun(self, x):
         r = self.residual(x)
@@ -701,12 +708,11 @@ def _lm(problem: _Problem, x: np.ndarray, max_nfev: int, ftol: float = 1e-3) -> 
     boundary (where a free K may push the optimum) trial steps that destabilize
     Ad - K C are rejected and the damping raised tenfold.
     """
-    r, J = problem.jacobian(x)
+    r, H, g = problem.normal_equations(x)
     if r is None:
         raise UntrustworthyResult("the start model gives an unstable predictor; give another start")
     cost = float(r @ r)
     m = max(r.size, 1)
-    H, g = J.T @ J, J.T @ r
     lam, nu = 1e-3, 2.0
     nfev, success, message = 1, False, "maximum number of evaluations reached"
     while nfev < max_nfev:
@@ -728,8 +734,7 @@ def _lm(problem: _Problem, x: np.ndarray, max_nfev: int, ftol: float = 1e-3) -> 
             nu = 2.0
             small = cost - cn <= ftol * cost / m
             x, cost = xn, cn
-            r, J = problem.jacobian(x)
-            H, g = J.T @ J, J.T @ r
+            r, H, g = problem.normal_equations(x)
             if small:
                 success, message = True, "converged"
                 break
@@ -740,7 +745,7 @@ def _lm(problem: _Problem, x: np.ndarray, max_nfev: int, ftol: float = 1e-3) -> 
             success, message = True, "no further decrease (damping limit)"
             break
     if problem._x is None or not np.array_equal(problem._x, x):
-        problem.jacobian(x)
+        problem.normal_equations(x)
     return _Solution(x=x, nfev=nfev, success=success, message=message)
 
 

@@ -101,15 +101,17 @@ def test_quick_experiment_meets_goals(tmp_path):
     Direct (interval-averaged equation + IV on the external signals): the RHP zero and
     the weave, capsize and caster eigenvalues within the tolerances; its v_w, v_c from three
     speeds are reported but only asserted within 0.3 m/s (docs/accuracy.md: the direct
-    critical speeds hinge on K2dd from few speeds)."""
+    critical speeds hinge on K2dd from few speeds).  Grey-box PEM (joint over the three
+    speeds, the direct method's free set): every eigenvalue, the zero and v_w, v_c within
+    the tolerances, and the free set well conditioned."""
     runs = acc.generate(tmp_path, "pid", acc.QUICK_SPEEDS, workers=2)
     assert [r.speed for r in runs] == list(acc.QUICK_SPEEDS)
     assert all(r.meta["fell_at"] is None for r in runs)
     # the stated sensor noise is really in the data: roll angle noise std ~ 1e-3 rad
     noise = runs[1]["phi"] - runs[1].true("phi")
     assert np.std(noise) == pytest.approx(1e-3, rel=0.1)
-    res = acc.identify_controller(runs, P, ("pem", "direct"))
-    for method in ("pem", "direct"):
+    res = acc.identify_controller(runs, P, ("pem", "direct", "greybox"))
+    for method in ("pem", "direct", "greybox"):
         m = res["methods"][method]
         assert len(m["rows"]) == 3
         for row in m["rows"]:
@@ -117,10 +119,12 @@ def test_quick_experiment_meets_goals(tmp_path):
                 assert d["pass"], (method, row["speed"], mode, d)
             assert row["zero"]["pass"], (method, row["speed"], row["zero"])
     for k, true in (("v_w", 4.2924), ("v_c", 6.0243)):
-        d = res["methods"]["pem"]["critical_speeds"][k]
-        assert d["true"] == pytest.approx(true, abs=1e-4)
-        assert abs(d["identified"] - true) <= 0.05
+        for method in ("pem", "greybox"):
+            d = res["methods"][method]["critical_speeds"][k]
+            assert d["true"] == pytest.approx(true, abs=1e-4)
+            assert abs(d["identified"] - true) <= 0.05, (method, k, d)
         assert abs(res["methods"]["direct"]["critical_speeds"][k]["identified"] - true) < 0.3
+    assert res["methods"]["greybox"]["condition"] < 1e4  # ident.greybox.MAX_CONDITION
 
 
 def test_cli_rejects_bad_lists(tmp_path):
