@@ -17,6 +17,7 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
 - :mod:`~bikeid.ident.validate`: ``compare`` (simulation and k-step prediction),
   ``resid`` (whiteness, input cross-correlation), ``goodness_of_fit``, poles, zeros.
+- :mod:`~bikeid.ident.uncertainty`: delta-method intervals on eigenvalues, v_w, v_c, Bode.
 
 The measured-data analysis (an experiment model plus a library of candidate effects):
 
