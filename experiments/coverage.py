@@ -11,7 +11,10 @@ for each quantity q with printed standard error s the harness records z = (q_hat
 - the 10 canonical parameters a1..a8, b1, b2 (``model.stderr``);
 - the real parts of the weave, capsize and caster eigenvalues and the weave frequency
   (first-order intervals of :func:`bikeid.ident.uncertainty.eigenvalue_intervals`; the
-  identified eigenvalues are paired with the true modes by minimum total distance).
+  identified eigenvalues are paired with the true modes by minimum total distance);
+- jointly, the 10 parameters: the Mahalanobis distance d2 = r' P^-1 r of r = theta_hat -
+  theta (chi-square with 10 degrees of freedom, mean 10, if P is right), counted inside the
+  joint region d2 <= chi2_10^-1(level).
 
 Per quantity it reports the mean and standard deviation of z (about 0 and 1 for an
 unbiased estimator with correct standard errors) and how many of the N intervals at
@@ -124,11 +127,14 @@ class CoverageResult:
         successful seed.
     failed : list of (int, str)
         Seeds whose fit raised, with the message (excluded from the counts).
+    mahalanobis : (N,) ndarray
+        d2 = r' P^-1 r of the 10 canonical parameters per successful seed (dimensionless).
     """
 
     settings: dict[str, Any]
     z: dict[str, np.ndarray]
     failed: list[tuple[int, str]] = field(default_factory=list)
+    mahalanobis: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n(self) -> int:
@@ -158,17 +164,32 @@ class CoverageResult:
         Returns
         -------
         dict of str to dict
-            ``z_mean``, ``z_std`` (ddof 1), ``covered``, ``n``, ``fraction``, ``ci``
+            ``z_mean``, ``z_std`` (ddof 1; over the finite z, None if too few),
+            ``infinite`` (seeds where the identified weave came out as two real roots, so
+            its frequency has a zero standard error), ``covered``, ``n``, ``fraction``, ``ci``
             (Clopper-Pearson 95 % of the fraction) and ``verdict``
-            (:func:`binomial_verdict`).
+            (:func:`binomial_verdict`); entry ``theta_joint`` has ``d2_mean`` (10 expected)
+            instead of the z statistics.
         """
-        out = {}
+        from scipy.stats import chi2
+
+        out: dict[str, dict[str, Any]] = {}
         for name, z in self.z.items():
             k = self.covered(name)
             lo, hi, verdict = binomial_verdict(k, z.size, self.settings["level"])
-            out[name] = {"z_mean": float(np.mean(z)), "z_std": float(np.std(z, ddof=1)),
+            fin = z[np.isfinite(z)]
+            out[name] = {"z_mean": float(np.mean(fin)) if fin.size else None,
+                         "z_std": float(np.std(fin, ddof=1)) if fin.size > 1 else None,
+                         "infinite": int(z.size - fin.size),
                          "covered": k, "n": int(z.size), "fraction": k / z.size,
                          "ci": [lo, hi], "verdict": verdict}  # fmt: skip
+        d2 = self.mahalanobis
+        if d2.size:
+            k = int(np.sum(d2 <= chi2.ppf(self.settings["level"], 10)))
+            lo, hi, verdict = binomial_verdict(k, d2.size, self.settings["level"])
+            out["theta_joint"] = {"d2_mean": float(np.mean(d2)), "covered": k,
+                                  "n": int(d2.size), "fraction": k / d2.size, "ci": [lo, hi],
+                                  "verdict": verdict}  # fmt: skip
         return out
 
     def to_json(self) -> dict[str, Any]:
@@ -180,7 +201,7 @@ class CoverageResult:
             ``settings``, ``summary`` (:meth:`summary`), ``z`` (lists), ``failed``.
         """
         return {"settings": self.settings, "summary": self.summary(),
-                "z": {k: v for k, v in self.z.items()},
+                "z": {k: v for k, v in self.z.items()}, "mahalanobis": self.mahalanobis,
                 "failed": [{"seed": s, "error": e} for s, e in self.failed]}  # fmt: skip
 
 
@@ -221,7 +242,9 @@ def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[st
     model = pem.fit(run)
     model = dataclasses.replace(model, covariance=model.covariance * settings["covariance_scale"])
     se = np.sqrt(np.diag(model.covariance))
-    z = dict(zip(QUANTITIES[:10], (model.theta - theta_true) / se, strict=True))
+    r = model.theta - theta_true
+    z = dict(zip(QUANTITIES[:10], r / se, strict=True))
+    z["d2"] = float(r @ np.linalg.solve(model.covariance, r))
     ei = eigenvalue_intervals(model, level=settings["level"])
     _, col = match_eigenvalues(ei.values, targets, return_index=True)
     for i, name in ((0, "weave"), (2, "capsize"), (3, "caster")):
@@ -324,7 +347,8 @@ def run_coverage(
         if log:
             log(f"seed {s}: {'failed' if failed and failed[-1][0] == s else 'ok'}")
     z = {q: np.array([r[q] for r in rows]) for q in QUANTITIES} if rows else {}
-    return CoverageResult(settings=settings, z=z, failed=failed)
+    d2 = np.array([r["d2"] for r in rows])
+    return CoverageResult(settings=settings, z=z, failed=failed, mahalanobis=d2)
 
 
 def table_text(result: CoverageResult) -> str:
@@ -351,10 +375,19 @@ def table_text(result: CoverageResult) -> str:
         f"{'quantity':<11} {'z mean':>7} {'z std':>6} {'covered':>9} {'95% CI':>15}  verdict",
     ]
     for name, row in result.summary().items():
+        if "d2_mean" in row:
+            lines.append(
+                f"{name:<11} mean d2 {row['d2_mean']:.2f} (10 if P is right) "
+                f"{row['covered']:>4}/{row['n']:<4} [{row['ci'][0]:.3f}, {row['ci'][1]:.3f}]  "
+                f"{row['verdict']}"
+            )
+            continue
+        zm, zs = (f"{row[k]:.2f}" if row[k] is not None else "-" for k in ("z_mean", "z_std"))
+        inf = f" ({row['infinite']} seeds real weave, z infinite)" if row["infinite"] else ""
         lines.append(
-            f"{name:<11} {row['z_mean']:7.2f} {row['z_std']:6.2f} "
+            f"{name:<11} {zm:>7} {zs:>6} "
             f"{row['covered']:>4}/{row['n']:<4} [{row['ci'][0]:.3f}, {row['ci'][1]:.3f}]  "
-            f"{row['verdict']}"
+            f"{row['verdict']}{inf}"
         )
     if result.failed:
         lines.append(f"{len(result.failed)} seeds failed: " + "; ".join(

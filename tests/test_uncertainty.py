@@ -14,7 +14,12 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from bikeid.experiments.coverage import CoverageResult, binomial_verdict, run_coverage
+from bikeid.experiments.coverage import (
+    QUANTITIES,
+    CoverageResult,
+    binomial_verdict,
+    run_coverage,
+)
 from bikeid.ident.canonical import speed_params_from_matrices, theta_from_matrices
 from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
 from bikeid.ident.uncertainty import (
@@ -187,37 +192,42 @@ def test_binomial_verdict_both_ways():
 
 @pytest.fixture(scope="module")
 def coverage40() -> CoverageResult:
-    # 40 seeds x 15 s of the linear loop
-    return run_coverage(40, duration=15.0)
+    # 40 seeds x 15 s of the linear loop (~11 s of CPU); a 10 N m dither so that the
+    # eigenvalue standard errors stay small in so short a run (docs/uncertainty.md)
+    return run_coverage(40, duration=15.0, dither=10.0)
 
 
 @pytest.mark.slow
 def test_coverage_is_nominal_on_the_linear_plant(coverage40):
     """Each quantity's count of 95 % intervals containing the exact truth lies in the 99.9 %
-    two-sided binomial acceptance region of Bin(40, 0.95) (computed here)."""
+    two-sided binomial acceptance region of Bin(40, 0.95) (computed here), and the joint
+    95 % region of the 10 parameters is consistent with nominal."""
     res = coverage40
     assert res.n == 40 and not res.failed
     lo = binom.ppf(0.0005, 40, 0.95)  # 32: P(count < 32) < 0.0005 when coverage is 95 %
     summary = res.summary()
     for name, row in summary.items():
         assert lo <= row["covered"] <= 40, (name, row)
-    assert summary["weave_re"]["verdict"] == "consistent"
-    # a calibrated estimator: z standard deviations near 1 (sd of a sample sd at n = 40 is
-    # ~0.11; 0.6..1.5 is > 3 of them either side, allowing for the short 15 s runs)
-    z_std = np.array([row["z_std"] for row in summary.values()])
-    assert np.all((z_std > 0.6) & (z_std < 1.5)), z_std
+        assert row.get("infinite", 0) == 0, (name, row)
+    assert summary["theta_joint"]["verdict"] == "consistent"
+    # parameter z-scores: sd near 1 (the sd of a sample sd at n = 40 is ~0.11; 0.7..1.4 is
+    # ~3 of them either side). Eigenvalue z sd are not bounded here: in 15 s runs the
+    # first-order propagation is visibly nonlinear (sd up to ~1.4, docs/uncertainty.md).
+    z_std = np.array([summary[q]["z_std"] for q in QUANTITIES[:10]])
+    assert np.all((z_std > 0.7) & (z_std < 1.4)), z_std
 
 
 @pytest.mark.slow
 def test_coverage_fails_when_the_covariance_is_too_small(coverage40):
     """Covariance x 0.1: z grows by sqrt(10) exactly (checked on 3 seeds through the
     harness), and coverage drops to ~P(|z| < 0.62) = 46 %, far below the region."""
-    small = run_coverage(3, duration=15.0, covariance_scale=0.1)
+    small = run_coverage(3, duration=15.0, dither=10.0, covariance_scale=0.1)
     for name in ("a1", "weave_re", "caster_re"):
         np.testing.assert_allclose(small.z[name], coverage40.z[name][:3] * math.sqrt(10),
                                    rtol=1e-9)  # fmt: skip
     scaled = CoverageResult(settings={**coverage40.settings, "covariance_scale": 0.1},
-                            z={k: v * math.sqrt(10) for k, v in coverage40.z.items()})  # fmt: skip
+                            z={k: v * math.sqrt(10) for k, v in coverage40.z.items()},
+                            mahalanobis=coverage40.mahalanobis * 10)  # fmt: skip
     lo = binom.ppf(0.0005, 40, 0.95)
     for name, row in scaled.summary().items():
         assert row["covered"] < lo and row["verdict"] == "too narrow", (name, row)
