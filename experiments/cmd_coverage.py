@@ -8,6 +8,13 @@ import sys
 from .cliutil import dump_json, integer, number
 
 
+def _level(text: str) -> float:
+    x = number(0.0, 1.0, lo_open=True)(text)
+    if x == 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is out of range; need > 0 and < 1")
+    return x
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     from .coverage import DEFAULTS
 
@@ -19,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "identify each with canonical PEM and count how often the intervals of the "
             "parameters and eigenvalues contain the truth (Clopper-Pearson interval of the "
             "count, verdict). Calibrates the intervals on the linear plant only "
-            "(docs/uncertainty.md). About 1.3 s per seed."
+            "(docs/uncertainty.md). A 50 s run costs ~0.35 s of CPU (200 seeds: 310 s wall on the "
+            "shared 2-core VM)."
         ),
     )
     p.add_argument("--seeds", type=integer(2, 100000), default=200, help="runs N (default 200)")
@@ -37,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--controller", choices=("pid", "pole"), default="pid")
     p.add_argument(
-        "--level", type=number(0.0, 1.0, lo_open=True), default=0.95,
-        help="nominal coverage of each interval (default 0.95, < 1)",
+        "--level", type=_level, default=0.95,
+        help="nominal coverage of each interval, 0 < level < 1 (default 0.95)",
     )  # fmt: skip
     p.add_argument(
         "--covariance-scale", type=number(0.0, 1e6, lo_open=True), default=1.0,
@@ -54,8 +62,6 @@ def cmd_coverage(args: argparse.Namespace) -> int:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from .coverage import run_coverage, table_text
 
-    if not args.level < 1.0:
-        raise ValueError(f"--level {args.level}: need a level below 1")
     result = run_coverage(
         args.seeds, speed=args.speed, duration=args.duration, dither=args.dither,
         controller=args.controller, level=args.level, covariance_scale=args.covariance_scale,
