@@ -688,12 +688,9 @@ def monte_carlo(
         C = _out_matrix(model.outputs)[0]
         G0, _ = _frequency_response(S @ p, C, w)
         ph0 = np.degrees(np.unwrap(np.angle(G0), axis=1))
-        mag = np.empty((P.shape[0], C.shape[0], w.size))
-        phase = np.empty_like(mag)
-        for k, pk in enumerate(P):
-            Gk = _resp(S @ pk, C, w)
-            mag[k] = 20.0 * np.log10(np.abs(Gk))
-            phase[k] = ph0 + np.degrees(np.angle(Gk / G0))
+        G = _resp(P @ S.T, C, w)  # (D, L, F)
+        mag = 20.0 * np.log10(np.abs(G))
+        phase = ph0[None] + np.degrees(np.angle(G / G0[None]))
     vw = vc = None
     if critical:
         vw, vc = np.full(P.shape[0], np.nan), np.full(P.shape[0], np.nan)
@@ -705,7 +702,15 @@ def monte_carlo(
                            phase_deg=phase, v_w=vw, v_c=vc)  # fmt: skip
 
 
-def _resp(theta, C, w) -> np.ndarray:
-    """G (L, F) = C (jw I - A)^-1 B of the canonical model (no derivatives)."""
-    A, B = canonical_ab(theta)
-    return np.stack([C @ np.linalg.solve(1j * wk * np.eye(4) - A, B[:, 0]) for wk in w], axis=1)
+def _resp(thetas: np.ndarray, C: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """G (D, L, F) = C (jw I - A)^-1 B of D canonical models at once (no derivatives)."""
+    th = np.atleast_2d(thetas)
+    A = np.zeros((th.shape[0], 4, 4))
+    A[:, 0, 1] = A[:, 2, 3] = 1.0
+    for j, (r, c) in enumerate(A_POS):
+        A[:, r, c] = th[:, j]
+    B = np.zeros((th.shape[0], 4))
+    B[:, B_POS[0]], B[:, B_POS[1]] = th[:, 8], th[:, 9]
+    M = 1j * w[None, :, None, None] * np.eye(4) - A[:, None]  # (D, F, 4, 4)
+    X = np.linalg.solve(M, np.broadcast_to(B[:, None, :, None], M.shape[:3] + (1,)))[..., 0]
+    return np.einsum("lk,dfk->dlf", C, X)
