@@ -129,12 +129,16 @@ class CoverageResult:
         Seeds whose fit raised, with the message (excluded from the counts).
     mahalanobis : (N,) ndarray
         d2 = r' P^-1 r of the 10 canonical parameters per successful seed (dimensionless).
+    stderr : dict of str to (N,) ndarray
+        The printed standard error of each quantity per successful seed (units of theta;
+        1/s for the eigenvalue parts).
     """
 
     settings: dict[str, Any]
     z: dict[str, np.ndarray]
     failed: list[tuple[int, str]] = field(default_factory=list)
     mahalanobis: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    stderr: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -165,8 +169,10 @@ class CoverageResult:
         -------
         dict of str to dict
             ``z_mean``, ``z_std`` (ddof 1; over the finite z, None if too few),
-            ``infinite`` (seeds where the identified weave came out as two real roots, so
-            its frequency has a zero standard error), ``covered``, ``n``, ``fraction``, ``ci``
+            ``se_median`` (median printed standard error, units of the quantity; None if
+            not recorded), ``infinite`` (seeds where the identified weave came out as two
+            real roots, so its frequency has a zero standard error), ``covered``, ``n``,
+            ``fraction``, ``ci``
             (Clopper-Pearson 95 % of the fraction) and ``verdict``
             (:func:`binomial_verdict`); entry ``theta_joint`` has ``d2_mean`` (10 expected)
             instead of the z statistics.
@@ -181,6 +187,8 @@ class CoverageResult:
             out[name] = {"z_mean": float(np.mean(fin)) if fin.size else None,
                          "z_std": float(np.std(fin, ddof=1)) if fin.size > 1 else None,
                          "infinite": int(z.size - fin.size),
+                         "se_median": float(np.median(self.stderr[name]))
+                         if name in self.stderr else None,
                          "covered": k, "n": int(z.size), "fraction": k / z.size,
                          "ci": [lo, hi], "verdict": verdict}  # fmt: skip
         d2 = self.mahalanobis
@@ -198,10 +206,11 @@ class CoverageResult:
         Returns
         -------
         dict
-            ``settings``, ``summary`` (:meth:`summary`), ``z`` (lists), ``failed``.
+            ``settings``, ``summary`` (:meth:`summary`), ``z`` and ``stderr`` (per quantity,
+            one value per seed), ``mahalanobis`` (per seed), ``failed``.
         """
         return {"settings": self.settings, "summary": self.summary(),
-                "z": {k: v for k, v in self.z.items()}, "mahalanobis": self.mahalanobis,
+                "z": dict(self.z), "stderr": self.stderr, "mahalanobis": self.mahalanobis,
                 "failed": [{"seed": s, "error": e} for s, e in self.failed]}  # fmt: skip
 
 
@@ -245,16 +254,19 @@ def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[st
     r = model.theta - theta_true
     z = dict(zip(QUANTITIES[:10], r / se, strict=True))
     z["d2"] = float(r @ np.linalg.solve(model.covariance, r))
+    z.update({f"se_{q}": float(e) for q, e in zip(QUANTITIES[:10], se, strict=True)})
     ei = eigenvalue_intervals(model, level=settings["level"])
     _, col = match_eigenvalues(ei.values, targets, return_index=True)
     for i, name in ((0, "weave"), (2, "capsize"), (3, "caster")):
         j = col[i]
         z[f"{name}_re"] = (ei.values[j].real - targets[i].real) / ei.std_real[j]
+        z[f"se_{name}_re"] = float(ei.std_real[j])
     j = col[0]
     # the identified weave may come out as two real roots: its imaginary-part error is then
     # the whole true frequency with a zero standard error (z = inf, not covered)
     dz = abs(ei.values[j].imag) - targets[0].imag
     z["weave_im"] = dz / ei.std_imag[j] if ei.std_imag[j] > 0 else math.copysign(math.inf, dz)
+    z["se_weave_im"] = float(ei.std_imag[j])
     return z
 
 
@@ -348,7 +360,8 @@ def run_coverage(
             log(f"seed {s}: {'failed' if failed and failed[-1][0] == s else 'ok'}")
     z = {q: np.array([r[q] for r in rows]) for q in QUANTITIES} if rows else {}
     d2 = np.array([r["d2"] for r in rows])
-    return CoverageResult(settings=settings, z=z, failed=failed, mahalanobis=d2)
+    se = {q: np.array([r[f"se_{q}"] for r in rows]) for q in QUANTITIES} if rows else {}
+    return CoverageResult(settings=settings, z=z, failed=failed, mahalanobis=d2, stderr=se)
 
 
 def table_text(result: CoverageResult) -> str:
@@ -372,20 +385,22 @@ def table_text(result: CoverageResult) -> str:
         f"{s['dither_hold']} samples, disturbance {s['disturbance']:g} N m, noise "
         f"{s['angle_noise']:g} rad / {s['rate_noise']:g} rad/s, covariance x "
         f"{s['covariance_scale']:g}, seeds {s['seeds'][0]}..{s['seeds'][1]}",
-        f"{'quantity':<11} {'z mean':>7} {'z std':>6} {'covered':>9} {'95% CI':>15}  verdict",
+        f"{'quantity':<11} {'med. SE':>9} {'z mean':>7} {'z std':>6} {'covered':>9} "
+        f"{'95% CI':>15}  verdict",
     ]
     for name, row in result.summary().items():
         if "d2_mean" in row:
             lines.append(
-                f"{name:<11} mean d2 {row['d2_mean']:.2f} (10 if P is right) "
+                f"{name:<11} {'':>9} mean d2 {row['d2_mean']:.2f} (10 if P is right) "
                 f"{row['covered']:>4}/{row['n']:<4} [{row['ci'][0]:.3f}, {row['ci'][1]:.3f}]  "
                 f"{row['verdict']}"
             )
             continue
         zm, zs = (f"{row[k]:.2f}" if row[k] is not None else "-" for k in ("z_mean", "z_std"))
         inf = f" ({row['infinite']} seeds real weave, z infinite)" if row["infinite"] else ""
+        se = f"{row['se_median']:.3g}" if row["se_median"] is not None else "-"
         lines.append(
-            f"{name:<11} {zm:>7} {zs:>6} "
+            f"{name:<11} {se:>9} {zm:>7} {zs:>6} "
             f"{row['covered']:>4}/{row['n']:<4} [{row['ci'][0]:.3f}, {row['ci'][1]:.3f}]  "
             f"{row['verdict']}{inf}"
         )
