@@ -11,7 +11,7 @@ Modules:
   :mod:`~bikeid.experiments.cmd_validate` (``validate``),
   :mod:`~bikeid.experiments.cmd_reproduce` (``reproduce``),
   :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials``,
-  ``data fetch``).
+  ``data fetch``), :mod:`~bikeid.experiments.cmd_coverage` (``coverage``).
 - :mod:`~bikeid.experiments.progress`: progress bars of the long commands (stderr, only on a
   terminal and without ``--json``); library loops report through a callback.
 - :mod:`~bikeid.experiments.cliutil`: helpers shared by the command modules (ranges, JSON
@@ -37,6 +37,8 @@ Modules:
   (fit a model with the effect library, save/load it, evaluate it on held-out decays).
 - :mod:`~bikeid.experiments.measured_report`: before/after report on the measured data
   (``bikeid measured report``).
+- :mod:`~bikeid.experiments.coverage`: how often PEM's intervals contain the exact truth on
+  the linear plant (``bikeid coverage``).
 - :mod:`~bikeid.experiments.report`: Markdown reports (paper | identified | truth tables)
   and ``summary.json``.
 - :mod:`~bikeid.experiments.plots`: Matplotlib figures shared by commands and reports.

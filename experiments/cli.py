@@ -30,6 +30,7 @@ COMMAND_MODULES = (
     "bikeid.experiments.cmd_validate",  # validate
     "bikeid.experiments.cmd_reproduce",  # reproduce
     "bikeid.experiments.cmd_measured",  # measured fit/evaluate, data fetch
+    "bikeid.experiments.cmd_coverage",  # coverage
 )
 
 #: The exit statuses of ``bikeid`` (also in ``bikeid --help``).

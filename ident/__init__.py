@@ -24,6 +24,7 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   ``validate_decays`` (the same on measured decays, ``bikeid measured evaluate``).
 - :mod:`~bikeid.ident.model_file`: ``save_model`` / ``load_model``, the one JSON file
   format of every identified model (parameters bit for bit, covariance, provenance).
+- :mod:`~bikeid.ident.uncertainty`: delta-method intervals on eigenvalues, v_w, v_c, Bode.
 
 The measured-data analysis (an experiment model plus a library of candidate effects):
 
