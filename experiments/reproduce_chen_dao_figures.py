@@ -151,6 +151,21 @@ def fig3(
             for val in crit_id.values():
                 if val is not None and lo <= val <= hi:
                     a.axvline(val, color="m", ls=":", lw=1.0)
+            # the paper's boundaries (Chen & Dao p. 3, Sec. III.B; cd.PAPER)
+            for key, val in cd.PAPER["critical"].items():
+                if lo <= val <= hi:
+                    a.axvline(val, color="tab:orange", ls="-.", lw=0.9)
+                    if a is a1:
+                        a1.annotate(f"paper {key}", (val, -1), fontsize=6, rotation=90,
+                                    color="tab:orange", ha="right", va="top")  # fmt: skip
+        an = cd.PAPER["anomaly"]
+        pts = [an["dip"], an["recovered"]]
+        if any(lo <= x <= hi for x, _ in pts):
+            a1.plot(*zip(*pts, strict=True), "D", color="tab:orange", ms=6, mfc="none",
+                    label="paper: capsize root (p. 3)")  # fmt: skip
+            zc = [an["stable_from"], an["unstable_from"]]
+            a1.plot(zc, [0, 0], "o", color="tab:orange", ms=5, mfc="none",
+                    label="paper: capsize sign changes")  # fmt: skip
         ymin = max(-40.0, float(np.nanmin(ev.real)) - 2)
         a1.set_ylim(ymin, 8)
         a2.set_ylim(0, max(20.0, float(np.nanmax(np.abs(ev.imag))) + 1))
@@ -181,7 +196,8 @@ def fig3(
         a1.set_ylabel("real part [1/s]")
         a2.set_ylabel("|imag part| [rad/s]")
         a2.set_xlabel(
-            "speed v [m/s]   (grey dashed: true v_d, v_w, v_c; magenta dotted: identified)"
+            "speed v [m/s]   (grey dashed: true v_d, v_w, v_c; magenta dotted: identified; "
+            "orange dash-dot: the paper's)"
         )
         a1.set_title(title, fontsize=9)
         a1.legend(fontsize=6, loc="lower left", ncol=2)
@@ -198,8 +214,17 @@ def fig3(
     save(fig, out / "cd_fig3a_eigenvalues.png")
     if zoom_ok:
         fig, axs = plt.subplots(2, 1, figsize=(9, 7.5), sharex=True)
-        panel(axs, 3.0, 4.2, zoom_ok, "Chen & Dao Fig. 3(b) analogue: zoom 3-4.2 m/s")
+        an = res["anomaly"]
+        panel(
+            axs,
+            3.0,
+            4.2,
+            zoom_ok,
+            "Chen & Dao Fig. 3(b) analogue: zoom 3-4.2 m/s; capsize anomaly "
+            f"{an['verdict']} in our data ({an['reason']})",
+        )
         axs[0].set_ylim(-16, 4)
+        axs[0].title.set_fontsize(7)
         save(fig, out / "cd_fig3b_zoom.png")
     res["figures"] = ["cd_fig3a_eigenvalues.png"] + (["cd_fig3b_zoom.png"] if zoom_ok else [])
     return res
