@@ -173,7 +173,8 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         ``truth`` (sorted true eigenvalues [1/s]), ``methods["pem"]`` with ``eig``
         (identified, paired with ``truth``), ``stderr`` and ``theta``, or ``error``; run facts
         (``fell_at``, ``seconds``).  With "direct": ``_prepared``, the complete run prepared
-        for :func:`direct_stacked` (or ``methods["direct"]["error"]`` if it ended early).
+        for :func:`direct_stacked`, and ``_prepared_truth``, its noise-free signals prepared
+        alike (or ``methods["direct"]["error"]`` if it ended early).
     """
     from bikeid.ident import pem
     from bikeid.sim.linear import eigenvalues, match_eigenvalues
@@ -218,6 +219,9 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         stop = run_stop(run)
         if stop is None:
             out["_prepared"] = prepare(run, derivative="forward")
+            # the same run's noise-free signals, prepared alike: separates the sensor
+            # noise's share of the direct method's bias from the rest
+            out["_prepared_truth"] = prepare(run, derivative="forward", source="truth")
         else:
             out["methods"]["direct"] = {
                 "error": f"run ended early at {float(stop['time']):.2f} s ({stop['cause']}): "
@@ -269,7 +273,8 @@ def direct_stacked(results: list[dict[str, Any]], p: BicycleParameters) -> dict[
     -------
     dict
         ``speeds`` used [m/s]; ``entries`` (free entry -> identified, stderr, true, in the
-        units of its matrix: M kg m^2, C1 kg m, K0 kg m, K2 kg); ``condition`` and
+        units of its matrix: M kg m^2, C1 kg m, K0 kg m, K2 kg, and ``noise_free``: the
+        same regression on the runs' noise-free signals, ``_prepared_truth``); ``condition`` and
         ``vaf_moore`` per row; ``notes``; or ``error`` (why no model).
     """
     from bikeid.ident.direct import identify
@@ -277,8 +282,10 @@ def direct_stacked(results: list[dict[str, Any]], p: BicycleParameters) -> dict[
 
     used = [g for g in results if "_prepared" in g]
     runs = [g.pop("_prepared") for g in used]
+    clean = [g.pop("_prepared_truth", None) for g in used]
     for g in results:
         g.pop("_prepared", None)
+        g.pop("_prepared_truth", None)
     speeds = sorted({g["speed"] for g in used})
     out: dict[str, Any] = {"speeds": speeds, "n_runs": len(runs)}
     err = None
@@ -306,6 +313,13 @@ def direct_stacked(results: list[dict[str, Any]], p: BicycleParameters) -> dict[
         }
         for n, v in res.free.items()
     }
+    if all(c is not None for c in clean):
+        try:
+            res0 = identify(clean, reference=p)
+            for n, e in out["entries"].items():
+                e["noise_free"] = res0.free.get(n)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            out["noise_free_error"] = str(exc)
     out["condition"] = res.condition
     out["vaf_moore"] = res.vaf_moore
     out["notes"] = list(res.notes)
