@@ -883,7 +883,7 @@ def fig3_summary(
         "rows": rows,
         "failed": [
             {"speed": g["speed"], "error": g["methods"]["pem"]["error"]}
-            for g in grid
+            for g in list(grid) + list(zoom or [])
             if g["methods"].get("pem", {}).get("error")
         ],
         "_ok": ok,
