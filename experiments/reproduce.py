@@ -291,6 +291,7 @@ def _sweep_summary(
                         "identified": r["eig"],
                         "true": g["truth"],
                         "fell_at": g["fell_at"],
+                        "max_abs_deg": g.get("max_abs_deg"),
                     }
                 )
                 axs[0, j].plot(

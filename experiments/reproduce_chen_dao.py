@@ -193,6 +193,7 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         "speed": float(speed),
         "fell_at": run.meta.get("fell_at"),
         "seconds": float(run.t[-1]),
+        "max_abs_deg": {k: float(np.degrees(np.abs(run.true(k)).max())) for k in ("phi", "delta")},
         "truth": truth,
         "methods": {},
     }

@@ -70,7 +70,7 @@ def _paper_capsize(v: float) -> str:
     pa = PAPER_ANOMALY
     for key in ("dip", "recovered"):
         if abs(pa[key][0] - v) < 6e-3:
-            return fmt(pa[key][1], 3)
+            return f"{pa[key][1]:.3f} (at {pa[key][0]:.3f} m/s)"
     if abs(pa["stable_from"] - v) < 1e-9:
         return "0 (turns stable)"
     if abs(pa["unstable_from"] - v) < 1e-9:
@@ -309,8 +309,9 @@ def _report_fig3(rep: Report, f3: dict, truth: dict, scan: dict | None = None) -
         f"(`reproduce_chen_dao.capsize_anomaly` on {an['n_speeds']} PEM fits in "
         f"{an['window'][0]:g}-{an['window'][1]:g} m/s: the paper's speeds and a grid). "
         f"Deciding numbers: {an['reason']}. Rule: present if the capsize root falls below "
-        "its robust (Theil-Sen) straight-line trend over the window by more than "
-        f"max({an['min_depth']:g} 1/s, 5 standard errors)"
+        "its trend (the least-squares line through the speeds in "
+        f"{an['reference'][0]:g}-{an['reference'][1]:g} m/s, after the paper's anomaly, "
+        f"extrapolated) by more than max({an['min_depth']:g} 1/s, 5 standard errors)"
         + (
             ""
             if an["trend"] is None
@@ -325,10 +326,10 @@ def _report_fig3(rep: Report, f3: dict, truth: dict, scan: dict | None = None) -
             ["speed [m/s]", "paper: capsize root", "bikeid identified", "ground truth"],
             [
                 [
-                    fmt(r["speed"], 3),
+                    f"{r['speed']:.3f}",
                     _paper_capsize(r["speed"]),
-                    fmt(r["capsize_identified"], 3),
-                    fmt(r["capsize_true"], 3),
+                    f"{r['capsize_identified']:.3f}",
+                    f"{r['capsize_true']:.3f}",
                 ]
                 for r in an["at_paper_speeds"]
             ],
