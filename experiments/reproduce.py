@@ -328,10 +328,7 @@ def _sweep_summary(
             ev = eigenvalues_vs_speed(benchmark(), fine).values
             axs[0, j].plot(fine, ev.real, color="0.5", lw=0.8)
             axs[1, j].plot(fine, np.abs(ev.imag), color="0.5", lw=0.8)
-        axs[0, j].set_title(
-            f"{c}: x PEM (per speed), + direct (one model, all speeds), grey = truth",
-            fontsize=8,
-        )
+        axs[0, j].set_title(f"{c}: x PEM, + direct", fontsize=9)
         axs[0, j].set_ylim(-30, 8)
         axs[1, j].set_xlabel("speed v [m/s]")
         for a in axs[:, j]:
@@ -339,7 +336,11 @@ def _sweep_summary(
             a.axhline(0, color="k", lw=0.5)
     axs[0, 0].set_ylabel("real part [1/s]")
     axs[1, 0].set_ylabel("|imag part| [rad/s]")
-    fig.suptitle("Sweep summary: identified vs true eigenvalues (benchmark, nonlinear plant)")
+    fig.suptitle(
+        "Sweep summary: identified vs true eigenvalues (benchmark, nonlinear plant)\n"
+        "x PEM: one model per speed; + direct: one regression over all speeds; grey: truth",
+        fontsize=10,
+    )
     save(fig, out / "sweep_eigenvalues.png")
     res["figure"] = "sweep_eigenvalues.png"
     return res
