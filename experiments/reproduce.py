@@ -209,7 +209,7 @@ def reproduce(
         f"{f3['critical_true']['v_c']:.4f})"
     )
     t0 = stage("Chen & Dao Figs. 4-5: coasting at 3.5 m/s, periodicity")
-    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log)
+    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log, workers)
     times["figs4_5"] = time.perf_counter() - t0
     t0 = stage(
         f"Chen & Dao v_l..v_w: coasting speed scan ({len(st.scan_speeds)} speeds, "

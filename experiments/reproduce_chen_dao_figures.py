@@ -282,8 +282,31 @@ def fig7(
     return res
 
 
+def _coast_entry(args: tuple) -> tuple[dict, dict]:
+    """One coasting run's analysis and summary entry (with its Floquet multipliers when
+    periodic); picklable worker: (parameters, initial condition, duration [s])."""
+    from . import limit_cycles as lc
+
+    p, ic, duration = args
+    r = lc.periodicity(lc.coast(p, ic, duration), ic.label)
+    return r.as_dict(), lc.summary_entry(p, ic, r)
+
+
+def _map(fn, jobs: list, workers: int) -> list:
+    if workers <= 1 or len(jobs) <= 1:
+        return [fn(j) for j in jobs]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(fn, jobs, chunksize=1))
+
+
 def limit_cycle_study(
-    p: BicycleParameters, out: Path, duration: float, log: Callable[[str], None] = lambda s: None
+    p: BicycleParameters,
+    out: Path,
+    duration: float,
+    log: Callable[[str], None] = lambda s: None,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check.
 
@@ -297,6 +320,8 @@ def limit_cycle_study(
         Length of each coasting run [s].
     log : callable
         Progress lines.
+    workers : int, optional
+        Worker processes for the runs and their Floquet multipliers (1: in this process).
 
     Returns
     -------
@@ -318,14 +343,18 @@ def limit_cycle_study(
         "figures": [],
         "limit_cycles": [],
     }
-    for name, conds in (("fig4", lc.FIG4_CONDITIONS), ("fig5", lc.FIG5_CONDITIONS)):
-        trajs = [lc.coast(p, ic, duration) for ic in conds]
-        labels = [ic.label for ic in conds]
-        per = [lc.periodicity(tr, ic.label) for tr, ic in zip(trajs, conds, strict=True)]
-        res[name] = [r.as_dict() for r in per]
-        res["limit_cycles"] += [
-            dict(lc.summary_entry(p, ic, r), figure=name) for ic, r in zip(conds, per, strict=True)
-        ]
+    figs = (("fig4", lc.FIG4_CONDITIONS), ("fig5", lc.FIG5_CONDITIONS))
+    conds = [ic for _, cs in figs for ic in cs]
+    # every run and its exact mirror image in one pool (a mirror is only kept for a
+    # periodic original; the mirrors of falls are short runs)
+    mirrors = [lc.mirrored(ic) for ic in conds]
+    done = _map(_coast_entry, [(p, ic, duration) for ic in conds + mirrors], workers)
+    by_label = {ic.label: d for ic, d in zip(conds + mirrors, done, strict=True)}
+    for name, cs in figs:
+        res[name] = [by_label[ic.label][0] for ic in cs]
+        res["limit_cycles"] += [dict(by_label[ic.label][1], figure=name) for ic in cs]
+        trajs = [lc.coast(p, ic, duration) for ic in cs]  # for the figures (deterministic)
+        labels = [ic.label for ic in cs]
         lc.plot_phase_portraits(
             trajs,
             labels,
@@ -341,7 +370,7 @@ def limit_cycle_study(
         )
         res["figures"] += [f"cd_{name}_phase.png", f"cd_{name}_energy_speed.png"]
         log(f"  {name}: " + ", ".join(f"{r['label']}: {r['verdict']}" for r in res[name]))
-    res["mirror_checks"] = _mirror_checks(p, duration, res["limit_cycles"])
+    res["mirror_checks"] = _mirror_checks(res["limit_cycles"], by_label)
     ev = np.sort_complex(eigenvalues(p, lc.SPEED))
     res["linear_eigenvalues"] = ev
     cs = critical_speeds(p)
@@ -349,8 +378,9 @@ def limit_cycle_study(
     return res
 
 
-def _mirror_checks(p: BicycleParameters, duration: float, entries: list[dict]) -> list[dict]:
-    """Run the exact mirror image of every periodic case; its multipliers must agree."""
+def _mirror_checks(entries: list[dict], by_label: dict[str, tuple[dict, dict]]) -> list[dict]:
+    """The exact mirror image of every periodic case (``by_label``: label -> the
+    :func:`_coast_entry` result, mirrors included); its multipliers must agree."""
     from . import limit_cycles as lc
 
     conds = {ic.label: ic for ic in lc.FIG4_CONDITIONS + lc.FIG5_CONDITIONS}
@@ -358,8 +388,7 @@ def _mirror_checks(p: BicycleParameters, duration: float, entries: list[dict]) -
     for e in entries:
         if e["outcome"] != "periodic":
             continue
-        ic = lc.mirrored(conds[e["label"]])
-        m = lc.summary_entry(p, ic, lc.periodicity(lc.coast(p, ic, duration), ic.label))
+        m = by_label[lc.mirrored(conds[e["label"]]).label][1]
         d = None
         if m["floquet_multipliers"] is not None and e["floquet_multipliers"] is not None:
             a = np.array([complex(*z) for z in e["floquet_multipliers"]])
