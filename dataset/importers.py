@@ -30,6 +30,12 @@ constant-speed linear model does not fit: split the log), or the file is empty o
 unreadable.  Nothing else escapes from a malformed file: only :class:`ValueError` and
 :class:`OSError` with a message.
 
+A log without a time column (one row per sample period, ``time=None`` with ``dt``), with
+leading rows logged before recording began (``skip_leading``), extra columns kept as logged
+(``extra``) or a speed that ramps (``speed_range=None``) is read by the same path: the TU Delft
+steer-by-wire logs are (:func:`bikeid.dataset.sbw_logs.load_log` is a mapping onto
+:func:`from_csv`).  A ``.gz`` CSV is decompressed.
+
 The run's ``meta`` gets ``source = "imported"``, ``speed`` (mean of v) [m/s] and
 ``import``: the file name, absolute path, SHA-256 of its bytes, format, the column mapping,
 the time column, the unit conversions (user unit, SI unit, factor) and the flipped signals.
@@ -38,10 +44,12 @@ the time column, the unit conversions (user unit, SI unit, factor) and the flipp
 from __future__ import annotations
 
 import csv
+import gzip
 import hashlib
 import io
 import math
 import os
+import zlib
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -50,7 +58,7 @@ import numpy as np
 
 from bikeid.sim.conventions import UNITS
 
-from .run import REQUIRED, Run, check_plausible
+from .run import CONSTANT_CHECKED, REQUIRED, Run, check_finite, check_plausible
 
 __all__ = ["CONVERSIONS", "from_csv", "from_dataframe", "from_hdf5"]
 
@@ -89,6 +97,7 @@ class _Table:
         fmt: str,
         path: Path | None,
         digest: str,
+        first: int = 0,
     ) -> None:
         self.label = label  # "data.csv" / "log.h5" / "data frame", starts every message
         self.data = data  # user column name -> float array (only the columns used)
@@ -96,6 +105,7 @@ class _Table:
         self.fmt = fmt
         self.path = path
         self.digest = digest
+        self.first = first  # leading data rows skipped (skip_leading): the time base's offset
 
 
 def _sha256(path: Path) -> str:
@@ -132,7 +142,12 @@ def _check_request(
     for k, v in columns.items():
         if not isinstance(v, str) or not v:
             raise ValueError(f"{what}[{k!r}] must be a non-empty column name, got {v!r}")
-    if not isinstance(time, str) or not time:
+    if time is None:
+        if dt is None:
+            raise ValueError(
+                "a log without a time column (time=None) needs its sample period dt=<s>"
+            )
+    elif not isinstance(time, str) or not time:
         raise ValueError(f"time must be the name of your time column, got {time!r}")
     if speed is not None:
         if "v" in columns:
@@ -185,30 +200,34 @@ def _build(
     dt: float | None,
     meta: Mapping[str, Any] | None,
     jitter: float,
-    speed_range: float,
+    speed_range: float | None,
+    extra: Mapping[str, str] | None = None,
+    bounds_as: Mapping[str, str] | None = None,
 ) -> Run:
     """Check the table's data and convert it into a Run."""
     label, data, row = table.label, table.data, table.row
+    extra = dict(extra or {})
     for key, tol in (("jitter", jitter), ("speed_range", speed_range)):
+        if tol is None and key == "speed_range":
+            continue
         if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
             raise ValueError(f"{key} must be a positive relative tolerance, got {tol!r}")
-    n = data[time].size
+    n = len(next(iter(data.values())))
     if n == 0:
         raise ValueError(f"{label}: the file holds no data rows; nothing to import")
     if n < 3:
         raise ValueError(f"{label}: only {n} data row(s); a run needs at least 3 samples")
-    used = [time] + [c for c in dict.fromkeys(columns.values()) if c != time]
+    if time is None:  # one row per sample period, counted from the first data row
+        t = (table.first + np.arange(n)) * dt
+        used = list(dict.fromkeys([*columns.values(), *extra.values()]))
+    else:
+        check_finite(data[time], label, time, rows=row)
+        t = data[time] * CONVERSIONS["s"][units.get(TIME, "s")]
+        used = [c for c in dict.fromkeys([*columns.values(), *extra.values()]) if c != time]
     for col in used:
-        bad = ~np.isfinite(data[col])
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise ValueError(
-                f"{label}: column {col!r}, {row(i)}: value {data[col][i]!r} is not finite; "
-                "clean the log or cut the run before that row"
-            )
-    t = data[time] * CONVERSIONS["s"][units.get(TIME, "s")]
+        check_finite(data[col], label, col, rows=row, t=t)
     step = np.diff(t)
-    if np.any(step <= 0):
+    if time is not None and np.any(step <= 0):
         i = int(np.argmax(step <= 0)) + 1
         raise ValueError(
             f"{label}: column {time!r}, {row(i)}: time {data[time][i]!r} does not increase "
@@ -218,14 +237,14 @@ def _build(
     dev = np.abs(step - h) / h
     dev[~np.isfinite(dev)] = np.inf  # a step that overflows float64 is irregular too
     worst = int(np.argmax(dev))
-    if dev[worst] > jitter:
+    if time is not None and dev[worst] > jitter:
         raise ValueError(
             f"{label}: column {time!r}, {row(worst + 1)}: irregular sampling, the step "
             f"{step[worst]:.6g} s differs from the median {h:.6g} s by "
             f"{100 * dev[worst]:.3g} % (tolerance {100 * jitter:.3g} %); resample the log "
             "onto a uniform time base or cut out the gap"
         )
-    if dt is not None and abs(dt - h) > jitter * h:
+    if time is not None and dt is not None and abs(dt - h) > jitter * h:
         raise ValueError(
             f"{label}: column {time!r}: dt={dt!r} s given but the file is sampled every "
             f"{h:.9g} s (median step, {units.get(TIME, 's')} converted to s); fix dt or "
@@ -240,10 +259,11 @@ def _build(
         x = data[col] * factor
         if sig in flip:
             x = -x
-        if sig != "v" and np.ptp(data[col]) == 0:
+        if sig != "v" and sig not in CONSTANT_CHECKED and np.ptp(data[col]) == 0:
+            # (the states and the steer torque: check_plausible below, same wording)
             raise ValueError(
-                f"{label}: column {col!r} (signal {sig!r}) is constant ({data[col][0]!r} "
-                "in every row); it carries no information: check the mapping or leave it out"
+                f"{label}: column {col!r} ({sig}) is constant ({data[col][0]:g}) over all "
+                f"{n} samples; it carries no information: check the mapping or leave it out"
             )
         signals[sig] = x
         conversions[sig] = {"from": user, "to": si, "factor": factor}
@@ -260,7 +280,7 @@ def _build(
                 "positive and finite; check the column, its unit or flip"
             )
         spread = float(np.ptp(v))
-        if spread > speed_range * mean:
+        if speed_range is not None and spread > speed_range * mean:
             lo, hi = int(np.argmin(v)), int(np.argmax(v))
             raise ValueError(
                 f"{label}: column {columns['v']!r}: speed ranges from {v[lo]:.4g} m/s "
@@ -273,6 +293,8 @@ def _build(
     else:
         nominal, speed_source = float(speed), "nominal"
         signals["v"] = np.full(n, nominal)
+    for name, col in extra.items():  # taken as logged: no unit conversion, no flip
+        signals[name] = data[col]
     user_meta = dict(meta or {})
     clash = sorted({"source", "import"} & set(user_meta))
     if clash:
@@ -291,26 +313,40 @@ def _build(
             "units": conversions,
             "flip": sorted(flip),
             "speed_source": speed_source,
-            "dt": h,
+            "dt": h if time is not None else dt,
         },
     }
+    if extra:
+        out_meta["import"]["extra"] = extra
+    if table.first:
+        out_meta["import"]["leading_rows_skipped"] = table.first
     try:
         run = Run(t=t, signals=signals, meta=out_meta)
     except ValueError as exc:
         raise ValueError(f"{label}: {exc}") from None
-    return check_plausible(run, label, rows=row, columns=columns)
+    return check_plausible(run, label, rows=row, columns={**extra, **columns}, bounds_as=bounds_as)
 
 
 def _missing(label: str, wanted: Iterable[str], have: list[str], kind: str) -> None:
     absent = [c for c in dict.fromkeys(wanted) if c not in have]
     if absent:
-        raise ValueError(f"{label}: no {kind} {absent}; the file has {have}")
+        raise ValueError(f"{label}: missing {kind}s {absent}; the file has {have}")
 
 
 # -- CSV --------------------------------------------------------------------------------
-def _read_csv(path: Path, wanted: list[str], delimiter: str) -> tuple[dict, list[int], str]:
-    """Parse the wanted columns; also the SHA-256 of exactly the bytes parsed."""
-    label = str(path)
+def _clip(text: str, n: int = 40) -> str:
+    """``repr(text)`` for a message, at most about ``n`` characters."""
+    return repr(text) if len(text) <= n else f"{text[:n]!r}... ({len(text):,} characters)"
+
+
+def _read_csv(
+    path: Path, wanted: list[str], delimiter: str, label: str, skip_leading: str | None = None
+) -> tuple[dict, list[int], str, int]:
+    """Parse the wanted columns (a ``.gz`` file is decompressed first).
+
+    Returns the columns, the line of each data row, the SHA-256 of the file's bytes and the
+    number of leading data rows dropped because their ``skip_leading`` cell is empty.
+    """
     if path.is_dir():
         raise ValueError(f"{label}: is a folder, not a CSV file")
     try:
@@ -318,6 +354,13 @@ def _read_csv(path: Path, wanted: list[str], delimiter: str) -> tuple[dict, list
     except OSError as exc:
         raise type(exc)(exc.errno, f"cannot read {label} ({exc.strerror})") from None
     digest = hashlib.sha256(raw).hexdigest()
+    if path.name.endswith(".gz"):
+        try:
+            raw = gzip.decompress(raw)
+        except (EOFError, OSError, zlib.error) as exc:
+            raise ValueError(
+                f"{label}: corrupt or truncated gzip file ({exc}); fetch or copy it again"
+            ) from None
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -349,10 +392,15 @@ def _read_csv(path: Path, wanted: list[str], delimiter: str) -> tuple[dict, list
         idx = {c: header.index(c) for c in wanted}
         cols: dict[str, list[float]] = {c: [] for c in wanted}
         rows: list[int] = []
+        first = 0
+        lead = None if skip_leading is None else header.index(skip_leading)
         for fields in reader:
             line = reader.line_num
             if not fields or all(not f.strip() for f in fields):
                 continue  # blank line
+            if lead is not None and not rows and (len(fields) <= lead or not fields[lead].strip()):
+                first += 1  # a leading row without the skip_leading value (not yet logging)
+                continue
             if len(fields) != len(header):
                 raise ValueError(
                     f"{label}: row {line}: {len(fields)} fields but the header (row "
@@ -365,12 +413,17 @@ def _read_csv(path: Path, wanted: list[str], delimiter: str) -> tuple[dict, list
                     cols[c].append(float(cell))
                 except ValueError:
                     raise ValueError(
-                        f"{label}: column {c!r}, row {line}: {cell!r} is not a number"
+                        f"{label}: row {line}, column {c!r}: non-numeric value {_clip(cell)}"
                     ) from None
             rows.append(line)
-    except csv.Error as exc:
-        raise ValueError(f"{label}: row {reader.line_num}: malformed CSV ({exc})") from None
-    return {c: np.asarray(v, dtype=float) for c, v in cols.items()}, rows, digest
+    except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+        raise ValueError(
+            f"{label}: line {reader.line_num} is not CSV a log can hold ({exc}); the file is "
+            "corrupt or not a CSV log"
+        ) from None
+    if skip_leading is not None and first and not rows:
+        raise ValueError(f"{label}: column {skip_leading!r} is empty in every row")
+    return {c: np.asarray(v, dtype=float) for c, v in cols.items()}, rows, digest, first
 
 
 def from_csv(
@@ -385,12 +438,17 @@ def from_csv(
     flip: Iterable[str] = (),
     delimiter: str = ",",
     jitter: float = JITTER,
-    speed_range: float = SPEED_RANGE,
+    speed_range: float | None = SPEED_RANGE,
+    extra: Mapping[str, str] | None = None,
+    skip_leading: str | None = None,
+    bounds_as: Mapping[str, str] | None = None,
+    label: str | None = None,
 ) -> Run:
     """Read a CSV log into a :class:`~bikeid.dataset.run.Run` (SI units, Meijaard signs).
 
     Lines before the header that start with ``#`` are skipped, as are blank lines; only
-    the mapped columns are parsed (other columns may hold anything).
+    the mapped columns are parsed (other columns may hold anything).  A file whose name
+    ends in ``.gz`` is decompressed (gzip) first.
 
     Parameters
     ----------
@@ -405,8 +463,10 @@ def from_csv(
         of :data:`CONVERSIONS` for that signal's SI unit (angles "deg"/"rad", rates
         "deg/s"/"rad/s", speed "m/s"/"km/h", torque "N m"/"N cm", time "s"/"ms").
         Signals not listed are taken to be in SI units already.
-    time : str, default "t"
-        Header of the time column.
+    time : str or None, default "t"
+        Header of the time column; None for a log with one row per sample period and no
+        time column (then ``dt`` is required and t = row index * dt, counted from the
+        first data row, including rows dropped by ``skip_leading``).
     speed : float, optional
         Constant nominal speed [m/s] for a log without a speed column (then ``v`` is this
         constant).  Not allowed together with a mapped ``v``.
@@ -423,8 +483,21 @@ def from_csv(
         Field separator.
     jitter : float, default 0.01
         Largest allowed relative deviation of a time step from the median step [-].
-    speed_range : float, default 0.10
-        Largest allowed (max - min) of the speed relative to its mean [-].
+    speed_range : float or None, default 0.10
+        Largest allowed (max - min) of the speed relative to its mean [-]; None accepts
+        any variation (a log with a start-up ramp the caller cuts itself).
+    extra : mapping of str to str, optional
+        Further signals to keep, name -> column, taken as logged (no unit conversion, no
+        flip), e.g. a controller's own torque; checked for finiteness and, through
+        ``bounds_as``, for plausibility.
+    skip_leading : str, optional
+        A column whose empty cells at the start of the file mark rows logged before the
+        recording began: those rows are dropped (``meta["import"]["leading_rows_skipped"]``).
+    bounds_as : mapping of str to str, optional
+        Extra signals checked against the physical bound of a bikeid signal
+        (:func:`bikeid.dataset.run.check_plausible`), e.g. ``{"hand_torque": "T_delta"}``.
+    label : str, optional
+        What messages call the file (default its path).
 
     Returns
     -------
@@ -451,15 +524,24 @@ def from_csv(
     ...                flip={"T_delta"})  # doctest: +SKIP
     """
     path = Path(path)
+    label = str(path) if label is None else label
     columns, units, flipped = _check_request(columns, units, time, speed, dt, flip, "columns")
     if not isinstance(delimiter, str) or len(delimiter) != 1:
         raise ValueError(f"delimiter must be one character, got {delimiter!r}")
-    wanted = [time] + list(columns.values())
-    data, rows, digest = _read_csv(path, list(dict.fromkeys(wanted)), delimiter)
-    table = _Table(str(path), data, lambda i: f"row {rows[i]}", "csv", path, digest)
+    extra = dict(extra or {})
+    clash = sorted(k for k in extra if k in columns or k in UNITS)
+    if clash:
+        raise ValueError(f"extra names {clash} are bikeid signals: map them in columns instead")
+    wanted = ([] if time is None else [time]) + list(columns.values()) + list(extra.values())
+    if skip_leading is not None:
+        wanted.append(skip_leading)
+    data, rows, digest, first = _read_csv(
+        path, list(dict.fromkeys(wanted)), delimiter, label, skip_leading
+    )
+    table = _Table(label, data, lambda i: f"row {rows[i]}", "csv", path, digest, first)
     return _build(
         table, columns, units, flipped, time=time, speed=speed, dt=dt, meta=meta,
-        jitter=jitter, speed_range=speed_range,
+        jitter=jitter, speed_range=speed_range, extra=extra, bounds_as=bounds_as,
     )  # fmt: skip
 
 

@@ -5,6 +5,10 @@ no time column, so t = i * 0.01 s.  Units are SI (rad, rad/s, N m, m/s).
 
 What the loader does, and why
 ------------------------------
+- **One reader**: :func:`load_log` maps the log's columns onto bikeid signals and reads
+  them with :func:`bikeid.dataset.importers.from_csv` (parsing, row-numbered errors,
+  plausibility, provenance in ``meta["import"]``: path and SHA-256); what follows is
+  specific to these logs.
 - **Time base**: t = i * 0.01 s from the first row of the file (row indices of
   ``eigen/segments.csv`` refer to the same numbering).
 - **Free-decay windows**: :mod:`bikeid.dataset.decays` (the listed rows of
@@ -59,16 +63,12 @@ alone cannot fix the absolute direction; the relative signs are what the model n
 
 from __future__ import annotations
 
-import csv
-import gzip
-import io
 import os
-import zlib
 from pathlib import Path
 
 import numpy as np
 
-from bikeid.dataset.run import Run, check_finite, check_plausible
+from bikeid.dataset.run import Run, check_plausible
 
 __all__ = [
     "COLUMNS",
@@ -79,6 +79,7 @@ __all__ = [
     "despike",
     "find_logs",
     "load_log",
+    "settled",
     "treadmill_speed",
 ]
 
@@ -98,6 +99,9 @@ SPIKE_K = 8.0
 SPIKE_FLOOR = {"fork_rate": 0.5, "x_acceleration": 5.0, "y_acceleration": 5.0}
 
 DATASET = "tudelft-sbw"
+
+#: Resolution of the treadmill's speed setting [m/s] (:func:`settled`).
+SETTING_STEP = 0.1
 
 
 def treadmill_speed(sensor: np.ndarray | float) -> np.ndarray | float:
@@ -175,18 +179,6 @@ def find_logs(root: str | os.PathLike, kind: str | None = None) -> list[Path]:
     return files
 
 
-def _read_text(path: Path) -> str:
-    try:
-        if path.name.endswith(".gz"):
-            with gzip.open(path, "rt", newline="") as fh:
-                return fh.read()
-        return path.read_text()
-    except (EOFError, gzip.BadGzipFile, zlib.error, UnicodeDecodeError) as exc:
-        raise ValueError(
-            f"{path.name}: corrupt or truncated file ({exc}); fetch it again"
-        ) from None
-
-
 def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray, int]:
     """Replace isolated spikes by interpolation (detector: see module docstring).
 
@@ -223,16 +215,13 @@ def despike(x: np.ndarray, floor: float, k: float = SPIKE_K) -> tuple[np.ndarray
     return out, nbad
 
 
-def _clip(text: str, n: int = 40) -> str:
-    """``repr(text)`` for a message, at most about ``n`` characters."""
-    return repr(text) if len(text) <= n else f"{text[:n]!r}... ({len(text):,} characters)"
-
-
 def load_log(path: str | os.PathLike) -> Run:
     """Read one steer-by-wire log into a :class:`dataset.run.Run` (see module docstring).
 
-    Raises ValueError naming the file and the problem for missing columns,
-    non-numeric fields, a truncated gzip stream or too few rows.
+    A thin mapping onto :func:`bikeid.dataset.importers.from_csv` (the one reader of a
+    user's logs: columns, units, signs, provenance, errors): :data:`MAPPING` and
+    :data:`EXTRA` name the columns, the units are SI already and no sign is flipped; then
+    the loader adds ``T_ext``, despikes and finds the settled treadmill speed.
 
     Parameters
     ----------
@@ -247,7 +236,8 @@ def load_log(path: str | os.PathLike) -> Run:
         T_delta (``command_fork``) and T_ext [N m], plus the extras of the module
         docstring; ``meta`` with ``file``, ``speed`` (treadmill) and ``speed_sensor``
         [m/s], ``first_index``, ``ramp_end_index``, ``settled_end_index`` (file rows),
-        ``spikes`` (count per despiked column) and ``dt`` [s].
+        ``spikes`` (count per despiked column), ``dt`` [s] and ``import`` (the file's path,
+        SHA-256 and the column mapping, :mod:`bikeid.dataset.importers`).
 
     Raises
     ------
@@ -260,70 +250,23 @@ def load_log(path: str | os.PathLike) -> Run:
         ``sim.conventions.PLAUSIBLE`` or a constant state or command column, named by
         file row and column).
     """
+    from .importers import from_csv
+
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"log file {path} does not exist")
-    text = _read_text(path)
-    reader = csv.reader(io.StringIO(text))
-    try:
-        header = [h.strip() for h in next(reader)]
-        rows, lines = [], []  # data rows and their line numbers in the file (header: line 1)
-        for r in reader:
-            if r and any(f.strip() for f in r):
-                rows.append(r)
-                lines.append(reader.line_num)
-    except StopIteration:
-        raise ValueError(f"{path.name}: empty file, expected a CSV header") from None
-    except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
-        raise ValueError(
-            f"{path.name}: line {reader.line_num} is not CSV a log can hold ({exc}); the file "
-            "is corrupt or not a steer-by-wire log: fetch it again"
-        ) from None
-    missing = [c for c in COLUMNS if c not in header]
-    if missing:
-        raise ValueError(f"{path.name}: missing columns {missing}; expected {list(COLUMNS)}")
-    col = {c: header.index(c) for c in COLUMNS}
-    if len(rows) < 10:
-        raise ValueError(f"{path.name}: only {len(rows)} data rows; need at least 10")
-    # leading rows with an empty sil_command: controller not yet running
-    first = 0
-    while first < len(rows) and (
-        len(rows[first]) <= col["sil_command"] or not rows[first][col["sil_command"]].strip()
-    ):
-        first += 1
-    if first == len(rows):
-        raise ValueError(f"{path.name}: sil_command is empty in every row")
-    data = np.empty((len(rows) - first, len(COLUMNS)))
-    for i, r in enumerate(rows[first:]):
-        if len(r) != len(header):
-            raise ValueError(
-                f"{path.name}: row {lines[first + i]} has {len(r)} fields, header has "
-                f"{len(header)} (truncated or malformed file)"
-            )
-        for j, c in enumerate(COLUMNS):
-            try:
-                data[i, j] = float(r[col[c]])
-            except ValueError:
-                raise ValueError(
-                    f"{path.name}: row {lines[first + i]}, column {c!r}: non-numeric value "
-                    f"{_clip(r[col[c]])}"
-                ) from None
-    lines_kept = np.asarray(lines[first:])
-    n = data.shape[0]
-    t = (first + np.arange(n)) * DT
-    for j, c in enumerate(COLUMNS):
-        check_finite(data[:, j], path.name, c, rows=lines_kept, t=t)
-    raw = {c: data[:, j].copy() for j, c in enumerate(COLUMNS)}
-    # Physical bounds on the raw values, before despiking: the despiker is for the
-    # sensor quirk the README documents (one-sample encoder-difference jumps of a few rad/s
-    # that the steer angle does not follow, < 5.4 rad/s in every log), not for values no
-    # bicycle can produce; those mean a corrupt file and are refused with row and column.
-    # (No speed metadata yet: the nominal speed is derived from v below, and the windows
-    # check it against v again, dataset.windows.)
-    check_plausible(
-        Run(t=t, signals=_signals(raw)), path.name, rows=lines_kept,
-        columns=SIGNAL_COLUMNS, bounds_as=BOUNDS_AS,
+    run = from_csv(
+        path, MAPPING, time=None, dt=DT, extra=EXTRA, skip_leading="sil_command",
+        speed_range=None, bounds_as=BOUNDS_AS, label=path.name,
     )  # fmt: skip
+    if run.n < 10:
+        raise ValueError(f"{path.name}: only {run.n} data rows; need at least 10")
+    raw = {c: run.signals[SIGNAL_OF.get(c, c)] for c in COLUMNS}
+    # T_ext is derived (no column of its own): its bound is checked here, by sample
+    signals = _signals(raw)
+    check_plausible(Run(t=run.t, signals=signals), path.name, columns=SIGNAL_COLUMNS,
+                    bounds_as={"T_ext": "T_delta"})  # fmt: skip
+    first = int(run.meta["import"].get("leading_rows_skipped", 0))
     settled, ramp_end, run_end = _settled_speed(raw["speed"])
     meta = {
         "source": "measured",
@@ -338,18 +281,64 @@ def load_log(path: str | os.PathLike) -> Run:
         "controller": {"law": "steer-into-lean", "T": "K (V - speed) phidot", "K": 2.0, "V": 6.5},
         "bicycle": "steer-by-wire",
         "dt": DT,
+        "import": run.meta["import"],
     }
     for c, floor in SPIKE_FLOOR.items():
         raw[c], meta["spikes"][c] = despike(raw[c], floor)
-    return Run(t=t, signals=_signals(raw), meta=meta)
+    return Run(t=run.t, signals=_signals(raw), meta=meta)
+
+
+def settled(run: Run) -> Run:
+    """The settled part of a log's run, with ``v`` the treadmill speed: what an estimator fits.
+
+    The start-up ramp and any run-down (``meta["ramp_end_index"]`` ..
+    ``meta["settled_end_index"]``) are cut, and the sensor speed is replaced by the
+    treadmill speed through :func:`treadmill_speed` (the speed the bicycle's dynamics see).
+    ``meta["speed"]`` becomes the treadmill's setting: the settled calibrated speed rounded
+    to :data:`SETTING_STEP` (the logs' names give 1.5, 2.5, 3.5, 4.5 and 4 m/s; the
+    calibrated plateaus of the 20 logs lie within 0.05 m/s of them), so that the logs of
+    one setting form one speed for the estimators; ``meta["speed_calibrated"]`` keeps the
+    unrounded value.
+
+    Parameters
+    ----------
+    run : Run
+        A run of :func:`load_log`.
+
+    Returns
+    -------
+    Run
+        The settled rows (same time base [s]); ``v`` [m/s] the treadmill speed,
+        ``v_sensor`` [m/s] the logged sensor speed; ``meta["v"]`` says so.
+
+    Raises
+    ------
+    ValueError
+        If the run has no settled-speed metadata (not read by :func:`load_log`) or fewer
+        than 2 settled samples.
+    """
+    if "ramp_end_index" not in run.meta:
+        raise ValueError("settled() needs a run read by sbw_logs.load_log")
+    part = run.window(run.meta["ramp_end_index"] * DT, run.meta["settled_end_index"] * DT)
+    signals = {**part.signals, "v": treadmill_speed(part["v"]), "v_sensor": part["v"]}
+    meta = {**part.meta, "v": "treadmill speed from the sensor calibration (sbw_logs.settled)",
+            "speed": round(run.meta["speed"] / SETTING_STEP) * SETTING_STEP,
+            "speed_calibrated": run.meta["speed"]}  # fmt: skip
+    return Run(t=part.t, signals=signals, meta=meta)
+
+
+#: Signal of the Run behind each column of the log (the required bikeid signals).
+MAPPING = {
+    "phi": "lean_angle", "phidot": "lean_rate", "delta": "fork_angle",
+    "deltadot": "fork_rate", "v": "speed", "T_delta": "command_fork",
+}  # fmt: skip
+#: Further columns read as signals of the same name (lean_torque is only checked).
+EXTRA = {c: c for c in COLUMNS if c not in MAPPING.values()}
+SIGNAL_OF = {c: s for s, c in MAPPING.items()}
 
 
 #: Column of the log behind each signal of the Run (for error messages).
-SIGNAL_COLUMNS = {
-    "phi": "lean_angle", "phidot": "lean_rate", "delta": "fork_angle",
-    "deltadot": "fork_rate", "v": "speed", "T_delta": "command_fork",
-    "T_ext": "command_fork - sil_command",
-}  # fmt: skip
+SIGNAL_COLUMNS = {**MAPPING, "T_ext": "command_fork - sil_command"}
 
 #: Extra signals checked against the physical bound of a convention name
 #: (``sim.conventions.PLAUSIBLE``): the torques against the steer torque, the handlebar

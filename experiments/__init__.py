@@ -8,6 +8,7 @@ Modules:
   :mod:`~bikeid.experiments.cmd_simulate` (``simulate``),
   :mod:`~bikeid.experiments.cmd_data` (``sweep``, ``stabilization``),
   :mod:`~bikeid.experiments.cmd_ident` (``identify``, ``accuracy``),
+  :mod:`~bikeid.experiments.cmd_validate` (``validate``),
   :mod:`~bikeid.experiments.cmd_reproduce` (``reproduce``),
   :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials``,
   ``data fetch``).
@@ -26,6 +27,8 @@ Modules:
 - :mod:`~bikeid.experiments.limit_cycles`: Chen & Dao Figs. 4-5, uncontrolled coasting at
   3.5 m/s and whether the motion is periodic; :mod:`~bikeid.experiments.floquet` converges
   a periodic orbit on the Poincare map and computes its Floquet multipliers.
+- :mod:`~bikeid.experiments.blind_trials`: effect-selection trials on logs from an
+  independent generator with randomized nuisances (four rates a user suffers).
 - :mod:`~bikeid.experiments.effect_trials`: randomized undeclared-effect trials on the
   nonlinear plant (``bikeid measured trials``).
 - :mod:`~bikeid.experiments.measured_study`: the measured-data pipeline as a library
@@ -35,6 +38,8 @@ Modules:
 - :mod:`~bikeid.experiments.report`: Markdown reports (paper | identified | truth tables)
   and ``summary.json``.
 - :mod:`~bikeid.experiments.plots`: Matplotlib figures shared by commands and reports.
+- :mod:`~bikeid.experiments.validation_plots`: the compare, resid and Bode figures of
+  ``bikeid validate``.
 
 Nothing is imported here; import the modules.
 """

@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "bikeid.experiments.cmd_simulate",  # simulate
     "bikeid.experiments.cmd_data",  # sweep, stabilization
     "bikeid.experiments.cmd_ident",  # identify
+    "bikeid.experiments.cmd_validate",  # validate
     "bikeid.experiments.cmd_reproduce",  # reproduce
     "bikeid.experiments.cmd_measured",  # measured fit/evaluate, data fetch
 )

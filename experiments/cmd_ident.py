@@ -27,9 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
     p.add_argument(
-        "--format", choices=("bikeid", "csv", "hdf5"), default="bikeid",
+        "--format", choices=("bikeid", "csv", "hdf5", "sbw"), default="bikeid",
         help="bikeid: files written by bikeid (sweep, store); csv / hdf5: your own logs, read "
-        "with --columns (dataset.importers)",
+        "with --columns (dataset.importers); sbw: TU Delft steer-by-wire logs (files or "
+        "folders; the settled part of each, v = treadmill speed, dataset.sbw_logs)",
     )  # fmt: skip
     p.add_argument(
         "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
@@ -68,6 +69,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--cutoff", type=number(0.0, 1e4, unit="Hz"), default=None,
         help="direct: zero-phase low-pass [Hz], 0 = none (default 3 Hz with 'interval', "
         "else 15 Hz as Moore & Hubbard)",
+    )  # fmt: skip
+    p.add_argument(
+        "--outputs", default=None, metavar="NAME,...",
+        help="measured states fitted (pem: phi and delta plus optionally phidot, deltadot; "
+        "default all four). direct needs all four (its regressors use every state)",
+    )  # fmt: skip
+    p.add_argument(
+        "--input", default="T_delta", metavar="SIGNAL",
+        help="the runs' torque signal [N m] used as the model's steer-torque input (default "
+        "T_delta; e.g. sil_command of the steer-by-wire logs)",
+    )  # fmt: skip
+    p.add_argument(
+        "--out", default=None, metavar="MODEL.json",
+        help="save the identified model (ident.model_file: parameters, covariance, data file "
+        "hashes, settings); per-speed pem over several speeds writes MODEL-v<speed>.json",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
@@ -141,7 +157,10 @@ def _truth(runs):
     from bikeid.sim.parameters import from_mapping
 
     meta = runs[0].meta
-    values = meta.get("parameters") or (meta.get("bicycle") or {}).get("parameters")
+    bicycle = meta.get("bicycle")  # a name (measured logs) or the simulated bicycle
+    values = meta.get("parameters") or (bicycle if isinstance(bicycle, dict) else {}).get(
+        "parameters"
+    )
     return from_mapping(values, name="run meta") if values else None
 
 
@@ -189,6 +208,15 @@ def _load(args: argparse.Namespace) -> list:
             if getattr(args, opt) is not None:
                 raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
         return [r for f in args.file for r in read_runs(f)]
+    if args.format == "sbw":
+        from bikeid.dataset.sbw_logs import load_log, settled
+
+        for opt in ("columns", "units", "speed"):
+            if getattr(args, opt) is not None:
+                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
+        if args.flip:
+            raise ValueError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
+        return [settled(load_log(p)) for p in _data_files(args)]
     from bikeid.dataset import importers
 
     if not args.columns:
@@ -204,17 +232,132 @@ def _load(args: argparse.Namespace) -> list:
     ]
 
 
+def _outputs(text: str | None, method: str) -> tuple[str, ...] | None:
+    """``--outputs``: the measured states fitted (None: the method's default)."""
+    from bikeid.sim.conventions import CANONICAL_STATE
+    from bikeid.sim.errors import InputError
+
+    if text is None:
+        return None
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names or len(set(names)) != len(names) or not set(names) <= set(CANONICAL_STATE):
+        raise InputError(
+            f"--outputs {text!r}: give measured states from {','.join(CANONICAL_STATE)}, "
+            "comma-separated, without repeats"
+        )
+    if method == "direct" and set(names) != set(CANONICAL_STATE):
+        raise InputError(
+            f"--outputs {text!r}: direct least squares needs phi, delta, phidot and deltadot "
+            "(its regressors use every state and both accelerations); drop --outputs or use "
+            "--method pem"
+        )
+    if not {"phi", "delta"} <= set(names):
+        raise InputError(
+            f"--outputs {text!r}: the canonical model needs phi and delta among its outputs "
+            "(Chen & Dao's output matrix); add them"
+        )
+    return names
+
+
+def _with_input(runs: list, name: str) -> list:
+    """The runs with ``name`` as the steer-torque input T_delta (``--input``)."""
+    import dataclasses
+
+    from bikeid.sim.conventions import UNITS
+    from bikeid.sim.errors import InputError
+
+    if name == "T_delta":
+        return runs
+    if UNITS.get(name, "N m") != "N m":
+        raise InputError(
+            f"--input {name}: that signal is in {UNITS[name]}, not a torque; give a steer "
+            "torque [N m] such as T_delta"
+        )
+    for i, r in enumerate(runs):
+        if name not in r.signals:
+            raise InputError(
+                f"--input {name}: run {i + 1} has no signal {name!r}; its signals are "
+                f"{', '.join(sorted(r.signals))}"
+            )
+        if not r.signals[name].any():
+            raise InputError(f"--input {name}: the signal is zero in run {i + 1}; nothing to fit")
+    return [
+        dataclasses.replace(r, signals={**r.signals, "T_delta": r.signals[name]},
+                            meta={**r.meta, "input": name})
+        for r in runs
+    ]  # fmt: skip
+
+
+def _data_files(args: argparse.Namespace) -> list:
+    """The files the runs were read from (hashed into the model file's provenance)."""
+    from pathlib import Path
+
+    files = []
+    for f in map(Path, args.file):
+        if f.is_dir() and args.format == "sbw":
+            from bikeid.dataset.sbw_logs import find_logs
+
+            logs = find_logs(f)
+            if not logs:
+                raise ValueError(f"{f} holds no steer-by-wire logs (*.log, *.log.gz)")
+            files += logs
+        else:
+            files.append(f)
+    return files
+
+
+def _model_targets(out: str, speeds: list[float], per_speed: bool) -> list:
+    """``--out`` file(s): one, or one per speed for per-speed pem over several speeds."""
+    from pathlib import Path
+
+    from bikeid.dataset.files import check_output_path
+
+    path = check_output_path(Path(out))
+    if per_speed and len(speeds) > 1:
+        targets = [path.with_name(f"{path.stem}-v{v:g}{path.suffix or '.json'}") for v in speeds]
+    else:
+        targets = [path]
+    for t in targets:
+        check_output_path(t)  # refuse a link or folder before the (long) fit
+    return targets
+
+
+def _settings(args: argparse.Namespace) -> dict:
+    """The method and options saved with the model."""
+    s: dict = {"command": "bikeid identify", "method": args.method, "format": args.format,
+               "input": args.input}  # fmt: skip
+    if args.format != "bikeid":
+        s.update(columns=args.columns, units=args.units, time=args.time, speed=args.speed,
+                 flip=[f.strip() for f in args.flip.split(",") if f.strip()])  # fmt: skip
+    if args.method == "direct":
+        s.update(bicycle=args.bicycle, iv=args.iv, derivative=args.derivative,
+                 cutoff=args.cutoff)  # fmt: skip
+    else:
+        s.update(speed_parameterized=args.speed_parameterized, noise_model="free")
+    return s
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from bikeid.ident.model_file import file_provenance, save_model
     from bikeid.sim.linear import eigenvalues
 
+    outputs = _outputs(args.outputs, args.method)
     runs = _load(args)
     if not runs:
         raise ValueError(f"{', '.join(args.file)} hold no runs")
+    runs = _with_input(runs, args.input)
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
-    out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds}
+    targets, provenance, settings = [], [], {}
+    if args.out:
+        per_speed_pem = args.method == "pem" and not args.speed_parameterized
+        targets = _model_targets(args.out, speeds, per_speed_pem)
+        provenance = file_provenance(_data_files(args))
+        settings = _settings(args)
+    out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,
+                 "input": args.input}  # fmt: skip
     if args.method == "direct":
         from bikeid.ident.direct import identify
         from bikeid.ident.signals import prepare
@@ -222,14 +365,18 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
         if args.speed_parameterized:
             raise ValueError("--speed-parameterized applies to --method pem (direct is always)")
-        reference = by_name(args.bicycle) if args.bicycle else truth
+        bicycle = args.bicycle or (runs[0].meta.get("bicycle") if truth is None else None)
+        reference = by_name(bicycle) if isinstance(bicycle, str) else truth
         if reference is None:
             raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
         cutoff = args.cutoff
         if cutoff is None:
             cutoff = 3.0 if args.derivative == "interval" else 15.0
+        settings["cutoff"] = cutoff
         prepared = [prepare(r, cutoff=cutoff or None, derivative=args.derivative) for r in runs]
         res = identify(prepared, reference, method="iv" if args.iv else "ls")
+        saved = [(res, targets[0])] if targets else []
+        out["outputs"] = ["phi", "delta", "phidot", "deltadot"]
         out.update(
             M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H,
             free={k: {"value": v, "stderr": res.stderr[k]} for k, v in res.free.items()},
@@ -247,14 +394,17 @@ def cmd_identify(args: argparse.Namespace) -> int:
         prev = None
         for v in speeds:
             at_v = [r for r in runs if round(r.speed, 6) == v]
-            prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,))
+            prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,),
+                                    **({"outputs": outputs} if outputs else {}))  # fmt: skip
         if args.speed_parameterized:
             if len(speeds) < 2:
                 raise ValueError(
                     "--speed-parameterized needs runs at two or more speeds to separate "
                     f"alpha from beta v^2; the data hold speed {speeds[0]} m/s only"
                 )
-            model = pem.fit_speed_model(runs, per_speed=per)
+            model = pem.fit_speed_model(runs, per_speed=per,
+                                        **({"outputs": outputs} if outputs else {}))  # fmt: skip
+            saved = [(model, targets[0])] if targets else []
             out["params"] = dict(zip(pem.SPEED_NAMES, model.params, strict=True))
             out["stderr"] = model.stderr
             out["critical_speeds"] = model.critical_speeds()
@@ -265,6 +415,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
                 for v, m in per.items()
             }
             eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
+            saved = list(zip(per.values(), targets, strict=True)) if targets else []
+        out["outputs"] = list(next(iter(per.values())).outputs)
+    settings["outputs"] = out["outputs"]  # as fitted (the method's default when not given)
+    for model, target in saved:
+        save_model(model, target, provenance=provenance, settings=settings, speeds=speeds)
+    out["model_files"] = [str(t) for _, t in saved]
     per_speed = []
     for v in speeds:
         row = {"speed": v, "eigenvalues": eig[v]}
@@ -291,6 +447,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
             for k, v in out["vaf_moore"].items()
         )
         print(f"VAF (Moore eq. 6): {vaf}; condition: {out['condition']}")
+    for f in out["model_files"]:
+        print(f"model saved to {f}")
     for row in per_speed:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")

@@ -10,7 +10,6 @@ from pathlib import Path
 
 from .cliutil import (
     MAX_WORKERS,
-    atomic_write_text,
     dump_json,
     integer,
     parse_range,
@@ -48,9 +47,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--plant",
-        choices=("nonlinear", "linear"),
+        choices=("nonlinear", "linear", "auto"),
         default="nonlinear",
-        help="nominal plant: nonlinear Whipple (defect-corrected, default) or linear",
+        help="nominal plant: nonlinear Whipple (defect-corrected, default), linear, or auto "
+        "(the one that fits the decays better before selection; both fits are printed)",
     )
     f.add_argument(
         "--weave-weight",
@@ -136,15 +136,35 @@ def _speeds(text: str | None):
     return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
 
 
+def _fit_files(data: str | None, obj: dict, decays: str) -> list[Path]:
+    """The logs a fit used (and eigen/segments.csv for listed decays): its provenance."""
+    from bikeid.dataset.sbw_logs import data_dir, find_logs
+
+    files = [p for p in find_logs(data_dir(data)) if p.name in set(obj["fit_files"])]
+    if decays == "listed":  # dataset.decays reads the segments.csv beside each log
+        segments = sorted({p.parent / "segments.csv" for p in files})
+        files += [s for s in segments if s.is_file()]
+    return files
+
+
 def cmd_fit(args) -> int:
     from bikeid.dataset.decays import load_decays
-    from bikeid.experiments.measured_study import fit_model
+    from bikeid.experiments.measured_study import fit_model, save_fit
 
     ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     out = fit_model(ws, args.max_effects, args.plant, args.stability, ww)
     out["decays"] = args.decays
-    atomic_write_text(args.out, dump_json(out) + "\n")
+    settings = {"max_effects": args.max_effects, "stability": args.stability,
+                "weave_weight": ww, "speeds": _speeds(args.speeds)}  # fmt: skip
+    save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
+    nf = out["nominal_fit"]
+    print(f"nominal fit (summed squared NRMSE): linear {nf['linear']:.4g}, nonlinear "
+          f"{nf['nonlinear']:.4g}; the data prefer the {nf['preferred']} plant; fitted with "
+          f"the {out['plant']} plant")  # fmt: skip
+    if out["plant"] != nf["preferred"]:
+        print(f"note: the {nf['preferred']} nominal fits these decays better; a mismatch of "
+              "the nominal plant can be read as an effect (try --plant auto)")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     w = out["identification"]["weave_weight"]
     if ww == "auto" and w == 0:
@@ -184,6 +204,13 @@ def cmd_evaluate(args) -> int:
         for when in ("before", "after"):
             a = s[f"push_asymmetry_{when}"]
             print(f"error by push direction {when}: {_asymmetry_text(a)}")
+        for f in out["validation"]["files"]:  # the model's validation (bikeid validate's tests)
+            print(f"validation {f['file']}: " + "; ".join(
+                f"{c} fit {f['fit'][c]:.1f} %, residuals "
+                f"{'white' if r['white'] else 'not white'}"
+                + ("" if "independent" not in r else
+                   f", {'independent of' if r['independent'] else 'correlated with'} T_ext")
+                for c, r in f["residuals"].items()))  # fmt: skip
     return 0
 
 

@@ -17,7 +17,11 @@ from bikeid.dataset.windows import Window
 from bikeid.ident.discrepancy_diagnostics import evaluate
 from bikeid.ident.effect_fit import FitResult, joint_fit
 from bikeid.ident.effect_library import LIBRARY
-from bikeid.ident.effect_selection import select_effects, selection_frequencies
+from bikeid.ident.effect_selection import (
+    compare_nominal_plants,
+    select_effects,
+    selection_frequencies,
+)
 from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
@@ -25,7 +29,7 @@ from bikeid.sim.textformats import loads_json
 
 from .cliutil import MAX_SPEED
 
-__all__ = ["evaluate_json", "fit_effect_set", "fit_model", "model_from_json"]
+__all__ = ["evaluate_json", "fit_effect_set", "fit_model", "model_from_json", "save_fit"]
 
 
 #: Plants a model file may name (``measured fit --plant``); a file without ``plant`` gets
@@ -40,8 +44,73 @@ def _is_number(v: object) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
+def save_fit(
+    obj: dict,
+    path: str | Path,
+    settings: dict | None = None,
+    provenance: list | None = None,
+) -> Path:
+    """Write the model object of :func:`fit_model` as a bikeid model file.
+
+    The file has ``kind = "experiment-model"`` (:mod:`bikeid.ident.model_file`): the
+    effects in the model section, ``plant`` (and ``decays`` when given) in the settings, the
+    fit speeds as ``speeds``, and the rest of ``obj`` (bicycle, files, windows, the
+    identification log, selection frequencies) in ``results``.
+
+    Parameters
+    ----------
+    obj : dict
+        A model object (:func:`fit_model`), optionally with ``decays``.
+    path : str or Path
+        The JSON file to write (atomically).
+    settings : dict, optional
+        Further options of the fit (e.g. ``max_effects``, ``weave_weight``).
+    provenance : list, optional
+        The data files (paths) or :func:`bikeid.ident.model_file.file_provenance` entries.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    from bikeid.ident.model_file import save_model
+
+    from .cliutil import to_jsonable
+
+    settings = {"command": "bikeid measured fit", "plant": obj["plant"], **(settings or {})}
+    if "decays" in obj:
+        settings["decays"] = obj["decays"]
+    skip = {"effects", "plant", "fit_speeds", "decays"}
+    results = to_jsonable({k: v for k, v in obj.items() if k not in skip})
+    model = ExperimentModel(effects=dict(obj["effects"]))
+    return save_model(model, path, provenance=provenance, settings=settings, results=results,
+                      speeds=obj["fit_speeds"])  # fmt: skip
+
+
+def _from_model_file(text: str, where: str) -> dict:
+    """The model object of a bikeid model file (``measured fit`` since format version 1)."""
+    from bikeid.ident.model_file import model_from_text
+
+    mf = model_from_text(text, where)
+    if mf.kind != "experiment-model":
+        raise InputError(
+            f"{where} holds a {mf.kind} model (bikeid identify); the measured commands need "
+            "the MODEL.json written by 'bikeid measured fit'"
+        )
+    obj = {**mf.results, "effects": dict(mf.model.effects), "fit_speeds": list(mf.speeds or [])}
+    if "plant" in mf.settings:
+        obj["plant"] = mf.settings["plant"]
+    if "decays" in mf.settings:
+        obj["decays"] = mf.settings["decays"]
+    return obj
+
+
 def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
     """Read and validate a model file written by ``bikeid measured fit``.
+
+    Two layouts are read: the bikeid model file (:mod:`bikeid.ident.model_file`, kind
+    ``experiment-model``), which ``measured fit`` writes, and the plain object earlier
+    versions wrote (``effects``, ``plant``, ``fit_speeds``, ``identification`` at the top).
 
     Parameters
     ----------
@@ -53,18 +122,20 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
     model : ExperimentModel
         The nominal experiment with the file's effects.
     obj : dict
-        The whole file; ``plant`` is filled in with :data:`DEFAULT_PLANT` (and
-        ``plant_defaulted`` set True) when the file has none.
+        The model object (the plain layout; for a model file its results with
+        ``effects``, ``plant`` and ``fit_speeds``); ``plant`` is filled in with
+        :data:`DEFAULT_PLANT` (and ``plant_defaulted`` set True) when the file has none.
 
     Raises
     ------
     bikeid.sim.errors.InputError
         A ValueError naming the file and the field: if the file cannot be read or is not
         strict JSON (:func:`bikeid.sim.textformats.loads_json`: duplicate keys, NaN and
-        deep nesting are refused), is not an object, lacks ``effects`` or has an effect
-        that is unknown or not a finite number, names a plant other than
-        :data:`PLANTS`, or has ``fit_speeds`` that are not a list of speeds in (0, 100]
-        m/s, or an ``identification`` that is not an object.
+        deep nesting are refused), is not an object, is a model file of another kind or
+        fails its checks (:func:`bikeid.ident.model_file.read_model_file`), lacks
+        ``effects`` or has an effect that is unknown or not a finite number, names a plant
+        other than :data:`PLANTS`, or has ``fit_speeds`` that are not a list of speeds in
+        (0, 100] m/s, or an ``identification`` that is not an object.
     """
     path = Path(path)
     where = f"model file {str(path)!r}"
@@ -83,6 +154,8 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
     obj = loads_json(text, where)
     if not isinstance(obj, dict):
         raise InputError(f"{where} must hold a JSON object, got {type(obj).__name__}")
+    if "format" in obj:
+        obj = _from_model_file(text, where)
     effects = obj.get("effects")
     if not isinstance(effects, dict):
         raise InputError(
@@ -140,7 +213,10 @@ def fit_model(
     max_effects : int, optional
         At most this many effects (:func:`bikeid.ident.effect_selection.select_effects`).
     plant : str, optional
-        ``"nonlinear"`` (defect-corrected nonlinear Whipple plant) or ``"linear"``.
+        ``"nonlinear"`` (defect-corrected nonlinear Whipple plant), ``"linear"``, or
+        ``"auto"``: the one of the two that fits the decays better before any effect is
+        selected (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).  Both
+        nominal fits are reported in every case (``nominal_fit``).
     stability : int, optional
         With N > 0, also the selection frequency of each name over N random 75 % subsamples
         (:func:`bikeid.ident.effect_selection.selection_frequencies`).
@@ -150,8 +226,13 @@ def fit_model(
     Returns
     -------
     dict
-        Effects (registry units), fit speeds [m/s], files, windows and the identification.
+        Effects (registry units), fit speeds [m/s], files, windows, the identification, the
+        nominal plant used (``plant``) and both nominal fits (``nominal_fit``: summed
+        squared NRMSE of roll rate and steer angle as linear and as nonlinear plant).
     """
+    nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
+    if plant == "auto":
+        plant = nominal_fit["preferred"]
     nl = plant == "nonlinear"
     extra = {}
     if stability:
@@ -171,6 +252,7 @@ def fit_model(
         "fit_files": sorted({w.file for w in windows}),
         "fit_windows": [{"file": w.file, "start": w.start, "end": w.start + w.n} for w in windows],
         "identification": res.as_dict(),
+        "nominal_fit": nominal_fit,
         **extra,
     }
 
@@ -189,12 +271,17 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
     -------
     dict
         The metric's description, plant, verdict, effects with standard errors, fit speeds,
-        and :func:`bikeid.ident.discrepancy_diagnostics.evaluate`'s ``files`` and ``summary``
-        (NRMSE, dimensionless; weave eigenvalues [1/s]).
+        :func:`bikeid.ident.discrepancy_diagnostics.evaluate`'s ``files`` and ``summary``
+        (NRMSE, dimensionless; weave eigenvalues [1/s]), and ``validation``: the model's fit
+        [%] and residual tests per file (:func:`bikeid.ident.validation_report.validate_decays`).
     """
+    from bikeid.ident.validation_report import validate_decays
+
     aug = ExperimentModel(effects=dict(model_obj["effects"]))
     plant = model_obj.get("plant", DEFAULT_PLANT)  # as model_from_json and measured fit
     ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
+    # the validation of `bikeid validate` on the decays (windows left corrected at `aug`)
+    validation = validate_decays(aug, windows)
     ident = model_obj.get("identification", {})
     std = {e["name"]: e for e in ident.get("effects", [])}
     effects = [
@@ -217,6 +304,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         "effects": effects,
         "fit_speeds": model_obj.get("fit_speeds"),
         **ev,
+        "validation": validation,
     }
 
 

@@ -17,6 +17,11 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
 - :mod:`~bikeid.ident.validate`: ``compare`` (simulation and k-step prediction),
   ``resid`` (whiteness, input cross-correlation), ``goodness_of_fit``, poles, zeros.
+- :mod:`~bikeid.ident.validation_report`: ``validate_model`` (fits, residual tests and a
+  nonparametric frequency response against a model, ``bikeid validate``) and
+  ``validate_decays`` (the same on measured decays, ``bikeid measured evaluate``).
+- :mod:`~bikeid.ident.model_file`: ``save_model`` / ``load_model``, the one JSON file
+  format of every identified model (parameters bit for bit, covariance, provenance).
 
 The measured-data analysis (an experiment model plus a library of candidate effects):
 
@@ -34,6 +39,7 @@ The measured-data analysis (an experiment model plus a library of candidate effe
 """
 
 from .direct import DirectResult, identify, vaf_moore, vaf_variance
+from .model_file import load_model, read_model_file, save_model
 from .pem import CanonicalModel, SpeedCanonicalModel, fit, fit_speed_model
 
 __all__ = [
@@ -43,6 +49,9 @@ __all__ = [
     "fit",
     "fit_speed_model",
     "identify",
+    "load_model",
+    "read_model_file",
+    "save_model",
     "vaf_moore",
     "vaf_variance",
 ]

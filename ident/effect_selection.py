@@ -57,6 +57,7 @@ from bikeid.ident.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_t
 
 __all__ = [
     "EXPLAINED_MIN",
+    "compare_nominal_plants",
     "T_MIN",
     "WEAVE_EPS",
     "Identification",
@@ -328,6 +329,37 @@ def select_effects(
         cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor, explained=float(explained),
         eq_ranking=err_ranking(model, windows), rounds=rounds, weave_weight=weave_weight,
     )  # fmt: skip
+
+
+def compare_nominal_plants(model: ExperimentModel, windows: list[Window]) -> dict:
+    """How the nominal model fits the windows as a linear and as a nonlinear plant.
+
+    A structural mismatch of the nominal plant (a linear truth fitted by the nonlinear plant,
+    or the reverse) is otherwise read as an effect; comparing both before selecting lets
+    the fit start from the plant that the data prefer and say so.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model (no effects fitted).
+    windows : list of Window
+        The decays; left unchanged (copies carry the nonlinear correction).
+
+    Returns
+    -------
+    dict
+        ``linear`` and ``nonlinear``: summed squared NRMSE of roll rate and steer angle
+        (:func:`bikeid.ident.experiment_model.window_errors`, dimensionless);
+        ``preferred``: the plant with the lower cost; ``ratio``: nonlinear / linear cost.
+    """
+    out: dict = {}
+    for name, nonlinear in (("linear", False), ("nonlinear", True)):
+        ws = [replace(w, correction=None) for w in windows]
+        attach_correction(ws, model, nonlinear)
+        out[name] = float(np.sum(window_errors(ws, model.simulate(ws)) ** 2))
+    out["preferred"] = "nonlinear" if out["nonlinear"] <= out["linear"] else "linear"
+    out["ratio"] = out["nonlinear"] / max(out["linear"], 1e-300)
+    return out
 
 
 def selection_frequencies(

@@ -9,13 +9,17 @@ the initial state that minimizes the error (MATLAB ``InitialCondition 'e'``).
 residual-input cross-correlation at lags -25..25 with the 99 % band
 2.576 / sqrt(N) (MATLAB ``resid`` defaults).  In closed loop, correlation at
 negative lags (input lagging the residual) reflects feedback, not a model error;
-judge positive lags, or use the dither as the input.
+judge positive lags, or use the dither as the input.  Beside the band, ``resid`` gives
+verdicts computed from the data: the chi-squared whiteness test N sum r(k)^2 ~ chi^2(M)
+(:func:`portmanteau`) and the independence test N r' R_u^-1 r ~ chi^2(M) on lags 1..M
+(:func:`independence_test`), both at level 1 - confidence (Ljung, sec. 16.6).
 
-Models: a :class:`ident.pem.CanonicalModel` (its innovation gain K is used for
-prediction), or any continuous python-control ``StateSpace`` whose outputs are
-named after run signals and whose inputs are run signals (K = 0 then), sampled
-exactly (``sim.sampling.zoh``).  The computations behind ``compare`` take discrete
-matrices and arrays and are public: :func:`simulation` (open-loop simulation, initial
+Models (:func:`sampled_model`): a :class:`ident.pem.CanonicalModel` (its innovation gain K
+is used for prediction), a ``SpeedCanonicalModel`` or a ``DirectResult`` (taken at each
+run's speed; K = 0 for the direct method's model), or any continuous python-control
+``StateSpace`` whose outputs are named after run signals and whose inputs are run signals
+(K = 0 then), sampled exactly (``sim.sampling.zoh``).  The computations behind ``compare``
+take discrete matrices and arrays and are public: :func:`simulation` (open-loop simulation, initial
 state by least squares) and :func:`k_step_prediction` (innovations predictor, then k
 open-loop steps); the reproductions of Chen & Dao and Moore & Hubbard use them.
 """
@@ -23,7 +27,7 @@ open-loop steps); the reproductions of Chen & Dao and Moore & Hubbard use them.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import control
 import numpy as np
@@ -32,7 +36,7 @@ from bikeid.dataset.run import Run
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
-from .direct import vaf_variance
+from .direct import DirectResult, vaf_variance
 
 __all__ = [
     "CompareResult",
@@ -42,6 +46,7 @@ __all__ = [
     "k_step_prediction",
     "poles",
     "resid",
+    "sampled_model",
     "simulation",
     "transfer_functions",
     "zeros",
@@ -77,11 +82,52 @@ def goodness_of_fit(y: np.ndarray, yhat: np.ndarray) -> dict[str, float]:
     }
 
 
-def _sampled(model, dt: float):
-    """(Ad, Bd, C, K, outputs, inputs) at dt."""
+def sampled_model(model, dt: float, v: float | None = None):
+    """The discrete innovations predictor of a model at the data's sample period.
+
+    Parameters
+    ----------
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        A ``CanonicalModel`` gives its own predictor (its ``dt`` must equal ``dt``); a
+        ``SpeedCanonicalModel`` its fixed-speed model at ``v`` (:meth:`at`: K of the
+        nearest fitted speed); a ``DirectResult`` its state space at ``v`` with inputs
+        T_phi, T_delta and F (a run without T_phi or F has them zero), all four states
+        measured and K = 0; a continuous ``StateSpace`` (D = 0)
+        is sampled exactly (zero-order hold) with K = 0.
+    dt : float
+        Sample period of the data [s].
+    v : float, optional
+        Forward speed [m/s]; required for models defined over speed.
+
+    Returns
+    -------
+    Ad, Bd, C, K : ndarray
+        x[k+1] = Ad x[k] + Bd u[k] + K (y[k] - C x[k]) (state units of the model; outputs
+        in rad and rad/s, inputs in N m).
+    outputs, inputs : tuple of str
+        Output and input signal names, in the order of the rows of C and columns of Bd.
+
+    Raises
+    ------
+    ValueError
+        If the model's sample period differs from ``dt``, a model over speed gets no
+        ``v``, a state space is discrete or has D != 0, or the model is of another type.
+    """
+    if isinstance(model, DirectResult) or hasattr(model, "at"):  # defined over speed
+        if v is None:
+            raise ValueError(
+                f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
+            )
+        if isinstance(model, DirectResult):  # all its inputs (zero when a run lacks them)
+            model = model.state_space(v)
+        else:
+            model = model.at(v)
     if hasattr(model, "predictor") and hasattr(model, "outputs"):
         if abs(model.dt - dt) > 1e-12:
-            raise ValueError(f"model identified at dt={model.dt} s, data at dt={dt} s")
+            raise ValueError(
+                f"model identified at dt={model.dt} s, data at dt={dt} s: give data logged "
+                "at the model's sample period (or identify again at the data's)"
+            )
         Ad, Bd, C, K = model.predictor()
         return Ad, Bd, C, K, tuple(model.outputs), ("T_delta",)
     if isinstance(model, control.StateSpace):
@@ -93,7 +139,10 @@ def _sampled(model, dt: float):
         Ad, Bd = zoh(A, B, dt)
         K = np.zeros((A.shape[0], C.shape[0]))
         return Ad, Bd, C, K, tuple(model.output_labels), tuple(model.input_labels)
-    raise ValueError("model must be an ident.pem.CanonicalModel or a control.StateSpace")
+    raise ValueError(
+        "model must be an ident.pem.CanonicalModel, SpeedCanonicalModel, "
+        "ident.direct.DirectResult or a control.StateSpace"
+    )
 
 
 @dataclass(frozen=True)
@@ -273,8 +322,8 @@ def compare(
     ----------
     runs : Run or sequence of Run
         The data (signals named after the model's inputs and outputs).
-    model : ident.pem.CanonicalModel or control.StateSpace
-        The model (a continuous ``StateSpace`` is sampled exactly at the run's dt).
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        The model, made discrete at each run's dt and speed by :func:`sampled_model`.
     horizon : int or None
         None: simulation (:func:`simulation`); h >= 1: h-step-ahead prediction by the
         model's innovations predictor (:func:`k_step_prediction` with k = h - 1 and the
@@ -291,9 +340,10 @@ def compare(
     Raises
     ------
     ValueError
-        A simulation of an unstable model over a long run (growth of the largest discrete
-        eigenvalue over the run above 1e12): use a finite horizon or a shorter window
-        (``Run.window``), as Moore's 8 s windows.
+        UntrustworthyResult (a ValueError) for a simulation of an unstable model over a long
+        run (growth of the largest discrete eigenvalue over the run above 1e12): use a finite
+        horizon or a shorter window (``Run.window``), as Moore's 8 s windows; likewise for a
+        prediction whose predictor Ad - K C is unstable (K = 0 and an unstable model).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if horizon is not None and horizon < 1:
@@ -301,7 +351,7 @@ def compare(
     yh_all, x0_all, ys = [], [], []
     outputs = None
     for run in runs:
-        Ad, Bd, C, K, outputs, inputs = _sampled(model, run.dt)
+        Ad, Bd, C, K, outputs, inputs = sampled_model(model, run.dt, run.speed)
         U = np.column_stack([run[i] for i in inputs])
         Y = np.column_stack([run[o] for o in outputs])
         N = run.n
@@ -314,6 +364,13 @@ def compare(
                 )
             yhat, x0 = simulation(Ad, Bd, C, U, Y, ic)
         else:
+            growth = np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) ** N
+            if growth > 1e12:
+                raise UntrustworthyResult(
+                    f"the model's predictor is unstable (Ad - K C; K = 0 for a model without "
+                    f"a noise model) and the run has {N} samples (growth {growth:.2g}): use a "
+                    "shorter window (Run.window) or a model with an innovation gain (pem)"
+                )
             # the one-step predictor is a simulation of x+ = (Ad - K C) x + [Bd K] [u; y]
             _, x0 = simulation(Ad - K @ C, np.hstack([Bd, K]), C, np.hstack([U, Y]), Y, ic)
             yhat = k_step_prediction(Ad, Bd, C, K, U, Y, horizon - 1, x0, head="open-loop")
@@ -350,6 +407,14 @@ class ResidResult:
         Fraction of autocorrelation lags 1..max_lag outside +-band, per output.
     cross_outside : dict of str to float
         Fraction of cross-correlation lags 0..max_lag outside +-band, per output.
+    whiteness_test : dict of str to dict
+        Per output the chi-squared whiteness test of the autocorrelation at lags
+        1..max_lag (:func:`portmanteau`: ``statistic``, ``dof``, ``p_value``, ``passed``).
+    independence_test : dict of str to dict
+        Per output the chi-squared test of independence from the input at lags 1..max_lag
+        (:func:`independence_test`), same keys.
+    input : str
+        The signal the cross-correlation used (``"T_delta"``, ``"dither"``, ...).
     """
 
     residuals: tuple[np.ndarray, ...]
@@ -359,6 +424,9 @@ class ResidResult:
     band: float
     fraction_outside: dict[str, float]
     cross_outside: dict[str, float]
+    whiteness_test: dict[str, dict] = field(default_factory=dict)
+    independence_test: dict[str, dict] = field(default_factory=dict)
+    input: str = "T_delta"
 
 
 def _xcorr(a: np.ndarray, b: np.ndarray, lag: int) -> float:
@@ -386,7 +454,7 @@ def resid(
     ----------
     runs : Run or sequence of Run
         The data; residuals of all runs are stacked for the statistics.
-    model : ident.pem.CanonicalModel or control.StateSpace
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
         The model, as in :func:`compare` (one-step prediction, ``horizon=1``).
     input : str, optional
         Run signal for the cross-correlation, or ``"dither"``.
@@ -398,7 +466,8 @@ def resid(
     Returns
     -------
     ResidResult
-        Residuals and their correlation statistics.
+        Residuals, their correlation statistics and the chi-squared whiteness and
+        independence tests at level 1 - ``confidence``.
 
     Raises
     ------
@@ -425,14 +494,17 @@ def resid(
     N = E.shape[0]
     band = float(norm.ppf(0.5 + confidence / 2) / np.sqrt(N))
     lags = np.arange(-max_lag, max_lag + 1)
-    auto, cross, frac, xfrac = {}, {}, {}, {}
+    u_acf = _acf(u, range(max_lag))
+    auto, cross, frac, xfrac, wtest, itest = {}, {}, {}, {}, {}, {}
     for j, o in enumerate(pred.outputs):
         e = E[:, j] - E[:, j].mean()
-        auto[o] = np.array([_xcorr(e, e, k) for k in range(max_lag + 1)])
+        auto[o] = _acf(e, range(max_lag + 1))
         cross[o] = np.array([_xcorr(e, u, int(k)) for k in lags])
         frac[o] = float(np.mean(np.abs(auto[o][1:]) > band))
         xfrac[o] = float(np.mean(np.abs(cross[o][max_lag:]) > band))
-    return ResidResult(tuple(res), lags, auto, cross, band, frac, xfrac)
+        wtest[o] = portmanteau(auto[o][1:], N, confidence)
+        itest[o] = independence_test(cross[o][max_lag + 1 :], u_acf, N, confidence)
+    return ResidResult(tuple(res), lags, auto, cross, band, frac, xfrac, wtest, itest, input)
 
 
 def _ss(model, v: float | None = None) -> control.StateSpace:
@@ -472,9 +544,7 @@ def poles(model, v: float | None = None) -> np.ndarray:
     return np.asarray(control.poles(_ss(model, v)))
 
 
-def zeros(
-    model, output: str = "phi", input: str = "T_delta", v: float | None = None
-) -> np.ndarray:
+def zeros(model, output: str = "phi", input: str = "T_delta", v: float | None = None) -> np.ndarray:
     """Transmission zeros [1/s] of one SISO channel.
 
     Parameters
@@ -534,13 +604,90 @@ def transfer_functions(
 
 # -- correlation tests of one residual sequence (resid's tests, also used by the effect
 # diagnostics of the measured data) ---------------------------------------------------------
-__all__ += ["cross_correlation", "whiteness"]
+__all__ += ["cross_correlation", "independence_test", "portmanteau", "whiteness"]
 
 
 def _band(n: int, confidence: float) -> float:
     from scipy.stats import norm
 
     return float(norm.ppf(0.5 + confidence / 2) / np.sqrt(n))
+
+
+def portmanteau(acf: np.ndarray, n: int, confidence: float = 0.99) -> dict:
+    """Whiteness test on an autocorrelation: zeta = N sum_k r(k)^2 against chi^2(M).
+
+    Under the hypothesis that the residual is white, sqrt(N) r(k) for k = 1..M are
+    asymptotically independent standard normal, so zeta is chi-squared with M degrees of
+    freedom (Ljung, *System Identification*, 2nd ed., sec. 16.6; Box & Pierce 1970).
+
+    Parameters
+    ----------
+    acf : (M,) array_like
+        Normalized autocorrelation at lags 1..M (dimensionless).
+    n : int
+        Number of samples the autocorrelation was computed from.
+    confidence : float, optional
+        The test's level is 1 - confidence (0.99: a white residual fails 1 % of the time).
+
+    Returns
+    -------
+    dict
+        ``statistic`` zeta, ``dof`` M, ``p_value`` (chi^2 survival function of zeta) and
+        ``passed`` (p_value >= 1 - confidence).
+    """
+    from scipy.stats import chi2
+
+    r = np.asarray(acf, float)
+    stat = float(n * np.sum(r**2))
+    p = float(chi2.sf(stat, r.size))
+    return {"statistic": stat, "dof": int(r.size), "p_value": p, "passed": p >= 1 - confidence}
+
+
+def independence_test(
+    ccf: np.ndarray, input_acf: np.ndarray, n: int, confidence: float = 0.99
+) -> dict:
+    """Residual-input independence test: zeta = N r' R^-1 r against chi^2(M).
+
+    ``r`` is the normalized residual-input cross-correlation at lags 1..M (the residual at k
+    against the input at k - 1 .. k - M: what a correct predictor leaves independent of past
+    inputs, in open and in closed loop), ``R`` the Toeplitz matrix of the input's normalized
+    autocorrelation at lags 0..M-1.  Under the hypothesis (white residual independent of the
+    input), sqrt(N) r is asymptotically normal with covariance R (Ljung, sec. 16.6), so zeta
+    is chi-squared with M degrees of freedom (fewer when R is singular: the rank, from its
+    eigenvalues above 1e-10 of the largest).
+
+    Parameters
+    ----------
+    ccf : (M,) array_like
+        Cross-correlation at lags 1..M (dimensionless).
+    input_acf : (M,) array_like
+        Input autocorrelation at lags 0..M-1 (1 at lag 0).
+    n : int
+        Number of samples.
+    confidence : float, optional
+        The test's level is 1 - confidence.
+
+    Returns
+    -------
+    dict
+        ``statistic``, ``dof``, ``p_value`` and ``passed`` (p_value >= 1 - confidence).
+    """
+    from scipy.linalg import toeplitz
+    from scipy.stats import chi2
+
+    r = np.asarray(ccf, float)
+    w, V = np.linalg.eigh(toeplitz(np.asarray(input_acf, float)))
+    keep = w > 1e-10 * w.max()
+    z = V[:, keep].T @ r
+    stat = float(n * np.sum(z**2 / w[keep]))
+    dof = int(keep.sum())
+    p = float(chi2.sf(stat, dof))
+    return {"statistic": stat, "dof": dof, "p_value": p, "passed": p >= 1 - confidence}
+
+
+def _acf(x: np.ndarray, lags) -> np.ndarray:
+    """Normalized autocorrelation of a mean-removed signal at ``lags``."""
+    return np.array([_xcorr(x, x, int(k)) for k in lags])
 
 
 def whiteness(e: np.ndarray, max_lag: int = 25, confidence: float = 0.99) -> dict:
@@ -558,13 +705,15 @@ def whiteness(e: np.ndarray, max_lag: int = 25, confidence: float = 0.99) -> dic
     Returns
     -------
     dict
-        ``acf``: normalized autocorrelation at lags 1..max_lag; ``band``; and
-        ``fraction_outside``: the fraction of ``acf`` outside +-band.
+        ``acf``: normalized autocorrelation at lags 1..max_lag; ``band``;
+        ``fraction_outside``: the fraction of ``acf`` outside +-band; and ``test``: the
+        chi-squared whiteness test of :func:`portmanteau` at level 1 - confidence.
     """
     e = np.asarray(e, float) - np.mean(e)
-    r = np.array([_xcorr(e, e, k) for k in range(1, max_lag + 1)])
+    r = _acf(e, range(1, max_lag + 1))
     band = _band(e.size, confidence)
-    return {"acf": r, "band": band, "fraction_outside": float(np.mean(np.abs(r) > band))}
+    return {"acf": r, "band": band, "fraction_outside": float(np.mean(np.abs(r) > band)),
+            "test": portmanteau(r, e.size, confidence)}  # fmt: skip
 
 
 def cross_correlation(
@@ -585,12 +734,15 @@ def cross_correlation(
     -------
     dict
         ``lags``; ``ccf``: normalized cross-correlation at ``lags``; ``band``;
-        ``fraction_outside``: the fraction of ``ccf`` outside +-band (all lags).
+        ``fraction_outside``: the fraction of ``ccf`` outside +-band (all lags); ``test``:
+        the chi-squared independence test of :func:`independence_test` on lags 1..max_lag
+        at level 1 - confidence.
     """
     e = np.asarray(e, float) - np.mean(e)
     u = np.asarray(u, float) - np.mean(u)
     lags = np.arange(-max_lag, max_lag + 1)
     r = np.array([_xcorr(e, u, int(k)) for k in lags])
     band = _band(e.size, confidence)
+    test = independence_test(r[max_lag + 1 :], _acf(u, range(max_lag)), e.size, confidence)
     return {"lags": lags, "ccf": r, "band": band,
-            "fraction_outside": float(np.mean(np.abs(r) > band))}  # fmt: skip
+            "fraction_outside": float(np.mean(np.abs(r) > band)), "test": test}  # fmt: skip

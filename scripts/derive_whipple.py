@@ -37,6 +37,21 @@ Emitted functions (parameter vector ``p`` in :data:`PARAMETERS` order, inputs
 - ``contact(q3, q4, q5, q7, u, p, out)``: ``out = [q1', q2', xF - q1, yF - q2]``,
   the rear contact rates and the front contact position relative to the rear
   contact, in N.
+- ``contact_forces(q4, q5, q7, u, ud, p, r) -> (N_R, N_F)`` [N]: normal contact
+  forces of the ground on the rear and front wheel along -A3 (up; positive = the
+  ground pushes up), with ``ud = u'`` in the order of ``u`` (from ``mass_forcing``).
+  Newton-Euler for the whole bicycle (:func:`_newton_euler`): the moment of momentum
+  about the rear contact along the horizontal normal to the contact line gives N_F,
+  vertical momentum gives N_R.  Only T_phi and F of ``r`` enter directly (T_delta
+  and T_R act between bodies).
+- ``momentum(q3, q4, q5, q7, u, p, out)``: ``out`` (12,) = linear momentum
+  [kg m/s], moment of momentum about the rear contact point [kg m^2/s], first
+  moment of mass about the rear contact [kg m] and the lateral-force point relative
+  to the rear contact [m], each in N components (for the independent test of the
+  contact forces by differentiating momenta numerically).
+
+The Whipple model holds both wheels on the ground (bilateral contact); a run is only
+physical while N_R > 0 and N_F > 0 (``sim.integrate`` stops at ``wheel_unloaded``).
 """
 
 from __future__ import annotations
@@ -161,6 +176,8 @@ def derive() -> dict:
     rel = fn.pos_from(dn)
     front = [rel.dot(N.x), rel.dot(N.y)]
 
+    contact_forces, momentum = _newton_euler(kane, bodies, P, dn, fn, pF, A, N, C, F_lat, T_phi)
+
     return {
         "q": (q3, q4, q5, q7),
         "u": (u4, u6, u7, u3, u5, u8),
@@ -175,7 +192,69 @@ def derive() -> dict:
         "rates": rates,
         "front": front,
         "kane": kane,
+        "ud": tuple(ui.diff(t) for ui in (u4, u6, u7, u3, u5, u8)),
+        "contact_forces": contact_forces,
+        "momentum": momentum,
     }
+
+
+def _newton_euler(kane, bodies, P, dn, fn, pF, A, N, C, F_lat, T_phi):
+    """Normal contact forces by Newton-Euler for the whole bicycle, and its momenta.
+
+    Ground forces: at the rear contact dn (tangential Rx A1 + Ry A2, normal -N_R A3) and
+    at the front contact fn (-N_F A3 normal); N_R, N_F > 0 when the ground pushes up.
+    Other external loads: gravity, the lateral force F at pF and the roll torque T_phi
+    A1 on C; T_delta, T_R and the steer/roll effects act between bodies (or, for roll
+    effects, exactly as T_phi does) and enter only through the accelerations.
+
+    - Moment of momentum about the fixed point coincident with dn, component along the
+      horizontal e = A3 x r (r = fn - dn, horizontal by the holonomic constraint): the
+      rear ground force has no moment, the front tangential force's moment is vertical,
+      so only N_F remains: N_F = e . (dH/dt - M_known) / |r|^2, with dH/dt =
+      sum (r_i - dn) x m_i a_i + I_i alpha_i + w_i x (I_i w_i).
+    - Newton along A3: N_R = m g - N_F - sum m_i a_i . A3.
+
+    Accelerations come from the velocities by time differentiation (q' replaced by u);
+    they are linear in u' = [u4', u6', u7', u3', u5', u8'], evaluated with u' from
+    ``mass_forcing``.  Also returned, for the independent check: linear momentum,
+    moment of momentum about dn, first moment of mass about dn and the lateral-force
+    point relative to dn, all in N components.
+    """
+    kdd = kane.kindiffdict()
+
+    def ddt(vec):
+        return vec.dt(N).subs(kdd)
+
+    g = P["g"]
+    mass = sum(b.mass for b in bodies)
+    lin_rate = sum((b.mass * ddt(b.masscenter.vel(N)) for b in bodies), me.Vector(0))
+    h_rate = me.Vector(0)
+    known = me.Vector(0)
+    lin = me.Vector(0)
+    h_dn = me.Vector(0)
+    first = me.Vector(0)
+    for b in bodies:
+        rel = b.masscenter.pos_from(dn)
+        w = b.frame.ang_vel_in(N)
+        alpha = ddt(w)
+        inertia = b.inertia[0]
+        h_rate += rel.cross(b.mass * ddt(b.masscenter.vel(N)))
+        h_rate += inertia.dot(alpha) + w.cross(inertia.dot(w))
+        known += rel.cross(b.mass * g * A.z)
+        lin += b.mass * b.masscenter.vel(N)
+        h_dn += rel.cross(b.mass * b.masscenter.vel(N)) + inertia.dot(w)
+        first += b.mass * rel
+    known += pF.pos_from(dn).cross(F_lat * A.y) + T_phi * A.x
+    r = fn.pos_from(dn)
+    rx, ry = r.dot(A.x), r.dot(A.y)
+    # e = A3 x r = -ry A1 + rx A2; |r|^2 = rx^2 + ry^2
+    diff = h_rate - known
+    n_front = (-ry * diff.dot(A.x) + rx * diff.dot(A.y)) / (rx**2 + ry**2)
+    n_rear = mass * g - n_front - lin_rate.dot(A.z)
+    in_n = [
+        vec.dot(axis) for vec in (lin, h_dn, first, pF.pos_from(dn)) for axis in (N.x, N.y, N.z)
+    ]
+    return [n_rear, n_front], in_n
 
 
 def _plain(expr, q, u):
@@ -311,6 +390,27 @@ def emit(sym: dict) -> str:
     )
     blocks.append(code)
 
+    ud = [sm.Symbol(f"{s.func.__name__}d") for s in u]
+    head_ud = [f"{s} = ud[{i}]" for i, s in enumerate(ud)]
+    nr, nf = (_plain(e, q, u) for e in sym["contact_forces"])
+    code, _ = _emit(
+        "contact_forces",
+        ["q4", "q5", "q7", "u", "ud", "p", "r"],
+        used(head_p + head_u + head_ud + head_r, [nr, nf]),
+        [],
+        returns=[nr, nf],
+    )
+    blocks.append(code)
+
+    outs = [(f"out[{i}]", _plain(e, q, u)) for i, e in enumerate(sym["momentum"])]
+    code, _ = _emit(
+        "momentum",
+        ["q3", "q4", "q5", "q7", "u", "p", "out"],
+        used(head_p + head_u, [e for _, e in outs]),
+        outs,
+    )
+    blocks.append(code)
+
     header = [
         "# generated by scripts/derive_whipple.py; do not edit",
         '"""Whipple bicycle equations (Moore 2012 coordinates), emitted by',
@@ -337,7 +437,8 @@ def lambdified(sym: dict) -> dict:
     benchmark of the lambdify + solve_ivp approach.  Signatures as the emitted
     functions but returning arrays: holonomic(q4, q5, q7, p) -> (h, dh),
     velocity_constraint(q4, q5, q7, p) -> (Ad, Ai), mass_forcing(q4, q5, q7, u, p, r)
-    -> (M, f), energy(q4, q5, q7, u, p) -> (ke, pe).
+    -> (M, f), energy(q4, q5, q7, u, p) -> (ke, pe), contact_forces(q4, q5, q7, u, ud,
+    p, r) -> (N_R, N_F), momentum(q3, q4, q5, q7, u, p) -> (12,) list.
     """
     q = sym["q"]
     u = sym["u"]
@@ -349,8 +450,13 @@ def lambdified(sym: dict) -> dict:
     nh = sm.Matrix([_plain(e, q, u) for e in sym["nonholonomic"]])
     M, f = _plain(sym["M"], q, u), _plain(sym["f"], q, u)
     ke, pe = _plain(sym["ke"], q, u), _plain(sym["pe"], q, u)
+    ud = [sm.Symbol(f"{s.func.__name__}d") for s in u]
+    cf = [_plain(e, q, u) for e in sym["contact_forces"]]
+    mom = [_plain(e, q, u) for e in sym["momentum"]]
     lam = sm.lambdify
     return {
+        "contact_forces": lam((q4, q5, q7, us, ud, par, r), cf, cse=True),
+        "momentum": lam((qs[0], q4, q5, q7, us, par), mom, cse=True),
         "holonomic": lam((q4, q5, q7, par), [hol, hol.diff(q5)], cse=True),
         "velocity_constraint": lam(
             (q4, q5, q7, par), [nh.jacobian(us[3:]), nh.jacobian(us[:3])], cse=True
@@ -360,13 +466,75 @@ def lambdified(sym: dict) -> dict:
     }
 
 
+def check(sym: dict, n: int = 20, seed: int = 1) -> float:
+    """Largest difference of the committed generated code from ``lambdified(sym)``.
+
+    Evaluates every emitted function at ``n`` random states of the benchmark-like
+    parameter vector of the committed module (imported from ``sim``; run from the
+    repository with ``bikeid`` importable).  Differences are scaled by max(1, |value|).
+    """
+    import numpy as np
+
+    from bikeid.sim import _whipple_generated as gen
+    from bikeid.sim.nonlinear import parameter_vector
+    from bikeid.sim.parameters import benchmark
+
+    fresh = lambdified(sym)
+    params = benchmark()
+    p = parameter_vector(params, (0.4, -0.8))
+    rng = np.random.default_rng(seed)
+    worst = 0.0
+
+    def diff(a, b):
+        a, b = np.ravel(np.asarray(a, float)), np.ravel(np.asarray(b, float))
+        return float(np.max(np.abs(a - b)) / max(1.0, float(np.max(np.abs(b)))))
+
+    for _ in range(n):
+        q3, q4, q7 = rng.uniform(-0.8, 0.8, size=3)
+        q5 = params.lam + rng.uniform(-0.1, 0.1)
+        u, ud, r = rng.normal(scale=3.0, size=6), rng.normal(size=6), rng.normal(size=4)
+        Ad, Ai, M, f = np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 6)), np.empty(6)
+        gen.velocity_constraint(q4, q5, q7, p, Ad, Ai)
+        gen.mass_forcing(q4, q5, q7, u, p, r, M, f)
+        mom = np.empty(12)
+        gen.momentum(q3, q4, q5, q7, u, p, mom)
+        pairs = [
+            (gen.holonomic(q4, q5, q7, p), fresh["holonomic"](q4, q5, q7, p)),
+            ((Ad, Ai), fresh["velocity_constraint"](q4, q5, q7, p)),
+            ((M, f), fresh["mass_forcing"](q4, q5, q7, u, p, r)),
+            (gen.energy(q4, q5, q7, u, p), fresh["energy"](q4, q5, q7, u, p)),
+            (
+                gen.contact_forces(q4, q5, q7, u, ud, p, r),
+                fresh["contact_forces"](q4, q5, q7, u, ud, p, r),
+            ),
+            (mom, fresh["momentum"](q3, q4, q5, q7, u, p)),
+        ]
+        for a, b in pairs:
+            if isinstance(a, tuple) and isinstance(a[0], np.ndarray):
+                worst = max([worst] + [diff(x, y) for x, y in zip(a, b, strict=True)])
+            else:
+                worst = max(worst, diff(a, b))
+    return worst
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(TARGET), help="file to write")
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="compare the committed sim/_whipple_generated.py with a fresh derivation "
+        "(numerically, 1e-9 relative) instead of writing; exit 1 on a mismatch",
+    )
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     sym = derive()
     t1 = time.perf_counter()
+    if args.check:
+        worst = check(sym)
+        ok = worst <= 1e-9
+        print(f"largest relative difference {worst:.2e}: {'ok' if ok else 'STALE'}")
+        return 0 if ok else 1
     text = emit(sym)
     t2 = time.perf_counter()
     out = Path(args.out)

@@ -18,14 +18,22 @@ the high-accuracy reference for tests.
 
 Stop reasons.  A run that ends early carries one :class:`Stop` (``Trajectory.stop``):
 its ``cause`` (a key of :data:`STOP_CAUSES`), time [s], one-line message and whether it is
-``physical``.  Physical stops: ``roll_limit`` (|roll| over ``fall_limit``, default 60 deg)
-and ``steer_limit`` (|steer| over 90 deg); ``Trajectory.fell_at`` is their time and is
-None otherwise.  Numerical stops, never reported as falls: ``controller_nonfinite``,
-``nonfinite_state`` and ``step_too_coarse``.  Every RK4 stop at a limit or a non-finite
-state is checked against the step first: if a decaying mode lambda of the linearized
-Whipple plant at the current speed has lambda h outside RK4's stability region
-(:func:`rk4_amplification` > 1), or re-integrating the last sample interval with half the
-step moves roll or steer by more than :data:`STEP_CHECK_TOL`, the stop is
+``physical``.  Physical stops, whichever comes first: ``wheel_unloaded`` (a wheel's normal
+contact force reaches 0, so the wheel lifts off and the Whipple model, whose wheels
+never leave the ground, ends; the message names the rear or front wheel),
+``roll_limit`` (|roll| over ``fall_limit``, default 60 deg) and ``steer_limit`` (|steer|
+over 90 deg); ``Trajectory.fell_at`` is their time and is None otherwise.  The normal
+forces are evaluated (from the equations of motion, :mod:`sim.nonlinear`) at the start
+of every sample interval, with the inputs then acting, and at the end of every RK4 step
+(a stop at a sample instant if a jump of the inputs unloads a wheel); the stop time of a
+crossing, like the limit crossings, is interpolated linearly within the RK4 step
+(``method="reference"``: located by a DOP853 event).  ``Trajectory.normal_forces`` holds
+them at every sample.  Numerical stops, never reported as falls: ``controller_nonfinite``,
+``nonfinite_state`` and ``step_too_coarse``.  Every RK4 stop at a limit, an unloaded
+wheel or a non-finite state is checked against the step first: if a decaying mode lambda
+of the linearized Whipple plant at the current speed has lambda h outside RK4's
+stability region (:func:`rk4_amplification` > 1), or re-integrating the last sample
+interval with half the step moves roll or steer by more than :data:`STEP_CHECK_TOL`, the stop is
 ``step_too_coarse`` with the fix (smaller dt or more substeps).
 
 State order, inputs and signs: :mod:`sim.nonlinear`.
@@ -45,7 +53,14 @@ from numba import njit
 from .conventions import MEASURED
 from .effects import InputChain, input_chain, plant_vector
 from .errors import check_memory
-from .nonlinear import INPUTS, WhippleBicycle, invalidate_stale_caches, outputs, rhs
+from .nonlinear import (
+    INPUTS,
+    WhippleBicycle,
+    invalidate_stale_caches,
+    outputs,
+    rhs,
+    rhs_contact,
+)
 from .parameters import BicycleParameters
 
 __all__ = [
@@ -63,6 +78,8 @@ DEFAULT_FALL_LIMIT = math.radians(60.0)
 #: |steer| [rad] beyond which a run stops (``steer_limit``): the front wheel is across
 #: the frame, no longer a bicycle being ridden.
 STEER_LIMIT = math.pi / 2
+
+
 def rk4_amplification(z: np.ndarray) -> np.ndarray:
     """|R(z)| of RK4, R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 (z = lambda h).
 
@@ -82,13 +99,17 @@ def rk4_amplification(z: np.ndarray) -> np.ndarray:
     """
     z = np.asarray(z, dtype=complex)
     return np.abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)
+
+
 #: Half-step check: a stop is ``step_too_coarse`` if re-integrating its sample interval
 #: with half the RK4 step changes roll or steer by more than this [rad].  At the default
 #: step (5 ms) the difference is ~(lambda h)^5 / 120 |x| <= 2e-6 rad at 15 m/s near a fall
 #: (|lambda| = 35.8 1/s); an unstable step gives O(1) rad; 0.01 rad (0.6 deg) lies between.
 STEP_CHECK_TOL = 0.01
 
-_OK, _FELL, _NONFINITE, _STEER = 0, 1, 2, 3
+_OK, _FELL, _NONFINITE, _STEER, _UNLOADED = 0, 1, 2, 3, 4
+#: Wheel names by the index of the normal-force vector [N_rear, N_front].
+WHEELS = ("rear", "front")
 
 
 @dataclass(frozen=True)
@@ -99,9 +120,14 @@ class StopCause:
     meaning: str
 
 
-#: Every reason a run can end early, by cause name.  Adding one (e.g. ``wheel_unloaded``,
-#: a normal contact force <= 0, physical) is one entry here plus its detection.
+#: Every reason a run can end early, by cause name.  Adding one is one entry here plus
+#: its detection.
 STOP_CAUSES: dict[str, StopCause] = {
+    "wheel_unloaded": StopCause(
+        True,
+        "a wheel's normal contact force reached 0: the wheel lifts off, the Whipple "
+        "model (bilateral contact) no longer holds",
+    ),
     "roll_limit": StopCause(True, "|roll| exceeded the fall limit: the bicycle fell"),
     "steer_limit": StopCause(True, "|steer| exceeded 90 deg: the front wheel folded"),
     "nonfinite_state": StopCause(
@@ -123,8 +149,9 @@ class Stop:
     cause : str
         A key of :data:`STOP_CAUSES`.
     time : float
-        Time of the stop [s] (the limit crossing, interpolated within the RK4 step, or
-        the sample at which the controller failed).
+        Time of the stop [s] (the limit or zero-load crossing, interpolated within the
+        RK4 step; the sample at which the controller failed, or at which a jump of the
+        inputs unloaded a wheel).
     message : str
         One line for the user, with the fix for numerical causes.
     physical : bool
@@ -144,9 +171,7 @@ class Stop:
 
     def __post_init__(self) -> None:
         if self.cause not in STOP_CAUSES:
-            raise ValueError(
-                f"unknown stop cause {self.cause!r}; causes are {sorted(STOP_CAUSES)}"
-            )
+            raise ValueError(f"unknown stop cause {self.cause!r}; causes are {sorted(STOP_CAUSES)}")
         physical = STOP_CAUSES[self.cause].physical
         if self.physical is not None and bool(self.physical) != physical:
             raise ValueError(f"stop cause {self.cause!r} has physical={physical}")
@@ -221,13 +246,17 @@ class Trajectory:
         Inputs acting at each sample instant [T_delta, T_phi, F, T_R]
         [N m, N m, N, N m] (T_delta after input effects; T_R the drive torque in
         held mode).
+    normal_forces : (N, 2) ndarray
+        Normal contact forces [N_rear, N_front] [N] at each sample, with the inputs
+        and effects acting then (:meth:`sim.nonlinear.WhippleBicycle.contact_forces`):
+        the ground's upward push on each wheel, > 0 while the run lasts.
     command : (N,) ndarray
         The controller's steer-torque command [N m] (0 without one).
     states : (N, 10) ndarray
         Integration states (:data:`sim.nonlinear.STATE`).
     fell_at : float or None
-        Time [s] of a physical stop (``roll_limit`` or ``steer_limit``), else None;
-        never set for a numerical failure.
+        Time [s] of a physical stop (``wheel_unloaded``, ``roll_limit`` or
+        ``steer_limit``), else None; never set for a numerical failure.
     stop_reason : str or None
         None, or why the run ended early (``stop.message``).
     energy : (N,) ndarray or None
@@ -247,6 +276,7 @@ class Trajectory:
     rear: np.ndarray
     front: np.ndarray
     inputs: np.ndarray
+    normal_forces: np.ndarray
     command: np.ndarray
     states: np.ndarray
     fell_at: float | None = None
@@ -263,8 +293,8 @@ class Trajectory:
         name : str
             A :data:`sim.conventions.MEASURED` name, an input of
             :data:`sim.nonlinear.INPUTS` (``T_delta``, ``T_phi``, ``F``, ``T_R``),
-            ``theta`` (pitch), or a contact coordinate ``x``, ``y`` (rear) or ``xF``,
-            ``yF`` (front).
+            ``theta`` (pitch), a contact coordinate ``x``, ``y`` (rear) or ``xF``,
+            ``yF`` (front), or a normal contact force ``N_rear``, ``N_front`` [N].
 
         Returns
         -------
@@ -286,6 +316,8 @@ class Trajectory:
             "y": self.rear[:, 1],
             "xF": self.front[:, 0],
             "yF": self.front[:, 1],
+            "N_rear": self.normal_forces[:, 0],
+            "N_front": self.normal_forces[:, 1],
         }
         if name not in extra:
             raise ValueError(
@@ -300,11 +332,11 @@ class Trajectory:
         -------
         dict of str to (N,) ndarray
             ``t``, the MEASURED signals, ``theta``, ``x``, ``y``, ``xF``, ``yF``,
-            the inputs ``T_delta``, ``T_phi``, ``F``, ``T_R`` and, if recorded,
-            ``energy``; SI units.
+            the inputs ``T_delta``, ``T_phi``, ``F``, ``T_R``, the normal contact
+            forces ``N_rear``, ``N_front`` and, if recorded, ``energy``; SI units.
         """
         cols = {"t": self.t}
-        for name in (*MEASURED, "theta", "x", "y", "xF", "yF", *INPUTS):
+        for name in (*MEASURED, "theta", "x", "y", "xF", "yF", *INPUTS, "N_rear", "N_front"):
             cols[name] = self.signal(name)
         if self.energy is not None:
             cols["energy"] = self.energy
@@ -320,13 +352,17 @@ def _lagged(T0, Tc, tau, s):
 
 
 @njit(cache=True)
-def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info):
+def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, wheels, info, nc):
     """Advance ``y`` over one sample interval with ``nsub`` RK4 steps, in place.
 
     rc = [T_delta command, T_phi, F, T_R] held over the interval; T_delta is
     lagged from T0 with time constant tau.  info <- [status, time offset of a
-    stop, T_R at the interval start].  Returns the status (0 ok, 1 |roll| > phimax,
-    2 non-finite, 3 |steer| > dmax).
+    stop, T_R at the interval start, wheel (0 rear, 1 front) of a wheel_unloaded
+    stop]; nc <- normal forces [N_R, N_F] [N] at the interval start.  With ``wheels``
+    the normal forces are evaluated at the start of the interval and at the end of
+    every step (that evaluation is also the next step's first stage, so it costs one
+    extra right-hand side per interval); a force <= 0 stops the run.  Returns the
+    status (0 ok, 1 |roll| > phimax, 2 non-finite, 3 |steer| > dmax, 4 wheel unloaded).
     """
     h = dt / nsub
     k1 = np.empty(10)
@@ -334,13 +370,20 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info
     k3 = np.empty(10)
     k4 = np.empty(10)
     yt = np.empty(10)
+    n0 = np.empty(2)
+    n1 = np.empty(2)
     r = rc.copy()
+    r[0] = _lagged(T0, rc[0], tau, 0.0)
+    info[2] = rhs_contact(y, q5g, p, r, ev, held, k1, n0)
+    nc[0] = n0[0]
+    nc[1] = n0[1]
+    if wheels and (n0[0] <= 0.0 or n0[1] <= 0.0):  # e.g. a jump of the inputs at t_k
+        info[0] = _UNLOADED
+        info[1] = 0.0
+        info[3] = 0.0 if n0[0] <= 0.0 else 1.0
+        return _UNLOADED
     for s in range(nsub):
         ts = s * h
-        r[0] = _lagged(T0, rc[0], tau, ts)
-        TR = rhs(y, q5g, p, r, ev, held, k1)
-        if s == 0:
-            info[2] = TR
         r[0] = _lagged(T0, rc[0], tau, ts + 0.5 * h)
         for i in range(10):
             yt[i] = y[i] + 0.5 * h * k1[i]
@@ -363,14 +406,31 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info
             info[0] = _NONFINITE
             info[1] = ts + h
             return _NONFINITE
-        # crossing times by linear interpolation within the step; the earlier one wins
+        # crossing times by linear interpolation within the step; the earliest one wins
         s_roll = 2.0
         s_steer = 2.0
+        s_wheel = 2.0
         if abs(y[3]) > phimax:
             s_roll = (phimax - phi_prev) / (abs(y[3]) - phi_prev)
         if abs(y[5]) > dmax:
             s_steer = (dmax - del_prev) / (abs(y[5]) - del_prev)
-        if s_roll <= 1.0 or s_steer <= 1.0:
+        if wheels or s < nsub - 1:
+            # end-of-step forces; the same evaluation is the next step's k1
+            rhs_contact(y, q5g, p, r, ev, held, k1, n1)
+            if wheels:
+                for j in range(2):
+                    if n1[j] <= 0.0:
+                        sj = n0[j] / (n0[j] - n1[j])
+                        if sj < s_wheel:
+                            s_wheel = sj
+                            info[3] = j
+                n0[0] = n1[0]
+                n0[1] = n1[1]
+        if s_roll <= 1.0 or s_steer <= 1.0 or s_wheel <= 1.0:
+            if s_wheel < s_roll and s_wheel < s_steer:
+                info[0] = _UNLOADED
+                info[1] = ts + h * s_wheel
+                return _UNLOADED
             if s_roll <= s_steer:
                 info[0] = _FELL
                 info[1] = ts + h * s_roll
@@ -383,20 +443,23 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info
 
 
 @njit(cache=True)
-def _rk4_sample(k, Tc, T0, X, OUT, OL, U, q5g, p, ev, held, tau, dt, nsub, phimax, dmax, info):
+def _rk4_sample(k, Tc, T0, X, OUT, OL, U, NC, q5g, p, ev, held, tau, dt, nsub, phimax, dmax, info):
     """One controller sample: advance X[k] to X[k + 1], outputs into OUT[k + 1].
 
-    Records the inputs acting at t_k in U[k].  Returns the status of
-    :func:`_rk4_interval`.
+    Records the inputs acting at t_k in U[k] and the normal forces at t_k in NC[k].
+    Returns the status of :func:`_rk4_interval` (wheel check on).
     """
     y = X[k].copy()
     rc = OL[k].copy()
     rc[0] = Tc
-    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, info)
+    nc = np.empty(2)
+    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, True, info, nc)
     U[k, 0] = T0
     U[k, 1] = OL[k, 1]
     U[k, 2] = OL[k, 2]
     U[k, 3] = info[2]
+    NC[k, 0] = nc[0]
+    NC[k, 1] = nc[1]
     if status == _OK:
         for i in range(10):
             X[k + 1, i] = y[i]
@@ -450,17 +513,28 @@ def _input_array(inputs, n: int) -> np.ndarray:
 
 
 def _reference_interval(
-    bike, y, q5g, ev, held, rc, T0, tau, dt, phimax, dmax, info, rtol, atol
+    bike, y, q5g, ev, held, rc, T0, tau, dt, phimax, dmax, info, nc, rtol, atol
 ):
     from scipy.integrate import solve_ivp
 
     r = rc.copy()
     ydot = np.empty(10)
+    nf = np.empty(2)
 
     def fun(s, yy):
         r[0] = _lagged(T0, rc[0], tau, s)
         rhs(yy, q5g, bike.p, r, ev, held, ydot)
         return ydot.copy()
+
+    def normal(j):
+        def event(s, yy):
+            r[0] = _lagged(T0, rc[0], tau, s)
+            rhs_contact(yy, q5g, bike.p, r, ev, held, ydot, nf)
+            return nf[j]
+
+        event.terminal = True
+        event.direction = -1.0
+        return event
 
     def fall(s, yy):
         return abs(yy[3]) - phimax
@@ -471,16 +545,24 @@ def _reference_interval(
     fall.terminal = True
     steer.terminal = True
     r[0] = T0
-    info[2] = rhs(y, q5g, bike.p, r, ev, held, ydot)
+    info[2] = rhs_contact(y, q5g, bike.p, r, ev, held, ydot, nf)
+    nc[:] = nf
+    if nf[0] <= 0.0 or nf[1] <= 0.0:  # unloaded at the interval start
+        info[0], info[1], info[3] = _UNLOADED, 0.0, 0.0 if nf[0] <= 0.0 else 1.0
+        return _UNLOADED
     sol = solve_ivp(
-        fun, (0.0, dt), y, method="DOP853", rtol=rtol, atol=atol, events=(fall, steer)
-    )
+        fun, (0.0, dt), y, method="DOP853", rtol=rtol, atol=atol,
+        events=(fall, steer, normal(0), normal(1)),
+    )  # fmt: skip
     if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
         info[0], info[1] = _NONFINITE, sol.t[-1]
         return _NONFINITE
     y[:] = sol.y[:, -1]
     if sol.status == 1:
-        status = _FELL if sol.t_events[0].size else _STEER
+        hit = [e.size > 0 for e in sol.t_events]
+        status = _FELL if hit[0] else _STEER if hit[1] else _UNLOADED
+        if status == _UNLOADED:
+            info[3] = 0.0 if hit[2] else 1.0
         info[0], info[1] = status, sol.t[-1]
         return status
     info[0] = _OK
@@ -585,8 +667,12 @@ def simulate(
         raise ValueError(f"sample time dt={dt!r} must be a positive number of seconds")
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration={duration!r} must be a positive number of seconds")
-    check_memory(duration / dt + 1, 37, f"a {duration:g} s run at dt={dt:g} s",
-                 "shorten the duration or raise the sample time")  # the arrays below
+    check_memory(
+        duration / dt + 1,
+        37,
+        f"a {duration:g} s run at dt={dt:g} s",
+        "shorten the duration or raise the sample time",
+    )  # the arrays below
     nsteps = int(round(duration / dt))
     if nsteps < 1 or abs(nsteps * dt - duration) > 1e-9 * max(1.0, duration):
         raise ValueError(f"duration {duration} s is not a whole number of samples of dt={dt} s")
@@ -612,11 +698,12 @@ def simulate(
         controller.reset()
 
     q5g = np.array([bike.pitch(y[3], y[5])])
-    info = np.zeros(3)
+    info = np.zeros(4)
     t = dt * np.arange(n)
     OUT = np.empty((n, 13))  # MEASURED, q5, xR, yR, xF, yF
     Ym = np.empty((n, 8))
     U = np.zeros((n, 4))
+    NC = np.full((n, 2), np.nan)  # normal forces [N_R, N_F] at each sample
     cmd = np.zeros(n)
     X = np.empty((n, 10))
     X[0] = y
@@ -663,14 +750,15 @@ def simulate(
         if k == n - 1:
             U[k] = ol[k]
             U[k, 0] = T_applied
+            T_R = rhs_contact(X[k].copy(), q5g, bike.p, U[k].copy(), ev, held, np.empty(10),
+                              NC[k])  # fmt: skip
             if held:
-                r_now = U[k].copy()
-                U[k, 3] = rhs(X[k].copy(), q5g, bike.p, r_now, ev, held, np.empty(10))
+                U[k, 3] = T_R
             break
         if rk4:
             q5_start = q5g[0]
             status = _rk4_sample(
-                k, Tc, T_applied, X, OUT, ol, U, q5g, bike.p, ev, held, tau, dt, nsub,
+                k, Tc, T_applied, X, OUT, ol, U, NC, q5g, bike.p, ev, held, tau, dt, nsub,
                 fall_limit, STEER_LIMIT, info,
             )  # fmt: skip
         else:
@@ -681,7 +769,7 @@ def simulate(
             U[k, 0] = T_applied
             status = _reference_interval(
                 bike, y, q5g, ev, held, rc, T_applied, tau, dt, fall_limit, STEER_LIMIT, info,
-                rtol, atol,
+                NC[k], rtol, atol,
             )  # fmt: skip
             U[k, 3] = info[2]
             X[k + 1] = y
@@ -689,7 +777,7 @@ def simulate(
                 outputs(y, q5g, bike.p, OUT[k + 1])
         if status != _OK:
             t_stop = float(t[k] + info[1])
-            stop = _limit_stop(status, t_stop, fall_limit)
+            stop = _limit_stop(status, t_stop, fall_limit, int(info[3]))
             if rk4:
                 rc = ol[k].copy()
                 rc[0] = Tc
@@ -713,6 +801,7 @@ def simulate(
         rear=OUT[sl, 9:11],
         front=OUT[sl, 11:13],
         inputs=U[sl],
+        normal_forces=NC[sl],
         command=cmd[sl],
         states=X[sl],
         fell_at=stop.time if stop is not None and stop.physical else None,
@@ -731,8 +820,16 @@ def simulate(
     )
 
 
-def _limit_stop(status: int, t_stop: float, fall_limit: float) -> Stop:
+def _limit_stop(status: int, t_stop: float, fall_limit: float, wheel: int = 0) -> Stop:
     """The stop the integrator's status code stands for, before the step check."""
+    if status == _UNLOADED:
+        return Stop(
+            "wheel_unloaded",
+            t_stop,
+            f"fell: the {WHEELS[wheel]} wheel's normal contact force reached 0 N at "
+            f"t={t_stop:.3f} s (the wheel lifts off; the Whipple model, with both wheels "
+            "held on the ground, ends here)",
+        )
     if status == _FELL:
         return Stop(
             "roll_limit",
@@ -754,9 +851,7 @@ def _limit_stop(status: int, t_stop: float, fall_limit: float) -> Stop:
     )
 
 
-def _coarse_step(
-    bike, y0, q5_start, ev, held, rc, T0, tau, dt, nsub, speed, what
-) -> str | None:
+def _coarse_step(bike, y0, q5_start, ev, held, rc, T0, tau, dt, nsub, speed, what) -> str | None:
     """Message if the RK4 step cannot resolve the dynamics at a stop, else None.
 
     Two tests (module docstring): lambda h of each decaying mode of the linearized plant
@@ -785,10 +880,11 @@ def _coarse_step(
     ends = []
     for m in (nsub, 2 * nsub):
         y = np.array(y0, dtype=float)
-        info = np.zeros(3)
+        info = np.zeros(4)
         _rk4_interval(
-            y, np.array([q5_start]), bike.p, ev, held, rc, T0, tau, dt, m, np.inf, np.inf, info
-        )
+            y, np.array([q5_start]), bike.p, ev, held, rc, T0, tau, dt, m, np.inf, np.inf,
+            False, info, np.empty(2),
+        )  # fmt: skip
         ends.append(y[[3, 5]])
     coarse, fine = ends
     if not np.all(np.isfinite(fine)):

@@ -37,6 +37,10 @@ same linear system; returned as the drive torque; any given T_R is ignored).
 
 Extra generalized forces (:mod:`sim.effects`) add to the dynamic rows of
 (u4, u6, u7).
+
+**Normal contact forces** (:meth:`WhippleBicycle.contact_forces`, :func:`rhs_contact`):
+the ground's upward force on each wheel [N], from the equations of motion.  The
+model's wheel-ground contact is bilateral: it stays valid only while both are > 0.
 """
 
 from __future__ import annotations
@@ -216,12 +220,49 @@ def rhs(y, q5g, p, r, ev, held, ydot):
     ``q5g[0]`` is the pitch warm start, updated in place.  Returns NaN (and a NaN
     ``ydot``) if the pitch Newton iteration fails.
     """
+    return _derivative(y, q5g, p, r, ev, held, ydot, ydot[:0])  # no forces: empty view
+
+
+@njit(cache=True)
+def rhs_contact(y, q5g, p, r, ev, held, ydot, nf):
+    """:func:`rhs` that also fills ``nf`` with the normal contact forces [N_R, N_F] [N].
+
+    Same accelerations; see :func:`normal_forces` for the forces (NaN if the pitch
+    Newton iteration fails).
+    """
+    return _derivative(y, q5g, p, r, ev, held, ydot, nf)
+
+
+@njit(cache=True)
+def normal_forces(q4, q5, q7, u, udot, p, r, extra, T_R, nf):
+    """Normal contact forces [N_R, N_F] [N] into ``nf`` (positive: the ground pushes up).
+
+    ``u``, ``udot`` in :data:`SPEEDS` order, ``r`` the inputs, ``extra`` the plant-effect
+    generalized forces on (u4, u6, u7) and ``T_R`` the drive torque acting.  The roll
+    effect (extra[0]) is a torque about the yaw frame's x axis on the rear frame, as
+    T_phi; the steer effect (extra[2]) acts between the frames, as T_delta.
+    """
+    re = np.empty(4)
+    re[0] = r[0] + extra[2]
+    re[1] = r[1] + extra[0]
+    re[2] = r[2]
+    re[3] = T_R
+    n_rear, n_front = gen.contact_forces(q4, q5, q7, u, udot, p, re)
+    nf[0] = n_rear
+    nf[1] = n_front
+
+
+@njit(cache=True)
+def _derivative(y, q5g, p, r, ev, held, ydot, nf):
+    """:func:`rhs`; with a 2-element ``nf`` also the normal forces (:func:`normal_forces`)."""
     q4 = y[3]
     q7 = y[5]
     q5 = pitch(q4, q7, q5g[0], p)
     if not math.isfinite(q5):
         for i in range(10):
             ydot[i] = np.nan
+        for i in range(nf.shape[0]):
+            nf[i] = np.nan
         return np.nan
     q5g[0] = q5
     u = np.empty(6)
@@ -230,6 +271,8 @@ def rhs(y, q5g, p, r, ev, held, ydot):
     plant_forces(ev, q4, q7, u[0], u[1], u[2], extra)
     udot = np.empty(6)
     T_R = accelerations(q4, q5, q7, u, p, r, extra, held, udot)
+    if nf.shape[0] == 2:
+        normal_forces(q4, q5, q7, u, udot, p, r, extra, T_R, nf)
     c = np.empty(4)
     gen.contact(y[2], q4, q5, q7, u, p, c)
     ydot[0] = c[0]
@@ -299,7 +342,10 @@ def invalidate_stale_caches(dispatchers, tag: str) -> None:
         pass
 
 
-invalidate_stale_caches([pitch, speeds, accelerations, rhs, outputs], "nonlinear")
+invalidate_stale_caches(
+    [pitch, speeds, accelerations, rhs, rhs_contact, normal_forces, _derivative, outputs],
+    "nonlinear",
+)
 
 
 # -- Python object ---------------------------------------------------------------------------
@@ -494,6 +540,59 @@ class WhippleBicycle:
         if not math.isfinite(T_R):
             raise ValueError("pitch Newton iteration failed: state too far from upright")
         return ydot, float(T_R)
+
+    def contact_forces(
+        self,
+        y: np.ndarray,
+        inputs=(0.0, 0.0, 0.0, 0.0),
+        mode: str = "coast",
+        effects=None,
+    ) -> tuple[float, float]:
+        """Normal contact forces of the ground on the rear and front wheel at state ``y``.
+
+        From the equations of motion (Newton-Euler for the whole bicycle with the
+        accelerations of ``mass_forcing``; ``scripts/derive_whipple.py``), not a static
+        estimate: they depend on the speeds, the inputs and the effects.  The Whipple
+        model's contact is bilateral, so a force <= 0 means the wheel would lift off and
+        the model no longer describes the bicycle (:mod:`sim.integrate` stops the run,
+        cause ``wheel_unloaded``).
+
+        Parameters
+        ----------
+        y : (10,) array_like
+            State in :data:`STATE` order.
+        inputs : (4,) array_like, optional
+            [T_delta, T_phi, F, T_R] [N m, N m, N, N m] (:data:`INPUTS`); default zero.
+        mode : {"coast", "held"}, optional
+            Speed mode. Default "coast".
+        effects : sequence, optional
+            Plant-side :mod:`sim.effects` objects (they change the accelerations; the
+            roll effect acts as a roll torque T_phi).
+
+        Returns
+        -------
+        N_rear : float
+            Normal force on the rear wheel [N], along the upward vertical (-A3, z is
+            down): positive when the ground pushes the wheel up.
+        N_front : float
+            Normal force on the front wheel [N], same sign convention.  Upright at rest
+            N_rear + N_front = m g; static split m g (w - x_cm) / w and m g x_cm / w.
+
+        Raises
+        ------
+        ValueError
+            If ``mode`` or ``inputs`` is invalid or the pitch Newton iteration fails.
+        """
+        held = _mode(mode)
+        ydot = np.empty(10)
+        nf = np.empty(2)
+        ev = plant_vector(effects)
+        T_R = rhs_contact(
+            np.asarray(y, float), self._q5, self.p, _inputs(inputs), ev, held, ydot, nf
+        )
+        if not math.isfinite(T_R):
+            raise ValueError("pitch Newton iteration failed: state too far from upright")
+        return float(nf[0]), float(nf[1])
 
     def all_speeds(
         self, q4: float, q5: float, q7: float, u4: float, u6: float, u7: float

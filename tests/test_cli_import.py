@@ -113,3 +113,103 @@ def test_export_refuses_a_link_at_the_output(folder):
     rc, _, err = _run(["export", "runs.h5", "--run", "v4", "--out", "one.csv"], folder)
     assert rc == 3 and "symbolic link" in err, err
     assert (folder / "precious.txt").read_text() == "keep"
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--method", "direct", "--bicycle", "benchmark"],
+        ["--method", "pem", "--speed-parameterized"],
+        ["--method", "pem", "--outputs", "phi,delta"],
+    ],
+)
+def test_identify_out_then_load_model(folder, extra):
+    """``identify --out``: the saved model loaded in Python has exactly the eigenvalues the
+    same command printed (JSON floats are repr round trips, so equality is exact), the
+    settings asked for, and the SHA-256 of the data file as hashlib computes it."""
+    import hashlib
+
+    from bikeid.ident import read_model_file
+
+    rc, out, err = _run(["identify", "runs.h5", *extra, "--json", "--out", "m.json"], folder)
+    assert rc == 0, err
+    res = json.loads(out)
+    printed = _eigs(out)
+    files = [folder / f for f in res["model_files"]]
+    assert len(files) == (2 if "--outputs" in extra else 1)
+    raw = (folder / "runs.h5").read_bytes()
+    for f in files:
+        mf = read_model_file(f)
+        assert mf.provenance == (
+            {"path": str((folder / "runs.h5").resolve()), "size": len(raw),
+             "sha256": hashlib.sha256(raw).hexdigest()},
+        )  # fmt: skip
+        assert mf.settings["method"] == extra[1] and mf.settings["outputs"] == res["outputs"]
+        for v in mf.speeds if mf.kind != "canonical-pem" else (mf.model.speed,):
+            eig = mf.model.eigenvalues() if mf.kind == "canonical-pem" else mf.model.eigenvalues(v)
+            got = sorted(np.asarray(eig, complex), key=lambda c: (c.real, c.imag))
+            assert np.array_equal(got, printed[v]), (got, printed[v])
+    if "--outputs" in extra:
+        assert mf.outputs == ("phi", "delta") and mf.model.K.shape == (4, 2)
+    for f in files:
+        f.unlink()
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--method", "direct", "--outputs", "phi,delta"], "direct least squares needs"),
+        (["--method", "pem", "--outputs", "phidot,deltadot"], "needs phi and delta"),
+        (["--method", "pem", "--outputs", "phi,delta,yaw"], "give measured states"),
+        (["--method", "pem", "--input", "phi"], "not a torque"),
+        (["--method", "pem", "--input", "hand_torque"], "has no signal 'hand_torque'"),
+        (["--method", "pem", "--out", "."], "is a folder"),
+    ],
+)
+def test_identify_refuses_impossible_choices(folder, extra, words):
+    rc, _, err = _run(["identify", "runs.h5", *extra], folder)
+    assert rc == 3 and words in err and len(err.strip().splitlines()) == 1, err
+
+
+SBW = (
+    Path(
+        __import__("os").environ.get(
+            "BIKEID_DATA", Path(__file__).resolve().parents[2] / "shared/data"
+        )
+    )
+    / "tudelft-sbw"
+)
+
+
+@pytest.mark.skipif(not (SBW / "eigen").is_dir(), reason="steer-by-wire logs not found")
+def test_identify_steer_by_wire_logs(tmp_path):
+    """``identify --format sbw`` on the measured free decays (4 speeds): each log is read by
+    dataset.sbw_logs (through dataset.importers), cut to its settled part with v the
+    treadmill speed; the treadmill settings 1.5 ... 4.5 m/s of the file names become the
+    speeds, the saved model's eigenvalues equal the printed ones exactly, and the provenance
+    lists each log with hashlib's SHA-256 of its bytes."""
+    import hashlib
+
+    from bikeid.dataset.sbw_logs import find_logs, load_log, settled, treadmill_speed
+    from bikeid.ident import read_model_file
+
+    argv = ["identify", str(SBW / "eigen"), "--format", "sbw", "--json", "--out", "m.json"]
+    rc, out, err = _run(argv, tmp_path)
+    assert rc == 0, err
+    printed = _eigs(out)
+    assert sorted(printed) == [1.5, 2.5, 3.5, 4.5]  # 5.4, 9, 12.6, 16.2 km/h
+    mf = read_model_file(tmp_path / "m.json")
+    assert mf.kind == "direct" and mf.settings["format"] == "sbw"
+    for v in printed:
+        got = sorted(np.asarray(mf.model.eigenvalues(v), complex), key=lambda c: (c.real, c.imag))
+        assert np.array_equal(got, printed[v])
+    logs = find_logs(SBW / "eigen")
+    assert [p["path"] for p in mf.provenance] == [str(p.resolve()) for p in logs]
+    for entry, p in zip(mf.provenance, logs, strict=True):
+        assert entry["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest()
+    full = load_log(logs[0])
+    part = settled(full)
+    a, b = full.meta["ramp_end_index"], full.meta["settled_end_index"]
+    first = full.meta["first_index"]
+    assert part.n == b - a and np.array_equal(part.t, full.t[a - first : b - first])
+    assert np.array_equal(part["v"], treadmill_speed(full["v"][a - first : b - first]))

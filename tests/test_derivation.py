@@ -62,3 +62,12 @@ def test_generated_code_matches_fresh_derivation(fresh):
             _close(M, M0)
             _close(f, np.ravel(f0))
             _close(gen.energy(q4, q5, q7, u, p), fresh["energy"](q4, q5, q7, u, p))
+            ud = rng.normal(scale=10.0, size=6)
+            _close(
+                gen.contact_forces(q4, q5, q7, u, ud, p, r),
+                fresh["contact_forces"](q4, q5, q7, u, ud, p, r),
+            )
+            q3 = rng.uniform(-3.0, 3.0)
+            mom = np.empty(12)
+            gen.momentum(q3, q4, q5, q7, u, p, mom)
+            _close(mom, fresh["momentum"](q3, q4, q5, q7, u, p))

@@ -289,7 +289,7 @@ def test_nan_or_inf(tmp_path, text):
     path = write_csv(tmp_path / "n.csv", good_table(), cells={(9, "steerrate"): text})
     with pytest.raises(ValueError) as e:
         read(path)
-    assert_names(str(e.value), str(path), "'steerrate'", f"row {9 + FIRST}", "not finite")
+    assert_names(str(e.value), str(path), "'steerrate'", f"row {9 + FIRST}", "non-finite")
 
 
 def test_nan_in_unmapped_column_is_ignored(tmp_path):
@@ -308,7 +308,7 @@ def test_empty_cell(tmp_path):
     path = write_csv(tmp_path / "s.csv", good_table(), cells={(0, "roll"): ""})
     with pytest.raises(ValueError) as e:
         read(path)
-    assert_names(str(e.value), str(path), "'roll'", f"row {FIRST}", "not a number")
+    assert_names(str(e.value), str(path), "'roll'", f"row {FIRST}", "non-numeric")
 
 
 def test_ragged_row(tmp_path):
@@ -335,7 +335,7 @@ def test_constant_signal(tmp_path):
     path = write_csv(tmp_path / "c.csv", table)
     with pytest.raises(ValueError) as e:
         read(path)
-    assert_names(str(e.value), str(path), "'steer'", "'delta'", "constant")
+    assert_names(str(e.value), str(path), "'steer'", "(delta)", "constant")
 
 
 @pytest.mark.parametrize("swing, ok", [(0.09, True), (0.11, False)])
@@ -412,7 +412,7 @@ def test_hdf5_errors(tmp_path):
     where = {k: f"data/{c}" for k, c in MAP.items()}
     with pytest.raises(ValueError) as e:
         from_hdf5(path, where, time="data/time")
-    assert_names(str(e.value), str(path), "'data/roll'", "index 12", "not finite")
+    assert_names(str(e.value), str(path), "'data/roll'", "index 12", "non-finite")
     with pytest.raises(ValueError) as e:
         from_hdf5(path, {**where, "phi": "data/lean"}, time="data/time")
     assert_names(str(e.value), str(path), "'data/lean'", "'data/steer'")

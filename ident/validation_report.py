@@ -1,0 +1,679 @@
+"""A model's validation report on data: compare, k-step prediction, resid, and Bode vs data.
+
+:func:`validate_model` gathers, for one model and one or more runs, what a reader needs to
+judge the model (MATLAB System Identification Toolbox habits, all built on
+:mod:`bikeid.ident.validate`):
+
+- measured outputs against the simulated (:func:`~bikeid.ident.validate.compare`, horizon
+  None) and the k-step-ahead predicted outputs (``horizon = k``), with MATLAB ``compare``'s
+  NRMSE fit 100 (1 - ||y - yhat|| / ||y - mean y||) [%] per output;
+- one-step residuals (:func:`~bikeid.ident.validate.resid`): autocorrelation and
+  residual-input cross-correlation with the 99 % band, and the chi-squared whiteness and
+  independence tests computed from them;
+- a nonparametric frequency response from the steer torque to each output
+  (:func:`frequency_response_estimate`, Welch spectra), kept only at frequencies whose
+  coherence shows excitation, to lay over the model's Bode plot.
+
+The result, :class:`ValidationReport`, turns into plain JSON types with
+:meth:`ValidationReport.to_json`; the figures are drawn by
+:mod:`bikeid.experiments.validation_plots`.  :func:`validate_decays` applies the same fit and
+residual tests to the steer-by-wire experiment model on measured free decays (``bikeid
+measured evaluate``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+
+from bikeid.dataset.run import SPEED_TOLERANCE, Run
+from bikeid.sim.errors import UntrustworthyResult
+
+from .validate import (
+    CompareResult,
+    ResidResult,
+    compare,
+    cross_correlation,
+    goodness_of_fit,
+    resid,
+    sampled_model,
+    whiteness,
+)
+
+__all__ = [
+    "FrequencyResponseEstimate",
+    "ValidationReport",
+    "frequency_response_estimate",
+    "model_frequency_response",
+    "residual_tests",
+    "validate_decays",
+    "validate_model",
+]
+
+#: Default coherence below which a frequency counts as not excited (dimensionless, 0-1).
+COHERENCE_MIN = 0.5
+#: Default prediction horizon k of the k-step-ahead comparison [samples].
+K_STEP = 10
+#: Speeds closer than this share one frequency-response estimate [m/s].
+SPEED_GROUP = 0.01
+
+
+def _runs(runs: Run | Sequence[Run]) -> list[Run]:
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    if not runs:
+        raise ValueError("no runs to validate on: give at least one run")
+    return runs
+
+
+def _label(run: Run, i: int) -> str:
+    return str(run.meta.get("name") or run.meta.get("file") or f"run {i + 1}")
+
+
+def model_frequency_response(
+    model, f: np.ndarray, dt: float, v: float | None = None, input: str = "T_delta"
+) -> dict[str, np.ndarray]:
+    """The model's frequency response as seen by sampled data (zero-order-hold input).
+
+    H(e^{j 2 pi f dt}) = C (z I - Ad)^-1 Bd of the model sampled exactly at ``dt``
+    (:func:`~bikeid.ident.validate.sampled_model`): the response a nonparametric estimate
+    from data logged at ``dt`` with a held input tends to (up to the Nyquist frequency
+    1 / (2 dt) it differs from the continuous H(j 2 pi f) by the hold's delay of dt / 2 and
+    the hold's sinc magnitude).
+
+    Parameters
+    ----------
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        The model.
+    f : (F,) array_like
+        Frequencies [Hz], below the Nyquist frequency.
+    dt : float
+        Sample period [s].
+    v : float, optional
+        Speed [m/s] (models defined over speed).
+    input : str, optional
+        The input column.
+
+    Returns
+    -------
+    dict of str to (F,) complex ndarray
+        Per output, the response in output units per input unit (rad/(N m), rad/(N m s)).
+
+    Raises
+    ------
+    ValueError
+        If the model has no such input (or :func:`sampled_model` refuses it).
+    """
+    Ad, Bd, C, _, outputs, inputs = sampled_model(model, dt, v)
+    if input not in inputs:
+        raise ValueError(f"the model has no input {input!r}; its inputs are {list(inputs)}")
+    b = Bd[:, inputs.index(input)]
+    n = Ad.shape[0]
+    z = np.exp(2j * np.pi * np.asarray(f, float) * dt)
+    H = np.array([C @ np.linalg.solve(zk * np.eye(n) - Ad, b) for zk in z]).reshape(len(z), -1)
+    return {o: H[:, j] for j, o in enumerate(outputs)}
+
+
+@dataclass(frozen=True)
+class FrequencyResponseEstimate:
+    """A nonparametric frequency response from the steer torque to one output.
+
+    Attributes
+    ----------
+    output : str
+        Output signal (e.g. ``"phi"``).
+    input : str
+        Input signal of the response (``"T_delta"``).
+    reference : str
+        The excitation the spectra are taken against: ``"dither"`` (closed-loop safe ratio
+        S_dy / S_du), ``"T_delta"`` (H1 = S_uy / S_uu, open loop) or ``"none"``.
+    speed : float
+        Speed of the runs [m/s].
+    f : (F,) ndarray
+        Frequencies [Hz] (0 excluded).
+    H : (F,) complex ndarray
+        Estimated response [output unit / N m].
+    coherence : (F,) ndarray
+        Coherence of the excitation with the signals used (the smaller of the two for the
+        dither ratio), 0-1.
+    rel_error : (F,) ndarray
+        First-order random error of ``H`` relative to |H| (standard deviation of each of
+        the real and imaginary parts of (H_est - H) / H): sqrt(1 - g^2) / (|g| sqrt(2 n_d))
+        per spectral ratio (Bendat & Piersol, *Random Data*, eq. 9.90), the two of the
+        dither ratio added in quadrature; n_d counts non-overlapping segments (conservative
+        for Welch's 50 % overlap).
+    valid : (F,) bool ndarray
+        Frequencies with coherence >= the threshold (excitation allows an estimate).
+    model : (F,) complex ndarray
+        The model's sampled response at ``f`` (:func:`model_frequency_response`).
+    n_averages : int
+        n_d, the number of non-overlapping segments averaged.
+    coherence_min : float
+        The threshold used.
+    note : str
+        Empty, or why there is no estimate ("not enough excitation: ...") or how to read it.
+    model_f : (G,) ndarray
+        A log-spaced grid [Hz] from f[0] / 4 to 0.98 of the Nyquist frequency, for drawing.
+    model_curve : (G,) complex ndarray
+        The model's sampled response on ``model_f``.
+    """
+
+    output: str
+    input: str
+    reference: str
+    speed: float
+    f: np.ndarray
+    H: np.ndarray
+    coherence: np.ndarray
+    rel_error: np.ndarray
+    valid: np.ndarray
+    model: np.ndarray
+    n_averages: int
+    coherence_min: float
+    note: str = ""
+    model_f: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    model_curve: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+
+    @property
+    def excited(self) -> bool:
+        """bool: True when at least one frequency has enough coherence for an estimate."""
+        return bool(np.any(self.valid))
+
+    def to_json(self) -> dict:
+        """The estimate at its valid frequencies, as plain JSON types.
+
+        Returns
+        -------
+        dict
+            ``output``, ``input``, ``reference``, ``speed`` [m/s], ``coherence_min``,
+            ``n_averages``, ``note``, the excited band ``f_min``/``f_max`` [Hz] (None when
+            there is none) and, at the valid frequencies only, ``f`` [Hz], ``H_re``,
+            ``H_im``, ``model_re``, ``model_im`` [output unit / N m], ``coherence`` and
+            ``rel_error``.
+        """
+        v = self.valid
+        fv = self.f[v]
+        return {
+            "output": self.output, "input": self.input, "reference": self.reference,
+            "speed": float(self.speed), "coherence_min": float(self.coherence_min),
+            "n_averages": int(self.n_averages), "note": self.note,
+            "f_min": float(fv.min()) if fv.size else None,
+            "f_max": float(fv.max()) if fv.size else None,
+            "f": fv.tolist(), "H_re": self.H[v].real.tolist(), "H_im": self.H[v].imag.tolist(),
+            "model_re": self.model[v].real.tolist(), "model_im": self.model[v].imag.tolist(),
+            "coherence": self.coherence[v].tolist(), "rel_error": self.rel_error[v].tolist(),
+        }  # fmt: skip
+
+
+def _nperseg(n_min: int) -> int:
+    """Segment length: a power of two giving >= 8 segments of the shortest run, 32..1024."""
+    return int(min(1024, max(32, 2 ** int(np.floor(np.log2(max(n_min, 2) / 8))))))
+
+
+def _excitation(runs: list[Run], input: str) -> tuple[str, str]:
+    """(reference, note): which signal excites the loop, or why none does."""
+    dithers = [r.dither for r in runs]
+    if all(d is not None and np.any(d) for d in dithers):
+        return "dither", ""
+    if any(d is not None for d in dithers):
+        return "none", (
+            "not enough excitation: a run has a zero (or no) dither, so T_delta is only the "
+            "controller's feedback and its spectra would estimate -1/controller, not the "
+            "bicycle; record runs with a dither (e.g. bikeid sweep --dither)"
+        )
+    if any("controller" in r.meta for r in runs):
+        return "none", (
+            "not enough excitation: closed-loop runs without a logged dither; T_delta is the "
+            "controller's feedback, so its spectra would estimate -1/controller"
+        )
+    return input, (
+        f"{input} taken as the excitation (no dither logged): right in open loop; in closed "
+        "loop, where noise drives the feedback, the estimate tends to -1/controller"
+    )
+
+
+def frequency_response_estimate(
+    runs: Run | Sequence[Run],
+    model,
+    coherence_min: float = COHERENCE_MIN,
+    nperseg: int | None = None,
+    input: str = "T_delta",
+) -> list[FrequencyResponseEstimate]:
+    """Welch estimate of the response from ``input`` to each model output, with coherence.
+
+    With a logged dither d in every run (closed loop), the estimate is the ratio
+    S_dy / S_du of cross-spectra with the dither, which is the plant's response however the
+    loop is closed (the joint input-output method; Ljung sec. 13.5), and the coherence is
+    the smaller of those of d with y and with u.  Without a dither field (imported logs
+    without a controller in their metadata), it is H1 = S_uy / S_uu with the coherence of u
+    and y.  Closed-loop runs without excitation (a zero dither, or a controller and no dither)
+    get no estimate and a note saying "not enough excitation".  Runs are grouped by speed
+    (one estimate per group); spectra are averaged over the runs' segments (Hann window,
+    50 % overlap, mean removed).
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        The data (same sample period).
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        The model whose outputs name the signals, and whose response is laid beside it.
+    coherence_min : float, optional
+        Frequencies with coherence below this are not estimated (``valid`` False).
+    nperseg : int, optional
+        Welch segment length [samples]; default a power of two giving at least 8 segments
+        of the shortest run (32..1024).
+    input : str, optional
+        The input signal of the response.
+
+    Returns
+    -------
+    list of FrequencyResponseEstimate
+        One per (speed group, output), in speed then output order.
+
+    Raises
+    ------
+    ValueError
+        If the runs' sample periods differ, ``coherence_min`` is outside (0, 1), or a run is
+        shorter than the segment length.
+    """
+    runs = _runs(runs)
+    if not 0 < coherence_min < 1:
+        raise ValueError(f"coherence_min={coherence_min}: need a value in (0, 1)")
+    dt = runs[0].dt
+    if any(abs(r.dt - dt) > 1e-9 * dt for r in runs):
+        raise ValueError("the runs have different sample periods; validate them separately")
+    groups: dict[float, list[Run]] = {}
+    for r in runs:
+        key = next((s for s in groups if abs(s - r.speed) <= SPEED_GROUP), r.speed)
+        groups.setdefault(key, []).append(r)
+    out = []
+    for v, rs in groups.items():
+        nps = nperseg or _nperseg(min(r.n for r in rs))
+        short = [r.n for r in rs if r.n < nps]
+        if short:
+            raise ValueError(f"a run has {short[0]} samples, fewer than the segment {nps}")
+        reference, note = _excitation(rs, input)
+        f = np.fft.rfftfreq(nps, dt)[1:]
+        outputs = sampled_model(model, dt, v)[4]
+        Gm = model_frequency_response(model, f, dt, v, input)
+        fd = np.geomspace(f[0] / 4, 0.98 / (2 * dt), 300)
+        Gd = model_frequency_response(model, fd, dt, v, input)
+        n_d = sum(r.n // nps for r in rs)
+        for o in outputs:
+            if reference == "none":
+                nan = np.full(f.size, np.nan)
+                out.append(FrequencyResponseEstimate(
+                    o, input, reference, v, f, nan + 0j, nan, nan, np.zeros(f.size, bool),
+                    Gm[o], n_d, coherence_min, note, fd, Gd[o]))  # fmt: skip
+                continue
+            spec = dict.fromkeys(("xx", "xy", "xu", "yy", "uu"), 0.0)
+            for r in rs:
+                x = r.dither if reference == "dither" else r[input]
+                sig = {"x": x, "y": r[o], "u": r[input]}
+                kw = {"fs": 1 / dt, "nperseg": nps, "detrend": "constant"}
+                w = r.n // nps  # weight each run by its share of segments
+                for k in spec:
+                    a, b = sig[k[0]], sig[k[1]]
+                    spec[k] = spec[k] + w * signal.csd(a, b, **kw)[1][1:]
+            g_xy = np.abs(spec["xy"]) ** 2 / (spec["xx"].real * spec["yy"].real)
+            if reference == "dither":
+                g_xu = np.abs(spec["xu"]) ** 2 / (spec["xx"].real * spec["uu"].real)
+                H = spec["xy"] / spec["xu"]
+                coh = np.minimum(g_xy, g_xu)
+                err = np.sqrt((1 - g_xy) / (2 * n_d * g_xy) + (1 - g_xu) / (2 * n_d * g_xu))
+            else:
+                H = spec["xy"] / spec["xx"].real
+                coh = g_xy
+                err = np.sqrt((1 - g_xy) / (2 * n_d * g_xy))
+            valid = coh >= coherence_min
+            text = note
+            if not valid.any():
+                text = (
+                    f"not enough excitation: coherence below {coherence_min} at every "
+                    f"frequency (largest {np.nanmax(coh):.2f}); excite the loop more or "
+                    "average more data"
+                )
+            out.append(FrequencyResponseEstimate(o, input, reference, v, f, H, coh, err,
+                                                 valid, Gm[o], n_d, coherence_min, text,
+                                                 fd, Gd[o]))  # fmt: skip
+    return out
+
+
+def residual_tests(
+    residuals: Sequence[np.ndarray],
+    inputs: Sequence[np.ndarray] | None,
+    names: Sequence[str],
+    max_lag: int = 25,
+    confidence: float = 0.99,
+) -> dict[str, dict]:
+    """Whiteness and input-independence tests of residuals given as arrays.
+
+    The tests of :func:`bikeid.ident.validate.resid`, for residuals computed elsewhere (e.g.
+    the simulation errors of the experiment model on measured decays): the residuals of all
+    segments are stacked, then :func:`~bikeid.ident.validate.whiteness` and
+    :func:`~bikeid.ident.validate.cross_correlation` are applied.
+
+    Parameters
+    ----------
+    residuals : sequence of (N_i, p) ndarray
+        Residuals per segment, one column per name (output units).
+    inputs : sequence of (N_i,) ndarray or None
+        The input per segment (N m), or None (no independence test).
+    names : sequence of str
+        The p output names.
+    max_lag : int, optional
+        Largest lag [samples].
+    confidence : float, optional
+        Band level; the tests' level is 1 - confidence.
+
+    Returns
+    -------
+    dict of str to dict
+        Per name: ``white`` (bool), ``whiteness_p``, ``fraction_outside`` (autocorrelation
+        lags 1..max_lag outside the band), and with inputs ``independent`` (bool) and
+        ``independence_p``; ``band`` and ``n`` (samples).
+    """
+    E = np.vstack([np.asarray(r, float).reshape(len(r), -1) for r in residuals])
+    u = None if inputs is None else np.concatenate([np.asarray(x, float) for x in inputs])
+    out = {}
+    for j, name in enumerate(names):
+        w = whiteness(E[:, j], max_lag, confidence)
+        row = {"n": int(E.shape[0]), "band": w["band"], "fraction_outside": w["fraction_outside"],
+               "white": bool(w["test"]["passed"]), "whiteness_p": w["test"]["p_value"]}  # fmt: skip
+        if u is not None and np.any(u - u.mean()):
+            c = cross_correlation(E[:, j], u, max_lag, confidence)
+            row.update(independent=bool(c["test"]["passed"]), independence_p=c["test"]["p_value"])
+        out[name] = row
+    return out
+
+
+@dataclass(frozen=True)
+class ValidationReport:
+    """How a model meets data: fits, residual tests and frequency responses.
+
+    Attributes
+    ----------
+    outputs : tuple of str
+        Output names (rad, rad/s).
+    runs : tuple of str
+        Run labels (``meta["name"]`` or ``meta["file"]``, else "run i").
+    speeds : tuple of float
+        Speed of each run [m/s].
+    t : tuple of (N_i,) ndarray
+        Time of each run [s].
+    measured : tuple of (N_i, p) ndarray
+        Measured outputs per run (columns in ``outputs`` order).
+    simulation : CompareResult or None
+        Simulated outputs and fits (None when refused, see ``simulation_note``).
+    simulation_note : str
+        Why there is no simulation (e.g. an unstable model over a long run), or "".
+    prediction : CompareResult
+        k-step-ahead predicted outputs and fits.
+    k_step : int
+        The prediction horizon k [samples] (MATLAB ``compare(data, model, k)``).
+    fit : dict of str to float or None
+        Simulation fit per output over all runs [%] (MATLAB ``compare``'s NRMSE fit x 100).
+    fit_k_step : dict of str to float
+        k-step prediction fit per output [%].
+    fit_per_run : tuple of dict
+        Per run: ``{"simulation": {output: %}, "k_step": {output: %}}``.
+    residuals : ResidResult
+        One-step residual analysis with the chi-squared tests.
+    frequency_responses : tuple of FrequencyResponseEstimate
+        Per speed group and output.
+    notes : tuple of str
+        Remarks for the reader (e.g. K = 0: k-step prediction is a simulation).
+    """
+
+    outputs: tuple[str, ...]
+    runs: tuple[str, ...]
+    speeds: tuple[float, ...]
+    t: tuple[np.ndarray, ...]
+    measured: tuple[np.ndarray, ...]
+    simulation: CompareResult | None
+    simulation_note: str
+    prediction: CompareResult
+    k_step: int
+    fit: dict[str, float | None]
+    fit_k_step: dict[str, float]
+    fit_per_run: tuple[dict, ...]
+    residuals: ResidResult
+    frequency_responses: tuple[FrequencyResponseEstimate, ...]
+    notes: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        """The report without the time series, as plain JSON types (NaN stays a float).
+
+        Returns
+        -------
+        dict
+            ``fit_definition``; ``outputs``, ``runs``, ``speeds`` [m/s], ``k_step``
+            [samples]; ``fit`` and ``fit_k_step`` [%] per output; ``fit_per_run``;
+            ``simulation_note``; ``residuals`` (input, band, per output the fraction of
+            lags outside it and the whiteness / independence tests); the frequency
+            responses (:meth:`FrequencyResponseEstimate.to_json`); ``notes``.
+        """
+        rr = self.residuals
+        res = {
+            o: {
+                "fraction_outside": rr.fraction_outside[o],
+                "cross_outside": rr.cross_outside[o],
+                "whiteness": rr.whiteness_test[o],
+                "independence": rr.independence_test[o],
+            }
+            for o in self.outputs
+        }
+        return {
+            "fit_definition": "100 (1 - ||y - yhat|| / ||y - mean y||) [%] (MATLAB compare's "
+            "NRMSE fit), over all runs stacked",
+            "outputs": list(self.outputs),
+            "runs": list(self.runs),
+            "speeds": [float(v) for v in self.speeds],
+            "k_step": int(self.k_step),
+            "fit": dict(self.fit),
+            "fit_k_step": dict(self.fit_k_step),
+            "fit_per_run": [dict(d) for d in self.fit_per_run],
+            "simulation_note": self.simulation_note,
+            "residuals": {
+                "input": rr.input,
+                "band": rr.band,
+                "max_lag": int(rr.lags[-1]),
+                "tests": "chi-squared at level 1 - confidence: whiteness N sum r(k)^2, "
+                "k = 1..M; independence N r' R_u^-1 r on lags 1..M",
+                "outputs": res,
+            },
+            "frequency_responses": [e.to_json() for e in self.frequency_responses],
+            "notes": list(self.notes),
+        }
+
+
+def _fits(Y: np.ndarray, Yh: np.ndarray, outputs: Sequence[str]) -> dict[str, float]:
+    return {o: 100 * goodness_of_fit(Y[:, j], Yh[:, j])["nrmse_fit"] for j, o in enumerate(outputs)}
+
+
+def validate_model(
+    model,
+    runs: Run | Sequence[Run],
+    k_step: int = K_STEP,
+    max_lag: int = 25,
+    confidence: float = 0.99,
+    coherence_min: float = COHERENCE_MIN,
+    input: str = "auto",
+    ic: str | np.ndarray = "estimate",
+    nperseg: int | None = None,
+) -> ValidationReport:
+    """Validate a model on runs: compare, k-step prediction, resid and frequency response.
+
+    Parameters
+    ----------
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+        The model (models over speed are taken at each run's speed).
+    runs : Run or sequence of Run
+        The validation data.
+    k_step : int, optional
+        Prediction horizon k >= 1 [samples] of the k-step comparison.
+    max_lag : int, optional
+        Largest lag of the residual correlations [samples].
+    confidence : float, optional
+        Level of the correlation bands; the tests' level is 1 - confidence.
+    coherence_min : float, optional
+        Coherence threshold of the frequency-response estimate.
+    input : str, optional
+        Signal of the residual cross-correlation: ``"auto"`` (the dither when every run
+        logs a nonzero one, else ``"T_delta"``), ``"dither"`` or a run signal.
+    ic : {"estimate", "zero"} or (n,) array_like, optional
+        Initial state of the simulations (:func:`~bikeid.ident.validate.compare`).
+    nperseg : int, optional
+        Welch segment length [samples] (:func:`frequency_response_estimate`).
+
+    Returns
+    -------
+    ValidationReport
+        Fits [%], residual tests and frequency responses.
+
+    Raises
+    ------
+    ValueError
+        On bad arguments, or runs the model cannot be compared with (missing signals,
+        another sample period).
+    UntrustworthyResult
+        If the model's predictor diverges over the runs (an unstable model without a noise
+        model, K = 0): validate on shorter windows.  A simulation alone that diverges is
+        not an error (``simulation`` is None, ``simulation_note`` says why).
+    """
+    runs = _runs(runs)
+    if not (isinstance(k_step, (int, np.integer)) and k_step >= 1):
+        raise ValueError(f"k_step={k_step}: need an integer >= 1 [samples]")
+    notes = []
+    try:
+        sim = compare(runs, model, ic=ic)
+        sim_note = ""
+    except UntrustworthyResult as exc:
+        sim, sim_note = None, f"simulation refused: {exc}"
+    try:
+        pred = compare(runs, model, horizon=int(k_step), ic=ic)
+    except UntrustworthyResult as exc:
+        raise UntrustworthyResult(
+            f"neither simulation nor prediction can be trusted: {exc}" if sim is None else str(exc)
+        ) from None
+    outputs = pred.outputs
+    if input == "auto":
+        dithered = all(r.dither is not None and np.any(r.dither) for r in runs)
+        input = "dither" if dithered else "T_delta"
+    rr = resid(runs, model, input=input, max_lag=max_lag, confidence=confidence)
+    K = sampled_model(model, runs[0].dt, runs[0].speed)[3]
+    if not np.any(K):
+        notes.append(
+            "the model has no noise model (K = 0): its k-step prediction and one-step "
+            "residuals are those of a simulation (output error)"
+        )
+    fixed = getattr(model, "speed", None) if hasattr(model, "predictor") else None
+    if fixed is not None:  # a fixed-speed model on runs at other speeds: say so
+        tol = max(SPEED_TOLERANCE[0], SPEED_TOLERANCE[1] * fixed)
+        other = sorted({round(r.speed, 3) for r in runs if abs(r.speed - fixed) > tol})
+        if other:
+            notes.append(
+                f"the model was identified at {fixed:g} m/s; runs at {other} m/s differ by "
+                f"more than {tol:g} m/s (a speed-parameterized model covers several speeds)"
+            )
+    measured = tuple(np.column_stack([r[o] for o in outputs]) for r in runs)
+    per_run = []
+    for i, Y in enumerate(measured):
+        row = {"k_step": _fits(Y, pred.yhat[i], outputs)}
+        row["simulation"] = _fits(Y, sim.yhat[i], outputs) if sim is not None else None
+        per_run.append(row)
+    frf = frequency_response_estimate(runs, model, coherence_min, nperseg)
+    for e in frf:
+        if e.note:
+            notes.append(f"{e.input} -> {e.output} at v = {e.speed:g} m/s: {e.note}")
+    return ValidationReport(
+        outputs=tuple(outputs),
+        runs=tuple(_label(r, i) for i, r in enumerate(runs)),
+        speeds=tuple(float(r.speed) for r in runs),
+        t=tuple(r.t for r in runs),
+        measured=measured,
+        simulation=sim,
+        simulation_note=sim_note,
+        prediction=pred,
+        k_step=int(k_step),
+        fit={o: (100 * sim.fit[o] if sim is not None else None) for o in outputs},
+        fit_k_step={o: 100 * pred.fit[o] for o in outputs},
+        fit_per_run=tuple(per_run),
+        residuals=rr,
+        frequency_responses=tuple(frf),
+        notes=tuple(dict.fromkeys(notes)),
+    )
+
+
+def validate_decays(
+    model,
+    windows: Sequence,
+    channels: Sequence[str] = ("phidot", "delta"),
+    max_lag: int = 25,
+    confidence: float = 0.99,
+) -> dict:
+    """Compare and residual tests of an experiment model on measured free decays, per file.
+
+    The validation of :func:`validate_model` for the steer-by-wire experiment model, whose
+    simulation from each decay's measured initial state (``model.simulate(windows)``,
+    :meth:`bikeid.ident.experiment_model.ExperimentModel.simulate`, with the windows'
+    attached defect corrections) is compared with the measurements: the NRMSE fit of
+    :func:`~bikeid.ident.validate.goodness_of_fit` per window and channel, and the
+    simulation errors' whiteness and independence from the external steer torque T_ext
+    (:func:`residual_tests`, the errors of a file's windows stacked; the model has no noise
+    model, so these are output-error residuals).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The model (anything with ``simulate(windows)`` returning per window a dict of the
+        channels).
+    windows : sequence of Window
+        The decays.
+    channels : sequence of str, optional
+        Window signals compared (default roll rate [rad/s] and steer angle [rad]).
+    max_lag : int, optional
+        Largest lag of the residual tests [samples].
+    confidence : float, optional
+        Band level; the tests' level is 1 - confidence.
+
+    Returns
+    -------
+    dict
+        ``fit_definition``; ``files``: per file (sorted by name) ``file``, ``speed`` [m/s],
+        ``windows``, ``fit`` per channel [%] (the mean over its windows of 100 times the
+        NRMSE fit, so 100 - fit is 100 times the window error of
+        :func:`bikeid.ident.experiment_model.window_errors`) and ``residuals``
+        (:func:`residual_tests` per channel); ``fit`` per channel [%], the mean over files.
+    """
+    windows = list(windows)
+    if not windows:
+        raise ValueError("validate_decays: no windows given")
+    sims = model.simulate(windows)
+    files = []
+    for f in sorted({w.file for w in windows}):
+        idx = [i for i, w in enumerate(windows) if w.file == f]
+        fit, res, u = {c: [] for c in channels}, [], []
+        for i in idx:
+            w, s_ = windows[i], sims[i]
+            for c in channels:
+                fit[c].append(100 * goodness_of_fit(getattr(w, c), s_[c])["nrmse_fit"])
+            res.append(np.column_stack([getattr(w, c) - s_[c] for c in channels]))
+            u.append(np.asarray(w.T_ext, float))
+        files.append({
+            "file": f,
+            "speed": float(np.mean([windows[i].speed for i in idx])),
+            "windows": len(idx),
+            "fit": {c: float(np.mean(v)) for c, v in fit.items()},
+            "residuals": residual_tests(res, u, channels, max_lag, confidence),
+        })  # fmt: skip
+    return {
+        "fit_definition": "mean over a file's decay windows of 100 (1 - ||y - y_sim|| / "
+        "||y - mean y||) [%] (MATLAB compare's NRMSE fit; simulation from the measured "
+        "initial state); residual tests chi-squared at level 1 - confidence on the "
+        "simulation errors, input T_ext",
+        "files": files,
+        "fit": {c: float(np.mean([f_["fit"][c] for f_ in files])) for c in channels},
+    }

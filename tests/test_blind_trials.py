@@ -1,0 +1,154 @@
+"""Blind effect-selection trials: the generator is a second implementation, the scores count
+what a user suffers, and a small batch of the trials runs here (the full size is
+``benchmarks/bench_blind_trials.py``)."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from bikeid.dataset.windows import Window
+from bikeid.experiments.blind_trials import (
+    BlindTrial,
+    Nuisance,
+    draw_blind_trials,
+    generate_windows,
+    linear_plant_matrices,
+    run_blind_trial,
+    score,
+    summarize_blind,
+)
+from bikeid.experiments.effect_trials import EFFECTS
+from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.sim import linear
+from bikeid.sim.parameters import benchmark, steer_by_wire
+
+QUIET = Nuisance(
+    plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0, noise=0.0,
+    colour=0.0, steer_noise=0.0, encoder_counts=2**40, gyro_bias=0.0, gyro_walk=0.0,
+    steer_rate="gyro", speed_wander=0.0, wander_freq=0.5,
+)
+
+
+def test_independent_matrices_match_meijaard_and_bikeid():
+    """bicycleparameters' canonical matrices equal Meijaard 2007's benchmark entries
+    (M11 = 80.81722, C1_21 = -0.85035641456978, K2_12 = 76.59734589573222; the 14-digit
+    values of Meijaard 2007 Table 2, relative 1e-12 covers their last printed digit) and
+    bikeid's sim.linear to round-off (1e-12 relative): two implementations agree, so the
+    blind generator's plant is the same physics by different code."""
+    M, C1, K0, K2 = linear_plant_matrices(benchmark())
+    assert M[0, 0] == pytest.approx(80.81722, rel=1e-12)
+    assert C1[1, 0] == pytest.approx(-0.85035641456978, rel=1e-12)
+    assert K2[0, 1] == pytest.approx(76.59734589573222, rel=1e-12)
+    cm = linear.canonical_matrices(steer_by_wire())
+    ours = linear_plant_matrices(steer_by_wire())
+    for a, b in zip(ours, (cm.M, cm.C1, cm.K0, cm.K2), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "effect, value",
+    [("none", float("nan")), ("steer_viscous_damping", 0.5), ("command_gain", 1.25),
+     ("actuator_lag", 0.02), ("input_delay", 0.02), ("roll_viscous_damping", 2.0)],
+)  # fmt: skip
+def test_generator_agrees_with_experiment_model(effect, value, monkeypatch):
+    """With every nuisance off, the generator's decays (its own RK4, 10 substeps of 1 ms)
+    equal the pipeline's experiment model with the same effect (exact zero-order-hold
+    discretization): two implementations of loop, plant and effect.  RK4's error at
+    h = 1 ms on modes of |lambda| < 20 1/s is ~(lambda h)^4 / 120 per step, < 1e-8 over the
+    window, so 1e-6 relative to the signal is a generous bound.  The pipeline's own estimate
+    of the start state (a quadratic through 5 samples, ~1e-4 off) is replaced by the first
+    samples, which with every nuisance off are the true state."""
+    monkeypatch.setattr(
+        Window, "state0", lambda w: np.array([w.phi[0], w.delta[0], w.phidot[0], w.deltadot[0]])
+    )
+    tr = BlindTrial(0, 1, effect, value, (2.5, 4.0), (3.0, 3.5), QUIET)
+    ws = generate_windows(tr, (2.5, 4.0), 2, seed=3, label="q")
+    fx = {} if effect == "none" else {effect: value}
+    sims = ExperimentModel(effects=fx).simulate(ws)
+    for w, s in zip(ws, sims, strict=True):
+        for ch in ("phidot", "delta"):
+            scale = np.max(np.abs(getattr(w, ch)))
+            np.testing.assert_allclose(s[ch], getattr(w, ch), atol=1e-6 * scale)
+
+
+def test_generator_nuisances_are_there():
+    """Quantization and colour are applied as drawn: steer samples lie on the encoder grid
+    (2 pi / counts), and the roll-rate noise of a zero-push decay has the drawn AR(1) lag-1
+    correlation (0.6 +- 3 / sqrt(n) for n = 4 x 100 samples per speed pair...)."""
+    nz = replace(QUIET, encoder_counts=4096, noise=0.01, colour=0.6)
+    tr = BlindTrial(0, 1, "none", float("nan"), (3.0, 4.0), (3.0, 3.5), nz)
+    ws = generate_windows(tr, (3.0,), 3, seed=5, label="n")
+    step = 2 * math.pi / 4096
+    for w in ws:
+        np.testing.assert_allclose(w.delta / step, np.round(w.delta / step), atol=1e-9)
+    quiet = generate_windows(replace(tr, nuisance=replace(QUIET, encoder_counts=4096)),
+                             (3.0,), 3, seed=5, label="n")  # fmt: skip
+    e = np.concatenate([w.phidot - q.phidot for w, q in zip(ws, quiet, strict=True)])
+    # the loop feeds the noise back, so compare with the noise alone only at lag 1 loosely
+    r1 = np.corrcoef(e[:-1], e[1:])[0, 1]
+    assert abs(r1 - 0.6) < 3 / math.sqrt(e.size) + 0.1
+
+
+def test_score_both_ways():
+    """Each verdict is computed from the pipeline's answer: right and wrong cases."""
+    tr = BlindTrial(0, 1, "steer_viscous_damping", 0.5, (2, 3), (3, 4), QUIET)
+    assert score(tr, ["steer_viscous_damping"], {"steer_viscous_damping": 0.55})["right_first"]
+    assert not score(tr, ["steer_viscous_damping"], {"steer_viscous_damping": 0.65})[
+        "right_first"
+    ]  # fmt: skip  (outside 20 % of 0.5)
+    s = score(tr, ["steer_viscous_damping", "steer_inertia"],
+              {"steer_viscous_damping": 0.5, "steer_inertia": 0.01})  # fmt: skip
+    assert s["right_first"] and s["extras"] == 1
+    none = replace(tr, effect="none", value=float("nan"))
+    assert score(none, ["unexplained"], {})["false_positive"] is False
+    assert score(none, ["steer_stiffness"], {"steer_stiffness": 0.3})["false_positive"]
+    out = replace(tr, effect="roll_stiffness", value=30.0)
+    assert score(out, ["unexplained", "steer_stiffness"], {"steer_stiffness": 1})[
+        "misattributed"] is False  # fmt: skip
+    assert score(out, ["steer_stiffness"], {"steer_stiffness": 1})["misattributed"]
+    rows = [dict(score(tr, ["steer_viscous_damping"], {"steer_viscous_damping": 0.5}),
+                 nuisance={"plant": "independent_linear"})] * 3  # fmt: skip
+    s = summarize_blind(rows)
+    assert s["right_first"]["k"] == 3 and s["mean_extras"]["mean"] == 0.0
+
+
+def test_draw_is_reproducible_and_extends():
+    """Trial i depends on (seed, i) only: a larger grid extends a smaller one."""
+    a = draw_blind_trials(4, 3)
+    b = draw_blind_trials(9, 3)
+    assert a == b[:4]
+    assert {t.effect for t in b} == set(EFFECTS) | {"none"}
+
+
+@pytest.mark.slow
+def test_blind_batch_runs_and_scores():
+    """A small batch runs end to end on both plants and yields a score per kind; the rates
+    themselves are measured by the benchmark (docs/measured.md), not asserted here beyond
+    the known case: a large steer damping on the independent linear plant, no nuisances
+    but white noise and quantization, fitted from the linear nominal (the plant it came
+    from), is named first within 20 % (the library effect the pipeline is built for)."""
+    nz = replace(QUIET, noise=0.008, encoder_counts=8192)
+    tr = BlindTrial(0, 11, "steer_viscous_damping", 0.7, (2.0, 3.5), (2.7, 4.2), nz)
+    row = run_blind_trial(tr, nonlinear=False)
+    assert row["right_first"], row["verdict"]
+
+
+@pytest.mark.parametrize("plant", ["independent_linear", "bikeid_nonlinear"])
+def test_nominal_plant_preference_follows_the_truth(plant):
+    """compare_nominal_plants prefers the plant the data came from, both ways: decays of the
+    linear truth are fitted better by the linear nominal, those of the nonlinear plant by the
+    nonlinear one (pushes as large as the logs', where the two differ by NRMSE ~0.1-0.5
+    at 1.5-2 m/s, docs/measured.md; noise small enough not to hide it)."""
+    from bikeid.ident.effect_selection import compare_nominal_plants
+
+    nz = replace(QUIET, plant=plant, noise=0.002, encoder_counts=16384)
+    tr = BlindTrial(0, 1, "none", float("nan"), (1.6, 2.2), (3.0, 3.5), nz)
+    ws = generate_windows(tr, (1.6, 2.2), 3, seed=9, label="p")
+    res = compare_nominal_plants(ExperimentModel(), ws)
+    expected = "linear" if plant == "independent_linear" else "nonlinear"
+    assert res["preferred"] == expected, res
+    # measured margins: cost ratio 1.3e3 (linear truth) and 3e-4 (nonlinear truth); a
+    # factor 10 leaves room for other seeds
+    assert (res["ratio"] > 10) if expected == "linear" else (res["ratio"] < 0.1)

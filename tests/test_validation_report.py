@@ -1,0 +1,263 @@
+"""ident.validation_report and ``bikeid validate``: every verdict checked both ways on a linear
+plant with a known model (dataset.linear_loop: exact ZOH simulation of the benchmark bicycle
+under the default PID), every number against an independent value."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bikeid.dataset.linear_loop import simulate
+from bikeid.ident.canonical import theta_from_matrices
+from bikeid.ident.pem import CanonicalModel
+from bikeid.ident.validate import independence_test, portmanteau
+from bikeid.ident.validation_report import frequency_response_estimate, validate_model
+from bikeid.sim.linear import canonical_matrices, state_space
+from bikeid.sim.parameters import benchmark
+
+P = benchmark()
+
+
+def _canonical(v: float, dt: float, outputs=("phi", "delta")) -> CanonicalModel:
+    """The true (or, at another speed, a wrong) canonical model with K = 0 (output error)."""
+    n = len(outputs)
+    return CanonicalModel(theta=theta_from_matrices(canonical_matrices(P), v),
+                          covariance=np.zeros((10, 10)), K=np.zeros((4, n)), dt=dt, speed=v,
+                          noise_covariance=np.eye(n), outputs=outputs)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def noisy_run():
+    """60 s at 5 m/s, 2 N m white dither, white sensor noise 1e-3 rad / 1e-2 rad/s."""
+    return simulate(P, 5.0, duration=60, seed=3, dither=2.0, angle_noise=1e-3, rate_noise=1e-2)
+
+
+def test_true_model_on_noise_free_data_fits_100_percent():
+    """Noise-free run, true model sampled exactly (ZOH on both sides), x0 estimated: the fit
+    is 100 % to rounding (1e-7 %, the 1e-9 of test_validate's compare check in percent), for
+    simulation and the 10-step prediction alike."""
+    r = simulate(P, 5.0, duration=20, seed=1, dither=1.0)
+    rep = validate_model(state_space(P, 5.0, inputs=("T_delta",)), r)
+    for o in ("phi", "delta", "phidot", "deltadot"):
+        assert rep.fit[o] == pytest.approx(100.0, abs=1e-7)
+        assert rep.fit_k_step[o] == pytest.approx(100.0, abs=1e-7)
+    assert rep.to_json()["fit"]["phi"] == pytest.approx(100.0, abs=1e-7)
+
+
+def test_fit_of_a_gain_error_matches_the_analytic_nrmse():
+    """From rest (x0 = 0, ic="zero") a model whose B is scaled by c simulates exactly c y
+    (linearity), so its fit is 100 (1 - |c - 1| ||y|| / ||y - mean y||).  Tolerance 1e-8 %:
+    the only difference is the rounding of the ZOH of c B against c times that of B."""
+    r = simulate(P, 5.0, duration=20, seed=2, dither=1.0, x0=[0, 0, 0, 0])
+    import control
+
+    sys = state_space(P, 5.0, inputs=("T_delta",))
+    c = 1.1
+    scaled = control.ss(sys.A, c * sys.B, sys.C, sys.D, inputs=sys.input_labels,
+                         outputs=sys.output_labels)  # fmt: skip
+    rep = validate_model(scaled, r, ic="zero")
+    for o in rep.outputs:
+        y = r[o]
+        expected = 100 * (1 - abs(c - 1) * np.linalg.norm(y) / np.linalg.norm(y - y.mean()))
+        assert rep.fit[o] == pytest.approx(expected, abs=1e-8)
+        assert 0 < expected < 95  # a real loss, not a rounding effect
+
+
+def test_portmanteau_and_independence_tests_are_calibrated():
+    """Under the null hypothesis the chi-squared tests reject at their level (1 %): 200 white
+    residual series against a strongly coloured input (AR(1), a = 0.9) are rejected
+    2 +- 2 times (binomial(200, 0.01): 99.9 % quantile 7, the bound used).  The naive statistic
+    N sum r^2 ignores the input's colour and rejects far more often, the reason for R_u.
+    A residual that is the input two samples late is rejected by both tests (p < 1e-10).
+    The naive count must exceed 14, which a calibrated 1 % test reaches with probability
+    below 1e-8 (binomial(200, 0.01))."""
+    rng = np.random.default_rng(0)
+    from scipy.signal import lfilter
+
+    n, M, rejected, naive = 2000, 25, 0, 0
+    from bikeid.ident.validate import cross_correlation
+
+    for _ in range(200):
+        u = lfilter([1.0], [1.0, -0.9], rng.normal(size=n))
+        e = rng.normal(size=n)
+        c = cross_correlation(e, u, M)
+        rejected += not c["test"]["passed"]
+        naive += n * np.sum(c["ccf"][M + 1 :] ** 2) > 44.31  # chi2(25) 99 % quantile
+    assert rejected <= 7
+    assert naive > 14
+    u = rng.normal(size=n)
+    e = np.roll(u, 2) + 0.5 * rng.normal(size=n)
+    c = cross_correlation(e, u, M)
+    assert c["test"]["p_value"] < 1e-10
+    assert independence_test(c["ccf"][M + 1 :], np.r_[1.0, np.zeros(M - 1)], n)["passed"] is False
+    ar = lfilter([1.0], [1.0, -0.3], rng.normal(size=n))
+    r1 = np.array([np.dot(ar[k:], ar[: n - k]) for k in range(1, M + 1)]) / np.dot(ar, ar)
+    assert portmanteau(r1, n)["p_value"] < 1e-10
+
+
+def test_residual_tests_pass_for_the_true_model_and_fail_for_a_wrong_one(noisy_run):
+    """True model, K = 0: the one-step residual is the white sensor noise (the plant is driven
+    by exactly the logged torque), so whiteness and independence from the dither pass at the
+    1 % level; the model of 4 m/s (a 20 % speed error) leaves the model error in the
+    residual and fails whiteness on both outputs (p < 1e-10)."""
+    good = validate_model(_canonical(5.0, noisy_run.dt), noisy_run)
+    bad = validate_model(_canonical(4.0, noisy_run.dt), noisy_run)
+    assert good.residuals.input == "dither"
+    for o in ("phi", "delta"):
+        assert good.residuals.whiteness_test[o]["passed"]
+        assert good.residuals.independence_test[o]["passed"]
+        assert not bad.residuals.whiteness_test[o]["passed"]
+        assert bad.residuals.whiteness_test[o]["p_value"] < 1e-10
+        assert bad.fit[o] < good.fit[o]
+    assert not any("identified at" in n for n in good.notes)
+    assert any("identified at 4 m/s" in n for n in bad.notes)  # 1 m/s > max(0.5, 15 % of 4)
+    j = good.to_json()["residuals"]["outputs"]["phi"]["whiteness"]
+    assert j["passed"] is True and j["dof"] == 25
+
+
+def test_frequency_response_estimate_within_its_bound(noisy_run):
+    """At the frequencies the coherence allows (>= 0.5), the closed-loop estimate S_dy / S_du
+    meets the true model's *sampled* response within 4 times its coherence-based random error
+    (Bendat & Piersol's first-order formula; were it exact, a 4-sigma miss would happen with
+    probability exp(-8) = 3e-4 per frequency).  Both ways: the 4 m/s model misses by more at
+    some frequency of phi and phidot, and so does the true model's continuous response for
+    deltadot (the hold's half-sample delay near Nyquist), so the bound is not vacuous."""
+    true = state_space(P, 5.0, inputs=("T_delta",))
+    ests = frequency_response_estimate(noisy_run, true)
+    assert {e.output for e in ests} == {"phi", "delta", "phidot", "deltadot"}
+    for e in ests:
+        assert e.reference == "dither" and e.valid.sum() >= 10, e.output
+        ratio = np.abs(e.H - e.model)[e.valid] / (np.abs(e.model) * e.rel_error)[e.valid]
+        assert ratio.max() < 4, e.output
+    at4 = state_space(P, 4.0, inputs=("T_delta",))
+    wrong = {e.output: e for e in frequency_response_estimate(noisy_run, at4)}
+    for o in ("phi", "phidot"):
+        e = wrong[o]
+        ratio = np.abs(e.H - e.model)[e.valid] / (np.abs(e.model) * e.rel_error)[e.valid]
+        assert ratio.max() > 4, o
+    e = next(e for e in ests if e.output == "deltadot")
+    j = list(true.output_labels).index("deltadot")
+    Gc = np.array([np.asarray(true(2j * np.pi * f))[j, 0] for f in e.f[e.valid]])
+    assert (np.abs(e.H[e.valid] - Gc) / (np.abs(Gc) * e.rel_error[e.valid])).max() > 4
+
+
+def test_no_dither_reports_not_enough_excitation():
+    """A closed-loop run without dither: T_delta is only feedback, so no estimate is made and
+    the report says so (an H1 estimate there would be -1/controller, not the bicycle)."""
+    r = simulate(P, 5.0, duration=20, seed=1, dither=0.0, angle_noise=1e-3)
+    rep = validate_model(_canonical(5.0, r.dt), r)
+    assert rep.residuals.input == "T_delta"
+    assert all(not e.excited for e in rep.frequency_responses)
+    assert any("not enough excitation" in n for n in rep.notes)
+    assert rep.to_json()["frequency_responses"][0]["f"] == []
+
+
+def test_unstable_model_simulation_refused_prediction_kept():
+    """At 2 m/s the weave is unstable: the 60 s simulation is refused with its reason (as
+    compare).  With all four states measured and the deadbeat observer gain K = Ad C' (so
+    Ad - K C = 0), the 5-step prediction of the true model on noise-free data fits 100 % (to
+    1e-6 %: five steps from the measured state, rounding only).  Without a noise model
+    (K = 0) the predictor diverges too, and the report refuses (UntrustworthyResult)."""
+    from bikeid.sim.errors import UntrustworthyResult
+
+    r = simulate(P, 2.0, duration=60, seed=1, dither=1.0)
+    m = _canonical(2.0, r.dt, outputs=("phi", "phidot", "delta", "deltadot"))
+    Ad, _, C, _ = m.predictor()
+    deadbeat = CanonicalModel(theta=m.theta, covariance=m.covariance, K=Ad @ C.T, dt=m.dt,
+                              speed=2.0, noise_covariance=m.noise_covariance,
+                              outputs=m.outputs)  # fmt: skip
+    rep = validate_model(deadbeat, r, k_step=5)
+    assert rep.simulation is None and "unstable" in rep.simulation_note
+    assert rep.fit["phi"] is None and rep.to_json()["fit"]["phi"] is None
+    for o in m.outputs:
+        assert rep.fit_k_step[o] == pytest.approx(100.0, abs=1e-6)
+    with pytest.raises(UntrustworthyResult, match="neither simulation nor prediction"):
+        validate_model(m, r)
+
+
+def test_models_over_speed_are_taken_at_each_runs_speed():
+    """A DirectResult and a SpeedCanonicalModel built from the true matrices, validated on
+    noise-free runs at 4 and 6 m/s: each run is compared with the model at its own speed, so
+    every fit is 100 % to rounding (1e-7 %, as the fixed-speed case), and the frequency
+    responses come in one group per speed."""
+    from bikeid.ident.canonical import speed_params_from_matrices
+    from bikeid.ident.direct import DirectResult
+    from bikeid.ident.pem import SpeedCanonicalModel
+
+    runs = [simulate(P, v, duration=10, seed=1, dither=1.0) for v in (4.0, 6.0)]
+    cm = canonical_matrices(P)
+    direct = DirectResult(
+        M=cm.M, C1=cm.C1, K0=cm.K0, K2=cm.K2, H=np.zeros(2), g=cm.g, free={}, stderr={},
+        covariance={}, condition={}, vaf_moore={}, vaf_variance={}, n_samples=0, method="ls",
+    )  # fmt: skip
+    dt = runs[0].dt
+    per = {v: _canonical(v, dt, outputs=("phi", "phidot", "delta", "deltadot")) for v in (4.0, 6.0)}
+    speed = SpeedCanonicalModel(params=speed_params_from_matrices(cm), per_speed=per, dt=dt,
+                                covariance=np.zeros((14, 14)), g=cm.g)  # fmt: skip
+    for model in (direct, speed):
+        rep = validate_model(model, runs)
+        for o in rep.outputs:
+            assert rep.fit[o] == pytest.approx(100.0, abs=1e-7), (type(model).__name__, o)
+            for row in rep.fit_per_run:
+                assert row["simulation"][o] == pytest.approx(100.0, abs=1e-7)
+        assert sorted({e.speed for e in rep.frequency_responses}) == [4.0, 6.0]
+
+
+def test_validate_decays_fit_is_the_evaluate_error():
+    """validate_decays (measured evaluate's validation) and experiment_model.window_errors
+    compute the same NRMSE by two code paths: fit = 100 (1 - error) to 1e-9 %, per file; the
+    true model fits its own noisy decays better than a model with a spurious effect."""
+    from bikeid.ident.experiment_model import ExperimentModel, window_errors
+    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.validation_report import validate_decays
+
+    truth = ExperimentModel()
+    ws = synthetic_windows(truth, [2.5, 4.5], per_speed=3, seed=1)
+    out = validate_decays(truth, ws)
+    err = window_errors(ws, truth.simulate(ws))
+    for f in out["files"]:
+        idx = [i for i, w in enumerate(ws) if w.file == f["file"]]
+        for j, c in enumerate(("phidot", "delta")):
+            assert f["fit"][c] == pytest.approx(100 * (1 - err[idx, j].mean()), abs=1e-9)
+        assert set(f["residuals"]["phidot"]) >= {"white", "whiteness_p", "fraction_outside"}
+    wrong = validate_decays(truth.with_effects(steer_viscous_damping=1.0), ws)
+    assert wrong["fit"]["phidot"] < out["fit"]["phidot"]
+
+
+def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_run, capsys):
+    """bikeid validate on a saved model: the JSON fit equals the library's, the figures and
+    validation.json are written; a folder holding other files is refused (exit 3) before any
+    work, as is an experiment model (validated by 'measured evaluate')."""
+    pytest.importorskip("bikeid.ident.model_file", reason="needs ident.model_file (load_model)")
+    from bikeid.dataset.store import write_runs
+    from bikeid.experiments.cli import main
+    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.ident.model_file import save_model
+
+    data = tmp_path / "runs.h5"
+    run = noisy_run.window(0, 20)
+    write_runs(data, [run])
+    model = tmp_path / "m.json"
+    save_model(_canonical(5.0, run.dt), model)
+    out = tmp_path / "val"
+    assert main(["validate", "--model", str(model), str(data), "--out", str(out), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    lib = validate_model(_canonical(5.0, run.dt), run)
+    assert doc["command"] == "bikeid validate"
+    assert doc["fit"]["phi"] == pytest.approx(lib.fit["phi"], rel=1e-12)
+    assert json.loads((out / "validation.json").read_text())["fit_k_step"] == doc["fit_k_step"]
+    for name in ("compare_1.png", "resid.png", "bode.png"):
+        assert (out / name).stat().st_size > 1000
+    # the same folder again is fine (written by bikeid validate); a foreign one is not
+    assert main(["validate", "--model", str(model), str(data), "--out", str(out)]) == 0
+    assert "sim fit %" in capsys.readouterr().out
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep")
+    assert main(["validate", "--model", str(model), str(data), "--out", str(foreign)]) == 3
+    assert "not written by bikeid validate" in capsys.readouterr().err
+    assert (foreign / "notes.txt").read_text() == "keep" and len(list(foreign.iterdir())) == 1
+    exp = tmp_path / "exp.json"
+    save_model(ExperimentModel(), exp)
+    assert main(["validate", "--model", str(exp), str(data)]) == 3
+    assert "measured evaluate" in capsys.readouterr().err
