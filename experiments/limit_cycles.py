@@ -54,6 +54,7 @@ __all__ = [
     "plot_energy_speed",
     "plot_phase_portraits",
     "section_points",
+    "speed_scan",
     "stop_info",
     "summary_entry",
 ]
@@ -114,6 +115,7 @@ def coast(
     duration: float,
     speed: float = SPEED,
     dt: float = 0.01,
+    substeps: int | None = None,
 ):
     """Uncontrolled coasting run (no inputs, speed free) with total energy recorded.
 
@@ -131,6 +133,8 @@ def coast(
         Initial forward speed [m/s] (3.5, Chen & Dao Figs. 4-5).
     dt : float, optional
         Output sample period [s].
+    substeps : int, optional
+        RK4 steps per sample (default ``sim.integrate.DEFAULT_SUBSTEPS``).
 
     Returns
     -------
@@ -138,12 +142,13 @@ def coast(
         The run (``mode="coast"``: rear wheel free, speed a state) with total energy
         ``energy`` [J] per sample.
     """
-    from bikeid.sim.integrate import simulate
+    from bikeid.sim.integrate import DEFAULT_SUBSTEPS, simulate
     from bikeid.sim.nonlinear import WhippleBicycle
 
     bike = WhippleBicycle(p)
     x0 = bike.state(speed, **ic.radians())
-    return simulate(bike, x0, duration, dt=dt, mode="coast", energy=True)
+    n = DEFAULT_SUBSTEPS if substeps is None else int(substeps)
+    return simulate(bike, x0, duration, dt=dt, substeps=n, mode="coast", energy=True)
 
 
 def section_points(t, phi, phidot, delta, deltadot, v) -> tuple[np.ndarray, np.ndarray]:
@@ -554,6 +559,108 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
     return e
 
 
+#: Initial condition of the speed scan: Fig. 4's smallest start (0.1 deg steer, at rest).
+SCAN_CONDITION = InitialCondition("delta0=0.1, phidot0=0", delta=0.1)
+
+
+def _scan_point(p: BicycleParameters, ic: InitialCondition, v: float, duration: float) -> dict:
+    """Class of one coasting run at initial speed v; a numerical stop is rerun at a 4x
+    finer RK4 step before it is reported as ``numerical``."""
+    import warnings
+
+    for substeps in (None, 8):
+        with warnings.catch_warnings():  # a numerical stop is handled here, not warned about
+            warnings.simplefilter("ignore", RuntimeWarning)
+            tr = coast(p, ic, duration, speed=v, substeps=substeps)
+        try:
+            r = periodicity(tr, ic.label)
+        except ValueError as exc:  # numerical stop (stop_info refuses it)
+            msg = str(exc)
+            continue
+        return {
+            "speed": float(v),
+            "outcome": r.verdict,
+            "period_n": r.returns_per_period,
+            "fall_time_s": r.fell_at,
+            "fall_cause": r.fall_cause,
+            "speed_range": r.speed_range,
+            "rk4_substeps": substeps,
+        }
+    return {"speed": float(v), "outcome": "numerical", "message": msg}
+
+
+def speed_scan(
+    p: BicycleParameters,
+    speeds,
+    duration: float,
+    ic: InitialCondition = SCAN_CONDITION,
+    refine: int = 4,
+) -> dict:
+    """Speeds at which coasting from ``ic`` reaches a periodic orbit (Chen & Dao's v_l .. v_w).
+
+    Every speed of ``speeds`` is run (:func:`coast`, :func:`periodicity`); each boundary
+    between a periodic grid speed and a neighbouring non-periodic one is then bisected
+    ``refine`` times (assuming one change of class inside the bracket), so the edges are
+    known to (grid step) / 2**refine.  Runs that stop for a numerical reason are rerun at a
+    4x finer step; if that also fails they are ``numerical`` (not periodic).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle.
+    speeds : sequence of float
+        Increasing initial speeds [m/s].
+    duration : float
+        Length of each run [s]; a motion still growing at the end is ``irregular``.
+    ic : InitialCondition, optional
+        Initial roll, steer and rates (default :data:`SCAN_CONDITION`).
+    refine : int, optional
+        Bisection steps per edge.
+
+    Returns
+    -------
+    dict
+        ``condition`` (label), ``duration`` [s], ``points`` (speed [m/s], outcome,
+        ``period_n``, fall time [s] and cause, speed range [m/s]; grid and bisection runs
+        sorted by speed), ``edges`` (per change between periodic and not: ``lower`` or
+        ``upper``, the bracketing speeds [m/s] and the outcome outside), ``range``
+        ((lowest, highest) periodic speed [m/s] or None) and ``resolution`` [m/s].
+    """
+    grid = [float(v) for v in speeds]
+    pts = {v: _scan_point(p, ic, v, duration) for v in grid}
+    edges = []
+    for a, b in zip(grid[:-1], grid[1:], strict=True):
+        pa, pb = pts[a]["outcome"] == "periodic", pts[b]["outcome"] == "periodic"
+        if pa == pb:
+            continue
+        lo, hi = a, b
+        for _ in range(refine):
+            m = 0.5 * (lo + hi)
+            pts[m] = _scan_point(p, ic, m, duration)
+            if (pts[m]["outcome"] == "periodic") == (pts[lo]["outcome"] == "periodic"):
+                lo = m
+            else:
+                hi = m
+        outside = pts[hi]["outcome"] if pa else pts[lo]["outcome"]
+        edges.append(
+            {
+                "kind": "lower" if pb else "upper",
+                "bracket": (lo, hi),
+                "outside": outside,
+            }
+        )
+    per = sorted(v for v, e in pts.items() if e["outcome"] == "periodic")
+    step = float(np.min(np.diff(grid))) if len(grid) > 1 else float("nan")
+    return {
+        "condition": ic.label,
+        "duration": duration,
+        "points": [pts[v] for v in sorted(pts)],
+        "edges": edges,
+        "range": (per[0], per[-1]) if per else None,
+        "resolution": step / 2**refine,
+    }
+
+
 # -- figures ---------------------------------------------------------------------------------
 def plot_phase_portraits(trajs, labels, path, title: str):
     """Roll angle vs roll rate and steer angle vs steer rate [deg, deg/s], one colour per run.
@@ -618,7 +725,8 @@ def plot_phase_portraits(trajs, labels, path, title: str):
 
 
 def plot_energy_speed(trajs, labels, path, title: str):
-    """Total energy minus its initial value [J] and forward speed [m/s] against time.
+    """Relative energy change |E(t) - E(0)| / |E(0)| (log axis) and forward speed [m/s]
+    against time, each run drawn only up to its stop (fall) time, which is marked.
 
     Parameters
     ----------
@@ -638,15 +746,32 @@ def plot_energy_speed(trajs, labels, path, title: str):
     """
     from .plots import plt, save
 
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
     for tr, lab in zip(trajs, labels, strict=True):
-        a1.plot(tr.t, tr.energy - tr.energy[0], lw=0.7, label=lab)
-        a2.plot(tr.t, tr.signal("v"), lw=0.7, label=lab)
-    a1.set_ylabel("E(t) - E(0) [J]")
+        try:
+            t_stop, cause = stop_info(tr)
+        except ValueError:  # numerical stop: drawn to its end, named in the label
+            t_stop, cause = float(tr.t[-1]), "numerical stop"
+        n = tr.t.size if t_stop is None else int(np.searchsorted(tr.t, t_stop, side="right"))
+        n = max(n, 1)
+        t = tr.t[:n]
+        rel = np.abs(tr.energy[:n] - tr.energy[0]) / abs(tr.energy[0])
+        rel = np.maximum(rel, 1e-16)  # exact zeros (t = 0) on the log axis
+        name = lab + ("" if t_stop is None else f" (stops at {t_stop:.2f} s: {cause})")
+        (line,) = a1.semilogy(t, rel, lw=0.7, label=name)
+        a2.plot(t, tr.signal("v")[:n], lw=0.7, color=line.get_color())
+        if t_stop is not None:
+            a1.semilogy(t[-1], rel[-1], "x", color=line.get_color(), ms=6)
+            a2.plot(t[-1], tr.signal("v")[n - 1], "x", color=line.get_color(), ms=6)
+    a1.set_ylabel("|E(t) - E(0)| / |E(0)|")
+    a1.set_ylim(1e-16, 1.0)
     a2.set_ylabel("forward speed v [m/s]")
-    a2.set_xlabel("time [s]")
+    a2.set_xlabel("time [s]   (x: the run stops, a fall)")
     for a in (a1, a2):
-        a.grid(alpha=0.3)
-    a2.legend(fontsize=7, loc="upper right", ncol=2)
-    a1.set_title(title)
+        a.grid(alpha=0.3, which="both")
+    a1.legend(fontsize=7, loc="upper right")
+    a1.set_title(
+        title + "\n(runs that stay up conserve energy to the RK4 error; falls end at the x)",
+        fontsize=9,
+    )
     return save(fig, path)

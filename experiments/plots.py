@@ -40,6 +40,33 @@ def save(fig, path: str | Path) -> Path:
     return path
 
 
+def phase_deg(response, low: float = -270.0) -> np.ndarray:
+    """Phase of a frequency response [deg], unwrapped along frequency on one branch.
+
+    ``np.unwrap`` along the (increasing) frequencies, then shifted by a multiple of 360 deg
+    so that the lowest-frequency value lies in (``low``, ``low`` + 360]: every curve drawn
+    with it starts on the same branch, whatever ``np.angle`` returned for its first point
+    (e.g. -180 or +180 for a negative static gain).
+
+    Parameters
+    ----------
+    response : (N,) array_like of complex
+        Frequency response at increasing frequencies.
+    low : float, optional
+        Lower end of the starting branch [deg] (default -270: phases start in (-270, 90]).
+
+    Returns
+    -------
+    (N,) ndarray
+        Phase [deg].
+    """
+    ph = np.degrees(np.unwrap(np.angle(np.asarray(response, complex).ravel())))
+    k = np.ceil((low - ph[0]) / 360.0)
+    if ph[0] + 360.0 * k <= low:
+        k += 1
+    return ph + 360.0 * k
+
+
 def plot_eigenvalues(sweep, path: str | Path, title: str = "", critical: dict | None = None):
     """Real and imaginary parts of tracked eigenvalues against speed.
 

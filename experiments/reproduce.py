@@ -26,6 +26,7 @@ import numpy as np
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
 from .report import write
+from .reproduce_chen_dao import ANOMALY_SPEEDS
 from .reproduce_report import build_report
 
 __all__ = ["FULL", "QUICK", "Settings", "reproduce"]
@@ -42,7 +43,8 @@ class Settings:
     fig3_speeds : tuple of float
         Speeds [m/s] of the fuzzy-controller identifications for Chen & Dao Fig. 3.
     zoom_speeds : tuple of float
-        Extra PEM-only speeds [m/s] near the weave/capsize crossing of Fig. 3.
+        Extra PEM-only speeds [m/s] of Fig. 3(b): the paper's anomaly speeds and a grid over
+        3.1-4.0 m/s, where the capsize-anomaly verdict is computed.
     sweep_speeds : tuple of float
         Speeds [m/s] of the controller sweep summary.
     id_duration : float
@@ -52,7 +54,11 @@ class Settings:
     fig7_duration : float
         Length of the Fig. 7 roll-tracking run [s].
     limit_cycle_duration : float
-        Length of each coasting run of Figs. 4-5 [s].
+        Length of each coasting run of Figs. 4-5 and of the speed scan [s].
+    scan_speeds : tuple of float
+        Initial speeds [m/s] of the coasting speed scan (where periodic orbits are reached).
+    scan_refine : int
+        Bisection steps on each edge of the periodic speed range.
     mh_speeds : tuple of float
         Speeds [m/s] of the Moore & Hubbard reproduction.
     mh_duration : float
@@ -67,31 +73,42 @@ class Settings:
     fig2_duration: float
     fig7_duration: float
     limit_cycle_duration: float
+    scan_speeds: tuple[float, ...]
+    scan_refine: int
     mh_speeds: tuple[float, ...]
     mh_duration: float
 
 
+def _grid(lo: float, hi: float, step: float) -> tuple[float, ...]:
+    return tuple(float(round(v, 6)) for v in np.arange(lo, hi + step / 2, step))
+
+
+SCAN_SPEEDS = _grid(2.5, 5.0, 0.25)
 FULL = Settings(
     name="full",
     fig3_speeds=tuple(float(v) for v in np.arange(1.0, 15.01, 0.5)),
-    zoom_speeds=(3.2, 3.4, 3.6, 3.8, 4.2),
+    zoom_speeds=ANOMALY_SPEEDS + _grid(3.1, 4.0, 0.05),
     sweep_speeds=tuple(float(v) for v in range(1, 16)),
     id_duration=50.0,
     fig2_duration=50.0,
     fig7_duration=50.0,
     limit_cycle_duration=300.0,
+    scan_speeds=SCAN_SPEEDS,
+    scan_refine=5,
     mh_speeds=(2.5, 4.5, 7.0),
     mh_duration=30.0,
 )
 QUICK = Settings(
     name="quick",
     fig3_speeds=(1.0, 2.0, 3.0, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0),
-    zoom_speeds=(),
+    zoom_speeds=ANOMALY_SPEEDS + _grid(3.1, 4.0, 0.1),
     sweep_speeds=(2.0, 5.0, 10.0),
     id_duration=30.0,
     fig2_duration=50.0,
     fig7_duration=50.0,
     limit_cycle_duration=100.0,
+    scan_speeds=SCAN_SPEEDS,
+    scan_refine=4,
     mh_speeds=(3.0, 6.0),
     mh_duration=20.0,
 )
@@ -178,7 +195,7 @@ def reproduce(
         f"identification runs (one process pool): fuzzy at {len(st.fig3_speeds)} speeds for "
         f"Fig. 3, pid and pole placement at {len(st.sweep_speeds)} speeds for the sweep summary"
     )
-    zoom_speeds = [v for v in st.zoom_speeds if v not in st.fig3_speeds]
+    zoom_speeds = sorted({v for v in st.zoom_speeds if v not in st.fig3_speeds})
     jobs = [("fuzzy", float(v), st.id_duration, bicycle, METHODS) for v in st.fig3_speeds]
     jobs += [("fuzzy", float(v), st.id_duration, bicycle, ("pem",)) for v in zoom_speeds]
     jobs += [
@@ -188,6 +205,10 @@ def reproduce(
     n3 = len(st.fig3_speeds)
     grid, zoom = results[:n3], results[n3 : n3 + len(zoom_speeds)]
     rest = results[n3 + len(zoom_speeds) :]
+    # the direct method: one regression over all speeds of a controller (K0dd vs K2dd)
+    direct = {"fuzzy": cd.direct_stacked(grid, p)}
+    for c in SWEEP_ONLY:
+        direct[c] = cd.direct_stacked([g for g in rest if g["controller"] == c], p)
     times["identification_runs"] = time.perf_counter() - t0
     t0 = stage("Chen & Dao Fig. 3: eigenvalues against speed")
     f3 = cdf.fig3(p, grid, out, zoom)
@@ -198,8 +219,18 @@ def reproduce(
         f"{f3['critical_true']['v_c']:.4f})"
     )
     t0 = stage("Chen & Dao Figs. 4-5: coasting at 3.5 m/s, periodicity")
-    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log)
+    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log, workers)
     times["figs4_5"] = time.perf_counter() - t0
+    t0 = stage(
+        f"Chen & Dao v_l..v_w: coasting speed scan ({len(st.scan_speeds)} speeds, "
+        f"{st.scan_refine} bisections per edge)"
+    )
+    from . import limit_cycles as lcm
+
+    scan = lcm.speed_scan(p, st.scan_speeds, st.limit_cycle_duration, refine=st.scan_refine)
+    scan["paper"] = cd.PAPER["periodic_range"]
+    log(f"  periodic orbits reached for initial speeds {scan['range']} m/s (paper 3.152-3.994)")
+    times["periodic_range"] = time.perf_counter() - t0
     t0 = stage("Chen & Dao Fig. 7: pole-placement roll tracking at 15 km/h")
     f7 = cdf.fig7(p, f2["_model"], out, st.fig7_duration)
     times["fig7"] = time.perf_counter() - t0
@@ -210,7 +241,7 @@ def reproduce(
     sweep = {"fuzzy": [g for g in grid if g["speed"] in st.sweep_speeds]}
     for c in SWEEP_ONLY:
         sweep[c] = [g for g in rest if g["controller"] == c]
-    sw = _sweep_summary(sweep, out)
+    sw = _sweep_summary(sweep, out, direct)
     times["sweep"] = time.perf_counter() - t0
     if progress:
         progress(7, 7, "report")
@@ -225,7 +256,13 @@ def reproduce(
             "critical_speeds": {k: crit[k] for k in ("v_d", "v_w", "v_c")},
             "weave_frequency_at_v_w": crit["weave_frequency"],
         },
-        "chen_dao": {"fig2": f2, "fig3": f3, "figs4_5": lc, "fig7": f7},
+        "chen_dao": {
+            "fig2": f2,
+            "fig3": f3,
+            "figs4_5": lc,
+            "periodic_range": scan,
+            "fig7": f7,
+        },
         "limit_cycles": lc["limit_cycles"],
         "moore_hubbard": mhr,
         "sweep": sw,
@@ -237,8 +274,12 @@ def reproduce(
 
 
 # -- sweep summary -------------------------------------------------------------------------------
-def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
-    """Identified vs true eigenvalues per controller and method, and their figure."""
+def _sweep_summary(
+    sweep: dict[str, list[dict]], out: Path, direct: dict[str, dict] | None = None
+) -> dict[str, Any]:
+    """Identified vs true eigenvalues per controller and method, and their figure; the
+    direct method's entry carries its one stacked regression (``direct[controller]``,
+    :func:`experiments.reproduce_chen_dao.direct_stacked`) as ``stacked``."""
     from .plots import plt, save
 
     res: dict[str, Any] = {}
@@ -262,6 +303,7 @@ def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
                         "identified": r["eig"],
                         "true": g["truth"],
                         "fell_at": g["fell_at"],
+                        "max_abs_deg": g.get("max_abs_deg"),
                     }
                 )
                 axs[0, j].plot(
@@ -287,6 +329,8 @@ def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
                 "worst": max(errs) if errs else None,
                 "per_speed": per,
             }
+            if m == "direct" and direct is not None:
+                res[f"{c}/{m}"]["stacked"] = direct.get(c)
         sp = [g["speed"] for g in rows]
         if sp:
             from bikeid.sim.linear import eigenvalues_vs_speed
@@ -296,7 +340,7 @@ def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
             ev = eigenvalues_vs_speed(benchmark(), fine).values
             axs[0, j].plot(fine, ev.real, color="0.5", lw=0.8)
             axs[1, j].plot(fine, np.abs(ev.imag), color="0.5", lw=0.8)
-        axs[0, j].set_title(f"{c}: x PEM, + direct, grey = truth", fontsize=9)
+        axs[0, j].set_title(f"{c}: x PEM, + direct", fontsize=9)
         axs[0, j].set_ylim(-30, 8)
         axs[1, j].set_xlabel("speed v [m/s]")
         for a in axs[:, j]:
@@ -304,7 +348,11 @@ def _sweep_summary(sweep: dict[str, list[dict]], out: Path) -> dict[str, Any]:
             a.axhline(0, color="k", lw=0.5)
     axs[0, 0].set_ylabel("real part [1/s]")
     axs[1, 0].set_ylabel("|imag part| [rad/s]")
-    fig.suptitle("Sweep summary: identified vs true eigenvalues (benchmark, nonlinear plant)")
+    fig.suptitle(
+        "Sweep summary: identified vs true eigenvalues (benchmark, nonlinear plant)\n"
+        "x PEM: one model per speed; + direct: one regression over all speeds; grey: truth",
+        fontsize=10,
+    )
     save(fig, out / "sweep_eigenvalues.png")
     res["figure"] = "sweep_eigenvalues.png"
     return res

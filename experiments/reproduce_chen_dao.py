@@ -28,8 +28,12 @@ import numpy as np
 from bikeid.sim.parameters import BicycleParameters
 
 __all__ = [
+    "ANOMALY_MIN_DEPTH",
     "PAPER",
+    "capsize_anomaly",
+    "capsize_roots",
     "critical_from_grid",
+    "direct_stacked",
     "eigen_stderr",
     "fig2_identification",
     "fig3_summary",
@@ -38,6 +42,7 @@ __all__ = [
     "paper_eq5_reading",
     "run_jobs",
     "transfer_functions",
+    "v_d_from_grid",
 ]
 
 #: Numbers printed in Chen & Dao (2010) (signs lost in the extracted text; see
@@ -55,7 +60,32 @@ PAPER = {
     "zeros_delta_abs": [3.311, 1.976],
     "max_error_deg": {"phi": 0.231, "delta": 0.172},
     "critical": {"v_d": 1.465, "v_w": 3.994, "v_c": 10.525, "v_l": 3.152},
+    # Chen & Dao (2010) p. 3, Sec. III.B ("Pole locations and dynamics"), Fig. 3(b): "the
+    # capsize pole goes down to [-]9.123 at a speed of 3.280 m/s then up to [-]0.797 at a speed
+    # of 3.453 m/s [...] the capsize pole passes to a stable region at 3.401 m/s and back to an
+    # unstable region at 3.568 m/s", inside range B2 = v_l .. v_w.  The extracted text lost the
+    # minus signs; "goes down" / "up to" and the stable region between 3.401 and 3.568 m/s make
+    # both values negative.  (The text is not self-consistent: a root at -9.123 at 3.280 m/s is
+    # already stable before the "passes to a stable region at 3.401 m/s".)
+    "anomaly": {
+        "v_l": 3.152,
+        "v_w": 3.994,
+        "dip": (3.280, -9.123),
+        "recovered": (3.453, -0.797),
+        "stable_from": 3.401,
+        "unstable_from": 3.568,
+    },
+    # p. 4, Sec. V: "limit-cycle phase portraits [...] within the speed range from 3.152 to
+    # 3.994 m/s"
+    "periodic_range": (3.152, 3.994),
 }
+#: The paper's anomaly speeds [m/s] (:data:`PAPER` ``anomaly``), identified in every run.
+ANOMALY_SPEEDS = (3.28, 3.401, 3.45, 3.568)
+#: Smallest excursion of the capsize root below its trend [1/s] that counts as the paper's
+#: anomaly: a quarter of the printed one (-9.123 at 3.280 m/s against about -2.4 1/s of the
+#: trend there, 6.7 1/s; even against the printed -0.797 it is 8.3 1/s) and 50 times the
+#: standard error of the identified capsize root in this range (0.01-0.04 1/s).
+ANOMALY_MIN_DEPTH = 2.0
 
 FIG2_SPEED = 4.2  # m/s
 FIG7_SPEED = 15.0 / 3.6  # 15 km/h
@@ -140,9 +170,11 @@ def identify_speed(args: tuple) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``truth`` (sorted true eigenvalues [1/s]), ``methods[m]`` with ``eig`` (identified,
-        paired with ``truth``), for PEM ``stderr`` and ``theta``, or ``error``; run facts
-        (``fell_at``, ``seconds``).
+        ``truth`` (sorted true eigenvalues [1/s]), ``methods["pem"]`` with ``eig``
+        (identified, paired with ``truth``), ``stderr`` and ``theta``, or ``error``; run facts
+        (``fell_at``, ``seconds``).  With "direct": ``_prepared``, the complete run prepared
+        for :func:`direct_stacked`, and ``_prepared_truth``, its noise-free signals prepared
+        alike (or ``methods["direct"]["error"]`` if it ended early).
     """
     from bikeid.ident import pem
     from bikeid.sim.linear import eigenvalues, match_eigenvalues
@@ -161,6 +193,7 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         "speed": float(speed),
         "fell_at": run.meta.get("fell_at"),
         "seconds": float(run.t[-1]),
+        "max_abs_deg": {k: float(np.degrees(np.abs(run.true(k)).max())) for k in ("phi", "delta")},
         "truth": truth,
         "methods": {},
     }
@@ -179,17 +212,22 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         except (ValueError, np.linalg.LinAlgError) as exc:
             out["methods"]["pem"] = {"error": str(exc)}
     if "direct" in methods:
-        from bikeid.ident.direct import identify
+        # one speed cannot separate K0dd from K2dd (ident.direct refuses it): the run is kept,
+        # prepared, for the regression over all speeds (:func:`direct_stacked`)
+        from bikeid.dataset.run import run_stop
         from bikeid.ident.signals import prepare
 
-        try:
-            res = identify(prepare(run, derivative="forward"), reference=p)
+        stop = run_stop(run)
+        if stop is None:
+            out["_prepared"] = prepare(run, derivative="forward")
+            # the same run's noise-free signals, prepared alike: separates the sensor
+            # noise's share of the direct method's bias from the rest
+            out["_prepared_truth"] = prepare(run, derivative="forward", source="truth")
+        else:
             out["methods"]["direct"] = {
-                "eig": match_eigenvalues(res.eigenvalues(speed), truth),
-                "error": None,
+                "error": f"run ended early at {float(stop['time']):.2f} s ({stop['cause']}): "
+                "left out of the direct regression"
             }
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            out["methods"]["direct"] = {"error": str(exc)}
     return out
 
 
@@ -212,6 +250,86 @@ def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
         return [identify_speed(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         return list(pool.map(identify_speed, jobs, chunksize=1))
+
+
+def direct_stacked(results: list[dict[str, Any]], p: BicycleParameters) -> dict[str, Any]:
+    """Moore & Hubbard's direct method with the runs of every speed in one regression.
+
+    At one speed g q and v^2 q are the same column up to speed noise, so K0dd and K2dd
+    cannot be separated (:func:`ident.direct.identify` refuses it); over several speeds they
+    can.  :func:`ident.direct.identify` stacks the complete runs (``_prepared`` of
+    :func:`identify_speed`) of one controller (Moore & Hubbard's free sets, the other entries
+    at the Whipple values of ``p``).  Each result gets ``methods["direct"]["eig"]``: the
+    one stacked model's eigenvalues at that run's speed, paired with the truth.
+
+    Parameters
+    ----------
+    results : list of dict
+        :func:`identify_speed` results of one controller (modified in place: ``_prepared``
+        removed, ``methods["direct"]`` set).
+    p : BicycleParameters
+        The simulated bicycle: fixed entries and ground truth.
+
+    Returns
+    -------
+    dict
+        ``speeds`` used [m/s]; ``entries`` (free entry -> identified, stderr, true, in the
+        units of its matrix: M kg m^2, C1 kg m, K0 kg m, K2 kg, and ``noise_free``: the
+        same regression on the runs' noise-free signals, ``_prepared_truth``); ``condition`` and
+        ``vaf_moore`` per row; ``notes``; or ``error`` (why no model).
+    """
+    from bikeid.ident.direct import identify
+    from bikeid.sim.linear import canonical_matrices, match_eigenvalues
+
+    used = [g for g in results if "_prepared" in g]
+    runs = [g.pop("_prepared") for g in used]
+    clean = [g.pop("_prepared_truth", None) for g in used]
+    for g in results:
+        g.pop("_prepared", None)
+        g.pop("_prepared_truth", None)
+    speeds = sorted({g["speed"] for g in used})
+    out: dict[str, Any] = {"speeds": speeds, "n_runs": len(runs)}
+    err = None
+    if len(speeds) < 2:
+        err = f"{len(speeds)} complete run speed(s): K0dd and K2dd need runs at two or more speeds"
+    else:
+        try:
+            res = identify(runs, reference=p)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            err = str(exc)
+    if err is not None:
+        out["error"] = err
+        for g in used:
+            g["methods"]["direct"] = {"error": err}
+        return out
+    cm = canonical_matrices(p)
+    idx = {"p": 0, "d": 1}
+    out["entries"] = {
+        n: {
+            "identified": v,
+            "stderr": res.stderr[n],
+            "true": float(getattr(cm, n[:-2])[idx[n[-2]], idx[n[-1]]])
+            if n[:-2] in ("M", "C1", "K0", "K2")
+            else None,
+        }
+        for n, v in res.free.items()
+    }
+    if all(c is not None for c in clean):
+        try:
+            res0 = identify(clean, reference=p)
+            for n, e in out["entries"].items():
+                e["noise_free"] = res0.free.get(n)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            out["noise_free_error"] = str(exc)
+    out["condition"] = res.condition
+    out["vaf_moore"] = res.vaf_moore
+    out["notes"] = list(res.notes)
+    for g in used:
+        g["methods"]["direct"] = {
+            "eig": match_eigenvalues(res.eigenvalues(g["speed"]), g["truth"]),
+            "error": None,
+        }
+    return out
 
 
 # -- Fig. 2 / eqs. 5-6 -------------------------------------------------------------------------
@@ -434,8 +552,8 @@ def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float 
     ``eigs[k]`` holds the 4 eigenvalues at ``speeds[k]``.  v_w: lowest speed where the
     largest real part of a complex pair changes sign from + to -; v_c: lowest speed above
     v_w where the largest real eigenvalue of the real ones changes sign from - to + (the
-    capsize root); v_d: midpoint between the last grid speed with only real eigenvalues and
-    the next speed (None if a complex pair exists at the first speed).
+    capsize root); v_d: :func:`v_d_from_grid` (interpolated zero of the weave pair's
+    discriminant; None when the data do not bracket it).
 
     Parameters
     ----------
@@ -450,19 +568,14 @@ def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float 
         ``v_d``, ``v_w``, ``v_c`` [m/s] or None where not found.
     """
     speeds = np.asarray(speeds, float)
-    has_pair = np.array([np.any(np.abs(e.imag) > 1e-9) for e in eigs])
     weave_re = np.array(
         [max((z.real for z in e if abs(z.imag) > 1e-9), default=np.nan) for e in eigs]
     )
     real_max = np.array(
         [max((z.real for z in e if abs(z.imag) <= 1e-9), default=np.nan) for e in eigs]
     )
-    out: dict[str, float | None] = {"v_d": None, "v_w": None, "v_c": None}
-    if not has_pair[0]:
-        idx = np.where(~has_pair)[0]
-        k = idx[-1]
-        if k + 1 < speeds.size:
-            out["v_d"] = float(0.5 * (speeds[k] + speeds[k + 1]))
+    out: dict[str, float | None] = {"v_d": v_d_from_grid(speeds, eigs)["v_d"], "v_w": None,
+                                    "v_c": None}  # fmt: skip
     for k in range(speeds.size - 1):
         a, b = weave_re[k], weave_re[k + 1]
         if np.isfinite(a) and np.isfinite(b) and a > 0 >= b:
@@ -476,6 +589,219 @@ def critical_from_grid(speeds: np.ndarray, eigs: np.ndarray) -> dict[str, float 
         if np.isfinite(a) and np.isfinite(b) and a < 0 <= b:
             out["v_c"] = float(speeds[k] + (speeds[k + 1] - speeds[k]) * (-a) / (b - a))
             break
+    return out
+
+
+def _pair_discriminant(e: np.ndarray) -> float:
+    """((r1 - r2) / 2)^2 of the weave pair when real, -Im^2 when complex [1/s^2]."""
+    e = np.asarray(e, complex)
+    cplx = [z for z in e if abs(z.imag) > 1e-9]
+    if cplx:
+        return -float(max(cplx, key=lambda z: z.real).imag ** 2)
+    r = np.sort(e.real)[-2:]  # below v_d the weave pair is the two largest real roots
+    return float(((r[1] - r[0]) / 2) ** 2)
+
+
+def v_d_from_grid(
+    speeds: np.ndarray, eigs: np.ndarray, stderr: np.ndarray | None = None
+) -> dict[str, Any]:
+    """v_d (the weave pair turns complex) from eigenvalues on a speed grid, by root finding.
+
+    The weave pair is the quadratic factor s^2 - 2 a s + (a^2 - D) of the characteristic
+    polynomial, D = ((r1 - r2) / 2)^2 while its roots r1, r2 are real (the two largest real
+    roots) and D = -Im^2 once they are a complex pair.  D(v) is smooth and has a simple zero
+    at v_d (the double root), so v_d is the zero of D linearly interpolated between the two
+    grid speeds that bracket its sign change (error O(h^2 D'') for grid step h; the
+    bracket is the resolution guaranteed by the data).
+
+    Parameters
+    ----------
+    speeds : (K,) array_like
+        Increasing speeds [m/s].
+    eigs : (K, 4) array_like of complex
+        Eigenvalues at each speed [1/s].
+    stderr : (K, 4, 2) array_like, optional
+        Standard errors of (Re, Im) per eigenvalue [1/s], to say how firmly the lowest
+        speed has a complex pair.
+
+    Returns
+    -------
+    dict
+        ``v_d`` [m/s] or None, ``bracket`` (the two grid speeds [m/s]) or None,
+        ``crossings`` (every interpolated real-to-complex zero [m/s]), ``discriminant``
+        (D per speed [1/s^2]) and ``reason`` (why None, else None).
+    """
+    speeds = np.asarray(speeds, float)
+    D = np.array([_pair_discriminant(e) for e in eigs])
+    cross = []
+    for k in range(speeds.size - 1):
+        if D[k] > 0 >= D[k + 1]:
+            v = speeds[k] + (speeds[k + 1] - speeds[k]) * D[k] / (D[k] - D[k + 1])
+            cross.append((float(v), (float(speeds[k]), float(speeds[k + 1]))))
+    out: dict[str, Any] = {
+        "v_d": cross[0][0] if cross else None,
+        "bracket": cross[0][1] if cross else None,
+        "crossings": [c[0] for c in cross],
+        "discriminant": D,
+        "reason": None,
+    }
+    if not cross and speeds.size:
+        if D[0] <= 0:
+            im = math.sqrt(-D[0])
+            se = ""
+            if stderr is not None:
+                e0 = np.asarray(eigs[0], complex)
+                j = int(np.argmax(np.where(np.abs(e0.imag) > 1e-9, e0.real, -np.inf)))
+                se = f" +- {float(np.asarray(stderr)[0][j][1]):.2g}"
+            out["reason"] = (
+                f"the weave pair is complex at every identified speed, from the lowest "
+                f"({speeds[0]:g} m/s, |Im| = {im:.3g}{se} 1/s): v_d lies below the data"
+            )
+        else:
+            out["reason"] = f"the weave pair is real at every identified speed up to {speeds[-1]:g}"
+    return out
+
+
+def capsize_roots(eigs: np.ndarray) -> np.ndarray:
+    """The capsize root at each speed: the largest real root when a complex (weave) pair
+    exists, the second smallest when all four roots are real (the two largest are then the
+    weave pair), NaN otherwise.
+
+    Parameters
+    ----------
+    eigs : (K, 4) array_like of complex
+        Eigenvalues at each speed [1/s].
+
+    Returns
+    -------
+    (K,) ndarray
+        Capsize root [1/s] (NaN where there is none).
+    """
+    out = np.full(len(eigs), np.nan)
+    for k, e in enumerate(eigs):
+        e = np.asarray(e, complex)
+        real = np.sort(e.real[np.abs(e.imag) <= 1e-9])
+        if real.size == 2:
+            out[k] = real[-1]
+        elif real.size == 4:
+            out[k] = real[1]
+    return out
+
+
+def capsize_anomaly(
+    speeds: np.ndarray,
+    eigs: np.ndarray,
+    stderr: np.ndarray | None = None,
+    window: tuple[float, float] = (3.152, 3.994),
+    min_depth: float = ANOMALY_MIN_DEPTH,
+    reference: tuple[float, float] = (3.568, 3.994),
+) -> dict[str, Any]:
+    """Is Chen & Dao's capsize anomaly in these eigenvalues?  Verdict and its numbers.
+
+    The paper's capsize root drops from its trend to -9.123 1/s at 3.280 m/s and returns by
+    3.453 m/s, inside v_l .. v_w = 3.152 .. 3.994 m/s (:data:`PAPER` ``anomaly``).  Here the
+    capsize root (:func:`capsize_roots`) at the speeds inside ``window`` is compared with its
+    trend: the least-squares straight line through the speeds of ``reference``, the part of
+    the window after the paper's anomaly (its capsize root is back on the unstable side at
+    3.568 m/s), extrapolated over the rest.  (A fit over the whole window is tilted by the
+    dip itself: the paper's covers 40 % of the window.)  On the true eigenvalues the
+    extrapolation error is below 0.15 1/s (the branch's curvature).  The deepest excursion
+    below the trend decides: ``present`` if it exceeds the threshold max(``min_depth``, 5
+    standard errors of that root), ``absent`` otherwise, ``undecided`` with fewer than 5
+    usable speeds.
+
+    Parameters
+    ----------
+    speeds : (K,) array_like
+        Speeds [m/s] (any order).
+    eigs : (K, 4) array_like of complex
+        Identified eigenvalues at each speed [1/s].
+    stderr : (K, 4, 2) array_like, optional
+        Standard errors of (Re, Im) per eigenvalue [1/s], same order as ``eigs``.
+    window : (float, float)
+        Speed range searched [m/s] (the paper's B2 range by default).
+    min_depth : float
+        Smallest excursion that counts [1/s] (:data:`ANOMALY_MIN_DEPTH`).
+    reference : (float, float)
+        Speeds (lo, hi] [m/s] whose capsize roots define the trend (at least 3).
+
+    Returns
+    -------
+    dict
+        ``verdict`` ("present", "absent", "undecided"), ``reason`` (one line with the
+        deciding numbers), ``reference``, ``n_speeds``, ``speeds`` and ``capsize`` [1/s]
+        used, ``trend`` (intercept [1/s], slope [1/(s m/s)]), ``deepest`` (speed [m/s],
+        capsize root, trend value, depth below the trend, its threshold [1/s], standard error
+        or None),
+        ``onset`` (lowest speed whose excursion exceeds the threshold [m/s], or None) and
+        ``sign_changes`` (speeds where the capsize root changes sign, linearly
+        interpolated [m/s]).
+    """
+    v = np.asarray(speeds, float)
+    order = np.argsort(v)
+    v = v[order]
+    eigs = [np.asarray(eigs[i], complex) for i in order]
+    c = capsize_roots(eigs)
+    se = np.full(v.size, np.nan)
+    if stderr is not None:
+        st = [np.asarray(stderr[i], float) for i in order]
+        for k, e in enumerate(eigs):
+            if np.isfinite(c[k]):
+                j = int(np.argmin(np.abs(e - c[k])))
+                se[k] = st[k][j][0]
+    sel = (v >= window[0] - 1e-9) & (v <= window[1] + 1e-9) & np.isfinite(c)
+    v, c, se = v[sel], c[sel], se[sel]
+    out: dict[str, Any] = {
+        "window": tuple(window),
+        "reference": tuple(reference),
+        "min_depth": min_depth,
+        "n_speeds": int(v.size),
+        "speeds": v,
+        "capsize": c,
+        "trend": None,
+        "deepest": None,
+        "onset": None,
+        "sign_changes": [
+            float(v[k] + (v[k + 1] - v[k]) * c[k] / (c[k] - c[k + 1]))
+            for k in range(v.size - 1)
+            if c[k] * c[k + 1] < 0
+        ],
+    }
+    if v.size < 5:
+        out["verdict"] = "undecided"
+        out["reason"] = f"{v.size} speeds with a capsize root in {window} m/s (need 5)"
+        return out
+    thr = np.maximum(min_depth, 5 * np.nan_to_num(se, nan=0.0))
+    ref = (v > reference[0] + 1e-9) & (v <= reference[1] + 1e-9)
+    if ref.sum() < 3:
+        out["verdict"] = "undecided"
+        out["reason"] = (
+            f"{int(ref.sum())} speeds in the reference range {reference} m/s (need 3 for the trend)"
+        )
+        return out
+    slope, icpt = np.polyfit(v[ref], c[ref], 1)
+    trend = icpt + slope * v
+    resid = c - trend
+    k = int(np.argmin(resid))
+    depth = float(-resid[k])
+    big = np.nonzero(-resid > thr)[0]
+    out["trend"] = (float(icpt), float(slope))
+    out["deepest"] = {
+        "speed": float(v[k]),
+        "capsize": float(c[k]),
+        "trend": float(trend[k]),
+        "depth": depth,
+        "threshold": float(thr[k]),
+        "stderr": None if not np.isfinite(se[k]) else float(se[k]),
+    }
+    out["onset"] = float(v[big[0]]) if big.size else None
+    present = depth > thr[k]
+    out["verdict"] = "present" if present else "absent"
+    out["reason"] = (
+        f"deepest capsize root {c[k]:.3f} 1/s at {v[k]:.3f} m/s is {depth:.3f} 1/s below its "
+        f"trend ({trend[k]:.3f}); threshold {thr[k]:.3f} 1/s; {v.size} speeds in "
+        f"{window[0]:g}-{window[1]:g} m/s"
+    )
     return out
 
 
@@ -498,7 +824,10 @@ def fig3_summary(
     Returns
     -------
     dict
-        ``critical_true``/``critical_identified``/``critical_paper`` [m/s], ``rows`` (per
+        ``critical_true``/``critical_identified``/``critical_paper`` [m/s],
+        ``v_d_identified`` (:func:`v_d_from_grid` on the main grid), ``anomaly``
+        (:func:`capsize_anomaly` on every fit in 3-4.2 m/s, with ``at_paper_speeds`` and
+        ``truth``, the verdict on the true eigenvalues at the same speeds), ``rows`` (per
         speed: identified and true eigenvalues [1/s], standard errors), ``failed``; private
         ``_ok`` and ``_zoom``, the successful fits of the main grid and of the zoom range.
     """
@@ -527,14 +856,35 @@ def fig3_summary(
                 "seconds": g["seconds"],
             }
         )
+    vd = v_d_from_grid(speeds, eig, np.array([g["methods"]["pem"]["stderr"] for g in ok]))
+    an_runs = sorted(zoom_ok, key=lambda g: g["speed"])
+    anomaly = capsize_anomaly(
+        [g["speed"] for g in an_runs],
+        [g["methods"]["pem"]["eig"] for g in an_runs],
+        [g["methods"]["pem"]["stderr"] for g in an_runs],
+    )
+    anomaly["at_paper_speeds"] = [
+        {
+            "speed": g["speed"],
+            "capsize_identified": float(capsize_roots([g["methods"]["pem"]["eig"]])[0]),
+            "capsize_true": float(capsize_roots([g["truth"]])[0]),
+        }
+        for g in an_runs
+        if any(abs(g["speed"] - a) < 1e-9 for a in ANOMALY_SPEEDS)
+    ]
+    anomaly["truth"] = capsize_anomaly(
+        [g["speed"] for g in an_runs], [g["truth"] for g in an_runs]
+    )["verdict"]
     return {
         "critical_true": {k: crit_true[k] for k in ("v_d", "v_w", "v_c")},
         "critical_identified": crit_id,
         "critical_paper": PAPER["critical"],
+        "v_d_identified": vd,
+        "anomaly": anomaly,
         "rows": rows,
         "failed": [
             {"speed": g["speed"], "error": g["methods"]["pem"]["error"]}
-            for g in grid
+            for g in list(grid) + list(zoom or [])
             if g["methods"].get("pem", {}).get("error")
         ],
         "_ok": ok,

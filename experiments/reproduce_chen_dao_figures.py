@@ -151,6 +151,21 @@ def fig3(
             for val in crit_id.values():
                 if val is not None and lo <= val <= hi:
                     a.axvline(val, color="m", ls=":", lw=1.0)
+            # the paper's boundaries (Chen & Dao p. 3, Sec. III.B; cd.PAPER)
+            for key, val in cd.PAPER["critical"].items():
+                if lo <= val <= hi:
+                    a.axvline(val, color="tab:orange", ls="-.", lw=0.9)
+                    if a is a1:
+                        a1.annotate(f"paper {key}", (val, -1), fontsize=6, rotation=90,
+                                    color="tab:orange", ha="right", va="top")  # fmt: skip
+        an = cd.PAPER["anomaly"]
+        pts = [an["dip"], an["recovered"]]
+        if any(lo <= x <= hi for x, _ in pts):
+            a1.plot(*zip(*pts, strict=True), "D", color="tab:orange", ms=6, mfc="none",
+                    label="paper: capsize root (p. 3)")  # fmt: skip
+            zc = [an["stable_from"], an["unstable_from"]]
+            a1.plot(zc, [0, 0], "o", color="tab:orange", ms=5, mfc="none",
+                    label="paper: capsize sign changes")  # fmt: skip
         ymin = max(-40.0, float(np.nanmin(ev.real)) - 2)
         a1.set_ylim(ymin, 8)
         a2.set_ylim(0, max(20.0, float(np.nanmax(np.abs(ev.imag))) + 1))
@@ -181,7 +196,8 @@ def fig3(
         a1.set_ylabel("real part [1/s]")
         a2.set_ylabel("|imag part| [rad/s]")
         a2.set_xlabel(
-            "speed v [m/s]   (grey dashed: true v_d, v_w, v_c; magenta dotted: identified)"
+            "speed v [m/s]   (grey dashed: true v_d, v_w, v_c; magenta dotted: identified; "
+            "orange dash-dot: the paper's)"
         )
         a1.set_title(title, fontsize=9)
         a1.legend(fontsize=6, loc="lower left", ncol=2)
@@ -198,8 +214,17 @@ def fig3(
     save(fig, out / "cd_fig3a_eigenvalues.png")
     if zoom_ok:
         fig, axs = plt.subplots(2, 1, figsize=(9, 7.5), sharex=True)
-        panel(axs, 3.0, 4.2, zoom_ok, "Chen & Dao Fig. 3(b) analogue: zoom 3-4.2 m/s")
+        an = res["anomaly"]
+        panel(
+            axs,
+            3.0,
+            4.2,
+            zoom_ok,
+            "Chen & Dao Fig. 3(b) analogue: zoom 3-4.2 m/s; capsize anomaly "
+            f"{an['verdict']} in our data ({an['reason']})",
+        )
         axs[0].set_ylim(-16, 4)
+        axs[0].title.set_fontsize(7)
         save(fig, out / "cd_fig3b_zoom.png")
     res["figures"] = ["cd_fig3a_eigenvalues.png"] + (["cd_fig3b_zoom.png"] if zoom_ok else [])
     return res
@@ -257,8 +282,31 @@ def fig7(
     return res
 
 
+def _coast_entry(args: tuple) -> tuple[dict, dict]:
+    """One coasting run's analysis and summary entry (with its Floquet multipliers when
+    periodic); picklable worker: (parameters, initial condition, duration [s])."""
+    from . import limit_cycles as lc
+
+    p, ic, duration = args
+    r = lc.periodicity(lc.coast(p, ic, duration), ic.label)
+    return r.as_dict(), lc.summary_entry(p, ic, r)
+
+
+def _map(fn, jobs: list, workers: int) -> list:
+    if workers <= 1 or len(jobs) <= 1:
+        return [fn(j) for j in jobs]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(fn, jobs, chunksize=1))
+
+
 def limit_cycle_study(
-    p: BicycleParameters, out: Path, duration: float, log: Callable[[str], None] = lambda s: None
+    p: BicycleParameters,
+    out: Path,
+    duration: float,
+    log: Callable[[str], None] = lambda s: None,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check.
 
@@ -272,6 +320,8 @@ def limit_cycle_study(
         Length of each coasting run [s].
     log : callable
         Progress lines.
+    workers : int, optional
+        Worker processes for the runs and their Floquet multipliers (1: in this process).
 
     Returns
     -------
@@ -293,14 +343,18 @@ def limit_cycle_study(
         "figures": [],
         "limit_cycles": [],
     }
-    for name, conds in (("fig4", lc.FIG4_CONDITIONS), ("fig5", lc.FIG5_CONDITIONS)):
-        trajs = [lc.coast(p, ic, duration) for ic in conds]
-        labels = [ic.label for ic in conds]
-        per = [lc.periodicity(tr, ic.label) for tr, ic in zip(trajs, conds, strict=True)]
-        res[name] = [r.as_dict() for r in per]
-        res["limit_cycles"] += [
-            dict(lc.summary_entry(p, ic, r), figure=name) for ic, r in zip(conds, per, strict=True)
-        ]
+    figs = (("fig4", lc.FIG4_CONDITIONS), ("fig5", lc.FIG5_CONDITIONS))
+    conds = [ic for _, cs in figs for ic in cs]
+    # every run and its exact mirror image in one pool (a mirror is only kept for a
+    # periodic original; the mirrors of falls are short runs)
+    mirrors = [lc.mirrored(ic) for ic in conds]
+    done = _map(_coast_entry, [(p, ic, duration) for ic in conds + mirrors], workers)
+    by_label = {ic.label: d for ic, d in zip(conds + mirrors, done, strict=True)}
+    for name, cs in figs:
+        res[name] = [by_label[ic.label][0] for ic in cs]
+        res["limit_cycles"] += [dict(by_label[ic.label][1], figure=name) for ic in cs]
+        trajs = [lc.coast(p, ic, duration) for ic in cs]  # for the figures (deterministic)
+        labels = [ic.label for ic in cs]
         lc.plot_phase_portraits(
             trajs,
             labels,
@@ -316,7 +370,7 @@ def limit_cycle_study(
         )
         res["figures"] += [f"cd_{name}_phase.png", f"cd_{name}_energy_speed.png"]
         log(f"  {name}: " + ", ".join(f"{r['label']}: {r['verdict']}" for r in res[name]))
-    res["mirror_checks"] = _mirror_checks(p, duration, res["limit_cycles"])
+    res["mirror_checks"] = _mirror_checks(res["limit_cycles"], by_label)
     ev = np.sort_complex(eigenvalues(p, lc.SPEED))
     res["linear_eigenvalues"] = ev
     cs = critical_speeds(p)
@@ -324,8 +378,9 @@ def limit_cycle_study(
     return res
 
 
-def _mirror_checks(p: BicycleParameters, duration: float, entries: list[dict]) -> list[dict]:
-    """Run the exact mirror image of every periodic case; its multipliers must agree."""
+def _mirror_checks(entries: list[dict], by_label: dict[str, tuple[dict, dict]]) -> list[dict]:
+    """The exact mirror image of every periodic case (``by_label``: label -> the
+    :func:`_coast_entry` result, mirrors included); its multipliers must agree."""
     from . import limit_cycles as lc
 
     conds = {ic.label: ic for ic in lc.FIG4_CONDITIONS + lc.FIG5_CONDITIONS}
@@ -333,8 +388,7 @@ def _mirror_checks(p: BicycleParameters, duration: float, entries: list[dict]) -
     for e in entries:
         if e["outcome"] != "periodic":
             continue
-        ic = lc.mirrored(conds[e["label"]])
-        m = lc.summary_entry(p, ic, lc.periodicity(lc.coast(p, ic, duration), ic.label))
+        m = by_label[lc.mirrored(conds[e["label"]]).label][1]
         d = None
         if m["floquet_multipliers"] is not None and e["floquet_multipliers"] is not None:
             a = np.array([complex(*z) for z in e["floquet_multipliers"]])

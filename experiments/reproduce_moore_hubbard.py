@@ -403,7 +403,7 @@ def reproduce(
         table5[mname] = {"M": cm.M, "C1": cm.C1, "K0": cm.K0, "K2": cm.K2, "H": H}
     cmw, Hw = _model_matrices("B", None)
     table5["Whipple (benchmark)"] = {"M": cmw.M, "C1": cmw.C1, "K0": cmw.K0, "K2": cmw.K2, "H": Hw}
-    figs = _figures(out, {k: _model_matrices("B", models[k])[0] for k in ("B-N", "B-S")}, cmw)
+    figs = _figures(out, {k: _model_matrices("B", models[k])[0] for k in ("B-N", "B-S")})
     return {
         "riders": RIDERS,
         "environments": ENVIRONMENTS,
@@ -421,89 +421,126 @@ def reproduce(
     }
 
 
-def _figures(out: Path, models: dict[str, Any], whipple) -> list[str]:
+def _truth_eigenvalues(env: str, speeds: np.ndarray) -> np.ndarray:
+    """Eigenvalues [1/s] of the benchmark rider's true linear plant in environment ``env``
+    at each speed, tracked continuously across speeds: the Whipple model for N; for S plus
+    the steer damping (``ident.experiment_model``; the Coulomb friction has no linear term).
+    """
+    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.sim.linear import match_eigenvalues
+    from bikeid.sim.parameters import benchmark
+
+    fx = {} if env == "N" else {"steer_viscous_damping": 0.3}
+    m = ExperimentModel(p=benchmark(), effects=fx)
+    out = np.empty((len(speeds), 4), complex)
+    for k, v in enumerate(speeds):
+        ev = np.linalg.eigvals(m.continuous(float(v))[0])
+        out[k] = ev if k == 0 else match_eigenvalues(ev, out[k - 1])
+    return out
+
+
+def _truth_tf(env: str, v: float):
+    """python-control T_delta -> phi transfer function of the true plant in ``env``."""
+    import control
+
+    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.sim.parameters import benchmark
+
+    fx = {} if env == "N" else {"steer_viscous_damping": 0.3}
+    A, B = ExperimentModel(p=benchmark(), effects=fx).continuous(v)
+    C = np.zeros((1, A.shape[0]))
+    C[0, 0] = 1.0
+    return control.ss(A, B[:, 1:2], C, 0)  # input w: torque straight on the steer
+
+
+def _figures(out: Path, models: dict[str, Any]) -> list[str]:
     import control
 
     from bikeid.sim.linear import eigenvalues_vs_speed, state_space
 
-    from .plots import plt, save
+    from .plots import phase_deg, plt, save
 
     speeds = np.linspace(0.5, 10.0, 200)
-    styles = {"Whipple (benchmark)": ("k", "-"), "B-N": ("tab:blue", "--"), "B-S": ("tab:red", ":")}
-    allm = {"Whipple (benchmark)": whipple, **models}
+    styles = {"B-N": ("tab:blue", "--"), "B-S": ("tab:red", "--")}
+    truth = {
+        "truth N (Whipple, benchmark)": ("tab:blue", "-", _truth_eigenvalues("N", speeds)),
+        "truth S (Whipple + steer damping)": ("tab:red", "-", _truth_eigenvalues("S", speeds)),
+    }
+    ident = {name: eigenvalues_vs_speed(cm, speeds).values for name, cm in models.items()}
+    curves = {**{k: v for k, v in truth.items()}}
+    for name, ev in ident.items():
+        c, ls = styles[name]
+        curves[f"identified {name}"] = (c, ls, ev)
     # Fig. 2: root locus
     fig, ax = plt.subplots(figsize=(7.5, 6))
-    for name, cm in allm.items():
-        c, ls = styles[name]
-        sw = eigenvalues_vs_speed(cm, speeds)
+    for name, (c, ls, ev) in curves.items():
+        lw = 1.6 if name.startswith("truth") else 1.0
         for j in range(4):
-            ax.plot(
-                sw.values[:, j].real,
-                sw.values[:, j].imag,
-                color=c,
-                ls=ls,
-                lw=1.0,
-                label=name if j == 0 else None,
-            )
+            ax.plot(ev[:, j].real, ev[:, j].imag, color=c, ls=ls, lw=lw,
+                    alpha=0.45 if name.startswith("truth") else 1.0,
+                    label=name if j == 0 else None)  # fmt: skip
         for v in (2.0, 4.0, 6.0, 9.0):
-            ev = sw.values[np.argmin(np.abs(speeds - v))]
-            ax.plot(ev.real, ev.imag, "o", color=c, ms=3)
+            e = ev[np.argmin(np.abs(speeds - v))]
+            ax.plot(e.real, e.imag, "o", color=c, ms=3)
     ax.set_xlim(-20, 10)
     ax.axvline(0, color="0.5", lw=0.6)
     ax.set_xlabel("real part [1/s]")
     ax.set_ylabel("imaginary part [rad/s]")
     ax.set_title(
-        "Moore & Hubbard Fig. 2 analogue: root locus 0.5-10 m/s\n"
-        "(dots at 2, 4, 6, 9 m/s; B = benchmark rider, N/S = environment)",
+        "Moore & Hubbard Fig. 2 analogue: root locus 0.5-10 m/s, benchmark rider\n"
+        "(solid: truth of each environment, dashed: identified; dots at 2, 4, 6, 9 m/s)",
         fontsize=9,
     )
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     save(fig, out / "mh_fig2_root_locus.png")
     # Fig. 3: real and imaginary parts vs speed
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
-    for name, cm in allm.items():
-        c, ls = styles[name]
-        sw = eigenvalues_vs_speed(cm, speeds)
+    for name, (c, ls, ev) in curves.items():
+        lw = 1.6 if name.startswith("truth") else 1.0
+        al = 0.45 if name.startswith("truth") else 1.0
         for j in range(4):
-            a1.plot(
-                speeds, sw.values[:, j].real, color=c, ls=ls, lw=1.0, label=name if j == 0 else None
-            )
-            a2.plot(speeds, np.abs(sw.values[:, j].imag), color=c, ls=ls, lw=1.0)
+            a1.plot(speeds, ev[:, j].real, color=c, ls=ls, lw=lw, alpha=al,
+                    label=name if j == 0 else None)  # fmt: skip
+            a2.plot(speeds, np.abs(ev[:, j].imag), color=c, ls=ls, lw=lw, alpha=al)
     a1.set_ylim(-20, 10)
     a1.axhline(0, color="0.5", lw=0.6)
     a1.set_ylabel("real part [1/s]")
     a2.set_ylabel("|imag part| [rad/s]")
     a2.set_xlabel("speed v [m/s]")
-    a1.legend(fontsize=8)
+    a1.legend(fontsize=7)
     a1.set_title(
-        "Moore & Hubbard Fig. 3 analogue: eigenvalues vs speed, identified vs Whipple", fontsize=9
+        "Moore & Hubbard Fig. 3 analogue: eigenvalues vs speed, identified vs each "
+        "environment's truth",
+        fontsize=9,
     )
     for a in (a1, a2):
         a.grid(alpha=0.3)
     save(fig, out / "mh_fig3_eigenvalues.png")
     # Fig. 4: Bode of T_delta -> phi
-    w = np.logspace(-1, 2, 300)
+    # phases unwrapped from 1e-5 rad/s, where every curve is at the phase of its static gain
+    # (0 or -180 deg: phase_deg's branch), and drawn from 0.1 rad/s
+    w = np.logspace(-5, 2, 700)
+    shown = w >= 0.1
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     colors = dict(zip(BODE_SPEEDS, ("tab:blue", "tab:orange", "tab:green", "tab:red"), strict=True))
-    for name, ls in (("Whipple (benchmark)", "-"), ("B-S", "--")):
-        cm = allm[name]
+    for name, ls in (("truth N", "-"), ("truth S", ":"), ("B-S", "--")):
         for v in BODE_SPEEDS:
-            sys = state_space(cm, v, inputs=("T_delta",))[0, 0]
-            resp = control.frequency_response(sys, w)
-            mag = np.abs(resp.complex).ravel()
-            ph = np.unwrap(np.angle(resp.complex).ravel())
-            a1.semilogx(
-                w, 20 * np.log10(mag), color=colors[v], ls=ls, lw=1.0, label=f"{name}, {v:g} m/s"
-            )
-            a2.semilogx(w, np.degrees(ph), color=colors[v], ls=ls, lw=1.0)
+            if name == "B-S":
+                sys = state_space(models["B-S"], v, inputs=("T_delta",))[0, 0]
+            else:
+                sys = _truth_tf(name[-1], v)
+            resp = control.frequency_response(sys, w).complex.ravel()
+            a1.semilogx(w[shown], 20 * np.log10(np.abs(resp[shown])), color=colors[v], ls=ls,
+                        lw=1.0, label=f"{name}, {v:g} m/s")  # fmt: skip
+            a2.semilogx(w[shown], phase_deg(resp)[shown], color=colors[v], ls=ls, lw=1.0)
     a1.set_ylabel("|phi / T_delta| [dB re 1 rad/(N m)]")
-    a2.set_ylabel("phase [deg]")
+    a2.set_ylabel("phase [deg] (0 or -180 at w -> 0)")
     a2.set_xlabel("frequency [rad/s]")
-    a1.legend(fontsize=7, ncol=2)
+    a1.legend(fontsize=6, ncol=3)
     a1.set_title(
-        "Moore & Hubbard Fig. 4 analogue: steer torque to roll angle "
-        "(solid: Whipple, dashed: identified B-S)",
+        "Moore & Hubbard Fig. 4 analogue: steer torque to roll angle (solid: truth N = "
+        "Whipple, dotted: truth S, dashed: identified B-S)",
         fontsize=9,
     )
     for a in (a1, a2):

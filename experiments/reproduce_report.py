@@ -13,6 +13,9 @@ from typing import Any
 import numpy as np
 
 from .report import Report, fmt, fmt_complex
+from .reproduce_chen_dao import PAPER
+
+PAPER_ANOMALY = PAPER["anomaly"]
 
 __all__ = ["build_report"]
 
@@ -50,14 +53,69 @@ def build_report(s: dict[str, Any]) -> Report:
     )
     rep.table(["setting", "value"], [[k, str(v)] for k, v in st.items()])
     _report_fig2(rep, cd["fig2"])
-    _report_fig3(rep, cd["fig3"], s["truth"])
+    _report_fig3(rep, cd["fig3"], s["truth"], cd.get("periodic_range"))
     _report_limit_cycles(rep, cd["figs4_5"])
+    if cd.get("periodic_range") is not None:
+        _report_periodic_range(rep, cd["periodic_range"])
     _report_fig7(rep, cd["fig7"])
     _report_mh(rep, s["moore_hubbard"])
     _report_sweep(rep, s["sweep"])
     rep.heading("Run times")
     rep.table(["stage", "seconds"], [[k, f"{v:.1f}"] for k, v in s["seconds"].items()])
     return rep
+
+
+def _paper_capsize(v: float) -> str:
+    """What the paper prints about the capsize root at speed v (p. 3), as text."""
+    pa = PAPER_ANOMALY
+    for key in ("dip", "recovered"):
+        if abs(pa[key][0] - v) < 6e-3:
+            return f"{pa[key][1]:.3f} (at {pa[key][0]:.3f} m/s)"
+    if abs(pa["stable_from"] - v) < 1e-9:
+        return "0 (turns stable)"
+    if abs(pa["unstable_from"] - v) < 1e-9:
+        return "0 (turns unstable)"
+    return "-"
+
+
+def _report_periodic_range(rep: Report, scan: dict) -> None:
+    rep.heading("Chen & Dao v_l .. v_w: speeds at which coasting reaches a periodic orbit")
+    rng = scan["range"]
+    lo, hi = scan["paper"]
+    rep.para(
+        f"Paper (p. 4, conclusions): periodic orbits ('limit cycles') within {lo}-{hi} m/s. "
+        f"Here: coasting runs from {scan['condition']} deg ({scan['duration']:g} s each, "
+        "classified as in Figs. 4-5) at a grid of initial speeds, each edge between periodic "
+        f"and not bisected to {fmt(scan['resolution'], 2)} m/s "
+        "(`limit_cycles.speed_scan`). Periodic for initial speeds "
+        + (f"{rng[0]:.3f}-{rng[1]:.3f} m/s" if rng else "none")
+        + ". Edges: "
+        + "; ".join(
+            f"{e['kind']} between {e['bracket'][0]:.4f} and {e['bracket'][1]:.4f} m/s "
+            f"({e['outside']} outside)"
+            for e in scan["edges"]
+        )
+        + ". An 'irregular' run above the upper edge is a motion still growing or not yet "
+        "closed when the run ends (the weave's growth rate goes to zero at v_w), so that "
+        "edge depends on the run length; below the lower edge runs fall or wander."
+    )
+    rep.table(
+        ["initial speed [m/s]", "class", "returns/period", "fall time [s] (cause)", "speed range"],
+        [
+            [
+                f"{p['speed']:.4f}",
+                p["outcome"],
+                str(p.get("period_n") or "-"),
+                "-"
+                if p.get("fall_time_s") is None
+                else f"{p['fall_time_s']:.2f} ({p['fall_cause']})",
+                "-"
+                if "speed_range" not in p
+                else f"{p['speed_range'][0]:.3f} .. {p['speed_range'][1]:.3f}",
+            ]
+            for p in scan["points"]
+        ],
+    )
 
 
 def _b_ratio(f2: dict, i: int) -> str:
@@ -190,21 +248,40 @@ def _report_fig2(rep: Report, f2: dict) -> None:
     rep.table(["quantity", "paper", "bikeid identified", "ground truth", "comment"], rows)
 
 
-def _report_fig3(rep: Report, f3: dict, truth: dict) -> None:
+def _report_fig3(rep: Report, f3: dict, truth: dict, scan: dict | None = None) -> None:
     rep.heading("Chen & Dao Fig. 3: eigenvalues against speed")
     for f in f3["figures"]:
         rep.figure(
             f, "Fig. 3(a) analogue (1-15 m/s)" if "3a" in f else "Fig. 3(b) analogue (3-4.2 m/s)"
         )
     ci, ct, cp = f3["critical_identified"], f3["critical_true"], f3["critical_paper"]
+    vd, an = f3["v_d_identified"], f3["anomaly"]
+    if vd["v_d"] is not None:
+        vd_comment = (
+            f"zero of the weave pair's discriminant, interpolated between {vd['bracket'][0]:g} "
+            f"and {vd['bracket'][1]:g} m/s (the data's resolution)"
+        )
+    else:
+        vd_comment = f"not found by the data: {vd['reason']}"
+    if scan is not None and scan.get("range") is not None:
+        lower = next((e for e in scan["edges"] if e["kind"] == "lower"), None)
+        vl_id = f"{lower['bracket'][0]:.3f}-{lower['bracket'][1]:.3f}" if lower is not None else "-"
+        vl_comment = (
+            "lower edge of the initial speeds whose coasting run reaches a periodic orbit "
+            "(speed scan below; below it: "
+            + (lower["outside"] if lower is not None else "-")
+            + "); identified eigenvalues: no boundary there (capsize anomaly "
+            f"{an['verdict']})"
+        )
+    else:
+        vl_id, vl_comment = "-", f"no periodic range found; capsize anomaly {an['verdict']}"
     rows = [
         [
             "v_d (weave pair turns complex)",
             cp["v_d"],
             fmt(ci["v_d"]),
             fmt(ct["v_d"]),
-            "true v_d is below the identified range (data start at 1 m/s); identified models at "
-            "low speed can split the nearly real unstable pair into two real roots",
+            vd_comment,
         ],
         [
             "v_w (weave stable above)",
@@ -221,15 +298,42 @@ def _report_fig3(rep: Report, f3: dict, truth: dict) -> None:
             f"identified - truth = {_cmp(ci['v_c'], ct['v_c'])} m/s; the capsize root is within "
             "0.2 1/s of zero over 5-15 m/s, so small errors move v_c a lot",
         ],
-        [
-            "v_l (paper's B1/B2 split)",
-            cp["v_l"],
-            "-",
-            "-",
-            "no such boundary in the linearization nor in our identified eigenvalues",
-        ],
+        ["v_l (paper's B1/B2 split)", cp["v_l"], vl_id, "-", vl_comment],
     ]
     rep.table(["boundary [m/s]", "paper", "bikeid identified", "ground truth", "comment"], rows)
+    pa = PAPER_ANOMALY
+    rep.para(
+        f"**Capsize anomaly (paper p. 3: capsize root {pa['dip'][1]} 1/s at {pa['dip'][0]} m/s, "
+        f"back to {pa['recovered'][1]} at {pa['recovered'][0]} m/s, inside v_l .. v_w): "
+        f"{an['verdict']} in our identified eigenvalues** "
+        f"(`reproduce_chen_dao.capsize_anomaly` on {an['n_speeds']} PEM fits in "
+        f"{an['window'][0]:g}-{an['window'][1]:g} m/s: the paper's speeds and a grid). "
+        f"Deciding numbers: {an['reason']}. Rule: present if the capsize root falls below "
+        "its trend (the least-squares line through the speeds in "
+        f"{an['reference'][0]:g}-{an['reference'][1]:g} m/s, after the paper's anomaly, "
+        f"extrapolated) by more than max({an['min_depth']:g} 1/s, 5 standard errors)"
+        + (
+            ""
+            if an["trend"] is None
+            else "; the paper's -9.123 at 3.280 m/s would be "
+            f"{an['trend'][0] + an['trend'][1] * pa['dip'][0] - pa['dip'][1]:.1f} 1/s below "
+            "our trend"
+        )
+        + f". The same rule on the true eigenvalues at these speeds: {an['truth']}."
+    )
+    if an.get("at_paper_speeds"):
+        rep.table(
+            ["speed [m/s]", "paper: capsize root", "bikeid identified", "ground truth"],
+            [
+                [
+                    f"{r['speed']:.3f}",
+                    _paper_capsize(r["speed"]),
+                    f"{r['capsize_identified']:.3f}",
+                    f"{r['capsize_true']:.3f}",
+                ]
+                for r in an["at_paper_speeds"]
+            ],
+        )
     rep.para(
         "Why the paper differs: its v_w (3.994) and v_c (10.525) do not match the benchmark's "
         f"linearization ({ct['v_w']:.3f}, {ct['v_c']:.3f}) although it used the benchmark "
@@ -237,8 +341,7 @@ def _report_fig3(rep: Report, f3: dict, truth: dict) -> None:
         "boundaries, so the paper's shifts are not a property of the nonlinear Whipple model "
         "near upright: they point at the paper's plant model (an 11-coordinate model not "
         "cross-checked against the benchmark, Moore's review) or at identification bias "
-        "(roll amplitudes of several degrees, closed loop). The paper's capsize excursion to "
-        "-9.1 1/s within 0.17 m/s (B2) has no counterpart here."
+        "(roll amplitudes of several degrees, closed loop)."
     )
     rows = []
     for r in f3["rows"]:
@@ -290,7 +393,11 @@ def _report_limit_cycles(rep: Report, lc: dict) -> None:
             [
                 f"Fig. {e['figure'][3]}: {e['label']}",
                 e["outcome"]
-                + (f" at {e['fall_time_s']:.2f} s" if e["fall_time_s"] is not None else ""),
+                + (
+                    f" at {e['fall_time_s']:.2f} s ({e['fall_cause']})"
+                    if e["fall_time_s"] is not None
+                    else ""
+                ),
                 str(e["period_n"] or "-"),
                 fmt(e["period_s"], 6),
                 fmt(e["closure_rel"], 2),
@@ -319,7 +426,9 @@ def _report_limit_cycles(rep: Report, lc: dict) -> None:
     rep.para(
         "Classes (`experiments.limit_cycles.classify`, Poincare section phidot = 0 at roll "
         "maxima, section point (phi, delta, deltadot, v), last half of the returns): falls = "
-        "the integrator stopped the run at |roll| > 60 deg (cause: its stop reason); decays = "
+        "a physical stop of the integrator (cause in brackets: `sim.integrate.STOP_CAUSES`, "
+        "e.g. wheel_unloaded: a normal contact force reaches zero; roll_limit |roll| > 60 deg; "
+        "steer_limit |steer| > 90 deg); decays = "
         "the section amplitude shrinks geometrically towards zero at a rate 3 standard errors "
         "from zero; periodic (n returns) = |x_{n+p} - x_n| below 1 % of each component's "
         "amplitude; irregular otherwise. For each periodic run the orbit is converged by "
@@ -511,9 +620,12 @@ def _report_mh(rep: Report, m: dict) -> None:
     for f, cap in zip(
         m["figures"],
         (
-            "Fig. 2 analogue: root locus",
-            "Fig. 3 analogue: eigenvalue parts vs speed",
-            "Fig. 4 analogue: Bode of T_delta -> phi at 2, 4, 6, 9 m/s",
+            "Fig. 2 analogue: root locus; truth of each environment (N: Whipple; S: Whipple + "
+            "steer damping) and the identified B-N, B-S",
+            "Fig. 3 analogue: eigenvalue parts vs speed, same curves",
+            "Fig. 4 analogue: Bode of T_delta -> phi at 2, 4, 6, 9 m/s (truth N, truth S, "
+            "identified B-S; phases unwrapped along frequency from the static gain's 0 or "
+            "-180 deg)",
         ),
         strict=True,
     ):
@@ -558,7 +670,46 @@ def _report_sweep(rep: Report, sw: dict) -> None:
     )
     rep.para(
         "max|Δλ| = largest distance between an identified eigenvalue and its matched true "
-        "one at a speed. Direct = Moore & Hubbard's free entries, the others at the "
-        "Whipple values (so it is partly told the answer); PEM estimates all 10 canonical "
-        "parameters."
+        "one at a speed. PEM: one model per speed (all 10 canonical parameters). Direct: "
+        "Moore & Hubbard's free entries, the others at the Whipple values (so it is partly "
+        "told the answer), in one regression over the complete runs of all speeds of the "
+        "controller (`ident.direct.identify` stacks them): at a single speed g q and v^2 q "
+        "are the same column and K0dd, K2dd cannot be separated; its eigenvalues are the one "
+        "model's at each speed."
     )
+    rows = []
+    for k, v in sw.items():
+        if k == "figure" or v.get("method") != "direct" or not v.get("stacked"):
+            continue
+        st = v["stacked"]
+        if "error" in st:
+            rows.append([v["controller"], "-", "-", "-", "-", "-", st["error"]])
+            continue
+        sp = ", ".join(f"{x:g}" for x in st["speeds"])
+        for n, e in st["entries"].items():
+            dev = "-" if e["true"] is None else fmt(e["identified"] - e["true"], 3)
+            sig = (
+                ""
+                if e["true"] is None or not e["stderr"]
+                else f" ({fmt((e['identified'] - e['true']) / e['stderr'], 2)} std)"
+            )
+            rows.append(
+                [
+                    v["controller"],
+                    n,
+                    f"{fmt(e['identified'], 4)} +- {fmt(e['stderr'], 2)}",
+                    fmt(e.get("noise_free"), 4),
+                    fmt(e["true"], 4),
+                    dev + sig,
+                    f"speeds {sp} m/s" if n == next(iter(st["entries"])) else "",
+                ]
+            )
+    if rows:
+        rep.para(
+            "Direct method, free entries against the truth (Whipple values of the simulated "
+            "bicycle; M kg m^2, C1 kg m, K0 kg m, K2 kg; std = the white-noise formula, which "
+            "understates the spread with filtered, closed-loop data). The noise-free column is "
+            "the same regression on the same runs' noise-free signals: where it is as far "
+            "from the truth, sensor noise is not the cause of the bias:"
+        )
+        rep.table(["controller", "entry", "identified +- std", "truth", "id - truth", "runs"], rows)

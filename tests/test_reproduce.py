@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from bikeid.experiments import reproduce_chen_dao as cd
+from bikeid.sim.integrate import STOP_CAUSES
 from bikeid.sim.linear import (
     canonical_matrices,
     critical_speeds,
@@ -19,22 +20,89 @@ from bikeid.sim.linear import (
 )
 from bikeid.sim.parameters import benchmark
 
+# Chen & Dao (2010), transcribed here from the paper (not from the module): p. 2, eq. (5)
+# (magnitudes; the extracted text lost every minus sign), the four poles printed under Fig. 2
+# (p. 2), eq. (6) (p. 2) and the zeros printed under it.
+EQ5_A_ROW2 = (5.392, 0.432, 12.570, 3.177)  # a1..a4: phi, phidot, delta, deltadot
+EQ5_A_ROW4 = (13.645, 20.944, 20.913, 17.000)  # a5..a8
+EQ5_B = (19.711, 233.588)
+POLES_PRINTED = (15.101, 1.668, 0.331, 3.343)  # "15.101, 1.668, and 0.331 +- 3.343j"
+EQ6_DEN = (1.0, 17.431, 47.586, 205.934, 284.279)
+EQ6_NUM_PHI = (19.711, 1077.263, 2524.109)
+EQ6_NUM_DELTA = (233.588, 311.882, 1528.374)
+ZEROS_PHI = (52.199, 2.453)
+ZEROS_DELTA = (3.311, 1.976)
 
-def test_paper_eq5_reading_reproduces_the_printed_poles_and_zeros():
-    """The sign reading of Chen & Dao's eq. 5 must give the poles the paper prints
-    (15.101, 1.668, 0.331 +- 3.343j, magnitudes) and the eq. 6 zeros (52.199, 2.453; 3.311,
-    1.976) to the 3-decimal rounding of the printed matrix (relative 2e-3)."""
+
+def _eq5_polys(th):
+    """Characteristic polynomial and the two numerators of eq. (3)'s A, B, C by hand.
+
+    With rows phi'' = a1 phi + a2 phi' + a3 delta + a4 delta' + b1 T and
+    delta'' = a5 phi + a6 phi' + a7 delta + a8 delta' + b2 T, Laplace-transformed:
+    [[s^2 - a2 s - a1, -(a4 s + a3)], [-(a6 s + a5), s^2 - a8 s - a7]] q = b T, so
+    det = P11 P22 - P12 P21, phi/T = (b1 P22 - b2 P12) / det, delta/T = (b2 P11 - b1 P21) / det
+    (Cramer's rule; independent of ident.canonical and scipy.signal.ss2tf).
+    """
+    a1, a2, a3, a4, a5, a6, a7, a8, b1, b2 = th
+    P11, P12 = np.array([1.0, -a2, -a1]), np.array([-a4, -a3])
+    P21, P22 = np.array([-a6, -a5]), np.array([1.0, -a8, -a7])
+    det = np.polysub(np.polymul(P11, P22), np.polymul(P12, P21))
+    nphi = np.polysub(b1 * P22, np.polymul([b2], P12))
+    ndel = np.polysub(b2 * P11, np.polymul([b1], P21))
+    return det, nphi, ndel
+
+
+def test_paper_eq5_reading_against_the_printed_numbers():
+    """The sign reading of eq. 5 (reproduce_chen_dao.paper_eq5_reading) against the paper's
+    own printed numbers, transcribed above, with an independent computation (Cramer's rule):
+    (1) its magnitudes are the printed eq. 5 entries exactly; (2) its characteristic
+    polynomial is the printed eq. 6 denominator and its numerators are eq. 6's (magnitudes,
+    leading phi coefficient positive as printed) to the 3-decimal rounding of the printed
+    matrix (relative 2e-3); (3) its roots have the printed pole magnitudes and the
+    numerators' roots the printed zero magnitudes (rel 2e-3; Re of the weave pair 5e-3, a
+    small difference of rounded numbers); (4) of all 1024 sign patterns, exactly as many
+    fit eq. 6 as the reading reports (brute force here), and the reading has the physical
+    pattern a3, a4 < 0 < a5, a6 (every Whipple linearization; e.g. Meijaard 2007 at 4.2 m/s)."""
+    import itertools
+
     r = cd.paper_eq5_reading()
-    poles = r["poles"]
-    got = sorted([abs(z.real) for z in poles if abs(z.imag) < 1e-9])
-    assert got == pytest.approx([1.668, 15.101], rel=2e-3)
+    th = np.asarray(r["theta"], float)
+    mags = EQ5_A_ROW2 + EQ5_A_ROW4 + EQ5_B
+    np.testing.assert_array_equal(np.abs(th), mags)
+    det, nphi, ndel = _eq5_polys(th)
+    np.testing.assert_allclose(det, EQ6_DEN, rtol=2e-3)
+    assert nphi[0] > 0
+    np.testing.assert_allclose(np.abs(nphi), EQ6_NUM_PHI, rtol=2e-3)
+    np.testing.assert_allclose(np.abs(ndel), EQ6_NUM_DELTA, rtol=2e-3)
+    poles = np.roots(det)
+    real = sorted(abs(z.real) for z in poles if abs(z.imag) < 1e-9)
+    assert real == pytest.approx(sorted(POLES_PRINTED[:2]), rel=2e-3)
     pair = [z for z in poles if z.imag > 1e-9][0]
-    assert abs(pair.real) == pytest.approx(0.331, rel=5e-3)
-    assert pair.imag == pytest.approx(3.343, rel=2e-3)
-    assert sorted(np.abs(r["zeros_phi"])) == pytest.approx([2.453, 52.199], rel=2e-3)
-    assert sorted(np.abs(r["zeros_delta"])) == pytest.approx([1.976, 3.311], rel=2e-3)
-    # the delta zeros have opposite signs: one right-half-plane zero (counter-steering)
-    assert r["zeros_delta"].min() < 0 < r["zeros_delta"].max()
+    assert abs(pair.real) == pytest.approx(POLES_PRINTED[2], rel=5e-3)
+    assert pair.imag == pytest.approx(POLES_PRINTED[3], rel=2e-3)
+    assert sorted(np.abs(np.roots(nphi))) == pytest.approx(sorted(ZEROS_PHI), rel=2e-3)
+    assert sorted(np.abs(np.roots(ndel))) == pytest.approx(sorted(ZEROS_DELTA), rel=2e-3)
+    # one right-half-plane zero of G_delta (the paper's non-minimum phase statement)
+    assert sum(z.real > 0 for z in np.roots(ndel)) == 1
+    fits = 0
+    for sg in itertools.product((1.0, -1.0), repeat=10):
+        d, n1, n2 = _eq5_polys(np.array(mags) * sg)
+        if (
+            np.allclose(d, EQ6_DEN, rtol=1e-3)
+            and n1[0] > 0
+            and np.allclose(np.abs(n1), EQ6_NUM_PHI, rtol=1e-3)
+            and np.allclose(np.abs(n2), EQ6_NUM_DELTA, rtol=1e-3)
+        ):
+            fits += 1
+    assert fits == r["candidates"] == 2
+    assert th[2] < 0 and th[3] < 0 and th[4] > 0 and th[5] > 0
+    from bikeid.ident.canonical import theta_from_matrices
+
+    tb = theta_from_matrices(canonical_matrices(benchmark()), 4.2)  # the same pattern
+    assert tb[2] < 0 and tb[3] < 0 and tb[4] > 0 and tb[5] > 0
+    # the module's table is this transcription (a typo there would change the report)
+    assert tuple(cd.PAPER["eq5_abs"]["a"]) == EQ5_A_ROW2 + EQ5_A_ROW4
+    assert tuple(cd.PAPER["den"]) == EQ6_DEN
 
 
 def test_critical_from_grid_on_the_true_eigenvalues():
@@ -50,6 +118,119 @@ def test_critical_from_grid_on_the_true_eigenvalues():
     assert got["v_d"] is None
     assert got["v_w"] == pytest.approx(truth["v_w"], abs=2e-3)
     assert got["v_c"] == pytest.approx(truth["v_c"], abs=2e-3)
+
+
+def test_v_d_by_root_finding_on_the_true_eigenvalues():
+    """v_d from eigenvalues on a 0.05 m/s grid (zero of the weave pair's discriminant,
+    linearly interpolated) against sim.linear.critical_speeds (root finding on the quartic's
+    discriminant, Meijaard 2007: 0.6842830789 m/s): the discriminant has a simple zero there,
+    so the interpolation error is below h^2 |D''| / 8 ~ 1e-3 m/s (h = 0.05; observed 2e-4).
+    On a grid starting above v_d the data cannot find it: None, with the reason."""
+    p = benchmark()
+    speeds = np.arange(0.3, 1.5001, 0.05)
+    got = cd.v_d_from_grid(speeds, np.array([eigenvalues(p, v) for v in speeds]))
+    assert got["v_d"] == pytest.approx(critical_speeds(p)["v_d"], abs=1e-3)
+    assert got["bracket"][0] < got["v_d"] < got["bracket"][1]
+    assert got["bracket"][1] - got["bracket"][0] == pytest.approx(0.05)
+    assert len(got["crossings"]) == 1
+    speeds = np.arange(1.0, 3.0, 0.5)
+    got = cd.v_d_from_grid(speeds, np.array([eigenvalues(p, v) for v in speeds]))
+    assert got["v_d"] is None and "below the data" in got["reason"]
+
+
+def _anomaly_speeds():
+    return np.union1d(np.round(np.arange(3.1, 4.0001, 0.05), 3), cd.ANOMALY_SPEEDS)
+
+
+def test_capsize_anomaly_verdict_both_ways():
+    """Known both ways.  Absent: the true eigenvalues (Meijaard 2007 linearization, a smooth
+    capsize root) at the paper's speeds and a 0.05 m/s grid over 3.1-4.0 m/s; the deepest
+    excursion below the trend (the line through 3.568-3.994 m/s, extrapolated) is then only
+    the curvature of the true branch (< 0.15 1/s).  Present: the same eigenvalues with the
+    capsize root replaced by the paper's dip (p. 3: -9.123 1/s at 3.280 m/s, back on the
+    true branch by 3.453 m/s, piecewise linear from v_l = 3.152): deepest at 3.28 m/s,
+    depth = the true root there minus -9.123 (6.73 1/s) to the trend's extrapolation error
+    (the true branch's curvature: 0.11 1/s at 3.28 m/s, allowed 0.15); onset at a grid
+    speed inside the dip.  Standard errors of 2 1/s raise the threshold to 10 1/s: absent.
+    Too few speeds: undecided."""
+    p = benchmark()
+    v = _anomaly_speeds()
+    true = [np.sort_complex(eigenvalues(p, x)) for x in v]
+    a = cd.capsize_anomaly(v, true)
+    assert a["verdict"] == "absent"
+    assert a["deepest"]["depth"] < 0.15
+    assert a["sign_changes"] == []
+    cap_true = cd.capsize_roots(true)
+    np.testing.assert_allclose(cap_true, [max(e.real[np.abs(e.imag) < 1e-9]) for e in true])
+    # the paper's dip, added to the true capsize root
+    v0, (v1, c1), v2 = 3.152, cd.PAPER["anomaly"]["dip"], cd.PAPER["anomaly"]["recovered"][0]
+    c_true_1 = float(cd.capsize_roots([eigenvalues(p, v1)])[0])
+    dip = np.interp(v, [v0, v1, v2], [0.0, c1 - c_true_1, 0.0], left=0.0, right=0.0)
+    synth = []
+    for e, d in zip(true, dip, strict=True):
+        e = e.copy()
+        j = int(np.argmax(np.where(np.abs(e.imag) < 1e-9, e.real, -np.inf)))
+        e[j] += d
+        synth.append(e)
+    a = cd.capsize_anomaly(v, synth)
+    assert a["verdict"] == "present"
+    assert a["deepest"]["speed"] == pytest.approx(v1)
+    assert a["deepest"]["capsize"] == pytest.approx(c1, abs=1e-12)
+    assert a["deepest"]["depth"] == pytest.approx(c_true_1 - c1, abs=0.15)
+    assert v0 < a["onset"] <= v1
+    # standard errors raise the threshold: a dip of 6.7 1/s with 2 1/s errors is not proof
+    se = np.zeros((len(v), 4, 2))
+    se[..., 0] = 2.0
+    assert cd.capsize_anomaly(v, synth, se)["verdict"] == "absent"
+    assert cd.capsize_anomaly(v[:4], synth[:4])["verdict"] == "undecided"
+
+
+def test_direct_stacked_recovers_the_truth_on_exact_linear_data():
+    """direct_stacked on noise-free runs of the linear simulator (dataset.linear_loop, exact
+    accelerations) at 2, 5 and 10 m/s: the one regression over all speeds returns Meijaard's
+    matrix entries (sim.linear.canonical_matrices) to round-off (float64 least squares at
+    condition ~1e2: 1e-8 relative) and its eigenvalues at each speed equal the true ones
+    (1e-7 1/s).  One speed alone cannot separate K0dd from K2dd: every row gets the error."""
+    from bikeid.dataset.linear_loop import simulate
+
+    p = benchmark()
+    cm = canonical_matrices(p)
+    res = []
+    for i, v in enumerate((2.0, 5.0, 10.0)):
+        run = simulate(p, v, duration=10, seed=i, dither=1.0, dither_hold=5)
+        run.signals = run.truth  # exact, noise-free signals with exact accelerations
+        res.append({"speed": v, "truth": np.sort_complex(eigenvalues(p, v)), "methods": {},
+                    "_prepared": run})  # fmt: skip
+    out = cd.direct_stacked(res, p)
+    assert "error" not in out and out["speeds"] == [2.0, 5.0, 10.0]
+    for n, e in out["entries"].items():
+        m, r, c = n[:-2], "pd".index(n[-2]), "pd".index(n[-1])
+        assert e["true"] == getattr(cm, m)[r, c]
+        assert e["identified"] == pytest.approx(e["true"], rel=1e-8, abs=1e-10), n
+    for g in res:
+        assert "_prepared" not in g
+        np.testing.assert_allclose(g["methods"]["direct"]["eig"], g["truth"], atol=1e-7)
+    one = [dict(res[0], methods={}, _prepared=res[0].get("_prepared"))]
+    one[0]["_prepared"] = simulate(p, 5.0, duration=5, seed=0, dither=1.0, dither_hold=5)
+    out = cd.direct_stacked(one, p)
+    assert "K0dd and K2dd" in out["error"] and one[0]["methods"]["direct"]["error"]
+
+
+def test_bode_phase_branch_is_the_same_for_every_curve():
+    """experiments.plots.phase_deg against analytic phases: -1/(s + 1) and 1/(s - 1) both
+    have phase -180 deg at w -> 0 (np.angle may return +180 for either), then -180 -
+    atan(w) and -180 + atan(w) (exact to round-off); a delay exp(-s T) sampled densely is
+    unwrapped to -w T, beyond -180 deg, without 360 deg jumps."""
+    from bikeid.experiments.plots import phase_deg
+
+    w = np.logspace(-5, 2, 400)
+    s = 1j * w
+    np.testing.assert_allclose(phase_deg(-1 / (s + 1)), -180 - np.degrees(np.arctan(w)),
+                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(phase_deg(1 / (s - 1)), -180 + np.degrees(np.arctan(w)),
+                               atol=1e-9)  # fmt: skip
+    w = np.linspace(0, 10, 2000)
+    np.testing.assert_allclose(phase_deg(np.exp(-1j * 0.5 * w)), -np.degrees(0.5 * w), atol=1e-9)
 
 
 def test_open_loop_and_k_step_prediction_are_exact_for_the_true_model():
@@ -153,8 +334,9 @@ def test_quick_reproduction_end_to_end(tmp_path):
     assert main(["reproduce", "--quick", "--out", str(tmp_path)]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
     assert (tmp_path / "report.md").read_text().count("| paper |") >= 3
-    for f in ("cd_fig2_identification.png", "cd_fig3a_eigenvalues.png", "cd_fig4_phase.png",
-              "cd_fig7_tracking.png", "mh_fig4_bode.png", "sweep_eigenvalues.png"):  # fmt: skip
+    for f in ("cd_fig2_identification.png", "cd_fig3a_eigenvalues.png", "cd_fig3b_zoom.png",
+              "cd_fig4_phase.png", "cd_fig4_energy_speed.png", "cd_fig7_tracking.png",
+              "mh_fig2_root_locus.png", "mh_fig4_bode.png", "sweep_eigenvalues.png"):  # fmt: skip
         assert (tmp_path / f).stat().st_size > 10_000, f
     p = benchmark()
     truth = critical_speeds(p)
@@ -209,4 +391,33 @@ def test_quick_reproduction_end_to_end(tmp_path):
     assert len(s["chen_dao"]["figs4_5"]["mirror_checks"]) == 4
     for c in s["chen_dao"]["figs4_5"]["mirror_checks"]:
         assert c["max_multiplier_difference"] < 1e-4, c["of"]
+    physical = {k for k, c in STOP_CAUSES.items() if c.physical}
+    for e in lcs:
+        if e["outcome"] == "falls":
+            assert e["fall_cause"] in physical
+    # the capsize anomaly: a verdict computed from the identified eigenvalues at the paper's
+    # speeds and the grid; the benchmark's true capsize root has no dip, so it must be
+    # "absent" both on the truth and on the data (its identified values are within 0.15 1/s
+    # of the truth, far inside the 2 1/s threshold)
+    an = s["chen_dao"]["fig3"]["anomaly"]
+    assert an["truth"] == "absent" and an["verdict"] == "absent"
+    assert {round(r["speed"], 3) for r in an["at_paper_speeds"]} == set(cd.ANOMALY_SPEEDS)
+    for r in an["at_paper_speeds"]:
+        assert r["capsize_identified"] == pytest.approx(r["capsize_true"], abs=0.15)
+    # v_d: no grid midpoint; the pair is complex from the lowest identified speed (the
+    # linearization's v_d = 0.684 m/s is below the data), so the data cannot find it
+    vd = s["chen_dao"]["fig3"]["v_d_identified"]
+    assert vd["v_d"] is None and "below the data" in vd["reason"]
+    # the speed scan: periodic orbits only below the linear v_w (upright stable above it)
+    scan = s["chen_dao"]["periodic_range"]
+    assert scan["range"] is not None and scan["range"][1] < truth["v_w"]
+    assert scan["resolution"] == pytest.approx(0.25 / 2**4)
+    # the direct method, one regression over the sweep speeds: a row at every speed (no
+    # single-speed K0dd/K2dd failure) and the truth it is compared with is Meijaard's
+    for c in ("fuzzy", "pid", "pole"):
+        d = s["sweep"][f"{c}/direct"]
+        assert d["n_ok"] == d["n"] == 3, c
+        for n, e in d["stacked"]["entries"].items():
+            m, r, col = n[:-2], "pd".index(n[-2]), "pd".index(n[-1])
+            assert e["true"] == pytest.approx(getattr(cm, m)[r, col], rel=1e-12)
     assert set(s["seconds"]) >= {"total"}  # run times are reported (benchmarks time them)
