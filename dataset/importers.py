@@ -9,7 +9,8 @@ Three readers share one validation step:
   array-like (a :class:`pandas.DataFrame`, a dict-like table, ...; pandas is not needed).
 
 ``columns`` (``datasets`` for HDF5) maps bikeid signal names (:data:`~bikeid.sim.conventions.UNITS`:
-``phi``, ``delta``, ``phidot``, ``deltadot``, ``v``, ``T_delta``, ``psi``, ...) to the
+``phi``, ``delta``, ``phidot``, ``deltadot``, ``v``, ``T_delta``, ``psi``, ..., and
+``dither``, a measured external steer-torque excitation kept as ``Run.dither``) to the
 user's column names; the time column is ``time``.  ``units`` converts from the user's units
 to bikeid's SI units (:data:`CONVERSIONS`): angles ``"deg"``/``"rad"``, rates
 ``"deg/s"``/``"rad/s"``, speed ``"m/s"``/``"km/h"``, torque ``"N m"``/``"N cm"``, time
@@ -116,8 +117,16 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+#: Signals a log may carry beyond :data:`~bikeid.sim.conventions.UNITS`, with their SI unit:
+#: ``dither``, the measured external steer-torque excitation (part of T_delta), becomes
+#: :attr:`bikeid.dataset.run.Run.dither` (the closed-loop-safe reference of frequency-response
+#: estimates, ``bikeid validate``).
+EXTRA_SIGNALS = {"dither": "N m"}
+SIGNAL_UNITS = {**UNITS, **EXTRA_SIGNALS}
+
+
 def _unit_of(signal: str) -> str:
-    return "s" if signal == TIME else UNITS[signal]
+    return "s" if signal == TIME else SIGNAL_UNITS[signal]
 
 
 def _check_request(
@@ -133,10 +142,11 @@ def _check_request(
     if not isinstance(columns, Mapping):
         raise ValueError(f"{what} must be a mapping of bikeid signal name -> your column name")
     columns = dict(columns)
-    unknown = [k for k in columns if k not in UNITS]
+    unknown = [k for k in columns if k not in SIGNAL_UNITS]
     if unknown:
         raise ValueError(
-            f"{what} maps unknown bikeid signals {unknown}; known signals are {list(UNITS)} "
+            f"{what} maps unknown bikeid signals {unknown}; known signals are "
+            f"{list(SIGNAL_UNITS)} "
             "(the time column is given with time=...)"
         )
     for k, v in columns.items():
@@ -253,7 +263,7 @@ def _build(
     signals: dict[str, np.ndarray] = {}
     conversions: dict[str, dict[str, Any]] = {}
     for sig, col in columns.items():
-        si = UNITS[sig]
+        si = SIGNAL_UNITS[sig]
         user = units.get(sig, si)
         factor = CONVERSIONS[si][user]
         x = data[col] * factor
@@ -321,7 +331,7 @@ def _build(
     if table.first:
         out_meta["import"]["leading_rows_skipped"] = table.first
     try:
-        run = Run(t=t, signals=signals, meta=out_meta)
+        run = Run(t=t, signals=signals, meta=out_meta, dither=signals.pop("dither", None))
     except ValueError as exc:
         raise ValueError(f"{label}: {exc}") from None
     return check_plausible(run, label, rows=row, columns={**extra, **columns}, bounds_as=bounds_as)

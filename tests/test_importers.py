@@ -507,3 +507,18 @@ def test_damaged_hdf5_never_a_traceback(data):
             from_hdf5(path, {k: f"data/{c}" for k, c in MAP.items()}, time="data/time")
         except (ValueError, OSError) as exc:
             assert str(path) in str(exc) and "\n" not in str(exc), str(exc)
+
+
+def test_dither_column_becomes_the_runs_dither(tmp_path):
+    """A logged external excitation maps to Run.dither (not a signal), with unit
+    conversion (N cm -> N m: factor 0.01 exactly as CONVERSIONS says); an unknown name is
+    refused naming the known ones, dither included."""
+    tab = good_table()
+    tab["excite"] = 30.0 * np.sin(11 * tab["time"])
+    path = write_csv(tmp_path / "d.csv", tab)
+    run = from_csv(path, {**MAP, "dither": "excite"}, {"dither": "N cm"}, time="time")
+    np.testing.assert_allclose(run.dither, 0.3 * np.sin(11 * tab["time"]), rtol=1e-15, atol=0)
+    assert "dither" not in run.signals
+    with pytest.raises(ValueError) as exc:
+        from_csv(path, {**MAP, "dithr": "excite"}, time="time")
+    assert_names(str(exc.value), "dithr", "dither")
