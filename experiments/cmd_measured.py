@@ -192,6 +192,12 @@ def cmd_fit(args) -> int:
     return 0
 
 
+def _print_file_errors(out: dict) -> None:
+    for f in out["files"]:
+        print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
+              f"after {f['error_after']:.3f}")  # fmt: skip
+
+
 def cmd_evaluate(args) -> int:
     from bikeid.dataset.decays import load_decays
     from bikeid.experiments.measured_study import (
@@ -213,9 +219,7 @@ def cmd_evaluate(args) -> int:
         if args.json:
             print(dump_json(out))
         else:
-            for f in out["files"]:
-                print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
-                      f"after {f['error_after']:.3f}")  # fmt: skip
+            _print_file_errors(out)
             s = out["summary"]
             print(f"summary ({s['windows']} windows, logged command replayed): before "
                   f"{s['error_before']:.3f} after {s['error_after']:.3f}; "
@@ -242,9 +246,7 @@ def cmd_evaluate(args) -> int:
     if args.json:
         print(dump_json(out))
     else:
-        for f in out["files"]:
-            print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
-                  f"after {f['error_after']:.3f}")  # fmt: skip
+        _print_file_errors(out)
         s = out["summary"]
         print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
               f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f}; the "
