@@ -47,7 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="csv/hdf5: constant speed [m/s] when the log has no speed column",
     )  # fmt: skip
     p.add_argument(
-        "--flip", default="", metavar="NAME,...",
+        "--flip",
+        default="",
+        metavar="NAME,...",
         help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
     )
     p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
@@ -96,7 +98,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", default=None, metavar="MODEL.json",
         help="save the identified model (ident.model_file: parameters, covariance, data file "
-        "hashes, settings); per-speed pem over several speeds writes MODEL-v<speed>.json",
+        "hashes, settings; any --method); per-speed pem over several speeds writes "
+        "MODEL-v<speed>.json",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
@@ -363,6 +366,9 @@ def _settings(args: argparse.Namespace) -> dict:
     if args.method == "direct":
         s.update(bicycle=args.bicycle, iv=args.iv, derivative=args.derivative,
                  cutoff=args.cutoff)  # fmt: skip
+    elif args.method == "greybox":
+        s.update(bicycle=args.bicycle, free=args.free, noise_model="free",
+                 drop_unidentifiable=args.drop_unidentifiable)  # fmt: skip
     else:
         s.update(speed_parameterized=args.speed_parameterized, noise_model="free")
     return s
@@ -383,11 +389,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
     speeds = sorted({round(r.speed, 6) for r in runs})
     if args.method != "greybox" and (args.free or args.drop_unidentifiable):
         raise ValueError("--free and --drop-unidentifiable apply to --method greybox")
-    if args.method == "greybox" and args.out:
-        raise ValueError(
-            "--out: grey-box models cannot be saved yet (ident.model_file stores direct, PEM "
-            "and experiment models); drop --out"
-        )
     targets, provenance, settings = [], [], {}
     if args.out:
         per_speed_pem = args.method == "pem" and not args.speed_parameterized
@@ -434,7 +435,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
         res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable,
                           **({"outputs": outputs} if outputs else {}))  # fmt: skip
-        saved = []
+        saved = [(res, targets[0])] if targets else []
         out["outputs"] = list(res.outputs)
         out.update(
             M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,

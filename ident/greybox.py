@@ -538,6 +538,31 @@ class GreyboxModel:
         _, J = theta_jacobian(self.canonical(), v, tuple(self.free), self.symmetric)
         return J @ self.covariance @ J.T
 
+    def at(self, v: float):
+        """The canonical model at speed ``v``: what saving, validation and intervals use.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s]; need not be one of the fitted speeds.
+
+        Returns
+        -------
+        ident.pem.CanonicalModel
+            theta = :meth:`theta` (v), covariance :meth:`theta_covariance` (v) (delta method
+            from the free entries), innovation gain ``K`` and ``noise_covariance`` of the
+            fitted speed nearest to ``v``, input T_delta only (a lateral-force column H is
+            not part of it), as :meth:`ident.pem.SpeedCanonicalModel.at`.
+        """
+        from .pem import CanonicalModel
+
+        near = min(self.K, key=lambda s: abs(s - v))
+        return CanonicalModel(
+            theta=self.theta(v), covariance=self.theta_covariance(v), K=self.K[near],
+            dt=self.dt, speed=float(v), noise_covariance=self.noise_covariance,
+            outputs=self.outputs,
+        )  # fmt: skip
+
     def state_space(self, v: float, inputs: Sequence[str] = ("T_delta",)) -> control.StateSpace:
         """python-control model at speed ``v``, all four states output.
 

@@ -87,13 +87,15 @@ def sampled_model(model, dt: float, v: float | None = None):
 
     Parameters
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult, GreyboxModel or control.StateSpace
         A ``CanonicalModel`` gives its own predictor (its ``dt`` must equal ``dt``); a
         ``SpeedCanonicalModel`` its fixed-speed model at ``v`` (:meth:`at`: K of the
         nearest fitted speed); a ``DirectResult`` its state space at ``v`` with inputs
         T_phi, T_delta and F (a run without T_phi or F has them zero), all four states
-        measured and K = 0; a continuous ``StateSpace`` (D = 0)
-        is sampled exactly (zero-order hold) with K = 0.
+        measured and K = 0; a ``GreyboxModel`` its canonical model at ``v``
+        (:meth:`~bikeid.ident.greybox.GreyboxModel.at`: the matrices' theta(v) with the
+        innovation gain of the nearest fitted speed, input T_delta); a continuous
+        ``StateSpace`` (D = 0) is sampled exactly (zero-order hold) with K = 0.
     dt : float
         Sample period of the data [s].
     v : float, optional
@@ -141,7 +143,7 @@ def sampled_model(model, dt: float, v: float | None = None):
         return Ad, Bd, C, K, tuple(model.output_labels), tuple(model.input_labels)
     raise ValueError(
         "model must be an ident.pem.CanonicalModel, SpeedCanonicalModel, "
-        "ident.direct.DirectResult or a control.StateSpace"
+        "ident.direct.DirectResult, ident.greybox.GreyboxModel or a control.StateSpace"
     )
 
 
