@@ -447,6 +447,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if len(speeds) >= 2:
             out["critical_speeds"] = res.critical_speeds()
         eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+        interval_models = {v: res.at(v) for v in speeds}
+        speed_model = res.speed_model() if len(speeds) >= 2 else None
     else:
         from bikeid.ident import pem
 
@@ -478,6 +480,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             out["stderr"] = model.stderr
             out["critical_speeds"] = model.critical_speeds()
             eig = {v: _sorted(model.eigenvalues(v)) for v in speeds}
+            interval_models, speed_model = {v: model.at(v) for v in speeds}, model
         else:
             out["models"] = {
                 v: {"theta": m.params(), "stderr": m.stderr, "A": m.A, "B": m.B}
@@ -485,6 +488,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             }
             eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
             saved = list(zip(per.values(), targets, strict=True)) if targets else []
+            interval_models, speed_model = per, None
         out["outputs"] = list(next(iter(per.values())).outputs)
         if bar:
             bar(steps, steps, "done")
@@ -498,6 +502,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if truth is not None:
             row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
         per_speed.append(row)
+    if args.method != "direct":
+        out["intervals"] = _intervals(interval_models, speed_model)
+        for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
+            row["eigenvalue_intervals"] = ei
     out["per_speed"] = per_speed
     if truth is not None and args.method == "pem" and args.speed_parameterized:
         from bikeid.sim.linear import critical_speeds
@@ -532,10 +540,63 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for row in per_speed:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")
+        if "eigenvalue_intervals" in row:
+            print(f"{'':8s}  95 % +-   {_half_widths(row['eigenvalue_intervals'])}")
         if "true_eigenvalues" in row:
             fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
             print(f"{'':8s}  true       {fmt}")
+    if "intervals" in out:
+        for line in _interval_lines(out["intervals"]):
+            print(line)
     return 0
+
+
+def _intervals(models: dict, speed_model) -> dict:
+    """95 % eigenvalue intervals per speed and, for a model over speed, of v_w and v_c.
+
+    ``models`` maps each speed to a model with a theta covariance (a CanonicalModel, or a
+    model over speed taken there); ``speed_model`` is a SpeedCanonicalModel (the
+    speed-parameterized fit, or a grey-box model's :meth:`speed_model`) or None.
+    """
+    from bikeid.ident.uncertainty import critical_speed_intervals, eigenvalue_intervals
+    from bikeid.ident.validation_report import INTERVAL_CALIBRATION
+    from bikeid.sim.errors import UntrustworthyResult
+
+    out: dict = {
+        "level": 0.95,
+        "calibration": INTERVAL_CALIBRATION,
+        "eigenvalues": [eigenvalue_intervals(m).to_json() for m in models.values()],
+    }
+    if speed_model is not None:
+        try:
+            out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
+        except UntrustworthyResult as exc:  # a tangential crossing: no first-order interval
+            out["critical_speeds"] = None
+            out["critical_speeds_note"] = str(exc)
+    return out  # fmt: skip
+
+
+def _half_widths(ei: dict) -> str:
+    """Half-widths of the real and imaginary parts, aligned under the eigenvalues."""
+    cells = []
+    for r in ei["eigenvalues"]:
+        re, im = (r["real"][1] - r["real"][0]) / 2, (r["imag"][1] - r["imag"][0]) / 2
+        cells.append(f"{re:6.3f} {im:6.3f}j")
+    return "  ".join(cells)
+
+
+def _interval_lines(iv: dict) -> list[str]:
+    lines = []
+    crit = iv.get("critical_speeds")
+    for name in ("v_w", "v_c") if crit else ():
+        c = crit[name]
+        if c["value"] is not None:
+            lo, hi = c["interval"]
+            lines.append(f"{name} = {c['value']:.3f} m/s, 95 % interval [{lo:.3f}, {hi:.3f}] m/s")
+    if iv.get("critical_speeds_note"):
+        lines.append(f"critical-speed intervals: {iv['critical_speeds_note']}")
+    lines.append(f"note: {iv['calibration']}")
+    return lines
 
 
 def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:

@@ -173,11 +173,18 @@ def table(report, model_path: str) -> str:
     for e in report.frequency_responses:
         if e.excited:
             fv = e.f[e.valid]
+            inside = e.in_band
+            band = "" if inside is None else (
+                f"; {int(inside.sum())} inside the model's 95 % Bode band, "
+                f"{int(e.consistent.sum())} within it widened by their own 95 % error")  # fmt: skip
             lines.append(
                 f"frequency response {e.input} -> {e.output} (v={e.speed:g} m/s, {e.reference}):"
                 f" {int(e.valid.sum())} frequencies in {fv.min():.2f}..{fv.max():.2f} Hz with "
-                f"coherence >= {e.coherence_min:g}"
+                f"coherence >= {e.coherence_min:g}{band}"
             )
+    summary = report.band_summary()
+    if summary is not None:
+        lines.append(f"Bode band: {summary['calibration']}")
     if report.simulation_note:
         lines.append(report.simulation_note)
     lines += [f"note: {n}" for n in report.notes]
