@@ -7,6 +7,7 @@ printed beside the estimate (``true_eigenvalues``).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
@@ -26,32 +27,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             "logged positive to the left. Each log file becomes one run."
         ),
     )
-    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
-    p.add_argument(
-        "--format", choices=("bikeid", "csv", "hdf5", "sbw"), default="bikeid",
-        help="bikeid: files written by bikeid (sweep, store); csv / hdf5: your own logs, read "
-        "with --columns (dataset.importers); sbw: TU Delft steer-by-wire logs (files or "
-        "folders; the settled part of each, v = treadmill speed, dataset.sbw_logs)",
+    add_data_options(
+        p,
+        FORMATS,
+        input_help="the runs' torque signal [N m] used as the model's steer-torque input "
+        "(default T_delta; e.g. sil_command of the steer-by-wire logs)",
     )  # fmt: skip
-    p.add_argument(
-        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
-        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
-    )  # fmt: skip
-    p.add_argument(
-        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
-        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
-    )  # fmt: skip
-    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
-    p.add_argument(
-        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
-        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
-    )  # fmt: skip
-    p.add_argument(
-        "--flip",
-        default="",
-        metavar="NAME,...",
-        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
-    )
     p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
     p.add_argument(
         "--free", default=None, metavar="NAME,...",
@@ -89,11 +70,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--outputs", default=None, metavar="NAME,...",
         help="measured states fitted (pem: phi and delta plus optionally phidot, deltadot; "
         "default all four). direct needs all four (its regressors use every state)",
-    )  # fmt: skip
-    p.add_argument(
-        "--input", default="T_delta", metavar="SIGNAL",
-        help="the runs' torque signal [N m] used as the model's steer-torque input (default "
-        "T_delta; e.g. sil_command of the steer-by-wire logs)",
     )  # fmt: skip
     p.add_argument(
         "--out", default=None, metavar="MODEL.json",
@@ -171,6 +147,64 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--out", default="accuracy", metavar="DIR", help="output folder")
     a.add_argument("--json", action="store_true", help="print JSON instead of the table")
     a.set_defaults(func=cmd_accuracy)  # fmt: skip
+
+
+#: Data formats ``bikeid identify`` reads, and what each is.
+FORMATS = {
+    "bikeid": "files written by bikeid (sweep, store)",
+    "csv": "your own logs, read with --columns (dataset.importers)",
+    "hdf5": "your own logs, read with --columns (dataset.importers)",
+    "sbw": "TU Delft steer-by-wire logs (files or folders; the settled part of each, v = "
+    "treadmill speed, dataset.sbw_logs)",
+}
+
+
+def add_data_options(
+    p: argparse.ArgumentParser, formats: Mapping[str, str], input_help: str
+) -> None:
+    """The data arguments of ``identify`` and ``validate``, read by :func:`_load`.
+
+    Adds FILE..., ``--format``, the importer options ``--columns``, ``--units``, ``--time``,
+    ``--speed``, ``--flip`` (csv/hdf5 logs) and ``--input`` (the torque signal used as
+    T_delta, :func:`_with_input`).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The command's parser.
+    formats : mapping of str to str
+        The ``--format`` choices (a subset of :data:`FORMATS`) and their help; the first is
+        the default.
+    input_help : str
+        Help text of ``--input``.
+
+    Returns
+    -------
+    None
+    """
+    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
+    p.add_argument(
+        "--format", choices=tuple(formats), default=next(iter(formats)),
+        help="; ".join(f"{k}: {v}" for k, v in formats.items()),
+    )  # fmt: skip
+    p.add_argument(
+        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
+        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
+        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
+    )  # fmt: skip
+    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
+    p.add_argument(
+        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
+        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
+    )  # fmt: skip
+    p.add_argument(
+        "--flip", default="", metavar="NAME,...",
+        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
+    )  # fmt: skip
+    p.add_argument("--input", default="T_delta", metavar="SIGNAL", help=input_help)
 
 
 def _truth(runs):

@@ -231,7 +231,8 @@ def _speed_section(m: SpeedCanonicalModel) -> dict:
     }
 
 
-def _direct_section(m: DirectResult) -> dict:
+def _matrix_section(m: DirectResult | GreyboxModel) -> dict:
+    """The Whipple matrices, H, g and the free entries with their standard errors."""
     return {
         "M": _arr(m.M, "M"),
         "C1": _arr(m.C1, "C1"),
@@ -241,6 +242,12 @@ def _direct_section(m: DirectResult) -> dict:
         "g": _num(m.g, "g"),
         "free": {k: _num(v, f"free[{k}]") for k, v in m.free.items()},
         "stderr": {k: _num(v, f"stderr[{k}]") for k, v in m.stderr.items()},
+    }
+
+
+def _direct_section(m: DirectResult) -> dict:
+    return {
+        **_matrix_section(m),
         "covariance": {
             row: {"names": list(names), "matrix": _arr(cov, f"covariance[{row}]")}
             for row, (names, cov) in m.covariance.items()
@@ -268,14 +275,7 @@ def _experiment_section(m: ExperimentModel) -> dict:
 
 def _greybox_section(m: GreyboxModel) -> dict:
     return {
-        "M": _arr(m.M, "M"),
-        "C1": _arr(m.C1, "C1"),
-        "K0": _arr(m.K0, "K0"),
-        "K2": _arr(m.K2, "K2"),
-        "H": _arr(m.H, "H"),
-        "g": _num(m.g, "g"),
-        "free": {k: _num(v, f"free[{k}]") for k, v in m.free.items()},
-        "stderr": {k: _num(v, f"stderr[{k}]") for k, v in m.stderr.items()},
+        **_matrix_section(m),
         "covariance": _arr(m.covariance, "covariance"),
         "condition": _num(m.condition, "condition"),
         "inflation": {k: _num(v, f"inflation[{k}]") for k, v in m.inflation.items()},
@@ -641,7 +641,8 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     )
 
 
-def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
+def _matrix_fields(r: _Reader, sec: Any, prefix: str) -> dict:
+    """M, C1, K0, K2, H, g, free and stderr of :func:`_matrix_section`, checked."""
     from .direct import ALL_ENTRIES
 
     free = r.numbers(sec, "free", prefix)
@@ -649,6 +650,17 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
     bad = [k for k in list(free) + list(stderr) if k not in ALL_ENTRIES]
     if bad:
         raise r.fail(prefix + "free", f"names unknown entries {bad}")
+    return {
+        **{k: r.array(sec, k, prefix, (2, 2)) for k in ("M", "C1", "K0", "K2")},
+        "H": r.array(sec, "H", prefix, (2,)),
+        "g": r.number(sec, "g", prefix),
+        "free": free,
+        "stderr": stderr,
+    }
+
+
+def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
+    fields = _matrix_fields(r, sec, prefix)
     covs_in = r.get(sec, "covariance", prefix)
     if not isinstance(covs_in, dict):
         raise r.fail(prefix + "covariance", "must be an object of row: {names, matrix}")
@@ -658,14 +670,7 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
         n = len(names)
         covs[row] = (names, r.array(c, "matrix", f"{prefix}covariance.{row}.", (n, n)))
     return DirectResult(
-        M=r.array(sec, "M", prefix, (2, 2)),
-        C1=r.array(sec, "C1", prefix, (2, 2)),
-        K0=r.array(sec, "K0", prefix, (2, 2)),
-        K2=r.array(sec, "K2", prefix, (2, 2)),
-        H=r.array(sec, "H", prefix, (2,)),
-        g=r.number(sec, "g", prefix),
-        free=free,
-        stderr=stderr,
+        **fields,
         covariance=covs,
         condition=r.numbers(sec, "condition", prefix),
         vaf_moore=r.numbers(sec, "vaf_moore", prefix, nullable=True),
@@ -703,16 +708,16 @@ def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
     except ValueError as exc:
         raise r.fail(prefix + "outputs", str(exc)) from None
     n_out = len(outputs)
-    free = r.numbers(sec, "free", prefix)
-    names = list(free)
+    fields = _matrix_fields(r, sec, prefix)
+    names = list(fields["free"])
     for key in ("stderr", "inflation", "weakest"):
         if list(r.numbers(sec, key, prefix)) != names:
             raise r.fail(prefix + key, f"must name the free entries {names} in order")
     fixed = r.numbers(sec, "fixed", prefix)
     dropped = r.texts(sec, "dropped", prefix)
-    bad = [k for k in names + list(fixed) + list(dropped) if k not in ALL_ENTRIES]
+    bad = [k for k in list(fixed) + list(dropped) if k not in ALL_ENTRIES]
     if bad or not names:
-        raise r.fail(prefix + "free", f"must name matrix entries; unknown {bad}")
+        raise r.fail(prefix + "fixed", f"must name matrix entries; unknown {bad}")
     symmetric = r.get(sec, "symmetric", prefix)
     if not isinstance(symmetric, bool):
         raise r.fail(prefix + "symmetric", "must be true or false")
@@ -731,14 +736,7 @@ def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
         raise r.fail(prefix + "K", f"must hold one gain per speed of 'speeds' {list(speeds)}")
     P = len(names)
     return GreyboxModel(
-        M=r.array(sec, "M", prefix, (2, 2)),
-        C1=r.array(sec, "C1", prefix, (2, 2)),
-        K0=r.array(sec, "K0", prefix, (2, 2)),
-        K2=r.array(sec, "K2", prefix, (2, 2)),
-        g=r.number(sec, "g", prefix),
-        H=r.array(sec, "H", prefix, (2,)),
-        free=free,
-        stderr=r.numbers(sec, "stderr", prefix),
+        **fields,
         covariance=r.array(sec, "covariance", prefix, (P, P)),
         condition=r.number(sec, "condition", prefix),
         inflation=r.numbers(sec, "inflation", prefix),

@@ -66,18 +66,22 @@ def goodness_of_fit(y: np.ndarray, yhat: np.ndarray) -> dict[str, float]:
     Returns
     -------
     dict of str to float
-        ``"mse"`` (unit of ``y`` squared); ``"nrmse_fit"`` (MATLAB ``compare``'s fit, as a
-        fraction), ``"nmse_fit"`` = 1 - (||y - yhat|| / ||y - mean y||)^2 and ``"vaf"``
-        = 1 - var(y - yhat) / var(y) (:func:`ident.direct.vaf_variance`), all
+        ``"mse"`` (unit of ``y`` squared); ``"nrmse"`` = ||y - yhat|| / ||y - mean y||
+        (0 = perfect; the error of ``bikeid measured evaluate``,
+        :func:`bikeid.ident.experiment_model.window_errors`); ``"nrmse_fit"`` = 1 - nrmse
+        (MATLAB ``compare``'s fit, as a fraction), ``"nmse_fit"`` = 1 - nrmse^2 and
+        ``"vaf"`` = 1 - var(y - yhat) / var(y) (:func:`ident.direct.vaf_variance`), all
         dimensionless, NaN when ``y`` is constant.
     """
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     err = np.linalg.norm(y - yhat)
     den = np.linalg.norm(y - y.mean())
+    ratio = float(err / den) if den > 0 else float("nan")
     return {
         "mse": float(np.mean((y - yhat) ** 2)),
-        "nrmse_fit": float(1 - err / den) if den > 0 else float("nan"),
-        "nmse_fit": float(1 - (err / den) ** 2) if den > 0 else float("nan"),
+        "nrmse": ratio,
+        "nrmse_fit": 1 - ratio,
+        "nmse_fit": 1 - ratio**2,
         "vaf": vaf_variance(y, yhat),
     }
 

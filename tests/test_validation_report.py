@@ -241,7 +241,9 @@ def test_models_over_speed_are_taken_at_each_runs_speed():
 
 def test_validate_decays_fit_is_the_evaluate_error():
     """validate_decays (measured evaluate's validation) and experiment_model.window_errors
-    compute the same NRMSE by two code paths: fit = 100 (1 - error) to 1e-9 %, per file; the
+    share one NRMSE (ident.validate.goodness_of_fit): fit = 100 (1 - error) to 1e-9 %, per
+    file; a simulation 1.1 times the measured roll rate has the analytic error
+    0.1 ||y|| / ||y - mean y|| (rounding only: 1e-12 relative) and an exact one 0; the
     true model fits its own noisy decays better than a model with a spurious effect."""
     from bikeid.ident.experiment_model import ExperimentModel, window_errors
     from bikeid.ident.synthetic_decays import synthetic_windows
@@ -258,6 +260,11 @@ def test_validate_decays_fit_is_the_evaluate_error():
         assert set(f["residuals"]["phidot"]) >= {"white", "whiteness_p", "fraction_outside"}
     wrong = validate_decays(truth.with_effects(steer_viscous_damping=1.0), ws)
     assert wrong["fit"]["phidot"] < out["fit"]["phidot"]
+    scaled = window_errors(ws, [{"phidot": 1.1 * w.phidot, "delta": w.delta} for w in ws])
+    for i, w in enumerate(ws):
+        y = w.phidot
+        expect = 0.1 * np.linalg.norm(y) / np.linalg.norm(y - y.mean())
+        assert scaled[i, 0] == pytest.approx(expect, rel=1e-12) and scaled[i, 1] == 0.0
 
 
 def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_run, capsys):
