@@ -574,7 +574,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for row in per_speed:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")
-        if "eigenvalue_intervals" in row:
+        if row.get("eigenvalue_intervals"):
             print(f"{'':8s}  95 % +-   {_half_widths(row['eigenvalue_intervals'])}")
         if "true_eigenvalues" in row:
             fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
@@ -594,20 +594,22 @@ def _intervals(models: dict, speed_model) -> dict:
     """
     from bikeid.ident.uncertainty import critical_speed_intervals, eigenvalue_intervals
     from bikeid.ident.validation_report import INTERVAL_CALIBRATION
-    from bikeid.sim.errors import UntrustworthyResult
+    from bikeid.sim.errors import InputError, UntrustworthyResult
 
-    out: dict = {
-        "level": 0.95,
-        "calibration": INTERVAL_CALIBRATION,
-        "eigenvalues": [eigenvalue_intervals(m).to_json() for m in models.values()],
-    }
+    out: dict = {"level": 0.95, "calibration": INTERVAL_CALIBRATION, "eigenvalues": []}
+    for v, m in models.items():
+        try:
+            out["eigenvalues"].append(eigenvalue_intervals(m).to_json())
+        except InputError as exc:  # no usable covariance: the estimate stands, no interval
+            out["eigenvalues"].append(None)
+            out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")
     if speed_model is not None:
         try:
             out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
-        except UntrustworthyResult as exc:  # a tangential crossing: no first-order interval
+        except (InputError, UntrustworthyResult) as exc:  # e.g. a tangential crossing
             out["critical_speeds"] = None
             out["critical_speeds_note"] = str(exc)
-    return out  # fmt: skip
+    return out
 
 
 def _half_widths(ei: dict) -> str:
@@ -629,6 +631,7 @@ def _interval_lines(iv: dict) -> list[str]:
             lines.append(f"{name} = {c['value']:.3f} m/s, 95 % interval [{lo:.3f}, {hi:.3f}] m/s")
     if iv.get("critical_speeds_note"):
         lines.append(f"critical-speed intervals: {iv['critical_speeds_note']}")
+    lines += [f"note: {n}" for n in iv.get("notes", [])]
     lines.append(f"note: {iv['calibration']}")
     return lines
 

@@ -291,13 +291,18 @@ def bode_band_halfwidths(model, f: np.ndarray, v: float) -> dict | None:
         (:func:`bikeid.ident.uncertainty.bode_bands` at ``BAND_LEVEL``); None for a model
         without covariance.
     """
+    from bikeid.sim.errors import InputError
+
     from .uncertainty import bode_bands, z_value
 
     m = model.at(v) if hasattr(model, "at") else model
     if not (hasattr(m, "predictor") and hasattr(m, "covariance")):
         return None
     z = z_value(BAND_LEVEL)
-    bands = bode_bands(m, 2 * np.pi * np.asarray(f, float), level=BAND_LEVEL)
+    try:
+        bands = bode_bands(m, 2 * np.pi * np.asarray(f, float), level=BAND_LEVEL)
+    except InputError:  # no usable (finite) covariance: no band, as for a direct model
+        return None
     return {b.output: (z * b.std_magnitude_db, z * b.std_phase_deg) for b in bands}
 
 

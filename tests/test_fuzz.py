@@ -5,9 +5,9 @@ Three generators (hypothesis, bounded, in CI):
 1. **Command lines** for every subcommand, discovered from the parser itself (a new command
    is covered the day it is registered; a mode that reads other inputs, ``measured evaluate
    --input=logged``, is fuzzed as a command of its own): each case sets one typed option to
-   a value that option's own parser refuses, plus up to four more options with hostile values (empty,
-   ``--``, NaN, infinities, 1e308, 99999999999999999999, 4096 characters, ranges of 1e308
-   points, paths that do not exist, ...).
+   a value that option's own parser refuses, plus up to four more options with hostile
+   values (empty, ``--``, NaN, infinities, 1e308, 99999999999999999999, 4096 characters,
+   ranges of 1e308 points, paths that do not exist, ...).
 2. **Files** a user can pass: parameter files (YAML and JSON) with mutated fields, duplicate
    keys and deep nesting, through ``bikeid linearize --bicycle FILE``; model files through
    ``bikeid.experiments.measured_study.model_from_json`` and damaged grey-box model files
