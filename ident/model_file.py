@@ -581,6 +581,24 @@ class _Reader:
             raise self.fail(prefix + key, "must be an object of name: number")
         return {k: self.number(v, k, f"{prefix}{key}.", nullable) for k in v}
 
+    def outputs(self, obj: dict, prefix: str) -> tuple[str, ...]:
+        """The ``outputs`` field: measured states the canonical predictor accepts."""
+        from .pem import _out_matrix
+
+        outputs = self.texts(obj, "outputs", prefix)
+        try:
+            _out_matrix(outputs)
+        except ValueError as exc:
+            raise self.fail(prefix + "outputs", str(exc)) from None
+        return outputs
+
+    def sample_period(self, obj: dict, prefix: str) -> float:
+        """The ``dt`` field: a positive sample period [s]."""
+        dt = self.number(obj, "dt", prefix)
+        if dt <= 0:
+            raise self.fail(prefix + "dt", "must be a positive sample period [s]")
+        return dt
+
     def names(self, obj: dict, key: str, prefix: str, expected: Sequence[str]) -> None:
         if list(self.texts(obj, key, prefix)) != list(expected):
             raise self.fail(prefix + key, f"must be {list(expected)} (this format's order)")
@@ -588,17 +606,9 @@ class _Reader:
 
 def _canonical_model(r: _Reader, sec: Any, prefix: str) -> CanonicalModel:
     r.names(sec, "parameter_names", prefix, THETA_NAMES)
-    outputs = r.texts(sec, "outputs", prefix)
-    from .pem import _out_matrix
-
-    try:
-        _out_matrix(outputs)
-    except ValueError as exc:
-        raise r.fail(prefix + "outputs", str(exc)) from None
+    outputs = r.outputs(sec, prefix)
     n_out = len(outputs)
-    dt = r.number(sec, "dt", prefix)
-    if dt <= 0:
-        raise r.fail(prefix + "dt", "must be a positive sample period [s]")
+    dt = r.sample_period(sec, prefix)
     x0 = r.get(sec, "x0", prefix)
     if not isinstance(x0, list):
         raise r.fail(prefix + "x0", "must be a list of initial states")
@@ -626,9 +636,7 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     outputs = r.texts(sec, "outputs", prefix)
     if any(m.outputs != outputs for m in models):
         raise r.fail(prefix + "per_speed", "must use the same outputs as the joint model")
-    dt = r.number(sec, "dt", prefix)
-    if dt <= 0:
-        raise r.fail(prefix + "dt", "must be a positive sample period [s]")
+    dt = r.sample_period(sec, prefix)
     return SpeedCanonicalModel(
         params=r.array(sec, "params", prefix, (14,)),
         covariance=r.array(sec, "covariance", prefix, (14, 14)),
@@ -700,13 +708,8 @@ def _experiment_model(r: _Reader, sec: Any, prefix: str) -> ExperimentModel:
 
 def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
     from .direct import ALL_ENTRIES
-    from .pem import _out_matrix
 
-    outputs = r.texts(sec, "outputs", prefix)
-    try:
-        _out_matrix(outputs)
-    except ValueError as exc:
-        raise r.fail(prefix + "outputs", str(exc)) from None
+    outputs = r.outputs(sec, prefix)
     n_out = len(outputs)
     fields = _matrix_fields(r, sec, prefix)
     names = list(fields["free"])
@@ -721,9 +724,7 @@ def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
     symmetric = r.get(sec, "symmetric", prefix)
     if not isinstance(symmetric, bool):
         raise r.fail(prefix + "symmetric", "must be true or false")
-    dt = r.number(sec, "dt", prefix)
-    if dt <= 0:
-        raise r.fail(prefix + "dt", "must be a positive sample period [s]")
+    dt = r.sample_period(sec, prefix)
     gains = r.get(sec, "K", prefix)
     if not isinstance(gains, list) or not gains:
         raise r.fail(prefix + "K", "must list {speed, gain} per speed")
