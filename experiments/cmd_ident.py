@@ -7,6 +7,7 @@ printed beside the estimate (``true_eigenvalues``).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 
@@ -26,30 +27,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             "logged positive to the left. Each log file becomes one run."
         ),
     )
-    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
-    p.add_argument(
-        "--format", choices=("bikeid", "csv", "hdf5", "sbw"), default="bikeid",
-        help="bikeid: files written by bikeid (sweep, store); csv / hdf5: your own logs, read "
-        "with --columns (dataset.importers); sbw: TU Delft steer-by-wire logs (files or "
-        "folders; the settled part of each, v = treadmill speed, dataset.sbw_logs)",
+    add_data_options(
+        p,
+        FORMATS,
+        input_help="the runs' torque signal [N m] used as the model's steer-torque input "
+        "(default T_delta; e.g. sil_command of the steer-by-wire logs)",
     )  # fmt: skip
-    p.add_argument(
-        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
-        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
-    )  # fmt: skip
-    p.add_argument(
-        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
-        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
-    )  # fmt: skip
-    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
-    p.add_argument(
-        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
-        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
-    )  # fmt: skip
-    p.add_argument(
-        "--flip", default="", metavar="NAME,...",
-        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
-    )
     p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
     p.add_argument(
         "--free", default=None, metavar="NAME,...",
@@ -89,14 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "default all four). direct needs all four (its regressors use every state)",
     )  # fmt: skip
     p.add_argument(
-        "--input", default="T_delta", metavar="SIGNAL",
-        help="the runs' torque signal [N m] used as the model's steer-torque input (default "
-        "T_delta; e.g. sil_command of the steer-by-wire logs)",
-    )  # fmt: skip
-    p.add_argument(
         "--out", default=None, metavar="MODEL.json",
         help="save the identified model (ident.model_file: parameters, covariance, data file "
-        "hashes, settings); per-speed pem over several speeds writes MODEL-v<speed>.json",
+        "hashes, settings; any --method); per-speed pem over several speeds writes "
+        "MODEL-v<speed>.json",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
@@ -168,6 +147,64 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--out", default="accuracy", metavar="DIR", help="output folder")
     a.add_argument("--json", action="store_true", help="print JSON instead of the table")
     a.set_defaults(func=cmd_accuracy)  # fmt: skip
+
+
+#: Data formats ``bikeid identify`` reads, and what each is.
+FORMATS = {
+    "bikeid": "files written by bikeid (sweep, store)",
+    "csv": "your own logs, read with --columns (dataset.importers)",
+    "hdf5": "your own logs, read with --columns (dataset.importers)",
+    "sbw": "TU Delft steer-by-wire logs (files or folders; the settled part of each, v = "
+    "treadmill speed, dataset.sbw_logs)",
+}
+
+
+def add_data_options(
+    p: argparse.ArgumentParser, formats: Mapping[str, str], input_help: str
+) -> None:
+    """The data arguments of ``identify`` and ``validate``, read by :func:`_load`.
+
+    Adds FILE..., ``--format``, the importer options ``--columns``, ``--units``, ``--time``,
+    ``--speed``, ``--flip`` (csv/hdf5 logs) and ``--input`` (the torque signal used as
+    T_delta, :func:`_with_input`).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The command's parser.
+    formats : mapping of str to str
+        The ``--format`` choices (a subset of :data:`FORMATS`) and their help; the first is
+        the default.
+    input_help : str
+        Help text of ``--input``.
+
+    Returns
+    -------
+    None
+    """
+    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
+    p.add_argument(
+        "--format", choices=tuple(formats), default=next(iter(formats)),
+        help="; ".join(f"{k}: {v}" for k, v in formats.items()),
+    )  # fmt: skip
+    p.add_argument(
+        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
+        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
+        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
+    )  # fmt: skip
+    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
+    p.add_argument(
+        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
+        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
+    )  # fmt: skip
+    p.add_argument(
+        "--flip", default="", metavar="NAME,...",
+        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
+    )  # fmt: skip
+    p.add_argument("--input", default="T_delta", metavar="SIGNAL", help=input_help)
 
 
 def _truth(runs):
@@ -363,6 +400,9 @@ def _settings(args: argparse.Namespace) -> dict:
     if args.method == "direct":
         s.update(bicycle=args.bicycle, iv=args.iv, derivative=args.derivative,
                  cutoff=args.cutoff)  # fmt: skip
+    elif args.method == "greybox":
+        s.update(bicycle=args.bicycle, free=args.free, noise_model="free",
+                 drop_unidentifiable=args.drop_unidentifiable)  # fmt: skip
     else:
         s.update(speed_parameterized=args.speed_parameterized, noise_model="free")
     return s
@@ -383,11 +423,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
     speeds = sorted({round(r.speed, 6) for r in runs})
     if args.method != "greybox" and (args.free or args.drop_unidentifiable):
         raise ValueError("--free and --drop-unidentifiable apply to --method greybox")
-    if args.method == "greybox" and args.out:
-        raise ValueError(
-            "--out: grey-box models cannot be saved yet (ident.model_file stores direct, PEM "
-            "and experiment models); drop --out"
-        )
     targets, provenance, settings = [], [], {}
     if args.out:
         per_speed_pem = args.method == "pem" and not args.speed_parameterized
@@ -434,7 +469,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
         res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable,
                           **({"outputs": outputs} if outputs else {}))  # fmt: skip
-        saved = []
+        saved = [(res, targets[0])] if targets else []
         out["outputs"] = list(res.outputs)
         out.update(
             M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,
@@ -446,6 +481,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if len(speeds) >= 2:
             out["critical_speeds"] = res.critical_speeds()
         eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+        interval_models = {v: res.at(v) for v in speeds}
+        speed_model = res.speed_model() if len(speeds) >= 2 else None
     else:
         from bikeid.ident import pem
 
@@ -477,6 +514,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             out["stderr"] = model.stderr
             out["critical_speeds"] = model.critical_speeds()
             eig = {v: _sorted(model.eigenvalues(v)) for v in speeds}
+            interval_models, speed_model = {v: model.at(v) for v in speeds}, model
         else:
             out["models"] = {
                 v: {"theta": m.params(), "stderr": m.stderr, "A": m.A, "B": m.B}
@@ -484,6 +522,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             }
             eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
             saved = list(zip(per.values(), targets, strict=True)) if targets else []
+            interval_models, speed_model = per, None
         out["outputs"] = list(next(iter(per.values())).outputs)
         if bar:
             bar(steps, steps, "done")
@@ -497,6 +536,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if truth is not None:
             row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
         per_speed.append(row)
+    if args.method != "direct":
+        out["intervals"] = _intervals(interval_models, speed_model)
+        for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
+            row["eigenvalue_intervals"] = ei
     out["per_speed"] = per_speed
     if truth is not None and args.method == "pem" and args.speed_parameterized:
         from bikeid.sim.linear import critical_speeds
@@ -531,10 +574,66 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for row in per_speed:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")
+        if row.get("eigenvalue_intervals"):
+            print(f"{'':8s}  95 % +-   {_half_widths(row['eigenvalue_intervals'])}")
         if "true_eigenvalues" in row:
             fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
             print(f"{'':8s}  true       {fmt}")
+    if "intervals" in out:
+        for line in _interval_lines(out["intervals"]):
+            print(line)
     return 0
+
+
+def _intervals(models: dict, speed_model) -> dict:
+    """95 % eigenvalue intervals per speed and, for a model over speed, of v_w and v_c.
+
+    ``models`` maps each speed to a model with a theta covariance (a CanonicalModel, or a
+    model over speed taken there); ``speed_model`` is a SpeedCanonicalModel (the
+    speed-parameterized fit, or a grey-box model's :meth:`speed_model`) or None.
+    """
+    from bikeid.ident.uncertainty import critical_speed_intervals, eigenvalue_intervals
+    from bikeid.ident.validation_report import INTERVAL_CALIBRATION
+    from bikeid.sim.errors import InputError, UntrustworthyResult
+
+    out: dict = {"level": 0.95, "calibration": INTERVAL_CALIBRATION, "eigenvalues": []}
+    for v, m in models.items():
+        try:
+            out["eigenvalues"].append(eigenvalue_intervals(m).to_json())
+        except InputError as exc:  # no usable covariance: the estimate stands, no interval
+            out["eigenvalues"].append(None)
+            out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")
+    if speed_model is not None:
+        try:
+            out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
+        except (InputError, UntrustworthyResult) as exc:  # e.g. a tangential crossing
+            out["critical_speeds"] = None
+            out["critical_speeds_note"] = str(exc)
+    return out
+
+
+def _half_widths(ei: dict) -> str:
+    """Half-widths of the real and imaginary parts, aligned under the eigenvalues."""
+    cells = []
+    for r in ei["eigenvalues"]:
+        re, im = (r["real"][1] - r["real"][0]) / 2, (r["imag"][1] - r["imag"][0]) / 2
+        cells.append(f"{re:6.3f} {im:6.3f}j")
+    return "  ".join(cells)
+
+
+def _interval_lines(iv: dict) -> list[str]:
+    lines = []
+    crit = iv.get("critical_speeds")
+    for name in ("v_w", "v_c") if crit else ():
+        c = crit[name]
+        if c["value"] is not None:
+            lo, hi = c["interval"]
+            lines.append(f"{name} = {c['value']:.3f} m/s, 95 % interval [{lo:.3f}, {hi:.3f}] m/s")
+    if iv.get("critical_speeds_note"):
+        lines.append(f"critical-speed intervals: {iv['critical_speeds_note']}")
+    lines += [f"note: {n}" for n in iv.get("notes", [])]
+    lines.append(f"note: {iv['calibration']}")
+    return lines
 
 
 def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:

@@ -13,7 +13,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .cliutil import dump_json, integer, mapping_arg, number
+from .cliutil import dump_json, integer, number
+from .cmd_ident import FORMATS, add_data_options
 
 #: Marker of the folders ``bikeid validate --out`` writes (in validation.json).
 MARKER = "bikeid validate"
@@ -25,42 +26,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="validate a saved model on data: fit %%, residual tests, Bode vs data",
         description=(
             "Compare a model saved by 'bikeid identify --out' with runs: measured vs "
-            "simulated and k-step-predicted outputs (MATLAB compare's NRMSE fit in %%), "
+            "simulated and k-step-predicted outputs (MATLAB compare's NRMSE fit in %), "
             "one-step residual whiteness and independence from the input (chi-squared tests "
-            "at 1 %%), and a nonparametric frequency response from T_delta to each output "
-            "where the coherence shows excitation. Data are read as by 'bikeid identify' "
+            "at 1 %), and a nonparametric frequency response from T_delta to each output "
+            "where the coherence shows excitation, with the model's 95 % Bode band (models with "
+            "a parameter covariance). Data are read as by 'bikeid identify' "
             "(--format bikeid|csv|hdf5 and its options)."
         ),
     )
-    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
     p.add_argument("--model", required=True, metavar="MODEL.json", help="model file to validate")
-    p.add_argument(
-        "--format", choices=("bikeid", "csv", "hdf5"), default="bikeid",
-        help="as 'bikeid identify': bikeid run files, or your own csv / hdf5 logs",
-    )  # fmt: skip
-    p.add_argument(
-        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
-        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
-    )  # fmt: skip
-    p.add_argument(
-        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
-        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
-    )  # fmt: skip
-    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
-    p.add_argument(
-        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
-        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
-    )  # fmt: skip
-    p.add_argument(
-        "--flip",
-        default="",
-        metavar="NAME,...",
-        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
+    add_data_options(
+        p,
+        {k: FORMATS[k] for k in ("bikeid", "csv", "hdf5")},
+        input_help="the runs' torque signal [N m] used as the model's input T_delta (default "
+        "T_delta)",
     )
-    p.add_argument(
-        "--input", default="T_delta", metavar="SIGNAL",
-        help="the runs' torque signal [N m] used as the model's input T_delta (default T_delta)",
-    )  # fmt: skip
     p.add_argument(
         "--k-step", type=integer(1, 1_000_000), default=10, metavar="K",
         help="horizon of the k-step-ahead prediction [samples] (default 10)",
@@ -173,11 +153,18 @@ def table(report, model_path: str) -> str:
     for e in report.frequency_responses:
         if e.excited:
             fv = e.f[e.valid]
+            inside = e.in_band
+            band = "" if inside is None else (
+                f"; {int(inside.sum())} inside the model's 95 % Bode band, "
+                f"{int(e.consistent.sum())} within it widened by their own 95 % error")  # fmt: skip
             lines.append(
                 f"frequency response {e.input} -> {e.output} (v={e.speed:g} m/s, {e.reference}):"
                 f" {int(e.valid.sum())} frequencies in {fv.min():.2f}..{fv.max():.2f} Hz with "
-                f"coherence >= {e.coherence_min:g}"
+                f"coherence >= {e.coherence_min:g}{band}"
             )
+    summary = report.band_summary()
+    if summary is not None:
+        lines.append(f"Bode band: {summary['calibration']}")
     if report.simulation_note:
         lines.append(report.simulation_note)
     lines += [f"note: {n}" for n in report.notes]

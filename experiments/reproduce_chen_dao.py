@@ -116,12 +116,12 @@ def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: st
     )
 
 
-def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.ndarray:
+def eigen_stderr(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """Standard errors of the eigenvalues of the canonical A(theta).
 
-    First-order propagation of the parameter covariance, the eigenvalues' derivatives by
-    central differences (perturbed eigenvalues paired with the unperturbed ones by
-    :func:`sim.linear.match_eigenvalues`).
+    First-order propagation of the parameter covariance with the analytic eigenvalue
+    derivatives of :func:`bikeid.ident.uncertainty.eigenvalue_jacobian` (the propagation of
+    :func:`bikeid.ident.uncertainty.eigenvalue_intervals`).
 
     Parameters
     ----------
@@ -129,8 +129,6 @@ def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.n
         Canonical parameters a1..a8 [1/s^2, 1/s], b1, b2 [rad/(N m s^2)].
     cov : (10, 10) ndarray
         Their covariance (units of theta squared).
-    step : float
-        Relative difference step (absolute for |theta_j| < 1).
 
     Returns
     -------
@@ -138,22 +136,11 @@ def eigen_stderr(theta: np.ndarray, cov: np.ndarray, step: float = 1e-6) -> np.n
         Standard errors of Re and Im [1/s], rows in the order of
         ``np.sort_complex(eig(A(theta)))``.
     """
-    from bikeid.ident.canonical import canonical_ab
-    from bikeid.sim.linear import match_eigenvalues
+    from bikeid.ident.uncertainty import eigenvalue_jacobian
 
-    base = np.sort_complex(np.linalg.eigvals(canonical_ab(theta)[0]))
-    J = np.zeros((8, theta.size))
-    for j in range(theta.size):
-        h = step * max(1.0, abs(theta[j]))
-        cols = []
-        for s in (1, -1):
-            th = theta.copy()
-            th[j] += s * h
-            ev = np.linalg.eigvals(canonical_ab(th)[0])  # real dtype when all roots are real
-            cols.append(ev[match_eigenvalues(ev, base, return_index=True)[1]])
-        d = (cols[0] - cols[1]) / (2 * h)
-        J[:, j] = np.concatenate([d.real, d.imag])
-    var = np.einsum("ij,jk,ik->i", J, cov, J)
+    jac = eigenvalue_jacobian(np.asarray(theta, float))[1]
+    J = np.vstack([jac.real, jac.imag])
+    var = np.einsum("ij,jk,ik->i", J, np.asarray(cov, float), J)
     return np.sqrt(np.maximum(var, 0)).reshape(2, 4).T
 
 

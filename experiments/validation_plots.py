@@ -8,8 +8,9 @@ Three PNG figures, written atomically (:func:`bikeid.experiments.plots.save`):
   the residual-input cross-correlation against lag with the 99 % band and the chi-squared
   test verdicts;
 - :func:`plot_bode`: per output and speed, the model's Bode plot (sampled response) with
-  the nonparametric estimate and its error bars at the frequencies the coherence allows,
-  and the coherence itself.
+  its 95 % band (when the model has a parameter covariance; calibrated on the linear plant
+  only) under the nonparametric estimate and its error bars at the frequencies the
+  coherence allows, and the coherence itself.
 """
 
 from __future__ import annotations
@@ -133,11 +134,23 @@ def plot_bode(report: ValidationReport, path: str | Path) -> Path:
         curve_ph = np.unwrap(np.angle(e.model_curve))
         mag.loglog(e.model_f, np.abs(e.model_curve), color="tab:blue", label="model (sampled)")
         ph.semilogx(e.model_f, np.degrees(curve_ph), color="tab:blue")
+        if e.curve_band_db.size:  # the model's 95 % band, under the estimate
+            k_db = 10.0 ** (e.curve_band_db / 20.0)
+            mag.fill_between(e.model_f, np.abs(e.model_curve) / k_db,
+                             np.abs(e.model_curve) * k_db, color="tab:blue", alpha=0.2, lw=0,
+                             label="model 95 % band (linear-plant calibrated)")  # fmt: skip
+            ph.fill_between(e.model_f, np.degrees(curve_ph) - e.curve_band_deg,
+                            np.degrees(curve_ph) + e.curve_band_deg, color="tab:blue",
+                            alpha=0.2, lw=0)  # fmt: skip
         v = e.valid
         if v.any():
             err = e.rel_error[v] * np.abs(e.H[v])
+            inside = e.in_band
+            where = "" if inside is None else (
+                f", {int(inside.sum())}/{int(v.sum())} in band, "
+                f"{int(e.consistent.sum())} with own error")  # fmt: skip
             mag.errorbar(e.f[v], np.abs(e.H[v]), yerr=err, fmt="o", ms=3, color="tab:red",
-                         lw=0.8, label=f"estimate ({e.reference})")  # fmt: skip
+                         lw=0.8, label=f"estimate ({e.reference}{where})")  # fmt: skip
             # phase of the estimate on the model curve's branch (same unwrapping offset)
             d = np.angle(e.H[v] / e.model[v])
             model_ph = np.interp(e.f[v], e.model_f, curve_ph)

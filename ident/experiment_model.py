@@ -738,7 +738,9 @@ def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
 def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> np.ndarray:
     """NRMSE per window and channel: ||y_sim - y|| / ||y - mean(y)|| (0 = perfect).
 
-    This is 1 - fit of MATLAB ``compare``/Moore's VAF (identification.md 1.2).
+    This is 1 - fit of MATLAB ``compare`` (identification.md 1.2), computed by
+    :func:`bikeid.ident.validate.goodness_of_fit` (``"nrmse"``), the fit of ``bikeid
+    validate``; NaN for a window whose signal is constant.
 
     Parameters
     ----------
@@ -754,9 +756,10 @@ def window_errors(windows: list[Window], sims, channels=("phidot", "delta")) -> 
     (len(windows), len(channels)) ndarray
         Dimensionless.
     """
+    from .validate import goodness_of_fit
+
     out = np.zeros((len(windows), len(channels)))
     for i, (w, s) in enumerate(zip(windows, sims, strict=True)):
         for j, c in enumerate(channels):
-            y = getattr(w, c)
-            out[i, j] = np.linalg.norm(s[c] - y) / max(np.linalg.norm(y - y.mean()), 1e-12)
+            out[i, j] = goodness_of_fit(getattr(w, c), s[c])["nrmse"]
     return out

@@ -535,8 +535,68 @@ class GreyboxModel:
             J cov J' with J = d theta / d entry (:func:`theta_jacobian`), squared units of
             theta.
         """
-        _, J = theta_jacobian(self.canonical(), v, tuple(self.free), self.symmetric)
+        J = self._theta_jacobian(v)
         return J @ self.covariance @ J.T
+
+    def _theta_jacobian(self, v: float) -> np.ndarray:
+        """d theta(v) / d free entries (10, P); H entries (free when a run had F) enter
+        theta only through the F column, so their columns here are zero."""
+        forced = any(n in _FORCE for n in self.free)
+        H = self.H if forced else None
+        return theta_jacobian(self.canonical(), v, tuple(self.free), self.symmetric, H)[1][:10]
+
+    def speed_model(self):
+        """The estimate as a speed-parameterized canonical model (what v_w, v_c intervals use).
+
+        The matrices give the 14 speed parameters p = [alpha, beta, gamma, b]
+        (:func:`ident.canonical.speed_params_from_matrices`; theta(v) = S(v) p); their
+        covariance is dp/de cov dp/de' with dp/de solved exactly from d theta / d e at
+        v = 0, 1, 2 m/s (theta is linear in p: S(0), S(1), S(2) stacked have full column
+        rank).
+
+        Returns
+        -------
+        ident.pem.SpeedCanonicalModel
+            ``params`` (14,), ``covariance`` (14, 14), ``per_speed`` = :meth:`at` of each
+            fitted speed, ``dt``, ``g``, ``outputs``, ``cost``, ``nfev`` of this fit.
+        """
+        from .canonical import speed_map, speed_params_from_matrices
+        from .pem import SpeedCanonicalModel
+
+        grid = (0.0, 1.0, 2.0)
+        S = np.vstack([speed_map(v) for v in grid])
+        J = np.vstack([self._theta_jacobian(v) for v in grid])
+        dp = np.linalg.lstsq(S, J, rcond=None)[0]
+        return SpeedCanonicalModel(
+            params=speed_params_from_matrices(self.canonical()),
+            covariance=dp @ self.covariance @ dp.T, per_speed={v: self.at(v) for v in self.K},
+            dt=self.dt, g=self.g, outputs=self.outputs, cost=self.cost, nfev=self.nfev,
+        )  # fmt: skip
+
+    def at(self, v: float):
+        """The canonical model at speed ``v``: what saving, validation and intervals use.
+
+        Parameters
+        ----------
+        v : float
+            Forward speed [m/s]; need not be one of the fitted speeds.
+
+        Returns
+        -------
+        ident.pem.CanonicalModel
+            theta = :meth:`theta` (v), covariance :meth:`theta_covariance` (v) (delta method
+            from the free entries), innovation gain ``K`` and ``noise_covariance`` of the
+            fitted speed nearest to ``v``, input T_delta only (a lateral-force column H is
+            not part of it), as :meth:`ident.pem.SpeedCanonicalModel.at`.
+        """
+        from .pem import CanonicalModel
+
+        near = min(self.K, key=lambda s: abs(s - v))
+        return CanonicalModel(
+            theta=self.theta(v), covariance=self.theta_covariance(v), K=self.K[near],
+            dt=self.dt, speed=float(v), noise_covariance=self.noise_covariance,
+            outputs=self.outputs,
+        )  # fmt: skip
 
     def state_space(self, v: float, inputs: Sequence[str] = ("T_delta",)) -> control.StateSpace:
         """python-control model at speed ``v``, all four states output.

@@ -19,7 +19,10 @@ A saved model is a strict JSON object (no pickle; read back with
 - ``"direct"``: :class:`bikeid.ident.direct.DirectResult` (Moore & Hubbard's least squares
   or instrumental variables: M, C1, K0, K2, H, per-row covariances);
 - ``"experiment-model"``: :class:`bikeid.ident.experiment_model.ExperimentModel` (the
-  steer-by-wire experiment with its fitted effects, ``bikeid measured fit``).
+  steer-by-wire experiment with its fitted effects, ``bikeid measured fit``);
+- ``"greybox"``: :class:`bikeid.ident.greybox.GreyboxModel` (the Whipple matrices with
+  their free entries estimated: estimates, covariance, fixed values, free set, per-speed
+  innovation gains, conditioning; ``bikeid identify --method greybox``).
 
 Numbers are written with Python's shortest round-trip representation (``repr``), so a
 loaded model holds the very same float64 values as the saved one: its eigenvalues and
@@ -64,6 +67,7 @@ from .canonical import SPEED_NAMES, THETA_NAMES
 from .direct import DirectResult
 from .experiment_model import DT as EXPERIMENT_DT
 from .experiment_model import ExperimentModel
+from .greybox import GreyboxModel
 from .pem import INPUT, CanonicalModel, SpeedCanonicalModel
 
 __all__ = [
@@ -87,6 +91,7 @@ KINDS = {
     "speed-canonical-pem": SpeedCanonicalModel,
     "direct": DirectResult,
     "experiment-model": ExperimentModel,
+    "greybox": GreyboxModel,
 }
 #: Largest model file read [bytes] (a PEM model with covariances is ~10 kB).
 MAX_BYTES = 20_000_000
@@ -104,7 +109,7 @@ class ModelFile:
 
     Attributes
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or ExperimentModel
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult, ExperimentModel or GreyboxModel
         The model, equal bit for bit to the one saved.
     kind : str
         One of :data:`KINDS`.
@@ -226,7 +231,8 @@ def _speed_section(m: SpeedCanonicalModel) -> dict:
     }
 
 
-def _direct_section(m: DirectResult) -> dict:
+def _matrix_section(m: DirectResult | GreyboxModel) -> dict:
+    """The Whipple matrices, H, g and the free entries with their standard errors."""
     return {
         "M": _arr(m.M, "M"),
         "C1": _arr(m.C1, "C1"),
@@ -236,6 +242,12 @@ def _direct_section(m: DirectResult) -> dict:
         "g": _num(m.g, "g"),
         "free": {k: _num(v, f"free[{k}]") for k, v in m.free.items()},
         "stderr": {k: _num(v, f"stderr[{k}]") for k, v in m.stderr.items()},
+    }
+
+
+def _direct_section(m: DirectResult) -> dict:
+    return {
+        **_matrix_section(m),
         "covariance": {
             row: {"names": list(names), "matrix": _arr(cov, f"covariance[{row}]")}
             for row, (names, cov) in m.covariance.items()
@@ -258,6 +270,27 @@ def _experiment_section(m: ExperimentModel) -> dict:
         "V": _num(m.V, "V"),
         "bicycle": m.p.name,
         "parameters": {k: _num(v, k) for k, v in m.p.as_dict().items()},
+    }
+
+
+def _greybox_section(m: GreyboxModel) -> dict:
+    return {
+        **_matrix_section(m),
+        "covariance": _arr(m.covariance, "covariance"),
+        "condition": _num(m.condition, "condition"),
+        "inflation": {k: _num(v, f"inflation[{k}]") for k, v in m.inflation.items()},
+        "weakest": {k: _num(v, f"weakest[{k}]") for k, v in m.weakest.items()},
+        "dropped": [str(n) for n in m.dropped],
+        "fixed": {k: _num(v, f"fixed[{k}]") for k, v in m.fixed.items()},
+        "symmetric": bool(m.symmetric),
+        "K": [{"speed": _num(v, "K speed"), "gain": _arr(k, f"K[{v}]")} for v, k in m.K.items()],
+        "dt": _num(m.dt, "dt"),
+        "outputs": list(m.outputs),
+        "speeds": [_num(v, "speeds") for v in m.speeds],
+        "noise_covariance": _arr(m.noise_covariance, "noise_covariance"),
+        "cost": _num(m.cost, "cost", nullable=True),
+        "nfev": int(m.nfev),
+        "notes": [str(n) for n in m.notes],
     }
 
 
@@ -286,6 +319,13 @@ def _summary(kind: str, model: Any) -> dict:
             "sample_time": float(model.dt),
             "speeds": [float(v) for v in sorted(model.per_speed)],
         }
+    if kind == "greybox":
+        return {
+            "inputs": [INPUT],
+            "outputs": list(model.outputs),
+            "sample_time": float(model.dt),
+            "speeds": [float(v) for v in model.speeds],
+        }
     if kind == "direct":
         return {
             "inputs": list(DIRECT_INPUTS),
@@ -306,6 +346,7 @@ _SECTIONS = {
     "speed-canonical-pem": _speed_section,
     "direct": _direct_section,
     "experiment-model": _experiment_section,
+    "greybox": _greybox_section,
 }
 
 
@@ -362,7 +403,7 @@ def model_json(
 
     Parameters
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or ExperimentModel
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult, ExperimentModel or GreyboxModel
         The model.
     provenance : sequence of path or dict, optional
         Data files (hashed here) or entries of :func:`file_provenance`.
@@ -421,7 +462,7 @@ def save_model(
 
     Parameters
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or ExperimentModel
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult, ExperimentModel or GreyboxModel
         The identified model.
     path : str or path-like
         The JSON file to write (its folder is created if missing).
@@ -540,6 +581,24 @@ class _Reader:
             raise self.fail(prefix + key, "must be an object of name: number")
         return {k: self.number(v, k, f"{prefix}{key}.", nullable) for k in v}
 
+    def outputs(self, obj: dict, prefix: str) -> tuple[str, ...]:
+        """The ``outputs`` field: measured states the canonical predictor accepts."""
+        from .pem import _out_matrix
+
+        outputs = self.texts(obj, "outputs", prefix)
+        try:
+            _out_matrix(outputs)
+        except ValueError as exc:
+            raise self.fail(prefix + "outputs", str(exc)) from None
+        return outputs
+
+    def sample_period(self, obj: dict, prefix: str) -> float:
+        """The ``dt`` field: a positive sample period [s]."""
+        dt = self.number(obj, "dt", prefix)
+        if dt <= 0:
+            raise self.fail(prefix + "dt", "must be a positive sample period [s]")
+        return dt
+
     def names(self, obj: dict, key: str, prefix: str, expected: Sequence[str]) -> None:
         if list(self.texts(obj, key, prefix)) != list(expected):
             raise self.fail(prefix + key, f"must be {list(expected)} (this format's order)")
@@ -547,17 +606,9 @@ class _Reader:
 
 def _canonical_model(r: _Reader, sec: Any, prefix: str) -> CanonicalModel:
     r.names(sec, "parameter_names", prefix, THETA_NAMES)
-    outputs = r.texts(sec, "outputs", prefix)
-    from .pem import _out_matrix
-
-    try:
-        _out_matrix(outputs)
-    except ValueError as exc:
-        raise r.fail(prefix + "outputs", str(exc)) from None
+    outputs = r.outputs(sec, prefix)
     n_out = len(outputs)
-    dt = r.number(sec, "dt", prefix)
-    if dt <= 0:
-        raise r.fail(prefix + "dt", "must be a positive sample period [s]")
+    dt = r.sample_period(sec, prefix)
     x0 = r.get(sec, "x0", prefix)
     if not isinstance(x0, list):
         raise r.fail(prefix + "x0", "must be a list of initial states")
@@ -585,9 +636,7 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     outputs = r.texts(sec, "outputs", prefix)
     if any(m.outputs != outputs for m in models):
         raise r.fail(prefix + "per_speed", "must use the same outputs as the joint model")
-    dt = r.number(sec, "dt", prefix)
-    if dt <= 0:
-        raise r.fail(prefix + "dt", "must be a positive sample period [s]")
+    dt = r.sample_period(sec, prefix)
     return SpeedCanonicalModel(
         params=r.array(sec, "params", prefix, (14,)),
         covariance=r.array(sec, "covariance", prefix, (14, 14)),
@@ -600,7 +649,8 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     )
 
 
-def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
+def _matrix_fields(r: _Reader, sec: Any, prefix: str) -> dict:
+    """M, C1, K0, K2, H, g, free and stderr of :func:`_matrix_section`, checked."""
     from .direct import ALL_ENTRIES
 
     free = r.numbers(sec, "free", prefix)
@@ -608,6 +658,17 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
     bad = [k for k in list(free) + list(stderr) if k not in ALL_ENTRIES]
     if bad:
         raise r.fail(prefix + "free", f"names unknown entries {bad}")
+    return {
+        **{k: r.array(sec, k, prefix, (2, 2)) for k in ("M", "C1", "K0", "K2")},
+        "H": r.array(sec, "H", prefix, (2,)),
+        "g": r.number(sec, "g", prefix),
+        "free": free,
+        "stderr": stderr,
+    }
+
+
+def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
+    fields = _matrix_fields(r, sec, prefix)
     covs_in = r.get(sec, "covariance", prefix)
     if not isinstance(covs_in, dict):
         raise r.fail(prefix + "covariance", "must be an object of row: {names, matrix}")
@@ -617,14 +678,7 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
         n = len(names)
         covs[row] = (names, r.array(c, "matrix", f"{prefix}covariance.{row}.", (n, n)))
     return DirectResult(
-        M=r.array(sec, "M", prefix, (2, 2)),
-        C1=r.array(sec, "C1", prefix, (2, 2)),
-        K0=r.array(sec, "K0", prefix, (2, 2)),
-        K2=r.array(sec, "K2", prefix, (2, 2)),
-        H=r.array(sec, "H", prefix, (2,)),
-        g=r.number(sec, "g", prefix),
-        free=free,
-        stderr=stderr,
+        **fields,
         covariance=covs,
         condition=r.numbers(sec, "condition", prefix),
         vaf_moore=r.numbers(sec, "vaf_moore", prefix, nullable=True),
@@ -652,11 +706,62 @@ def _experiment_model(r: _Reader, sec: Any, prefix: str) -> ExperimentModel:
         raise InputError(f"{r.where}: {exc}") from None
 
 
+def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
+    from .direct import ALL_ENTRIES
+
+    outputs = r.outputs(sec, prefix)
+    n_out = len(outputs)
+    fields = _matrix_fields(r, sec, prefix)
+    names = list(fields["free"])
+    for key in ("stderr", "inflation", "weakest"):
+        if list(r.numbers(sec, key, prefix)) != names:
+            raise r.fail(prefix + key, f"must name the free entries {names} in order")
+    fixed = r.numbers(sec, "fixed", prefix)
+    dropped = r.texts(sec, "dropped", prefix)
+    bad = [k for k in list(fixed) + list(dropped) if k not in ALL_ENTRIES]
+    if bad or not names:
+        raise r.fail(prefix + "fixed", f"must name matrix entries; unknown {bad}")
+    symmetric = r.get(sec, "symmetric", prefix)
+    if not isinstance(symmetric, bool):
+        raise r.fail(prefix + "symmetric", "must be true or false")
+    dt = r.sample_period(sec, prefix)
+    gains = r.get(sec, "K", prefix)
+    if not isinstance(gains, list) or not gains:
+        raise r.fail(prefix + "K", "must list {speed, gain} per speed")
+    K = {}
+    for i, e in enumerate(gains):
+        pre = f"{prefix}K[{i}]."
+        K[r.number(e, "speed", pre)] = r.array(e, "gain", pre, (4, n_out))
+    speeds = tuple(float(v) for v in r.array(sec, "speeds", prefix, (None,)))
+    if list(K) != list(speeds):
+        raise r.fail(prefix + "K", f"must hold one gain per speed of 'speeds' {list(speeds)}")
+    P = len(names)
+    return GreyboxModel(
+        **fields,
+        covariance=r.array(sec, "covariance", prefix, (P, P)),
+        condition=r.number(sec, "condition", prefix),
+        inflation=r.numbers(sec, "inflation", prefix),
+        weakest=r.numbers(sec, "weakest", prefix),
+        dropped=dropped,
+        fixed=fixed,
+        symmetric=symmetric,
+        K=K,
+        dt=dt,
+        outputs=outputs,
+        speeds=speeds,
+        noise_covariance=r.array(sec, "noise_covariance", prefix, (n_out, n_out)),
+        cost=r.number(sec, "cost", prefix, nullable=True),
+        nfev=r.integer(sec, "nfev", prefix),
+        notes=r.texts(sec, "notes", prefix),
+    )
+
+
 _READERS = {
     "canonical-pem": _canonical_model,
     "speed-canonical-pem": _speed_model,
     "direct": _direct_model,
     "experiment-model": _experiment_model,
+    "greybox": _greybox_model,
 }
 
 
@@ -803,7 +908,7 @@ def load_model(path: str | os.PathLike) -> Any:
 
     Returns
     -------
-    CanonicalModel, SpeedCanonicalModel, DirectResult or ExperimentModel
+    CanonicalModel, SpeedCanonicalModel, DirectResult, ExperimentModel or GreyboxModel
         The saved model, by the file's ``kind``; equal bit for bit to the saved one.
         :func:`read_model_file` also returns the provenance, settings and results.
 

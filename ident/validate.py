@@ -66,18 +66,22 @@ def goodness_of_fit(y: np.ndarray, yhat: np.ndarray) -> dict[str, float]:
     Returns
     -------
     dict of str to float
-        ``"mse"`` (unit of ``y`` squared); ``"nrmse_fit"`` (MATLAB ``compare``'s fit, as a
-        fraction), ``"nmse_fit"`` = 1 - (||y - yhat|| / ||y - mean y||)^2 and ``"vaf"``
-        = 1 - var(y - yhat) / var(y) (:func:`ident.direct.vaf_variance`), all
+        ``"mse"`` (unit of ``y`` squared); ``"nrmse"`` = ||y - yhat|| / ||y - mean y||
+        (0 = perfect; the error of ``bikeid measured evaluate``,
+        :func:`bikeid.ident.experiment_model.window_errors`); ``"nrmse_fit"`` = 1 - nrmse
+        (MATLAB ``compare``'s fit, as a fraction), ``"nmse_fit"`` = 1 - nrmse^2 and
+        ``"vaf"`` = 1 - var(y - yhat) / var(y) (:func:`ident.direct.vaf_variance`), all
         dimensionless, NaN when ``y`` is constant.
     """
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     err = np.linalg.norm(y - yhat)
     den = np.linalg.norm(y - y.mean())
+    ratio = float(err / den) if den > 0 else float("nan")
     return {
         "mse": float(np.mean((y - yhat) ** 2)),
-        "nrmse_fit": float(1 - err / den) if den > 0 else float("nan"),
-        "nmse_fit": float(1 - (err / den) ** 2) if den > 0 else float("nan"),
+        "nrmse": ratio,
+        "nrmse_fit": 1 - ratio,
+        "nmse_fit": 1 - ratio**2,
         "vaf": vaf_variance(y, yhat),
     }
 
@@ -87,13 +91,15 @@ def sampled_model(model, dt: float, v: float | None = None):
 
     Parameters
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+    model : CanonicalModel, SpeedCanonicalModel, DirectResult, GreyboxModel or control.StateSpace
         A ``CanonicalModel`` gives its own predictor (its ``dt`` must equal ``dt``); a
         ``SpeedCanonicalModel`` its fixed-speed model at ``v`` (:meth:`at`: K of the
         nearest fitted speed); a ``DirectResult`` its state space at ``v`` with inputs
         T_phi, T_delta and F (a run without T_phi or F has them zero), all four states
-        measured and K = 0; a continuous ``StateSpace`` (D = 0)
-        is sampled exactly (zero-order hold) with K = 0.
+        measured and K = 0; a ``GreyboxModel`` its canonical model at ``v``
+        (:meth:`~bikeid.ident.greybox.GreyboxModel.at`: the matrices' theta(v) with the
+        innovation gain of the nearest fitted speed, input T_delta); a continuous
+        ``StateSpace`` (D = 0) is sampled exactly (zero-order hold) with K = 0.
     dt : float
         Sample period of the data [s].
     v : float, optional
@@ -141,7 +147,7 @@ def sampled_model(model, dt: float, v: float | None = None):
         return Ad, Bd, C, K, tuple(model.output_labels), tuple(model.input_labels)
     raise ValueError(
         "model must be an ident.pem.CanonicalModel, SpeedCanonicalModel, "
-        "ident.direct.DirectResult or a control.StateSpace"
+        "ident.direct.DirectResult, ident.greybox.GreyboxModel or a control.StateSpace"
     )
 
 

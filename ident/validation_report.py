@@ -12,7 +12,9 @@ judge the model (MATLAB System Identification Toolbox habits, all built on
   independence tests computed from them;
 - a nonparametric frequency response from the steer torque to each output
   (:func:`frequency_response_estimate`, Welch spectra), kept only at frequencies whose
-  coherence shows excitation, to lay over the model's Bode plot.
+  coherence shows excitation, to lay over the model's Bode plot, with the model's 95 %
+  Bode band (:func:`bikeid.ident.uncertainty.bode_bands`, for models with a parameter
+  covariance) and which estimated points lie inside it.
 
 The result, :class:`ValidationReport`, turns into plain JSON types with
 :meth:`ValidationReport.to_json`; the figures are drawn by
@@ -44,8 +46,10 @@ from .validate import (
 )
 
 __all__ = [
+    "INTERVAL_CALIBRATION",
     "FrequencyResponseEstimate",
     "ValidationReport",
+    "bode_band_halfwidths",
     "frequency_response_estimate",
     "model_frequency_response",
     "residual_tests",
@@ -59,6 +63,14 @@ COHERENCE_MIN = 0.5
 K_STEP = 10
 #: Speeds closer than this share one frequency-response estimate [m/s].
 SPEED_GROUP = 0.01
+#: Confidence level of the model's Bode band.
+BAND_LEVEL = 0.95
+#: What every printed interval says about itself (docs/uncertainty.md).
+INTERVAL_CALIBRATION = (
+    "95 % intervals are first-order (delta method) from the fit's parameter covariance; their "
+    "coverage is calibrated on the linear plant only (docs/uncertainty.md), not on the "
+    "nonlinear plant or measured data, where they can be too narrow"
+)
 
 
 def _runs(runs: Run | Sequence[Run]) -> list[Run]:
@@ -85,7 +97,7 @@ def model_frequency_response(
 
     Parameters
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+    model : CanonicalModel, SpeedCanonicalModel, GreyboxModel, DirectResult or StateSpace
         The model.
     f : (F,) array_like
         Frequencies [Hz], below the Nyquist frequency.
@@ -158,6 +170,13 @@ class FrequencyResponseEstimate:
         A log-spaced grid [Hz] from f[0] / 4 to 0.98 of the Nyquist frequency, for drawing.
     model_curve : (G,) complex ndarray
         The model's sampled response on ``model_f``.
+    band_db, band_deg : (F,) ndarray
+        Half-widths of the model's 95 % Bode band at ``f`` [dB, deg]
+        (:func:`bikeid.ident.uncertainty.bode_bands`: z times the standard errors of
+        20 log10 |G| and of the phase), laid about ``model``; empty when the model has no
+        parameter covariance (direct, StateSpace).
+    curve_band_db, curve_band_deg : (G,) ndarray
+        The same half-widths on ``model_f`` (for drawing).
     """
 
     output: str
@@ -175,11 +194,47 @@ class FrequencyResponseEstimate:
     note: str = ""
     model_f: np.ndarray = field(default_factory=lambda: np.zeros(0))
     model_curve: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    band_db: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    band_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    curve_band_db: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    curve_band_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def excited(self) -> bool:
         """bool: True when at least one frequency has enough coherence for an estimate."""
         return bool(np.any(self.valid))
+
+    @property
+    def in_band(self) -> np.ndarray | None:
+        """(F,) bool ndarray or None: valid estimates whose magnitude (dB) and phase both lie
+        inside the model's 95 % Bode band (None without a band)."""
+        if self.band_db.size == 0:
+            return None
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = self.H / self.model
+            d_db = np.abs(20.0 * np.log10(np.abs(ratio)))
+            d_deg = np.abs(np.degrees(np.angle(ratio)))
+        return self.valid & (d_db <= self.band_db) & (d_deg <= self.band_deg)
+
+    @property
+    def consistent(self) -> np.ndarray | None:
+        """(F,) bool ndarray or None: valid estimates within the band widened by their own
+        95 % random error (half-widths added in quadrature: sqrt(band^2 + (z e)^2), e the
+        relative error :attr:`rel_error` as sd of ln|H| and of the phase [rad]); None
+        without a band.  The estimate is usually noisier than the model, so this, not
+        :attr:`in_band`, says whether model and data disagree."""
+        if self.band_db.size == 0:
+            return None
+        from .uncertainty import z_value
+
+        ze = z_value(BAND_LEVEL) * self.rel_error
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = self.H / self.model
+            d_db = np.abs(20.0 * np.log10(np.abs(ratio)))
+            d_deg = np.abs(np.degrees(np.angle(ratio)))
+        w_db = np.hypot(self.band_db, ze * 20.0 / np.log(10.0))
+        w_deg = np.hypot(self.band_deg, np.degrees(ze))
+        return self.valid & (d_db <= w_db) & (d_deg <= w_deg)
 
     def to_json(self) -> dict:
         """The estimate at its valid frequencies, as plain JSON types.
@@ -191,10 +246,18 @@ class FrequencyResponseEstimate:
             ``n_averages``, ``note``, the excited band ``f_min``/``f_max`` [Hz] (None when
             there is none) and, at the valid frequencies only, ``f`` [Hz], ``H_re``,
             ``H_im``, ``model_re``, ``model_im`` [output unit / N m], ``coherence`` and
-            ``rel_error``.
+            ``rel_error``; ``band`` (None without a parameter covariance): ``level``,
+            half-widths ``db`` and ``deg`` and ``inside`` per valid frequency,
+            ``n_inside`` and ``n_consistent`` (:attr:`consistent`) of ``n_points``.
         """
         v = self.valid
         fv = self.f[v]
+        inside = self.in_band
+        band = None if inside is None else {
+            "level": BAND_LEVEL, "db": self.band_db[v].tolist(), "deg": self.band_deg[v].tolist(),
+            "inside": inside[v].tolist(), "n_inside": int(inside.sum()), "n_points": int(v.sum()),
+            "n_consistent": int(self.consistent.sum()),
+        }  # fmt: skip
         return {
             "output": self.output, "input": self.input, "reference": self.reference,
             "speed": float(self.speed), "coherence_min": float(self.coherence_min),
@@ -204,7 +267,43 @@ class FrequencyResponseEstimate:
             "f": fv.tolist(), "H_re": self.H[v].real.tolist(), "H_im": self.H[v].imag.tolist(),
             "model_re": self.model[v].real.tolist(), "model_im": self.model[v].imag.tolist(),
             "coherence": self.coherence[v].tolist(), "rel_error": self.rel_error[v].tolist(),
+            "band": band,
         }  # fmt: skip
+
+
+def bode_band_halfwidths(model, f: np.ndarray, v: float) -> dict | None:
+    """Half-widths [dB, deg] of a model's 95 % Bode band per output, or None.
+
+    Parameters
+    ----------
+    model : CanonicalModel, SpeedCanonicalModel, GreyboxModel, DirectResult or StateSpace
+        The model; a band exists for those with a parameter covariance (a model over speed
+        is taken at ``v`` with :meth:`at`).
+    f : (F,) ndarray
+        Frequencies [Hz], positive.
+    v : float
+        Speed [m/s].
+
+    Returns
+    -------
+    dict of str to ((F,) ndarray, (F,) ndarray) or None
+        Per output, z times the standard errors of 20 log10 |G| [dB] and of the phase [deg]
+        (:func:`bikeid.ident.uncertainty.bode_bands` at ``BAND_LEVEL``); None for a model
+        without covariance.
+    """
+    from bikeid.sim.errors import InputError
+
+    from .uncertainty import bode_bands, z_value
+
+    m = model.at(v) if hasattr(model, "at") else model
+    if not (hasattr(m, "predictor") and hasattr(m, "covariance")):
+        return None
+    z = z_value(BAND_LEVEL)
+    try:
+        bands = bode_bands(m, 2 * np.pi * np.asarray(f, float), level=BAND_LEVEL)
+    except InputError:  # no usable (finite) covariance: no band, as for a direct model
+        return None
+    return {b.output: (z * b.std_magnitude_db, z * b.std_phase_deg) for b in bands}
 
 
 def _nperseg(n_min: int) -> int:
@@ -257,7 +356,7 @@ def frequency_response_estimate(
     ----------
     runs : Run or sequence of Run
         The data (same sample period).
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+    model : CanonicalModel, SpeedCanonicalModel, GreyboxModel, DirectResult or StateSpace
         The model whose outputs name the signals, and whose response is laid beside it.
     coherence_min : float, optional
         Frequencies with coherence below this are not estimated (``valid`` False).
@@ -300,13 +399,18 @@ def frequency_response_estimate(
         Gm = model_frequency_response(model, f, dt, v, input)
         fd = np.geomspace(f[0] / 4, 0.98 / (2 * dt), 300)
         Gd = model_frequency_response(model, fd, dt, v, input)
+        band = bode_band_halfwidths(model, f, v) if input == "T_delta" else None
+        band_d = bode_band_halfwidths(model, fd, v) if band else None
         n_d = sum(r.n // nps for r in rs)
         for o in outputs:
+            bk = {} if band is None else {"band_db": band[o][0], "band_deg": band[o][1],
+                                          "curve_band_db": band_d[o][0],
+                                          "curve_band_deg": band_d[o][1]}  # fmt: skip
             if reference == "none":
                 nan = np.full(f.size, np.nan)
                 out.append(FrequencyResponseEstimate(
                     o, input, reference, v, f, nan + 0j, nan, nan, np.zeros(f.size, bool),
-                    Gm[o], n_d, coherence_min, note, fd, Gd[o]))  # fmt: skip
+                    Gm[o], n_d, coherence_min, note, fd, Gd[o], **bk))  # fmt: skip
                 continue
             spec = dict.fromkeys(("xx", "xy", "xu", "yy", "uu"), 0.0)
             for r in rs:
@@ -337,7 +441,7 @@ def frequency_response_estimate(
                 )
             out.append(FrequencyResponseEstimate(o, input, reference, v, f, H, coh, err,
                                                  valid, Gm[o], n_d, coherence_min, text,
-                                                 fd, Gd[o]))  # fmt: skip
+                                                 fd, Gd[o], **bk))  # fmt: skip
     return out
 
 
@@ -485,8 +589,35 @@ class ValidationReport:
                 "outputs": res,
             },
             "frequency_responses": [e.to_json() for e in self.frequency_responses],
+            "bode_band": self.band_summary(),
             "notes": list(self.notes),
         }
+
+    def band_summary(self) -> dict | None:
+        """How many nonparametric points lie inside the model's 95 % Bode band.
+
+        Returns
+        -------
+        dict or None
+            ``level``, ``n_inside``, ``n_consistent`` and ``n_points`` over every excited
+            channel and speed, ``fraction`` and ``fraction_consistent`` (None without
+            points), ``calibration`` (what the band is worth:
+            :data:`INTERVAL_CALIBRATION`); None when the model has no parameter covariance.
+        """
+        marks = [e.in_band for e in self.frequency_responses]
+        if not marks or any(m is None for m in marks):
+            return None
+        n_in = sum(int(m.sum()) for m in marks)
+        n_ok = sum(int(e.consistent.sum()) for e in self.frequency_responses)
+        n = sum(int(e.valid.sum()) for e in self.frequency_responses)
+        return {"level": BAND_LEVEL, "n_inside": n_in, "n_consistent": n_ok, "n_points": n,
+                "fraction": n_in / n if n else None,
+                "fraction_consistent": n_ok / n if n else None,
+                "calibration": INTERVAL_CALIBRATION,
+                "inside_means": "magnitude [dB] and phase [deg] of the estimate both within "
+                "the band's half-widths about the model's sampled response",
+                "consistent_means": "the same with the band widened by the estimate's own "
+                "95 % random error (in quadrature)"}  # fmt: skip
 
 
 def _fits(Y: np.ndarray, Yh: np.ndarray, outputs: Sequence[str]) -> dict[str, float]:
@@ -508,7 +639,7 @@ def validate_model(
 
     Parameters
     ----------
-    model : CanonicalModel, SpeedCanonicalModel, DirectResult or control.StateSpace
+    model : CanonicalModel, SpeedCanonicalModel, GreyboxModel, DirectResult or StateSpace
         The model (models over speed are taken at each run's speed).
     runs : Run or sequence of Run
         The validation data.

@@ -54,6 +54,65 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
     cs, true_cs = out["critical_speeds"], critical_speeds(p)
     assert abs(cs["v_w"] - true_cs["v_w"]) < 0.15
     assert abs(cs["v_c"] - true_cs["v_c"]) < 0.15
+    # the 95 % intervals are centred on the printed values, 1.96 standard errors wide
+    # (ident.uncertainty.z_value(0.95) = 1.959964), and say what they are calibrated on
+    iv = out["intervals"]
+    assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
+    for name in ("v_w", "v_c"):
+        c = iv["critical_speeds"][name]
+        assert c["value"] == pytest.approx(cs[name], rel=1e-12)
+        assert c["interval"][1] - c["value"] == pytest.approx(1.959964 * c["std"], rel=1e-6)
+    for row in out["per_speed"]:
+        ei = row["eigenvalue_intervals"]
+        centres = [complex(e["value"]["re"], e["value"]["im"]) for e in ei["eigenvalues"]]
+        np.testing.assert_allclose(np.sort_complex(centres), _complex(row["eigenvalues"]),
+                                   rtol=1e-10)  # fmt: skip
+
+
+def test_greybox_intervals_match_monte_carlo(sweeps, capsys, tmp_path):
+    """``identify --method greybox --out``: the JSON's eigenvalue and v_w intervals are those
+    of ident.uncertainty on the saved model (GreyboxModel.at / speed_model), and that
+    first-order propagation from the free entries agrees with Monte Carlo: 400 draws of the
+    entries from N(estimate, covariance / 1e4) (small, where first order is exact), each
+    turned into matrices, eigenvalues at 5 m/s and v_w.  Measured agreement 2-5 %; the
+    tolerance 15 % is ~4 sampling standard errors of an sd from 400 draws (1/sqrt(798))."""
+    import dataclasses
+
+    from bikeid.ident import uncertainty
+    from bikeid.ident.greybox import _matrices
+    from bikeid.ident.model_file import load_model
+    from bikeid.sim.linear import state_matrices
+
+    noisy, _ = sweeps
+    target = tmp_path / "grey.json"
+    out = _identify(capsys, "--method", "greybox", noisy, "--out", target)
+    g = load_model(target)
+    cv = uncertainty.critical_speed_intervals(g.speed_model()).to_json()
+    assert out["intervals"]["critical_speeds"] == cv
+    row = out["per_speed"][1]
+    assert row["eigenvalue_intervals"] == uncertainty.eigenvalue_intervals(g.at(4.5)).to_json()
+    small = dataclasses.replace(g, covariance=g.covariance * 1e-4)
+    ei = uncertainty.eigenvalue_intervals(small.at(5.0))
+    v_w = uncertainty.critical_speed_intervals(small.speed_model())
+    rng = np.random.default_rng(0)
+    names, L = list(g.free), np.linalg.cholesky(small.covariance)
+    base = {**g.fixed, **g.free}
+    draws_vw, draws_ev = [], []
+    for _ in range(400):
+        vals = {**base, **dict(zip(names, np.array(list(g.free.values())) +
+                                   L @ rng.standard_normal(len(names)), strict=True))}  # fmt: skip
+        if g.symmetric:
+            vals["Mdp"], vals["K0dp"] = vals["Mpd"], vals["K0pd"]
+        cm = _matrices(vals, g.g)
+        draws_vw.append(critical_speeds(cm)["v_w"])
+        draws_ev.append(match_eigenvalues(np.linalg.eigvals(state_matrices(cm, 5.0)[0]),
+                                          ei.values))  # fmt: skip
+    ev = np.array(draws_ev)
+    assert np.std(draws_vw, ddof=1) == pytest.approx(v_w.std_v_w, rel=0.15)
+    np.testing.assert_allclose(ev.real.std(0, ddof=1), ei.std_real, rtol=0.15)
+    complex_pair = ei.std_imag > 0
+    np.testing.assert_allclose(ev.imag.std(0, ddof=1)[complex_pair], ei.std_imag[complex_pair],
+                               rtol=0.15)  # fmt: skip
 
 
 def test_direct_on_noise_free_sweep_matches_truth(sweeps, capsys):

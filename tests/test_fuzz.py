@@ -3,14 +3,16 @@
 Three generators (hypothesis, bounded, in CI):
 
 1. **Command lines** for every subcommand, discovered from the parser itself (a new command
-   is covered the day it is registered): each case sets one typed option to a value that
-   option's own parser refuses, plus up to four more options with hostile values (empty,
-   ``--``, NaN, infinities, 1e308, 99999999999999999999, 4096 characters, ranges of 1e308
-   points, paths that do not exist, ...).
+   is covered the day it is registered; a mode that reads other inputs, ``measured evaluate
+   --input=logged``, is fuzzed as a command of its own): each case sets one typed option to
+   a value that option's own parser refuses, plus up to four more options with hostile
+   values (empty, ``--``, NaN, infinities, 1e308, 99999999999999999999, 4096 characters,
+   ranges of 1e308 points, paths that do not exist, ...).
 2. **Files** a user can pass: parameter files (YAML and JSON) with mutated fields, duplicate
    keys and deep nesting, through ``bikeid linearize --bicycle FILE``; model files through
-   ``bikeid.experiments.measured_study.model_from_json``; bikeid HDF5 run files with
-   corrupted bytes through ``bikeid identify``; imported CSV logs with mutated cells through
+   ``bikeid.experiments.measured_study.model_from_json`` and damaged grey-box model files
+   through ``bikeid validate --model``; bikeid HDF5 run files with corrupted bytes through
+   ``bikeid identify`` and ``bikeid validate``; imported CSV logs with mutated cells through
    ``bikeid.dataset.importers.from_csv``.
 3. **Output paths** (:func:`test_output_targets_are_never_clobbered`): a symlink, a FIFO, a
    folder and (where the test may create one) a character device planted at each output.
@@ -73,6 +75,12 @@ def _commands() -> list[tuple[tuple[str, ...], list[argparse.Action]]]:
 
 
 COMMANDS = _commands()
+#: Fixed arguments of extra command-line variants fuzzed like a command of their own (a mode
+#: that reads other inputs): ``measured evaluate --input logged`` reads an identify model.
+VARIANTS = {("measured", "evaluate"): ("--input=logged",)}
+CASES = [(p, (), a) for p, a in COMMANDS] + [
+    (p, VARIANTS[p], a) for p, a in COMMANDS if p in VARIANTS
+]
 
 
 def _refused_by_type(action: argparse.Action, value: str) -> bool:
@@ -134,17 +142,18 @@ def _value_option(acts):
     return [a for a in acts if a.option_strings and a.nargs != 0]
 
 
-@pytest.mark.parametrize("path,acts", COMMANDS, ids=[" ".join(p) for p, _ in COMMANDS])
-def test_malformed_command_lines(path, acts, tmp_path_factory):
+@pytest.mark.parametrize("path,fixed,acts", CASES, ids=[" ".join(p + f) for p, f, _ in CASES])
+def test_malformed_command_lines(path, fixed, acts, tmp_path_factory):
     folder = tmp_path_factory.mktemp("fuzz")
-    typed = [a for a in _value_option(acts) if callable(a.type)]
-    others = _value_option(acts)
+    held = {f.split("=")[0] for f in fixed}  # options a variant fixes are not fuzzed
+    typed = [a for a in _value_option(acts) if callable(a.type) and a.option_strings[0] not in held]
+    others = [a for a in _value_option(acts) if a.option_strings[0] not in held]
     positional = [a for a in acts if not a.option_strings]
     counter = {"n": 0}
 
     @st.composite
     def argv(draw):
-        args = list(path)
+        args = [*path, *fixed]
         refused = None
         if tuple(path) in NETWORK or not (typed or others):
             args.append(draw(st.sampled_from(["--bogus", "--dest=", "-x", "--all-speeds=1"])))
@@ -177,7 +186,7 @@ def test_malformed_command_lines(path, acts, tmp_path_factory):
     case()
     if tuple(path) not in NETWORK:  # (the network commands have only 4 distinct cases)
         assert counter["n"] >= 60  # the budget was spent on real cases
-    print(f"{' '.join(path)}: {counter['n']} generated command lines refused cleanly")
+    print(f"{' '.join(path + fixed)}: {counter['n']} generated command lines refused cleanly")
 
 
 # -- files -----------------------------------------------------------------------------
@@ -247,6 +256,63 @@ def test_malformed_model_files(doc, base):
             assert str(exc), "empty message"
 
 
+def _greybox_text(dt: float) -> str:
+    """A valid grey-box model file (benchmark matrices, three free entries)."""
+    from bikeid.ident.greybox import GreyboxModel
+    from bikeid.ident.model_file import model_json
+    from bikeid.sim.linear import canonical_matrices
+    from bikeid.sim.parameters import benchmark
+
+    cm = canonical_matrices(benchmark())
+    free = {"Mpd": cm.M[0, 1], "K0dd": cm.K0[1, 1], "K2dd": cm.K2[1, 1]}
+    return model_json(GreyboxModel(
+        M=cm.M, C1=cm.C1, K0=cm.K0, K2=cm.K2, g=cm.g, H=np.zeros(2), free=free,
+        stderr=dict.fromkeys(free, 1e-3), covariance=np.eye(3) * 1e-6, condition=10.0,
+        inflation=dict.fromkeys(free, 1.0), weakest=dict.fromkeys(free, 0.5), dropped=(),
+        fixed={"Mpp": cm.M[0, 0]}, symmetric=True, K={5.0: np.zeros((4, 4))}, dt=dt,
+        outputs=("phi", "phidot", "delta", "deltadot"), speeds=(5.0,),
+        noise_covariance=np.eye(4) * 1e-6,
+    ))  # fmt: skip
+
+
+@settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(data=st.data())
+def test_damaged_model_files_through_validate(run_file, data):
+    """A grey-box model file (``identify --method greybox --out``) with one field at any depth
+    replaced by a hostile JSON value, through ``bikeid validate --model``: status 0, 3 or 4,
+    one line, no traceback, nothing written."""
+    obj = json.loads(_greybox_text(0.01))
+    paths = []
+
+    def walk(node, prefix):
+        paths.append(prefix)
+        if isinstance(node, dict):
+            for k, v in node.items():
+                walk(v, (*prefix, k))
+        elif isinstance(node, list):
+            for k, v in enumerate(node):
+                walk(v, (*prefix, k))
+
+    walk(obj, ())
+    path = data.draw(st.sampled_from(paths[1:]))
+    hostile = st.one_of(st.none(), st.booleans(), st.text(max_size=6), st.just([]),
+                        st.just({}), st.sampled_from([1e308, -1.0, 0.0, 2**70]))  # fmt: skip
+    value = data.draw(hostile)
+    node = obj
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = value
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "runs.h5").write_bytes(run_file)
+        (Path(d) / "m.json").write_text(json.dumps(obj))
+        _check_refusal(["validate", "runs.h5", "--model=m.json"], Path(d), (0, 3, 4))
+
+
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory) -> bytes:
     from bikeid.dataset.linear_loop import simulate
@@ -258,12 +324,16 @@ def run_file(tmp_path_factory) -> bytes:
     return f.read_bytes()
 
 
-@settings(max_examples=40, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-@given(data=st.data())
-def test_corrupted_run_files(run_file, data):
-    """bikeid HDF5 run files with bytes overwritten: ``identify`` refuses cleanly (or, when
-    the damage misses everything it reads, succeeds without NaN)."""
+@settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(data=st.data(), command=st.sampled_from(["identify", "validate"]))
+def test_corrupted_run_files(run_file, data, command):
+    """bikeid HDF5 run files with bytes overwritten: ``identify`` and ``validate`` refuse
+    cleanly (or, when the damage misses everything they read, succeed without NaN)."""
     raw = bytearray(run_file)
     for _ in range(data.draw(st.integers(1, 8))):
         i = data.draw(st.integers(0, len(raw) - 1))
@@ -273,7 +343,11 @@ def test_corrupted_run_files(run_file, data):
     with tempfile.TemporaryDirectory() as d:
         f = Path(d) / "runs.h5"
         f.write_bytes(bytes(raw))
-        _check_refusal(["identify", str(f), "--method=direct"], Path(d), (0, 3, 4))
+        if command == "identify":
+            _check_refusal(["identify", str(f), "--method=direct"], Path(d), (0, 3, 4))
+        else:
+            (Path(d) / "m.json").write_text(_greybox_text(0.01))
+            _check_refusal(["validate", str(f), "--model=m.json"], Path(d), (0, 3, 4))
 
 
 @SETTINGS
@@ -315,9 +389,15 @@ OUTPUTS = {
     "eig --plot": lambda out: ["eig", "--speeds=0:2:1", f"--plot={out}"],
     "simulate --out": lambda out: ["simulate", "--speed=5", "--duration=0.1", f"--out={out}"],
     "sweep --out": lambda out: [
-        "sweep", "--controller=pid", "--speeds=5", "--duration=0.2", "--seeds=0", "--no-progress",
+        "sweep",
+        "--controller=pid",
+        "--speeds=5",
+        "--duration=0.2",
+        "--seeds=0",
+        "--no-progress",
         f"--out={out}",
     ],
+    "validate --out": lambda out: ["validate", "runs.h5", "--model=m.json", f"--out={out}"],
 }
 
 
@@ -336,12 +416,28 @@ def _plant(kind: str, target: Path, sentinel: Path) -> None:
                         "and folder cases cover the same refusal")  # fmt: skip
 
 
+def _validate_inputs(folder: Path) -> None:
+    """A short run file and a grey-box model file for ``validate``."""
+    from bikeid.dataset.linear_loop import simulate
+    from bikeid.dataset.store import write_runs
+    from bikeid.sim.parameters import benchmark
+
+    run = simulate(benchmark(), 5.0, duration=2.0, seed=1)
+    write_runs(folder / "runs.h5", [run])
+    (folder / "m.json").write_text(_greybox_text(run.dt))
+
+
 @pytest.mark.parametrize("kind", ["symlink", "fifo", "folder", "device"])
 @pytest.mark.parametrize("command", sorted(OUTPUTS))
 def test_output_targets_are_never_clobbered(command, kind, tmp_path):
     """A symlink, FIFO, folder or device at an output path is refused (status 3) and left
     as it was; the symlink's target (a user's file) is untouched."""
-    suffix = {"eig --plot": ".png", "simulate --out": ".csv", "sweep --out": ".h5"}[command]
+    suffix = {"eig --plot": ".png", "simulate --out": ".csv", "sweep --out": ".h5",
+              "validate --out": ""}[command]  # fmt: skip
+    if command == "validate --out":
+        if kind == "folder":
+            pytest.skip("an empty folder is what validate --out writes into (not a refusal)")
+        _validate_inputs(tmp_path)
     target = tmp_path / f"out{suffix}"
     sentinel = tmp_path / "precious.txt"
     sentinel.write_text("a user's data")

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from bikeid.dataset import files
 from bikeid.dataset.linear_loop import simulate
-from bikeid.ident import load_model, pem, read_model_file, save_model
+from bikeid.ident import greybox, load_model, pem, read_model_file, save_model
 from bikeid.ident.direct import identify
 from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.ident.model_file import model_from_text, model_json
@@ -51,11 +51,13 @@ def models(runs):
     speed = pem.fit_speed_model(runs, per_speed=per, max_nfev=5, passes=1)
     direct = identify([prepare(r, cutoff=None, derivative="interval") for r in runs], P)
     exp = ExperimentModel(effects={"input_delay": 0.0123456789012345, "steer_viscous_damping": 0.1})
+    grey = greybox.fit(runs, reference=P, max_nfev=20, passes=1)
     return {
         "canonical-pem": per[3.0],
         "speed-canonical-pem": speed,
         "direct": direct,
         "experiment-model": exp,
+        "greybox": grey,
     }
 
 
@@ -81,7 +83,7 @@ def _same(a, b, where="model") -> None:
 
 
 @pytest.mark.parametrize(
-    "kind", ["canonical-pem", "speed-canonical-pem", "direct", "experiment-model"]
+    "kind", ["canonical-pem", "speed-canonical-pem", "direct", "experiment-model", "greybox"]
 )
 def test_round_trip_bit_for_bit(kind, models, runs, tmp_path):
     """Every field, the eigenvalues and a simulation of the loaded model equal the saved
@@ -107,13 +109,17 @@ def test_round_trip_bit_for_bit(kind, models, runs, tmp_path):
         for mm in (m, back):
             Ad, Bd, C, _ = mm.at(4.0).predictor()
             sims.append(simulation(Ad, Bd, C, u, np.column_stack([r[o] for o in mm.outputs])))
-    elif kind == "direct":
+    elif kind in ("direct", "greybox"):
         sims = []
         for mm in (m, back):
             assert np.array_equal(mm.eigenvalues(5.0), m.eigenvalues(5.0))
             ss = mm.state_space(5.0, inputs=("T_delta",))
             Ad, Bd = zoh(np.asarray(ss.A), np.asarray(ss.B), r.dt)
             sims.append(simulation(Ad, Bd, np.asarray(ss.C)[:2], u, y))
+        if kind == "greybox":  # what identify prints: critical speeds, theta covariance
+            assert back.critical_speeds() == m.critical_speeds()
+            assert np.array_equal(back.theta_covariance(4.0), m.theta_covariance(4.0))
+            assert isinstance(back, greybox.GreyboxModel) and back.speeds == (3.0, 5.0)
     else:
         assert np.array_equal(back.eigenvalues(5.0), m.eigenvalues(5.0))
         return
@@ -171,6 +177,45 @@ def test_round_trip_property(theta, cov, k, dt):
         cost=float("nan"),
     )
     _same(m, model_from_text(model_json(m)).model)
+
+
+@settings(deadline=None)  # timing is not what is tested (a loaded machine)
+@given(
+    mats=st.lists(finite, min_size=18, max_size=18),
+    cov=st.lists(finite, min_size=9, max_size=9),
+    k=st.lists(finite, min_size=16, max_size=16),
+    dt=st.floats(min_value=1e-300, max_value=1e3, allow_subnormal=False),
+    symmetric=st.booleans(),
+)
+def test_greybox_round_trip_property(mats, cov, k, dt, symmetric):
+    """A grey-box model of any finite values (subnormal, huge, -0.0) comes back with the
+    same bits in every field: estimates, covariance, fixed values, free set, per-speed
+    gains, speeds and conditioning."""
+    names = ("Mpd", "K0dd", "C1dd")
+    m = greybox.GreyboxModel(
+        M=np.array(mats[0:4]).reshape(2, 2), C1=np.array(mats[4:8]).reshape(2, 2),
+        K0=np.array(mats[8:12]).reshape(2, 2), K2=np.array(mats[12:16]).reshape(2, 2),
+        g=9.81, H=np.array(mats[16:18]),
+        free=dict(zip(names, mats[:3], strict=True)),
+        stderr=dict(zip(names, mats[3:6], strict=True)),
+        covariance=np.array(cov).reshape(3, 3), condition=mats[6],
+        inflation=dict(zip(names, mats[7:10], strict=True)),
+        weakest=dict(zip(names, mats[10:13], strict=True)), dropped=("K2dd",),
+        fixed={"Mpp": mats[13], "K2dd": mats[14]}, symmetric=symmetric,
+        K={2.0: np.array(k[:8]).reshape(4, 2), 4.5: np.array(k[8:]).reshape(4, 2)},
+        dt=dt, outputs=("phi", "delta"), speeds=(2.0, 4.5),
+        noise_covariance=np.eye(2) * 5e-324, cost=float("nan"), nfev=7, notes=("a", "b"),
+    )  # fmt: skip
+    _same(m, model_from_text(model_json(m)).model)
+
+
+def test_greybox_file_refuses_inconsistent_gains(models):
+    """One gain per speed in the file's order: a missing gain is named, one line."""
+    obj = json.loads(model_json(models["greybox"]))
+    obj["model"]["K"] = obj["model"]["K"][:1]
+    with pytest.raises(InputError, match=r"'model\.K'.*one gain per speed") as exc:
+        model_from_text(json.dumps(obj), "model file 'g.json'")
+    assert "\n" not in str(exc.value)
 
 
 def _text(models, **change) -> str:

@@ -421,3 +421,38 @@ def test_quick_reproduction_end_to_end(tmp_path):
             m, r, col = n[:-2], "pd".index(n[-2]), "pd".index(n[-1])
             assert e["true"] == pytest.approx(getattr(cm, m)[r, col], rel=1e-12)
     assert set(s["seconds"]) >= {"total"}  # run times are reported (benchmarks time them)
+
+
+def test_eigen_stderr_is_the_propagation_of_ident_uncertainty():
+    """eigen_stderr calls ident.uncertainty: equal to eigenvalue_intervals' standard errors
+    (same computation, 1e-12 relative) and to the central-difference propagation it used to
+    do itself (perturbed eigenvalues paired by match_eigenvalues, relative step 1e-6:
+    truncation ~1e-12, round-off ~1e-10 relative, so rtol 1e-6 as tests/test_uncertainty.py).
+    Truth: the benchmark bicycle's canonical model at 5 m/s, a random SPD covariance."""
+    from bikeid.ident.canonical import canonical_ab, theta_from_matrices
+    from bikeid.ident.pem import CanonicalModel
+    from bikeid.ident.uncertainty import eigenvalue_intervals
+
+    theta = theta_from_matrices(canonical_matrices(benchmark()), 5.0)
+    rng = np.random.default_rng(1)
+    R = rng.standard_normal((10, 10)) * 1e-3 * np.maximum(np.abs(theta), 1.0)
+    cov = R @ R.T
+    se = cd.eigen_stderr(theta, cov)
+    m = CanonicalModel(theta=theta, covariance=cov, K=np.zeros((4, 2)), dt=0.01, speed=5.0,
+                       noise_covariance=np.eye(2), outputs=("phi", "delta"))  # fmt: skip
+    ei = eigenvalue_intervals(m)
+    np.testing.assert_allclose(se, np.column_stack([ei.std_real, ei.std_imag]), rtol=1e-12)
+    base = np.sort_complex(np.linalg.eigvals(canonical_ab(theta)[0]))
+    J = np.zeros((8, 10))
+    for j in range(10):
+        h = 1e-6 * max(1.0, abs(theta[j]))
+        cols = []
+        for s in (1, -1):
+            th = theta.copy()
+            th[j] += s * h
+            ev = np.linalg.eigvals(canonical_ab(th)[0])
+            cols.append(ev[match_eigenvalues(ev, base, return_index=True)[1]])
+        d = (cols[0] - cols[1]) / (2 * h)
+        J[:, j] = np.concatenate([d.real, d.imag])
+    fd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, cov, J), 0)).reshape(2, 4).T
+    np.testing.assert_allclose(se, fd, rtol=1e-6, atol=1e-12)

@@ -2,6 +2,7 @@
 plant with a known model (dataset.linear_loop: exact ZOH simulation of the benchmark bicycle
 under the default PID), every number against an independent value."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -18,12 +19,47 @@ from bikeid.sim.parameters import benchmark
 P = benchmark()
 
 
-def _canonical(v: float, dt: float, outputs=("phi", "delta")) -> CanonicalModel:
-    """The true (or, at another speed, a wrong) canonical model with K = 0 (output error)."""
+def _canonical(v: float, dt: float, outputs=("phi", "delta"), rel: float = 0.0) -> CanonicalModel:
+    """The true (or, at another speed, a wrong) canonical model with K = 0 (output error)
+    and independent parameter errors of ``rel`` times each parameter (standard deviation)."""
     n = len(outputs)
-    return CanonicalModel(theta=theta_from_matrices(canonical_matrices(P), v),
-                          covariance=np.zeros((10, 10)), K=np.zeros((4, n)), dt=dt, speed=v,
-                          noise_covariance=np.eye(n), outputs=outputs)  # fmt: skip
+    theta = theta_from_matrices(canonical_matrices(P), v)
+    return CanonicalModel(theta=theta, covariance=np.diag((rel * theta) ** 2),
+                          K=np.zeros((4, n)), dt=dt, speed=v, noise_covariance=np.eye(n),
+                          outputs=outputs)  # fmt: skip
+
+
+def test_bode_band_holds_the_estimate_of_the_true_model_not_of_a_wrong_one(noisy_run):
+    """Both ways: the true model with 20 % parameter standard errors has a band (median
+    half-width ~4 dB) wider than the estimate's own scatter (median relative error 0.2-0.24,
+    ~2 dB), so nearly every point lies inside (measured 62 of 66; required >= 85 %); the
+    4 m/s model with 1 % errors misses them all (measured 0 of 66; required <= 5 %).  The
+    half-widths are 1.959964 standard errors of ident.uncertainty.bode_bands."""
+    from bikeid.ident.uncertainty import bode_bands
+
+    true = _canonical(5.0, noisy_run.dt, rel=0.2)
+    rep = validate_model(true, noisy_run)
+    band = rep.band_summary()
+    assert band["fraction"] >= 0.85 and "linear plant only" in band["calibration"]
+    e = rep.frequency_responses[0]
+    ref = bode_bands(true, 2 * np.pi * e.f)[list(true.outputs).index(e.output)]
+    np.testing.assert_allclose(e.band_db, 1.959964 * ref.std_magnitude_db, rtol=1e-6)
+    wrong = validate_model(_canonical(4.0, noisy_run.dt, rel=0.01), noisy_run).band_summary()
+    assert wrong["fraction"] <= 0.05
+    # widened by the estimate's own 95 % error: the exact model (zero band) is consistent
+    # at every point (measured 66 of 66; Bendat & Piersol's error counts non-overlapping
+    # segments, so it is conservative), the 4 m/s model at fewer (measured 57 of 66)
+    exact = validate_model(_canonical(5.0, noisy_run.dt), noisy_run).band_summary()
+    assert exact["n_inside"] == 0 and exact["fraction_consistent"] >= 0.95
+    assert wrong["fraction_consistent"] <= 0.9
+    # the criterion itself: a point 0.5 half-width off in dB and phase is inside, 1.5 is not
+    for k, expect in ((0.5, True), (1.5, False)):
+        H = e.model * 10 ** (k * e.band_db / 20) * np.exp(1j * np.radians(k * e.band_deg))
+        moved = dataclasses.replace(e, H=H)
+        assert np.all(moved.in_band[e.valid] == expect)
+    assert (
+        validate_model(state_space(P, 5.0, inputs=("T_delta",)), noisy_run).band_summary() is None
+    )
 
 
 @pytest.fixture(scope="module")
@@ -205,7 +241,9 @@ def test_models_over_speed_are_taken_at_each_runs_speed():
 
 def test_validate_decays_fit_is_the_evaluate_error():
     """validate_decays (measured evaluate's validation) and experiment_model.window_errors
-    compute the same NRMSE by two code paths: fit = 100 (1 - error) to 1e-9 %, per file; the
+    share one NRMSE (ident.validate.goodness_of_fit): fit = 100 (1 - error) to 1e-9 %, per
+    file; a simulation 1.1 times the measured roll rate has the analytic error
+    0.1 ||y|| / ||y - mean y|| (rounding only: 1e-12 relative) and an exact one 0; the
     true model fits its own noisy decays better than a model with a spurious effect."""
     from bikeid.ident.experiment_model import ExperimentModel, window_errors
     from bikeid.ident.synthetic_decays import synthetic_windows
@@ -222,6 +260,11 @@ def test_validate_decays_fit_is_the_evaluate_error():
         assert set(f["residuals"]["phidot"]) >= {"white", "whiteness_p", "fraction_outside"}
     wrong = validate_decays(truth.with_effects(steer_viscous_damping=1.0), ws)
     assert wrong["fit"]["phidot"] < out["fit"]["phidot"]
+    scaled = window_errors(ws, [{"phidot": 1.1 * w.phidot, "delta": w.delta} for w in ws])
+    for i, w in enumerate(ws):
+        y = w.phidot
+        expect = 0.1 * np.linalg.norm(y) / np.linalg.norm(y - y.mean())
+        assert scaled[i, 0] == pytest.approx(expect, rel=1e-12) and scaled[i, 1] == 0.0
 
 
 def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_run, capsys):
@@ -238,11 +281,15 @@ def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_
     run = noisy_run.window(0, 20)
     write_runs(data, [run])
     model = tmp_path / "m.json"
-    save_model(_canonical(5.0, run.dt), model)
+    save_model(_canonical(5.0, run.dt, rel=0.2), model)
     out = tmp_path / "val"
     assert main(["validate", "--model", str(model), str(data), "--out", str(out), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    lib = validate_model(_canonical(5.0, run.dt), run)
+    lib = validate_model(_canonical(5.0, run.dt, rel=0.2), run)
+    assert doc["bode_band"] == lib.band_summary() and doc["bode_band"]["n_points"] > 0
+    assert [f["band"]["n_inside"] for f in doc["frequency_responses"]] == [
+        int(e.in_band.sum()) for e in lib.frequency_responses
+    ]
     assert doc["command"] == "bikeid validate"
     assert doc["fit"]["phi"] == pytest.approx(lib.fit["phi"], rel=1e-12)
     assert json.loads((out / "validation.json").read_text())["fit_k_step"] == doc["fit_k_step"]
@@ -250,7 +297,9 @@ def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_
         assert (out / name).stat().st_size > 1000
     # the same folder again is fine (written by bikeid validate); a foreign one is not
     assert main(["validate", "--model", str(model), str(data), "--out", str(out)]) == 0
-    assert "sim fit %" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "sim fit %" in text and "inside the model's 95 % Bode band" in text
+    assert "calibrated on the linear plant only" in text
     foreign = tmp_path / "mine"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("keep")
