@@ -731,7 +731,7 @@ def _bode_part(root: Path, split_models: list, say) -> dict:
     bode = _load(root, "bode")
     if not bode:
         return {"note": "no Bode logs in the data"}
-    bode.sort(key=lambda r: float(r.meta["file"].split("_")[-1].replace("Hz.log.gz", "")))
+    bode.sort(key=_bode_frequency)
     fit, held = bode[0::2], bode[1::2]
     say("pem 4 m/s (even Bode runs)")
     pem4 = _pem_model(fit, f"canonical PEM on {len(fit)} Bode runs (even) at 4 m/s")
@@ -746,9 +746,19 @@ def _bode_part(root: Path, split_models: list, say) -> dict:
             "models": list(models), "frf": _frf(bode, models)}  # fmt: skip
 
 
+def _bode_frequency(run: Run) -> float:
+    """Excitation frequency [Hz] of a Bode log from its name (``..._<f>Hz.log[.gz]``)."""
+    import re
+
+    m = re.search(r"_([0-9.]+)Hz", run.meta["file"])
+    return float(m.group(1)) if m else math.nan
+
+
 def _frf(runs: list[Run], models: dict) -> dict:
     """Measured frequency response T_delta -> phi, delta at 4 m/s (T_ext as the reference
-    signal of the joint input-output estimate) beside each model's sampled response."""
+    signal of the joint input-output estimate, one point per run at its excitation
+    frequency, kept where the coherence passes) beside each model's sampled response, with
+    each model's median relative complex error |H_model - H| / |H| over those points."""
     import control
 
     from bikeid.ident.validation_report import frequency_response_estimate
@@ -763,14 +773,22 @@ def _frf(runs: list[Run], models: dict) -> dict:
             A, b[:, None], C, np.zeros((2, 1)), inputs=["T_delta"], outputs=["phi", "delta"]
         )
 
-    est = frequency_response_estimate(ex, ss(models["whipple"]), input="T_delta")
+    # one estimate per run (each excites one frequency): the bin nearest its frequency
     out = {"speed": v, "outputs": {}}
-    for e in est:
-        ok = e.valid
-        out["outputs"][e.output] = {
-            "f": e.f[ok], "H": e.H[ok], "coherence": e.coherence[ok], "rel_error": e.rel_error[ok],
-            "note": e.note, "reference": e.reference,
-        }  # fmt: skip
+    nom = ss(models["whipple"])
+    for r in ex:
+        f0 = _bode_frequency(r)
+        nps = int(min(1024, 2 ** np.floor(np.log2(r.n / 4))))  # >= 4 segments, <= 0.1 Hz bins
+        for e in frequency_response_estimate([r], nom, nperseg=nps, input="T_delta"):
+            k = int(np.argmin(np.abs(e.f - f0)))
+            d = out["outputs"].setdefault(e.output, {"f": [], "H": [], "coherence": [],
+                                                     "rel_error": [], "file": []})  # fmt: skip
+            if e.valid[k]:
+                vals = (e.f[k], e.H[k], e.coherence[k], e.rel_error[k], r.meta["file"])
+                for key, val in zip(
+                    ("f", "H", "coherence", "rel_error", "file"), vals, strict=True
+                ):
+                    d[key].append(val)
     from bikeid.ident.validation_report import model_frequency_response
 
     fgrid = np.geomspace(0.3, 10.0, 200)
@@ -778,6 +796,13 @@ def _frf(runs: list[Run], models: dict) -> dict:
     for n, m in models.items():
         resp = model_frequency_response(ss(m), fgrid, DT)
         out["models"][n] = {"f": fgrid, **{k: val for k, val in resp.items()}}
+        err = {}
+        for o, d in out["outputs"].items():
+            if d["f"]:
+                Hm = model_frequency_response(ss(m), np.asarray(d["f"]), DT)[o]
+                H = np.asarray(d["H"])
+                err[o] = float(np.median(np.abs(Hm - H) / np.abs(H)))
+        out["models"][n]["median_rel_error"] = err
     return out
 
 

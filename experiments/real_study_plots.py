@@ -246,6 +246,15 @@ def write_study(study: dict, out: str | Path) -> Path:
         L += ["", "Equation VAF, steer row:", ""]
         L += _runs_table(b["runs"], models, lambda r: r["equation_vaf"]["steer"])
         L.append("")
+        fr = b["frf"]
+        L += ["Frequency response T_delta -> (phi, delta) measured in the Bode runs (one point "
+              "per run at its excitation frequency, T_ext as the reference): median relative "
+              "complex error |H_model - H| / |H| per model:", "",
+              "| model | phi | delta |", "|---|---|---|"]  # fmt: skip
+        for n, m in fr["models"].items():
+            e = m.get("median_rel_error", {})
+            L.append(f"| {n} | {_f(e.get('phi', math.nan))} | {_f(e.get('delta', math.nan))} |")
+        L.append("")
     L += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
     path = out / "report.md"
     atomic_write_text(path, "\n".join(L) + "\n")
@@ -311,9 +320,15 @@ def _bode_figure(frf: dict, path: Path) -> Path:
     fig, ax = plt.subplots(2, len(outs), figsize=(6 * len(outs), 6), squeeze=False)
     for j, o in enumerate(outs):
         for i, (n, m) in enumerate(frf["models"].items()):
+            if o not in m:
+                continue
             H = np.asarray(m[o])
             ax[0, j].loglog(m["f"], np.abs(H), color=f"C{i}", label=n)
-            ax[1, j].semilogx(m["f"], np.degrees(np.unwrap(np.angle(H))), color=f"C{i}")
+            ph = np.degrees(np.unwrap(np.angle(H)))
+            ph -= 360.0 * np.round(
+                ph[np.argmin(np.abs(m["f"] - 2.0))] / 360.0
+            )  # near 2 Hz in +-180
+            ax[1, j].semilogx(m["f"], ph, color=f"C{i}")
         e = frf["outputs"][o]
         if len(e["f"]):
             H = np.asarray(e["H"])
