@@ -329,6 +329,9 @@ def cmd_study(args) -> int:
     from bikeid.experiments.real_study_plots import headline, write_study
 
     data_dir(args.data)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise InputError(f"--out {args.out} is not a folder; give a folder (created if missing) "
+                         "for report.md, study.json and the figures")  # fmt: skip
     check_output_path(Path(args.out) / "report.md")
     say = None if args.json else (lambda t: print(f"fitting: {t}", file=sys.stderr))
     study = run_study(args.data, fit_effects=args.fit_effects, quick=args.quick, progress=say)

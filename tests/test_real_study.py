@@ -159,3 +159,24 @@ def test_study_on_real_logs(tmp_path):
     h = headline(study)
     assert h["2.5+4.5"]["best"] == "effects"
     assert math.isfinite(h["1.5+3.5"]["ratio_to_whipple"])
+
+
+def test_cli_refuses_bad_folders(tmp_path, capsys, monkeypatch):
+    """Bad input is one line naming the problem, exit 3, nothing written: a data folder
+    without the logs, and an --out that is a file (checked before any fit runs)."""
+    from bikeid.experiments.cli import main
+
+    monkeypatch.delenv("BIKEID_DATA", raising=False)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    rc = main(["measured", "study", "--data", str(empty), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 3 and len(err) == 1 and "error" in err[0]
+    assert not (tmp_path / "o").exists()
+    if DATA:
+        f = tmp_path / "file"
+        f.write_text("keep")
+        rc = main(["measured", "study", "--data", DATA, "--out", str(f)])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 3 and len(err) == 1 and "give a folder" in err[0]
+        assert f.read_text() == "keep"
