@@ -71,8 +71,10 @@ __all__ = [
     "StudyModel",
     "effect_footprints",
     "equation_vaf",
+    "decay_runs",
     "matrix_model",
     "run_study",
+    "signal_consistency",
     "simulation_vaf",
     "translate_deviations",
 ]
@@ -567,6 +569,63 @@ def _entry(cm: CanonicalMatrices, name: str) -> float:
     return float(getattr(cm, m)[i, j])
 
 
+def decay_runs(windows: list) -> list[Run]:
+    """The free-decay windows as runs (no push inside): signals, logged command, speed.
+
+    Parameters
+    ----------
+    windows : list of Window
+        Free decays with ``T_logged`` (:func:`bikeid.dataset.decays.load_decays`).
+
+    Returns
+    -------
+    list of Run
+        One run per window: phi, delta [rad], rates [rad/s], ``v`` the treadmill speed
+        [m/s], ``T_delta`` the logged total steer command [N m]; ``meta['speed']`` rounded
+        to 0.5 m/s like :func:`bikeid.dataset.sbw_logs.settled`.
+    """
+    out = []
+    for w in windows:
+        n = w.n
+        sig = {"phi": w.phi, "delta": w.delta, "phidot": w.phidot, "deltadot": w.deltadot,
+               "v": np.full(n, w.speed), "T_delta": w.T_logged}  # fmt: skip
+        out.append(Run(t=np.arange(n) * DT, signals=sig,
+                       meta={"speed": round(w.speed * 2) / 2, "file": w.file}))  # fmt: skip
+    return out
+
+
+def signal_consistency(run: Run, max_lag: int = 30) -> dict[str, dict[str, float]]:
+    """Timing and scale of each measured angle against its measured rate.
+
+    The central difference of the angle (phi: the IMU's Kalman estimate; delta: the encoder)
+    is compared with the rate (gyro; fork rate): the shift [samples] that maximizes their
+    cross-correlation (positive: the differentiated angle lags the rate) and the
+    least-squares gain d(angle)/dt ~ gain x rate.  Consistent sensors give 0 and 1.
+
+    Parameters
+    ----------
+    run : Run
+        A measured run (0.01 s samples).
+    max_lag : int, optional
+        Largest shift tried [samples].
+
+    Returns
+    -------
+    dict
+        ``roll`` and ``steer``: ``lag`` [samples] and ``gain`` (dimensionless).
+    """
+    out = {}
+    for row, (ang, rate) in (("roll", ("phi", "phidot")), ("steer", ("delta", "deltadot"))):
+        a = np.gradient(run[ang], run.dt)
+        b = run[rate]
+        a, b = a - a.mean(), b - b.mean()
+        m = max_lag
+        n = a.size
+        lag = max(range(-m, m + 1), key=lambda k: float(a[m + k : n - m + k] @ b[m : n - m]))
+        out[row] = {"lag": int(lag), "gain": float(a @ b / (b @ b))}
+    return out
+
+
 # --------------------------------------------------------------------------- the study
 
 
@@ -636,8 +695,10 @@ def run_study(
     dict
         ``splits``: per split the fit speeds, held-out speeds, effect-set source, models
         (entries, stderr, conditioning) and ``runs`` (held-out run -> model -> measures);
-        ``bode``: the 4 m/s table and FRF; ``translation`` per split and model; ``weave``:
-        the measured weave per speed; ``definitions``.
+        ``bode``: the 4 m/s table and FRF; ``translation`` per split and model;
+        ``direct_decays`` per split (the direct method on the free-decay windows only, no
+        push inside); ``weave``: the measured weave per speed; ``signal_consistency`` per
+        eigen run (:func:`signal_consistency`); ``definitions``.
 
     Raises
     ------
@@ -684,6 +745,9 @@ def run_study(
             ws = _second_half_windows(decays, r)
             ms = {**models, "pem": pem_models[r.speed]}
             rows[r.meta["file"]] = {"speed": r.speed, **_evaluate(ms, second, ws)}
+        say(f"direct on the decay windows {tag}")
+        dd = _direct_model(decay_runs([w for w in decays if _near(w.speed, fit_s)]),
+                           f"direct LS on the free decays of {tag} m/s")  # fmt: skip
         trans = {}
         for name in ("direct", "greybox"):
             m = models[name]
@@ -692,11 +756,12 @@ def run_study(
             "fit_speeds": list(fit_s), "held_out_speeds": sorted(r.speed for r in held),
             "effects_source": source,
             "models": {k: _model_json(m) for k, m in models.items()},
-            "runs": rows, "translation": trans,
+            "runs": rows, "translation": trans, "direct_decays": _model_json(dd),
         })  # fmt: skip
         split_models.append(models)
     out["pem"] = {f"{v:g}": _model_json(m) for v, m in pem_models.items()}
     out["weave"] = _measured_weave(decays)
+    out["signal_consistency"] = {r.meta["file"]: signal_consistency(r) for r in eig}
     out["_models"] = {"splits": split_models, "pem": pem_models}
     if bode and not quick:
         out["bode"] = _bode_part(root, split_models, say)

@@ -167,6 +167,21 @@ def _translation_lines(split: dict) -> list[str]:
     return lines
 
 
+def _decay_direct_line(dd: dict) -> str:
+    """The direct method on the decay windows: each entry with its z against Whipple."""
+    from bikeid.ident.direct import _parse
+
+    w = canonical_matrices(steer_by_wire())
+    parts = []
+    for n, v in dd["free"].items():
+        m, i, j = _parse(n)
+        z = (v - float(getattr(w, m)[i, j])) / dd["stderr"][n]
+        parts.append(f"{n} {v:.3g} +- {dd['stderr'][n]:.2g} (z {z:+.1f})")
+    return (
+        "Direct method on the free-decay windows only (no push inside): " + ", ".join(parts) + "."
+    )
+
+
 def write_study(study: dict, out: str | Path) -> Path:
     """Write ``report.md``, ``study.json`` and the figures of a study into ``out``.
 
@@ -229,6 +244,7 @@ def write_study(study: dict, out: str | Path) -> Path:
               + f"; direct regression condition numbers roll {di['condition']['roll']:.3g}, "
               f"steer {di['condition']['steer']:.3g}.", "",
               "Effect translation of the significant deviations:", ""]  # fmt: skip
+        L[-2:-2] = [_decay_direct_line(s["direct_decays"]), ""]
         L += _translation_lines(s)
         L.append("")
     b = study.get("bode")
@@ -254,6 +270,23 @@ def write_study(study: dict, out: str | Path) -> Path:
         for n, m in fr["models"].items():
             e = m.get("median_rel_error", {})
             L.append(f"| {n} | {_f(e.get('phi', math.nan))} | {_f(e.get('delta', math.nan))} |")
+        L.append("")
+    sc = study.get("signal_consistency", {})
+    if sc:
+        L += [
+            "## Sensor consistency (eigen runs)",
+            "",
+            "Differentiated angle against the measured rate: shift maximizing the "
+            "cross-correlation [samples of 0.01 s; positive = the angle lags] and gain.",
+            "",
+            "| run | roll lag | roll gain | steer lag | steer gain |",
+            "|---|---|---|---|---|",
+        ]
+        for f, c in sc.items():
+            L.append(
+                f"| {f} | {c['roll']['lag']} | {c['roll']['gain']:.3f} | "
+                f"{c['steer']['lag']} | {c['steer']['gain']:.3f} |"
+            )
         L.append("")
     L += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figs]
     path = out / "report.md"
