@@ -792,7 +792,8 @@ def _measured_weave(decays: list) -> dict:
 
 
 def _bode_part(root: Path, split_models: list, say) -> dict:
-    """The 4 m/s runs: PEM on even runs, every model on the odd runs; measured FRF."""
+    """The 4 m/s runs: PEM and grey-box (entries one speed cannot separate dropped) on the
+    even runs, every model on the odd runs; measured FRF."""
     bode = _load(root, "bode")
     if not bode:
         return {"note": "no Bode logs in the data"}
@@ -800,7 +801,10 @@ def _bode_part(root: Path, split_models: list, say) -> dict:
     fit, held = bode[0::2], bode[1::2]
     say("pem 4 m/s (even Bode runs)")
     pem4 = _pem_model(fit, f"canonical PEM on {len(fit)} Bode runs (even) at 4 m/s")
-    models = {"whipple": split_models[0]["whipple"], "pem": pem4}
+    say("grey-box 4 m/s (even Bode runs)")
+    grey4 = _greybox_model(fit, f"grey-box PEM on {len(fit)} Bode runs (even) at 4 m/s")
+    grey4.speeds = (float(fit[0].speed),)
+    models = {"whipple": split_models[0]["whipple"], "pem": pem4, "greybox[4]": grey4}
     for k, ms in enumerate(split_models):
         for n in ("effects", "direct", "greybox"):
             models[f"{n}[{k}]"] = ms[n]
@@ -808,6 +812,7 @@ def _bode_part(root: Path, split_models: list, say) -> dict:
     for r in held:
         rows[r.meta["file"]] = {"speed": r.speed, **_evaluate(models, r, [])}
     return {"fit_files": [r.meta["file"] for r in fit], "runs": rows,
+            "greybox_4mps": _model_json(grey4),
             "models": list(models), "frf": _frf(bode, models)}  # fmt: skip
 
 

@@ -259,6 +259,10 @@ def write_study(study: dict, out: str | Path) -> Path:
             "",
         ]
         L += _runs_table(b["runs"], models, lambda r: r["simulation_vaf"]["mean"])
+        g4 = b["greybox_4mps"]["info"]
+        L += ["", f"Conditioning of Moore & Hubbard's free set on the 4 m/s runs (one speed): "
+              f"dropped {', '.join(g4['dropped']) or 'none'} (fixed at Whipple), condition "
+              f"number {g4['condition']:.3g} after dropping."]  # fmt: skip
         L += ["", "Equation VAF, steer row:", ""]
         L += _runs_table(b["runs"], models, lambda r: r["equation_vaf"]["steer"])
         L.append("")
