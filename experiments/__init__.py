@@ -10,7 +10,7 @@ Modules:
   :mod:`~bikeid.experiments.cmd_ident` (``identify``, ``accuracy``),
   :mod:`~bikeid.experiments.cmd_validate` (``validate``),
   :mod:`~bikeid.experiments.cmd_reproduce` (``reproduce``),
-  :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials``,
+  :mod:`~bikeid.experiments.cmd_measured` (``measured fit|evaluate|report|trials|study``,
   ``data fetch``), :mod:`~bikeid.experiments.cmd_coverage` (``coverage``).
 - :mod:`~bikeid.experiments.progress`: progress bars of the long commands (stderr, only on a
   terminal and without ``--json``); library loops report through a callback.
@@ -37,6 +37,10 @@ Modules:
   (fit a model with the effect library, save/load it, evaluate it on held-out decays).
 - :mod:`~bikeid.experiments.measured_report`: before/after report on the measured data
   (``bikeid measured report``).
+- :mod:`~bikeid.experiments.real_study`: Moore & Hubbard's model comparison on the measured
+  logs (direct, per-speed PEM, grey-box, Whipple, Whipple + effects; held-out VAF tables and
+  the effect translation of identified entries; ``bikeid measured study``), with its report
+  and figures in :mod:`~bikeid.experiments.real_study_plots`.
 - :mod:`~bikeid.experiments.coverage`: how often PEM's intervals contain the exact truth on
   the linear plant (``bikeid coverage``).
 - :mod:`~bikeid.experiments.report`: Markdown reports (paper | identified | truth tables)
