@@ -2,6 +2,8 @@
 
     python benchmarks/bench_blind_trials.py [--n 90] [--seed 0] [--processes 2]
         [--plant nonlinear|linear|auto] [--log blind.jsonl] [--resume blind.jsonl]
+        [--min-heldout-gain G] [--unexplained-rule floor|coloured|residual]
+        [--unexplained-threshold X]
 
 Draws ``n`` trials of :mod:`bikeid.experiments.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
@@ -44,6 +46,24 @@ def main() -> None:
         help="the pipeline's nominal plant (default: that of 'measured fit'); auto: the "
         "better-fitting one before selection",
     )
+    ap.add_argument(
+        "--min-heldout-gain",
+        type=float,
+        default=None,
+        help="least held-out cost reduction to accept an effect (select_effects)",
+    )
+    ap.add_argument(
+        "--unexplained-rule",
+        choices=("floor", "coloured", "residual"),
+        default="floor",
+        help="how 'unexplained' is decided (select_effects)",
+    )
+    ap.add_argument(
+        "--unexplained-threshold",
+        type=float,
+        default=None,
+        help="threshold of that rule (select_effects)",
+    )
     ap.add_argument("--log", help="append each finished trial to this JSON-lines file")
     ap.add_argument("--resume", help="reuse the finished trials of this JSON-lines log")
     args = ap.parse_args()
@@ -63,8 +83,10 @@ def main() -> None:
     rows = [done[i] for i in sorted(done) if i < args.n]
     t0 = time.perf_counter()
     job = partial(
-        run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear"
-    )
+        run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
+        min_heldout_gain=args.min_heldout_gain, unexplained_rule=args.unexplained_rule,
+        unexplained_threshold=args.unexplained_threshold,
+    )  # fmt: skip
     with ProcessPoolExecutor(max_workers=args.processes) as pool:
         for r in pool.map(job, trials):
             r = to_jsonable(r)
@@ -80,7 +102,9 @@ def main() -> None:
     s = summarize_blind(rows)
     print(
         f"{len(trials)} trials run in {time.perf_counter() - t0:.0f} s wall; "
-        f"nominal plant {args.plant}, seed {args.seed}"
+        f"nominal plant {args.plant}, seed {args.seed}, min held-out gain "
+        f"{args.min_heldout_gain}, unexplained rule {args.unexplained_rule} "
+        f"{args.unexplained_threshold}"
     )
     print(_fmt("right effect first, value in band", s["right_first"]))
     print(_fmt("library trials with extra effects", s["with_extras"]))

@@ -486,7 +486,9 @@ def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) ->
     return {"kind": "library", "extras": extras, "right_first": ok}
 
 
-def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects: int = 2) -> dict:
+def run_blind_trial(
+    trial: BlindTrial, nonlinear: bool | str = True, max_effects: int = 2, **select_kw
+) -> dict:
     """Generate, select (not told), evaluate on held-out speeds, score.
 
     Parameters
@@ -499,11 +501,15 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects
         (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).
     max_effects : int, optional
         Selection rounds.
+    **select_kw
+        Further options of :func:`bikeid.ident.effect_selection.select_effects` (e.g.
+        ``min_heldout_gain``, ``unexplained_rule``, ``unexplained_threshold``).
 
     Returns
     -------
     dict
-        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds;
+        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds,
+        the selection's ``evidence`` and round log (``rounds``);
         ``error`` is the pipeline's message when it failed (verdict ``["error"]``, scored as
         not right and not a false positive, and counted by :func:`summarize_blind`).
     """
@@ -519,7 +525,9 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects
     if nonlinear == "auto":
         nonlinear = plants["preferred"] == "nonlinear"
     try:
-        res = select_effects(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
+        res = select_effects(
+            nominal, fit, max_effects=max_effects, nonlinear=nonlinear, **select_kw
+        )
         ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
     except (ValueError, ArithmeticError) as exc:  # e.g. a candidate's nonlinear run fell
         row = {**asdict(trial), "verdict": ["error"], "estimates": {}, "error": str(exc)}
@@ -530,7 +538,8 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects
     row = {**asdict(trial), "verdict": res.verdict, "estimates": est,
            "error_before": ev["error_before"], "error_after": ev["error_after"],
            "explained_fraction": res.explained, "error": None, "nominal_costs": plants,
-           "nominal_plant": "nonlinear" if nonlinear else "linear"}  # fmt: skip
+           "nominal_plant": "nonlinear" if nonlinear else "linear",
+           "evidence": res.evidence, "rounds": res.rounds}  # fmt: skip
     row.update(score(trial, res.verdict, est))
     row["seconds"] = time.perf_counter() - t0
     return row
