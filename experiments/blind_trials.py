@@ -68,6 +68,7 @@ __all__ = [
     "draw_blind_trials",
     "generate_windows",
     "linear_plant_matrices",
+    "rescore_unexplained",
     "run_blind_trial",
     "score",
     "summarize_blind",
@@ -543,6 +544,50 @@ def run_blind_trial(
     row.update(score(trial, res.verdict, est))
     row["seconds"] = time.perf_counter() - t0
     return row
+
+
+def rescore_unexplained(rows: list[dict], rule: str, threshold: float) -> list[dict]:
+    """The trials rescored with another ``unexplained`` rule, the accepted effects kept.
+
+    The verdict ``unexplained`` is decided after the selection from numbers every trial
+    logs (``evidence.unexplained`` of :func:`run_blind_trial`), so the trade-off between
+    right answers and misattributions over a rule's threshold is exact without rerunning.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_blind_trial` results (with ``evidence``; failed trials are kept as they
+        are).
+    rule : str
+        ``"floor"`` or ``"coloured"`` (unexplained when the explained fraction is below
+        ``threshold``) or ``"residual"`` (when the final cost over the residual noise floor
+        is above it); see :func:`bikeid.ident.effect_selection.select_effects`.
+    threshold : float
+        The rule's threshold (dimensionless).
+
+    Returns
+    -------
+    list of dict
+        New rows with the verdict and the scores of :func:`score` recomputed.
+    """
+    key = {"floor": "explained", "coloured": "explained_coloured",
+           "residual": "final_over_residual_floor"}[rule]  # fmt: skip
+    out = []
+    for r in rows:
+        ev = (r.get("evidence") or {}).get("unexplained")
+        if r.get("error") or not ev:
+            out.append(dict(r))
+            continue
+        x = ev[key]
+        flag = x > threshold if rule == "residual" else x < threshold
+        names = [n for n in r["verdict"] if n != "unexplained"]
+        verdict = (["unexplained"] if flag or not names else []) + names
+        nz = Nuisance(**r["nuisance"])
+        value = float("nan") if r["value"] is None else float(r["value"])  # JSON null
+        tr = BlindTrial(r["index"], r["seed"], r["effect"], value,
+                        tuple(r["fit_speeds"]), tuple(r["eval_speeds"]), nz)  # fmt: skip
+        out.append({**r, "verdict": verdict, **score(tr, verdict, r["estimates"])})
+    return out
 
 
 def _rate(rows: list[dict], key: str) -> dict:

@@ -173,6 +173,7 @@ def select_effects(
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
     min_heldout_gain: float | None = None,
+    min_improved: float = 0.0,
     unexplained_rule: str = "floor",
     unexplained_threshold: float | None = None,
 ) -> Identification:
@@ -216,6 +217,10 @@ def select_effects(
         Least fractional reduction of the held-out cost for acceptance (default
         ``min_gain``); a larger value asks each effect to beat what corrections of the
         nominal parameters within their uncertainty gain on held-out decays.
+    min_improved : float, optional
+        Least fraction of the held-out decays whose own cost the effect must lower (a paired
+        sign criterion; 1.0 = every one, a one-sided sign-test p of 2^-n for n held-out
+        decays); 0 (default) asks only for the summed held-out cost.
     unexplained_rule : str, optional
         How ``"unexplained"`` is decided: ``"floor"`` (default): explained fraction of the
         cost above the second-difference noise floor below the threshold (default
@@ -325,6 +330,8 @@ def select_effects(
             row["heldout_improved"] = int(np.sum(val_wn < cur_val_w))
             if val >= cur_val * (1 - min_val_gain):
                 continue
+            if row["heldout_improved"] < min_improved * len(val_w) - 1e-9:
+                continue
             wv = weave_error(val_w, sims, lam_val)
             score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
             row.update(heldout_weave_error=wv, heldout_weave_before=cur_wv, score=score)
@@ -401,6 +408,7 @@ def select_effects(
             "explained_coloured": float(explained_c), "final_over_residual_floor": left_r,
         },
         "min_heldout_gain": min_val_gain,
+        "min_improved": min_improved,
     }  # fmt: skip
     for e in effects:
         e.explained = float(explained)
