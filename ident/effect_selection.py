@@ -25,6 +25,12 @@ Workflow (identification.md section 5, approaches A/B/E):
    accepted effects remove less than ``EXPLAINED_MIN`` = 90 % of the nominal cost
    above that floor, the verdict is ``unexplained`` (listed first), with the
    accepted effects reported as partial.
+5. **Options and evidence.**  ``min_heldout_gain`` and ``min_improved`` (share of held-out
+   decays improved) make acceptance stricter; ``unexplained_rule`` decides ``unexplained``
+   from the second-difference floor (default), a coloured-noise floor, or the final
+   residual's own noise floor.  :attr:`Identification.evidence` records, per accepted effect
+   and for ``unexplained``, the numbers behind the verdict (:func:`evidence_lines` prints
+   them); their rates on the blind trials are in docs/measured.md "Blind trials".
 
 The pieces live in their own modules: the library and its fit settings in
 :mod:`bikeid.ident.effect_library` (effect facts: :mod:`bikeid.sim.effect_registry`), the
