@@ -2,6 +2,8 @@
 
     python benchmarks/bench_blind_trials.py [--n 90] [--seed 0] [--processes 2]
         [--plant nonlinear|linear|auto] [--log blind.jsonl] [--resume blind.jsonl]
+        [--min-heldout-gain G] [--min-improved F] [--unexplained-rule floor|coloured|residual]
+        [--unexplained-threshold X] [--tradeoff]
 
 Draws ``n`` trials of :mod:`bikeid.experiments.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
@@ -23,7 +25,12 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 
-from bikeid.experiments.blind_trials import draw_blind_trials, run_blind_trial, summarize_blind
+from bikeid.experiments.blind_trials import (
+    draw_blind_trials,
+    rescore_unexplained,
+    run_blind_trial,
+    summarize_blind,
+)
 from bikeid.experiments.cliutil import dump_json, to_jsonable
 
 
@@ -44,6 +51,36 @@ def main() -> None:
         help="the pipeline's nominal plant (default: that of 'measured fit'); auto: the "
         "better-fitting one before selection",
     )
+    ap.add_argument(
+        "--min-heldout-gain",
+        type=float,
+        default=None,
+        help="least held-out cost reduction to accept an effect (select_effects)",
+    )
+    ap.add_argument(
+        "--min-improved",
+        type=float,
+        default=0.0,
+        help="least fraction of held-out decays an effect must improve (select_effects)",
+    )
+    ap.add_argument(
+        "--unexplained-rule",
+        choices=("floor", "coloured", "residual"),
+        default="floor",
+        help="how 'unexplained' is decided (select_effects)",
+    )
+    ap.add_argument(
+        "--unexplained-threshold",
+        type=float,
+        default=None,
+        help="threshold of that rule (select_effects)",
+    )
+    ap.add_argument(
+        "--tradeoff",
+        action="store_true",
+        help="also print the rates for a grid of thresholds of each 'unexplained' rule "
+        "(the accepted effects as selected: exact, no rerun)",
+    )
     ap.add_argument("--log", help="append each finished trial to this JSON-lines file")
     ap.add_argument("--resume", help="reuse the finished trials of this JSON-lines log")
     args = ap.parse_args()
@@ -63,8 +100,11 @@ def main() -> None:
     rows = [done[i] for i in sorted(done) if i < args.n]
     t0 = time.perf_counter()
     job = partial(
-        run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear"
-    )
+        run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
+        min_heldout_gain=args.min_heldout_gain, min_improved=args.min_improved,
+        unexplained_rule=args.unexplained_rule,
+        unexplained_threshold=args.unexplained_threshold,
+    )  # fmt: skip
     with ProcessPoolExecutor(max_workers=args.processes) as pool:
         for r in pool.map(job, trials):
             r = to_jsonable(r)
@@ -80,7 +120,10 @@ def main() -> None:
     s = summarize_blind(rows)
     print(
         f"{len(trials)} trials run in {time.perf_counter() - t0:.0f} s wall; "
-        f"nominal plant {args.plant}, seed {args.seed}"
+        f"nominal plant {args.plant}, seed {args.seed}, min held-out gain "
+        f"{args.min_heldout_gain}, min improved {args.min_improved}, unexplained rule "
+        f"{args.unexplained_rule} "
+        f"{args.unexplained_threshold}"
     )
     print(_fmt("right effect first, value in band", s["right_first"]))
     print(_fmt("library trials with extra effects", s["with_extras"]))
@@ -91,6 +134,20 @@ def main() -> None:
     print(_fmt("outside library misattributed", s["misattributed"]))
     print(f"{'pipeline failures (counted as misses)':34s} {s['pipeline_errors']}")
     print(dump_json(s["per_plant"]))
+    if args.tradeoff:
+        _tradeoff(rows)
+
+
+def _tradeoff(rows: list[dict]) -> None:
+    grid = {"floor": (0.5, 0.7, 0.8, 0.85, 0.9, 0.95), "coloured": (0.7, 0.8, 0.9, 0.95),
+            "residual": (1.5, 1.8, 2.0, 2.5, 3.0, 4.0, 6.0)}  # fmt: skip
+    print("unexplained rule, threshold: right first in band | misattributed | false positive")
+    for rule, thresholds in grid.items():
+        for thr in thresholds:
+            s = summarize_blind(rescore_unexplained(rows, rule, thr))
+            rf, mi, fp = s["right_first"], s["misattributed"], s["false_positive"]
+            print(f"  {rule:9s} {thr:5.2f}: {rf['k']:2d}/{rf['n']} | {mi['k']}/{mi['n']} | "
+                  f"{fp['k']}/{fp['n']}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -68,6 +68,7 @@ __all__ = [
     "draw_blind_trials",
     "generate_windows",
     "linear_plant_matrices",
+    "rescore_unexplained",
     "run_blind_trial",
     "score",
     "summarize_blind",
@@ -486,7 +487,9 @@ def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) ->
     return {"kind": "library", "extras": extras, "right_first": ok}
 
 
-def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects: int = 2) -> dict:
+def run_blind_trial(
+    trial: BlindTrial, nonlinear: bool | str = True, max_effects: int = 2, **select_kw
+) -> dict:
     """Generate, select (not told), evaluate on held-out speeds, score.
 
     Parameters
@@ -499,11 +502,15 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects
         (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).
     max_effects : int, optional
         Selection rounds.
+    **select_kw
+        Further options of :func:`bikeid.ident.effect_selection.select_effects` (e.g.
+        ``min_heldout_gain``, ``unexplained_rule``, ``unexplained_threshold``).
 
     Returns
     -------
     dict
-        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds;
+        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds,
+        the selection's ``evidence`` and round log (``rounds``);
         ``error`` is the pipeline's message when it failed (verdict ``["error"]``, scored as
         not right and not a false positive, and counted by :func:`summarize_blind`).
     """
@@ -519,7 +526,9 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects
     if nonlinear == "auto":
         nonlinear = plants["preferred"] == "nonlinear"
     try:
-        res = select_effects(nominal, fit, max_effects=max_effects, nonlinear=nonlinear)
+        res = select_effects(
+            nominal, fit, max_effects=max_effects, nonlinear=nonlinear, **select_kw
+        )
         ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
     except (ValueError, ArithmeticError) as exc:  # e.g. a candidate's nonlinear run fell
         row = {**asdict(trial), "verdict": ["error"], "estimates": {}, "error": str(exc)}
@@ -530,10 +539,55 @@ def run_blind_trial(trial: BlindTrial, nonlinear: bool | str = True, max_effects
     row = {**asdict(trial), "verdict": res.verdict, "estimates": est,
            "error_before": ev["error_before"], "error_after": ev["error_after"],
            "explained_fraction": res.explained, "error": None, "nominal_costs": plants,
-           "nominal_plant": "nonlinear" if nonlinear else "linear"}  # fmt: skip
+           "nominal_plant": "nonlinear" if nonlinear else "linear",
+           "evidence": res.evidence, "rounds": res.rounds}  # fmt: skip
     row.update(score(trial, res.verdict, est))
     row["seconds"] = time.perf_counter() - t0
     return row
+
+
+def rescore_unexplained(rows: list[dict], rule: str, threshold: float) -> list[dict]:
+    """The trials rescored with another ``unexplained`` rule, the accepted effects kept.
+
+    The verdict ``unexplained`` is decided after the selection from numbers every trial
+    logs (``evidence.unexplained`` of :func:`run_blind_trial`), so the trade-off between
+    right answers and misattributions over a rule's threshold is exact without rerunning.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_blind_trial` results (with ``evidence``; failed trials are kept as they
+        are).
+    rule : str
+        ``"floor"`` or ``"coloured"`` (unexplained when the explained fraction is below
+        ``threshold``) or ``"residual"`` (when the final cost over the residual noise floor
+        is above it); see :func:`bikeid.ident.effect_selection.select_effects`.
+    threshold : float
+        The rule's threshold (dimensionless).
+
+    Returns
+    -------
+    list of dict
+        New rows with the verdict and the scores of :func:`score` recomputed.
+    """
+    key = {"floor": "explained", "coloured": "explained_coloured",
+           "residual": "final_over_residual_floor"}[rule]  # fmt: skip
+    out = []
+    for r in rows:
+        ev = (r.get("evidence") or {}).get("unexplained")
+        if r.get("error") or not ev:
+            out.append(dict(r))
+            continue
+        x = ev[key]
+        flag = x > threshold if rule == "residual" else x < threshold
+        names = [n for n in r["verdict"] if n != "unexplained"]
+        verdict = (["unexplained"] if flag or not names else []) + names
+        nz = Nuisance(**r["nuisance"])
+        value = float("nan") if r["value"] is None else float(r["value"])  # JSON null
+        tr = BlindTrial(r["index"], r["seed"], r["effect"], value,
+                        tuple(r["fit_speeds"]), tuple(r["eval_speeds"]), nz)  # fmt: skip
+        out.append({**r, "verdict": verdict, **score(tr, verdict, r["estimates"])})
+    return out
 
 
 def _rate(rows: list[dict], key: str) -> dict:

@@ -199,6 +199,10 @@ def cmd_fit(args) -> int:
         print(f"note: the {nf['preferred']} nominal fits these decays better; a mismatch of "
               "the nominal plant can be read as an effect (try --plant auto)")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    from bikeid.ident.effect_selection import evidence_lines
+
+    for line in evidence_lines(out["identification"]["evidence"]):
+        print(f"  {line}")
     w = out["identification"]["weave_weight"]
     if ww == "auto" and w == 0:
         print("weave term off: no fit speed has >= 3 decays with a measurable weave")

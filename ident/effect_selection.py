@@ -25,6 +25,12 @@ Workflow (identification.md section 5, approaches A/B/E):
    accepted effects remove less than ``EXPLAINED_MIN`` = 90 % of the nominal cost
    above that floor, the verdict is ``unexplained`` (listed first), with the
    accepted effects reported as partial.
+5. **Options and evidence.**  ``min_heldout_gain`` and ``min_improved`` (share of held-out
+   decays improved) make acceptance stricter; ``unexplained_rule`` decides ``unexplained``
+   from the second-difference floor (default), a coloured-noise floor, or the final
+   residual's own noise floor.  :attr:`Identification.evidence` records, per accepted effect
+   and for ``unexplained``, the numbers behind the verdict (:func:`evidence_lines` prints
+   them); their rates on the blind trials are in docs/measured.md "Blind trials".
 
 The pieces live in their own modules: the library and its fit settings in
 :mod:`bikeid.ident.effect_library` (effect facts: :mod:`bikeid.sim.effect_registry`), the
@@ -51,6 +57,7 @@ from bikeid.ident.effect_fit import (
     joint_fit,
     noise_floor,
     output_residuals,
+    residual_noise_floor,
 )
 from bikeid.ident.effect_library import LIBRARY, Candidate
 from bikeid.ident.experiment_model import ExperimentModel, window_errors
@@ -58,7 +65,9 @@ from bikeid.ident.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_t
 
 __all__ = [
     "EXPLAINED_MIN",
+    "RESIDUAL_MAX",
     "compare_nominal_plants",
+    "evidence_lines",
     "T_MIN",
     "WEAVE_EPS",
     "Identification",
@@ -67,6 +76,7 @@ __all__ = [
 ]
 
 EXPLAINED_MIN = 0.9
+RESIDUAL_MAX = 2.0  # final cost over the noise part of the final residual ("residual" rule)
 T_MIN = 3.0
 WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter, ~2 %)
 
@@ -112,6 +122,13 @@ class Identification:
         Forward-selection log, one entry per round.
     weave_weight : float
         Weight of the weave-eigenvalue term in the fits (0: decay signals only).
+    evidence : dict
+        Why each name of the verdict is there: ``effects`` maps each accepted effect to
+        the round it was accepted in, its fit gain, held-out cost ratio and held-out gain
+        (1 - ratio), the held-out windows it improved, its held-out weave error before and
+        after, and its t after the joint fit; ``unexplained`` holds the final cost, the noise
+        floors (second differences, coloured, from the final residual), the explained
+        fractions, the rule and its threshold, and the verdict it gave.
     """
 
     model: ExperimentModel
@@ -125,6 +142,7 @@ class Identification:
     eq_ranking: list[dict] = field(default_factory=list)
     rounds: list[dict] = field(default_factory=list)  # forward-selection log, per round
     weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
+    evidence: dict = field(default_factory=dict)  # why each name is in the verdict
 
     def as_dict(self) -> dict:
         """The identification's JSON record (``identification`` of a model file).
@@ -134,7 +152,7 @@ class Identification:
         dict
             ``selection_rounds``, ``verdict``, ``effects``, ``ranking``,
             ``equation_error_ranking``, ``cost_nominal``, ``cost_final``,
-            ``cost_noise_floor``, ``explained_fraction``, ``weave_weight``.
+            ``cost_noise_floor``, ``explained_fraction``, ``weave_weight``, ``evidence``.
         """
         return {
             "selection_rounds": self.rounds,
@@ -147,6 +165,7 @@ class Identification:
             "cost_noise_floor": self.cost_floor,
             "explained_fraction": self.explained,
             "weave_weight": self.weave_weight,
+            "evidence": self.evidence,
         }
 
 
@@ -159,6 +178,10 @@ def select_effects(
     nonlinear: bool = False,
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
+    min_heldout_gain: float | None = None,
+    min_improved: float = 0.0,
+    unexplained_rule: str = "floor",
+    unexplained_threshold: float | None = None,
 ) -> Identification:
     """Greedy forward selection of library effects by output error (module docstring).
 
@@ -196,6 +219,24 @@ def select_effects(
     progress : callable, optional
         ``progress(done, total, label)`` before each candidate fit; ``total`` counts the
         candidate fits of ``max_effects`` full rounds (an early stop jumps to the end).
+    min_heldout_gain : float, optional
+        Least fractional reduction of the held-out cost for acceptance (default
+        ``min_gain``); a larger value asks each effect to beat what corrections of the
+        nominal parameters within their uncertainty gain on held-out decays.
+    min_improved : float, optional
+        Least fraction of the held-out decays whose own cost the effect must lower (a paired
+        sign criterion; 1.0 = every one, a one-sided sign-test p of 2^-n for n held-out
+        decays); 0 (default) asks only for the summed held-out cost.
+    unexplained_rule : str, optional
+        How ``"unexplained"`` is decided: ``"floor"`` (default): explained fraction of the
+        cost above the second-difference noise floor below the threshold (default
+        :data:`EXPLAINED_MIN`); ``"coloured"``: the same with the coloured-noise floor
+        (:func:`bikeid.ident.effect_fit.noise_floor` ``method="coloured"``);
+        ``"residual"``: final cost over the noise part of the final residual
+        (:func:`bikeid.ident.effect_fit.residual_noise_floor`) above the threshold
+        (default :data:`RESIDUAL_MAX`).
+    unexplained_threshold : float, optional
+        The rule's threshold (dimensionless).
 
     Returns
     -------
@@ -206,9 +247,13 @@ def select_effects(
     Raises
     ------
     ValueError
-        If a candidate is not in the library, fewer than 2 windows are given, or
-        ``weave_weight`` is negative or not finite.
+        If a candidate is not in the library, fewer than 2 windows are given,
+        ``weave_weight`` is negative or not finite, or ``unexplained_rule`` is unknown.
     """
+    if unexplained_rule not in ("floor", "coloured", "residual"):
+        raise ValueError(f"unknown unexplained_rule {unexplained_rule!r}; use 'floor', "
+                         "'coloured' or 'residual'")  # fmt: skip
+    min_val_gain = min_gain if min_heldout_gain is None else float(min_heldout_gain)
     names = list(candidates or LIBRARY)
     bad = [n for n in names if n not in LIBRARY]
     if bad:
@@ -236,6 +281,8 @@ def select_effects(
     accepted: list[str] = []
     cur = model
     cur_val = fit_effects(cur, val_w, []).cost
+    cur_val_w = np.sum(window_errors(val_w, cur.simulate(val_w)) ** 2, axis=1)
+    ev_effects: dict[str, dict] = {}
     cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
     ranking: list[EffectEstimate] = []
     rounds: list[dict] = []
@@ -283,16 +330,28 @@ def select_effects(
                 val_w, res.model, nonlinear
             )  # only the held-out half is simulated here
             sims = res.model.simulate(val_w)
-            val = float(np.sum(window_errors(val_w, sims) ** 2))
+            val_wn = np.sum(window_errors(val_w, sims) ** 2, axis=1)
+            val = float(np.sum(val_wn))
             row["heldout_cost_ratio"] = val / cur_val
-            if val >= cur_val * (1 - min_gain):
+            row["heldout_improved"] = int(np.sum(val_wn < cur_val_w))
+            if val >= cur_val * (1 - min_val_gain):
+                continue
+            if row["heldout_improved"] < min_improved * len(val_w) - 1e-9:
                 continue
             wv = weave_error(val_w, sims, lam_val)
             score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
             row.update(heldout_weave_error=wv, heldout_weave_before=cur_wv, score=score)
-            passing.append((score, n, res, val, wv))
+            passing.append((score, n, res, val, wv, val_wn, gain))
         if passing:
-            _score, n, res, cur_val, cur_wv = min(passing, key=lambda z: z[0])
+            _score, n, res, val, wv, val_wn, gain = min(passing, key=lambda z: z[0])
+            ev_effects[n] = {
+                "round": _round + 1, "fit_gain": gain, "heldout_cost_ratio": val / cur_val,
+                "heldout_gain": 1 - val / cur_val,
+                "heldout_windows_improved": int(np.sum(val_wn < cur_val_w)),
+                "heldout_windows": len(val_w), "heldout_weave_error_before": cur_wv,
+                "heldout_weave_error_after": wv,
+            }  # fmt: skip
+            cur_val, cur_wv, cur_val_w = val, wv, val_wn
             accepted.append(n)
             cur = res.model
         rounds.append({"accepted": n if passing else None, "candidates": log})
@@ -330,16 +389,85 @@ def select_effects(
         v, sd = final.values[n], final.std[n]
         effects.append(EffectEstimate(n, v, sd, cand.unit, tval(n), accepted=True))
     explained = (cost0 - cost_sig) / max(cost0 - floor, 1e-12 * cost0)
+    floor_c = noise_floor(windows, "coloured")
+    explained_c = (cost0 - cost_sig) / max(cost0 - floor_c, 1e-12 * cost0)
+    floor_r = residual_noise_floor(r_sig, [w.n for w in windows for _ in range(2)])
+    left_r = cost_sig / max(floor_r, 1e-300)
+    if unexplained_rule == "residual":
+        thr = RESIDUAL_MAX if unexplained_threshold is None else float(unexplained_threshold)
+        structured = left_r > thr
+    else:
+        thr = EXPLAINED_MIN if unexplained_threshold is None else float(unexplained_threshold)
+        structured = (explained if unexplained_rule == "floor" else explained_c) < thr
     verdict = [e.name for e in effects]
-    if explained < EXPLAINED_MIN or not effects:
+    if structured or not effects:
         verdict = ["unexplained"] + verdict
+    for e in effects:
+        ev_effects[e.name]["t_joint"] = e.t
+    evidence = {
+        "effects": {e.name: ev_effects[e.name] for e in effects},
+        "unexplained": {
+            "rule": unexplained_rule, "threshold": thr, "unexplained": verdict[0] == "unexplained",
+            "cost_nominal": cost0, "cost_final": cost_sig,
+            "floor_second_difference": floor, "floor_coloured": floor_c,
+            "floor_residual": floor_r, "explained": float(explained),
+            "explained_coloured": float(explained_c), "final_over_residual_floor": left_r,
+        },
+        "min_heldout_gain": min_val_gain,
+        "min_improved": min_improved,
+    }  # fmt: skip
     for e in effects:
         e.explained = float(explained)
     return Identification(
         model=final.model, effects=effects, ranking=ranking, verdict=verdict,
         cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor, explained=float(explained),
         eq_ranking=err_ranking(model, windows), rounds=rounds, weave_weight=weave_weight,
+        evidence=evidence,
     )  # fmt: skip
+
+
+def evidence_lines(evidence: dict) -> list[str]:
+    """The evidence of :attr:`Identification.evidence` as printable lines, one per name.
+
+    Parameters
+    ----------
+    evidence : dict
+        :attr:`Identification.evidence` (or the ``evidence`` of its JSON record).
+
+    Returns
+    -------
+    list of str
+        One line per accepted effect (held-out cost ratio and gain, held-out windows
+        improved, fit gain, t after the joint fit), then one for ``unexplained`` (the final
+        cost against the noise floors, the rule, its threshold and its answer).
+    """
+    out = []
+    for name, e in evidence.get("effects", {}).items():
+        out.append(
+            f"evidence for {name}: held-out cost ratio {e['heldout_cost_ratio']:.3f} (gain "
+            f"{100 * e['heldout_gain']:.1f} %, needed {100 * evidence['min_heldout_gain']:.1f} "
+            f"%), {e['heldout_windows_improved']}/{e['heldout_windows']} held-out decays "
+            f"improved, fit gain {100 * e['fit_gain']:.1f} % (round {e['round']}), t "
+            f"{e.get('t_joint', float('nan')):.1f} after the joint fit"
+        )
+    u = evidence.get("unexplained")
+    if u:
+        if u["rule"] == "residual":
+            test = (f"final cost / residual floor {u['final_over_residual_floor']:.2f} "
+                    f"(unexplained above {u['threshold']:.2f})")  # fmt: skip
+        else:
+            key = "explained" if u["rule"] == "floor" else "explained_coloured"
+            floor = "second-difference" if u["rule"] == "floor" else "coloured"
+            test = (f"explained fraction ({floor} floor) {u[key]:.2f} (unexplained below "
+                    f"{u['threshold']:.2f})")  # fmt: skip
+        out.append(
+            f"evidence for unexplained: cost nominal {u['cost_nominal']:.4g} -> final "
+            f"{u['cost_final']:.4g}; noise floors: second differences "
+            f"{u['floor_second_difference']:.4g}, coloured {u['floor_coloured']:.4g}, final "
+            f"residual {u['floor_residual']:.4g}; {test} -> "
+            + ("unexplained" if u["unexplained"] else "explained")
+        )
+    return out
 
 
 def compare_nominal_plants(model: ExperimentModel, windows: list[Window]) -> dict:
