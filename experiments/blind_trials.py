@@ -57,7 +57,7 @@ from bikeid.experiments.effect_trials import (
     EVAL_PER_SPEED,
     FIT_PER_SPEED,
     N_SAMPLES,
-    binomial_ci,
+    rate,
 )
 
 __all__ = [
@@ -590,13 +590,6 @@ def rescore_unexplained(rows: list[dict], rule: str, threshold: float) -> list[d
     return out
 
 
-def _rate(rows: list[dict], key: str) -> dict:
-    k = sum(bool(r[key]) for r in rows)
-    n = len(rows)
-    lo, hi = binomial_ci(k, n) if n else (float("nan"), float("nan"))
-    return {"k": k, "n": n, "rate": k / n if n else float("nan"), "ci95": [lo, hi]}
-
-
 def summarize_blind(rows: list[dict]) -> dict:
     """The four rates of the blind trials with exact 95 % intervals.
 
@@ -623,24 +616,24 @@ def summarize_blind(rows: list[dict]) -> dict:
     half = 1.96 * ex.std(ddof=1) / math.sqrt(len(ex)) if len(ex) > 1 else float("nan")
     s = {
         "trials": len(rows),
-        "right_first": _rate(lib, "right_first"),
-        "with_extras": _rate(lib, "has_extra"),
+        "right_first": rate(lib, "right_first"),
+        "with_extras": rate(lib, "has_extra"),
         "mean_extras": {
             "mean": float(ex.mean()) if len(ex) else float("nan"),
             "ci95": [float(ex.mean() - half), float(ex.mean() + half)] if len(ex) > 1 else None,
             "n": len(ex),
         },  # fmt: skip
-        "false_positive": _rate(none, "false_positive"),
-        "misattributed": _rate(outside, "misattributed"),
+        "false_positive": rate(none, "false_positive"),
+        "misattributed": rate(outside, "misattributed"),
         "pipeline_errors": sum(1 for r in rows if r.get("error")),
     }
     per = {}
     for plant in ("independent_linear", "bikeid_nonlinear"):
         rs = [r for r in rows if r["nuisance"]["plant"] == plant]
         per[plant] = {
-            "right_first": _rate([r for r in rs if r["kind"] == "library"], "right_first"),
-            "false_positive": _rate([r for r in rs if r["kind"] == "none"], "false_positive"),
-            "misattributed": _rate([r for r in rs if r["kind"] == "outside"], "misattributed"),
+            "right_first": rate([r for r in rs if r["kind"] == "library"], "right_first"),
+            "false_positive": rate([r for r in rs if r["kind"] == "none"], "false_positive"),
+            "misattributed": rate([r for r in rs if r["kind"] == "outside"], "misattributed"),
         }
     s["per_plant"] = per
     return s

@@ -58,6 +58,7 @@ __all__ = [
     "binomial_ci",
     "decay_windows",
     "draw_trials",
+    "rate",
     "run_trial",
     "run_trials",
     "summarize",
@@ -492,10 +493,25 @@ def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     return (float(ci.low), float(ci.high))
 
 
-def _rate(rows: list[dict], key: str) -> dict:
+def rate(rows: list[dict], key: str) -> dict:
+    """How many rows have ``key`` true, as a rate with its exact 95 % interval.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Trial results.
+    key : str
+        A boolean field of each row.
+
+    Returns
+    -------
+    dict
+        ``k``, ``n``, ``rate`` (k / n, NaN without rows) and ``ci95`` (Clopper-Pearson,
+        :func:`binomial_ci`; NaN without rows).
+    """
     k = sum(bool(r[key]) for r in rows)
     n = len(rows)
-    lo, hi = binomial_ci(k, n)
+    lo, hi = binomial_ci(k, n) if n else (float("nan"), float("nan"))
     return {"k": k, "n": n, "rate": k / n if n else float("nan"), "ci95": [lo, hi]}
 
 
@@ -519,16 +535,16 @@ def summarize(rows: list[dict]) -> dict:
     out_ = [r for r in rows if not r["in_library"]]
     summ: dict = {"trials": len(rows)}
     if lib:
-        summ["library"] = {k: _rate(lib, k) for k in
+        summ["library"] = {k: rate(lib, k) for k in
                            ("ranked_first", "magnitude_ok", "error_halved", "success")}  # fmt: skip
     if out_:
-        summ["outside"] = {"unexplained": _rate(out_, "unexplained")}
+        summ["outside"] = {"unexplained": rate(out_, "unexplained")}
     per = {}
     for name in dict.fromkeys(r["effect"] for r in rows):
         rs = [r for r in rows if r["effect"] == name]
         keys = ("ranked_first", "magnitude_ok", "error_halved") if rs[0]["in_library"] else (
             "unexplained",)  # fmt: skip
-        d = {k: _rate(rs, k) for k in keys}
+        d = {k: rate(rs, k) for k in keys}
         firsts: dict[str, int] = {}
         for r in rs:
             firsts[r["verdict"][0]] = firsts.get(r["verdict"][0], 0) + 1
