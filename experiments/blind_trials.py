@@ -266,13 +266,11 @@ def draw_blind_trials(
 
 def _ar1(rng: np.random.Generator, n: int, std: float, a: float) -> np.ndarray:
     """AR(1) noise with marginal std ``std`` and coefficient ``a``."""
+    from scipy.signal import lfilter
+
     e = rng.normal(0.0, std * math.sqrt(1 - a * a), n)
-    out = np.empty(n)
-    x = rng.normal(0.0, std)
-    for k in range(n):
-        x = a * x + e[k]
-        out[k] = x
-    return out
+    x = rng.normal(0.0, std)  # stationary start
+    return lfilter([1.0], [1.0, -a], e, zi=[a * x])[0]
 
 
 class _LinearPlant:

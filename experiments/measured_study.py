@@ -443,6 +443,7 @@ def evaluate_plant_model(model, windows: list[Window], speed_tolerance: float = 
         If no window is at the model's speed or a window has no logged command.
     """
     from bikeid.ident.experiment_model import window_errors
+    from bikeid.ident.validate import simulation
     from bikeid.sim.linear import state_space
     from bikeid.sim.parameters import steer_by_wire
     from bikeid.sim.sampling import zoh
@@ -466,11 +467,7 @@ def evaluate_plant_model(model, windows: list[Window], speed_tolerance: float = 
         for key, (A, b) in (("before", (np.asarray(nom.A), np.asarray(nom.B)[:, 0])),
                             ("after", _plant_state_space(model, w.speed))):  # fmt: skip
             Ad, Bd = zoh(A, b[:, None], DT)
-            x = w.state0()
-            Y = np.empty((w.n, 4))
-            for k in range(w.n):
-                Y[k] = x
-                x = Ad @ x + Bd[:, 0] * w.T_logged[k]
+            Y, _ = simulation(Ad, Bd, np.eye(4), w.T_logged, ic=w.state0())
             sims[key].append({"phi": Y[:, 0], "delta": Y[:, 1], "phidot": Y[:, 2],
                               "deltadot": Y[:, 3]})  # fmt: skip
     e0 = window_errors(use, sims["before"]).mean(axis=1)
