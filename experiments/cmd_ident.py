@@ -575,7 +575,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")
         if row.get("eigenvalue_intervals"):
-            print(f"{'':8s}  95 % +-   {_half_widths(row['eigenvalue_intervals'])}")
+            for part in ("real", "imag"):
+                print(f"{'':8s}  95 % {part[:2].capitalize()}  "
+                      f"{_interval_cells(row['eigenvalue_intervals'], part)}")  # fmt: skip
         if "true_eigenvalues" in row:
             fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
             print(f"{'':8s}  true       {fmt}")
@@ -612,13 +614,9 @@ def _intervals(models: dict, speed_model) -> dict:
     return out
 
 
-def _half_widths(ei: dict) -> str:
-    """Half-widths of the real and imaginary parts, aligned under the eigenvalues."""
-    cells = []
-    for r in ei["eigenvalues"]:
-        re, im = (r["real"][1] - r["real"][0]) / 2, (r["imag"][1] - r["imag"][0]) / 2
-        cells.append(f"{re:6.3f} {im:6.3f}j")
-    return "  ".join(cells)
+def _interval_cells(ei: dict, part: str) -> str:
+    """[lower, upper] of the real or imaginary parts, one cell per eigenvalue."""
+    return "  ".join(f"[{r[part][0]:+.3f}, {r[part][1]:+.3f}]" for r in ei["eigenvalues"])
 
 
 def _interval_lines(iv: dict) -> list[str]:

@@ -10,8 +10,11 @@ for each quantity q with printed standard error s the harness records z = (q_hat
 
 - the 10 canonical parameters a1..a8, b1, b2 (``model.stderr``);
 - the real parts of the weave, capsize and caster eigenvalues and the weave frequency
-  (first-order intervals of :func:`bikeid.ident.uncertainty.eigenvalue_intervals`; the
+  (first-order intervals, ``eigenvalue_intervals(..., method="delta")``; the
   identified eigenvalues are paired with the true modes by minimum total distance);
+- the same four eigenvalue parts by the profile intervals of
+  :func:`~bikeid.ident.uncertainty.eigenvalue_intervals` (the default method: the ends over
+  the parameters' confidence ellipsoid), counted as contained or not (rows ``... profile``);
 - jointly, the 10 parameters: the Mahalanobis distance d2 = r' P^-1 r of r = theta_hat -
   theta (chi-square with 10 degrees of freedom, mean 10, if P is right), counted inside the
   joint region d2 <= chi2_10^-1(level).
@@ -40,6 +43,7 @@ import numpy as np
 
 __all__ = [
     "DEFAULTS",
+    "PROFILED",
     "QUANTITIES",
     "CoverageResult",
     "binomial_verdict",
@@ -53,11 +57,13 @@ QUANTITIES = (
     "weave_re", "weave_im", "capsize_re", "caster_re",
 )  # fmt: skip
 
+#: Eigenvalue parts whose profile intervals are counted too.
+PROFILED = ("weave_re", "weave_im", "capsize_re", "caster_re")
+
 #: Default experiment: 50 s at 100 Hz, roll PID (-200, -500, -80), dither 3 N m held 50 ms,
 #: unlogged disturbance 0.5 N m, sensor noise 1e-3 rad and 1e-2 rad/s.  The dither is 3x
-#: that of ``benchmarks/bench_ident.py`` so that the eigenvalue standard errors are small
-#: against the eigenvalues' separation (first-order propagation applies; docs/uncertainty.md
-#: shows what happens at 1 N m).
+#: that of ``benchmarks/bench_ident.py``, so that the weave pair stays complex in every fit;
+#: docs/uncertainty.md shows what happens at 1 N m.
 DEFAULTS: dict[str, float] = {
     "speed": 5.0,
     "duration": 50.0,
@@ -132,6 +138,9 @@ class CoverageResult:
     stderr : dict of str to (N,) ndarray
         The printed standard error of each quantity per successful seed (units of theta;
         1/s for the eigenvalue parts).
+    profile_inside : dict of str to (N,) bool ndarray
+        Whether the profile interval of each eigenvalue part (:data:`PROFILED`) contained
+        the truth, per successful seed.
     """
 
     settings: dict[str, Any]
@@ -139,6 +148,7 @@ class CoverageResult:
     failed: list[tuple[int, str]] = field(default_factory=list)
     mahalanobis: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stderr: dict[str, np.ndarray] = field(default_factory=dict)
+    profile_inside: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -175,7 +185,8 @@ class CoverageResult:
             ``fraction``, ``ci``
             (Clopper-Pearson 95 % of the fraction) and ``verdict``
             (:func:`binomial_verdict`); entry ``theta_joint`` has ``d2_mean`` (10 expected)
-            instead of the z statistics.
+            instead of the z statistics, and entries ``<part> profile`` only the counts of
+            the profile intervals.
         """
         from scipy.stats import chi2
 
@@ -191,6 +202,12 @@ class CoverageResult:
                          if name in self.stderr else None,
                          "covered": k, "n": int(z.size), "fraction": k / z.size,
                          "ci": [lo, hi], "verdict": verdict}  # fmt: skip
+        for name, inside in self.profile_inside.items():
+            k = int(np.sum(inside))
+            lo, hi, verdict = binomial_verdict(k, inside.size, self.settings["level"])
+            out[f"{name} profile"] = {"covered": k, "n": int(inside.size),
+                                      "fraction": k / inside.size, "ci": [lo, hi],
+                                      "verdict": verdict}  # fmt: skip
         d2 = self.mahalanobis
         if d2.size:
             k = int(np.sum(d2 <= chi2.ppf(self.settings["level"], 10)))
@@ -207,10 +224,13 @@ class CoverageResult:
         -------
         dict
             ``settings``, ``summary`` (:meth:`summary`), ``z`` and ``stderr`` (per quantity,
-            one value per seed), ``mahalanobis`` (per seed), ``failed``.
+            one value per seed), ``profile_inside`` (per eigenvalue part and seed),
+            ``mahalanobis`` (per seed), ``failed``.
         """
         return {"settings": self.settings, "summary": self.summary(),
-                "z": dict(self.z), "stderr": self.stderr, "mahalanobis": self.mahalanobis,
+                "z": dict(self.z), "stderr": self.stderr,
+                "profile_inside": {k: v.tolist() for k, v in self.profile_inside.items()},
+                "mahalanobis": self.mahalanobis,
                 "failed": [{"seed": s, "error": e} for s, e in self.failed]}  # fmt: skip
 
 
@@ -255,13 +275,19 @@ def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[st
     z = dict(zip(QUANTITIES[:10], r / se, strict=True))
     z["d2"] = float(r @ np.linalg.solve(model.covariance, r))
     z.update({f"se_{q}": float(e) for q, e in zip(QUANTITIES[:10], se, strict=True)})
-    ei = eigenvalue_intervals(model, level=settings["level"])
+    ei = eigenvalue_intervals(model, level=settings["level"])  # profile ends + first-order SE
     _, col = match_eigenvalues(ei.values, targets, return_index=True)
     for i, name in ((0, "weave"), (2, "capsize"), (3, "caster")):
         j = col[i]
         z[f"{name}_re"] = (ei.values[j].real - targets[i].real) / ei.std_real[j]
         z[f"se_{name}_re"] = float(ei.std_real[j])
+        z[f"in_{name}_re"] = bool(ei.real_lower[j] <= targets[i].real <= ei.real_upper[j])
     j = col[0]
+    t_im = targets[0].imag  # the interval of |Im| of the identified pair (as z below)
+    lo_im, hi_im = sorted((abs(ei.imag_lower[j]), abs(ei.imag_upper[j])))
+    if ei.imag_lower[j] < 0 < ei.imag_upper[j]:
+        lo_im = 0.0
+    z["in_weave_im"] = bool(lo_im <= t_im <= hi_im)
     # the identified weave may come out as two real roots: its imaginary-part error is then
     # the whole true frequency with a zero standard error (z = inf, not covered)
     dz = abs(ei.values[j].imag) - targets[0].imag
@@ -361,7 +387,9 @@ def run_coverage(
     z = {q: np.array([r[q] for r in rows]) for q in QUANTITIES} if rows else {}
     d2 = np.array([r["d2"] for r in rows])
     se = {q: np.array([r[f"se_{q}"] for r in rows]) for q in QUANTITIES} if rows else {}
-    return CoverageResult(settings=settings, z=z, failed=failed, mahalanobis=d2, stderr=se)
+    inside = {q: np.array([r[f"in_{q}"] for r in rows]) for q in PROFILED} if rows else {}
+    return CoverageResult(settings=settings, z=z, failed=failed, mahalanobis=d2, stderr=se,
+                          profile_inside=inside)  # fmt: skip
 
 
 def table_text(result: CoverageResult) -> str:
@@ -389,6 +417,12 @@ def table_text(result: CoverageResult) -> str:
         f"{'95% CI':>15}  verdict",
     ]
     for name, row in result.summary().items():
+        if "z_mean" not in row and "d2_mean" not in row:  # a profile row: counts only
+            lines.append(
+                f"{name:<18} {'':>16} {row['covered']:>4}/{row['n']:<4} "
+                f"[{row['ci'][0]:.3f}, {row['ci'][1]:.3f}]  {row['verdict']}"
+            )
+            continue
         if "d2_mean" in row:
             lines.append(
                 f"{name:<11} {'':>9} mean d2 {row['d2_mean']:.2f} (10 if P is right) "

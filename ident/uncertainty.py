@@ -1,4 +1,4 @@
-"""Confidence intervals on what is derived from a fitted canonical model (delta method).
+"""Confidence intervals on what is derived from a fitted canonical model.
 
 A PEM fit (:mod:`ident.pem`) gives parameters p with covariance P_p: ``theta`` (10) of a
 :class:`~bikeid.ident.pem.CanonicalModel`, or ``params`` (14) of a
@@ -22,6 +22,16 @@ z = Phi^-1((1 + level) / 2) (1.96 at the default level 0.95).
   R = (jw I - A)^-1, propagated to log-magnitude (dB, d ln|G| = Re(dG / G)) and phase
   (d angle = Im(dG / G)).
 
+The first-order interval is symmetric and assumes q linear in p over the interval.  Where it
+is not (eigenvalue real parts whose standard error is a sizeable fraction of their distance
+to the other modes), :func:`profile_interval` gives the interval the quadratic
+log-likelihood implies without linearizing q: the least and greatest q(p') over the
+ellipsoid (p' - p)' P_p^-1 (p' - p) <= z^2, found by projected gradient ascent on its
+surface.  It equals the first-order interval when q is linear and follows q's curvature
+otherwise; :func:`eigenvalue_intervals` and :func:`critical_speed_intervals` use it by
+default (``method="profile"``; ``"delta"`` gives the symmetric interval), and
+docs/uncertainty.md measures both against the truth.
+
 :func:`monte_carlo` draws p from N(p, P_p) and recomputes the same quantities (eigenvalues
 paired with the nominal ones by :func:`bikeid.sim.linear.match_eigenvalues`), the check of
 the first-order propagation (tests/test_uncertainty.py).  These intervals are only as good
@@ -32,8 +42,9 @@ plant or measured data.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,11 +72,15 @@ __all__ = [
     "eigenvalue_intervals",
     "eigenvalue_jacobian",
     "monte_carlo",
+    "profile_interval",
     "z_value",
 ]
 
 #: Step [m/s] of the central difference dh/dv in :func:`critical_speed_intervals`.
 SPEED_STEP = 1e-4
+
+#: Interval methods: the quadratic-likelihood profile (default) and the first-order one.
+METHODS = ("profile", "delta")
 
 
 def z_value(level: float) -> float:
@@ -140,6 +155,109 @@ def _parameters(model, v: float | None) -> tuple[np.ndarray, np.ndarray, np.ndar
     return p, 0.5 * (cov + cov.T), S, speed
 
 
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise InputError(f"method={method!r}: choose one of {', '.join(METHODS)}")
+
+
+def _sqrt_cov(cov: np.ndarray) -> np.ndarray:
+    """L with L L' = cov (eigendecomposition: a singular covariance is allowed)."""
+    evals, evecs = np.linalg.eigh(cov)
+    return evecs * np.sqrt(np.maximum(evals, 0.0))
+
+
+#: Iterations and relative tolerance (of u, and of q against the first-order half-width)
+#: of :func:`profile_interval`'s ascent.
+PROFILE_MAX_ITER = 60
+PROFILE_TOL = 1e-9
+
+
+def profile_interval(
+    func: Callable[[np.ndarray, Any], tuple[float, np.ndarray, Any]],
+    p: np.ndarray,
+    cov: np.ndarray,
+    state: Any = None,
+    level: float = 0.95,
+) -> tuple[float, float, bool]:
+    """Least and greatest q(p') over the confidence ellipsoid of p (profile interval).
+
+    Under a quadratic log-likelihood in p (the asymptotic one of a prediction-error fit)
+    the likelihood-ratio interval of a scalar q = q(p) is {q(p') : (p' - p)' P^-1 (p' - p)
+    <= z^2}, z = Phi^-1((1 + level) / 2).  Each end is found on the ellipsoid's surface
+    p' = p + L u, |u| = z, L L' = P, by the fixed point u = z grad_u q / |grad_u q| of the
+    Lagrange condition, each step halved until q does not get worse (a monotone ascent).
+    For q linear in p the ends are q(p) -+ z sd, the first-order interval.
+
+    Parameters
+    ----------
+    func : callable
+        ``func(p_prime, state) -> (q, dq_dp, new_state)``: the quantity, its gradient with
+        respect to p and a state passed to the next call (e.g. the eigenvalues to track a
+        mode by); must accept the start ``state``.
+    p : (P,) ndarray
+        Estimate.
+    cov : (P, P) ndarray
+        Its covariance (positive semi-definite).
+    state : object, optional
+        Initial state for ``func``.
+    level : float, optional
+        Confidence level (default 0.95).
+
+    Returns
+    -------
+    lower, upper : float
+        Ends of the interval (units of q).
+    converged : bool
+        Both ascents stopped within :data:`PROFILE_MAX_ITER` iterations because a step
+        moved u by less than :data:`PROFILE_TOL` z or raised q by less than
+        :data:`PROFILE_TOL` times the first-order half-width; if not, the ends are the best
+        points found (too narrow by about the last steps' change in q).
+
+    Raises
+    ------
+    InputError
+        If ``level`` is not in (0, 1).
+    """
+    z = z_value(level)
+    L = _sqrt_cov(np.asarray(cov, float))
+    p = np.asarray(p, float)
+    q0, g0, s0 = func(p, state)
+    gu0 = L.T @ g0
+    if not np.any(gu0):  # q does not depend on p within the covariance's range
+        return float(q0), float(q0), True
+    half = z * float(np.linalg.norm(gu0))  # first-order half-width: the scale of q's changes
+    ends, ok = [], True
+    for sign in (-1.0, 1.0):
+        u = sign * z * gu0 / np.linalg.norm(gu0)
+        q, g, st = func(p + L @ u, s0)
+        f, gu = sign * q, sign * (L.T @ g)
+        done = False
+        for _ in range(PROFILE_MAX_ITER):
+            norm = np.linalg.norm(gu)
+            if norm == 0.0:
+                done = True
+                break
+            target, step = z * gu / norm, 1.0
+            while True:
+                cand = u + step * (target - u)
+                cand = z * cand / np.linalg.norm(cand)
+                qc, gc, sc = func(p + L @ cand, st)
+                if sign * qc >= f or step < 1.0 / 64:
+                    break
+                step *= 0.5
+            moved, gain = np.linalg.norm(cand - u), sign * qc - f
+            if not gain >= 0.0:  # no ascent along the surface at 1/64 of a step: a maximum
+                done = True
+                break
+            u, f, gu, st = cand, sign * qc, sign * (L.T @ gc), sc
+            if moved <= PROFILE_TOL * z or gain <= PROFILE_TOL * half:
+                done = True
+                break
+        ok = ok and done
+        ends.append(sign * f)
+    return float(ends[0]), float(ends[1]), ok
+
+
 def eigenvalue_jacobian(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eigenvalues of the canonical A(theta) and their derivatives (analytic perturbation).
 
@@ -178,7 +296,7 @@ def eigenvalue_jacobian(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
 
 @dataclass(frozen=True)
 class EigenIntervals:
-    """First-order confidence intervals on the eigenvalues of a model at one speed.
+    """Confidence intervals on the eigenvalues of a model at one speed.
 
     Attributes
     ----------
@@ -189,13 +307,20 @@ class EigenIntervals:
     values : (4,) complex ndarray
         Eigenvalues [1/s], sorted by real then imaginary part.
     std_real, std_imag : (4,) ndarray
-        Standard errors of the real and imaginary parts [1/s] (zero imaginary-part error
-        for a real eigenvalue of a real matrix).
+        First-order standard errors of the real and imaginary parts [1/s] (zero
+        imaginary-part error for a real eigenvalue of a real matrix).
     covariance : (8, 8) ndarray
-        Covariance of [Re lambda_0..3, Im lambda_0..3] [1/s^2].
+        First-order covariance of [Re lambda_0..3, Im lambda_0..3] [1/s^2].
     condition : (4,) ndarray
         Eigenvalue condition numbers (:func:`eigenvalue_jacobian`); above ~1e3 the
-        eigenvalue is near a double root and the first-order interval is unreliable.
+        eigenvalue is near a double root and no interval of it is reliable.
+    method : str
+        ``"profile"`` (ends from :func:`profile_interval`, generally asymmetric) or
+        ``"delta"`` (value -+ z std).
+    real_bounds, imag_bounds : (4, 2) ndarray or None
+        [lower, upper] of the real and imaginary parts [1/s] for ``method="profile"``.
+    converged : (4, 2) bool ndarray or None
+        Whether the profile ascents of the real and imaginary parts converged.
     """
 
     speed: float
@@ -205,30 +330,42 @@ class EigenIntervals:
     std_imag: np.ndarray
     covariance: np.ndarray
     condition: np.ndarray
+    method: str = "delta"
+    real_bounds: np.ndarray | None = None
+    imag_bounds: np.ndarray | None = None
+    converged: np.ndarray | None = None
 
     @property
     def z(self) -> float:
-        """float: half-width of the intervals in standard errors (:func:`z_value`)."""
+        """float: half-width of the first-order intervals in standard errors."""
         return z_value(self.level)
 
     @property
     def real_lower(self) -> np.ndarray:
         """(4,) ndarray: lower ends of the real-part intervals [1/s]."""
+        if self.real_bounds is not None:
+            return self.real_bounds[:, 0]
         return self.values.real - self.z * self.std_real
 
     @property
     def real_upper(self) -> np.ndarray:
         """(4,) ndarray: upper ends of the real-part intervals [1/s]."""
+        if self.real_bounds is not None:
+            return self.real_bounds[:, 1]
         return self.values.real + self.z * self.std_real
 
     @property
     def imag_lower(self) -> np.ndarray:
         """(4,) ndarray: lower ends of the imaginary-part intervals [1/s]."""
+        if self.imag_bounds is not None:
+            return self.imag_bounds[:, 0]
         return self.values.imag - self.z * self.std_imag
 
     @property
     def imag_upper(self) -> np.ndarray:
         """(4,) ndarray: upper ends of the imaginary-part intervals [1/s]."""
+        if self.imag_bounds is not None:
+            return self.imag_bounds[:, 1]
         return self.values.imag + self.z * self.std_imag
 
     def contains(self, truth: Sequence[complex]) -> tuple[np.ndarray, np.ndarray]:
@@ -260,8 +397,9 @@ class EigenIntervals:
         Returns
         -------
         dict
-            ``speed`` [m/s], ``level``, ``z`` and per eigenvalue ``value`` ({re, im} [1/s]),
-            ``std`` ({re, im}), ``real`` and ``imag`` ([lower, upper] [1/s]), ``condition``.
+            ``speed`` [m/s], ``level``, ``z``, ``method`` and per eigenvalue ``value``
+            ({re, im} [1/s]), ``std`` ({re, im}, first order), ``real`` and ``imag``
+            ([lower, upper] [1/s]), ``condition`` and, for the profile, ``converged``.
         """
         rows = [
             {"value": self.values[i],
@@ -271,12 +409,17 @@ class EigenIntervals:
              "condition": self.condition[i]}
             for i in range(self.values.size)
         ]  # fmt: skip
+        if self.converged is not None:
+            for row, ok in zip(rows, self.converged, strict=True):
+                row["converged"] = bool(np.all(ok))
         return _jsonable({"speed": self.speed, "level": self.level, "z": self.z,
-                          "eigenvalues": rows})  # fmt: skip
+                          "method": self.method, "eigenvalues": rows})  # fmt: skip
 
 
-def eigenvalue_intervals(model, v: float | None = None, level: float = 0.95) -> EigenIntervals:
-    """Delta-method confidence intervals on the eigenvalues of a fitted model.
+def eigenvalue_intervals(
+    model, v: float | None = None, level: float = 0.95, method: str = "profile"
+) -> EigenIntervals:
+    """Confidence intervals on the eigenvalues of a fitted model.
 
     Parameters
     ----------
@@ -287,27 +430,67 @@ def eigenvalue_intervals(model, v: float | None = None, level: float = 0.95) -> 
         speed of a fixed-speed one if given.
     level : float, optional
         Confidence level (default 0.95).
+    method : {"profile", "delta"}, optional
+        ``"profile"`` (default): the ends of each real and imaginary part over the
+        parameters' confidence ellipsoid (:func:`profile_interval`; the mode is followed
+        by :func:`bikeid.sim.linear.match_eigenvalues`), which holds its coverage where an
+        eigenvalue is curved in the parameters; ``"delta"``: value -+ z std.
 
     Returns
     -------
     EigenIntervals
-        Eigenvalues with standard errors and intervals of their real and imaginary parts.
+        Eigenvalues with first-order standard errors and the intervals of their real and
+        imaginary parts.
 
     Raises
     ------
     InputError
-        If the model has no usable covariance, ``v`` is missing or inconsistent, or
-        ``level`` is not in (0, 1).
+        If the model has no usable covariance, ``v`` is missing or inconsistent,
+        ``level`` is not in (0, 1) or ``method`` is unknown.
     """
     z_value(level)
+    _check_method(method)
     p, cov, S, speed = _parameters(model, v)
     lam, jac, cond = eigenvalue_jacobian(S @ p)
     Jp = jac @ S  # d lambda / d p
     J = np.vstack([Jp.real, Jp.imag])
     C = J @ cov @ J.T
     sd = np.sqrt(np.maximum(np.diag(C), 0.0))
-    return EigenIntervals(speed=speed, level=level, values=lam, std_real=sd[:4],
-                          std_imag=sd[4:], covariance=C, condition=cond)  # fmt: skip
+    ei = EigenIntervals(speed=speed, level=level, values=lam, std_real=sd[:4],
+                        std_imag=sd[4:], covariance=C, condition=cond)  # fmt: skip
+    if method == "delta":
+        return ei
+    bounds = np.empty((2, 4, 2))
+    ok = np.empty((4, 2), dtype=bool)
+    for i in range(4):
+        mirror = [k for k in range(i) if lam[i].imag != 0 and lam[k] == np.conj(lam[i])]
+        if mirror:  # the conjugate of a pair profiled already: same real, mirrored imaginary
+            k = mirror[0]
+            bounds[0, i], bounds[1, i], ok[i] = bounds[0, k], -bounds[1, k, ::-1], ok[k]
+            continue
+        for k, part in enumerate(("real", "imag")):
+            if part == "imag" and lam[i].imag == 0.0 and not np.any(Jp[i].imag):
+                bounds[k, i], ok[i, k] = (0.0, 0.0), True  # a real root stays real nearby
+                continue
+            lo, hi, conv = profile_interval(_eigen_part(S, i, part), p, cov, lam, level)
+            bounds[k, i], ok[i, k] = (lo, hi), conv
+    return dataclasses.replace(ei, method="profile", real_bounds=bounds[0],
+                               imag_bounds=bounds[1], converged=ok)  # fmt: skip
+
+
+def _eigen_part(S: np.ndarray, i: int, part: str):
+    """q(p) = Re or Im of the mode that was eigenvalue i, for :func:`profile_interval`.
+
+    The state is the previous point's eigenvalues, to which the new ones are paired.
+    """
+
+    def func(pp: np.ndarray, ref: np.ndarray):
+        lam, jac, _ = eigenvalue_jacobian(S @ pp)
+        _, col = match_eigenvalues(lam, ref, return_index=True)
+        lam, d = lam[col], jac[col[i]] @ S
+        return (lam[i].real, d.real, lam) if part == "real" else (lam[i].imag, d.imag, lam)
+
+    return func
 
 
 @dataclass(frozen=True)
@@ -325,6 +508,14 @@ class CriticalSpeedIntervals:
         Their standard errors [m/s] (None with the speed).
     gradient_v_w, gradient_v_c : (14,) ndarray or None
         dv/dp (implicit-function derivative) [m/s per unit of each parameter].
+    method : str
+        ``"profile"`` (:func:`profile_interval`) or ``"delta"`` (value -+ z std).
+    bounds_v_w, bounds_v_c : (float, float) or None
+        Profile interval [m/s]; None for the delta method, or where a profile end reaches
+        parameters without that speed below ``vmax`` (then :meth:`interval` falls back
+        to the first-order interval and ``open_v_w``/``open_v_c`` is True).
+    open_v_w, open_v_c : bool
+        The profile found parameters in the ellipsoid without the critical speed.
     """
 
     level: float
@@ -334,6 +525,11 @@ class CriticalSpeedIntervals:
     std_v_c: float | None
     gradient_v_w: np.ndarray | None
     gradient_v_c: np.ndarray | None
+    method: str = "delta"
+    bounds_v_w: tuple[float, float] | None = None
+    bounds_v_c: tuple[float, float] | None = None
+    open_v_w: bool = False
+    open_v_c: bool = False
 
     def interval(self, name: str) -> tuple[float, float] | None:
         """The confidence interval of one critical speed.
@@ -346,7 +542,9 @@ class CriticalSpeedIntervals:
         Returns
         -------
         (float, float) or None
-            (lower, upper) [m/s] = value -+ z std, or None when the model has no such speed.
+            (lower, upper) [m/s]: the profile interval, or value -+ z std (delta method,
+            or a profile that left the speed's domain); None when the model has no such
+            speed.
 
         Raises
         ------
@@ -358,6 +556,8 @@ class CriticalSpeedIntervals:
         val, sd = getattr(self, name), getattr(self, f"std_{name}")
         if val is None:
             return None
+        if getattr(self, f"bounds_{name}") is not None:
+            return tuple(getattr(self, f"bounds_{name}"))
         z = z_value(self.level)
         return (val - z * sd, val + z * sd)
 
@@ -367,13 +567,14 @@ class CriticalSpeedIntervals:
         Returns
         -------
         dict
-            ``level`` and, for ``v_w`` and ``v_c``, ``value``, ``std`` and ``interval``
-            [m/s] (None where the model has no such speed).
+            ``level``, ``method`` and, for ``v_w`` and ``v_c``, ``value``, ``std``,
+            ``interval`` [m/s] (None where the model has no such speed) and ``open``.
         """
-        out: dict[str, Any] = {"level": self.level}
+        out: dict[str, Any] = {"level": self.level, "method": self.method}
         for name in ("v_w", "v_c"):
             out[name] = {"value": getattr(self, name), "std": getattr(self, f"std_{name}"),
-                         "interval": self.interval(name)}  # fmt: skip
+                         "interval": self.interval(name),
+                         "open": getattr(self, f"open_{name}")}  # fmt: skip
         return _jsonable(out)
 
 
@@ -385,10 +586,31 @@ def _h(params: np.ndarray, g: float, v: float, func) -> complex:
     return complex(func(*_grid_coeffs(cm, [v]))[0])
 
 
+def _critical_gradient(p: np.ndarray, g: float, v0: float, func, name: str) -> np.ndarray:
+    """dv/dp at a critical speed v0 by the implicit function theorem (module docstring)."""
+    from bikeid.sim.errors import UntrustworthyResult
+
+    eps = 1e-30 * max(1.0, float(np.max(np.abs(p))))
+    dh_dp = np.empty(p.size)
+    for j in range(p.size):
+        pc = p.astype(complex)
+        pc[j] += 1j * eps
+        dh_dp[j] = _h(pc, g, v0, func).imag / eps
+    dh_dv = (_h(p, g, v0 + SPEED_STEP, func).real - _h(p, g, v0 - SPEED_STEP, func).real) / (
+        2 * SPEED_STEP
+    )
+    if dh_dv == 0.0 or not math.isfinite(dh_dv):
+        raise UntrustworthyResult(
+            f"{name} = {v0:.4f} m/s is a tangential crossing (dh/dv = 0): no first-order "
+            "interval; use monte_carlo"
+        )
+    return -dh_dp / dh_dv
+
+
 def critical_speed_intervals(
-    model, level: float = 0.95, vmax: float = 30.0
+    model, level: float = 0.95, vmax: float = 30.0, method: str = "profile"
 ) -> CriticalSpeedIntervals:
-    """Delta-method intervals on v_w and v_c of a speed-parameterized model.
+    """Confidence intervals on v_w and v_c of a speed-parameterized model.
 
     Parameters
     ----------
@@ -398,24 +620,26 @@ def critical_speed_intervals(
         Confidence level (default 0.95).
     vmax : float, optional
         Highest speed searched [m/s] (:func:`bikeid.sim.linear.critical_speeds`).
+    method : {"profile", "delta"}, optional
+        ``"profile"`` (default): the least and greatest speed over the parameters'
+        confidence ellipsoid (:func:`profile_interval`); ``"delta"``: value -+ z std.
 
     Returns
     -------
     CriticalSpeedIntervals
-        The speeds, their standard errors and gradients.
+        The speeds, their standard errors, gradients and intervals.
 
     Raises
     ------
     InputError
-        If the model is not speed-parameterized or has no usable covariance, or ``level``
-        is not in (0, 1).
+        If the model is not speed-parameterized or has no usable covariance, ``level`` is
+        not in (0, 1) or ``method`` is unknown.
     UntrustworthyResult
         If h crosses zero tangentially (dh/dv = 0) at a critical speed, where the first-
         order derivative does not exist.
     """
-    from bikeid.sim.errors import UntrustworthyResult
-
     z_value(level)
+    _check_method(method)
     if not hasattr(model, "per_speed"):
         raise InputError(
             "critical speeds need a speed-parameterized model (ident.pem.fit_speed_model)"
@@ -423,31 +647,39 @@ def critical_speed_intervals(
     p, cov, _, _ = _parameters(model, 1.0)
     g = float(model.g)
     crit = critical_speeds(matrices_from_speed_params(p, g), vmax)
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = {"method": method}
     for name, func in (("v_w", _hurwitz3), ("v_c", _const_term)):
         v0 = crit[name]
         if v0 is None:
             out[name], out[f"std_{name}"], out[f"gradient_{name}"] = None, None, None
             continue
-        eps = 1e-30 * max(1.0, float(np.max(np.abs(p))))
-        dh_dp = np.empty(p.size)
-        for j in range(p.size):
-            pc = p.astype(complex)
-            pc[j] += 1j * eps
-            dh_dp[j] = _h(pc, g, v0, func).imag / eps
-        dh_dv = (_h(p, g, v0 + SPEED_STEP, func).real - _h(p, g, v0 - SPEED_STEP, func).real) / (
-            2 * SPEED_STEP
-        )
-        if dh_dv == 0.0 or not math.isfinite(dh_dv):
-            raise UntrustworthyResult(
-                f"{name} = {v0:.4f} m/s is a tangential crossing (dh/dv = 0): no first-order "
-                "interval; use monte_carlo"
-            )
-        grad = -dh_dp / dh_dv
+        grad = _critical_gradient(p, g, v0, func, name)
         out[name] = float(v0)
         out[f"std_{name}"] = float(math.sqrt(max(grad @ cov @ grad, 0.0)))
         out[f"gradient_{name}"] = grad
+        if method == "profile":
+            lo, hi, _ = profile_interval(_critical_speed(g, vmax, name, func), p, cov, v0, level)
+            if math.isfinite(lo) and math.isfinite(hi):
+                out[f"bounds_{name}"] = (lo, hi)
+            else:
+                out[f"open_{name}"] = True
     return CriticalSpeedIntervals(level=level, **out)
+
+
+def _critical_speed(g: float, vmax: float, name: str, func):
+    """q(p) = v_w or v_c for :func:`profile_interval` (NaN where p has none below vmax)."""
+    from bikeid.sim.errors import UntrustworthyResult
+
+    def q(pp: np.ndarray, state):
+        v = critical_speeds(matrices_from_speed_params(pp, g), vmax)[name]
+        if v is None:
+            return math.nan, np.zeros(pp.size), state
+        try:
+            return float(v), _critical_gradient(pp, g, v, func, name), v
+        except UntrustworthyResult:
+            return math.nan, np.zeros(pp.size), state
+
+    return q
 
 
 @dataclass(frozen=True)

@@ -67,8 +67,9 @@ SPEED_GROUP = 0.01
 BAND_LEVEL = 0.95
 #: What every printed interval says about itself (docs/uncertainty.md).
 INTERVAL_CALIBRATION = (
-    "95 % intervals are first-order (delta method) from the fit's parameter covariance; their "
-    "coverage is calibrated on the linear plant only (docs/uncertainty.md), not on the "
+    "95 % intervals of eigenvalues and critical speeds are profile intervals (the ends over the "
+    "parameters' confidence ellipsoid from the fit's covariance), Bode bands first-order; "
+    "their coverage is calibrated on the linear plant only (docs/uncertainty.md), not on the "
     "nonlinear plant or measured data, where they can be too narrow"
 )
 
