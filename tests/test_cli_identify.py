@@ -54,14 +54,21 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
     cs, true_cs = out["critical_speeds"], critical_speeds(p)
     assert abs(cs["v_w"] - true_cs["v_w"]) < 0.15
     assert abs(cs["v_c"] - true_cs["v_c"]) < 0.15
-    # the 95 % intervals are centred on the printed values, 1.96 standard errors wide
-    # (ident.uncertainty.z_value(0.95) = 1.959964), and say what they are calibrated on
+    # the 95 % intervals are profile intervals around the printed values; where the
+    # standard error is a small fraction of the value (under 1 % here) the speed is nearly
+    # linear in the parameters over the interval, so each end is within 5 % of the
+    # first-order half-width 1.96 SE (ident.uncertainty.z_value(0.95) = 1.959964); they say
+    # what they are calibrated on
     iv = out["intervals"]
     assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
+    assert iv["critical_speeds"]["method"] == "profile"
     for name in ("v_w", "v_c"):
         c = iv["critical_speeds"][name]
         assert c["value"] == pytest.approx(cs[name], rel=1e-12)
-        assert c["interval"][1] - c["value"] == pytest.approx(1.959964 * c["std"], rel=1e-6)
+        assert c["std"] < 0.01 * c["value"]
+        lo, hi = c["interval"]
+        assert hi - c["value"] == pytest.approx(1.959964 * c["std"], rel=0.05)
+        assert c["value"] - lo == pytest.approx(1.959964 * c["std"], rel=0.05)
     for row in out["per_speed"]:
         ei = row["eigenvalue_intervals"]
         centres = [complex(e["value"]["re"], e["value"]["im"]) for e in ei["eigenvalues"]]
