@@ -52,6 +52,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--covariance-scale", type=number(0.0, 1e6, lo_open=True), default=1.0,
         help="factor on each fitted covariance (0.1 shows the verdict failing); default 1",
     )  # fmt: skip
+    p.add_argument(
+        "--critical", action="store_true",
+        help="instead: v_w and v_c intervals of speed-parameterized fits over runs at 2-8 m/s "
+        "(default 100 seeds would take ~6 min; --speed is then ignored)",
+    )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
     p.set_defaults(func=cmd_coverage)
 
@@ -60,12 +65,19 @@ def cmd_coverage(args: argparse.Namespace) -> int:
     import os
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from .coverage import run_coverage, table_text
+    from .coverage import run_coverage, run_critical_coverage, table_text
 
-    result = run_coverage(
-        args.seeds, speed=args.speed, duration=args.duration, dither=args.dither,
-        controller=args.controller, level=args.level, covariance_scale=args.covariance_scale,
-    )  # fmt: skip
+    if args.critical:
+        result = run_critical_coverage(
+            args.seeds, duration=args.duration, dither=args.dither, level=args.level,
+            covariance_scale=args.covariance_scale,
+        )  # fmt: skip
+    else:
+        result = run_coverage(
+            args.seeds, speed=args.speed, duration=args.duration, dither=args.dither,
+            controller=args.controller, level=args.level,
+            covariance_scale=args.covariance_scale,
+        )  # fmt: skip
     if result.n < 2:
         raise ValueError(f"only {result.n} of {args.seeds} fits succeeded; see --json")
     print(dump_json(result.to_json()) if args.json else table_text(result), file=sys.stdout)

@@ -42,12 +42,14 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "CRITICAL_SPEEDS",
     "DEFAULTS",
     "PROFILED",
     "QUANTITIES",
     "CoverageResult",
     "binomial_verdict",
     "run_coverage",
+    "run_critical_coverage",
     "table_text",
 ]
 
@@ -180,8 +182,9 @@ class CoverageResult:
         dict of str to dict
             ``z_mean``, ``z_std`` (ddof 1; over the finite z, None if too few),
             ``se_median`` (median printed standard error, units of the quantity; None if
-            not recorded), ``infinite`` (seeds where the identified weave came out as two
-            real roots, so its frequency has a zero standard error), ``covered``, ``n``,
+            not recorded), ``infinite`` (seeds with a non-finite z: the identified weave
+            came out as two real roots, so its frequency has a zero standard error, or a
+            fit has no v_w / v_c), ``covered``, ``n``,
             ``fraction``, ``ci``
             (Clopper-Pearson 95 % of the fraction) and ``verdict``
             (:func:`binomial_verdict`); entry ``theta_joint`` has ``d2_mean`` (10 expected)
@@ -198,7 +201,7 @@ class CoverageResult:
             out[name] = {"z_mean": float(np.mean(fin)) if fin.size else None,
                          "z_std": float(np.std(fin, ddof=1)) if fin.size > 1 else None,
                          "infinite": int(z.size - fin.size),
-                         "se_median": float(np.median(self.stderr[name]))
+                         "se_median": float(np.nanmedian(self.stderr[name]))
                          if name in self.stderr else None,
                          "covered": k, "n": int(z.size), "fraction": k / z.size,
                          "ci": [lo, hi], "verdict": verdict}  # fmt: skip
@@ -254,21 +257,26 @@ def _mode_targets(p, speed: float) -> tuple[list[complex], list[str]]:
     ]
 
 
-def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[str, float]:
+def _closed_loop_run(p, settings: dict[str, Any], speed: float, seed: int):
+    """One run of the linear closed loop of ``settings`` at ``speed`` [m/s]."""
     from bikeid.controllers.registry import make
     from bikeid.dataset.linear_loop import simulate
-    from bikeid.ident import pem
-    from bikeid.ident.uncertainty import eigenvalue_intervals
-    from bikeid.sim.linear import match_eigenvalues
 
     controller = make(settings["controller"], p, sample_time=0.01)
-    run = simulate(
-        p, settings["speed"], duration=settings["duration"], controller=controller, seed=seed,
+    return simulate(
+        p, speed, duration=settings["duration"], controller=controller, seed=seed,
         dither=settings["dither"], dither_hold=settings["dither_hold"],
         disturbance=settings["disturbance"], angle_noise=settings["angle_noise"],
         rate_noise=settings["rate_noise"],
     )  # fmt: skip
-    model = pem.fit(run)
+
+
+def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[str, float]:
+    from bikeid.ident import pem
+    from bikeid.ident.uncertainty import eigenvalue_intervals
+    from bikeid.sim.linear import match_eigenvalues
+
+    model = pem.fit(_closed_loop_run(p, settings, settings["speed"], seed))
     model = dataclasses.replace(model, covariance=model.covariance * settings["covariance_scale"])
     se = np.sqrt(np.diag(model.covariance))
     r = model.theta - theta_true
@@ -392,6 +400,114 @@ def run_coverage(
                           profile_inside=inside)  # fmt: skip
 
 
+#: Speeds [m/s] of the critical-speed coverage: 2-8 m/s brackets the benchmark's v_w (4.29)
+#: and v_c (6.02).
+CRITICAL_SPEEDS = (2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+
+
+def run_critical_coverage(
+    seeds: int = 100,
+    *,
+    speeds: tuple[float, ...] = CRITICAL_SPEEDS,
+    duration: float = DEFAULTS["duration"],
+    dither: float = DEFAULTS["dither"],
+    level: float = 0.95,
+    covariance_scale: float = 1.0,
+    first_seed: int = 0,
+    vmax: float = 15.0,
+    log: Callable[[str], None] | None = None,
+) -> CoverageResult:
+    """Coverage of the v_w and v_c intervals of speed-parameterized PEM fits.
+
+    Per seed s, one run per speed (seed ``s * len(speeds) + k`` for the k-th speed; the other
+    settings are :data:`DEFAULTS`, roll PID) identified jointly by
+    :func:`bikeid.ident.pem.fit_speed_model`; the truth is
+    :func:`bikeid.sim.linear.critical_speeds` of the benchmark.  A fit without the speed in
+    (0, ``vmax``] counts as not covering it (z = NaN).
+
+    Parameters
+    ----------
+    seeds : int, optional
+        Number of seeds N (>= 2).
+    speeds : tuple of float, optional
+        Run speeds [m/s] (>= 2 distinct, each 1-15).
+    duration, dither : float, optional
+        Run length [s] and dither amplitude [N m] of each run.
+    level : float, optional
+        Nominal coverage of the intervals.
+    covariance_scale : float, optional
+        Factor on each fitted covariance (as in :func:`run_coverage`).
+    first_seed : int, optional
+        First seed.
+    vmax : float, optional
+        Highest speed searched for v_w and v_c [m/s].
+    log : callable, optional
+        Receives one progress line per seed.
+
+    Returns
+    -------
+    CoverageResult
+        ``z``, ``stderr`` and ``profile_inside`` for ``v_w`` and ``v_c`` (no joint row).
+
+    Raises
+    ------
+    InputError
+        On fewer than 2 seeds or distinct speeds, a speed outside 1-15 m/s, a non-positive
+        ``covariance_scale`` or a bad ``level``.
+    """
+    from bikeid.ident import pem
+    from bikeid.ident.uncertainty import critical_speed_intervals, z_value
+    from bikeid.sim.errors import InputError
+    from bikeid.sim.linear import canonical_matrices, critical_speeds
+    from bikeid.sim.parameters import benchmark
+
+    sp = tuple(float(v) for v in speeds)
+    if int(seeds) != seeds or seeds < 2:
+        raise InputError(f"seeds={seeds}: need at least 2 runs")
+    if len(set(sp)) < 2 or not all(1.0 <= v <= 15.0 for v in sp):
+        raise InputError(f"speeds={sp}: need at least 2 distinct speeds within 1-15 m/s")
+    if not (math.isfinite(covariance_scale) and covariance_scale > 0):
+        raise InputError(f"covariance_scale={covariance_scale}: need a positive factor")
+    z_value(level)
+    p = benchmark()
+    truth = critical_speeds(canonical_matrices(p), vmax)
+    settings = {**{k: v for k, v in DEFAULTS.items() if k != "speed"},
+                "duration": float(duration), "dither": float(dither),
+                "dither_hold": int(DEFAULTS["dither_hold"]), "speeds": list(sp),
+                "controller": "pid", "level": float(level), "vmax": float(vmax),
+                "covariance_scale": float(covariance_scale),
+                "seeds": [int(first_seed), int(first_seed + seeds - 1)],
+                "truth": {"v_w": truth["v_w"], "v_c": truth["v_c"]},
+                "plant": "benchmark, linear (dataset.linear_loop, exact ZOH)",
+                "estimator": "ident.pem.fit_speed_model, 4 outputs"}  # fmt: skip
+    names = ("v_w", "v_c")
+    z: dict[str, list[float]] = {n: [] for n in names}
+    se: dict[str, list[float]] = {n: [] for n in names}
+    inside: dict[str, list[bool]] = {n: [] for n in names}
+    failed: list[tuple[int, str]] = []
+    for s in range(int(first_seed), int(first_seed + seeds)):
+        try:
+            runs = [_closed_loop_run(p, settings, v, s * len(sp) + k) for k, v in enumerate(sp)]
+            model = pem.fit_speed_model(runs)
+            model = dataclasses.replace(model, covariance=model.covariance * covariance_scale)
+            ci = critical_speed_intervals(model, level=level, vmax=vmax)
+        except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
+            failed.append((s, str(exc).splitlines()[0]))
+            ci = None
+        for n in names if ci is not None else ():
+            val, sd, iv = getattr(ci, n), getattr(ci, f"std_{n}"), ci.interval(n)
+            z[n].append((val - truth[n]) / sd if val is not None and sd > 0 else math.nan)
+            se[n].append(sd if sd is not None else math.nan)
+            inside[n].append(iv is not None and iv[0] <= truth[n] <= iv[1])
+        if log:
+            log(f"seed {s}: {'failed' if failed and failed[-1][0] == s else 'ok'}")
+    return CoverageResult(
+        settings=settings, z={n: np.array(v) for n, v in z.items()}, failed=failed,
+        stderr={n: np.array(v) for n, v in se.items()},
+        profile_inside={n: np.array(v, dtype=bool) for n, v in inside.items()},
+    )  # fmt: skip
+
+
 def table_text(result: CoverageResult) -> str:
     """A plain-text table of :meth:`CoverageResult.summary`.
 
@@ -407,8 +523,10 @@ def table_text(result: CoverageResult) -> str:
         verdict, after a header naming the settings.
     """
     s = result.settings
+    where = (f"{s['speed']:g} m/s" if "speeds" not in s else
+             "speeds " + ", ".join(f"{v:g}" for v in s["speeds"]) + " m/s (speed-parameterized)")
     lines = [
-        f"coverage of {100 * s['level']:g} % intervals: linear benchmark at {s['speed']:g} m/s, "
+        f"coverage of {100 * s['level']:g} % intervals: linear benchmark at {where}, "
         f"{s['controller']}, {s['duration']:g} s, dither {s['dither']:g} N m held "
         f"{s['dither_hold']} samples, disturbance {s['disturbance']:g} N m, noise "
         f"{s['angle_noise']:g} rad / {s['rate_noise']:g} rad/s, covariance x "
@@ -431,7 +549,8 @@ def table_text(result: CoverageResult) -> str:
             )
             continue
         zm, zs = (f"{row[k]:.2f}" if row[k] is not None else "-" for k in ("z_mean", "z_std"))
-        inf = f" ({row['infinite']} seeds real weave, z infinite)" if row["infinite"] else ""
+        what = "found no " + name if name.startswith("v_") else "real weave, z infinite"
+        inf = f" ({row['infinite']} seeds {what})" if row["infinite"] else ""
         se = f"{row['se_median']:.3g}" if row["se_median"] is not None else "-"
         lines.append(
             f"{name:<11} {se:>9} {zm:>7} {zs:>6} "

@@ -206,7 +206,9 @@ def profile_interval(
     Returns
     -------
     lower, upper : float
-        Ends of the interval (units of q).
+        Ends of the interval (units of q); NaN where the ascent towards that end met points
+        at which ``func`` returns a non-finite q (q undefined there: the interval is open
+        on that side within the ellipsoid).
     converged : bool
         Both ascents stopped within :data:`PROFILE_MAX_ITER` iterations because a step
         moved u by less than :data:`PROFILE_TOL` z or raised q by less than
@@ -231,7 +233,7 @@ def profile_interval(
         u = sign * z * gu0 / np.linalg.norm(gu0)
         q, g, st = func(p + L @ u, s0)
         f, gu = sign * q, sign * (L.T @ g)
-        done = False
+        done, undefined = False, not math.isfinite(q)
         for _ in range(PROFILE_MAX_ITER):
             norm = np.linalg.norm(gu)
             if norm == 0.0:
@@ -242,6 +244,7 @@ def profile_interval(
                 cand = u + step * (target - u)
                 cand = z * cand / np.linalg.norm(cand)
                 qc, gc, sc = func(p + L @ cand, st)
+                undefined = undefined or not math.isfinite(qc)
                 if sign * qc >= f or step < 1.0 / 64:
                     break
                 step *= 0.5
@@ -254,7 +257,7 @@ def profile_interval(
                 done = True
                 break
         ok = ok and done
-        ends.append(sign * f)
+        ends.append(math.nan if undefined else sign * f)
     return float(ends[0]), float(ends[1]), ok
 
 
@@ -511,11 +514,11 @@ class CriticalSpeedIntervals:
     method : str
         ``"profile"`` (:func:`profile_interval`) or ``"delta"`` (value -+ z std).
     bounds_v_w, bounds_v_c : (float, float) or None
-        Profile interval [m/s]; None for the delta method, or where a profile end reaches
-        parameters without that speed below ``vmax`` (then :meth:`interval` falls back
-        to the first-order interval and ``open_v_w``/``open_v_c`` is True).
+        Profile interval [m/s]; None for the delta method.  Where the ascent towards one
+        end reached parameters without that speed in (0, vmax], that end is the edge of
+        the searched range (0 or ``vmax``) and ``open_v_w``/``open_v_c`` is True.
     open_v_w, open_v_c : bool
-        The profile found parameters in the ellipsoid without the critical speed.
+        The confidence ellipsoid holds parameters without the critical speed in (0, vmax].
     """
 
     level: float
@@ -542,9 +545,8 @@ class CriticalSpeedIntervals:
         Returns
         -------
         (float, float) or None
-            (lower, upper) [m/s]: the profile interval, or value -+ z std (delta method,
-            or a profile that left the speed's domain); None when the model has no such
-            speed.
+            (lower, upper) [m/s]: the profile interval (an open side at 0 or ``vmax``),
+            or value -+ z std for the delta method; None when the model has no such speed.
 
         Raises
         ------
@@ -659,10 +661,9 @@ def critical_speed_intervals(
         out[f"gradient_{name}"] = grad
         if method == "profile":
             lo, hi, _ = profile_interval(_critical_speed(g, vmax, name, func), p, cov, v0, level)
-            if math.isfinite(lo) and math.isfinite(hi):
-                out[f"bounds_{name}"] = (lo, hi)
-            else:
-                out[f"open_{name}"] = True
+            out[f"open_{name}"] = not (math.isfinite(lo) and math.isfinite(hi))
+            out[f"bounds_{name}"] = (lo if math.isfinite(lo) else 0.0,
+                                     hi if math.isfinite(hi) else float(vmax))  # fmt: skip
     return CriticalSpeedIntervals(level=level, **out)
 
 

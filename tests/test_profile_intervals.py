@@ -139,3 +139,43 @@ def test_profile_keeps_coverage_where_first_order_fails(fitted):
     for k in (weave, capsize):
         assert lo <= prof[k] <= hi, (prof, (lo, hi))
         assert delta[k] < lo, (delta, lo)
+
+
+def _speed_model(rel: float):
+    """The benchmark's exact speed parameters with sd = rel |p| (random correlation)."""
+    from bikeid.ident.canonical import speed_params_from_matrices
+
+    params = speed_params_from_matrices(canonical_matrices(benchmark()))
+    X = np.random.default_rng(1).standard_normal((42, 14))
+    d = rel * np.maximum(np.abs(params), 1e-3)
+    cov = np.corrcoef(X.T) * np.outer(d, d)
+    return pem.SpeedCanonicalModel(params=params, covariance=cov, per_speed={}, dt=0.01,
+                                   g=9.81)  # fmt: skip
+
+
+@pytest.mark.parametrize("rel", [0.01, 0.5])
+def test_critical_speed_interval_is_open_exactly_when_the_ellipsoid_loses_the_speed(rel):
+    """v_c over the confidence ellipsoid: with a 1 % spread every one of 150 points drawn on
+    its surface has a v_c in (0, 8] m/s and the interval is closed, inside (0, 8); with a
+    50 % spread some such point has none, and the interval is open at the range's edge.
+    Second method: direct evaluation of ``sim.linear.critical_speeds`` at those points."""
+    from bikeid.ident.canonical import matrices_from_speed_params
+    from bikeid.ident.uncertainty import critical_speed_intervals
+    from bikeid.sim.linear import critical_speeds
+
+    vmax = 8.0
+    m = _speed_model(rel)
+    ci = critical_speed_intervals(m, vmax=vmax)
+    evals, evecs = np.linalg.eigh(m.covariance)
+    L = evecs * np.sqrt(np.maximum(evals, 0.0))
+    u = np.random.default_rng(2).standard_normal((150, 14))
+    u *= Z / np.linalg.norm(u, axis=1, keepdims=True)
+    missing = sum(
+        critical_speeds(matrices_from_speed_params(m.params + L @ x, 9.81), vmax)["v_c"] is None
+        for x in u
+    )
+    lo, hi = ci.interval("v_c")
+    if rel < 0.1:
+        assert missing == 0 and not ci.open_v_c and 0 < lo < ci.v_c < hi < vmax
+    else:
+        assert missing > 0 and ci.open_v_c and (lo == 0.0 or hi == vmax)
