@@ -626,7 +626,9 @@ def _interval_lines(iv: dict) -> list[str]:
         c = crit[name]
         if c["value"] is not None:
             lo, hi = c["interval"]
-            lines.append(f"{name} = {c['value']:.3f} m/s, 95 % interval [{lo:.3f}, {hi:.3f}] m/s")
+            lines.append(f"{name} = {c['value']:.3f} m/s, 95 % interval [{lo:.3f}, {hi:.3f}] m/s"
+                         + (f" (open: the confidence region holds parameters without {name} "
+                            "in the searched range)" if c.get("open") else ""))  # fmt: skip
     if iv.get("critical_speeds_note"):
         lines.append(f"critical-speed intervals: {iv['critical_speeds_note']}")
     lines += [f"note: {n}" for n in iv.get("notes", [])]

@@ -763,9 +763,25 @@ def _solve(problem: _Problem, x0: np.ndarray, max_nfev: int, method: str):
 
 
 def _covariance(problem: _Problem, n_extra: int) -> np.ndarray:
+    """Sandwich covariance (J'J)^-1 (sum_t J_t' Lambda J_t) (J'J)^-1 of the estimate.
+
+    J (N L x P) and r are the weighted Jacobian and residuals, J_t the L x P block of
+    sample t and Lambda the L x L sample covariance of the weighted innovations (degrees of
+    freedom N L - P - n_extra).  The per-output weights whiten each output but not the
+    correlation between outputs; this sandwich accounts for it (a prediction-error
+    estimate under a non-optimal weighting; Ljung 1999, Sec. 9.3) and equals
+    sigma^2 (J'J)^-1 when Lambda = sigma^2 I.
+    """
     J, r = problem._J, problem._r
+    n_out = problem.L
     dof = max(r.size - J.shape[1] - n_extra, 1)
-    return float(r @ r) / dof * np.linalg.pinv(J.T @ J)
+    R = r.reshape(-1, n_out)
+    lam = (R.T @ R) / dof * n_out
+    Jt = J.reshape(R.shape[0], n_out, -1)
+    inv = np.linalg.pinv(J.T @ J)
+    meat = np.einsum("tlp,lm,tmq->pq", Jt, lam, Jt)
+    cov = inv @ meat @ inv
+    return 0.5 * (cov + cov.T)
 
 
 #: Subspace starts tried by ``fit(..., multistart=True)``: (past window [s], coarse dt [s]).
