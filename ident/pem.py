@@ -24,7 +24,8 @@ x0 is solved by least squares at each evaluation and the Jacobian is projected
 Minimizer: ``scipy.optimize.least_squares(method="lm")`` (Levenberg-Marquardt,
 MINPACK).  A trial step whose predictor is unstable gets a large finite residual
 and is rejected.  Outputs are weighted by the inverse residual standard deviation
-(two passes), so the covariance sigma^2 (J'J)^-1 is that of a whitened residual.
+(two passes); the covariance is the sandwich of ``_covariance``, which accounts for the
+correlation between the outputs' innovations that per-output weights leave.
 
 Start.  ``ident.subspace.pbsid`` on decimated data (closed-loop safe), converted to
 continuous time and to the canonical form; by default two past windows/decimations

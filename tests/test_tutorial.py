@@ -103,17 +103,17 @@ def test_validation_fits_are_the_quoted_ones(ran):
 
 def test_eigenvalue_intervals_are_the_quoted_ones(ran):
     """Quoted (value, real-part interval, imaginary part, its interval): weave +0.641
-    [+0.577, +0.704], frequency 2.934 [2.886, 2.982]; caster -8.333 [-8.699, -7.935]; capsize
-    -2.935 [-3.176, -2.726]; the Whipple line equals sim.linear at 4 m/s (printed digits)."""
+    [+0.558, +0.723], frequency 2.934 [2.871, 2.997]; caster -8.333 [-8.839, -7.762]; capsize
+    -2.935 [-3.292, -2.644]; the Whipple line equals sim.linear at 4 m/s (printed digits)."""
     folder, out = ran
     text = next(v for k, v in out.items() if "plot_eigenvalues.py" in k)
     num = r"([+-]\d+\.\d+)"
     rows = re.findall(rf"identified {num} \[{num}, {num}\]  {num} \[{num}, {num}\]j", text)
     got = sorted(tuple(float(x) for x in r) for r in rows)
-    quoted = sorted([(-8.333, -8.699, -7.935, 0.0, 0.0, 0.0),
-                     (-2.935, -3.176, -2.726, 0.0, 0.0, 0.0),
-                     (0.641, 0.577, 0.704, -2.934, -2.982, -2.886),
-                     (0.641, 0.577, 0.704, 2.934, 2.886, 2.982)])  # fmt: skip
+    quoted = sorted([(-8.333, -8.839, -7.762, 0.0, 0.0, 0.0),
+                     (-2.935, -3.292, -2.644, 0.0, 0.0, 0.0),
+                     (0.641, 0.558, 0.723, -2.934, -2.997, -2.871),
+                     (0.641, 0.558, 0.723, 2.934, 2.871, 2.997)])  # fmt: skip
     assert len(got) == 4
     np.testing.assert_allclose(np.array(got), np.array(quoted), atol=0.005)
     from bikeid.sim.linear import eigenvalues
