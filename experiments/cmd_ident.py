@@ -624,9 +624,10 @@ def _interval_lines(iv: dict) -> list[str]:
     crit = iv.get("critical_speeds")
     for name in ("v_w", "v_c") if crit else ():
         c = crit[name]
-        if c["value"] is not None:
+        if c["interval"] is not None:
             lo, hi = c["interval"]
-            lines.append(f"{name} = {c['value']:.3f} m/s, 95 % interval [{lo:.3f}, {hi:.3f}] m/s"
+            val = f"{c['value']:.3f} m/s" if c["value"] is not None else "none found"
+            lines.append(f"{name} = {val}, 95 % interval [{lo:.3f}, {hi:.3f}] m/s"
                          + (f" (open: the confidence region holds parameters without {name} "
                             "in the searched range)" if c.get("open") else ""))  # fmt: skip
     if iv.get("critical_speeds_note"):

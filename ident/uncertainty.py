@@ -516,7 +516,10 @@ class CriticalSpeedIntervals:
     bounds_v_w, bounds_v_c : (float, float) or None
         Profile interval [m/s]; None for the delta method.  Where the ascent towards one
         end reached parameters without that speed in (0, vmax], that end is the edge of
-        the searched range (0 or ``vmax``) and ``open_v_w``/``open_v_c`` is True.
+        the searched range (0 or ``vmax``) and ``open_v_w``/``open_v_c`` is True.  v_c is
+        profiled as v_c^2, the root of the constant term of the characteristic polynomial
+        (smooth, negative where there is no capsize speed), so it has an interval also
+        when the estimate itself has no v_c in (0, vmax].
     open_v_w, open_v_c : bool
         The confidence ellipsoid holds parameters without the critical speed in (0, vmax].
     """
@@ -546,7 +549,8 @@ class CriticalSpeedIntervals:
         -------
         (float, float) or None
             (lower, upper) [m/s]: the profile interval (an open side at 0 or ``vmax``),
-            or value -+ z std for the delta method; None when the model has no such speed.
+            or value -+ z std for the delta method; None when the model has no such speed
+            (for v_c by the profile: when no parameters in the confidence region have one).
 
         Raises
         ------
@@ -556,10 +560,10 @@ class CriticalSpeedIntervals:
         if name not in ("v_w", "v_c"):
             raise InputError(f"critical speed {name!r}: choose 'v_w' or 'v_c'")
         val, sd = getattr(self, name), getattr(self, f"std_{name}")
-        if val is None:
-            return None
         if getattr(self, f"bounds_{name}") is not None:
             return tuple(getattr(self, f"bounds_{name}"))
+        if val is None:
+            return None
         z = z_value(self.level)
         return (val - z * sd, val + z * sd)
 
@@ -654,17 +658,63 @@ def critical_speed_intervals(
         v0 = crit[name]
         if v0 is None:
             out[name], out[f"std_{name}"], out[f"gradient_{name}"] = None, None, None
+        else:
+            grad = _critical_gradient(p, g, v0, func, name)
+            out[name] = float(v0)
+            out[f"std_{name}"] = float(math.sqrt(max(grad @ cov @ grad, 0.0)))
+            out[f"gradient_{name}"] = grad
+        if method != "profile":
             continue
-        grad = _critical_gradient(p, g, v0, func, name)
-        out[name] = float(v0)
-        out[f"std_{name}"] = float(math.sqrt(max(grad @ cov @ grad, 0.0)))
-        out[f"gradient_{name}"] = grad
-        if method == "profile":
+        if name == "v_c":  # profile v_c^2, a smooth root that exists beyond (0, vmax] too
+            lo, hi, _ = profile_interval(_capsize_square, p, cov, None, level)
+            if not (math.isfinite(lo) and math.isfinite(hi) and hi > 0):
+                out["open_v_c"] = True
+                if v0 is not None:
+                    out["bounds_v_c"] = (0.0, float(vmax))
+                continue
+            out["open_v_c"] = lo <= 0.0 or hi > vmax**2
+            out["bounds_v_c"] = (math.sqrt(max(lo, 0.0)), min(math.sqrt(hi), float(vmax)))
+        elif v0 is not None:
             lo, hi, _ = profile_interval(_critical_speed(g, vmax, name, func), p, cov, v0, level)
             out[f"open_{name}"] = not (math.isfinite(lo) and math.isfinite(hi))
             out[f"bounds_{name}"] = (lo if math.isfinite(lo) else 0.0,
                                      hi if math.isfinite(hi) else float(vmax))  # fmt: skip
     return CriticalSpeedIntervals(level=level, **out)
+
+
+def _capsize_root(p: np.ndarray) -> complex:
+    """v_c^2: the root s of det(alpha + s beta) = 0 that stays finite as det(beta) -> 0.
+
+    With alpha, beta the canonical position blocks (A21 = alpha + v^2 beta), the constant
+    term of the characteristic polynomial is det(alpha + s beta) = a s^2 + b s + c, s = v^2,
+    and a = det(beta) is zero for the Whipple structure (K2 has a zero column), so v_c^2 =
+    -c / b there; identified models have a small a, and the root continuing -c / b is
+    2 c / (-b - sign(b) sqrt(b^2 - 4 a c)).  Negative: no capsize speed; NaN: complex roots.
+    Complex parameters are allowed (complex-step derivative).
+    """
+    al, be = p[0:4].reshape(2, 2), p[4:8].reshape(2, 2)
+    a = be[0, 0] * be[1, 1] - be[0, 1] * be[1, 0]
+    b = al[0, 0] * be[1, 1] + be[0, 0] * al[1, 1] - al[0, 1] * be[1, 0] - be[0, 1] * al[1, 0]
+    c = al[0, 0] * al[1, 1] - al[0, 1] * al[1, 0]
+    disc = b * b - 4 * a * c
+    if disc.real < 0 or b.real == 0:
+        return complex(math.nan)
+    root = np.sqrt(disc + 0j)
+    return complex(2 * c / (-b - math.copysign(1.0, b.real) * root))
+
+
+def _capsize_square(pp: np.ndarray, state):
+    """q(p) = v_c^2 (:func:`_capsize_root`) and its complex-step gradient."""
+    q = _capsize_root(pp.astype(complex)).real
+    if not math.isfinite(q):
+        return math.nan, np.zeros(pp.size), state
+    eps = 1e-30 * max(1.0, float(np.max(np.abs(pp))))
+    grad = np.empty(pp.size)
+    for j in range(pp.size):
+        pc = pp.astype(complex)
+        pc[j] += 1j * eps
+        grad[j] = _capsize_root(pc).imag / eps
+    return q, grad, state
 
 
 def _critical_speed(g: float, vmax: float, name: str, func):
