@@ -516,10 +516,10 @@ class CriticalSpeedIntervals:
     bounds_v_w, bounds_v_c : (float, float) or None
         Profile interval [m/s]; None for the delta method.  Where the ascent towards one
         end reached parameters without that speed in (0, vmax], that end is the edge of
-        the searched range (0 or ``vmax``) and ``open_v_w``/``open_v_c`` is True.  v_c is
-        profiled as v_c^2, the root of the constant term of the characteristic polynomial
-        (smooth, negative where there is no capsize speed), so it has an interval also
-        when the estimate itself has no v_c in (0, vmax].
+        the searched range (0 or ``vmax``) and ``open_v_w``/``open_v_c`` is True.  The
+        v_c interval is found by test inversion (the speeds at which the characteristic
+        polynomial's constant term vanishes for some parameters in the region), so it
+        exists also when the estimate itself has no v_c in (0, vmax].
     open_v_w, open_v_c : bool
         The confidence ellipsoid holds parameters without the critical speed in (0, vmax].
     """
@@ -665,15 +665,9 @@ def critical_speed_intervals(
             out[f"gradient_{name}"] = grad
         if method != "profile":
             continue
-        if name == "v_c":  # profile v_c^2, a smooth root that exists beyond (0, vmax] too
-            lo, hi, _ = profile_interval(_capsize_square, p, cov, None, level)
-            if not (math.isfinite(lo) and math.isfinite(hi) and hi > 0):
-                out["open_v_c"] = True
-                if v0 is not None:
-                    out["bounds_v_c"] = (0.0, float(vmax))
-                continue
-            out["open_v_c"] = lo <= 0.0 or hi > vmax**2
-            out["bounds_v_c"] = (math.sqrt(max(lo, 0.0)), min(math.sqrt(hi), float(vmax)))
+        if name == "v_c":  # the speeds at which some parameters in the region have e = 0
+            bounds, is_open = _capsize_speed_set(p, cov, level, vmax)
+            out["bounds_v_c"], out["open_v_c"] = bounds, is_open
         elif v0 is not None:
             lo, hi, _ = profile_interval(_critical_speed(g, vmax, name, func), p, cov, v0, level)
             out[f"open_{name}"] = not (math.isfinite(lo) and math.isfinite(hi))
@@ -682,39 +676,61 @@ def critical_speed_intervals(
     return CriticalSpeedIntervals(level=level, **out)
 
 
-def _capsize_root(p: np.ndarray) -> complex:
-    """v_c^2: the root s of det(alpha + s beta) = 0 that stays finite as det(beta) -> 0.
+#: Speed grid step [m/s] of :func:`_capsize_speed_set` (each end then bisected 12 times).
+CAPSIZE_GRID_STEP = 0.05
 
-    With alpha, beta the canonical position blocks (A21 = alpha + v^2 beta), the constant
-    term of the characteristic polynomial is det(alpha + s beta) = a s^2 + b s + c, s = v^2,
-    and a = det(beta) is zero for the Whipple structure (K2 has a zero column), so v_c^2 =
-    -c / b there; identified models have a small a, and the root continuing -c / b is
-    2 c / (-b - sign(b) sqrt(b^2 - 4 a c)).  Negative: no capsize speed; NaN: complex roots.
-    Complex parameters are allowed (complex-step derivative).
+
+def _capsize_constant(s: float):
+    """q(p) = det(alpha + s beta), the characteristic polynomial's constant term at v^2 = s.
+
+    alpha = p[0:4], beta = p[4:8] (2x2, row-major; A21 = alpha + v^2 beta); its gradient
+    is adj(X)' = [[x11, -x10], [-x01, x00]] for alpha and s times that for beta.
     """
-    al, be = p[0:4].reshape(2, 2), p[4:8].reshape(2, 2)
-    a = be[0, 0] * be[1, 1] - be[0, 1] * be[1, 0]
-    b = al[0, 0] * be[1, 1] + be[0, 0] * al[1, 1] - al[0, 1] * be[1, 0] - be[0, 1] * al[1, 0]
-    c = al[0, 0] * al[1, 1] - al[0, 1] * al[1, 0]
-    disc = b * b - 4 * a * c
-    if disc.real < 0 or b.real == 0:
-        return complex(math.nan)
-    root = np.sqrt(disc + 0j)
-    return complex(2 * c / (-b - math.copysign(1.0, b.real) * root))
+
+    def q(pp: np.ndarray, state):
+        x = pp[0:4].reshape(2, 2) + s * pp[4:8].reshape(2, 2)
+        adj_t = np.array([x[1, 1], -x[1, 0], -x[0, 1], x[0, 0]])
+        grad = np.zeros(pp.size)
+        grad[0:4], grad[4:8] = adj_t, s * adj_t
+        return float(x[0, 0] * x[1, 1] - x[0, 1] * x[1, 0]), grad, state
+
+    return q
 
 
-def _capsize_square(pp: np.ndarray, state):
-    """q(p) = v_c^2 (:func:`_capsize_root`) and its complex-step gradient."""
-    q = _capsize_root(pp.astype(complex)).real
-    if not math.isfinite(q):
-        return math.nan, np.zeros(pp.size), state
-    eps = 1e-30 * max(1.0, float(np.max(np.abs(pp))))
-    grad = np.empty(pp.size)
-    for j in range(pp.size):
-        pc = pp.astype(complex)
-        pc[j] += 1j * eps
-        grad[j] = _capsize_root(pc).imag / eps
-    return q, grad, state
+def _capsize_speed_set(
+    p: np.ndarray, cov: np.ndarray, level: float, vmax: float
+) -> tuple[tuple[float, float] | None, bool]:
+    """The v_c interval by test inversion: speeds v at which the constant term
+    det(alpha + v^2 beta) changes sign for some parameters in the confidence ellipsoid.
+
+    v belongs to the set when 0 lies within the profile interval (:func:`profile_interval`)
+    of the constant term at v^2.  The set's hull on a grid of :data:`CAPSIZE_GRID_STEP`
+    over (0, vmax], ends refined by bisection, is returned with ``open`` = True where it
+    reaches the grid's first point or vmax.  This needs no v_c at the estimate, so a fit
+    whose own capsize root never crosses zero still gets the speeds the data allow.
+    """
+
+    def inside(v: float) -> bool:
+        lo, hi, _ = profile_interval(_capsize_constant(v * v), p, cov, None, level)
+        return lo <= 0.0 <= hi
+
+    grid = np.arange(CAPSIZE_GRID_STEP, vmax + CAPSIZE_GRID_STEP / 2, CAPSIZE_GRID_STEP)
+    hit = np.array([inside(float(v)) for v in grid])
+    if not hit.any():
+        return None, False
+    i, j = int(np.argmax(hit)), int(hit.size - 1 - np.argmax(hit[::-1]))
+    ends = []
+    for k, step in ((i, -1), (j, 1)):
+        if not 0 <= k + step < grid.size:  # the set reaches the edge of the range
+            ends.append(float(grid[k]))
+            continue
+        a, b = float(grid[k]), float(grid[k + step])  # a inside, b outside
+        for _ in range(12):
+            m = 0.5 * (a + b)
+            a, b = (m, b) if inside(m) else (a, m)
+        ends.append(a)
+    lo, hi = sorted(ends)
+    return (lo, hi), bool(hit[0] or hit[-1])
 
 
 def _critical_speed(g: float, vmax: float, name: str, func):
