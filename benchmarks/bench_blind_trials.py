@@ -43,6 +43,7 @@ from bikeid.experiments.blind_trials import (
     summarize_blind,
 )
 from bikeid.experiments.cliutil import dump_json, to_jsonable
+from bikeid.ident.effect_selection import LINEAR_PLANT_MARGIN
 
 
 def _fmt(name: str, r: dict) -> str:
@@ -68,6 +69,14 @@ def main() -> None:
         default="auto",
         help="the pipeline's nominal plant (default auto, that of 'measured fit': linear only "
         "when its nominal cost is lower by more than LINEAR_PLANT_MARGIN)",
+    )
+    ap.add_argument(
+        "--plant-margin",
+        type=float,
+        default=None,
+        metavar="M",
+        help="margin of --plant auto (default LINEAR_PLANT_MARGIN; 1 = the better-fitting "
+        "plant, the auto of the runs before the margin)",
     )
     ap.add_argument(
         "--nominal-only",
@@ -130,6 +139,7 @@ def main() -> None:
     t0 = time.perf_counter()
     job = partial(
         run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
+        plant_margin=args.plant_margin,
         min_heldout_gain=args.min_heldout_gain, min_improved=args.min_improved,
         unexplained_rule=args.unexplained_rule,
         unexplained_threshold=args.unexplained_threshold,
@@ -149,7 +159,8 @@ def main() -> None:
     s = summarize_blind(rows)
     print(
         f"{len(trials)} trials run in {time.perf_counter() - t0:.0f} s wall; "
-        f"nominal plant {args.plant}, seed {args.seed}, "
+        f"nominal plant {args.plant} (margin {args.plant_margin or LINEAR_PLANT_MARGIN}), "
+        f"seed {args.seed}, "
         f"{'classes ' + str(args.per_class) if args.per_class else f'{args.n} trials'}, "
         f"min held-out gain "
         f"{args.min_heldout_gain}, min improved {args.min_improved}, unexplained rule "

@@ -559,7 +559,11 @@ def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) ->
 
 
 def run_blind_trial(
-    trial: BlindTrial, nonlinear: bool | str = "auto", max_effects: int = 2, **select_kw
+    trial: BlindTrial,
+    nonlinear: bool | str = "auto",
+    max_effects: int = 2,
+    plant_margin: float | None = None,
+    **select_kw,
 ) -> dict:
     """Generate, select (not told), evaluate on held-out speeds, score.
 
@@ -575,6 +579,10 @@ def run_blind_trial(
         False: linear.
     max_effects : int, optional
         Selection rounds.
+    plant_margin : float, optional
+        The margin of "auto" (default
+        :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`; 1 takes whichever plant
+        fits better, the "auto" of earlier runs).
     **select_kw
         Further options of :func:`bikeid.ident.effect_selection.select_effects` (e.g.
         ``min_heldout_gain``, ``unexplained_rule``, ``unexplained_threshold``).
@@ -602,7 +610,7 @@ def run_blind_trial(
     nominal = ExperimentModel()
     plants = compare_nominal_plants(nominal, fit)
     if nonlinear == "auto":
-        choice = choose_nominal_plant(plants)
+        choice = choose_nominal_plant(plants, *(() if plant_margin is None else (plant_margin,)))
         nonlinear, why = choice["plant"] == "nonlinear", choice["reason"]
     else:
         why = f"{'nonlinear' if nonlinear else 'linear'} plant as asked"
