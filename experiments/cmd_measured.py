@@ -247,11 +247,9 @@ def cmd_fit(args) -> int:
     save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
     ch = out["plant_choice"]
     print(f"nominal plant: {out['plant']} ({ch['reason']})")
-    if ch["asked"] != "auto":
-        auto = "linear" if ch["ratio"] > ch["margin"] else "nonlinear"
-        if auto != out["plant"]:
-            print(f"note: --plant auto would fit with the {auto} plant; a mismatch of the "
-                  "nominal plant can be read as an effect")  # fmt: skip
+    if ch["auto"] != out["plant"]:
+        print(f"note: --plant auto would fit with the {ch['auto']} plant; a mismatch of the "
+              "nominal plant can be read as an effect")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     from bikeid.ident.effect_selection import evidence_lines
 

@@ -255,8 +255,9 @@ def fit_model(
     -------
     dict
         Effects (registry units), fit speeds [m/s], files, windows, the identification, the
-        nominal plant used (``plant``), why (``plant_choice``: the plant asked for, the
-        cost ratio nonlinear / linear, the margin and a sentence) and both nominal fits
+        nominal plant used (``plant``), why (``plant_choice``: the plant asked for, the one
+        ``auto`` takes, the cost ratio nonlinear / linear, the margin and a sentence) and both
+        nominal fits
         (``nominal_fit``: summed squared NRMSE of roll rate and steer angle as linear and
         as nonlinear plant).
 
@@ -269,11 +270,12 @@ def fit_model(
     if plant not in PLANT_CHOICES:
         raise ValueError(f"plant must be one of {', '.join(PLANT_CHOICES)}, got {plant!r}")
     nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
-    choice = {"asked": plant, **choose_nominal_plant(nominal_fit)}
+    auto = choose_nominal_plant(nominal_fit)
+    choice = {"asked": plant, **auto, "auto": auto["plant"]}
     if plant == "auto":
-        plant = choice["plant"]
+        plant = auto["plant"]
     else:
-        choice["reason"] = f"{plant} plant as asked (auto would take the {choice['plant']})"
+        choice["reason"] = f"{plant} plant as asked (auto would take the {auto['plant']})"
         choice["plant"] = plant
     nl = plant == "nonlinear"
     extra = {}

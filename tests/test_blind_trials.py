@@ -212,6 +212,7 @@ def test_auto_plant_choice_both_ways(plant):
     assert f"so the {expected} plant" in out["plant_choice"]["reason"]
     forced = fit_model(ws, max_effects=0, plant="nonlinear", min_heldout_gain=0.25)
     assert forced["plant"] == "nonlinear" and "as asked" in forced["plant_choice"]["reason"]
+    assert forced["plant_choice"]["auto"] == expected
     assert forced["identification"]["evidence"]["min_heldout_gain"] == 0.25
     with pytest.raises(ValueError, match="margin"):
         choose_nominal_plant(costs, margin=0.5)
