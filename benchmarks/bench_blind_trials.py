@@ -1,9 +1,10 @@
 """Benchmark: blind effect-selection trials (an independent generator; four rates).
 
-    python benchmarks/bench_blind_trials.py [--n 90] [--seed 0] [--processes 2]
-        [--plant nonlinear|linear|auto] [--log blind.jsonl] [--resume blind.jsonl]
-        [--min-heldout-gain G] [--min-improved F] [--unexplained-rule floor|coloured|residual]
-        [--unexplained-threshold X] [--tradeoff]
+    python benchmarks/bench_blind_trials.py [--n 90 | --per-class none=24,outside=24]
+        [--seed 0] [--processes 2] [--plant auto|nonlinear|linear] [--log blind.jsonl]
+        [--resume blind.jsonl] [--min-heldout-gain G] [--min-improved F]
+        [--unexplained-rule floor|coloured|residual] [--unexplained-threshold X] [--tradeoff]
+        [--nominal-only]
 
 Draws ``n`` trials of :mod:`bikeid.experiments.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
@@ -12,7 +13,12 @@ selection of ``bikeid measured fit`` on each (not told the effect) and prints, w
 extra effects and the mean number of extras, false positives on no-effect logs, and
 outside-library effects misattributed to a library effect.  Trial i depends only on
 (seed, i); ``--log`` appends each finished trial, ``--resume`` skips the trials already in the
-log and summarizes all of them.
+log and summarizes all of them.  ``--per-class`` draws only chosen classes (``library``,
+``outside``, ``none`` or one effect) in chosen numbers instead of the cycle of ``--n``
+(:func:`bikeid.experiments.blind_trials.draw_blind_classes`, reproducible by seed).
+``--nominal-only`` runs no selection: it prints the nominal cost ratio (nonlinear / linear
+plant) of every trial's fit decays and its range per truth plant and class, the calibration
+of :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`.
 """
 
 from __future__ import annotations
@@ -25,13 +31,19 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 
+import numpy as np
+
 from bikeid.experiments.blind_trials import (
+    draw_blind_classes,
     draw_blind_trials,
+    nominal_comparison,
+    parse_per_class,
     rescore_unexplained,
     run_blind_trial,
     summarize_blind,
 )
 from bikeid.experiments.cliutil import dump_json, to_jsonable
+from bikeid.ident.effect_selection import LINEAR_PLANT_MARGIN
 
 
 def _fmt(name: str, r: dict) -> str:
@@ -42,14 +54,35 @@ def _fmt(name: str, r: dict) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=90)
+    ap.add_argument(
+        "--per-class",
+        type=_per_class_arg,
+        metavar="CLASS=N,...",
+        help="draw only these classes in these numbers (library, outside, none or an effect "
+        "name), e.g. none=24,outside=24; replaces --n",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument(
         "--plant",
-        choices=("nonlinear", "linear", "auto"),
-        default="nonlinear",
-        help="the pipeline's nominal plant (default: that of 'measured fit'); auto: the "
-        "better-fitting one before selection",
+        choices=("auto", "nonlinear", "linear"),
+        default="auto",
+        help="the pipeline's nominal plant (default auto, that of 'measured fit': linear only "
+        "when its nominal cost is lower by more than LINEAR_PLANT_MARGIN)",
+    )
+    ap.add_argument(
+        "--plant-margin",
+        type=float,
+        default=None,
+        metavar="M",
+        help="margin of --plant auto (default LINEAR_PLANT_MARGIN; 1 = the better-fitting "
+        "plant, the auto of the runs before the margin)",
+    )
+    ap.add_argument(
+        "--nominal-only",
+        action="store_true",
+        help="no selection: the nominal cost ratio of each trial and its range per truth "
+        "plant and class (calibration of the plant margin)",
     )
     ap.add_argument(
         "--min-heldout-gain",
@@ -96,11 +129,17 @@ def main() -> None:
                 if line.strip():
                     r = json.loads(line)
                     done[r["index"]] = r
-    trials = [t for t in draw_blind_trials(args.n, args.seed) if t.index not in done]
-    rows = [done[i] for i in sorted(done) if i < args.n]
+    drawn = (draw_blind_classes(args.per_class, args.seed) if args.per_class
+             else draw_blind_trials(args.n, args.seed))  # fmt: skip
+    if args.nominal_only:
+        _nominal_only(drawn, args.processes)
+        return
+    trials = [t for t in drawn if t.index not in done]
+    rows = [done[i] for i in sorted(done) if i < len(drawn)]
     t0 = time.perf_counter()
     job = partial(
         run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
+        plant_margin=args.plant_margin,
         min_heldout_gain=args.min_heldout_gain, min_improved=args.min_improved,
         unexplained_rule=args.unexplained_rule,
         unexplained_threshold=args.unexplained_threshold,
@@ -120,7 +159,10 @@ def main() -> None:
     s = summarize_blind(rows)
     print(
         f"{len(trials)} trials run in {time.perf_counter() - t0:.0f} s wall; "
-        f"nominal plant {args.plant}, seed {args.seed}, min held-out gain "
+        f"nominal plant {args.plant} (margin {args.plant_margin or LINEAR_PLANT_MARGIN}), "
+        f"seed {args.seed}, "
+        f"{'classes ' + str(args.per_class) if args.per_class else f'{args.n} trials'}, "
+        f"min held-out gain "
         f"{args.min_heldout_gain}, min improved {args.min_improved}, unexplained rule "
         f"{args.unexplained_rule} "
         f"{args.unexplained_threshold}"
@@ -136,6 +178,32 @@ def main() -> None:
     print(dump_json(s["per_plant"]))
     if args.tradeoff:
         _tradeoff(rows)
+
+
+def _per_class_arg(text: str) -> dict[str, int]:
+    try:
+        return parse_per_class(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--per-class: ")) from None
+
+
+def _nominal_only(trials: list, processes: int) -> None:
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=processes) as pool:
+        rows = list(pool.map(nominal_comparison, trials))
+    for r in rows:
+        print(f"{r['index']:4d} {r['effect']:24s} {r['plant']:18s} linear {r['linear']:8.4g} "
+              f"nonlinear {r['nonlinear']:8.4g} ratio {r['ratio']:8.4g}")  # fmt: skip
+    print(f"{len(rows)} trials in {time.perf_counter() - t0:.0f} s wall; nominal cost ratio "
+          "nonlinear / linear, min / 5 % / median / 95 % / max:")  # fmt: skip
+    for plant in ("independent_linear", "bikeid_nonlinear"):
+        for kind in ("none", "library", "outside", "all"):
+            x = np.array([r["ratio"] for r in rows if r["plant"] == plant
+                          and kind in ("all", r["kind"])])  # fmt: skip
+            if x.size:
+                q = np.quantile(x, [0.0, 0.05, 0.5, 0.95, 1.0])
+                qs = " / ".join(f"{v:.3g}" for v in q)
+                print(f"  {plant:18s} {kind:8s} n={x.size:3d}: {qs}")
 
 
 def _tradeoff(rows: list[dict]) -> None:

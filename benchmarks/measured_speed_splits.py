@@ -1,6 +1,7 @@
 """The held-out goal on every speed split: fit on some speeds, evaluate on the others.
 
-Runs the pipeline of ``bikeid measured fit`` (nonlinear nominal, greedy selection) on the
+Runs the pipeline of ``bikeid measured fit`` (nominal plant by its ``--plant auto`` default
+unless ``--plant`` is given, greedy selection) on the
 free decays of the fit speeds and ``bikeid measured evaluate`` on the remaining ones, for
 each split, and prints one row per split: the effects chosen, the held-out decay error
 (mean NRMSE of roll rate and steer angle) and the held-out weave-eigenvalue error, before
@@ -13,6 +14,7 @@ leave-one-speed-out splits (fit on three speeds).  Each split takes 10-20 s on t
 
     python benchmarks/measured_speed_splits.py --data ../shared/data
     python benchmarks/measured_speed_splits.py --data ../shared/data --splits "2.5,4.5;1.5,3.5"
+    python benchmarks/measured_speed_splits.py --data ../shared/data --plant nonlinear
 """
 
 from __future__ import annotations
@@ -27,16 +29,24 @@ from bikeid.experiments.measured_study import evaluate_json, fit_model
 
 
 def run_split(
-    data: str | None, fit_speeds: list[float], decays: str = "listed", weave_weight="auto"
+    data: str | None,
+    fit_speeds: list[float],
+    decays: str = "listed",
+    weave_weight="auto",
+    plant: str = "auto",
 ) -> dict:
     """Fit on ``fit_speeds``, evaluate on every other speed; the row of the table."""
     t0 = time.perf_counter()
-    model = fit_model(load_decays(data, fit_speeds, source=decays), weave_weight=weave_weight)
+    model = fit_model(
+        load_decays(data, fit_speeds, source=decays), weave_weight=weave_weight, plant=plant
+    )
     ev = evaluate_json(model, load_decays(data, exclude=fit_speeds, source=decays))
     s = ev["summary"]
     return {
         "fit_speeds": model["fit_speeds"],
         "heldout_speeds": sorted({round(f["speed"], 2) for f in ev["files"]}),
+        "plant": model["plant"],
+        "nominal_ratio": model["plant_choice"]["ratio"],
         "verdict": model["identification"]["verdict"],
         "effects": model["effects"],
         "error_before": s["error_before"],
@@ -65,12 +75,18 @@ def main(argv=None) -> int:
         type=parse_weave_weight,
         help="as for 'bikeid measured fit'",
     )
+    ap.add_argument(
+        "--plant",
+        choices=("auto", "nonlinear", "linear"),
+        default="auto",
+        help="nominal plant, as for 'bikeid measured fit' (default auto)",
+    )
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args(argv)
     rows = []
     for text in a.splits.split(";"):
         sp = [float(x) for x in text.split(",") if x.strip()]
-        rows.append(run_split(a.data, sp, a.decays, a.weave_weight))
+        rows.append(run_split(a.data, sp, a.decays, a.weave_weight, a.plant))
         r = rows[-1]
         if not a.json:
             eff = ", ".join(f"{k} {v:.3g}" for k, v in r["effects"].items()) or "-"
@@ -80,7 +96,8 @@ def main(argv=None) -> int:
                 f"{r['error_after']:.3f} ({r['ratio']:.2f}), weave {r['weave_error_before']:.3f}"
                 f" -> {r['weave_error_after']:.3f} ({r['weave_ratio']:.2f})"
                 f"{'  BOTH HALVED' if r['both_halved'] else ''}; "
-                f"{'unexplained + ' if 'unexplained' in r['verdict'] else ''}{eff} "
+                f"{'unexplained + ' if 'unexplained' in r['verdict'] else ''}{eff}; "
+                f"{r['plant']} plant (nominal cost ratio {r['nominal_ratio']:.3f}) "
                 f"[{r['seconds']:.0f} s]",
                 flush=True,
             )

@@ -56,7 +56,9 @@ from bikeid.experiments.effect_trials import (
     EFFECTS,
     EVAL_PER_SPEED,
     FIT_PER_SPEED,
+    LIBRARY_EFFECTS,
     N_SAMPLES,
+    OUTSIDE_EFFECTS,
     rate,
 )
 
@@ -65,8 +67,12 @@ __all__ = [
     "TRAIL_UNCERTAINTY",
     "BlindTrial",
     "Nuisance",
+    "CLASSES",
+    "draw_blind_classes",
     "draw_blind_trials",
     "generate_windows",
+    "nominal_comparison",
+    "parse_per_class",
     "linear_plant_matrices",
     "rescore_unexplained",
     "run_blind_trial",
@@ -83,6 +89,8 @@ BODY_INERTIAS = {"R": ("IRxx", "IRyy"), "B": ("IBxx", "IByy", "IBzz", "IBxz"),
                  "H": ("IHxx", "IHyy", "IHzz", "IHxz"), "F": ("IFxx", "IFyy")}  # fmt: skip
 INERTIAS = tuple(k for ks in BODY_INERTIAS.values() for k in ks)
 TRIAL_EFFECTS = (*EFFECTS, "none")
+#: The trial classes of :func:`draw_blind_classes` and the hidden effects each cycles through.
+CLASSES = {"library": LIBRARY_EFFECTS, "outside": OUTSIDE_EFFECTS, "none": ("none",)}
 
 
 @dataclass(frozen=True)
@@ -196,7 +204,7 @@ def linear_plant_matrices(p) -> tuple[np.ndarray, ...]:
 
 
 def draw_blind_trials(
-    n: int, seed: int = 0, effects: tuple[str, ...] | None = None
+    n: int, seed: int = 0, effects: tuple[str, ...] | None = None, first: int = 0
 ) -> list[BlindTrial]:
     """``n`` blind trials, effects cycling through ``effects`` (default all and "none").
 
@@ -210,6 +218,9 @@ def draw_blind_trials(
         Grid seed (>= 0).
     effects : tuple of str, optional
         Names from :data:`TRIAL_EFFECTS`.
+    first : int, optional
+        Index of the first trial (>= 0): the trials are ``first .. first + n - 1``, each
+        drawn from (seed, its index), the effects cycling from the first name.
 
     Returns
     -------
@@ -228,12 +239,14 @@ def draw_blind_trials(
     bad = [e for e in names if e not in TRIAL_EFFECTS]
     if bad:
         raise ValueError(f"unknown effects {bad}; choose from {list(TRIAL_EFFECTS)}")
+    if int(first) != first or first < 0:
+        raise ValueError(f"first index must be a non-negative integer, got {first!r}")
     from bikeid.experiments.effect_trials import _speeds
 
     out = []
-    for i in range(int(n)):
+    for i in range(int(first), int(first) + int(n)):
         rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
-        name = names[i % len(names)]
+        name = names[(i - int(first)) % len(names)]
         if name == "none":
             value = float("nan")
             v = _speeds(rng, "command_gain", 1.0)  # stability of the nominal loop
@@ -261,6 +274,66 @@ def draw_blind_trials(
         )
         out.append(BlindTrial(i, int(rng.integers(2**31)), name, value, (v[0], v[1]),
                               (v[2], v[3]), nz))  # fmt: skip
+    return out
+
+
+def parse_per_class(text: str) -> dict[str, int]:
+    """``--per-class`` text ``CLASS=N,...`` as an ordered dict of class -> count.
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated ``CLASS=N`` pairs; a class is a key of :data:`CLASSES` (``library``,
+        ``outside``, ``none``) or one hidden effect of :data:`TRIAL_EFFECTS`; N >= 1.
+
+    Returns
+    -------
+    dict of str to int
+        The counts, in the order given.
+
+    Raises
+    ------
+    ValueError
+        One line naming the bad pair and the allowed classes.
+    """
+    allowed = [*CLASSES, *(e for e in TRIAL_EFFECTS if e != "none")]
+    out: dict[str, int] = {}
+    for pair in (p.strip() for p in text.split(",")):
+        if not pair:
+            continue
+        name, sep, num = (x.strip() for x in pair.partition("="))
+        if not sep or name not in allowed or not num.isdigit() or int(num) < 1 or name in out:
+            raise ValueError(f"--per-class: {pair!r} is not CLASS=N with N >= 1 and a class "
+                             f"given once, out of {', '.join(allowed)}")  # fmt: skip
+        out[name] = int(num)
+    if not out:
+        raise ValueError("--per-class: give CLASS=N pairs, e.g. none=24,outside=24")
+    return out
+
+
+def draw_blind_classes(counts: dict[str, int], seed: int = 0) -> list[BlindTrial]:
+    """Blind trials of chosen classes: ``counts[c]`` trials of each class ``c`` in turn.
+
+    Each class cycles through its hidden effects (:data:`CLASSES`, or one effect), the
+    classes taking consecutive index ranges in the order given, so that every trial has its
+    own index and depends only on (seed, index, the counts before it): the draw is
+    reproducible by seed, as :func:`draw_blind_trials`.
+
+    Parameters
+    ----------
+    counts : dict of str to int
+        Class (``library``, ``outside``, ``none`` or an effect name) -> number of trials.
+    seed : int, optional
+        Grid seed (>= 0).
+
+    Returns
+    -------
+    list of BlindTrial
+    """
+    out: list[BlindTrial] = []
+    for name, k in counts.items():
+        effects = CLASSES.get(name, (name,))
+        out += draw_blind_trials(k, seed, effects, first=len(out))
     return out
 
 
@@ -486,7 +559,11 @@ def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) ->
 
 
 def run_blind_trial(
-    trial: BlindTrial, nonlinear: bool | str = True, max_effects: int = 2, **select_kw
+    trial: BlindTrial,
+    nonlinear: bool | str = "auto",
+    max_effects: int = 2,
+    plant_margin: float | None = None,
+    **select_kw,
 ) -> dict:
     """Generate, select (not told), evaluate on held-out speeds, score.
 
@@ -495,11 +572,17 @@ def run_blind_trial(
     trial : BlindTrial
         The trial.
     nonlinear : bool or "auto", optional
-        Nominal plant of the pipeline: nonlinear (default of ``bikeid measured fit``),
-        linear, or "auto": the one that fits the fit windows better before selection
-        (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).
+        Nominal plant of the pipeline: "auto" (default, as ``bikeid measured fit``): the
+        linear plant only when its nominal cost on the fit windows is lower by more than
+        :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`
+        (:func:`bikeid.ident.effect_selection.choose_nominal_plant`); True: nonlinear;
+        False: linear.
     max_effects : int, optional
         Selection rounds.
+    plant_margin : float, optional
+        The margin of "auto" (default
+        :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`; 1 takes whichever plant
+        fits better, the "auto" of earlier runs).
     **select_kw
         Further options of :func:`bikeid.ident.effect_selection.select_effects` (e.g.
         ``min_heldout_gain``, ``unexplained_rule``, ``unexplained_threshold``).
@@ -508,12 +591,17 @@ def run_blind_trial(
     -------
     dict
         The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds,
-        the selection's ``evidence`` and round log (``rounds``);
+        the nominal costs (``nominal_costs``), the plant used (``nominal_plant``) and why
+        (``plant_reason``), the selection's ``evidence`` and round log (``rounds``);
         ``error`` is the pipeline's message when it failed (verdict ``["error"]``, scored as
         not right and not a false positive, and counted by :func:`summarize_blind`).
     """
     from bikeid.ident.discrepancy_diagnostics import evaluate
-    from bikeid.ident.effect_selection import compare_nominal_plants, select_effects
+    from bikeid.ident.effect_selection import (
+        choose_nominal_plant,
+        compare_nominal_plants,
+        select_effects,
+    )
     from bikeid.ident.experiment_model import ExperimentModel
 
     t0 = time.perf_counter()
@@ -522,7 +610,10 @@ def run_blind_trial(
     nominal = ExperimentModel()
     plants = compare_nominal_plants(nominal, fit)
     if nonlinear == "auto":
-        nonlinear = plants["preferred"] == "nonlinear"
+        choice = choose_nominal_plant(plants, *(() if plant_margin is None else (plant_margin,)))
+        nonlinear, why = choice["plant"] == "nonlinear", choice["reason"]
+    else:
+        why = f"{'nonlinear' if nonlinear else 'linear'} plant as asked"
     try:
         res = select_effects(
             nominal, fit, max_effects=max_effects, nonlinear=nonlinear, **select_kw
@@ -537,11 +628,42 @@ def run_blind_trial(
     row = {**asdict(trial), "verdict": res.verdict, "estimates": est,
            "error_before": ev["error_before"], "error_after": ev["error_after"],
            "explained_fraction": res.explained, "error": None, "nominal_costs": plants,
-           "nominal_plant": "nonlinear" if nonlinear else "linear",
+           "nominal_plant": "nonlinear" if nonlinear else "linear", "plant_reason": why,
            "evidence": res.evidence, "rounds": res.rounds}  # fmt: skip
     row.update(score(trial, res.verdict, est))
     row["seconds"] = time.perf_counter() - t0
     return row
+
+
+def nominal_comparison(trial: BlindTrial) -> dict:
+    """The nominal plants' costs on a trial's fit decays, without any selection.
+
+    The same decays :func:`run_blind_trial` fits (a fraction of its time), so the ratios of
+    many trials calibrate :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`.
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        The trial.
+
+    Returns
+    -------
+    dict
+        ``index``, ``effect``, ``kind`` (``library``, ``outside``, ``none``), ``plant`` (the
+        truth: ``nuisance.plant``) and, from
+        :func:`bikeid.ident.effect_selection.compare_nominal_plants`, ``linear``,
+        ``nonlinear`` (summed squared NRMSE) and ``ratio`` (nonlinear / linear).
+    """
+    from bikeid.ident.effect_selection import compare_nominal_plants
+    from bikeid.ident.experiment_model import ExperimentModel
+
+    fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
+    c = compare_nominal_plants(ExperimentModel(), fit)
+    kind = ("none" if trial.effect == "none" else
+            "library" if EFFECTS[trial.effect].in_library else "outside")  # fmt: skip
+    return {"index": trial.index, "effect": trial.effect, "kind": kind,
+            "plant": trial.nuisance.plant, "linear": c["linear"], "nonlinear": c["nonlinear"],
+            "ratio": c["ratio"]}  # fmt: skip
 
 
 def rescore_unexplained(rows: list[dict], rule: str, threshold: float) -> list[dict]:

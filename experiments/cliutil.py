@@ -48,6 +48,7 @@ def number(
     hi: float | None = None,
     *,
     lo_open: bool = False,
+    hi_open: bool = False,
     unit: str = "",
 ) -> Callable[[str], float]:
     """An argparse ``type=``: a finite float in ``[lo, hi]`` (``(lo, hi]`` with lo_open).
@@ -58,6 +59,8 @@ def number(
         Bounds (None: unbounded), in ``unit``.
     lo_open : bool, optional
         Exclude ``lo`` itself (e.g. a duration must be > 0).
+    hi_open : bool, optional
+        Exclude ``hi`` itself (e.g. a fractional gain must be < 1).
     unit : str, optional
         Unit named in the message (e.g. ``"m/s"``).
 
@@ -69,7 +72,7 @@ def number(
     """
     u = f" {unit}" if unit else ""
     low = "" if lo is None else (f"> {lo:g}{u}" if lo_open else f">= {lo:g}{u}")
-    high = "" if hi is None else f"<= {hi:g}{u}"
+    high = "" if hi is None else (f"< {hi:g}{u}" if hi_open else f"<= {hi:g}{u}")
     need = " and ".join(x for x in (low, high) if x) or "a finite number"
 
     def parse(text: str) -> float:
@@ -79,7 +82,9 @@ def number(
             raise argparse.ArgumentTypeError(f"{text!r} is not a number; need {need}") from None
         if not math.isfinite(x):
             raise argparse.ArgumentTypeError(f"{text!r} is not finite; need {need}")
-        if (lo is not None and (x < lo or (lo_open and x == lo))) or (hi is not None and x > hi):
+        if (lo is not None and (x < lo or (lo_open and x == lo))) or (
+            hi is not None and (x > hi or (hi_open and x == hi))
+        ):
             raise argparse.ArgumentTypeError(f"{text}{u} is out of range; need {need}")
         return x
 

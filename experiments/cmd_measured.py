@@ -14,6 +14,7 @@ from .cliutil import (
     MAX_WORKERS,
     dump_json,
     integer,
+    number,
     parse_range,
     range_text,
     to_jsonable,
@@ -25,6 +26,55 @@ DECAYS_HELP = (
     "free-decay windows: 'listed' = eigen/segments.csv rows, detected from the roll rate "
     "for logs it does not list (default); 'detected' = detected for every log"
 )
+
+
+def add_acceptance_options(p: argparse.ArgumentParser) -> None:
+    """The acceptance options of the effect selection (docs/measured.md, "Blind trials").
+
+    ``--min-heldout-gain`` in [0, 1), ``--min-improved`` in [0, 1], ``--unexplained-rule``
+    and ``--unexplained-threshold`` (> 0): passed to
+    :func:`bikeid.ident.effect_selection.select_effects`; a bad value is a usage error
+    (exit status 2) naming the option and the allowed range.
+    """
+    p.add_argument(
+        "--min-heldout-gain",
+        type=number(0.0, 1.0, hi_open=True),
+        default=None,
+        metavar="G",
+        help="least fractional cost reduction an effect must bring on the held-out decays, in "
+        "[0, 1) (default 0.02, the fit gain; the blind trials' strict setting is 0.25)",
+    )
+    p.add_argument(
+        "--min-improved",
+        type=number(0.0, 1.0),
+        default=0.0,
+        metavar="F",
+        help="least share of the held-out decays whose own cost an effect must lower, in "
+        "[0, 1] (default 0: only the summed held-out cost; the strict setting is 0.75)",
+    )
+    p.add_argument(
+        "--unexplained-rule",
+        choices=("floor", "coloured", "residual"),
+        default="floor",
+        help="how 'unexplained' is decided: explained fraction above the second-difference "
+        "(floor, default) or coloured-noise floor, or final cost over the residual's noise "
+        "floor (residual)",
+    )
+    p.add_argument(
+        "--unexplained-threshold",
+        type=number(0.0, lo_open=True),
+        default=None,
+        metavar="X",
+        help="threshold of that rule, > 0 (default 0.9 for floor and coloured, 2.0 for "
+        "residual)",
+    )
+
+
+def acceptance_kw(args: argparse.Namespace) -> dict:
+    """The ``select_effects`` keywords of :func:`add_acceptance_options`' options."""
+    return {"min_heldout_gain": args.min_heldout_gain, "min_improved": args.min_improved,
+            "unexplained_rule": args.unexplained_rule,
+            "unexplained_threshold": args.unexplained_threshold}  # fmt: skip
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -50,10 +100,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--plant",
-        choices=("nonlinear", "linear", "auto"),
-        default="nonlinear",
-        help="nominal plant: nonlinear Whipple (defect-corrected, default), linear, or auto "
-        "(the one that fits the decays better before selection; both fits are printed)",
+        choices=("auto", "nonlinear", "linear"),
+        default="auto",
+        help="nominal plant: auto (default): the nonlinear Whipple plant (defect-corrected) "
+        "unless the linear one fits the decays more than 1.2 times better before selection "
+        "(both fits and the choice are printed); nonlinear or linear force one",
     )
     f.add_argument(
         "--weave-weight",
@@ -64,6 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "fit: 'auto' (default) gives it the nominal model's output-error cost, a number is "
         "the weight, 0 fits the decay signals only (docs/measured.md)",
     )
+    add_acceptance_options(f)
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument(
@@ -106,6 +158,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--linear", action="store_true", help="linear nominal model (for comparison)")
     t.add_argument("--json", action="store_true", help="print all trials and the summary as JSON")
     t.add_argument("--log", help="append each finished trial to this JSON-lines file")
+    add_acceptance_options(t)
     t.set_defaults(func=cmd_trials)
     r = msub.add_parser("report", help="write report.md with before/after figures")
     r.add_argument("--model", help="MODEL.json (default: fit on the first and third speeds)")
@@ -186,18 +239,17 @@ def cmd_fit(args) -> int:
     ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     bar = terminal_progress("measured fit", unit="fit")
-    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar)
+    kw = acceptance_kw(args)
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, **kw)
     out["decays"] = args.decays
     settings = {"max_effects": args.max_effects, "stability": args.stability,
-                "weave_weight": ww, "speeds": _speeds(args.speeds)}  # fmt: skip
+                "weave_weight": ww, "speeds": _speeds(args.speeds), **kw}  # fmt: skip
     save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
-    nf = out["nominal_fit"]
-    print(f"nominal fit (summed squared NRMSE): linear {nf['linear']:.4g}, nonlinear "
-          f"{nf['nonlinear']:.4g}; the data prefer the {nf['preferred']} plant; fitted with "
-          f"the {out['plant']} plant")  # fmt: skip
-    if out["plant"] != nf["preferred"]:
-        print(f"note: the {nf['preferred']} nominal fits these decays better; a mismatch of "
-              "the nominal plant can be read as an effect (try --plant auto)")  # fmt: skip
+    ch = out["plant_choice"]
+    print(f"nominal plant: {out['plant']} ({ch['reason']})")
+    if ch["auto"] != out["plant"]:
+        print(f"note: --plant auto would fit with the {ch['auto']} plant; a mismatch of the "
+              "nominal plant can be read as an effect")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     from bikeid.ident.effect_selection import evidence_lines
 
@@ -249,7 +301,7 @@ def cmd_evaluate(args) -> int:
     if obj.get("plant_defaulted"):
         print(
             f"bikeid measured evaluate: {args.model} names no plant; using "
-            f"{obj['plant']!r}, the default of 'measured fit'",
+            f"{obj['plant']!r}, the plant 'measured fit' used before it recorded one",
             file=sys.stderr,
         )
     sp = _speeds(args.speeds)
@@ -303,8 +355,9 @@ def cmd_trials(args) -> int:
             bar(len(finished), args.n, "")
 
     out = run_trials(
-        args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress
-    )
+        args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress,
+        **acceptance_kw(args),
+    )  # fmt: skip
     if args.json:
         print(dump_json(out))
         return 0

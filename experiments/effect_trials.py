@@ -401,7 +401,11 @@ def decay_windows(
 
 
 def run_trial(
-    spec: TrialSpec, max_effects: int = 2, nonlinear: bool = True, weave_weight="auto"
+    spec: TrialSpec,
+    max_effects: int = 2,
+    nonlinear: bool = True,
+    weave_weight="auto",
+    **select_kw,
 ) -> dict:
     """Simulate, identify (not told), evaluate on held-out speeds; returns a JSON-able dict.
 
@@ -420,6 +424,10 @@ def run_trial(
         Nominal model is the nonlinear plant by defect correction.
     weave_weight : float or "auto", optional
         Weight of the weave-eigenvalue term.
+    **select_kw
+        Acceptance options of :func:`bikeid.ident.effect_selection.select_effects`
+        (``min_heldout_gain``, ``min_improved``, ``unexplained_rule``,
+        ``unexplained_threshold``).
 
     Returns
     -------
@@ -438,8 +446,9 @@ def run_trial(
     held = decay_windows(fx, spec.eval_speeds, EVAL_PER_SPEED, spec.noise, spec.seed + 1, "eval")
     nominal = ExperimentModel()
     res = select_effects(
-        nominal, fit, max_effects=max_effects, nonlinear=nonlinear, weave_weight=weave_weight
-    )
+        nominal, fit, max_effects=max_effects, nonlinear=nonlinear, weave_weight=weave_weight,
+        **select_kw,
+    )  # fmt: skip
     ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
     first = res.verdict[0]
     est = next((e for e in res.effects if e.name == spec.effect), None)
@@ -593,6 +602,7 @@ def run_trials(
     nonlinear: bool = True,
     progress=None,
     weave_weight="auto",
+    **select_kw,
 ) -> dict:
     """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
 
@@ -614,13 +624,15 @@ def run_trials(
         Called with each finished trial's dict.
     weave_weight : float or "auto", optional
         Weight of the weave-eigenvalue term.
+    **select_kw
+        Acceptance options for every trial (:func:`run_trial`).
 
     Returns
     -------
     dict
         ``trials`` (list of dict) and ``summary`` (:func:`summarize` plus
         ``wall_seconds`` [s], ``seed``, ``processes``, ``nominal_plant``,
-        ``weave_weight``).
+        ``weave_weight``, ``acceptance``: the options given).
 
     Raises
     ------
@@ -634,7 +646,8 @@ def run_trials(
     t0 = time.perf_counter()
     rows = []
     if processes == 1 or len(specs) == 1:
-        results = (run_trial(s, nonlinear=nonlinear, weave_weight=weave_weight) for s in specs)
+        results = (run_trial(s, nonlinear=nonlinear, weave_weight=weave_weight, **select_kw)
+                   for s in specs)  # fmt: skip
         for r in results:
             rows.append(r)
             if progress:
@@ -643,7 +656,7 @@ def run_trials(
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=int(processes)) as pool:
-            job = partial(run_trial, nonlinear=nonlinear, weave_weight=weave_weight)
+            job = partial(run_trial, nonlinear=nonlinear, weave_weight=weave_weight, **select_kw)
             for r in pool.map(job, specs):
                 rows.append(r)
                 if progress:
@@ -654,4 +667,5 @@ def run_trials(
     summ["processes"] = int(processes)
     summ["nominal_plant"] = "nonlinear" if nonlinear else "linear"
     summ["weave_weight"] = weave_weight
+    summ["acceptance"] = dict(select_kw)
     return {"trials": rows, "summary": summ}

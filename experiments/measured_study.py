@@ -22,6 +22,7 @@ from bikeid.ident.discrepancy_diagnostics import evaluate
 from bikeid.ident.effect_fit import FitResult, joint_fit
 from bikeid.ident.effect_library import LIBRARY
 from bikeid.ident.effect_selection import (
+    choose_nominal_plant,
     compare_nominal_plants,
     select_effects,
     selection_frequencies,
@@ -44,10 +45,14 @@ __all__ = [
 ]
 
 
-#: Plants a model file may name (``measured fit --plant``); a file without ``plant`` gets
-#: :data:`DEFAULT_PLANT`, the default of ``measured fit``.
+#: Plants a model file may name (``measured fit`` records the one it fitted with); a file
+#: without ``plant`` gets :data:`DEFAULT_PLANT`, the plant ``measured fit`` used before it
+#: recorded one (and the one ``--plant auto``, its default, keeps on the real decays).
 PLANTS = ("nonlinear", "linear")
 DEFAULT_PLANT = "nonlinear"
+#: ``measured fit --plant`` choices; ``auto`` (default) applies
+#: :func:`bikeid.ident.effect_selection.choose_nominal_plant`.
+PLANT_CHOICES = ("auto", *PLANTS)
 #: Largest model file read [bytes] (a fitted model is a few kB; a stability run ~100 kB).
 MAX_MODEL_BYTES = 20_000_000
 
@@ -212,10 +217,11 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
 def fit_model(
     windows: list[Window],
     max_effects: int = 3,
-    plant: str = "nonlinear",
+    plant: str = "auto",
     stability: int = 0,
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
+    **select_kw,
 ) -> dict:
     """Select effects on ``windows`` and return the model object ``measured fit`` writes.
 
@@ -226,10 +232,12 @@ def fit_model(
     max_effects : int, optional
         At most this many effects (:func:`bikeid.ident.effect_selection.select_effects`).
     plant : str, optional
-        ``"nonlinear"`` (defect-corrected nonlinear Whipple plant), ``"linear"``, or
-        ``"auto"``: the one of the two that fits the decays better before any effect is
-        selected (:func:`bikeid.ident.effect_selection.compare_nominal_plants`).  Both
-        nominal fits are reported in every case (``nominal_fit``).
+        ``"auto"`` (default): the nonlinear Whipple plant (defect-corrected) unless the
+        linear plant's nominal cost on the decays is lower by more than
+        :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`
+        (:func:`bikeid.ident.effect_selection.choose_nominal_plant`); ``"nonlinear"`` or
+        ``"linear"`` force one.  Both nominal fits are reported in every case
+        (``nominal_fit``), the plant used as ``plant`` and why as ``plant_choice``.
     stability : int, optional
         With N > 0, also the selection frequency of each name over N random 75 % subsamples
         (:func:`bikeid.ident.effect_selection.selection_frequencies`).
@@ -238,33 +246,54 @@ def fit_model(
     progress : callable, optional
         ``progress(done, total, label)`` through the subsamples, then the candidate fits
         (:mod:`bikeid.experiments.progress`).
+    **select_kw
+        Acceptance options of :func:`bikeid.ident.effect_selection.select_effects`
+        (``min_heldout_gain``, ``min_improved``, ``unexplained_rule``,
+        ``unexplained_threshold``), also used by the stability subsamples.
 
     Returns
     -------
     dict
         Effects (registry units), fit speeds [m/s], files, windows, the identification, the
-        nominal plant used (``plant``) and both nominal fits (``nominal_fit``: summed
-        squared NRMSE of roll rate and steer angle as linear and as nonlinear plant).
+        nominal plant used (``plant``), why (``plant_choice``: the plant asked for, the one
+        ``auto`` takes, the cost ratio nonlinear / linear, the margin and a sentence) and both
+        nominal fits
+        (``nominal_fit``: summed squared NRMSE of roll rate and steer angle as linear and
+        as nonlinear plant).
+
+    Raises
+    ------
+    ValueError
+        If ``plant`` is not one of :data:`PLANT_CHOICES` or ``select_effects`` refuses an
+        option.
     """
+    if plant not in PLANT_CHOICES:
+        raise ValueError(f"plant must be one of {', '.join(PLANT_CHOICES)}, got {plant!r}")
     nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
+    auto = choose_nominal_plant(nominal_fit)
+    choice = {"asked": plant, **auto, "auto": auto["plant"]}
     if plant == "auto":
-        plant = nominal_fit["preferred"]
+        plant = auto["plant"]
+    else:
+        choice["reason"] = f"{plant} plant as asked (auto would take the {auto['plant']})"
+        choice["plant"] = plant
     nl = plant == "nonlinear"
     extra = {}
     if stability:
         freq = selection_frequencies(
             ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl,
-            progress=progress,
+            progress=progress, **select_kw,
         )  # fmt: skip
         extra = {"selection_frequency": freq,
                  "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
     res = select_effects(
         ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl,
-        weave_weight=weave_weight, progress=progress,
+        weave_weight=weave_weight, progress=progress, **select_kw,
     )  # fmt: skip
     return {
         "bicycle": "steer-by-wire",
         "plant": plant,
+        "plant_choice": choice,
         "effects": {e.name: float(e.value) for e in res.effects},
         "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
         "fit_files": sorted({w.file for w in windows}),

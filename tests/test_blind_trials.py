@@ -10,11 +10,14 @@ import pytest
 
 from bikeid.dataset.windows import Window
 from bikeid.experiments.blind_trials import (
+    CLASSES,
     BlindTrial,
     Nuisance,
+    draw_blind_classes,
     draw_blind_trials,
     generate_windows,
     linear_plant_matrices,
+    parse_per_class,
     run_blind_trial,
     score,
     summarize_blind,
@@ -124,6 +127,26 @@ def test_draw_is_reproducible_and_extends():
     assert {t.effect for t in b} == set(EFFECTS) | {"none"}
 
 
+def test_class_draw_is_reproducible_and_by_class():
+    """``--per-class none=3,outside=4`` draws 3 no-effect then 4 outside trials with their
+    own indices 0-6; the same seed gives the same trials, another seed other ones, and each
+    trial equals the one :func:`draw_blind_trials` draws at its index from the class's
+    effects (one mechanism)."""
+    counts = parse_per_class("none=3, outside=4")
+    assert counts == {"none": 3, "outside": 4}
+    a = draw_blind_classes(counts, seed=5)
+    assert [t.index for t in a] == list(range(7))
+    assert [t.effect for t in a[:3]] == ["none"] * 3
+    assert {t.effect for t in a[3:]} == set(CLASSES["outside"])
+    assert repr(a) == repr(draw_blind_classes(counts, seed=5))  # repr: NaN values compare
+    assert a[3:] == draw_blind_trials(4, 5, CLASSES["outside"], first=3)
+    assert [t.seed for t in draw_blind_classes(counts, seed=6)] != [t.seed for t in a]
+    assert draw_blind_classes({"steer_stiffness": 2}, 0)[1].effect == "steer_stiffness"
+    for bad in ("none=0", "none", "nothing=3", "none=2,none=3", "none=x", ""):
+        with pytest.raises(ValueError, match="--per-class"):
+            parse_per_class(bad)
+
+
 @pytest.mark.slow
 def test_blind_batch_runs_and_scores():
     """A small batch runs end to end on both plants and yields a score per kind; the rates
@@ -154,3 +177,42 @@ def test_nominal_plant_preference_follows_the_truth(plant):
     # measured margins: cost ratio 1.3e3 (linear truth) and 3e-4 (nonlinear truth); a
     # factor 10 leaves room for other seeds
     assert (res["ratio"] > 10) if expected == "linear" else (res["ratio"] < 0.1)
+
+
+@pytest.mark.parametrize("plant", ["independent_linear", "bikeid_nonlinear"])
+def test_auto_plant_choice_both_ways(plant):
+    """The default plant choice (``choose_nominal_plant``, LINEAR_PLANT_MARGIN) on decays
+    computed here: the linear plant for the linear truth's decays (ratio ~1e3, far above the
+    margin), the nonlinear for the nonlinear truth's (ratio ~1e-3); and the margin decides:
+    the same linear-truth costs keep the nonlinear plant under a margin 1 % above their own
+    ratio, as the real decays (ratio 1.014 < 1.2) keep it.  ``fit_model`` (what ``measured
+    fit`` runs, no selection round here) records the same choice and its reason."""
+    from bikeid.experiments.measured_study import fit_model
+    from bikeid.ident.effect_selection import (
+        LINEAR_PLANT_MARGIN,
+        choose_nominal_plant,
+        compare_nominal_plants,
+    )
+
+    nz = replace(QUIET, plant=plant, noise=0.002, encoder_counts=16384)
+    tr = BlindTrial(0, 1, "none", float("nan"), (1.6, 2.2), (3.0, 3.5), nz)
+    ws = generate_windows(tr, (1.6, 2.2), 3, seed=9, label="p")
+    costs = compare_nominal_plants(ExperimentModel(), ws)
+    expected = "linear" if plant == "independent_linear" else "nonlinear"
+    choice = choose_nominal_plant(costs)
+    assert choice["plant"] == expected and choice["margin"] == LINEAR_PLANT_MARGIN, choice
+    assert choice["ratio"] == pytest.approx(costs["nonlinear"] / costs["linear"], rel=1e-12)
+    if expected == "linear":  # the margin decides, on either side of the computed ratio
+        assert choose_nominal_plant(costs, margin=1.01 * choice["ratio"])["plant"] == "nonlinear"
+        assert choose_nominal_plant(costs, margin=0.99 * choice["ratio"])["plant"] == "linear"
+    else:  # no margin >= 1 takes the linear plant when the nonlinear fits better
+        assert choose_nominal_plant(costs, margin=1.0)["plant"] == "nonlinear"
+    out = fit_model(ws, max_effects=0)
+    assert out["plant"] == expected and out["plant_choice"]["asked"] == "auto"
+    assert f"so the {expected} plant" in out["plant_choice"]["reason"]
+    forced = fit_model(ws, max_effects=0, plant="nonlinear", min_heldout_gain=0.25)
+    assert forced["plant"] == "nonlinear" and "as asked" in forced["plant_choice"]["reason"]
+    assert forced["plant_choice"]["auto"] == expected
+    assert forced["identification"]["evidence"]["min_heldout_gain"] == 0.25
+    with pytest.raises(ValueError, match="margin"):
+        choose_nominal_plant(costs, margin=0.5)

@@ -150,6 +150,18 @@ def test_debug_prints_the_traceback(monkeypatch, capsys):
          ("argument --stability", ">= 0")),
         (["measured", "fit", "--out", "m.json", "--weave-weight", "-2"],
          ("argument --weave-weight", "'auto' or a number >= 0")),
+        (["measured", "fit", "--out", "m.json", "--min-heldout-gain", "1"],
+         ("argument --min-heldout-gain", "out of range", "need >= 0 and < 1")),
+        (["measured", "fit", "--out", "m.json", "--min-heldout-gain", "-0.1"],
+         ("argument --min-heldout-gain", "need >= 0 and < 1")),
+        (["measured", "fit", "--out", "m.json", "--min-improved", "1.5"],
+         ("argument --min-improved", "need >= 0 and <= 1")),
+        (["measured", "fit", "--out", "m.json", "--unexplained-threshold", "0"],
+         ("argument --unexplained-threshold", "need > 0")),
+        (["measured", "fit", "--out", "m.json", "--unexplained-rule", "vibes"],
+         ("argument --unexplained-rule", "invalid choice")),
+        (["measured", "trials", "--min-improved", "nan"],
+         ("argument --min-improved", "not finite")),
         (["reproduce", "--workers", "x"], ("argument --workers", "'x' is not a whole number")),
     ],
 )  # fmt: skip
@@ -302,13 +314,15 @@ def test_model_duplicate_and_deep(capsys, tmp_path):
 
 
 def test_model_without_plant_defaults_like_fit(tmp_path):
-    """A model file without ``plant`` is evaluated with the nonlinear plant, the default
-    of ``measured fit --plant`` (it was the linear one), and says so."""
+    """A model file without ``plant`` is evaluated with the nonlinear plant, the plant
+    ``measured fit`` used before it recorded one (its default is now ``auto``, which writes
+    the plant it chose), and says so."""
     import inspect
 
     from bikeid.experiments.measured_study import DEFAULT_PLANT, fit_model, model_from_json
 
-    assert inspect.signature(fit_model).parameters["plant"].default == DEFAULT_PLANT
+    assert inspect.signature(fit_model).parameters["plant"].default == "auto"
+    assert DEFAULT_PLANT == "nonlinear"
     model = tmp_path / "m.json"
     model.write_text(json.dumps({"effects": {"steer_viscous_damping": 0.4}}))
     _, obj = model_from_json(model)
