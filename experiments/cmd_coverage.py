@@ -54,8 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument(
         "--critical", action="store_true",
-        help="instead: v_w and v_c intervals of speed-parameterized fits over runs at 2-8 m/s "
-        "(default 100 seeds would take ~6 min; --speed is then ignored)",
+        help="instead: v_w and v_c intervals of speed-parameterized fits over runs at 2, 3, "
+        "..., 8 m/s (~3 s of CPU per seed: 100 seeds ~5 min; --speed and --controller are "
+        "then ignored)",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
     p.set_defaults(func=cmd_coverage)
