@@ -76,10 +76,10 @@ from .pem import (
     _initial_k,
     _kernel,
     _lm,
-    _out_matrix,
     _Problem,
     _run_data,
     _single_threaded_blas,
+    output_matrix,
 )
 from .signals import check_sampling
 
@@ -848,7 +848,7 @@ def fit(
         raise InputError(f"noise_model {noise_model!r}: choose 'free' or 'none'")
     outputs = tuple(outputs)
     try:
-        C, _ = _out_matrix(outputs)
+        C, _ = output_matrix(outputs)
         data = _run_data(runs, outputs)
     except ValueError as exc:
         raise InputError(str(exc)) from None

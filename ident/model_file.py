@@ -583,11 +583,11 @@ class _Reader:
 
     def outputs(self, obj: dict, prefix: str) -> tuple[str, ...]:
         """The ``outputs`` field: measured states the canonical predictor accepts."""
-        from .pem import _out_matrix
+        from .pem import output_matrix
 
         outputs = self.texts(obj, "outputs", prefix)
         try:
-            _out_matrix(outputs)
+            output_matrix(outputs)
         except ValueError as exc:
             raise self.fail(prefix + "outputs", str(exc)) from None
         return outputs

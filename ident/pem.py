@@ -82,6 +82,7 @@ __all__ = [
     "SUBSPACE_STARTS",
     "fit",
     "fit_speed_model",
+    "output_matrix",
     "subspace_start",
 ]
 
@@ -173,7 +174,27 @@ def _discretize(theta: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return Ad, Bd[:, 0]
 
 
-def _out_matrix(outputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+def output_matrix(outputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Output matrix C (y = C x) of the measured canonical states.
+
+    Parameters
+    ----------
+    outputs : sequence of str
+        Measured states in order, from ("phi", "delta", "phidot", "deltadot"); must
+        include phi and delta, without repeats.
+
+    Returns
+    -------
+    C : (L, 4) ndarray
+        Rows of the identity picking each output from x = [phi, delta, phidot, deltadot].
+    idx : (L,) int64 ndarray
+        The state index of each output.
+
+    Raises
+    ------
+    ValueError
+        If an output is unknown or repeated, or phi or delta is missing.
+    """
     bad = [o for o in outputs if o not in CANONICAL_STATE]
     if bad or len(set(outputs)) != len(outputs) or not {"phi", "delta"} <= set(outputs):
         raise ValueError(
@@ -282,7 +303,7 @@ class CanonicalModel:
     @property
     def C(self) -> np.ndarray:
         """(L, 4) ndarray: 0/1 output matrix selecting ``outputs`` from the canonical state."""
-        return _out_matrix(self.outputs)[0]
+        return output_matrix(self.outputs)[0]
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -543,7 +564,7 @@ class _Problem:
 
     def __init__(self, data, mapping, Ks, free_k, weights, outputs):
         self.data, self.mapping, self.Ks, self.free_k = data, mapping, Ks, free_k
-        self.C, self.idx = _out_matrix(outputs)
+        self.C, self.idx = output_matrix(outputs)
         self.L = len(outputs)
         self.w = np.asarray(weights, float)
         self._x, self._r, self._J, self.x0s = None, None, None, []
@@ -910,7 +931,7 @@ def fit(
     if noise_model not in ("free", "none"):
         raise ValueError(f"noise_model {noise_model!r}: choose 'free' or 'none'")
     outputs = tuple(outputs)
-    C, _ = _out_matrix(outputs)
+    C, _ = output_matrix(outputs)
     data = _run_data(runs, outputs)
     dts = {round(d.dt, 12) for d in data}
     if len(dts) > 1:
@@ -1044,7 +1065,7 @@ def fit_speed_model(
     data = _run_data(runs, outputs)
     mapping = [speed_map(d.v) for d in data]
     Ks = [per[round(r.speed, 6)].K for r in runs]
-    C = _out_matrix(outputs)[0]
+    C = output_matrix(outputs)[0]
     for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
         Ad, Bd = _discretize(mapping[i] @ params, d.dt)
         if not np.max(np.abs(np.linalg.eigvals(Ad - Ks[i] @ C))) < 1.0:

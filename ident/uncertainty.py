@@ -53,11 +53,11 @@ import numpy as np
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import (
     CanonicalMatrices,
-    _const_term,
-    _grid_coeffs,
-    _hurwitz3,
+    constant_term,
     critical_speeds,
+    hurwitz3,
     match_eigenvalues,
+    quartic_coefficients,
 )
 
 from .canonical import A_POS, B_POS, canonical_ab, matrices_from_speed_params, speed_map
@@ -589,7 +589,7 @@ def _h(params: np.ndarray, g: float, v: float, func) -> complex:
     p = np.asarray(params)
     al, be, ga = (p[i : i + 4].reshape(2, 2) for i in (0, 4, 8))
     cm = CanonicalMatrices(M=np.eye(2), C1=-ga, K0=-al / g, K2=-be, g=g)
-    return complex(func(*_grid_coeffs(cm, [v]))[0])
+    return complex(func(*quartic_coefficients(cm, [v]))[0])
 
 
 def _critical_gradient(p: np.ndarray, g: float, v0: float, func, name: str) -> np.ndarray:
@@ -654,7 +654,7 @@ def critical_speed_intervals(
     g = float(model.g)
     crit = critical_speeds(matrices_from_speed_params(p, g), vmax)
     out: dict[str, Any] = {"method": method}
-    for name, func in (("v_w", _hurwitz3), ("v_c", _const_term)):
+    for name, func in (("v_w", hurwitz3), ("v_c", constant_term)):
         v0 = crit[name]
         if v0 is None:
             out[name], out[f"std_{name}"], out[f"gradient_{name}"] = None, None, None
@@ -845,9 +845,9 @@ def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) 
     z = z_value(level)
     w = _check_frequencies(frequencies)
     p, cov, S, _ = _parameters(model, v)
-    from .pem import _out_matrix
+    from .pem import output_matrix
 
-    C = _out_matrix(model.outputs)[0]
+    C = output_matrix(model.outputs)[0]
     G, dG = _frequency_response(S @ p, C, w)
     rel = (dG / G[:, :, None]) @ S  # d ln G / dp  (L, F, P)
     out = []
@@ -981,10 +981,10 @@ def monte_carlo(
         ev[k] = match_eigenvalues(np.linalg.eigvals(canonical_ab(S @ pk)[0]), nominal)
     mag = phase = None
     if frequencies is not None:
-        from .pem import _out_matrix
+        from .pem import output_matrix
 
         w = _check_frequencies(frequencies)
-        C = _out_matrix(model.outputs)[0]
+        C = output_matrix(model.outputs)[0]
         G0, _ = _frequency_response(S @ p, C, w)
         ph0 = np.degrees(np.unwrap(np.angle(G0), axis=1))
         G = _resp(P @ S.T, C, w)  # (D, L, F)

@@ -35,11 +35,14 @@ __all__ = [
     "CanonicalMatrices",
     "EigenSweep",
     "canonical_matrices",
+    "constant_term",
     "critical_speeds",
     "eigenvalues",
     "eigenvalues_vs_speed",
+    "hurwitz3",
     "lateral_force_vector",
     "match_eigenvalues",
+    "quartic_coefficients",
     "state_matrices",
     "state_space",
     "transfer_function",
@@ -582,10 +585,26 @@ def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> Ei
 
 
 # -- critical speeds -----------------------------------------------------------------------
-def _grid_coeffs(cm: CanonicalMatrices, v: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(a, b, c, d, e) of the quartic det(M s^2 + v C1 s + g K0 + v^2 K2) at every speed of
-    ``v`` at once (the determinant expanded by hand); the grid scan and the bisection of
-    :func:`_roots` both use it, so they see one function."""
+def quartic_coefficients(cm: CanonicalMatrices, v: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Coefficients of the characteristic quartic at every speed of ``v`` at once.
+
+    The determinant det(M s^2 + v C1 s + g K0 + v^2 K2) = a s^4 + b s^3 + c s^2 + d s + e
+    is expanded by hand; the grid scan and the bisection of :func:`_roots` (and the
+    implicit derivatives of ``ident.uncertainty``) all use it, so they see one function.
+
+    Parameters
+    ----------
+    cm : CanonicalMatrices
+        The bicycle (M, C1, K0, K2, g; complex entries allowed, for complex-step
+        derivatives).
+    v : (n,) array_like
+        Speeds [m/s].
+
+    Returns
+    -------
+    a, b, c, d, e : (n,) ndarray
+        The quartic's coefficients at each speed (units of M^2 [kg^2 m^4] times 1/s^k).
+    """
     v = np.asarray(v, dtype=float)[:, None, None]
     K = cm.g * cm.K0 + v**2 * cm.K2
     C = v * cm.C1
@@ -613,12 +632,35 @@ def _discriminant(a, b, c, d, e):
     )  # fmt: skip
 
 
-def _hurwitz3(a, b, c, d, e):
-    """b c d - a d^2 - b^2 e: zero exactly when a pair of roots is +-i w."""
+def hurwitz3(a, b, c, d, e):
+    """Third Hurwitz determinant of the quartic (its zero defines v_w).
+
+    Parameters
+    ----------
+    a, b, c, d, e : ndarray
+        Quartic coefficients (:func:`quartic_coefficients`).
+
+    Returns
+    -------
+    ndarray
+        b c d - a d^2 - b^2 e: zero exactly when a pair of roots is +-i w.
+    """
     return b * c * d - a * d**2 - b**2 * e
 
 
-def _const_term(a, b, c, d, e):
+def constant_term(a, b, c, d, e):
+    """The quartic's constant term (its zero defines v_c: a root crosses s = 0).
+
+    Parameters
+    ----------
+    a, b, c, d, e : ndarray
+        Quartic coefficients (:func:`quartic_coefficients`).
+
+    Returns
+    -------
+    ndarray
+        e = det(g K0 + v^2 K2).
+    """
     return e
 
 
@@ -631,7 +673,7 @@ def _roots(f, cm: CanonicalMatrices, vmax: float, step: float = 0.01) -> list[fl
     without ``scipy.optimize`` (its import is ~0.4 s of ``bikeid critical-speeds``).
     """
     grid = np.arange(step, vmax + step / 2, step)
-    vals = f(*_grid_coeffs(cm, grid))
+    vals = f(*quartic_coefficients(cm, grid))
     exact = [float(v) for v, fv in zip(grid[:-1], vals[:-1], strict=True) if fv == 0.0]
     k = np.nonzero(vals[:-1] * vals[1:] < 0)[0]
     lo, hi, flo = grid[k], grid[k + 1], vals[k]
@@ -640,14 +682,14 @@ def _roots(f, cm: CanonicalMatrices, vmax: float, step: float = 0.01) -> list[fl
         open_ = (mid > lo) & (mid < hi)
         if not open_.any():
             break
-        fmid = f(*_grid_coeffs(cm, mid))
+        fmid = f(*quartic_coefficients(cm, mid))
         hit = open_ & (fmid == 0.0)
         lo, hi = np.where(hit, mid, lo), np.where(hit, mid, hi)
         right = open_ & ~hit & (np.sign(fmid) == np.sign(flo))  # the zero is in (mid, hi)
         left = open_ & ~hit & ~right
         lo, flo = np.where(right, mid, lo), np.where(right, fmid, flo)
         hi = np.where(left, mid, hi)
-    fhi = f(*_grid_coeffs(cm, hi)) if hi.size else hi
+    fhi = f(*quartic_coefficients(cm, hi)) if hi.size else hi
     best = np.where(np.abs(flo) <= np.abs(fhi), lo, hi)
     return sorted(exact + [float(v) for v in best])
 
@@ -693,11 +735,11 @@ def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0
         and np.abs(eigenvalues(cm, max(v - 1e-4, 0.0)).imag).max() < 1e-6
     ]  # fmt: skip
     w_roots = []
-    for v in _roots(_hurwitz3, cm, vmax):
+    for v in _roots(hurwitz3, cm, vmax):
         ev = eigenvalues(cm, v)
         if np.min(np.abs(ev.real[np.abs(ev.imag) > 1e-9]), initial=np.inf) < 1e-6:
             w_roots.append(v)
-    c_roots = _roots(_const_term, cm, vmax)
+    c_roots = _roots(constant_term, cm, vmax)
     out: dict = {
         "v_d": d_roots[0] if d_roots else None,
         "v_w": w_roots[0] if w_roots else None,

@@ -87,14 +87,14 @@ def test_critical_speeds_bisection_matches_brentq():
 
     for name in ("benchmark", "steer-by-wire", "Fisher"):
         cm = linear.canonical_matrices(by_name(name))
-        for f in (linear._discriminant, linear._hurwitz3, linear._const_term):
+        for f in (linear._discriminant, linear.hurwitz3, linear.constant_term):
             got = linear._roots(f, cm, 30.0)
             grid = np.arange(0.01, 30.0 + 0.005, 0.01)
-            vals = f(*linear._grid_coeffs(cm, grid))
+            vals = f(*linear.quartic_coefficients(cm, grid))
             ks = np.nonzero(vals[:-1] * vals[1:] < 0)[0]
             ref = [
                 brentq(
-                    lambda v, f=f, cm=cm: float(f(*linear._grid_coeffs(cm, [v]))[0]),
+                    lambda v, f=f, cm=cm: float(f(*linear.quartic_coefficients(cm, [v]))[0]),
                     grid[k],
                     grid[k + 1],
                     xtol=1e-15,
