@@ -525,6 +525,13 @@ def generate_windows(trial: BlindTrial, speeds, per_speed: int, seed: int, label
     return out
 
 
+def _kind(effect: str) -> str:
+    """The class of a hidden effect: "none", "library" or "outside"."""
+    if effect == "none":
+        return "none"
+    return "library" if EFFECTS[effect].in_library else "outside"
+
+
 def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) -> dict:
     """What a user suffers in one trial (module docstring).
 
@@ -544,10 +551,11 @@ def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) ->
         ``right_first`` (library), ``misattributed`` (outside), ``false_positive`` (none).
     """
     accepted = list(estimates)
-    if trial.effect == "none":
+    kind = _kind(trial.effect)
+    if kind == "none":
         return {"kind": "none", "extras": len(accepted), "false_positive": bool(accepted)}
     es = EFFECTS[trial.effect]
-    if not es.in_library:
+    if kind == "outside":
         return {"kind": "outside", "extras": len(accepted),
                 "misattributed": bool(verdict and verdict[0] != "unexplained")}  # fmt: skip
     first = bool(verdict and verdict[0] == trial.effect)
@@ -659,9 +667,7 @@ def nominal_comparison(trial: BlindTrial) -> dict:
 
     fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
     c = compare_nominal_plants(ExperimentModel(), fit)
-    kind = ("none" if trial.effect == "none" else
-            "library" if EFFECTS[trial.effect].in_library else "outside")  # fmt: skip
-    return {"index": trial.index, "effect": trial.effect, "kind": kind,
+    return {"index": trial.index, "effect": trial.effect, "kind": _kind(trial.effect),
             "plant": trial.nuisance.plant, "linear": c["linear"], "nonlinear": c["nonlinear"],
             "ratio": c["ratio"]}  # fmt: skip
 

@@ -80,6 +80,8 @@ def cmd_coverage(args: argparse.Namespace) -> int:
             covariance_scale=args.covariance_scale,
         )  # fmt: skip
     if result.n < 2:
-        raise ValueError(f"only {result.n} of {args.seeds} fits succeeded; see --json")
+        why = f" (seed {result.failed[0][0]}: {result.failed[0][1]})" if result.failed else ""
+        raise ValueError(f"only {result.n} of {args.seeds} fits succeeded{why}; give the fits "
+                         "more information (longer --duration, larger --dither)")  # fmt: skip
     print(dump_json(result.to_json()) if args.json else table_text(result), file=sys.stdout)
     return 0

@@ -257,6 +257,18 @@ def _mode_targets(p, speed: float) -> tuple[list[complex], list[str]]:
     ]
 
 
+def _check_settings(seeds: int, covariance_scale: float, level: float) -> None:
+    """The checks both harnesses share (InputError naming the bad value)."""
+    from bikeid.ident.uncertainty import z_value
+    from bikeid.sim.errors import InputError
+
+    if int(seeds) != seeds or seeds < 2:
+        raise InputError(f"seeds={seeds}: need at least 2 runs")
+    if not (math.isfinite(covariance_scale) and covariance_scale > 0):
+        raise InputError(f"covariance_scale={covariance_scale}: need a positive factor")
+    z_value(level)
+
+
 def _closed_loop_run(p, settings: dict[str, Any], speed: float, seed: int):
     """One run of the linear closed loop of ``settings`` at ``speed`` [m/s]."""
     from bikeid.controllers.registry import make
@@ -362,16 +374,10 @@ def run_coverage(
         speed without the three modes.
     """
     from bikeid.ident.canonical import theta_from_matrices
-    from bikeid.ident.uncertainty import z_value
-    from bikeid.sim.errors import InputError
     from bikeid.sim.linear import canonical_matrices
     from bikeid.sim.parameters import benchmark
 
-    if int(seeds) != seeds or seeds < 2:
-        raise InputError(f"seeds={seeds}: need at least 2 runs")
-    if not (math.isfinite(covariance_scale) and covariance_scale > 0):
-        raise InputError(f"covariance_scale={covariance_scale}: need a positive factor")
-    z_value(level)
+    _check_settings(seeds, covariance_scale, level)
     p = benchmark()
     targets, _ = _mode_targets(p, speed)
     theta_true = theta_from_matrices(canonical_matrices(p), speed)
@@ -456,19 +462,15 @@ def run_critical_coverage(
         ``covariance_scale`` or a bad ``level``.
     """
     from bikeid.ident import pem
-    from bikeid.ident.uncertainty import critical_speed_intervals, z_value
+    from bikeid.ident.uncertainty import critical_speed_intervals
     from bikeid.sim.errors import InputError
     from bikeid.sim.linear import canonical_matrices, critical_speeds
     from bikeid.sim.parameters import benchmark
 
     sp = tuple(float(v) for v in speeds)
-    if int(seeds) != seeds or seeds < 2:
-        raise InputError(f"seeds={seeds}: need at least 2 runs")
+    _check_settings(seeds, covariance_scale, level)
     if len(set(sp)) < 2 or not all(1.0 <= v <= 15.0 for v in sp):
         raise InputError(f"speeds={sp}: need at least 2 distinct speeds within 1-15 m/s")
-    if not (math.isfinite(covariance_scale) and covariance_scale > 0):
-        raise InputError(f"covariance_scale={covariance_scale}: need a positive factor")
-    z_value(level)
     p = benchmark()
     truth = critical_speeds(canonical_matrices(p), vmax)
     settings = {**{k: v for k, v in DEFAULTS.items() if k != "speed"},

@@ -972,9 +972,7 @@ def monte_carlo(
     p, cov, S, speed = _parameters(model, v)
     if critical and not hasattr(model, "per_speed"):
         raise InputError("critical=True needs a speed-parameterized model (fit_speed_model)")
-    evals, evecs = np.linalg.eigh(cov)
-    root = evecs * np.sqrt(np.maximum(evals, 0.0))
-    P = p[None, :] + rng.standard_normal((int(draws), p.size)) @ root.T
+    P = p[None, :] + rng.standard_normal((int(draws), p.size)) @ _sqrt_cov(cov).T
     nominal = np.sort_complex(np.linalg.eigvals(canonical_ab(S @ p)[0]).astype(complex))
     ev = np.empty((P.shape[0], 4), dtype=complex)
     for k, pk in enumerate(P):

@@ -122,7 +122,7 @@ def test_profile_keeps_coverage_where_first_order_fails(fitted):
     fits): the profile intervals of the weave and capsize real parts contain the exact
     benchmark eigenvalues in a count inside the 99.9 % binomial acceptance region of
     Bin(400, 0.95), while the symmetric first-order intervals fall below it (their
-    coverage here is ~0.89-0.91, docs/uncertainty.md)."""
+    coverage here is ~0.91, benchmarks/bench_interval_curvature.py)."""
     theta = theta_from_matrices(canonical_matrices(benchmark()), SPEED)
     truth = eigenvalues(benchmark(), SPEED)
     L = np.linalg.cholesky(fitted.covariance)
@@ -179,3 +179,26 @@ def test_critical_speed_interval_is_open_exactly_when_the_ellipsoid_loses_the_sp
         assert missing == 0 and not ci.open_v_c and 0 < lo < ci.v_c < hi < vmax
     else:
         assert missing > 0 and ci.open_v_c and (lo == 0.0 or hi == vmax)
+
+
+def test_capsize_constant_is_the_quartics_constant_term():
+    """The test inversion's det(alpha + v^2 beta) and its analytic gradient against a second
+    route: ``sim.linear.quartic_coefficients``' e (the determinant expanded there) on the
+    same parameters, and complex-step derivatives of it (exact to rounding), at 3 speeds
+    and a random perturbation of the benchmark's speed parameters; 1e-12 relative is
+    rounding of terms of size ~1e3."""
+    from bikeid.ident.canonical import speed_params_from_matrices
+    from bikeid.ident.uncertainty import _capsize_constant, _h
+    from bikeid.sim.linear import constant_term
+
+    p0 = speed_params_from_matrices(canonical_matrices(benchmark()))
+    p = p0 * (1 + 0.1 * np.random.default_rng(4).standard_normal(p0.size))
+    for v in (2.0, 6.0, 11.0):
+        q, grad, _ = _capsize_constant(v * v)(p, None)
+        assert q == pytest.approx(_h(p, 9.81, v, constant_term).real, rel=1e-12)
+        cs = np.empty(p.size)
+        for j in range(p.size):
+            pc = p.astype(complex)
+            pc[j] += 1e-30j
+            cs[j] = _h(pc, 9.81, v, constant_term).imag / 1e-30
+        np.testing.assert_allclose(grad, cs, rtol=1e-12, atol=1e-12 * np.abs(cs).max())
