@@ -3,8 +3,8 @@
     python benchmarks/bench_blind_trials.py [--n 90 | --per-class none=24,outside=24]
         [--seed 0] [--processes 2] [--plant auto|nonlinear|linear] [--log blind.jsonl]
         [--resume blind.jsonl] [--min-heldout-gain G] [--min-improved F]
-        [--unexplained-rule floor|coloured|residual] [--unexplained-threshold X] [--tradeoff]
-        [--nominal-only]
+        [--unexplained-rule floor|coloured|residual] [--unexplained-threshold X]
+        [--nominal-uncertainty default|none|inertia=F,trail=M] [--tradeoff] [--nominal-only]
 
 Draws ``n`` trials of :mod:`bikeid.experiments.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
@@ -43,6 +43,7 @@ from bikeid.experiments.blind_trials import (
     summarize_blind,
 )
 from bikeid.experiments.cliutil import dump_json, to_jsonable
+from bikeid.experiments.cmd_measured import acceptance_kw, add_acceptance_options
 from bikeid.ident.effect_selection import LINEAR_PLANT_MARGIN
 
 
@@ -84,30 +85,7 @@ def main() -> None:
         help="no selection: the nominal cost ratio of each trial and its range per truth "
         "plant and class (calibration of the plant margin)",
     )
-    ap.add_argument(
-        "--min-heldout-gain",
-        type=float,
-        default=None,
-        help="least held-out cost reduction to accept an effect (select_effects)",
-    )
-    ap.add_argument(
-        "--min-improved",
-        type=float,
-        default=0.0,
-        help="least fraction of held-out decays an effect must improve (select_effects)",
-    )
-    ap.add_argument(
-        "--unexplained-rule",
-        choices=("floor", "coloured", "residual"),
-        default="floor",
-        help="how 'unexplained' is decided (select_effects)",
-    )
-    ap.add_argument(
-        "--unexplained-threshold",
-        type=float,
-        default=None,
-        help="threshold of that rule (select_effects)",
-    )
+    add_acceptance_options(ap)  # the options of bikeid measured fit, same defaults
     ap.add_argument(
         "--tradeoff",
         action="store_true",
@@ -139,10 +117,7 @@ def main() -> None:
     t0 = time.perf_counter()
     job = partial(
         run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
-        plant_margin=args.plant_margin,
-        min_heldout_gain=args.min_heldout_gain, min_improved=args.min_improved,
-        unexplained_rule=args.unexplained_rule,
-        unexplained_threshold=args.unexplained_threshold,
+        plant_margin=args.plant_margin, **acceptance_kw(args),
     )  # fmt: skip
     with ProcessPoolExecutor(max_workers=args.processes) as pool:
         for r in pool.map(job, trials):
@@ -165,7 +140,8 @@ def main() -> None:
         f"min held-out gain "
         f"{args.min_heldout_gain}, min improved {args.min_improved}, unexplained rule "
         f"{args.unexplained_rule} "
-        f"{args.unexplained_threshold}"
+        f"{args.unexplained_threshold}, nominal uncertainty "
+        f"{to_jsonable(args.nominal_uncertainty)}"
     )
     print(_fmt("right effect first, value in band", s["right_first"]))
     print(_fmt("library trials with extra effects", s["with_extras"]))

@@ -264,7 +264,8 @@ def mapping_arg(option: str) -> Callable[[str], dict[str, str]]:
 def to_jsonable(obj: Any) -> Any:
     """numpy arrays, complex numbers and nested containers to plain JSON types.
 
-    Complex numbers become ``{"re": x, "im": y}``; NaN/inf become ``null``.
+    Complex numbers become ``{"re": x, "im": y}``; NaN/inf become ``null``; an object with
+    an ``as_dict`` method becomes that dict.
     """
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
@@ -280,6 +281,8 @@ def to_jsonable(obj: Any) -> Any:
         return int(obj)
     if isinstance(obj, np.bool_):
         return bool(obj)
+    if callable(getattr(obj, "as_dict", None)):  # e.g. NominalUncertainty
+        return to_jsonable(obj.as_dict())
     return obj
 
 

@@ -68,13 +68,32 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
         help="threshold of that rule, > 0 (default 0.9 for floor and coloured, 2.0 for "
         "residual)",
     )
+    p.add_argument(
+        "--nominal-uncertainty",
+        type=_uncertainty,
+        default="default",
+        metavar="U",
+        help="half-widths within which the stated bicycle parameters are calibrated before "
+        "any effect is tried: 'default' (inertia=0.05,trail=0.002: each body's inertia "
+        "tensor +-5 %%, trail +-2 mm), 'none' (take them as exact) or inertia=F,trail=M",
+    )
+
+
+def _uncertainty(text: str):
+    from bikeid.ident.nominal_uncertainty import NominalUncertainty  # not at start-up
+
+    try:
+        return NominalUncertainty.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def acceptance_kw(args: argparse.Namespace) -> dict:
     """The ``select_effects`` keywords of :func:`add_acceptance_options`' options."""
     return {"min_heldout_gain": args.min_heldout_gain, "min_improved": args.min_improved,
             "unexplained_rule": args.unexplained_rule,
-            "unexplained_threshold": args.unexplained_threshold}  # fmt: skip
+            "unexplained_threshold": args.unexplained_threshold,
+            "nominal_uncertainty": args.nominal_uncertainty}  # fmt: skip
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -243,7 +262,7 @@ def cmd_fit(args) -> int:
     out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, **kw)
     out["decays"] = args.decays
     settings = {"max_effects": args.max_effects, "stability": args.stability,
-                "weave_weight": ww, "speeds": _speeds(args.speeds), **kw}  # fmt: skip
+                "weave_weight": ww, "speeds": _speeds(args.speeds), **to_jsonable(kw)}  # fmt: skip
     save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
     ch = out["plant_choice"]
     print(f"nominal plant: {out['plant']} ({ch['reason']})")

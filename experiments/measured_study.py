@@ -30,6 +30,7 @@ from bikeid.ident.effect_selection import (
 from bikeid.ident.experiment_model import ExperimentModel
 from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
+from bikeid.sim.parameters import from_mapping
 from bikeid.sim.textformats import loads_json
 
 from .cliutil import MAX_SPEED
@@ -59,6 +60,18 @@ MAX_MODEL_BYTES = 20_000_000
 
 def _is_number(v: object) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _experiment_model(obj: dict, where: str = "model object") -> ExperimentModel:
+    """The experiment model of a model object: its ``effects`` on its ``parameters`` (the
+    bicycle the fit calibrated within its uncertainty) or, without them, the stated
+    steer-by-wire bicycle.  A ValueError names ``where`` and the bad field."""
+    params = obj.get("parameters")
+    try:
+        p = None if params is None else from_mapping(params, name="steer-by-wire (calibrated)")
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{where}: 'parameters': {exc}") from None
+    return ExperimentModel(effects=dict(obj["effects"]), **({} if p is None else {"p": p}))
 
 
 def save_fit(
@@ -97,9 +110,9 @@ def save_fit(
     settings = {"command": "bikeid measured fit", "plant": obj["plant"], **(settings or {})}
     if "decays" in obj:
         settings["decays"] = obj["decays"]
-    skip = {"effects", "plant", "fit_speeds", "decays"}
+    skip = {"effects", "plant", "fit_speeds", "decays", "parameters"}
     results = to_jsonable({k: v for k, v in obj.items() if k not in skip})
-    model = ExperimentModel(effects=dict(obj["effects"]))
+    model = _experiment_model(obj)
     return save_model(model, path, provenance=provenance, settings=settings, results=results,
                       speeds=obj["fit_speeds"])  # fmt: skip
 
@@ -114,7 +127,8 @@ def _from_model_file(text: str, where: str) -> dict:
             f"{where} holds a {mf.kind} model (bikeid identify); the measured commands need "
             "the MODEL.json written by 'bikeid measured fit'"
         )
-    obj = {**mf.results, "effects": dict(mf.model.effects), "fit_speeds": list(mf.speeds or [])}
+    obj = {**mf.results, "effects": dict(mf.model.effects), "fit_speeds": list(mf.speeds or []),
+           "parameters": mf.model.p.as_dict()}  # fmt: skip
     if "plant" in mf.settings:
         obj["plant"] = mf.settings["plant"]
     if "decays" in mf.settings:
@@ -137,7 +151,9 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
     Returns
     -------
     model : ExperimentModel
-        The nominal experiment with the file's effects.
+        The experiment with the file's effects, on the file's bicycle parameters (those the
+        fit calibrated within their uncertainty; the stated steer-by-wire bicycle when the
+        file has none).
     obj : dict
         The model object (the plain layout; for a model file its results with
         ``effects``, ``plant`` and ``fit_speeds``); ``plant`` is filled in with
@@ -209,7 +225,7 @@ def model_from_json(path: str | Path) -> tuple[ExperimentModel, dict]:
             "'effects' a list of objects with a 'name'); delete the key or refit"
         )
     try:
-        return ExperimentModel(effects=dict(effects)), obj
+        return _experiment_model(obj, where), obj
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None
 
@@ -254,7 +270,9 @@ def fit_model(
     Returns
     -------
     dict
-        Effects (registry units), fit speeds [m/s], files, windows, the identification, the
+        Effects (registry units), the bicycle parameters of the fitted model
+        (``parameters``, SI: the stated ones moved within ``nominal_uncertainty``), fit
+        speeds [m/s], files, windows, the identification, the
         nominal plant used (``plant``), why (``plant_choice``: the plant asked for, the one
         ``auto`` takes, the cost ratio nonlinear / linear, the margin and a sentence) and both
         nominal fits
@@ -292,6 +310,7 @@ def fit_model(
     )  # fmt: skip
     return {
         "bicycle": "steer-by-wire",
+        "parameters": res.model.p.as_dict(),
         "plant": plant,
         "plant_choice": choice,
         "effects": {e.name: float(e.value) for e in res.effects},
@@ -327,7 +346,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
     """
     from bikeid.ident.validation_report import validate_decays
 
-    aug = ExperimentModel(effects=dict(model_obj["effects"]))
+    aug = _experiment_model(model_obj)
     plant = model_obj.get("plant", DEFAULT_PLANT)  # as model_from_json and measured fit
     replay = bool(windows) and all(w.drive == "logged" for w in windows)
     note = None

@@ -11,7 +11,7 @@ clustered by window (:func:`effect_std`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -19,6 +19,7 @@ from scipy.optimize import least_squares
 from bikeid.dataset.windows import Window
 from bikeid.ident.effect_library import LIBRARY, Candidate
 from bikeid.ident.experiment_model import ExperimentModel, attach_nonlinear_correction
+from bikeid.ident.nominal_uncertainty import Calibration
 from bikeid.ident.weave import WeaveTerm
 
 __all__ = [
@@ -250,12 +251,16 @@ class FitResult:
         Window-clustered standard error of each value (same unit).
     cost : float
         Final sum of squared normalized residuals (dimensionless).
+    calibration : Calibration or None
+        The nominal parameters' offsets fitted with the effects (``calibration=`` of
+        :func:`fit_effects`), None when they were not fitted.
     """
 
     model: ExperimentModel
     values: dict[str, float]
     std: dict[str, float]
     cost: float
+    calibration: Calibration | None = None
 
 
 def fit_effects(
@@ -264,10 +269,14 @@ def fit_effects(
     names: list[str],
     start: dict | None = None,
     weave: WeaveTerm | None = None,
+    calibration: Calibration | None = None,
 ) -> FitResult:
     """Output-error least squares of the named effects (others kept as in ``model``);
     with ``weave``, the weave-eigenvalue residuals are appended (one more cluster for the
-    standard errors) and ``cost`` includes them.
+    standard errors) and ``cost`` includes them; with ``calibration``, the nominal
+    parameters' offsets are fitted too, within their uncertainty's box
+    (:mod:`bikeid.ident.nominal_uncertainty`; the model's parameters become
+    ``calibration``'s at the fitted offsets).
 
     Parameters
     ----------
@@ -282,15 +291,18 @@ def fit_effects(
         Start values by name [effect units] (default: those of ``model``).
     weave : WeaveTerm, optional
         Weave-eigenvalue residuals to append.
+    calibration : Calibration, optional
+        Start offsets of the nominal parameters and their box (bounds +-1 half-width).
 
     Returns
     -------
     FitResult
         Fitted model, values and window-clustered standard errors [effect units], final
-        cost (dimensionless).
+        cost (dimensionless), and the fitted ``calibration`` (when one was given).
     """
     extra = weave is not None and weave.weight > 0 and bool(weave.targets)
-    if not names:
+    ncal = len(calibration.offsets) if calibration is not None else 0
+    if not names and not ncal:
         r = output_residuals(model, windows)
         if extra:
             r = np.concatenate([r, weave.residuals(model)])
@@ -302,12 +314,17 @@ def fit_effects(
     lo = np.array([(c.lower - c.absent) / c.scale if c.lower > -np.inf else -np.inf for c in cands])
     hi = np.array([(c.upper - c.absent) / c.scale if c.upper < np.inf else np.inf for c in cands])
     lo = np.where(np.isfinite(lo), lo, -np.inf)
+    if ncal:  # the nominal offsets, in half-widths, bounded by the box
+        x0 = np.concatenate([x0, np.clip(calibration.offsets, -1 + 1e-9, 1 - 1e-9)])
+        lo, hi = np.concatenate([lo, -np.ones(ncal)]), np.concatenate([hi, np.ones(ncal)])
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+    k = len(cands)
 
     def mk(x):
-        return model.with_effects(
-            **{c.name: c.absent + c.scale * xi for c, xi in zip(cands, x, strict=True)}
+        m = model.with_effects(
+            **{c.name: c.absent + c.scale * xi for c, xi in zip(cands, x[:k], strict=True)}
         )
+        return replace(m, p=calibration.params(x[k:])) if ncal else m
 
     def fun(x):
         m = mk(x)
@@ -323,10 +340,16 @@ def fit_effects(
     sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
     sizes = [2 * w.n for w in windows] + ([2 * len(weave.targets)] if extra else [])
-    std = effect_std(sol.jac, r, sizes)
-    vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x, strict=True)}
-    stds = {c.name: c.scale * si for c, si in zip(cands, std, strict=True)}
-    return FitResult(mk(sol.x), vals, stds, float(r @ r))
+    # an offset on its box's edge is held there (an active bound), not estimated: the
+    # standard errors are those of the effects and of the offsets inside the box
+    free = np.ones(sol.x.size, dtype=bool)
+    free[k:] = np.abs(sol.x[k:]) < 1 - 1e-6
+    std = np.zeros(sol.x.size)
+    std[free] = effect_std(sol.jac[:, free], r, sizes)
+    vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x[:k], strict=True)}
+    stds = {c.name: c.scale * si for c, si in zip(cands, std[:k], strict=True)}
+    cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None
+    return FitResult(mk(sol.x), vals, stds, float(r @ r), cal)
 
 
 def joint_fit(
@@ -336,6 +359,7 @@ def joint_fit(
     start: dict | None = None,
     nonlinear: bool = False,
     weave: WeaveTerm | None = None,
+    calibration: Calibration | None = None,
 ) -> FitResult:
     """Fit the named effects jointly on all windows (and ``weave``, see
     :func:`fit_effects`); with ``nonlinear`` the defect
@@ -345,8 +369,8 @@ def joint_fit(
 
     Parameters
     ----------
-    model, windows, names, start, weave
-        As for :func:`fit_effects`.
+    model, windows, names, start, weave, calibration
+        As for :func:`fit_effects` (the calibration's offsets are refitted each time).
     nonlinear : bool, optional
         Nonlinear plant by defect correction.
 
@@ -357,10 +381,10 @@ def joint_fit(
     """
     if nonlinear and all(w.correction is None for w in windows):
         attach_correction(windows, model, True)
-    res = fit_effects(model, windows, names, start, weave)
-    for _ in range(2 if nonlinear and names else 0):
+    res = fit_effects(model, windows, names, start, weave, calibration)
+    for _ in range(2 if nonlinear and (names or calibration) else 0):
         attach_correction(windows, res.model, True)
-        res = fit_effects(model, windows, names, res.values, weave)
+        res = fit_effects(model, windows, names, res.values, weave, res.calibration)
     return res
 
 

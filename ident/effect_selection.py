@@ -61,6 +61,7 @@ from bikeid.ident.effect_fit import (
 )
 from bikeid.ident.effect_library import LIBRARY, Candidate
 from bikeid.ident.experiment_model import ExperimentModel, window_errors
+from bikeid.ident.nominal_uncertainty import Calibration, NominalUncertainty
 from bikeid.ident.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_targets
 
 __all__ = [
@@ -94,6 +95,14 @@ WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter
 LINEAR_PLANT_MARGIN = 1.2
 
 
+def _t_value(name: str, value: float, sd: float, cal: Calibration | None) -> float:
+    """t of an effect: its distance from absent, or for a parameter correction along a
+    calibrated direction its reach beyond the uncertainty band, over its standard error."""
+    excess = cal.excess(name, value) if cal is not None else None
+    d = abs(value - LIBRARY[name].absent) if excess is None else excess
+    return d / sd if sd > 0 else (np.inf if d > 0 else 0.0)
+
+
 def _scan_start(model, windows, cand: Candidate, base: list[str], start: dict) -> float:
     best, arg = np.inf, cand.grid[0]
     for g in cand.grid:
@@ -121,7 +130,7 @@ class Identification:
         :data:`EXPLAINED_MIN` of the nominal cost above the noise floor.
     cost_nominal : float
         Output-error cost of the nominal model on all windows (dimensionless, a sum of
-        NRMSE^2).
+        NRMSE^2); with ``nominal_uncertainty``, of the nominal calibrated within it.
     cost_final : float
         Same cost of the final model.
     cost_floor : float
@@ -139,7 +148,11 @@ class Identification:
         Why each name of the verdict is there: ``effects`` maps each accepted effect to
         the round it was accepted in, its fit gain, held-out cost ratio and held-out gain
         (1 - ratio), the held-out windows it improved, its held-out weave error before and
-        after, and its t after the joint fit; ``unexplained`` holds the final cost, the noise
+        after, and its t after the joint fit (for a parameter correction along a calibrated
+        direction, t beyond the band); ``nominal_calibration`` (with ``nominal_uncertainty``)
+        the offsets of the fit half and of the final fit, which sit on the band's edge,
+        the held-out cost before and after the calibration and the cost of the stated and
+        the calibrated nominal; ``unexplained`` holds the final cost, the noise
         floors (second differences, coloured, from the final residual), the explained
         fractions, the rule and its threshold, and the verdict it gave.
     """
@@ -195,6 +208,7 @@ def select_effects(
     min_improved: float = 0.0,
     unexplained_rule: str = "floor",
     unexplained_threshold: float | None = None,
+    nominal_uncertainty: NominalUncertainty | None = None,
 ) -> Identification:
     """Greedy forward selection of library effects by output error (module docstring).
 
@@ -250,6 +264,14 @@ def select_effects(
         (default :data:`RESIDUAL_MAX`).
     unexplained_threshold : float, optional
         The rule's threshold (dimensionless).
+    nominal_uncertainty : NominalUncertainty, optional
+        The stated parameters' uncertainty (:mod:`bikeid.ident.nominal_uncertainty`).  When
+        given, the nominal is first calibrated within it on the fit half (bounded least
+        squares of the body inertias and the trail, weave term included), every accepted
+        effect is refitted with the offsets, and the final joint fit moves them too; a
+        library parameter correction along a calibrated direction is tested by its t
+        *beyond* the band (a parameter off by its uncertainty is not an effect).  None
+        (default): the stated parameters are taken as exact.
 
     Returns
     -------
@@ -288,7 +310,7 @@ def select_effects(
         raise ValueError("identification needs at least 2 windows (one is held out)")
     fit_w, val_w = windows[0::2], windows[1::2]
     attach_correction(windows, model, nonlinear)
-    cost0 = fit_effects(model, windows, []).cost  # decay signals only (for "explained")
+    cost0 = cost_stated = fit_effects(model, windows, []).cost  # decay signals ("explained")
     floor = noise_floor(windows)
     lam_all = [decay_eigenvalue(w) for w in windows]  # measured weave of each decay
     lam_val = lam_all[1::2]
@@ -305,7 +327,22 @@ def select_effects(
         wv_fit = WeaveTerm(weave_weight, weave_targets(fit_w, lam_all[0::2])).at(model, fit_w)
         wv_all = replace(unit, weight=weave_weight)  # offsets taken at the final model below
     accepted: list[str] = []
-    cur = model
+    cur, cal, ev_nominal = model, None, None
+    if nominal_uncertainty is not None:  # the nominal within its uncertainty, on the fit half
+        cal0 = Calibration(nominal_uncertainty, model.p)
+        c = joint_fit(model, fit_w, [], None, nonlinear, wv_fit, cal0)
+        cur, cal = c.model, c.calibration
+        held = []
+        for m in (model, cur):  # held-out cost of the stated and the calibrated nominal
+            attach_correction(val_w, m, nonlinear)
+            held.append(fit_effects(m, val_w, []).cost)
+        ev_nominal = {"fit_half": cal.as_dict(), "heldout_cost_stated": held[0],
+                      "heldout_cost_calibrated": held[1],
+                      "heldout_gain": 1 - held[1] / max(held[0], 1e-300)}  # fmt: skip
+        attach_correction(windows, cur, nonlinear)
+        cost0 = fit_effects(cur, windows, []).cost
+        if wv_fit:
+            wv_fit = wv_fit.at(cur, fit_w)
     cur_val = fit_effects(cur, val_w, []).cost
     cur_val_w = np.sum(window_errors(val_w, cur.simulate(val_w)) ** 2, axis=1)
     ev_effects: dict[str, dict] = {}
@@ -328,7 +365,7 @@ def select_effects(
                 start[n] = _scan_start(cur, fit_w, cand, accepted, {})
             res = fit_effects(cur, fit_w, accepted + [n], start, wv_fit)
             v, sd = res.values[n], res.std[n]
-            t = abs(v - cand.absent) / sd if sd > 0 else np.inf
+            t = _t_value(n, v, sd, cal)
             gain = (base_cost - res.cost) / max(base_cost, 1e-300)
             trials.append((gain, n, res, EffectEstimate(n, v, sd, cand.unit, t, gain)))
         trials.sort(key=lambda z: -z[0])
@@ -339,7 +376,7 @@ def select_effects(
                 wv_n = wv_fit.at(res.model, fit_w) if wv_fit else None
                 res = fit_effects(cur, fit_w, accepted + [n], res.values, wv_n)
                 v, sd = res.values[n], res.std[n]
-                t = abs(v - LIBRARY[n].absent) / sd if sd > 0 else np.inf
+                t = _t_value(n, v, sd, cal)
                 gain = (base_cost - res.cost) / max(base_cost, 1e-300)
                 top.append((gain, n, res, EffectEstimate(n, v, sd, LIBRARY[n].unit, t, gain)))
             trials = sorted(top, key=lambda z: -z[0]) + trials[3:]
@@ -380,6 +417,13 @@ def select_effects(
             cur_val, cur_wv, cur_val_w = val, wv, val_wn
             accepted.append(n)
             cur = res.model
+            if cal is not None:  # the offsets move with the accepted effects
+                res = fit_effects(cur, fit_w, accepted, res.values, wv_fit, cal)
+                cur, cal = res.model, res.calibration
+                attach_correction(val_w, cur, nonlinear)
+                sims = cur.simulate(val_w)
+                cur_val_w = np.sum(window_errors(val_w, sims) ** 2, axis=1)
+                cur_val, cur_wv = float(np.sum(cur_val_w)), weave_error(val_w, sims, lam_val)
         rounds.append({"accepted": n if passing else None, "candidates": log})
         attach_correction(windows, cur, nonlinear)
         if not passing:
@@ -390,18 +434,17 @@ def select_effects(
         progress(steps, steps, "joint fit")
     if wv_all:
         wv_all = wv_all.at(cur, windows)
-    final = joint_fit(model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all)
+    final = joint_fit(
+        model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all, cal
+    )
 
     def tval(n):
-        sd = final.std[n]
-        return abs(final.values[n] - LIBRARY[n].absent) / sd if sd > 0 else np.inf
+        return _t_value(n, final.values[n], final.std[n], final.calibration)
 
     while accepted and min(tval(n) for n in accepted) <= T_MIN:  # backward pruning
         accepted.remove(min(accepted, key=tval))
-        final = fit_effects(model, windows, accepted, final.values, wv_all)
-        attach_correction(windows, final.model, nonlinear and bool(accepted))
-        if nonlinear and not accepted:
-            attach_correction(windows, model, True)
+        final = fit_effects(model, windows, accepted, final.values, wv_all, final.calibration)
+        attach_correction(windows, final.model, nonlinear)
     contrib = {}  # increase of the fitted cost (signals + weave term) without the effect
     for n in accepted:
         without = final.model.with_effects(**{n: LIBRARY[n].absent})
@@ -442,6 +485,11 @@ def select_effects(
         "min_heldout_gain": min_val_gain,
         "min_improved": min_improved,
     }  # fmt: skip
+    if final.calibration is not None:
+        evidence["nominal_calibration"] = {
+            **ev_nominal, **final.calibration.as_dict(), "cost_stated": cost_stated,
+            "cost_calibrated": cost0,
+        }  # fmt: skip
     for e in effects:
         e.explained = float(explained)
     return Identification(
