@@ -15,6 +15,7 @@ leave-one-speed-out splits (fit on three speeds).  Each split takes 10-20 s on t
     python benchmarks/measured_speed_splits.py --data ../shared/data
     python benchmarks/measured_speed_splits.py --data ../shared/data --splits "2.5,4.5;1.5,3.5"
     python benchmarks/measured_speed_splits.py --data ../shared/data --plant nonlinear
+    python benchmarks/measured_speed_splits.py --data ../shared/data --nominal-uncertainty none
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import json
 import time
 
 from bikeid.dataset.decays import load_decays
-from bikeid.experiments.cmd_measured import parse_weave_weight
+from bikeid.experiments.cmd_measured import parse_weave_weight, uncertainty_arg
 from bikeid.experiments.measured_study import evaluate_json, fit_model
 
 
@@ -34,12 +35,14 @@ def run_split(
     decays: str = "listed",
     weave_weight="auto",
     plant: str = "auto",
+    nominal_uncertainty="default",
 ) -> dict:
     """Fit on ``fit_speeds``, evaluate on every other speed; the row of the table."""
     t0 = time.perf_counter()
     model = fit_model(
-        load_decays(data, fit_speeds, source=decays), weave_weight=weave_weight, plant=plant
-    )
+        load_decays(data, fit_speeds, source=decays), weave_weight=weave_weight, plant=plant,
+        nominal_uncertainty=nominal_uncertainty,
+    )  # fmt: skip
     ev = evaluate_json(model, load_decays(data, exclude=fit_speeds, source=decays))
     s = ev["summary"]
     return {
@@ -81,12 +84,19 @@ def main(argv=None) -> int:
         default="auto",
         help="nominal plant, as for 'bikeid measured fit' (default auto)",
     )
+    ap.add_argument(
+        "--nominal-uncertainty",
+        default="default",
+        type=uncertainty_arg,
+        metavar="U",
+        help="as for 'bikeid measured fit' (default 'default'; 'none' for the stated bicycle)",
+    )
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args(argv)
     rows = []
     for text in a.splits.split(";"):
         sp = [float(x) for x in text.split(",") if x.strip()]
-        rows.append(run_split(a.data, sp, a.decays, a.weave_weight, a.plant))
+        rows.append(run_split(a.data, sp, a.decays, a.weave_weight, a.plant, a.nominal_uncertainty))
         r = rows[-1]
         if not a.json:
             eff = ", ".join(f"{k} {v:.3g}" for k, v in r["effects"].items()) or "-"

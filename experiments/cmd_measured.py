@@ -65,21 +65,24 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
         type=number(0.0, lo_open=True),
         default=None,
         metavar="X",
-        help="threshold of that rule, > 0 (default 0.9 for floor and coloured, 2.0 for "
-        "residual)",
+        help="threshold of that rule, > 0 (default 0.9 for floor and coloured, 2.0 for residual)",
     )
     p.add_argument(
         "--nominal-uncertainty",
-        type=_uncertainty,
+        type=uncertainty_arg,
         default="default",
         metavar="U",
-        help="half-widths within which the stated bicycle parameters are calibrated before "
-        "any effect is tried: 'default' (inertia=0.05,trail=0.002: each body's inertia "
-        "tensor +-5 %%, trail +-2 mm), 'none' (take them as exact) or inertia=F,trail=M",
+        help="the stated bicycle's uncertainty: its inertias and trail are calibrated within "
+        "it before any effect is tried, and a parameter or instrument offset within it is "
+        "not reported as an effect. 'default': each body's inertia tensor +-5 %%, trail "
+        "+-2 mm, gyro offset +-0.01 rad/s, roll angle +-0.005 rad, steer encoder zero "
+        "+-0.002 rad; 'none': take the bicycle as exact; or "
+        "inertia=F,trail=M,roll_rate_bias=B,roll_angle_bias=B,steer_angle_bias=B",
     )
 
 
-def _uncertainty(text: str):
+def uncertainty_arg(text: str):
+    """``--nominal-uncertainty``'s argparse type (a usage error names the accepted forms)."""
     from bikeid.ident.nominal_uncertainty import NominalUncertainty  # not at start-up
 
     try:

@@ -28,6 +28,7 @@ from bikeid.ident.effect_selection import (
     selection_frequencies,
 )
 from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.nominal_uncertainty import NominalUncertainty
 from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
 from bikeid.sim.parameters import from_mapping
@@ -237,6 +238,7 @@ def fit_model(
     stability: int = 0,
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
+    nominal_uncertainty: NominalUncertainty | str | None = "default",
     **select_kw,
 ) -> dict:
     """Select effects on ``windows`` and return the model object ``measured fit`` writes.
@@ -262,6 +264,10 @@ def fit_model(
     progress : callable, optional
         ``progress(done, total, label)`` through the subsamples, then the candidate fits
         (:mod:`bikeid.experiments.progress`).
+    nominal_uncertainty : NominalUncertainty, str or None, optional
+        The stated bicycle's uncertainty (:mod:`bikeid.ident.nominal_uncertainty`; text as
+        :meth:`~bikeid.ident.nominal_uncertainty.NominalUncertainty.parse`); default
+        ``"default"``, as ``measured fit``; None takes the bicycle as exact.
     **select_kw
         Acceptance options of :func:`bikeid.ident.effect_selection.select_effects`
         (``min_heldout_gain``, ``min_improved``, ``unexplained_rule``,
@@ -287,6 +293,9 @@ def fit_model(
     """
     if plant not in PLANT_CHOICES:
         raise ValueError(f"plant must be one of {', '.join(PLANT_CHOICES)}, got {plant!r}")
+    if isinstance(nominal_uncertainty, str):
+        nominal_uncertainty = NominalUncertainty.parse(nominal_uncertainty)
+    select_kw["nominal_uncertainty"] = nominal_uncertainty
     nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
     auto = choose_nominal_plant(nominal_fit)
     choice = {"asked": plant, **auto, "auto": auto["plant"]}

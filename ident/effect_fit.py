@@ -297,8 +297,9 @@ def fit_effects(
     Returns
     -------
     FitResult
-        Fitted model, values and window-clustered standard errors [effect units], final
-        cost (dimensionless), and the fitted ``calibration`` (when one was given).
+        Fitted model, values and window-clustered standard errors [effect units; infinite
+        for a value held on its bound], final cost (dimensionless), and the fitted
+        ``calibration`` (when one was given).
     """
     extra = weave is not None and weave.weight > 0 and bool(weave.targets)
     ncal = len(calibration.offsets) if calibration is not None else 0
@@ -340,12 +341,14 @@ def fit_effects(
     sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
     sizes = [2 * w.n for w in windows] + ([2 * len(weave.targets)] if extra else [])
-    # an offset on its box's edge is held there (an active bound), not estimated: the
-    # standard errors are those of the effects and of the offsets inside the box
-    free = np.ones(sol.x.size, dtype=bool)
-    free[k:] = np.abs(sol.x[k:]) < 1 - 1e-6
-    std = np.zeros(sol.x.size)
-    std[free] = effect_std(sol.jac[:, free], r, sizes)
+    # a value on its bound (an active constraint: an effect at a plausibility bound or at
+    # absent = bound, an offset on its box's edge) is held there, not estimated: the
+    # standard errors are those of the values inside their bounds; an effect on its bound
+    # gets an infinite one (t = 0: no evidence), an offset on the edge 0 (fixed)
+    free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)
+    std = np.where(np.arange(sol.x.size) < k, np.inf, 0.0)
+    if free.any():
+        std[free] = effect_std(sol.jac[:, free], r, sizes)
     vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x[:k], strict=True)}
     stds = {c.name: c.scale * si for c, si in zip(cands, std[:k], strict=True)}
     cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None

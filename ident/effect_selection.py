@@ -511,11 +511,25 @@ def evidence_lines(evidence: dict) -> list[str]:
     Returns
     -------
     list of str
-        One line per accepted effect (held-out cost ratio and gain, held-out windows
-        improved, fit gain, t after the joint fit), then one for ``unexplained`` (the final
+        With a nominal calibration, first a line with its offsets, which sit on the band's
+        edge, and its cost and held-out gain; one line per accepted effect (held-out cost
+        ratio and gain, held-out windows improved, fit gain, t after the joint fit), then
+        one for ``unexplained`` (the final
         cost against the noise floors, the rule, its threshold and its answer).
     """
     out = []
+    cal = evidence.get("nominal_calibration")
+    if cal:
+        offs = ", ".join(f"{k} {100 * v:+.1f} %" if k.startswith("inertia") else
+                         f"{k} {1000 * v:+.2f} mm" for k, v in cal["offsets"].items())  # fmt: skip
+        edge = ", ".join(cal["at_edge"]) or "none"
+        out.append(
+            f"nominal within its uncertainty (inertia +-{100 * cal['uncertainty']['inertia']:g} "
+            f"%, trail +-{1000 * cal['uncertainty']['trail']:g} mm), final offsets {offs} "
+            f"(on the band's edge: {edge}); before any effect the calibration took the cost "
+            f"{cal['cost_stated']:.4g} -> {cal['cost_calibrated']:.4g} with held-out gain "
+            f"{100 * cal['heldout_gain']:.1f} % (a correction, not an effect)"
+        )
     for name, e in evidence.get("effects", {}).items():
         out.append(
             f"evidence for {name}: held-out cost ratio {e['heldout_cost_ratio']:.3f} (gain "

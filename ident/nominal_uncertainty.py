@@ -20,6 +20,13 @@ blind trials: a steer damping of 0.02 N m s/rad, a 2 ms input delay, a rear-fram
   (``trail_correction``, ``front_inertia_scale``, ``rear_inertia_scale``) reaches beyond the
   band: a parameter off by no more than its uncertainty is not an effect
   (:func:`bikeid.ident.effect_selection.select_effects` tests its t from the band's edge).
+- The instruments' offsets get bands too (``sensor``): a gyro bias ``roll_rate_bias``, a
+  roll-angle offset ``roll_angle_bias`` and an encoder zero ``steer_angle_bias`` within them
+  are the instrument's stated uncertainty, not findings, so they are tested beyond the band
+  the same way (they are fitted as library effects, not calibrated as offsets).  Defaults,
+  our assumption where the data give no specification: +-0.01 rad/s (0.6 deg/s, the order of
+  a MEMS gyro's offset left after zeroing at standstill), +-0.005 rad (0.3 deg, IMU levelling)
+  and +-0.002 rad (0.1 deg, an encoder zeroed on a straight wheel).
 
 Only the parameters named here move; masses, geometry other than the trail, and the
 controller are taken as stated.
@@ -34,7 +41,7 @@ import numpy as np
 
 from bikeid.sim.parameters import BicycleParameters
 
-__all__ = ["BODY_INERTIAS", "DEFAULT_TEXT", "Calibration", "NominalUncertainty"]
+__all__ = ["BODY_INERTIAS", "DEFAULT_TEXT", "SENSOR_BANDS", "Calibration", "NominalUncertainty"]
 
 #: The inertia entries of each body [kg m^2], scaled together by one factor.
 BODY_INERTIAS: dict[str, tuple[str, ...]] = {
@@ -46,8 +53,10 @@ BODY_INERTIAS: dict[str, tuple[str, ...]] = {
 #: Library parameter corrections along a calibrated direction: effect -> offset name.
 _OVERLAPS = {"trail_correction": "trail", "front_inertia_scale": "inertia_H",
              "rear_inertia_scale": "inertia_B"}  # fmt: skip
+#: Default half-widths of the instruments' offsets, by library effect [its unit].
+SENSOR_BANDS = {"roll_rate_bias": 0.01, "roll_angle_bias": 0.005, "steer_angle_bias": 0.002}
 #: The text of the default uncertainty (``bikeid measured fit --nominal-uncertainty``).
-DEFAULT_TEXT = "inertia=0.05,trail=0.002"
+DEFAULT_TEXT = "inertia=0.05,trail=0.002," + ",".join(f"{k}={v:g}" for k, v in SENSOR_BANDS.items())
 
 
 @dataclass(frozen=True)
@@ -61,20 +70,31 @@ class NominalUncertainty:
         x0.95-1.05); 0 keeps the inertias as stated.
     trail : float
         Half-width of the trail [m]; 0 keeps it as stated.
+    sensor : dict of str to float
+        Half-widths of the instruments' offsets by library effect (``roll_rate_bias``
+        [rad/s], ``roll_angle_bias`` [rad], ``steer_angle_bias`` [rad]); default
+        :data:`SENSOR_BANDS`, a name left out has none.
 
     Raises
     ------
     ValueError
-        If a half-width is not a finite number, ``inertia`` is outside [0, 0.5) or ``trail``
-        outside [0, 0.05) m.
+        If a half-width is not a finite number, ``inertia`` is outside [0, 0.5), ``trail``
+        outside [0, 0.05) m, a sensor band is not one of :data:`SENSOR_BANDS`' names or
+        outside [0, its plausible range).
     """
 
     inertia: float = 0.05
     trail: float = 0.002
+    sensor: dict = field(default_factory=lambda: dict(SENSOR_BANDS))
 
     def __post_init__(self) -> None:
-        for name, hi, unit in (("inertia", 0.5, "relative"), ("trail", 0.05, "m")):
-            v = getattr(self, name)
+        checks = [("inertia", self.inertia, 0.5, "relative"), ("trail", self.trail, 0.05, "m")]
+        for name, v in self.sensor.items():
+            if name not in SENSOR_BANDS:
+                raise ValueError(f"nominal uncertainty: {name!r} is not an instrument offset; "
+                                 f"use {', '.join(SENSOR_BANDS)}")  # fmt: skip
+            checks.append((name, v, 0.2, "its unit"))
+        for name, v, hi, unit in checks:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v < hi):
                 raise ValueError(f"nominal uncertainty {name} must be a number in [0, {hi}) "
                                  f"({unit} half-width), got {v!r}")  # fmt: skip
@@ -137,9 +157,11 @@ class NominalUncertainty:
         Returns
         -------
         float or None
-            max(|total deviation| - half-width, 0) [m or relative]; None when ``effect`` is
-            not along a calibrated direction.
+            max(|total deviation| - half-width, 0) [m or relative; for an instrument offset
+            max(|value| - its band, 0) in its unit]; None when ``effect`` has no band.
         """
+        if effect in self.sensor:
+            return max(abs(value) - self.sensor[effect], 0.0)
         name = _OVERLAPS.get(effect)
         if name not in self.names:
             return None
@@ -148,8 +170,8 @@ class NominalUncertainty:
         return max(abs(total) - self.width(name), 0.0)
 
     def as_dict(self) -> dict:
-        """``inertia`` (relative) and ``trail`` [m] half-widths, JSON-ready."""
-        return {"inertia": self.inertia, "trail": self.trail}
+        """``inertia`` (relative), ``trail`` [m] and ``sensor`` half-widths, JSON-ready."""
+        return {"inertia": self.inertia, "trail": self.trail, "sensor": dict(self.sensor)}
 
     @classmethod
     def parse(cls, text: str) -> NominalUncertainty | None:
@@ -159,8 +181,9 @@ class NominalUncertainty:
         ----------
         text : str
             ``none`` (the stated parameters are exact: no calibration), ``default``
-            (:data:`DEFAULT_TEXT`), or comma-separated ``inertia=`` (relative) and
-            ``trail=`` [m] half-widths (an omitted one is 0).
+            (:data:`DEFAULT_TEXT`), or comma-separated ``inertia=`` (relative), ``trail=``
+            [m] and instrument-offset (``roll_rate_bias=`` ...) half-widths (an omitted one
+            is 0).
 
         Returns
         -------
@@ -182,16 +205,17 @@ class NominalUncertainty:
             key, sep, val = part.partition("=")
             key = key.strip()
             try:
-                if not sep or key not in ("inertia", "trail") or key in kw:
+                if not sep or key not in ("inertia", "trail", *SENSOR_BANDS) or key in kw:
                     raise ValueError
                 kw[key] = float(val)
             except ValueError:
                 raise ValueError(
                     f"nominal uncertainty {text!r}: cannot read {part!r}; use none, default "
-                    f"or inertia=F,trail=M (relative and metre half-widths, e.g. "
-                    f"{DEFAULT_TEXT})"
+                    f"or inertia=F,trail=M[,roll_rate_bias=B,...] (half-widths: relative, "
+                    f"metres, the offset's unit; the default is {DEFAULT_TEXT})"
                 ) from None
-        return cls(inertia=kw.get("inertia", 0.0), trail=kw.get("trail", 0.0))
+        sensor = {k: kw[k] for k in SENSOR_BANDS if k in kw}
+        return cls(kw.get("inertia", 0.0), kw.get("trail", 0.0), sensor)
 
 
 @dataclass(frozen=True)

@@ -61,6 +61,14 @@ def test_evidence_lines_state_the_numbers():
     lines = evidence_lines(ev)
     assert "held-out cost ratio 0.483" in lines[0] and "6/6" in lines[0]
     assert "1.44" in lines[1] and lines[1].endswith("-> explained")
+    ev["nominal_calibration"] = {
+        "uncertainty": {"inertia": 0.05, "trail": 0.002}, "at_edge": ["inertia_R"],
+        "offsets": {"inertia_R": -0.05, "inertia_B": 0.012, "trail": 0.0015},
+        "cost_stated": 9.277, "cost_calibrated": 7.944, "heldout_gain": 0.123}  # fmt: skip
+    first = evidence_lines(ev)[0]
+    for text in ("inertia_R -5.0 %", "inertia_B +1.2 %", "trail +1.50 mm", "edge: inertia_R",
+                 "9.277 -> 7.944", "held-out gain 12.3 %"):  # fmt: skip
+        assert text in first, first
 
 
 def _quiet_trial(effect: str, value: float, seed: int = 11):

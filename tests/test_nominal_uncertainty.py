@@ -47,11 +47,15 @@ def test_apply_moves_each_body_and_the_trail():
      ("rear_inertia_scale", 1.04, 0.0, 0.0),  # 4 % within 5 %
      ("rear_inertia_scale", 1.2, -1.0, 0.14 - 0.05),  # 0.95 x 1.2 = 1.14
      ("front_inertia_scale", 0.9, 0.0, 0.05),
-     ("steer_stiffness", 1.0, 0.0, None)],  # not along a calibrated direction
+     ("roll_rate_bias", -0.007, 0.0, 0.0),  # a gyro offset within +-0.01 rad/s
+     ("roll_rate_bias", -0.025, 0.0, 0.015),
+     ("steer_angle_bias", 0.024, 0.0, 0.022),  # the real encoder zero: beyond +-2 mrad
+     ("steer_stiffness", 1.0, 0.0, None)],  # no band
 )  # fmt: skip
 def test_excess_beyond_the_band(effect, value, offsets, expected):
     """What a parameter correction reaches beyond the band, hand-computed: the total
-    deviation (calibrated offset and correction stacked) less the half-width."""
+    deviation (calibrated offset and correction stacked) less the half-width; an instrument
+    offset's value less its band."""
     u = NominalUncertainty()
     x = np.zeros(5)
     x[{"trail_correction": 4, "rear_inertia_scale": 1, "front_inertia_scale": 2}.get(effect, 0)] = (
@@ -66,7 +70,10 @@ def test_parse_and_errors():
     assert NominalUncertainty.parse("none") is None
     assert NominalUncertainty.parse("default") == NominalUncertainty.parse(DEFAULT_TEXT)
     assert NominalUncertainty.parse("default") == NominalUncertainty()
-    assert NominalUncertainty.parse("trail=0.003") == NominalUncertainty(0.0, 0.003)
+    assert NominalUncertainty.parse("trail=0.003") == NominalUncertainty(0.0, 0.003, {})
+    assert NominalUncertainty.parse("roll_rate_bias=0.02").sensor == {"roll_rate_bias": 0.02}
+    with pytest.raises(ValueError, match="not an instrument offset"):
+        NominalUncertainty(sensor={"speed_scale": 0.1})
     for bad in ("inertia", "inertia=x", "mass=0.1", "inertia=0.1,inertia=0.2", ""):
         with pytest.raises(ValueError, match="use none, default or inertia=F,trail=M"):
             NominalUncertainty.parse(bad)
