@@ -65,7 +65,8 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
         type=number(0.0, lo_open=True),
         default=None,
         metavar="X",
-        help="threshold of that rule, > 0 (default 0.9 for floor and coloured, 2.0 for residual)",
+        help="threshold of that rule, > 0 (default 0.85 for floor and coloured, 0.9 with "
+        "--nominal-uncertainty none; 2.0 for residual)",
     )
     p.add_argument(
         "--nominal-uncertainty",

@@ -342,13 +342,17 @@ def fit_effects(
     r = sol.fun
     sizes = [2 * w.n for w in windows] + ([2 * len(weave.targets)] if extra else [])
     # a value on its bound (an active constraint: an effect at a plausibility bound or at
-    # absent = bound, an offset on its box's edge) is held there, not estimated: the
-    # standard errors are those of the values inside their bounds; an effect on its bound
-    # gets an infinite one (t = 0: no evidence), an offset on the edge 0 (fixed)
+    # absent = bound, an offset on its box's edge) is held there, not estimated: an effect on
+    # its bound gets an infinite standard error (t = 0: no evidence), an offset on the edge 0.
+    # The offsets inside the box stay in the covariance, so an effect's standard error counts
+    # what they can mimic; their box enters as prior information (uniform on [-1, 1]:
+    # variance 1/3 half-widths^2), so a direction the decays do not resolve cannot dilute it
+    # beyond what the box allows
     free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)
-    std = np.where(np.arange(sol.x.size) < k, np.inf, 0.0)
+    is_effect = np.arange(sol.x.size) < k
+    std = np.where(is_effect, np.inf, 0.0)
     if free.any():
-        std[free] = effect_std(sol.jac[:, free], r, sizes)
+        std[free] = effect_std(sol.jac[:, free], r, sizes, np.where(is_effect, 0.0, 3.0)[free])
     vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x[:k], strict=True)}
     stds = {c.name: c.scale * si for c, si in zip(cands, std[:k], strict=True)}
     cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None
@@ -391,7 +395,9 @@ def joint_fit(
     return res
 
 
-def effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
+def effect_std(
+    J: np.ndarray, r: np.ndarray, sizes: list[int], prior: np.ndarray | None = None
+) -> np.ndarray:
     """Standard errors of output-error estimates, clustered by window.
 
     The residual of one decay is smooth and mostly model error, so its samples are far
@@ -409,6 +415,10 @@ def effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
         Residuals at the estimate.
     sizes : list of int
         Residual count of each cluster (window), in order.
+    prior : (p,) ndarray, optional
+        Prior information of each parameter [1 / its scaled unit^2] (0: none), combined with
+        the data's covariance C as (C^-1 + diag(prior))^-1 (e.g. 3 for an offset uniform on
+        [-1, 1], variance 1/3).
 
     Returns
     -------
@@ -433,6 +443,8 @@ def effect_std(J: np.ndarray, r: np.ndarray, sizes: list[int]) -> np.ndarray:
         r1 = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if n > 3 else 0.0
         neff = max(n * (1 - r1) / (1 + r1), p + 1)
         cov = float(r @ r) / (neff - p) * bread
+    if prior is not None and np.any(prior > 0):
+        cov = np.linalg.pinv(np.linalg.pinv(cov) + np.diag(prior))
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 

@@ -31,7 +31,7 @@ QUIET = Nuisance(
     plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0, noise=0.0,
     colour=0.0, steer_noise=0.0, encoder_counts=2**40, gyro_bias=0.0, gyro_walk=0.0,
     steer_rate="gyro", speed_wander=0.0, wander_freq=0.5,
-)
+)  # fmt: skip
 
 
 def test_independent_matrices_match_meijaard_and_bikeid():
@@ -216,3 +216,43 @@ def test_auto_plant_choice_both_ways(plant):
     assert forced["identification"]["evidence"]["min_heldout_gain"] == 0.25
     with pytest.raises(ValueError, match="margin"):
         choose_nominal_plant(costs, margin=0.5)
+
+
+@pytest.mark.slow
+def test_benchmark_at_ci_size_reports_what_its_log_recounts(tmp_path):
+    """The blind benchmark at CI size (one library, one no-effect and one outside trial,
+    seed 0, the defaults of ``bikeid measured fit``): it runs end to end, logs every trial,
+    and each printed rate equals a recount from the log, every trial rescored from its own
+    verdict and estimates by :func:`score` (a second pass over the same data).  The rates
+    themselves, at full size, are docs/measured.md's ("The nominal within its
+    uncertainty")."""
+    import json
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    log = tmp_path / "blind.jsonl"
+    cmd = [sys.executable, str(root / "benchmarks" / "bench_blind_trials.py"), "--per-class",
+           "steer_viscous_damping=1,none=1,roll_stiffness=1", "--seed", "0", "--processes", "1",
+           "--log", str(log)]  # fmt: skip
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    rows = [json.loads(line) for line in log.read_text().splitlines()]
+    assert sorted(r["kind"] for r in rows) == ["library", "none", "outside"]
+    counts = {"right effect first": 0, "false positive": 0, "outside library misattributed": 0}
+    for r in rows:
+        nz = Nuisance(**r["nuisance"])
+        value = float("nan") if r["value"] is None else float(r["value"])
+        tr = BlindTrial(r["index"], r["seed"], r["effect"], value, tuple(r["fit_speeds"]),
+                        tuple(r["eval_speeds"]), nz)  # fmt: skip
+        again = score(tr, r["verdict"], r["estimates"])
+        assert all(r[k] == v for k, v in again.items()), (r, again)
+        counts["right effect first"] += bool(again.get("right_first"))
+        counts["false positive"] += bool(again.get("false_positive"))
+        counts["outside library misattributed"] += bool(again.get("misattributed"))
+        assert "nominal_calibration" in r["evidence"]  # the default calibrates the nominal
+    for label, k in counts.items():
+        m = re.search(rf"^{label}[^\n]*?\s(\d+)/1\s", out.stdout, re.M)
+        assert m and int(m.group(1)) == k, (label, out.stdout)
