@@ -24,7 +24,8 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   ``validate_decays`` (the same on measured decays, ``bikeid measured evaluate``).
 - :mod:`~bikeid.ident.model_file`: ``save_model`` / ``load_model``, the one JSON file
   format of every identified model (parameters bit for bit, covariance, provenance).
-- :mod:`~bikeid.ident.uncertainty`: delta-method intervals on eigenvalues, v_w, v_c, Bode.
+- :mod:`~bikeid.ident.uncertainty`: profile and delta-method intervals on eigenvalues, v_w,
+  v_c, Bode.
 
 The measured-data analysis (an experiment model plus a library of candidate effects):
 
@@ -32,6 +33,8 @@ The measured-data analysis (an experiment model plus a library of candidate effe
   plant, its controller, the effects of :mod:`bikeid.sim.effect_registry`).
 - :mod:`~bikeid.ident.effect_library`: the effects the selection may add, with their fit
   settings.
+- :mod:`~bikeid.ident.nominal_uncertainty`: the stated bicycle's uncertainty (inertias, trail,
+  instrument offsets) and the nominal calibrated within it.
 - :mod:`~bikeid.ident.effect_fit`: fitting effect values to free decays, standard errors.
 - :mod:`~bikeid.ident.weave`: the measured weave eigenvalue of decays and its fit term.
 - :mod:`~bikeid.ident.effect_selection`: ``select_effects``, greedy selection with

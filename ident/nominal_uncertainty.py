@@ -107,7 +107,18 @@ class NominalUncertainty:
         return out + (("trail",) if self.trail > 0 else ())
 
     def width(self, name: str) -> float:
-        """Half-width of offset ``name`` (relative for an inertia, [m] for the trail)."""
+        """Half-width of one offset.
+
+        Parameters
+        ----------
+        name : str
+            One of :attr:`names`.
+
+        Returns
+        -------
+        float
+            Relative for an inertia, [m] for the trail.
+        """
         return self.trail if name == "trail" else self.inertia
 
     def apply(self, p: BicycleParameters, x: np.ndarray) -> BicycleParameters:
@@ -136,7 +147,18 @@ class NominalUncertainty:
         return p.replace(**ch) if ch else p
 
     def values(self, x: np.ndarray) -> dict[str, float]:
-        """The offsets ``x`` in physical units: relative inertia change [-], trail [m]."""
+        """The offsets in physical units.
+
+        Parameters
+        ----------
+        x : ndarray
+            Offsets in half-widths (order of :attr:`names`).
+
+        Returns
+        -------
+        dict of str to float
+            Relative inertia change [-] per body, trail change [m].
+        """
         return {n: self.width(n) * float(xi) for n, xi in zip(self.names, x, strict=True)}
 
     def excess(self, effect: str, value: float, x: np.ndarray) -> float | None:
@@ -170,7 +192,13 @@ class NominalUncertainty:
         return max(abs(total) - self.width(name), 0.0)
 
     def as_dict(self) -> dict:
-        """``inertia`` (relative), ``trail`` [m] and ``sensor`` half-widths, JSON-ready."""
+        """The half-widths, JSON-ready.
+
+        Returns
+        -------
+        dict
+            ``inertia`` (relative), ``trail`` [m] and ``sensor`` (by effect, its unit).
+        """
         return {"inertia": self.inertia, "trail": self.trail, "sensor": dict(self.sensor)}
 
     @classmethod
@@ -245,16 +273,47 @@ class Calibration:
             object.__setattr__(self, "offsets", np.zeros(len(self.uncertainty.names)))
 
     def params(self, x: np.ndarray | None = None) -> BicycleParameters:
-        """The parameters at the offsets ``x`` (default: :attr:`offsets`)."""
+        """The parameters at some offsets.
+
+        Parameters
+        ----------
+        x : ndarray, optional
+            Offsets in half-widths (default: :attr:`offsets`).
+
+        Returns
+        -------
+        BicycleParameters
+            :meth:`NominalUncertainty.apply` of :attr:`base`.
+        """
         return self.uncertainty.apply(self.base, self.offsets if x is None else x)
 
     def excess(self, effect: str, value: float) -> float | None:
-        """:meth:`NominalUncertainty.excess` at these offsets."""
+        """How far a correction reaches beyond its band at these offsets.
+
+        Parameters
+        ----------
+        effect : str
+            Registry name.
+        value : float
+            The correction [its unit].
+
+        Returns
+        -------
+        float or None
+            :meth:`NominalUncertainty.excess` at :attr:`offsets`.
+        """
         return self.uncertainty.excess(effect, value, self.offsets)
 
     def as_dict(self) -> dict:
-        """The half-widths, the offsets in physical units (relative inertia change, trail
-        [m]) and which offsets sit on the band's edge (within 1 %)."""
+        """The calibration as a JSON-ready record.
+
+        Returns
+        -------
+        dict
+            ``uncertainty`` (the half-widths), ``offsets`` in physical units (relative
+            inertia change, trail [m]), ``at_edge`` (offsets within 1 % of the band's edge)
+            and, after a fit, ``std`` (same units).
+        """
         vals = self.uncertainty.values(self.offsets)
         out = {"uncertainty": self.uncertainty.as_dict(), "offsets": vals,
                "at_edge": [n for n, xi in zip(self.uncertainty.names, self.offsets,
