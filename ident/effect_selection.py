@@ -349,7 +349,7 @@ def select_effects(
         ev_nominal = {"fit_half": cal.as_dict(), "heldout_cost_stated": held[0],
                       "heldout_cost_calibrated": held[1],
                       "heldout_gain": 1 - held[1] / max(held[0], 1e-300)}  # fmt: skip
-        attach_correction(windows, cur, nonlinear)
+        attach_correction(fit_w, cur, nonlinear)  # the held-out half is already at cur
         cost0 = fit_effects(cur, windows, []).cost
         if wv_fit:
             wv_fit = wv_fit.at(cur, fit_w)

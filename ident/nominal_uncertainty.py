@@ -257,7 +257,8 @@ class Calibration:
     base : BicycleParameters
         The stated parameters (offset 0).
     offsets : ndarray
-        Offsets in units of the half-widths (order of ``uncertainty.names``), in [-1, 1].
+        Offsets in units of the half-widths (order of ``uncertainty.names``), in [-1, 1];
+        empty (default): all 0.  A ValueError names a count that does not match.
     std : ndarray or None
         Their standard errors from the fit that set them (same units; 0 for an offset held
         on the box's edge), None before a fit.
@@ -269,8 +270,12 @@ class Calibration:
     std: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if self.offsets.size != len(self.uncertainty.names):
-            object.__setattr__(self, "offsets", np.zeros(len(self.uncertainty.names)))
+        k = len(self.uncertainty.names)
+        if self.offsets.size == 0 and k:  # not given: the stated parameters
+            object.__setattr__(self, "offsets", np.zeros(k))
+        elif self.offsets.size != k:
+            raise ValueError(f"calibration offsets: {self.offsets.size} given, the uncertainty "
+                             f"has {k} ({', '.join(self.uncertainty.names)})")  # fmt: skip
 
     def params(self, x: np.ndarray | None = None) -> BicycleParameters:
         """The parameters at some offsets.

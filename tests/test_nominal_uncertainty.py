@@ -91,6 +91,9 @@ def test_calibration_record():
     assert d["at_edge"] == ["inertia_R", "inertia_H"]
     assert d["offsets"]["trail"] == pytest.approx(0.001)
     assert c.params().c == pytest.approx(steer_by_wire().c + 0.001)
+    assert Calibration(NominalUncertainty(), steer_by_wire()).offsets.tolist() == [0.0] * 5
+    with pytest.raises(ValueError, match="2 given"):
+        Calibration(NominalUncertainty(), steer_by_wire(), np.zeros(2))
 
 
 @pytest.mark.slow
