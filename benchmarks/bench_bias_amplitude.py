@@ -10,7 +10,8 @@ whole excitation (chirp amplitude and dither amplitude together) is multiplied b
 and the runs are identified (``ident.pem.fit``) with Chen & Dao's outputs (phi, delta) and
 with all four measured states, on
 
-- the nonlinear plant (``experiments.sweep.simulate_task``, the reproduction's runs at s = 1);
+- the nonlinear plant (``experiments.testbed.sweep.simulate_task``, the reproduction's runs at s =
+1);
 - the linear plant (``dataset.linear_loop.simulate``, same fuzzy controller, same chirp,
   dither and sensor-noise levels): the truth is exact there, so any bias it shows comes from
   the closed loop / noise model / output choice, not from the plant's nonlinearity.
@@ -42,7 +43,7 @@ OUTPUT_SETS = {"phi,delta": ("phi", "delta"), "all4": ("phi", "phidot", "delta",
 
 
 def _nonlinear_run(scale: float, seed: int):
-    from bikeid.experiments.sweep import SweepSpec, Task, simulate_task
+    from bikeid.experiments.testbed.sweep import SweepSpec, Task, simulate_task
 
     spec = SweepSpec("fuzzy", (SPEED,), (seed,), 50.0, bicycle="benchmark", reference="chirp",
                      chirp_amplitude=math.radians(CHIRP_DEG * scale), dither=DITHER * scale,
@@ -155,7 +156,7 @@ def main() -> None:
               f"{r['printed_se']:.4f} | {r['bias_over_s2']:+.4f} |")  # fmt: skip
     if args.json:
         from bikeid.dataset.files import atomic_write_text
-        from bikeid.experiments.cliutil import dump_json
+        from bikeid.experiments.cli.args import dump_json
 
         atomic_write_text(args.json, dump_json({"summary": rows, "fits": records}) + "\n")
 

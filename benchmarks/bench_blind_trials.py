@@ -6,7 +6,7 @@
         [--unexplained-rule floor|coloured|residual] [--unexplained-threshold X]
         [--nominal-uncertainty default|none|inertia=F,trail=M] [--tradeoff] [--nominal-only]
 
-Draws ``n`` trials of :mod:`bikeid.experiments.blind_trials` (effects cycle through six
+Draws ``n`` trials of :mod:`bikeid.experiments.measured.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
 selection of ``bikeid measured fit`` on each (not told the effect) and prints, with exact
 95 % intervals: right effect first with its value in band (library trials), trials with
@@ -15,10 +15,10 @@ outside-library effects misattributed to a library effect.  Trial i depends only
 (seed, i); ``--log`` appends each finished trial, ``--resume`` skips the trials already in the
 log and summarizes all of them.  ``--per-class`` draws only chosen classes (``library``,
 ``outside``, ``none`` or one effect) in chosen numbers instead of the cycle of ``--n``
-(:func:`bikeid.experiments.blind_trials.draw_blind_classes`, reproducible by seed).
+(:func:`bikeid.experiments.measured.blind_trials.draw_blind_classes`, reproducible by seed).
 ``--nominal-only`` runs no selection: it prints the nominal cost ratio (nonlinear / linear
 plant) of every trial's fit decays and its range per truth plant and class, the calibration
-of :data:`bikeid.ident.effect_selection.LINEAR_PLANT_MARGIN`.
+of :data:`bikeid.ident.effects.selection.LINEAR_PLANT_MARGIN`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,9 @@ from functools import partial
 
 import numpy as np
 
-from bikeid.experiments.blind_trials import (
+from bikeid.experiments.cli.args import dump_json, to_jsonable
+from bikeid.experiments.cli.measured import acceptance_kw, add_acceptance_options
+from bikeid.experiments.measured.blind_trials import (
     draw_blind_classes,
     draw_blind_trials,
     nominal_comparison,
@@ -42,9 +44,7 @@ from bikeid.experiments.blind_trials import (
     run_blind_trial,
     summarize_blind,
 )
-from bikeid.experiments.cliutil import dump_json, to_jsonable
-from bikeid.experiments.cmd_measured import acceptance_kw, add_acceptance_options
-from bikeid.ident.effect_selection import LINEAR_PLANT_MARGIN
+from bikeid.ident.effects.selection import LINEAR_PLANT_MARGIN
 
 
 def _fmt(name: str, r: dict) -> str:

@@ -3,7 +3,7 @@
     python benchmarks/bench_effect_trials.py [--n 160] [--seed 1]
         [--processes 2] [--log trials.jsonl] [--resume trials.jsonl]
 
-Runs ``experiments.effect_trials.run_trials`` (the same as ``bikeid measured trials``),
+Runs ``experiments.measured.effect_trials.run_trials`` (the same as ``bikeid measured trials``),
 printing each trial as it finishes and the rates with 95 % Clopper-Pearson intervals at the
 end (per effect: what was named first).  ``--resume`` summarizes an existing JSON-lines log
 (e.g. of an interrupted run) without simulating: trial i depends only on (seed, i), so the
@@ -18,9 +18,9 @@ import os
 import platform
 import time
 
-from bikeid.experiments.cliutil import to_jsonable
-from bikeid.experiments.cmd_measured import parse_weave_weight
-from bikeid.experiments.effect_trials import format_summary, run_trials, summarize
+from bikeid.experiments.cli.args import to_jsonable
+from bikeid.experiments.cli.measured import parse_weave_weight
+from bikeid.experiments.measured.effect_trials import format_summary, run_trials, summarize
 
 
 def main() -> None:

@@ -33,7 +33,7 @@ def main() -> None:
 
     from bikeid.controllers.registry import make
     from bikeid.dataset.linear_loop import simulate
-    from bikeid.experiments.coverage import DEFAULTS, binomial_verdict
+    from bikeid.experiments.testbed.coverage import DEFAULTS, binomial_verdict
     from bikeid.ident import pem
     from bikeid.ident.canonical import theta_from_matrices
     from bikeid.ident.uncertainty import eigenvalue_intervals

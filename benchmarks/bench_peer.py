@@ -4,7 +4,7 @@ subspace codes; eigenvalue errors against the truth and time per fit, side by si
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_peer.py [--speeds 2,4,5,6,8]
         [--repeats 3] [--block-rows 40] [--json peer.json]
 
-Data: the accuracy study's closed-loop runs (``bikeid.experiments.accuracy.generate``:
+Data: the accuracy study's closed-loop runs (``bikeid.experiments.testbed.accuracy.generate``:
 nonlinear Whipple plant, roll PID, 3 deg roll chirp reference + 1 N m steer-torque dither
 held per speed band, default sensors (1e-3 rad, 1e-2 rad/s), 100 Hz, 50 s, seed 0),
 written to HDF5 in a temporary folder and read back; every method gets these same runs.
@@ -14,7 +14,7 @@ Methods (model order 4 for all):
 - bikeid PEM: ``ident.pem.fit`` on one speed's run (canonical model, free Kalman gain,
   PBSID multistart), outputs phi, delta, phidot, deltadot.
 - bikeid direct: Moore & Hubbard's equations of motion by instrumental variables
-  (``experiments.accuracy.identify_controller(..., methods=("direct",))``, the accuracy
+  (``experiments.testbed.accuracy.identify_controller(..., methods=("direct",))``, the accuracy
   study's settings: 3 Hz cut-off, dither/reference instruments at lags 0..40); one fit over
   all speeds, so its time is that one fit.
 - bikeid PBSID: ``ident.subspace.pbsid`` (the PEM's closed-loop-safe subspace start),
@@ -27,9 +27,10 @@ Methods (model order 4 for all):
   ``SS_f`` = ``SS_p`` = ``--block-rows``, ``SS_fixed_order=4``.
 
 The discrete models' eigenvalues are mapped to continuous time by log(z)/dt.  Errors:
-``experiments.accuracy.eigen_errors`` (identified eigenvalues paired with the true weave pair,
+``experiments.testbed.accuracy.eigen_errors`` (identified eigenvalues paired with the true weave
+pair,
 capsize and caster by ``sim.linear.match_eigenvalues``) against the true linearization
-(``experiments.accuracy.true_modes``); "within tolerance" uses the accuracy study's
+(``experiments.testbed.accuracy.true_modes``); "within tolerance" uses the accuracy study's
 max(0.02 |lambda|, 0.05 1/s).  Times: per speed the median of ``--repeats`` fits, then the
 median over speeds.  The peers are optional (``pip install .[bench]``); a missing one is
 listed as not installed.  Timings depend on the machine and its load; quote the machine
@@ -58,7 +59,7 @@ import numpy as np  # noqa: E402
 from bikeid.dataset.files import atomic_write_text  # noqa: E402
 from bikeid.dataset.store import read_runs  # noqa: E402
 from bikeid.experiments import accuracy as acc  # noqa: E402
-from bikeid.experiments.cliutil import dump_json, parse_range  # noqa: E402
+from bikeid.experiments.cli.args import dump_json, parse_range  # noqa: E402
 from bikeid.ident import pem  # noqa: E402
 from bikeid.ident.subspace import pbsid  # noqa: E402
 from bikeid.sim.parameters import benchmark  # noqa: E402

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bikeid.experiments.sweep import CONTROLLERS, SweepSpec, Task, run_sweep, simulate_task
+from bikeid.experiments.testbed.sweep import CONTROLLERS, SweepSpec, Task, run_sweep, simulate_task
 
 
 def main() -> None:

@@ -23,9 +23,9 @@ import time
 import numpy as np
 
 from bikeid.dataset.decays import load_decays
-from bikeid.experiments.measured_study import fit_effect_set
-from bikeid.ident.discrepancy_diagnostics import evaluate
-from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.effects.diagnostics import evaluate
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.pipeline import fit_effect_set
 from bikeid.sim.effect_registry import EFFECTS
 
 

@@ -34,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from bikeid.dataset.decays import load_decays
-from bikeid.experiments.measured_study import evaluate_json, fit_effect_set, fit_model
-from bikeid.ident.experiment_model import attach_nonlinear_correction
+from bikeid.ident.effects.experiment_model import attach_nonlinear_correction
+from bikeid.ident.effects.pipeline import evaluate_json, fit_effect_set, fit_model
 
 CHANNELS = ("phi", "delta", "phidot", "deltadot")
 SPLITS = ((2.5, 4.5), (1.5, 3.5))

@@ -25,8 +25,8 @@ import json
 import time
 
 from bikeid.dataset.decays import load_decays
-from bikeid.experiments.cmd_measured import parse_weave_weight, uncertainty_arg
-from bikeid.experiments.measured_study import evaluate_json, fit_model
+from bikeid.experiments.cli.measured import parse_weave_weight, uncertainty_arg
+from bikeid.ident.effects.pipeline import evaluate_json, fit_model
 
 
 def run_split(

@@ -1,7 +1,7 @@
 """Fit library effects to the measured weave *eigenvalues* instead of the decay time series.
 
 Per speed, the measured weave is the median of the damped-oscillation fits to the decays
-with its bootstrap standard error (``bikeid.ident.weave.weave_targets``).  A set of effects
+with its bootstrap standard error (``bikeid.ident.effects.weave.weave_targets``).  A set of effects
 is fitted by least squares on (lambda_model - lambda_data) / uncertainty, real and
 imaginary parts, with lambda_model the oscillatory root of the sampled linear closed loop
 nearest to the data (``ExperimentModel.weave``).  chi2 = the weighted sum of squares (about
@@ -28,16 +28,17 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from bikeid.dataset.decays import load_decays
-from bikeid.experiments.measured_study import evaluate_json
-from bikeid.ident.effect_fit import joint_fit
-from bikeid.ident.experiment_model import ExperimentModel
-from bikeid.ident.weave import WeaveTerm, weave_targets
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.fit import joint_fit
+from bikeid.ident.effects.pipeline import evaluate_json
+from bikeid.ident.effects.weave import WeaveTerm, weave_targets
 from bikeid.sim.effect_registry import effect
 
 
 def fit_weaves(names: list[str], targets: tuple) -> tuple[float, dict]:
     """Least squares of the named effects on the weave eigenvalues ``targets``
-    (:func:`bikeid.ident.weave.weave_targets` rows; residuals of :class:`WeaveTerm`, weight 1,
+    (:func:`bikeid.ident.effects.weave.weave_targets` rows; residuals of :class:`WeaveTerm`,
+    weight 1,
     no estimator offsets: the loop root is compared with the decay fits directly)."""
     term = WeaveTerm(1.0, targets)
 

@@ -59,7 +59,7 @@ class Window:
     meta : dict
         Free-form metadata.
     correction : dict or None
-        Nonlinear minus linear nominal outputs (``ident.experiment_model``), or None.
+        Nonlinear minus linear nominal outputs (``ident.effects.experiment_model``), or None.
     T_logged : (n,) ndarray or None
         Logged total steer-motor command over the window [N m] (the plant input; None when
         unknown).
@@ -83,7 +83,8 @@ class Window:
     freq: float | None = None
     T_phi: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
-    correction: dict | None = None  # nonlinear - linear nominal outputs (ident.experiment_model)
+    # nonlinear - linear nominal outputs (ident.effects.experiment_model)
+    correction: dict | None = None
     T_logged: np.ndarray | None = None
     drive: str = "loop"
 

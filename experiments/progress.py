@@ -5,7 +5,7 @@ take a callback ``progress(done, total, label)`` instead of printing: ``done`` o
 steps finished, ``label`` naming the current step (a speed, a candidate effect, a stage).  A
 new ``total`` starts a new stage (the bar is reset).  They skip the call when the callback
 is None, so a script or a test that passes nothing gets no output.  (The sweeps,
-:func:`bikeid.experiments.sweep.run_sweep` and ``stabilization_table``, draw their own
+:func:`bikeid.experiments.testbed.sweep.run_sweep` and ``stabilization_table``, draw their own
 ``tqdm`` bar when called with ``progress=True``; their commands ask for it only where
 :func:`on_terminal` is true.)
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .cliutil import atomic_write_text, to_jsonable
+from bikeid.experiments.cli.args import atomic_write_text, to_jsonable
 
 __all__ = ["Report", "fmt", "fmt_complex", "write"]
 

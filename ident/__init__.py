@@ -27,26 +27,14 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
 - :mod:`~bikeid.ident.uncertainty`: profile and delta-method intervals on eigenvalues, v_w,
   v_c, Bode.
 
-The measured-data analysis (an experiment model plus a library of candidate effects):
-
-- :mod:`~bikeid.ident.experiment_model`: the steer-by-wire treadmill experiment (Whipple
-  plant, its controller, the effects of :mod:`bikeid.sim.effect_registry`).
-- :mod:`~bikeid.ident.effect_library`: the effects the selection may add, with their fit
-  settings.
-- :mod:`~bikeid.ident.nominal_uncertainty`: the stated bicycle's uncertainty (inertias, trail,
-  instrument offsets) and the nominal calibrated within it.
-- :mod:`~bikeid.ident.effect_fit`: fitting effect values to free decays, standard errors.
-- :mod:`~bikeid.ident.weave`: the measured weave eigenvalue of decays and its fit term.
-- :mod:`~bikeid.ident.effect_selection`: ``select_effects``, greedy selection with
-  significance and out-of-sample checks, ending in a named set or ``unexplained``.
-- :mod:`~bikeid.ident.discrepancy_diagnostics`: equation error, error ranking, residual
-  spectra, push asymmetry, ``evaluate`` (before/after errors).
-- :mod:`~bikeid.ident.synthetic_decays`: free decays of a known model, for tests.
+The measured-data analysis, :mod:`bikeid.ident.effects` (one subpackage with a small front
+door: the experiment model, the effect library, the fit, the nominal calibration, the
+selection and the before/after evaluation).
 """
 
-from .direct import DirectResult, identify, vaf_moore, vaf_variance
-from .model_file import load_model, read_model_file, save_model
-from .pem import CanonicalModel, SpeedCanonicalModel, fit, fit_speed_model
+from bikeid.ident.direct import DirectResult, identify, vaf_moore, vaf_variance
+from bikeid.ident.model_file import load_model, read_model_file, save_model
+from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel, fit, fit_speed_model
 
 __all__ = [
     "CanonicalModel",

@@ -49,11 +49,10 @@ import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.ident.signals import check_sampling, differentiate
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
 from bikeid.sim.parameters import BicycleParameters, from_mapping
-
-from .signals import check_sampling, differentiate
 
 __all__ = [
     "MOORE_ROLL",

@@ -56,20 +56,9 @@ import numpy as np
 from scipy.linalg import expm, expm_frechet
 
 from bikeid.dataset.run import Run
-from bikeid.sim.errors import InputError, UntrustworthyResult
-from bikeid.sim.linear import (
-    CanonicalMatrices,
-    canonical_matrices,
-    critical_speeds,
-    eigenvalues_vs_speed,
-    lateral_force_vector,
-    state_matrices,
-)
-from bikeid.sim.parameters import BicycleParameters, from_mapping
-
-from .canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
-from .direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, _parse
-from .pem import (
+from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
+from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, _parse
+from bikeid.ident.pem import (
     DEFAULT_OUTPUTS,
     _discretize,
     _discretize_with_derivatives,
@@ -81,7 +70,17 @@ from .pem import (
     _single_threaded_blas,
     output_matrix,
 )
-from .signals import check_sampling
+from bikeid.ident.signals import check_sampling
+from bikeid.sim.errors import InputError, UntrustworthyResult
+from bikeid.sim.linear import (
+    CanonicalMatrices,
+    canonical_matrices,
+    critical_speeds,
+    eigenvalues_vs_speed,
+    lateral_force_vector,
+    state_matrices,
+)
+from bikeid.sim.parameters import BicycleParameters, from_mapping
 
 __all__ = [
     "DEFAULT_FREE",
@@ -560,8 +559,8 @@ class GreyboxModel:
             ``params`` (14,), ``covariance`` (14, 14), ``per_speed`` = :meth:`at` of each
             fitted speed, ``dt``, ``g``, ``outputs``, ``cost``, ``nfev`` of this fit.
         """
-        from .canonical import speed_map, speed_params_from_matrices
-        from .pem import SpeedCanonicalModel
+        from bikeid.ident.canonical import speed_map, speed_params_from_matrices
+        from bikeid.ident.pem import SpeedCanonicalModel
 
         grid = (0.0, 1.0, 2.0)
         S = np.vstack([speed_map(v) for v in grid])
@@ -589,7 +588,7 @@ class GreyboxModel:
             fitted speed nearest to ``v``, input T_delta only (a lateral-force column H is
             not part of it), as :meth:`ident.pem.SpeedCanonicalModel.at`.
         """
-        from .pem import CanonicalModel
+        from bikeid.ident.pem import CanonicalModel
 
         near = min(self.K, key=lambda s: abs(s - v))
         return CanonicalModel(

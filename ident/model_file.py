@@ -18,7 +18,7 @@ A saved model is a strict JSON object (no pickle; read back with
   speed-parameterized model with each speed's fixed-speed fit);
 - ``"direct"``: :class:`bikeid.ident.direct.DirectResult` (Moore & Hubbard's least squares
   or instrumental variables: M, C1, K0, K2, H, per-row covariances);
-- ``"experiment-model"``: :class:`bikeid.ident.experiment_model.ExperimentModel` (the
+- ``"experiment-model"``: :class:`bikeid.ident.effects.experiment_model.ExperimentModel` (the
   steer-by-wire experiment with its fitted effects, ``bikeid measured fit``);
 - ``"greybox"``: :class:`bikeid.ident.greybox.GreyboxModel` (the Whipple matrices with
   their free entries estimated: estimates, covariance, fixed values, free set, per-speed
@@ -60,15 +60,14 @@ from typing import Any
 import numpy as np
 
 from bikeid.dataset.files import atomic_write_text, check_output_path
+from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
+from bikeid.ident.direct import DirectResult
+from bikeid.ident.effects.experiment_model import DT as EXPERIMENT_DT
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.greybox import GreyboxModel
+from bikeid.ident.pem import INPUT, CanonicalModel, SpeedCanonicalModel
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import loads_json
-
-from .canonical import SPEED_NAMES, THETA_NAMES
-from .direct import DirectResult
-from .experiment_model import DT as EXPERIMENT_DT
-from .experiment_model import ExperimentModel
-from .greybox import GreyboxModel
-from .pem import INPUT, CanonicalModel, SpeedCanonicalModel
 
 __all__ = [
     "FORMAT",
@@ -583,7 +582,7 @@ class _Reader:
 
     def outputs(self, obj: dict, prefix: str) -> tuple[str, ...]:
         """The ``outputs`` field: measured states the canonical predictor accepts."""
-        from .pem import output_matrix
+        from bikeid.ident.pem import output_matrix
 
         outputs = self.texts(obj, "outputs", prefix)
         try:
@@ -651,7 +650,7 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
 
 def _matrix_fields(r: _Reader, sec: Any, prefix: str) -> dict:
     """M, C1, K0, K2, H, g, free and stderr of :func:`_matrix_section`, checked."""
-    from .direct import ALL_ENTRIES
+    from bikeid.ident.direct import ALL_ENTRIES
 
     free = r.numbers(sec, "free", prefix)
     stderr = r.numbers(sec, "stderr", prefix)
@@ -707,7 +706,7 @@ def _experiment_model(r: _Reader, sec: Any, prefix: str) -> ExperimentModel:
 
 
 def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
-    from .direct import ALL_ENTRIES
+    from bikeid.ident.direct import ALL_ENTRIES
 
     outputs = r.outputs(sec, prefix)
     n_out = len(outputs)

@@ -57,12 +57,7 @@ from scipy.linalg import expm_frechet, solve_discrete_are
 from scipy.optimize import least_squares
 
 from bikeid.dataset.run import Run
-from bikeid.sim.conventions import CANONICAL_STATE
-from bikeid.sim.errors import UntrustworthyResult
-from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
-from bikeid.sim.sampling import zoh
-
-from .canonical import (
+from bikeid.ident.canonical import (
     A_POS,
     B_POS,
     SPEED_NAMES,
@@ -73,8 +68,12 @@ from .canonical import (
     to_bikeid_order,
     to_canonical_form,
 )
-from .signals import check_sampling
-from .subspace import d2c, decimate, pbsid
+from bikeid.ident.signals import check_sampling
+from bikeid.ident.subspace import d2c, decimate, pbsid
+from bikeid.sim.conventions import CANONICAL_STATE
+from bikeid.sim.errors import UntrustworthyResult
+from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
+from bikeid.sim.sampling import zoh
 
 __all__ = [
     "CanonicalModel",

@@ -40,12 +40,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.ident.direct import DirectResult, identify
+from bikeid.ident.signals import check_sampling
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, state_matrices
 from bikeid.sim.sampling import zoh
-
-from .direct import DirectResult, identify
-from .signals import check_sampling
 
 __all__ = ["ControllerFit", "fit_controller", "identify_tailored", "simulate_instruments"]
 
@@ -255,7 +254,7 @@ def identify_tailored(
         Entries to estimate (default Moore & Hubbard's sets).
     prepare : callable
         Maps a raw run to the signals the regression uses (e.g.
-        ``experiments.accuracy.direct_prepare``); applied alike to data and simulated
+        ``experiments.testbed.accuracy.direct_prepare``); applied alike to data and simulated
         instruments.
     start : {"external", "ls"} or DirectResult or CanonicalMatrices, optional
         First model for the instruments: "external" (default: ``identify(...,

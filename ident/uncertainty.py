@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, matrices_from_speed_params, speed_map
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import (
     CanonicalMatrices,
@@ -59,8 +60,7 @@ from bikeid.sim.linear import (
     match_eigenvalues,
     quartic_coefficients,
 )
-
-from .canonical import A_POS, B_POS, canonical_ab, matrices_from_speed_params, speed_map
+from bikeid.sim.textformats import to_jsonable
 
 __all__ = [
     "BodeBand",
@@ -107,21 +107,6 @@ def z_value(level: float) -> float:
     if not (isinstance(level, (int, float)) and 0.0 < level < 1.0):
         raise InputError(f"level={level!r}: need a confidence level strictly between 0 and 1")
     return float(norm.ppf(0.5 + 0.5 * level))
-
-
-def _jsonable(x: Any) -> Any:
-    """Plain JSON types (complex -> {"re", "im"}, non-finite -> None), as cliutil.to_jsonable."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in (x.tolist() if isinstance(x, np.ndarray) else x)]
-    if isinstance(x, (complex, np.complexfloating)):
-        return {"re": _jsonable(float(x.real)), "im": _jsonable(float(x.imag))}
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def _parameters(model, v: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -415,7 +400,7 @@ class EigenIntervals:
         if self.converged is not None:
             for row, ok in zip(rows, self.converged, strict=True):
                 row["converged"] = bool(np.all(ok))
-        return _jsonable({"speed": self.speed, "level": self.level, "z": self.z,
+        return to_jsonable({"speed": self.speed, "level": self.level, "z": self.z,
                           "method": self.method, "eigenvalues": rows})  # fmt: skip
 
 
@@ -581,7 +566,7 @@ class CriticalSpeedIntervals:
             out[name] = {"value": getattr(self, name), "std": getattr(self, f"std_{name}"),
                          "interval": self.interval(name),
                          "open": getattr(self, f"open_{name}")}  # fmt: skip
-        return _jsonable(out)
+        return to_jsonable(out)
 
 
 def _h(params: np.ndarray, g: float, v: float, func) -> complex:
@@ -790,7 +775,7 @@ class BodeBand:
         dict
             Every attribute, arrays as lists (frequencies [rad/s], dB, deg).
         """
-        return _jsonable({k: getattr(self, k) for k in self.__dataclass_fields__})
+        return to_jsonable({k: getattr(self, k) for k in self.__dataclass_fields__})
 
 
 def _frequency_response(theta, C, w) -> tuple[np.ndarray, np.ndarray]:
@@ -845,7 +830,7 @@ def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) 
     z = z_value(level)
     w = _check_frequencies(frequencies)
     p, cov, S, _ = _parameters(model, v)
-    from .pem import output_matrix
+    from bikeid.ident.pem import output_matrix
 
     C = output_matrix(model.outputs)[0]
     G, dG = _frequency_response(S @ p, C, w)
@@ -923,7 +908,7 @@ class MonteCarloDraws:
                 out[name] = {"mean": float(np.mean(ok)) if ok.size else None,
                              "std": float(np.std(ok, ddof=1)) if ok.size > 1 else None,
                              "missing": int(x.size - ok.size)}  # fmt: skip
-        return _jsonable(out)
+        return to_jsonable(out)
 
 
 def monte_carlo(
@@ -979,7 +964,7 @@ def monte_carlo(
         ev[k] = match_eigenvalues(np.linalg.eigvals(canonical_ab(S @ pk)[0]), nominal)
     mag = phase = None
     if frequencies is not None:
-        from .pem import output_matrix
+        from bikeid.ident.pem import output_matrix
 
         w = _check_frequencies(frequencies)
         C = output_matrix(model.outputs)[0]

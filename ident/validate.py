@@ -33,10 +33,9 @@ import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.ident.direct import DirectResult, vaf_variance
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.sampling import zoh
-
-from .direct import DirectResult, vaf_variance
 
 __all__ = [
     "CompareResult",
@@ -68,7 +67,7 @@ def goodness_of_fit(y: np.ndarray, yhat: np.ndarray) -> dict[str, float]:
     dict of str to float
         ``"mse"`` (unit of ``y`` squared); ``"nrmse"`` = ||y - yhat|| / ||y - mean y||
         (0 = perfect; the error of ``bikeid measured evaluate``,
-        :func:`bikeid.ident.experiment_model.window_errors`); ``"nrmse_fit"`` = 1 - nrmse
+        :func:`bikeid.ident.effects.experiment_model.window_errors`); ``"nrmse_fit"`` = 1 - nrmse
         (MATLAB ``compare``'s fit, as a fraction), ``"nmse_fit"`` = 1 - nrmse^2 and
         ``"vaf"`` = 1 - var(y - yhat) / var(y) (:func:`ident.direct.vaf_variance`), all
         dimensionless, NaN when ``y`` is constant.

@@ -32,9 +32,7 @@ import numpy as np
 from scipy import signal
 
 from bikeid.dataset.run import SPEED_TOLERANCE, Run
-from bikeid.sim.errors import UntrustworthyResult
-
-from .validate import (
+from bikeid.ident.validate import (
     CompareResult,
     ResidResult,
     compare,
@@ -44,6 +42,7 @@ from .validate import (
     sampled_model,
     whiteness,
 )
+from bikeid.sim.errors import UntrustworthyResult
 
 __all__ = [
     "INTERVAL_CALIBRATION",
@@ -226,7 +225,7 @@ class FrequencyResponseEstimate:
         :attr:`in_band`, says whether model and data disagree."""
         if self.band_db.size == 0:
             return None
-        from .uncertainty import z_value
+        from bikeid.ident.uncertainty import z_value
 
         ze = z_value(BAND_LEVEL) * self.rel_error
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -292,9 +291,8 @@ def bode_band_halfwidths(model, f: np.ndarray, v: float) -> dict | None:
         (:func:`bikeid.ident.uncertainty.bode_bands` at ``BAND_LEVEL``); None for a model
         without covariance.
     """
+    from bikeid.ident.uncertainty import bode_bands, z_value
     from bikeid.sim.errors import InputError
-
-    from .uncertainty import bode_bands, z_value
 
     m = model.at(v) if hasattr(model, "at") else model
     if not (hasattr(m, "predictor") and hasattr(m, "covariance")):
@@ -750,7 +748,7 @@ def validate_decays(
 
     The validation of :func:`validate_model` for the steer-by-wire experiment model, whose
     simulation from each decay's measured initial state (``model.simulate(windows)``,
-    :meth:`bikeid.ident.experiment_model.ExperimentModel.simulate`, with the windows'
+    :meth:`bikeid.ident.effects.experiment_model.ExperimentModel.simulate`, with the windows'
     attached defect corrections) is compared with the measurements: the NRMSE fit of
     :func:`~bikeid.ident.validate.goodness_of_fit` per window and channel, and the
     simulation errors' whiteness and independence from the external steer torque T_ext
@@ -777,7 +775,7 @@ def validate_decays(
         ``fit_definition``; ``files``: per file (sorted by name) ``file``, ``speed`` [m/s],
         ``windows``, ``fit`` per channel [%] (the mean over its windows of 100 times the
         NRMSE fit, so 100 - fit is 100 times the window error of
-        :func:`bikeid.ident.experiment_model.window_errors`) and ``residuals``
+        :func:`bikeid.ident.effects.experiment_model.window_errors`) and ``residuals``
         (:func:`residual_tests` per channel); ``fit`` per channel [%], the mean over files.
     """
     windows = list(windows)

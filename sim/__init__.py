@@ -26,6 +26,8 @@ Modules:
 - :mod:`~bikeid.sim.effect_registry`: every such effect declared once (name, unit,
   plausible range, layer, how the plant carries it).
 - :mod:`~bikeid.sim.sampling`: the one exact zero-order-hold discretization (:func:`zoh`).
+- :mod:`~bikeid.sim.periodic_orbits`: periodic orbits of the uncontrolled bicycle converged
+  on a Poincare map, and their Floquet multipliers.
 - ``_whipple_generated``: the equations of motion emitted by ``scripts/derive_whipple.py``
   (private).
 

@@ -79,3 +79,7 @@ PLAUSIBLE = {
 #: Speed range [m/s] of a run's nominal speed (``Run.meta["speed"]``): forward motion up to
 #: the upper bound of ``PLAUSIBLE["v"]`` (every bikeid model needs v > 0).
 NOMINAL_SPEED = (0.0, 30.0)
+
+#: Largest forward speed any command accepts [m/s] (360 km/h: beyond any bicycle; the
+#: linear model's v^2 K2 stays far from overflow).
+MAX_SPEED = 100.0

@@ -13,7 +13,7 @@ Higher stages attach their *application* of an entry and never re-spell its fact
   nonlinear simulator (:meth:`Effect.nonlinear` builds those objects);
 * :mod:`bikeid.dataset.sensors` applies the ``sensor`` layer (bias and scale of a channel,
   :meth:`Effect.sensor`);
-* the experiment model of the measured data (``bikeid.ident.experiment_model``) applies
+* the experiment model of the measured data (``bikeid.ident.effects.experiment_model``) applies
   every entry to the linear model, and the effect library (``bikeid.ident``) adds its fit
   settings (scale, bounds, scan grid) to the entries with ``in_library``.
 

@@ -28,9 +28,9 @@ identification library may select it) are declared once, as an entry of
 3. name it as the entry's ``plant_term`` and add its class to the registry's builders
    (``effect_registry._plant_builders``), so that
    :func:`bikeid.sim.effect_registry.nonlinear_effects` builds it from a value;
-4. apply the entry in the linear experiment model (``bikeid.ident.experiment_model``) and,
+4. apply the entry in the linear experiment model (``bikeid.ident.effects.experiment_model``) and,
    if the identification may select it, give it fit settings in
-   ``bikeid.ident.effect_library.LIBRARY`` (tests/test_effect_registry_use.py checks both).
+   ``bikeid.ident.effects.library.LIBRARY`` (tests/test_effect_registry_use.py checks both).
 
 An effect the plant cannot carry states why in the entry's ``no_plant`` instead (sensor
 effects are applied by :meth:`bikeid.dataset.sensors.Sensors.with_effects`).

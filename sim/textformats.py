@@ -1,4 +1,5 @@
-"""Strict readers of the JSON and YAML text a user hands to bikeid.
+"""Strict readers of the JSON and YAML text a user hands to bikeid, and the one converter
+of bikeid's values to plain JSON types (:func:`to_jsonable`, :func:`dump_json`).
 
 Python's ``json`` and PyYAML accept things that silently change a user's numbers:
 duplicate keys (the last one wins), ``NaN``/``Infinity`` in JSON, and nesting deep
@@ -10,11 +11,14 @@ problem.
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
+
+import numpy as np
 
 from .errors import InputError
 
-__all__ = ["MAX_DEPTH", "loads_json", "loads_yaml"]
+__all__ = ["MAX_DEPTH", "dump_json", "loads_json", "loads_yaml", "to_jsonable"]
 
 #: Deepest nesting of lists/mappings accepted (bikeid's files nest 4 levels at most).
 MAX_DEPTH = 64
@@ -181,3 +185,54 @@ def _node_depth(node: Any) -> int:
                 else:
                     stack.append((item, d + 1))
     return deepest
+
+
+def to_jsonable(obj: Any) -> Any:
+    """numpy arrays, complex numbers and nested containers to plain JSON types.
+
+    Complex numbers become ``{"re": x, "im": y}``; NaN/inf become ``null``; an object with
+    an ``as_dict`` method becomes that dict.
+
+    Parameters
+    ----------
+    obj : Any
+        The value to convert.
+
+    Returns
+    -------
+    Any
+        The same structure in dicts, lists, str, int, float, bool and None.
+    """
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (complex, np.complexfloating)):
+        return {"re": to_jsonable(float(obj.real)), "im": to_jsonable(float(obj.imag))}
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if callable(getattr(obj, "as_dict", None)):  # e.g. NominalUncertainty
+        return to_jsonable(obj.as_dict())
+    return obj
+
+
+def dump_json(obj: Any) -> str:
+    """``obj`` as indented JSON text, through :func:`to_jsonable`.
+
+    Parameters
+    ----------
+    obj : Any
+        Nested dicts, lists, numpy arrays and scalars, complex numbers.
+
+    Returns
+    -------
+    str
+        The JSON text (2-space indent).
+    """
+    return json.dumps(to_jsonable(obj), indent=2)

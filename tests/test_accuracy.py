@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from bikeid.dataset.linear_loop import simulate
-from bikeid.experiments import accuracy as acc
+from bikeid.experiments.testbed import accuracy as acc
 from bikeid.ident import pem
 from bikeid.ident.canonical import steer_zeros, theta_from_matrices
 from bikeid.ident.direct import identify

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bikeid.dataset.windows import Window
-from bikeid.experiments.blind_trials import (
+from bikeid.experiments.measured.blind_trials import (
     CLASSES,
     BlindTrial,
     Nuisance,
@@ -22,8 +22,8 @@ from bikeid.experiments.blind_trials import (
     score,
     summarize_blind,
 )
-from bikeid.experiments.effect_trials import EFFECTS
-from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.experiments.measured.effect_trials import EFFECTS
+from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.sim import linear
 from bikeid.sim.parameters import benchmark, steer_by_wire
 
@@ -166,7 +166,7 @@ def test_nominal_plant_preference_follows_the_truth(plant):
     linear truth are fitted better by the linear nominal, those of the nonlinear plant by the
     nonlinear one (pushes as large as the logs', where the two differ by NRMSE ~0.1-0.5
     at 1.5-2 m/s, docs/measured.md; noise small enough not to hide it)."""
-    from bikeid.ident.effect_selection import compare_nominal_plants
+    from bikeid.ident.effects.selection import compare_nominal_plants
 
     nz = replace(QUIET, plant=plant, noise=0.002, encoder_counts=16384)
     tr = BlindTrial(0, 1, "none", float("nan"), (1.6, 2.2), (3.0, 3.5), nz)
@@ -187,8 +187,8 @@ def test_auto_plant_choice_both_ways(plant):
     the same linear-truth costs keep the nonlinear plant under a margin 1 % above their own
     ratio, as the real decays (ratio 1.014 < 1.2) keep it.  ``fit_model`` (what ``measured
     fit`` runs, no selection round here) records the same choice and its reason."""
-    from bikeid.experiments.measured_study import fit_model
-    from bikeid.ident.effect_selection import (
+    from bikeid.ident.effects.pipeline import fit_model
+    from bikeid.ident.effects.selection import (
         LINEAR_PLANT_MARGIN,
         choose_nominal_plant,
         compare_nominal_plants,

@@ -92,7 +92,7 @@ def test_error_types_stay_value_errors():
 def test_exception_to_exit_code(monkeypatch, capsys, exc, code, phrase):
     """The mapping of :mod:`bikeid.sim.errors`, each status on a case known to give it
     (success included), through a handler that raises."""
-    from bikeid.experiments import cmd_plant
+    from bikeid.experiments.cli import plant as cmd_plant
 
     def handler(args):
         if exc is not None:
@@ -110,7 +110,7 @@ def test_exception_to_exit_code(monkeypatch, capsys, exc, code, phrase):
 
 
 def test_debug_prints_the_traceback(monkeypatch, capsys):
-    from bikeid.experiments import cmd_plant
+    from bikeid.experiments.cli import plant as cmd_plant
 
     def handler(args):
         raise RuntimeError("boom")
@@ -319,7 +319,7 @@ def test_model_without_plant_defaults_like_fit(tmp_path):
     the plant it chose), and says so."""
     import inspect
 
-    from bikeid.experiments.measured_study import DEFAULT_PLANT, fit_model, model_from_json
+    from bikeid.ident.effects.pipeline import DEFAULT_PLANT, fit_model, model_from_json
 
     assert inspect.signature(fit_model).parameters["plant"].default == "auto"
     assert DEFAULT_PLANT == "nonlinear"
@@ -378,7 +378,7 @@ def test_unidentifiable_is_exit_4(monkeypatch, capsys, tmp_path):
     """An estimator's refusal reaches the user as status 4 with its message, here the
     direct method's conditioning refusal (raised by ``ident.direct``)."""
     import bikeid.ident.direct as direct
-    from bikeid.experiments import cmd_ident
+    from bikeid.experiments.cli import identify as cmd_ident
 
     def refuse(*args, **kwargs):
         raise UntrustworthyResult("roll row is unidentifiable: condition number 1e+13")
@@ -422,7 +422,7 @@ def test_argument_types_raise_only_usage_errors(text):
     ArgumentTypeError (argparse turns it into exit status 2)."""
     import argparse
 
-    from bikeid.experiments.cliutil import MAX_SPEED, integer, range_text, speed_value
+    from bikeid.experiments.cli.args import MAX_SPEED, integer, range_text, speed_value
 
     for parse in (speed_value, integer(1, 1024), range_text("--speeds", 0.0)):
         try:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bikeid.experiments.cli import main
-from bikeid.experiments.sweep import SweepSpec, run_sweep
+from bikeid.experiments.testbed.sweep import SweepSpec, run_sweep
 from bikeid.sim.linear import critical_speeds, eigenvalues, match_eigenvalues
 from bikeid.sim.parameters import benchmark
 

@@ -89,7 +89,7 @@ def test_export_then_identify_a_users_log(folder):
     assert rc == 0, err
     from_csv, from_h5 = _eigs(out_csv), _eigs(out_h5)
     assert sorted(from_csv) == sorted(from_h5) == [4.0, 5.0]
-    from bikeid.experiments.accuracy import eigen_tolerance
+    from bikeid.experiments.testbed.accuracy import eigen_tolerance
     from bikeid.sim.linear import eigenvalues, match_eigenvalues
     from bikeid.sim.parameters import benchmark
 

@@ -278,10 +278,10 @@ def _predicted_rms_deg(ctrl: PolePlacement, v: float, dt: float = 0.01) -> float
 
 
 def _stabilization_cell(v: float, monkeypatch=None, **pole_options) -> dict:
-    """One cell of ``bikeid stabilization`` (same code path, ``experiments.sweep``), 50 s;
+    """One cell of ``bikeid stabilization`` (same code path, ``experiments.testbed.sweep``), 50 s;
     ``pole_options`` are added to the registry's PolePlacement (needs ``monkeypatch``)."""
     import bikeid.controllers.registry as registry
-    from bikeid.experiments import sweep
+    from bikeid.experiments.testbed import sweep
 
     if pole_options:
         orig = registry._FACTORIES["pole-placement"]

@@ -98,7 +98,7 @@ def test_attenuation_scalar_formula_t4():
 
 
 def _pid_runs(speeds, seed=0, sensors="default", chirp_deg=1.5, duration=50.0):
-    from bikeid.experiments.sweep import SweepSpec, simulate_task
+    from bikeid.experiments.testbed.sweep import SweepSpec, simulate_task
 
     spec = SweepSpec("pid", tuple(speeds), (seed,), duration, reference="chirp",
                      chirp_amplitude=np.radians(chirp_deg), dither=1.0, dither_hold=0.02,

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from bikeid.ident.discrepancy_diagnostics import evaluate
-from bikeid.ident.effect_fit import fit_effects
-from bikeid.ident.effect_selection import select_effects, selection_frequencies
-from bikeid.ident.experiment_model import ExperimentModel
-from bikeid.ident.synthetic_decays import synthetic_windows
+from bikeid.ident.effects.diagnostics import evaluate
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.fit import fit_effects
+from bikeid.ident.effects.selection import select_effects, selection_frequencies
+from bikeid.ident.effects.synthetic_decays import synthetic_windows
+from bikeid.ident.effects.weave import weave_error
 from bikeid.ident.validate import whiteness
-from bikeid.ident.weave import weave_error
 
 
 def test_whiteness_band():
@@ -99,7 +99,7 @@ def test_weave_error_is_relative_root_shift():
     ws = synthetic_windows(truth, [3.5], 3, noise=0.0, seed=5)
     for w in ws:  # undo the encoder quantization for a clean check
         w.delta = truth.simulate([w], nsub=10)[0]["delta"]
-    from bikeid.ident.weave import decay_eigenvalue
+    from bikeid.ident.effects.weave import decay_eigenvalue
 
     lam = [decay_eigenvalue(w) for w in ws]
     assert weave_error(ws, truth.simulate(ws, nsub=10), lam) < 1e-3
@@ -116,7 +116,7 @@ def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
     import numpy as np
 
     from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
-    from bikeid.ident.experiment_model import COULOMB_EPS, DT
+    from bikeid.ident.effects.experiment_model import COULOMB_EPS, DT
     from bikeid.sim.effect_registry import nonlinear_effects
 
     a, b = SPEED_CALIBRATION
@@ -165,8 +165,8 @@ def test_push_asymmetry_mirror_symmetry():
 
     import numpy as np
 
-    from bikeid.ident.discrepancy_diagnostics import push_asymmetry
-    from bikeid.ident.experiment_model import window_errors
+    from bikeid.ident.effects.diagnostics import push_asymmetry
+    from bikeid.ident.effects.experiment_model import window_errors
 
     nominal = ExperimentModel()
     ws = synthetic_windows(ExperimentModel(effects={"steer_viscous_damping": 0.4}), [2.5, 4.0],
@@ -201,7 +201,7 @@ def test_weave_uncertainty_matches_monte_carlo_scatter():
     distinct values; Efron & Tibshirani 1993, sec. 7.3), so the bound is 0.7-1.6x."""
     import numpy as np
 
-    from bikeid.ident.weave import decay_eigenvalue, median_complex, weave_uncertainty
+    from bikeid.ident.effects.weave import decay_eigenvalue, median_complex, weave_uncertainty
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.3})
     meds, boot = [], []
@@ -233,8 +233,8 @@ def test_weave_term_recovers_linear_effects():
 
     import numpy as np
 
-    from bikeid.ident.effect_fit import output_residuals
-    from bikeid.ident.weave import WeaveTerm, weave_targets
+    from bikeid.ident.effects.fit import output_residuals
+    from bikeid.ident.effects.weave import WeaveTerm, weave_targets
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.4, "steer_stiffness": 1.5})
     ws = synthetic_windows(truth, [2.5, 4.5], 6, seed=4)

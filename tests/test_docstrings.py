@@ -1,8 +1,8 @@
 """The public API's docstrings follow numpydoc in python-control's style.
 
-For every public module ``bikeid.<stage>.<name>`` (:data:`DOCUMENTED_MODULES`: all of them
-but the command-line modules ``experiments.cli*`` and ``experiments.cmd_*``, which only parse
-arguments and print):
+For every public module of every stage and its subpackages (:data:`DOCUMENTED_MODULES`:
+all of them but the command-line modules ``experiments.cli.*``, which only parse arguments
+and print):
 
 - every function named in the module's ``__all__`` (or, without ``__all__``, every public
   function defined in it) has a docstring with a ``Parameters`` section (numpydoc
@@ -12,9 +12,10 @@ arguments and print):
   section, and each of its public methods (defined in the class, not inherited; dunders
   skipped) obeys the function rule; a public property has a non-empty docstring.
 
-Each stage package (:data:`DOCUMENTED_PACKAGES`) must have a docstring that names
-every public module of its folder as ``bikeid.<stage>.<module>`` and names no module that
-does not exist, so the one-line-per-module list stays true as modules are added.
+Each package (:data:`DOCUMENTED_PACKAGES`, subpackages included) must have a docstring that
+names every public module and subpackage of its folder (``bikeid.<package>.<module>`` or
+``:mod:`.module```) and names no module that does not exist, so the one-line-per-module list stays
+true as modules are added.
 """
 
 from __future__ import annotations
@@ -29,7 +30,16 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
 
-DOCUMENTED_PACKAGES = tuple(f"bikeid.{s}" for s in STAGES)
+def _package_dirs() -> dict[str, Path]:
+    """Every package of the stages, subpackages included: dotted name -> folder."""
+    out = {}
+    for stage in STAGES:
+        for init in sorted((ROOT / stage).rglob("__init__.py")):
+            out[".".join(("bikeid", *init.parent.relative_to(ROOT).parts))] = init.parent
+    return out
+
+
+DOCUMENTED_PACKAGES = tuple(_package_dirs())
 
 
 def _section(doc: str, title: str) -> bool:
@@ -117,14 +127,12 @@ def check_module(modname: str) -> tuple[list[str], dict[str, int]]:
 def _discovered() -> set[str]:
     """Modules ``bikeid.<stage>.<name>`` the convention applies to (from the files)."""
     out = set()
-    for stage in STAGES:
-        for f in (ROOT / stage).glob("*.py"):
-            name = f.stem
-            if name.startswith("_"):
-                continue
-            if stage == "experiments" and (name.startswith("cli") or name.startswith("cmd_")):
-                continue
-            out.add(f"bikeid.{stage}.{name}")
+    for package, folder in _package_dirs().items():
+        if package.startswith("bikeid.experiments.cli"):
+            continue
+        for f in folder.glob("*.py"):
+            if not f.stem.startswith("_"):
+                out.add(f"{package}.{f.stem}")
     return out
 
 
@@ -230,11 +238,14 @@ def test_checker_self_check():
 # -- stage package docstrings ------------------------------------------------------------
 @pytest.mark.parametrize("package", DOCUMENTED_PACKAGES)
 def test_package_docstring_lists_its_modules(package):
-    stage = package.split(".")[1]
+    folder = _package_dirs()[package]
     doc = (importlib.import_module(package).__doc__ or "").strip()
     assert doc, f"{package} has no docstring"
-    present = {f.stem for f in (ROOT / stage).glob("*.py") if not f.stem.startswith("_")}
-    named = set(re.findall(rf"bikeid\.{stage}\.([A-Za-z_]\w*)", doc))
+    present = {f.stem for f in folder.glob("*.py") if not f.stem.startswith("_")}
+    present |= {d.name for d in folder.iterdir() if (d / "__init__.py").exists()}
+    # a child is named in full (bikeid.pkg.child) or relative to the package (:mod:`.child`)
+    named = set(re.findall(rf"{re.escape(package)}\.([A-Za-z_]\w*)", doc))
+    named |= set(re.findall(r":mod:`~?\.([A-Za-z_]\w*)`", doc))
     unlisted = sorted(present - named)
     stale = sorted(named - present)
     assert not unlisted, f"{package} docstring does not list modules {unlisted}"

@@ -25,7 +25,7 @@ def _inside(name: str, frac: float = 0.2) -> float:
 
 
 def test_library_is_the_registry_in_library_set():
-    from bikeid.ident.effect_library import LIBRARY
+    from bikeid.ident.effects.library import LIBRARY
 
     assert set(LIBRARY) == set(library_names())
     for name, cand in LIBRARY.items():
@@ -39,8 +39,8 @@ def test_library_is_the_registry_in_library_set():
 def test_every_registry_effect_changes_the_experiment_model(name):
     """A non-absent value inside the plausible range changes the simulated decay of one
     synthetic window (linear model, 3 m/s) by more than round-off (1e-9)."""
-    from bikeid.ident.experiment_model import ExperimentModel
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     w = synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0]
     nominal = ExperimentModel().simulate([w])[0]
@@ -65,7 +65,7 @@ def test_every_plant_term_changes_the_nonlinear_plant(name):
 
 
 def test_trial_effects_take_their_facts_from_the_registry():
-    from bikeid.experiments.effect_trials import EFFECTS as TRIALS
+    from bikeid.experiments.measured.effect_trials import EFFECTS as TRIALS
     from bikeid.sim import effects as fx
 
     for name, spec in TRIALS.items():

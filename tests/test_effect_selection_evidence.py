@@ -4,8 +4,8 @@ and its printed lines, and the verdicts on blind-generator logs whose answer is 
 import numpy as np
 import pytest
 
-from bikeid.ident.effect_fit import noise_floor, residual_noise_floor
-from bikeid.ident.effect_selection import evidence_lines
+from bikeid.ident.effects.fit import noise_floor, residual_noise_floor
+from bikeid.ident.effects.selection import evidence_lines
 
 T = np.arange(100) * 0.01
 DECAY = 0.5 * np.exp(-T) * np.sin(2 * np.pi * 1.5 * T)  # a weave-like decay [rad/s]
@@ -74,7 +74,7 @@ def test_evidence_lines_state_the_numbers():
 def _quiet_trial(effect: str, value: float, seed: int = 11):
     """Blind-generator decays (independent linear plant) with nuisances off but white roll-rate
     noise 0.008 rad/s and a 8192-count steer encoder; the answer is known."""
-    from bikeid.experiments.blind_trials import BlindTrial, Nuisance, generate_windows
+    from bikeid.experiments.measured.blind_trials import BlindTrial, Nuisance, generate_windows
 
     nz = Nuisance(
         plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
@@ -100,8 +100,8 @@ def test_evidence_verdicts_both_ways(effect, value, accepted, unexplained):
     start-state error); a no-effect log gets no effect under the held-out rule; an
     outside-library roll damping leaves structure the residual rule calls unexplained,
     whatever library effect absorbs part of it."""
-    from bikeid.ident.effect_selection import RESIDUAL_MAX, select_effects
-    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.selection import RESIDUAL_MAX, select_effects
 
     ws = _quiet_trial(effect, value)
     res = select_effects(
@@ -132,7 +132,7 @@ def test_rescore_unexplained_both_ways():
     misattributed under threshold 4 and not under 2."""
     from dataclasses import asdict
 
-    from bikeid.experiments.blind_trials import draw_blind_trials, rescore_unexplained
+    from bikeid.experiments.measured.blind_trials import draw_blind_trials, rescore_unexplained
 
     tr = {t.effect: t for t in draw_blind_trials(9, 0)}
     lib, out = tr["steer_viscous_damping"], tr["roll_stiffness"]

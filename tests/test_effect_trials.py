@@ -1,4 +1,4 @@
-"""Randomized undeclared-effect trials on the nonlinear plant (experiments.effect_trials).
+"""Randomized undeclared-effect trials on the nonlinear plant (experiments.measured.effect_trials).
 
 Budget: the cheap tests take a few seconds; the rate test runs 24 trials on 2 processes
 (about 60 s on 2 cores: 24 trials, ~4 s of CPU each) and is marked slow.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bikeid.experiments.effect_trials import (
+from bikeid.experiments.measured.effect_trials import (
     EFFECTS,
     LIBRARY_EFFECTS,
     OUTSIDE_EFFECTS,
@@ -18,7 +18,7 @@ from bikeid.experiments.effect_trials import (
     draw_trials,
     run_trials,
 )
-from bikeid.ident.experiment_model import (
+from bikeid.ident.effects.experiment_model import (
     COULOMB_EPS,
     DT,
     ExperimentModel,

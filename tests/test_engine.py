@@ -4,7 +4,8 @@
   out by hand (second method, no code shared with the engine);
 - its own per-sample Python path (the controller object called every sample) against its
   compiled path (the controller's linear law);
-- the vectorized steer-by-wire fast path ``ident.experiment_model.ExperimentModel.simulate``;
+- the vectorized steer-by-wire fast path
+``ident.effects.experiment_model.ExperimentModel.simulate``;
 - the equations of motion (exact accelerations).
 
 Round-off tolerances: the compared computations perform the same arithmetic in a
@@ -29,7 +30,7 @@ from bikeid.controllers.excitation import ChirpReference, StepReference
 from bikeid.controllers.pole_placement import SLOW_POLES
 from bikeid.dataset.linear_loop import closed_loop_matrix, simulate
 from bikeid.dataset.windows import Window
-from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.sim.linear import canonical_matrices, lateral_force_vector, state_matrices
 from bikeid.sim.parameters import benchmark, steer_by_wire
 

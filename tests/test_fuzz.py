@@ -10,7 +10,7 @@ Three generators (hypothesis, bounded, in CI):
    ranges of 1e308 points, paths that do not exist, ...).
 2. **Files** a user can pass: parameter files (YAML and JSON) with mutated fields, duplicate
    keys and deep nesting, through ``bikeid linearize --bicycle FILE``; model files through
-   ``bikeid.experiments.measured_study.model_from_json`` and damaged grey-box model files
+   ``bikeid.ident.effects.pipeline.model_from_json`` and damaged grey-box model files
    through ``bikeid validate --model``; bikeid HDF5 run files with corrupted bytes through
    ``bikeid identify`` and ``bikeid validate``; imported CSV logs with mutated cells through
    ``bikeid.dataset.importers.from_csv``.
@@ -243,7 +243,7 @@ def test_malformed_parameter_files(changes, fmt, extra):
 )
 def test_malformed_model_files(doc, base):
     """Model files (``measured fit`` output): anything but a valid model is a ValueError."""
-    from bikeid.experiments.measured_study import model_from_json
+    from bikeid.ident.effects.pipeline import model_from_json
 
     if base and isinstance(doc, dict):
         doc = {"effects": {"steer_viscous_damping": 0.3}, "plant": "linear", "K": 2.0} | doc

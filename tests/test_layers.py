@@ -31,9 +31,11 @@ RANK = {s: i for i, s in enumerate(STAGES)}
 def _modules() -> dict[str, Path]:
     out = {"bikeid": ROOT / "__init__.py"}
     for stage in STAGES:
-        for f in sorted((ROOT / stage).glob("*.py")):
-            name = f"bikeid.{stage}" if f.stem == "__init__" else f"bikeid.{stage}.{f.stem}"
-            out[name] = f
+        for f in sorted((ROOT / stage).rglob("*.py")):  # subpackages too
+            parts = ["bikeid", *f.relative_to(ROOT).with_suffix("").parts]
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join(parts)] = f
     return out
 
 
@@ -135,7 +137,7 @@ def test_no_import_cycles_between_modules():
     graph, _ = _graph()
     # A package __init__ re-exporting its own submodules is not a cycle of two topics.
     pruned = {
-        m: {t for t in ts if not (m.count(".") == 1 and t.startswith(m + "."))}
+        m: {t for t in ts if not t.startswith(m + ".")}
         for m, ts in graph.items()
     }
     assert not _cycles(pruned), f"import cycles: {_cycles(pruned)}"
@@ -193,3 +195,15 @@ def test_installed_distribution_has_one_top_level_name():
     assert all(res["stages"]), res
     bare = _installed("import sim")
     assert bare.returncode != 0 and "No module named 'sim'" in bare.stderr, bare.stderr
+
+
+def test_every_subpackage_is_installed():
+    """Each folder of the stages holding an ``__init__.py`` is listed in pyproject.toml's
+    packages (a missing one would be left out of the wheel)."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "packages"
+    ])
+    found = {m for m, f in _modules().items() if f.name == "__init__.py"}
+    assert found <= listed, f"not in pyproject.toml packages: {sorted(found - listed)}"

@@ -1,4 +1,4 @@
-"""Tests of the Poincare-section periodicity check (experiments.limit_cycles)."""
+"""Tests of the Poincare-section periodicity check (experiments.papers.limit_cycles)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bikeid.experiments import limit_cycles as lc
+from bikeid.experiments.papers import limit_cycles as lc
 from bikeid.sim.integrate import DEFAULT_FALL_LIMIT, STEER_LIMIT, STOP_CAUSES
 
 #: Physical stop causes (a fall), whatever the simulator adds to them.
@@ -207,8 +207,8 @@ def test_fig4_orbit_is_periodic_with_multipliers_and_mirror_check():
     and multipliers.  Its orbit is sectioned on the other half (roll maxima of the mirror
     are the negated minima of the original) and converged separately, so the agreement
     tests the whole chain; tolerance 1e-4 (observed 2e-6)."""
-    from bikeid.experiments.floquet import orbit_stability
     from bikeid.sim.parameters import benchmark
+    from bikeid.sim.periodic_orbits import orbit_stability
 
     p = benchmark()
     ic = lc.FIG4_CONDITIONS[2]
@@ -237,8 +237,8 @@ def test_delta0_and_phi0_orbits_are_mirror_images():
     other (1e-6 relative) and reach mirror-image period-2 orbits: the mirrored delta0 run's
     orbit and the phi0 run's orbit have the same period (to 1e-5) and multipliers (to 1e-3;
     observed 7e-5, the orbits lie on energy levels 1.5e-3 J apart)."""
-    from bikeid.experiments.floquet import orbit_stability
     from bikeid.sim.parameters import benchmark
+    from bikeid.sim.periodic_orbits import orbit_stability
 
     p = benchmark()
     out = []

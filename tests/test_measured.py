@@ -12,7 +12,7 @@ import pytest
 from bikeid.dataset.decays import read_segments
 from bikeid.dataset.download import fetch
 from bikeid.dataset.sbw_logs import despike, load_log, treadmill_speed
-from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.effects.experiment_model import ExperimentModel
 
 DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
 HAVE = (Path(DATA) / "tudelft-sbw" / "eigen").is_dir()
@@ -116,7 +116,7 @@ def test_closed_loop_sign_stabilizes():
 def test_simulation_matches_closed_loop_matrix():
     """Second method: the vectorized simulation equals powers of the augmented loop
     matrix (delay, lag, gain, biases) to round-off (1e-10)."""
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     m = ExperimentModel(effects={"input_delay": 0.023, "actuator_lag": 0.02, "command_gain": 0.9,
                                  "roll_rate_bias": 0.01, "steer_torque_bias": 0.05})  # fmt: skip
@@ -381,7 +381,7 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     assert len(new) >= len(old) - 1
     pairs = [(o, n) for o in old for n in new if abs(o.start - n.start) <= 3]
     assert len(pairs) == len(old)
-    from bikeid.ident.experiment_model import attach_nonlinear_correction, window_errors
+    from bikeid.ident.effects.experiment_model import attach_nonlinear_correction, window_errors
 
     m = ExperimentModel()
     eo, en = ([p[i] for p in pairs] for i in (0, 1))

@@ -23,7 +23,7 @@ from bikeid.dataset import files
 from bikeid.dataset.linear_loop import simulate
 from bikeid.ident import greybox, load_model, pem, read_model_file, save_model
 from bikeid.ident.direct import identify
-from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.model_file import model_from_text, model_json
 from bikeid.ident.signals import prepare
 from bikeid.ident.validate import simulation
@@ -320,10 +320,11 @@ def test_nullable_values_read_as_nan(models):
 
 def test_measured_fit_file_round_trip(models, tmp_path):
     """``measured fit`` writes its model object as an experiment-model file; ``measured
-    evaluate``/``report`` (measured_study.model_from_json) read back the same object (the
+    evaluate``/``report`` (bikeid.ident.effects.pipeline.model_from_json) read back the same object
+    (the
     effect values bit for bit), the old plain layout is still read, and a model of another
     kind is refused naming the command that writes the right one."""
-    from bikeid.experiments.measured_study import model_from_json, save_fit
+    from bikeid.ident.effects.pipeline import model_from_json, save_fit
 
     obj = {
         "bicycle": "steer-by-wire", "plant": "linear",

@@ -5,7 +5,7 @@ uncertainty from being reported as an effect (known both ways on blind-generator
 import numpy as np
 import pytest
 
-from bikeid.ident.nominal_uncertainty import (
+from bikeid.ident.effects.nominal_uncertainty import (
     BODY_INERTIAS,
     DEFAULT_TEXT,
     Calibration,
@@ -106,9 +106,9 @@ def test_nominal_off_by_its_uncertainty_is_not_an_effect():
     0.48, and a gyro scale 1.004); calibrated within the band it accepts none.  With a
     steer damping of 0.5 N m s/rad the calibrated selection still names it first, within
     2 % (measured 0.4987: the damping is far outside what the band can mimic)."""
-    from bikeid.experiments.blind_trials import BlindTrial, Nuisance, generate_windows
-    from bikeid.ident.effect_selection import select_effects
-    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.experiments.measured.blind_trials import BlindTrial, Nuisance, generate_windows
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.selection import select_effects
 
     nz = Nuisance(
         plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
@@ -138,7 +138,7 @@ def test_model_object_keeps_the_calibrated_bicycle(tmp_path):
     """A measured-fit model object with calibrated parameters is saved and read back with
     those parameters (not the stated bicycle), and the held-out evaluation's model is built
     on them; a model object with broken parameters is refused, naming the field."""
-    from bikeid.experiments.measured_study import _experiment_model, model_from_json, save_fit
+    from bikeid.ident.effects.pipeline import _experiment_model, model_from_json, save_fit
     from bikeid.sim.errors import InputError
 
     p = NominalUncertainty().apply(steer_by_wire(), np.array([1.0, -1.0, 0.3, 0.0, 1.0]))

@@ -352,9 +352,9 @@ def test_evaluate_raises_instead_of_reporting_nan(monkeypatch):
     """Known both ways: finite errors on clean synthetic decays; an error that comes out nan
     (here injected into the first window's roll-rate error) raises naming file and quantity
     instead of reaching the printed summary."""
-    from bikeid.ident import discrepancy_diagnostics as dd
-    from bikeid.ident.experiment_model import ExperimentModel
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects import diagnostics as dd
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     ws = synthetic_windows(ExperimentModel(), [2.5], 3, seed=0)
     ev = dd.evaluate(ExperimentModel(), ExperimentModel(), ws)
@@ -381,9 +381,9 @@ def test_evaluate_refuses_hand_built_bad_windows(value, match):
     1e300 (the observed spike) makes the weave fit overflow, which is refused, not printed."""
     from dataclasses import replace
 
-    from bikeid.ident.discrepancy_diagnostics import evaluate
-    from bikeid.ident.experiment_model import ExperimentModel
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.diagnostics import evaluate
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     ws = synthetic_windows(ExperimentModel(), [2.5], 3, seed=0)
     pr = ws[1].phidot.copy()
@@ -396,9 +396,9 @@ def test_evaluate_refuses_hand_built_bad_windows(value, match):
 def test_weave_helpers_refuse_nan():
     from dataclasses import replace
 
-    from bikeid.ident.experiment_model import ExperimentModel
-    from bikeid.ident.synthetic_decays import synthetic_windows
-    from bikeid.ident.weave import decay_eigenvalue, median_complex
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.weave import decay_eigenvalue, median_complex
 
     assert median_complex([1 + 2j, 3 + 4j, 2 + 1j]) == 2 + 2j
     with pytest.raises(ValueError, match="1 non-finite"):

@@ -105,7 +105,7 @@ def test_sweep_bar_on_a_terminal_only(tmp_path):
 def test_accuracy_reports_its_stages(tmp_path):
     """``run_accuracy`` for one controller and one speed: 2 stages (simulate, identify), so
     the callback sees 0/2, 1/2 and 2/2 in order; log lines go to the given ``log``."""
-    from bikeid.experiments.accuracy import run_accuracy
+    from bikeid.experiments.testbed.accuracy import run_accuracy
 
     calls, lines = [], []
     run_accuracy(
@@ -121,9 +121,9 @@ def test_effect_selection_counts_its_candidate_fits():
     """``select_effects`` with 2 candidates and one round: 2 candidate fits, then the joint
     fit, so the callback sees 0/2, 1/2 (labelled by candidate) and 2/2; the verdict is that
     of the injected effect (as in tests/test_discrepancy.py, here on 2 decays per speed)."""
-    from bikeid.ident.effect_selection import select_effects
-    from bikeid.ident.experiment_model import ExperimentModel
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.selection import select_effects
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.4})
     ws = synthetic_windows(truth, [1.5, 3.5], 2, seed=1)

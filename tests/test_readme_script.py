@@ -5,7 +5,7 @@ README.md, runs it unchanged, and checks every identified eigenvalue of the clos
 data against the true eigenvalue of the linearized benchmark bicycle (Meijaard et al.
 2007, the same computation ``tests/test_linear.py`` checks against their Table 2).
 
-Tolerance: the project's identification accuracy goal (``experiments.accuracy``:
+Tolerance: the project's identification accuracy goal (``experiments.testbed.accuracy``:
 2 % of |lambda|, at least 0.05 1/s), the same goal ``bikeid accuracy`` reports against.
 The run is seeded, so the errors are deterministic (0.036, 0.040 and 0.048 1/s when this
 test was written, for tolerances 0.062, 0.050 and 0.243 1/s).
@@ -36,7 +36,7 @@ def test_script_is_at_most_15_lines():
 
 
 def test_readme_script_identifies_the_eigenvalues():
-    from bikeid.experiments.accuracy import eigen_tolerance
+    from bikeid.experiments.testbed.accuracy import eigen_tolerance
 
     ns: dict = {}
     out = io.StringIO()

@@ -1,4 +1,4 @@
-"""Moore & Hubbard's study on the real logs (experiments/real_study.py): measures, effect
+"""Moore & Hubbard's study on the real logs (experiments/measured/study.py): measures, effect
 translation, and the study end to end on the steer-by-wire logs (skipped without data)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from scipy import signal
 
 from bikeid.dataset.run import Run
-from bikeid.experiments.real_study import (
+from bikeid.experiments.measured.study import (
     matrix_model,
     simulation_vaf,
     translate_deviations,
@@ -124,10 +124,10 @@ def test_study_on_real_logs(tmp_path):
     report and figures are written.
     """
     from bikeid.dataset.sbw_logs import data_dir
-    from bikeid.experiments.measured_study import evaluate_plant_model
-    from bikeid.experiments.real_study import _second_half_windows, run_study
-    from bikeid.experiments.real_study_plots import headline, write_study
+    from bikeid.experiments.measured.study import _second_half_windows, run_study
+    from bikeid.experiments.measured.study_plots import headline, write_study
     from bikeid.ident import direct
+    from bikeid.ident.effects.pipeline import evaluate_plant_model
 
     study = run_study(DATA, quick=True)
     path = write_study(study, tmp_path)
@@ -188,7 +188,7 @@ def test_signal_consistency_finds_a_known_lag_and_scale():
     delayed by 3 samples and scaled by 0.9: shift +3 and gain 0.9 times the power-weighted
     cosine of the 0.03 s delay (0.5 %: central-difference error of the 2 Hz tone, 0.3 %,
     and the padded first samples)."""
-    from bikeid.experiments.real_study import signal_consistency
+    from bikeid.experiments.measured.study import signal_consistency
 
     dt, n = 0.01, 4000
     t = np.arange(n) * dt

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from bikeid.dataset.windows import Window
-from bikeid.ident.experiment_model import ExperimentModel
+from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.sim.linear import eigenvalues
 
 DATA = os.environ.get("BIKEID_DATA")
@@ -119,8 +119,8 @@ def test_identified_plant_model_replay_equals_the_nominal_when_it_is_the_nominal
     model's at the windows' speed (ident.canonical.theta_from_matrices) gives the same error
     as the nominal (sim.linear's state space): two code paths, one model, agreement to 1e-9;
     a perturbed model (b2 +20 %) gives a different, larger error (both ways)."""
-    from bikeid.experiments.measured_study import evaluate_plant_model
     from bikeid.ident.canonical import theta_from_matrices
+    from bikeid.ident.effects.pipeline import evaluate_plant_model
     from bikeid.ident.pem import CanonicalModel
     from bikeid.sim.linear import canonical_matrices
     from bikeid.sim.parameters import steer_by_wire

@@ -10,7 +10,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from bikeid.experiments import reproduce_chen_dao as cd
+from bikeid.experiments.papers import chen_dao as cd
 from bikeid.sim.integrate import STOP_CAUSES
 from bikeid.sim.linear import (
     canonical_matrices,
@@ -53,7 +53,8 @@ def _eq5_polys(th):
 
 
 def test_paper_eq5_reading_against_the_printed_numbers():
-    """The sign reading of eq. 5 (reproduce_chen_dao.paper_eq5_reading) against the paper's
+    """The sign reading of eq. 5 (bikeid.experiments.papers.chen_dao.paper_eq5_reading) against the
+    paper's
     own printed numbers, transcribed above, with an independent computation (Cramer's rule):
     (1) its magnitudes are the printed eq. 5 entries exactly; (2) its characteristic
     polynomial is the printed eq. 6 denominator and its numerators are eq. 6's (magnitudes,
@@ -297,7 +298,7 @@ def test_moore_hubbard_stacked_fit_equals_ident_direct_for_one_rider():
     """For runs of a single rider, the stacked two-stage regression of the Moore & Hubbard
     reproduction must equal ident.direct.identify (an independent implementation of the same
     eqs. 4-5) to round-off, with the same fixed entries (Whipple, HpF = push height)."""
-    from bikeid.experiments import reproduce_moore_hubbard as mh
+    from bikeid.experiments.papers import moore_hubbard as mh
     from bikeid.ident.direct import identify
     from bikeid.sim.linear import lateral_force_vector
 

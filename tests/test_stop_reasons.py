@@ -22,7 +22,7 @@ from bikeid.controllers.pid import PID
 from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.run import Run, run_stop
 from bikeid.dataset.sensors import Sensors
-from bikeid.experiments.sweep import (
+from bikeid.experiments.testbed.sweep import (
     SweepSpec,
     parts_dir,
     run_sweep,
@@ -291,7 +291,7 @@ def test_refused_sweep_leaves_no_lock(tmp_path):
 
 
 def test_accuracy_skips_early_ended_runs_with_a_message():
-    from bikeid.experiments.accuracy import identify_controller
+    from bikeid.experiments.testbed.accuracy import identify_controller
 
     run = simulate_run(benchmark(), _NanAfter(0.5), 5.0, duration=2.0, sensors=Sensors.ideal())
     log: list[str] = []

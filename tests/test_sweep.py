@@ -25,7 +25,7 @@ from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.sensors import Channel, Sensors
 from bikeid.dataset.store import list_runs, read_run, read_runs, write_runs
 from bikeid.experiments.cli import main
-from bikeid.experiments.sweep import (
+from bikeid.experiments.testbed.sweep import (
     SweepSpec,
     Task,
     _lock,
@@ -256,7 +256,7 @@ def test_cli_bad_input(capsys, tmp_path):
         == 2
     )
     assert "seeds must be integers" in capsys.readouterr().err
-    from bikeid.experiments.cmd_data import _seeds
+    from bikeid.experiments.cli.data import _seeds
 
     assert _seeds("0:4") == (0, 1, 2, 3, 4) and _seeds("3,7") == (3, 7)
 

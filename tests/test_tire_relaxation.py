@@ -1,6 +1,6 @@
 """Front-tyre lateral relaxation (``tire_relaxation``) in the experiment model.
 
-The model (``ident/experiment_model.py`` docstring) replaces the front contact's lateral
+The model (``ident/effects/experiment_model.py`` docstring) replaces the front contact's lateral
 non-slip constraint by a heading lag sigma / v.  Checked here against the Whipple model of
 ``sim.linear`` (Meijaard 2007) in the limit sigma -> 0, against the Meijaard appendix A
 intermediate values for the yaw coupling, and against a second formulation in absolute
@@ -17,7 +17,7 @@ import scipy.linalg as sla
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bikeid.ident.experiment_model import ExperimentModel, yaw_coupling
+from bikeid.ident.effects.experiment_model import ExperimentModel, yaw_coupling
 from bikeid.sim.linear import canonical_matrices, state_matrices
 from bikeid.sim.parameters import benchmark, steer_by_wire
 
@@ -152,7 +152,7 @@ def test_steady_turn_unchanged():
 def test_simulation_with_relaxation_matches_closed_loop():
     """The vectorized simulation with the extra state equals powers of the augmented loop
     matrix to round-off (1e-10), lag and relaxation together (state layout check)."""
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     m = ExperimentModel(effects={"tire_relaxation": 0.2, "actuator_lag": 0.02})
     w = synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0]

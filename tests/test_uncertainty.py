@@ -1,4 +1,5 @@
-"""Delta-method intervals (ident.uncertainty) and the coverage harness (experiments.coverage).
+"""Delta-method intervals (ident.uncertainty) and the coverage harness
+(experiments.testbed.coverage).
 
 Independent sources: central differences of ``numpy.linalg.eigvals`` and of
 ``sim.linear.critical_speeds`` (second method for the analytic/implicit derivatives); Monte
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from bikeid.experiments.coverage import (
+from bikeid.experiments.testbed.coverage import (
     QUANTITIES,
     CoverageResult,
     binomial_verdict,

@@ -240,13 +240,14 @@ def test_models_over_speed_are_taken_at_each_runs_speed():
 
 
 def test_validate_decays_fit_is_the_evaluate_error():
-    """validate_decays (measured evaluate's validation) and experiment_model.window_errors
+    """validate_decays (measured evaluate's validation) and
+    bikeid.ident.effects.experiment_model.window_errors
     share one NRMSE (ident.validate.goodness_of_fit): fit = 100 (1 - error) to 1e-9 %, per
     file; a simulation 1.1 times the measured roll rate has the analytic error
     0.1 ||y|| / ||y - mean y|| (rounding only: 1e-12 relative) and an exact one 0; the
     true model fits its own noisy decays better than a model with a spurious effect."""
-    from bikeid.ident.experiment_model import ExperimentModel, window_errors
-    from bikeid.ident.synthetic_decays import synthetic_windows
+    from bikeid.ident.effects.experiment_model import ExperimentModel, window_errors
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
     from bikeid.ident.validation_report import validate_decays
 
     truth = ExperimentModel()
@@ -274,7 +275,7 @@ def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_
     pytest.importorskip("bikeid.ident.model_file", reason="needs ident.model_file (load_model)")
     from bikeid.dataset.store import write_runs
     from bikeid.experiments.cli import main
-    from bikeid.ident.experiment_model import ExperimentModel
+    from bikeid.ident.effects.experiment_model import ExperimentModel
     from bikeid.ident.model_file import save_model
 
     data = tmp_path / "runs.h5"

@@ -1,0 +1,694 @@
+"""``bikeid identify``: direct (Moore & Hubbard), canonical PEM (Chen & Dao) or grey-box PEM.
+
+For simulated runs (``meta['parameters']`` present) the true linearization is
+printed beside the estimate (``true_eigenvalues``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Mapping
+
+from bikeid.controllers.registry import STUDY_CONTROLLERS
+from bikeid.experiments.cli.args import (
+    MAX_WORKERS,
+    dump_json,
+    integer,
+    mapping_arg,
+    number,
+    range_text,
+)
+from bikeid.experiments.progress import quiet, terminal_progress
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "identify",
+        help="identify the bicycle from runs: bikeid HDF5 files or your own CSV/HDF5 logs",
+        description=(
+            "Identify from bikeid run files (the default format) or from your own logs: "
+            "--format csv|hdf5 with --columns mapping bikeid signals (phi, delta, phidot, "
+            "deltadot, T_delta, and v unless --speed is given) to your columns or datasets, "
+            "--units for non-SI columns (deg, deg/s, km/h, N cm, ms), --flip for signals "
+            "logged positive to the left. Each log file becomes one run."
+        ),
+    )
+    add_data_options(
+        p,
+        FORMATS,
+        input_help="the runs' torque signal [N m] used as the model's steer-torque input "
+        "(default T_delta; e.g. sil_command of the steer-by-wire logs)",
+    )  # fmt: skip
+    p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
+    p.add_argument(
+        "--free", default=None, metavar="NAME,...",
+        help="greybox: free matrix entries, e.g. Mpd,K0pd,Mdd,K0dd,K2dd (default Moore & "
+        "Hubbard's set, ident.greybox.DEFAULT_FREE); the rest fixed at --bicycle's values",
+    )  # fmt: skip
+    p.add_argument(
+        "--drop-unidentifiable", action="store_true",
+        help="greybox: fix the worst-determined free entries until the condition number is "
+        "below ident.greybox.MAX_CONDITION (default: refuse, exit 4)",
+    )  # fmt: skip
+    p.add_argument(
+        "--speed-parameterized",
+        action="store_true",
+        help="pem: one model over all speeds (odd a's = alpha + beta v^2, even a's = gamma v)",
+    )
+    p.add_argument(
+        "--bicycle", help="fixed-entry values for direct/greybox (default: the runs' meta)"
+    )
+    p.add_argument("--iv", action="store_true", help="direct: instrumental variables (lagged)")
+    p.add_argument(
+        "--derivative", choices=("interval", "central", "forward", "backward"),
+        default="interval",
+        help="direct: how accelerations are formed (see ident.signals). 'interval' (default): "
+        "the equation averaged over each sample interval, exact for zero-order-held torques; "
+        "Moore & Hubbard's recipe is '--derivative central --cutoff 15', which is biased by "
+        "the torque steps of a sampled controller (docs/accuracy.md)",
+    )  # fmt: skip
+    p.add_argument(
+        "--cutoff", type=number(0.0, 1e4, unit="Hz"), default=None,
+        help="direct: zero-phase low-pass [Hz], 0 = none (default 3 Hz with 'interval', "
+        "else 15 Hz as Moore & Hubbard)",
+    )  # fmt: skip
+    p.add_argument(
+        "--outputs", default=None, metavar="NAME,...",
+        help="measured states fitted (pem: phi and delta plus optionally phidot, deltadot; "
+        "default all four). direct needs all four (its regressors use every state)",
+    )  # fmt: skip
+    p.add_argument(
+        "--out", default=None, metavar="MODEL.json",
+        help="save the identified model (ident.model_file: parameters, covariance, data file "
+        "hashes, settings; any --method); per-speed pem over several speeds writes "
+        "MODEL-v<speed>.json",
+    )  # fmt: skip
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_identify)
+
+    e = sub.add_parser(
+        "export",
+        help="write runs of a bikeid HDF5 file (or steer-by-wire logs) as CSV (units in the "
+        "header)",
+        description=(
+            "One CSV per run: line 1 the run's metadata as JSON after '# bikeid run: ', line "
+            "2 the headers 'name [unit]', then one row per sample (17 significant digits, "
+            "exact for float64). Read back with pandas.read_csv(path, comment='#') or "
+            "bikeid identify --format csv. With --format sbw, FILE is a steer-by-wire log "
+            "or a folder of them (each log one run: its settled stretch, bikeid signals)."
+        ),
+    )
+    e.add_argument("file", help="bikeid HDF5 run file, or (--format sbw) logs or a folder")
+    e.add_argument(
+        "--format", choices=("bikeid", "sbw"), default="bikeid",
+        help="bikeid: a run file written by bikeid; sbw: the steer-by-wire logs",
+    )  # fmt: skip
+    e.add_argument("--run", default=None, help="run name (default: every run)")
+    e.add_argument(
+        "--out", required=True,
+        help="CSV file (one run) or folder (one RUN.csv per run; created if missing)",
+    )  # fmt: skip
+    e.set_defaults(func=cmd_export)
+
+    a = sub.add_parser(
+        "accuracy",
+        help="identification accuracy on the nonlinear closed-loop testbed",
+        description=(
+            "Simulate 50 s of closed-loop data per speed and controller (cached in DIR/data), "
+            "identify with the direct, PEM and grey-box methods and compare eigenvalues, v_w, "
+            "v_c and the RHP zero of delta/T_delta with the true linearization. Writes "
+            "DIR/accuracy.json and DIR/accuracy.md; progress on stderr when it is a terminal."
+        ),
+    )
+    a.add_argument(
+        "--quick",
+        action="store_true",
+        help="speeds 2, 5, 10 m/s (below v_w, between v_w and v_c, above v_c)",
+    )
+    a.add_argument(
+        "--controllers",
+        type=_names_arg(STUDY_CONTROLLERS, "controllers"),
+        default=",".join(STUDY_CONTROLLERS),
+        help=f"comma-separated subset of {','.join(STUDY_CONTROLLERS)} (default all)",
+    )
+    a.add_argument(
+        "--methods",
+        type=_names_arg(("direct", "pem", "greybox"), "methods"),
+        default="direct,pem,greybox",
+        help="comma-separated subset of direct,pem,greybox (default all)",
+    )
+    a.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.1),
+        default=None,
+        metavar="A:B:STEP",
+        help="speeds [m/s] (default 1:15:0.5; stop included)",
+    )
+    a.add_argument(
+        "--workers",
+        type=integer(1, MAX_WORKERS),
+        default=2,
+        help="simulation processes (default 2)",
+    )
+    a.add_argument("--out", default="accuracy", metavar="DIR", help="output folder")
+    a.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    a.set_defaults(func=cmd_accuracy)  # fmt: skip
+
+
+#: Data formats ``bikeid identify`` reads, and what each is.
+FORMATS = {
+    "bikeid": "files written by bikeid (sweep, store)",
+    "csv": "your own logs, read with --columns (dataset.importers)",
+    "hdf5": "your own logs, read with --columns (dataset.importers)",
+    "sbw": "TU Delft steer-by-wire logs (files or folders; the settled part of each, v = "
+    "treadmill speed, dataset.sbw_logs)",
+}
+
+
+def add_data_options(
+    p: argparse.ArgumentParser, formats: Mapping[str, str], input_help: str
+) -> None:
+    """The data arguments of ``identify`` and ``validate``, read by :func:`_load`.
+
+    Adds FILE..., ``--format``, the importer options ``--columns``, ``--units``, ``--time``,
+    ``--speed``, ``--flip`` (csv/hdf5 logs) and ``--input`` (the torque signal used as
+    T_delta, :func:`_with_input`).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The command's parser.
+    formats : mapping of str to str
+        The ``--format`` choices (a subset of :data:`FORMATS`) and their help; the first is
+        the default.
+    input_help : str
+        Help text of ``--input``.
+
+    Returns
+    -------
+    None
+    """
+    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
+    p.add_argument(
+        "--format", choices=tuple(formats), default=next(iter(formats)),
+        help="; ".join(f"{k}: {v}" for k, v in formats.items()),
+    )  # fmt: skip
+    p.add_argument(
+        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
+        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
+        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
+    )  # fmt: skip
+    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
+    p.add_argument(
+        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
+        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
+    )  # fmt: skip
+    p.add_argument(
+        "--flip", default="", metavar="NAME,...",
+        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
+    )  # fmt: skip
+    p.add_argument("--input", default="T_delta", metavar="SIGNAL", help=input_help)
+
+
+def _truth(runs):
+    """The simulated bicycle: ``meta['parameters']`` or ``meta['bicycle']['parameters']``
+    (closed-loop runs and sweeps); None for measured data."""
+    from bikeid.sim.parameters import from_mapping
+
+    meta = runs[0].meta
+    bicycle = meta.get("bicycle")  # a name (measured logs) or the simulated bicycle
+    values = meta.get("parameters") or (bicycle if isinstance(bicycle, dict) else {}).get(
+        "parameters"
+    )
+    return from_mapping(values, name="run meta") if values else None
+
+
+def _sorted(z):
+    import numpy as np
+
+    return sorted(np.asarray(z, dtype=complex), key=lambda c: (c.real, c.imag))
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from bikeid.dataset.files import check_output_path
+    from bikeid.dataset.store import export_csv, list_runs, read_run
+
+    if args.format == "sbw":
+        from bikeid.dataset.sbw_logs import load_log, settled
+
+        if args.run is not None:
+            raise ValueError("--run applies to bikeid run files; give the log file itself")
+        ns = argparse.Namespace(file=[args.file], format="sbw")
+        logs = {Path(f).name.removesuffix(".gz").removesuffix(".log"): f for f in _data_files(ns)}
+        names = list(logs)
+    else:
+        names = [args.run] if args.run else list_runs(args.file)
+    if not names:
+        raise ValueError(f"{args.file} holds no runs")
+    out = Path(args.out)
+    if out.suffix.lower() == ".csv":
+        if len(names) != 1:
+            raise ValueError(
+                f"{args.file} holds {len(names)} runs: give --run NAME, or a folder as --out"
+            )
+        targets = {names[0]: out}
+    else:
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out} is a file: give a .csv name or a folder")
+        targets = {n: out / f"{n}.csv" for n in names}
+    for target in targets.values():
+        check_output_path(target)  # refuse a link or device before writing anything
+    if args.format == "sbw":  # all readable before the first write
+        runs = {n: settled(load_log(f)) for n, f in logs.items()}
+    else:
+        runs = {n: read_run(args.file, n) for n in names}
+    for n, target in targets.items():
+        export_csv(runs[n], target)
+        print(target)
+    return 0
+
+
+def _load(args: argparse.Namespace) -> list:
+    """The runs of every file: bikeid run files, or logs through ``dataset.importers``."""
+    if args.format == "bikeid":
+        from bikeid.dataset.store import read_runs
+
+        for opt in ("columns", "units", "speed"):
+            if getattr(args, opt) is not None:
+                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
+        return [r for f in args.file for r in read_runs(f)]
+    if args.format == "sbw":
+        from bikeid.dataset.sbw_logs import load_log, settled
+
+        for opt in ("columns", "units", "speed"):
+            if getattr(args, opt) is not None:
+                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
+        if args.flip:
+            raise ValueError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
+        return [settled(load_log(p)) for p in _data_files(args)]
+    from bikeid.dataset import importers
+
+    if not args.columns:
+        raise ValueError(
+            f"--format {args.format} needs --columns NAME=COL,... mapping phi, delta, phidot, "
+            "deltadot, T_delta (and v, or give --speed) to your columns"
+        )
+    read = importers.from_csv if args.format == "csv" else importers.from_hdf5
+    flip = [f.strip() for f in args.flip.split(",") if f.strip()]
+    return [
+        read(f, args.columns, args.units, time=args.time, speed=args.speed, flip=flip)
+        for f in args.file
+    ]
+
+
+def _outputs(text: str | None, method: str) -> tuple[str, ...] | None:
+    """``--outputs``: the measured states fitted (None: the method's default)."""
+    from bikeid.sim.conventions import CANONICAL_STATE
+    from bikeid.sim.errors import InputError
+
+    if text is None:
+        return None
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names or len(set(names)) != len(names) or not set(names) <= set(CANONICAL_STATE):
+        raise InputError(
+            f"--outputs {text!r}: give measured states from {','.join(CANONICAL_STATE)}, "
+            "comma-separated, without repeats"
+        )
+    if method == "direct" and set(names) != set(CANONICAL_STATE):
+        raise InputError(
+            f"--outputs {text!r}: direct least squares needs phi, delta, phidot and deltadot "
+            "(its regressors use every state and both accelerations); drop --outputs or use "
+            "--method pem"
+        )
+    if not {"phi", "delta"} <= set(names):
+        raise InputError(
+            f"--outputs {text!r}: the canonical model needs phi and delta among its outputs "
+            "(Chen & Dao's output matrix); add them"
+        )
+    return names
+
+
+def _with_input(runs: list, name: str) -> list:
+    """The runs with ``name`` as the steer-torque input T_delta (``--input``)."""
+    import dataclasses
+
+    from bikeid.sim.conventions import UNITS
+    from bikeid.sim.errors import InputError
+
+    if name == "T_delta":
+        return runs
+    if UNITS.get(name, "N m") != "N m":
+        raise InputError(
+            f"--input {name}: that signal is in {UNITS[name]}, not a torque; give a steer "
+            "torque [N m] such as T_delta"
+        )
+    for i, r in enumerate(runs):
+        if name not in r.signals:
+            raise InputError(
+                f"--input {name}: run {i + 1} has no signal {name!r}; its signals are "
+                f"{', '.join(sorted(r.signals))}"
+            )
+        if not r.signals[name].any():
+            raise InputError(f"--input {name}: the signal is zero in run {i + 1}; nothing to fit")
+    return [
+        dataclasses.replace(r, signals={**r.signals, "T_delta": r.signals[name]},
+                            meta={**r.meta, "input": name})
+        for r in runs
+    ]  # fmt: skip
+
+
+def _data_files(args: argparse.Namespace) -> list:
+    """The files the runs were read from (hashed into the model file's provenance)."""
+    from pathlib import Path
+
+    files = []
+    for f in map(Path, args.file):
+        if f.is_dir() and args.format == "sbw":
+            from bikeid.dataset.sbw_logs import find_logs
+
+            logs = find_logs(f)
+            if not logs:
+                raise ValueError(f"{f} holds no steer-by-wire logs (*.log, *.log.gz)")
+            files += logs
+        else:
+            files.append(f)
+    return files
+
+
+def _model_targets(out: str, speeds: list[float], per_speed: bool) -> list:
+    """``--out`` file(s): one, or one per speed for per-speed pem over several speeds."""
+    from pathlib import Path
+
+    from bikeid.dataset.files import check_output_path
+
+    path = check_output_path(Path(out))
+    if per_speed and len(speeds) > 1:
+        targets = [path.with_name(f"{path.stem}-v{v:g}{path.suffix or '.json'}") for v in speeds]
+    else:
+        targets = [path]
+    for t in targets:
+        check_output_path(t)  # refuse a link or folder before the (long) fit
+    return targets
+
+
+def _settings(args: argparse.Namespace) -> dict:
+    """The method and options saved with the model."""
+    s: dict = {"command": "bikeid identify", "method": args.method, "format": args.format,
+               "input": args.input}  # fmt: skip
+    if args.format != "bikeid":
+        s.update(columns=args.columns, units=args.units, time=args.time, speed=args.speed,
+                 flip=[f.strip() for f in args.flip.split(",") if f.strip()])  # fmt: skip
+    if args.method == "direct":
+        s.update(bicycle=args.bicycle, iv=args.iv, derivative=args.derivative,
+                 cutoff=args.cutoff)  # fmt: skip
+    elif args.method == "greybox":
+        s.update(bicycle=args.bicycle, free=args.free, noise_model="free",
+                 drop_unidentifiable=args.drop_unidentifiable)  # fmt: skip
+    else:
+        s.update(speed_parameterized=args.speed_parameterized, noise_model="free")
+    return s
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from bikeid.ident.model_file import file_provenance, save_model
+    from bikeid.sim.linear import eigenvalues
+
+    outputs = _outputs(args.outputs, args.method)
+    runs = _load(args)
+    if not runs:
+        raise ValueError(f"{', '.join(args.file)} hold no runs")
+    runs = _with_input(runs, args.input)
+    truth = _truth(runs)
+    speeds = sorted({round(r.speed, 6) for r in runs})
+    if args.method != "greybox" and (args.free or args.drop_unidentifiable):
+        raise ValueError("--free and --drop-unidentifiable apply to --method greybox")
+    targets, provenance, settings = [], [], {}
+    if args.out:
+        per_speed_pem = args.method == "pem" and not args.speed_parameterized
+        targets = _model_targets(args.out, speeds, per_speed_pem)
+        provenance = file_provenance(_data_files(args))
+        settings = _settings(args)
+    out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,
+                 "input": args.input}  # fmt: skip
+    if args.method == "direct":
+        from bikeid.ident.direct import identify
+        from bikeid.ident.signals import prepare
+        from bikeid.sim.parameters import by_name
+
+        if args.speed_parameterized:
+            raise ValueError("--speed-parameterized applies to --method pem (direct is always)")
+        bicycle = args.bicycle or (runs[0].meta.get("bicycle") if truth is None else None)
+        reference = by_name(bicycle) if isinstance(bicycle, str) else truth
+        if reference is None:
+            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
+        cutoff = args.cutoff
+        if cutoff is None:
+            cutoff = 3.0 if args.derivative == "interval" else 15.0
+        settings["cutoff"] = cutoff
+        prepared = [prepare(r, cutoff=cutoff or None, derivative=args.derivative) for r in runs]
+        res = identify(prepared, reference, method="iv" if args.iv else "ls")
+        saved = [(res, targets[0])] if targets else []
+        out["outputs"] = ["phi", "delta", "phidot", "deltadot"]
+        out.update(
+            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H,
+            free={k: {"value": v, "stderr": res.stderr[k]} for k, v in res.free.items()},
+            condition=res.condition, vaf_moore=res.vaf_moore, vaf_variance=res.vaf_variance,
+            notes=list(res.notes),
+        )  # fmt: skip
+        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+    elif args.method == "greybox":
+        from bikeid.ident import greybox
+        from bikeid.sim.parameters import by_name
+
+        if args.speed_parameterized:
+            raise ValueError("--speed-parameterized applies to --method pem (greybox is always)")
+        reference = by_name(args.bicycle) if args.bicycle else truth
+        if reference is None:
+            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
+        free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
+        res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable,
+                          **({"outputs": outputs} if outputs else {}))  # fmt: skip
+        saved = [(res, targets[0])] if targets else []
+        out["outputs"] = list(res.outputs)
+        out.update(
+            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,
+            free={k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
+                  for k, v in res.free.items()},
+            least_determined=list(res.least_determined), dropped=list(res.dropped),
+            notes=list(res.notes),
+        )  # fmt: skip
+        if len(speeds) >= 2:
+            out["critical_speeds"] = res.critical_speeds()
+        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
+        interval_models = {v: res.at(v) for v in speeds}
+        speed_model = res.speed_model() if len(speeds) >= 2 else None
+    else:
+        from bikeid.ident import pem
+
+        # Per-speed fits, each also started from the next lower speed's model (robust
+        # against local minima on low-SNR closed-loop data); the speed-parameterized model
+        # reuses them as its start, as in ``bikeid accuracy``.
+        per: dict = {}
+        prev = None
+        bar = terminal_progress("identify", json_output=args.json, unit="fit")
+        steps = len(speeds) + bool(args.speed_parameterized)
+        for k, v in enumerate(speeds):
+            if bar:
+                bar(k, steps, f"PEM at {v:g} m/s")
+            at_v = [r for r in runs if round(r.speed, 6) == v]
+            prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,),
+                                    **({"outputs": outputs} if outputs else {}))  # fmt: skip
+        if args.speed_parameterized:
+            if len(speeds) < 2:
+                raise ValueError(
+                    "--speed-parameterized needs runs at two or more speeds to separate "
+                    f"alpha from beta v^2; the data hold speed {speeds[0]} m/s only"
+                )
+            if bar:
+                bar(len(speeds), steps, "speed-parameterized model")
+            model = pem.fit_speed_model(runs, per_speed=per,
+                                        **({"outputs": outputs} if outputs else {}))  # fmt: skip
+            saved = [(model, targets[0])] if targets else []
+            out["params"] = dict(zip(pem.SPEED_NAMES, model.params, strict=True))
+            out["stderr"] = model.stderr
+            out["critical_speeds"] = model.critical_speeds()
+            eig = {v: _sorted(model.eigenvalues(v)) for v in speeds}
+            interval_models, speed_model = {v: model.at(v) for v in speeds}, model
+        else:
+            out["models"] = {
+                v: {"theta": m.params(), "stderr": m.stderr, "A": m.A, "B": m.B}
+                for v, m in per.items()
+            }
+            eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
+            saved = list(zip(per.values(), targets, strict=True)) if targets else []
+            interval_models, speed_model = per, None
+        out["outputs"] = list(next(iter(per.values())).outputs)
+        if bar:
+            bar(steps, steps, "done")
+    settings["outputs"] = out["outputs"]  # as fitted (the method's default when not given)
+    for model, target in saved:
+        save_model(model, target, provenance=provenance, settings=settings, speeds=speeds)
+    out["model_files"] = [str(t) for _, t in saved]
+    per_speed = []
+    for v in speeds:
+        row = {"speed": v, "eigenvalues": eig[v]}
+        if truth is not None:
+            row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
+        per_speed.append(row)
+    if args.method != "direct":
+        out["intervals"] = _intervals(interval_models, speed_model)
+        for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
+            row["eigenvalue_intervals"] = ei
+    out["per_speed"] = per_speed
+    if truth is not None and args.method == "pem" and args.speed_parameterized:
+        from bikeid.sim.linear import critical_speeds
+
+        out["true_critical_speeds"] = critical_speeds(truth)
+    if args.json:
+        print(dump_json(out))
+        return 0
+    np.set_printoptions(precision=5, suppress=True, linewidth=110)
+    print(f"{', '.join(args.file)}: {len(runs)} runs, method {args.method}")
+    if args.method == "greybox":
+        for k in ("M", "C1", "K0", "K2", "H"):
+            print(f"{k} =\n{out[k]}")
+        for k, d in out["free"].items():
+            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g} (SE inflation "
+                  f"{d['inflation']:.3g})")  # fmt: skip
+        print(f"condition number {out['condition']:.3g} (weakest direction: "
+              f"{', '.join(out['least_determined'])}); fixed as poorly determined: "
+              f"{out['dropped'] or 'none'}")  # fmt: skip
+    if args.method == "direct":
+        for k in ("M", "C1", "K0", "K2", "H"):
+            print(f"{k} =\n{out[k]}")
+        for k, d in out["free"].items():
+            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g}")
+        vaf = ", ".join(
+            f"{k} {v:.4f}" if isinstance(v, float) and np.isfinite(v) else f"{k} n/a"
+            for k, v in out["vaf_moore"].items()
+        )
+        print(f"VAF (Moore eq. 6): {vaf}; condition: {out['condition']}")
+    for f in out["model_files"]:
+        print(f"model saved to {f}")
+    for row in per_speed:
+        fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
+        print(f"v={row['speed']:6.2f}  identified {fmt}")
+        if row.get("eigenvalue_intervals"):
+            for part in ("real", "imag"):
+                print(f"{'':8s}  95 % {part[:2].capitalize()}  "
+                      f"{_interval_cells(row['eigenvalue_intervals'], part)}")  # fmt: skip
+        if "true_eigenvalues" in row:
+            fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
+            print(f"{'':8s}  true       {fmt}")
+    if "intervals" in out:
+        for line in _interval_lines(out["intervals"]):
+            print(line)
+    return 0
+
+
+def _intervals(models: dict, speed_model) -> dict:
+    """95 % eigenvalue intervals per speed and, for a model over speed, of v_w and v_c.
+
+    ``models`` maps each speed to a model with a theta covariance (a CanonicalModel, or a
+    model over speed taken there); ``speed_model`` is a SpeedCanonicalModel (the
+    speed-parameterized fit, or a grey-box model's :meth:`speed_model`) or None.
+    """
+    from bikeid.ident.uncertainty import critical_speed_intervals, eigenvalue_intervals
+    from bikeid.ident.validation_report import INTERVAL_CALIBRATION
+    from bikeid.sim.errors import InputError, UntrustworthyResult
+
+    out: dict = {"level": 0.95, "calibration": INTERVAL_CALIBRATION, "eigenvalues": []}
+    for v, m in models.items():
+        try:
+            out["eigenvalues"].append(eigenvalue_intervals(m).to_json())
+        except InputError as exc:  # no usable covariance: the estimate stands, no interval
+            out["eigenvalues"].append(None)
+            out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")
+    if speed_model is not None:
+        try:
+            out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
+        except (InputError, UntrustworthyResult) as exc:  # e.g. a tangential crossing
+            out["critical_speeds"] = None
+            out["critical_speeds_note"] = str(exc)
+    return out
+
+
+def _interval_cells(ei: dict, part: str) -> str:
+    """[lower, upper] of the real or imaginary parts, one cell per eigenvalue."""
+    return "  ".join(f"[{r[part][0]:+.3f}, {r[part][1]:+.3f}]" for r in ei["eigenvalues"])
+
+
+def _interval_lines(iv: dict) -> list[str]:
+    lines = []
+    crit = iv.get("critical_speeds")
+    for name in ("v_w", "v_c") if crit else ():
+        c = crit[name]
+        if c["interval"] is not None:
+            lo, hi = c["interval"]
+            val = f"{c['value']:.3f} m/s" if c["value"] is not None else "none found"
+            lines.append(f"{name} = {val}, 95 % interval [{lo:.3f}, {hi:.3f}] m/s"
+                         + (f" (open: the confidence region holds parameters without {name} "
+                            "in the searched range)" if c.get("open") else ""))  # fmt: skip
+    if iv.get("critical_speeds_note"):
+        lines.append(f"critical-speed intervals: {iv['critical_speeds_note']}")
+    lines += [f"note: {n}" for n in iv.get("notes", [])]
+    lines.append(f"note: {iv['calibration']}")
+    return lines
+
+
+def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in names if n not in allowed]
+    if bad or not names:
+        raise ValueError(f"--{what} {text!r}: give a comma-separated subset of {','.join(allowed)}")
+    return list(dict.fromkeys(names))
+
+
+def _names_arg(allowed: tuple[str, ...], what: str):
+    def check(text: str) -> str:
+        try:
+            _names(text, allowed, what)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--{what} ")) from None
+        return text
+
+    check.__name__ = what
+    return check
+
+
+def cmd_accuracy(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from bikeid.experiments.cli.args import atomic_write_text, parse_range
+    from bikeid.experiments.testbed import accuracy as acc
+
+    controllers = _names(args.controllers, acc.CONTROLLERS, "controllers")
+    methods = _names(args.methods, acc.METHODS, "methods")
+    if args.quick and args.speeds:
+        raise ValueError("--quick fixes the speeds; drop --speeds or --quick")
+    if args.speeds:
+        speeds = tuple(float(v) for v in parse_range(args.speeds, "--speeds", minimum=0.1))
+    else:
+        speeds = acc.QUICK_SPEEDS if args.quick else acc.FULL_SPEEDS
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    bar = terminal_progress("accuracy", json_output=args.json, unit="stage")
+    result = acc.run_accuracy(
+        out, controllers, methods, speeds, workers=args.workers,
+        log=bar.write if bar else quiet, progress=bar,
+    )  # fmt: skip
+    atomic_write_text(out / "accuracy.json", dump_json(result))
+    atomic_write_text(out / "accuracy.md", acc.markdown(result))
+    if args.json:
+        print(dump_json(result))
+    else:
+        print(acc.table_text(result), end="")
+        print(f"wrote {out / 'accuracy.json'} and {out / 'accuracy.md'}")
+    return 0

@@ -1,0 +1,450 @@
+"""Measured-data commands: ``measured fit|evaluate|report`` and ``data fetch``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from bikeid.experiments.cli.args import (
+    MAX_WORKERS,
+    dump_json,
+    integer,
+    number,
+    parse_range,
+    range_text,
+    to_jsonable,
+)
+from bikeid.experiments.progress import terminal_progress
+from bikeid.sim.errors import InputError
+
+DATA_HELP = "folder holding tudelft-sbw/ (or the folder itself); default $BIKEID_DATA"
+DECAYS_HELP = (
+    "free-decay windows: 'listed' = eigen/segments.csv rows, detected from the roll rate "
+    "for logs it does not list (default); 'detected' = detected for every log"
+)
+
+
+def add_acceptance_options(p: argparse.ArgumentParser) -> None:
+    """The acceptance options of the effect selection (docs/measured.md, "Blind trials").
+
+    ``--min-heldout-gain`` in [0, 1), ``--min-improved`` in [0, 1], ``--unexplained-rule``
+    and ``--unexplained-threshold`` (> 0): passed to
+    :func:`bikeid.ident.effects.selection.select_effects`; a bad value is a usage error
+    (exit status 2) naming the option and the allowed range.
+    """
+    p.add_argument(
+        "--min-heldout-gain",
+        type=number(0.0, 1.0, hi_open=True),
+        default=None,
+        metavar="G",
+        help="least fractional cost reduction an effect must bring on the held-out decays, in "
+        "[0, 1) (default 0.02, the fit gain; the blind trials' strict setting is 0.25)",
+    )
+    p.add_argument(
+        "--min-improved",
+        type=number(0.0, 1.0),
+        default=0.0,
+        metavar="F",
+        help="least share of the held-out decays whose own cost an effect must lower, in "
+        "[0, 1] (default 0: only the summed held-out cost; the strict setting is 0.75)",
+    )
+    p.add_argument(
+        "--unexplained-rule",
+        choices=("floor", "coloured", "residual"),
+        default="floor",
+        help="how 'unexplained' is decided: explained fraction above the second-difference "
+        "(floor, default) or coloured-noise floor, or final cost over the residual's noise "
+        "floor (residual)",
+    )
+    p.add_argument(
+        "--unexplained-threshold",
+        type=number(0.0, lo_open=True),
+        default=None,
+        metavar="X",
+        help="threshold of that rule, > 0 (default 0.85 for floor and coloured, 0.9 with "
+        "--nominal-uncertainty none; 2.0 for residual)",
+    )
+    p.add_argument(
+        "--nominal-uncertainty",
+        type=uncertainty_arg,
+        default="default",
+        metavar="U",
+        help="the stated bicycle's uncertainty: its inertias and trail are calibrated within "
+        "it before any effect is tried, and a parameter or instrument offset within it is "
+        "not reported as an effect. 'default': each body's inertia tensor +-5 %%, trail "
+        "+-2 mm, gyro offset +-0.01 rad/s, roll angle +-0.005 rad, steer encoder zero "
+        "+-0.002 rad; 'none': take the bicycle as exact; or "
+        "inertia=F,trail=M,roll_rate_bias=B,roll_angle_bias=B,steer_angle_bias=B",
+    )
+
+
+def uncertainty_arg(text: str):
+    """``--nominal-uncertainty``'s argparse type (a usage error names the accepted forms)."""
+    from bikeid.ident.effects.nominal_uncertainty import NominalUncertainty  # not at start-up
+
+    try:
+        return NominalUncertainty.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def acceptance_kw(args: argparse.Namespace) -> dict:
+    """The ``select_effects`` keywords of :func:`add_acceptance_options`' options."""
+    return {"min_heldout_gain": args.min_heldout_gain, "min_improved": args.min_improved,
+            "unexplained_rule": args.unexplained_rule,
+            "unexplained_threshold": args.unexplained_threshold,
+            "nominal_uncertainty": args.nominal_uncertainty}  # fmt: skip
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("measured", help="fit/evaluate the experiment model on measured data")
+    msub = p.add_subparsers(dest="measured_command", metavar="SUBCOMMAND")
+    f = msub.add_parser("fit", help="identify missing effects on some speeds, write MODEL.json")
+    f.add_argument("--data", help=DATA_HELP)
+    f.add_argument("--out", required=True, help="model JSON to write")
+    f.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        help="treadmill speeds to fit on [m/s], e.g. 1.5,3.5 (default all)",
+    )
+    f.add_argument("--max-effects", type=integer(0, 100), default=3)
+    f.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
+    f.add_argument(
+        "--stability",
+        type=integer(0, 100_000),
+        default=0,
+        metavar="N",
+        help="also refit on N random 75 %% subsamples of the decays and report how often each "
+        "effect is selected (stability selection; about N x the fit time)",
+    )
+    f.add_argument(
+        "--plant",
+        choices=("auto", "nonlinear", "linear"),
+        default="auto",
+        help="nominal plant: auto (default): the nonlinear Whipple plant (defect-corrected) "
+        "unless the linear one fits the decays more than 1.2 times better before selection "
+        "(both fits and the choice are printed); nonlinear or linear force one",
+    )
+    f.add_argument(
+        "--weave-weight",
+        type=_weave_weight_arg,
+        default="auto",
+        metavar="W",
+        help="weight of the measured weave eigenvalue of each speed (>= 3 decays) in every "
+        "fit: 'auto' (default) gives it the nominal model's output-error cost, a number is "
+        "the weight, 0 fits the decay signals only (docs/measured.md)",
+    )
+    add_acceptance_options(f)
+    f.set_defaults(func=cmd_fit)
+    e = msub.add_parser("evaluate", help="error before/after per file and speed")
+    e.add_argument(
+        "--model",
+        required=True,
+        help="MODEL.json from 'measured fit', or a model of 'bikeid identify --out' (with "
+        "--input logged)",
+    )
+    e.add_argument("--data", help=DATA_HELP)
+    e.add_argument(
+        "--speeds",
+        type=range_text("--speeds", 0.0),
+        help="speeds to evaluate (default: those not used in the fit)",
+    )
+    e.add_argument("--json", action="store_true", help="print JSON")
+    e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
+    e.add_argument(
+        "--input",
+        choices=("loop", "logged"),
+        default="loop",
+        help="what drives the model over each window: 'loop' (default) the known "
+        "steer-into-lean law closed around the model; 'logged' the logged total steer "
+        "command replayed open loop (no controller needed; unstable models grow)",
+    )
+    e.set_defaults(func=cmd_evaluate)
+    t = msub.add_parser(
+        "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
+    )
+    t.add_argument(
+        "--n",
+        type=integer(1, 100_000),
+        default=32,
+        help="number of trials (default 32: 4 per effect)",
+    )
+    t.add_argument("--seed", type=integer(0, 2**32 - 1), default=1, help="grid seed (default 1)")
+    t.add_argument(
+        "--processes", type=integer(1, MAX_WORKERS), default=2, help="worker processes (default 2)"
+    )
+    t.add_argument("--effects", help="comma list of injected effects (default: all)")
+    t.add_argument("--linear", action="store_true", help="linear nominal model (for comparison)")
+    t.add_argument("--json", action="store_true", help="print all trials and the summary as JSON")
+    t.add_argument("--log", help="append each finished trial to this JSON-lines file")
+    add_acceptance_options(t)
+    t.set_defaults(func=cmd_trials)
+    r = msub.add_parser("report", help="write report.md with before/after figures")
+    r.add_argument("--model", help="MODEL.json (default: fit on the first and third speeds)")
+    r.add_argument("--data", help=DATA_HELP)
+    r.add_argument("--out", required=True, help="output folder")
+    r.set_defaults(func=cmd_report)
+    s = msub.add_parser(
+        "study", help="Moore & Hubbard's model comparison on the logs (held-out tables, figures)"
+    )
+    s.add_argument("--data", help=DATA_HELP)
+    s.add_argument("--out", required=True, help="output folder (report.md, study.json, PNGs)")
+    s.add_argument("--json", action="store_true", help="print the study as JSON")
+    s.add_argument(
+        "--fit-effects",
+        action="store_true",
+        help="refit the effects model with 'measured fit' per split (about 25 s each) instead "
+        "of the effect sets documented in docs/measured.md",
+    )
+    s.add_argument(
+        "--quick", action="store_true", help="grey-box with fewer iterations, no Bode part"
+    )
+    s.set_defaults(func=cmd_study)
+    p.set_defaults(func=lambda a: p.print_help() or 2)
+
+    d = sub.add_parser("data", help="measured data files")
+    dsub = d.add_subparsers(dest="data_command", metavar="SUBCOMMAND")
+    g = dsub.add_parser("fetch", help="download the pinned steer-by-wire logs (needs internet)")
+    g.add_argument("--dest", default="data", help="folder to create tudelft-sbw/ in")
+    g.add_argument(
+        "--all-speeds",
+        action="store_true",
+        help="also fetch the campaign's free-decay runs at 2, 3, 4 and 5 m/s (more decays "
+        "per speed and two more speeds for held-out tests)",
+    )
+    g.set_defaults(func=cmd_fetch)
+    d.set_defaults(func=lambda a: d.print_help() or 2)
+
+
+def parse_weave_weight(text: str) -> float | str:
+    """``--weave-weight``: 'auto' or a finite number >= 0 (a clear error otherwise)."""
+    if text == "auto":
+        return text
+    try:
+        w = float(text)
+    except ValueError:
+        w = float("nan")
+    if not (math.isfinite(w) and w >= 0):
+        raise ValueError(f"--weave-weight must be 'auto' or a number >= 0, got {text!r}")
+    return w
+
+
+def _weave_weight_arg(text: str) -> float | str:
+    try:
+        return parse_weave_weight(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--weave-weight ")) from None
+
+
+def _speeds(text: str | None):
+    return None if text is None else [float(x) for x in parse_range(text, "--speeds", 0.0)]
+
+
+def _fit_files(data: str | None, obj: dict, decays: str) -> list[Path]:
+    """The logs a fit used (and eigen/segments.csv for listed decays): its provenance."""
+    from bikeid.dataset.sbw_logs import data_dir, find_logs
+
+    files = [p for p in find_logs(data_dir(data)) if p.name in set(obj["fit_files"])]
+    if decays == "listed":  # dataset.decays reads the segments.csv beside each log
+        segments = sorted({p.parent / "segments.csv" for p in files})
+        files += [s for s in segments if s.is_file()]
+    return files
+
+
+def cmd_fit(args) -> int:
+    from bikeid.dataset.decays import load_decays
+    from bikeid.ident.effects.pipeline import fit_model, save_fit
+
+    ww = parse_weave_weight(str(args.weave_weight))
+    ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
+    bar = terminal_progress("measured fit", unit="fit")
+    kw = acceptance_kw(args)
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, **kw)
+    out["decays"] = args.decays
+    settings = {"max_effects": args.max_effects, "stability": args.stability,
+                "weave_weight": ww, "speeds": _speeds(args.speeds), **to_jsonable(kw)}  # fmt: skip
+    save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
+    ch = out["plant_choice"]
+    print(f"nominal plant: {out['plant']} ({ch['reason']})")
+    if ch["auto"] != out["plant"]:
+        print(f"note: --plant auto would fit with the {ch['auto']} plant; a mismatch of the "
+              "nominal plant can be read as an effect")  # fmt: skip
+    print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    from bikeid.ident.effects.selection import evidence_lines
+
+    for line in evidence_lines(out["identification"]["evidence"]):
+        print(f"  {line}")
+    w = out["identification"]["weave_weight"]
+    if ww == "auto" and w == 0:
+        print("weave term off: no fit speed has >= 3 decays with a measurable weave")
+    if "selection_frequency" in out:
+        freq = ", ".join(f"{k} {v:.2f}" for k, v in out["selection_frequency"].items())
+        print(f"selected in {args.stability} subsamples (fraction): {freq}")
+    return 0
+
+
+def _print_file_errors(out: dict) -> None:
+    for f in out["files"]:
+        print(f"{f['file']:40s} v={f['speed']:.2f}  before {f['error_before']:.3f}  "
+              f"after {f['error_after']:.3f}")  # fmt: skip
+
+
+def cmd_evaluate(args) -> int:
+    from bikeid.dataset.decays import load_decays
+    from bikeid.ident.effects.pipeline import (
+        evaluate_json,
+        evaluate_plant_model,
+        model_from_json,
+        plant_model_file,
+    )
+
+    plant_model = plant_model_file(args.model)
+    if plant_model is not None:  # an identified plant model (bikeid identify --out)
+        if args.input != "logged":
+            raise InputError(
+                f"{args.model} holds an identified plant model, which knows no controller: "
+                "evaluate it with --input logged (the logged steer command replayed)"
+            )
+        ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
+        out = evaluate_plant_model(plant_model, ws)
+        if args.json:
+            print(dump_json(out))
+        else:
+            _print_file_errors(out)
+            s = out["summary"]
+            print(f"summary ({s['windows']} windows, logged command replayed): before "
+                  f"{s['error_before']:.3f} after {s['error_after']:.3f}; "
+                  f"{len(s['skipped'])} windows at other speeds skipped")  # fmt: skip
+        return 0
+    model, obj = model_from_json(args.model)
+    if obj.get("plant_defaulted"):
+        print(
+            f"bikeid measured evaluate: {args.model} names no plant; using "
+            f"{obj['plant']!r}, the plant 'measured fit' used before it recorded one",
+            file=sys.stderr,
+        )
+    sp = _speeds(args.speeds)
+    ws = load_decays(
+        args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
+    )
+    if args.input == "logged":
+        from dataclasses import replace
+
+        ws = [replace(w, drive="logged") for w in ws]
+    out = evaluate_json(obj, ws)
+    if out.get("note"):
+        print(f"bikeid measured evaluate: {out['note']}", file=sys.stderr)
+    if args.json:
+        print(dump_json(out))
+    else:
+        _print_file_errors(out)
+        s = out["summary"]
+        print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
+              f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f}; the "
+              f"measured weave is uncertain by {s['weave_data_rel_std']:.3f})")  # fmt: skip
+        for when in ("before", "after"):
+            a = s[f"push_asymmetry_{when}"]
+            print(f"error by push direction {when}: {_asymmetry_text(a)}")
+        for f in out["validation"]["files"]:  # the model's validation (bikeid validate's tests)
+            print(f"validation {f['file']}: " + "; ".join(
+                f"{c} fit {f['fit'][c]:.1f} %, residuals "
+                f"{'white' if r['white'] else 'not white'}"
+                + ("" if "independent" not in r else
+                   f", {'independent of' if r['independent'] else 'correlated with'} T_ext")
+                for c, r in f["residuals"].items()))  # fmt: skip
+    return 0
+
+
+def cmd_trials(args) -> int:
+    from bikeid.experiments.measured.effect_trials import format_summary, run_trials
+
+    effects = None if not args.effects else tuple(x.strip() for x in args.effects.split(","))
+
+    bar = terminal_progress("trials", json_output=args.json, unit="trial")
+    finished = []
+    if bar:
+        bar(0, args.n, "")
+
+    def progress(row):
+        if args.log:
+            with open(args.log, "a") as fh:
+                fh.write(json.dumps(to_jsonable(row)) + "\n")
+        finished.append(row)
+        if bar:
+            bar(len(finished), args.n, "")
+
+    out = run_trials(
+        args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress,
+        **acceptance_kw(args),
+    )  # fmt: skip
+    if args.json:
+        print(dump_json(out))
+        return 0
+    s = out["summary"]
+    print(format_summary(s))
+    print(f"{s['trials']} trials, {s['wall_seconds']:.0f} s wall, {s['processes']} processes")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from bikeid.dataset.sbw_logs import data_dir
+    from bikeid.experiments.measured.report import write_report
+
+    if args.model:  # refuse a bad model, then a missing data folder, before making the folder
+        from bikeid.ident.effects.pipeline import model_from_json
+
+        model_from_json(args.model)
+    data_dir(args.data)
+    path = write_report(args.out, args.data, args.model)
+    print(path)
+    return 0
+
+
+def cmd_study(args) -> int:
+    from bikeid.dataset.files import check_output_path
+    from bikeid.dataset.sbw_logs import data_dir
+    from bikeid.experiments.measured.study import run_study
+    from bikeid.experiments.measured.study_plots import headline, write_study
+
+    data_dir(args.data)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise InputError(f"--out {args.out} is not a folder; give a folder (created if missing) "
+                         "for report.md, study.json and the figures")  # fmt: skip
+    check_output_path(Path(args.out) / "report.md")
+    say = None if args.json else (lambda t: print(f"fitting: {t}", file=sys.stderr))
+    study = run_study(args.data, fit_effects=args.fit_effects, quick=args.quick, progress=say)
+    path = write_study(study, args.out)
+    if args.json:
+        print(dump_json({**{k: v for k, v in study.items() if k != "_models"},
+                         "headline": headline(study)}))  # fmt: skip
+        return 0
+    for tag, h in headline(study).items():
+        print(f"fit {tag} m/s: best on held-out decays {h['best']} "
+              f"({h['ratio_to_whipple']:.2f} x Whipple's median decay error)")  # fmt: skip
+    print(path)
+    return 0
+
+
+def _asymmetry_text(a: dict) -> str:
+    """Push-direction errors, saying "no pushes" where a side has none (never "nan")."""
+    import math
+
+    def num(x, fmt):
+        return format(x, fmt) if x is not None and math.isfinite(x) else "n/a"
+
+    if not all(a.get(k) is not None and math.isfinite(a[k]) for k in ("error_right", "error_left")):
+        return (f"right {num(a.get('error_right'), '.3f')}, left {num(a.get('error_left'), '.3f')}"
+                " (no comparison: one direction has no pushes)")  # fmt: skip
+    return (f"right {a['error_right']:.3f}, left {a['error_left']:.3f} (ratio "
+            f"{num(a.get('ratio'), '.2f')}, p = {num(a.get('p_value'), '.3g')})")  # fmt: skip
+
+
+def cmd_fetch(args) -> int:
+    from bikeid.dataset.download import CAMPAIGN, PINNED, fetch
+
+    sums = fetch(args.dest, files=PINNED | CAMPAIGN if args.all_speeds else PINNED)
+    print(f"fetched {len(sums)} files into {Path(args.dest) / 'tudelft-sbw'}")
+    return 0

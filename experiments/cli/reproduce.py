@@ -1,0 +1,55 @@
+"""``bikeid reproduce [--out DIR] [--quick] [--workers N]``: both papers redone with the truth."""
+
+from __future__ import annotations
+
+import argparse
+
+from bikeid.experiments.cli.args import MAX_WORKERS, integer
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "reproduce",
+        help="redo every figure and table of Chen & Dao (2010) and Moore & Hubbard",
+        description=(
+            "Redo the figures and tables of Chen & Dao (2010) and Moore & Hubbard on the "
+            "testbed: paper | bikeid identified | ground truth side by side in DIR/report.md, "
+            "DIR/summary.json and PNG figures. Progress goes to stderr when it is a terminal."
+        ),
+    )
+    p.add_argument(
+        "--out",
+        default="reproduce",
+        metavar="DIR",
+        help="output folder (created; default ./reproduce)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="fewer speeds, shorter runs (< 2 min); the report lists the settings",
+    )
+    p.add_argument(
+        "--workers",
+        type=integer(1, MAX_WORKERS),
+        default=None,
+        metavar="N",
+        help="worker processes for the identification runs (default min(2, cores))",
+    )
+    p.add_argument(
+        "--bicycle",
+        default="benchmark",
+        help="parameter set for the Chen & Dao part (default benchmark)",
+    )
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from bikeid.experiments.papers.reproduce import reproduce
+    from bikeid.experiments.progress import quiet, terminal_progress
+
+    bar = terminal_progress("reproduce", unit="stage")
+    reproduce(
+        args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
+        log=bar.write if bar else quiet, progress=bar,
+    )  # fmt: skip
+    return 0

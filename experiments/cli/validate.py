@@ -1,0 +1,200 @@
+"""``bikeid validate``: a saved model against data (compare, k-step, resid, Bode vs data).
+
+Loads the model with :func:`bikeid.ident.model_file.load_model`, reads the runs as
+``bikeid identify`` does (same ``--format`` options), computes
+:func:`bikeid.ident.validation_report.validate_model`, prints a table (fit [%] per output,
+whiteness and independence verdicts, the excited band of the frequency-response estimate)
+and, with ``--out DIR``, writes ``validation.json`` and the figures of
+:mod:`bikeid.experiments.validation_plots` there.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from bikeid.experiments.cli.args import dump_json, integer, number
+from bikeid.experiments.cli.identify import FORMATS, add_data_options
+
+#: Marker of the folders ``bikeid validate --out`` writes (in validation.json).
+MARKER = "bikeid validate"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "validate",
+        help="validate a saved model on data: fit %%, residual tests, Bode vs data",
+        description=(
+            "Compare a model saved by 'bikeid identify --out' with runs: measured vs "
+            "simulated and k-step-predicted outputs (MATLAB compare's NRMSE fit in %), "
+            "one-step residual whiteness and independence from the input (chi-squared tests "
+            "at 1 %), and a nonparametric frequency response from T_delta to each output "
+            "where the coherence shows excitation, with the model's 95 % Bode band (models with "
+            "a parameter covariance). Data are read as by 'bikeid identify' "
+            "(--format bikeid|csv|hdf5 and its options)."
+        ),
+    )
+    p.add_argument("--model", required=True, metavar="MODEL.json", help="model file to validate")
+    add_data_options(
+        p,
+        {k: FORMATS[k] for k in ("bikeid", "csv", "hdf5")},
+        input_help="the runs' torque signal [N m] used as the model's input T_delta (default "
+        "T_delta)",
+    )
+    p.add_argument(
+        "--k-step", type=integer(1, 1_000_000), default=10, metavar="K",
+        help="horizon of the k-step-ahead prediction [samples] (default 10)",
+    )  # fmt: skip
+    p.add_argument(
+        "--coherence", type=number(0.0, 0.99, lo_open=True), default=0.5,
+        help="coherence below which a frequency counts as not excited (default 0.5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--out", default=None, metavar="DIR",
+        help="write validation.json, compare_*.png, resid.png and bode.png into DIR (a new or "
+        "empty folder, or one written by bikeid validate)",
+    )  # fmt: skip
+    p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
+    p.set_defaults(func=cmd_validate)
+
+
+def check_out_dir(out: str | Path) -> Path:
+    """Refuse an output folder bikeid did not make for a validation (before any work).
+
+    Parameters
+    ----------
+    out : str or Path
+        The ``--out`` folder.
+
+    Returns
+    -------
+    Path
+        The folder (not created yet).
+
+    Raises
+    ------
+    ValueError
+        If ``out`` is a file or a link, or a non-empty folder without a ``validation.json``
+        written by ``bikeid validate``.
+    """
+    from bikeid.dataset.files import check_output_path
+    from bikeid.sim.textformats import loads_json
+
+    out = Path(out)
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise ValueError(f"--out {out} is not a folder; give a new or empty folder")
+    if out.is_dir() and any(out.iterdir()):
+        marker = out / "validation.json"
+        try:
+            ours = loads_json(marker.read_text(encoding="utf-8"), str(marker)).get("command")
+        except (OSError, ValueError, AttributeError):
+            ours = None
+        if ours != MARKER:
+            raise ValueError(
+                f"--out {out} holds files not written by bikeid validate; give a new or empty "
+                "folder (bikeid does not overwrite other files)"
+            )
+    check_output_path(out / "validation.json")
+    return out
+
+
+def _model(path: str):
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.model_file import load_model
+
+    model = load_model(path)
+    if isinstance(model, ExperimentModel):
+        raise ValueError(
+            f"{path} holds an experiment model (bikeid measured fit): validate it on the "
+            "measured decays with 'bikeid measured evaluate --model'"
+        )
+    return model
+
+
+def _verdict(test: dict) -> str:
+    return f"{'passed' if test['passed'] else 'FAILED'} (p={test['p_value']:.2g})"
+
+
+def _num(x) -> str:
+    import math
+
+    return "n/a" if x is None or not math.isfinite(x) else f"{x:.1f}"
+
+
+def table(report, model_path: str) -> str:
+    """The printed summary: fits [%], test verdicts, excited bands, notes.
+
+    Parameters
+    ----------
+    report : ValidationReport
+        The validation.
+    model_path : str
+        The model file (for the heading).
+
+    Returns
+    -------
+    str
+        Lines ending in a newline.
+    """
+    rr = report.residuals
+    speeds = sorted({round(v, 3) for v in report.speeds})
+    lines = [
+        f"{model_path} on {len(report.runs)} run(s) at {', '.join(f'{v:g}' for v in speeds)} m/s",
+        "fit = 100 (1 - ||y - yhat|| / ||y - mean y||) % (MATLAB compare); residual tests: "
+        f"chi-squared at 1 %, lags 1..{int(rr.lags[-1])}",
+        f"{'output':9s} {'sim fit %':>9s} {f'{report.k_step}-step fit %':>14s}  "
+        f"{'whiteness':18s} independence of {rr.input}",
+    ]
+    for o in report.outputs:
+        lines.append(
+            f"{o:9s} {_num(report.fit[o]):>9s} {_num(report.fit_k_step[o]):>14s}  "
+            f"{_verdict(rr.whiteness_test[o]):18s} {_verdict(rr.independence_test[o])}"
+        )
+    for e in report.frequency_responses:
+        if e.excited:
+            fv = e.f[e.valid]
+            inside = e.in_band
+            band = "" if inside is None else (
+                f"; {int(inside.sum())} inside the model's 95 % Bode band, "
+                f"{int(e.consistent.sum())} within it widened by their own 95 % error")  # fmt: skip
+            lines.append(
+                f"frequency response {e.input} -> {e.output} (v={e.speed:g} m/s, {e.reference}):"
+                f" {int(e.valid.sum())} frequencies in {fv.min():.2f}..{fv.max():.2f} Hz with "
+                f"coherence >= {e.coherence_min:g}{band}"
+            )
+    summary = report.band_summary()
+    if summary is not None:
+        lines.append(f"Bode band: {summary['calibration']}")
+    if report.simulation_note:
+        lines.append(report.simulation_note)
+    lines += [f"note: {n}" for n in report.notes]
+    return "\n".join(lines) + "\n"
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from bikeid.experiments.cli.args import atomic_write_text
+    from bikeid.experiments.cli.identify import _load, _with_input
+    from bikeid.ident.validation_report import validate_model
+
+    out = check_out_dir(args.out) if args.out else None
+    model = _model(args.model)
+    runs = _with_input(_load(args), args.input)
+    if not runs:
+        raise ValueError(f"{', '.join(args.file)} hold no runs")
+    report = validate_model(model, runs, k_step=args.k_step, coherence_min=args.coherence)
+    doc = {"command": MARKER, "model": str(args.model), "data": list(map(str, args.file)),
+           **report.to_json()}  # fmt: skip
+    written = []
+    if out is not None:
+        from bikeid.experiments.validation_plots import write_figures
+
+        written = write_figures(report, out)
+        atomic_write_text(out / "validation.json", dump_json(doc) + "\n")
+        written.append(out / "validation.json")
+    if args.json:
+        print(dump_json(doc))
+    else:
+        print(table(report, args.model), end="")
+        if written:
+            print(f"wrote {', '.join(str(p) for p in written)}")
+    return 0

@@ -1,0 +1,767 @@
+"""Blind effect-selection trials: logs from a generator the pipeline was not built from.
+
+The undeclared-effect trials of :mod:`bikeid.experiments.measured.effect_trials` draw their
+data from
+bikeid's own nonlinear plant and instrument model, the code the pipeline's experiment model
+is built from.  These trials draw steer-by-wire-format free decays from a generator that
+shares none of the pipeline's plant code, randomize every nuisance a real log shows, and
+score what a user suffers, not only whether the right name comes first.
+
+Generator (per trial, everything drawn from the trial's seed):
+
+- **Plant**: with probability 3/4 the *independent linear* plant: the canonical matrices
+  M, C1, K0, K2 of ``bicycleparameters.bicycle.benchmark_par_to_canonical`` (Moore's
+  implementation of Meijaard 2007, not :mod:`bikeid.sim.linear`) for the steer-by-wire
+  bicycle's parameters *perturbed within their measurement uncertainty* (the data README
+  gives none; we use +-5 % on each body's inertia tensor and +-2 mm on the trail, uniform),
+  integrated by RK4 with 10 substeps per 10 ms sample, written here.  Otherwise bikeid's
+  nonlinear plant (:func:`bikeid.dataset.closed_loop.simulate_run`) with the same perturbed
+  parameters.
+- **Hidden effect**: one of six library effects, one of two effects outside the library
+  (roll viscous damping, roll stiffness), or none.  The linear plant applies them here:
+  steer torques -c deltadot, -T_c tanh(deltadot / 0.01 rad/s), -k delta; roll torques
+  -c_r phidot, -k_r phi; the command path delay (whole samples) -> gain -> first-order lag.
+- **Loop**: the firmware's steer-into-lean law T = 2 (6.5 - v_s) phidot_m on the measured
+  roll rate and the sensor speed v_s = 1.066 v - 0.128 (data README), zero-order hold.
+- **Push**: an initial state like the logs' window starts, or a half-sine roll-torque pulse
+  of 0.1-0.4 s and 15-45 N m (the window starts when the pulse ends; the commands during
+  the pulse are the window's history).
+- **Instruments** (linear plant): roll-rate noise std 0.004-0.02 rad/s, AR(1) coloured with
+  coefficient 0-0.7 (same marginal std), roll angle noise std/5, steer noise 1e-4-5e-4 rad,
+  steer encoder of 4096, 8192 or 16384 counts per turn, steer rate from encoder differences or
+  a rate sensor (the data README does not say which),
+  gyro bias 0-0.005 rad/s plus a random walk of 0-0.003 rad/s per sqrt(s); treadmill speed
+  wander of 0-3 % (a 0.2-1 Hz sine) seen by the plant, the sensor speed following it.
+  The nonlinear plant uses :mod:`bikeid.dataset.sensors` (white noise, quantization, bias)
+  and a constant speed.
+
+Scores per trial (:func:`score`): ``right_first`` (library effect named first, value within
+20 % of its deviation from absent), ``extras`` (accepted effects other than the true one),
+``false_positive`` (no-effect log: any effect accepted), ``misattributed`` (outside-library
+effect: a library effect named first instead of ``unexplained``).  :func:`summarize` gives
+the four rates with exact (Clopper-Pearson) 95 % intervals.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+from bikeid.experiments.measured.effect_trials import (
+    DELTA0,
+    DT,
+    EFFECTS,
+    EVAL_PER_SPEED,
+    FIT_PER_SPEED,
+    LIBRARY_EFFECTS,
+    N_SAMPLES,
+    OUTSIDE_EFFECTS,
+    rate,
+)
+
+__all__ = [
+    "INERTIA_UNCERTAINTY",
+    "TRAIL_UNCERTAINTY",
+    "BlindTrial",
+    "Nuisance",
+    "CLASSES",
+    "draw_blind_classes",
+    "draw_blind_trials",
+    "generate_windows",
+    "nominal_comparison",
+    "parse_per_class",
+    "linear_plant_matrices",
+    "rescore_unexplained",
+    "run_blind_trial",
+    "score",
+    "summarize_blind",
+]
+
+INERTIA_UNCERTAINTY = 0.05  # relative, every inertia (no published uncertainty: +-5 %)
+TRAIL_UNCERTAINTY = 0.002  # m, trail (+-2 mm)
+SUBSTEPS = 10
+HIST = 20  # commands before a window start kept as its history
+CONTROL_GAIN, CONTROL_SPEED = 2.0, 6.5  # T = K (V - v_s) phidot_m (data README)
+BODY_INERTIAS = {"R": ("IRxx", "IRyy"), "B": ("IBxx", "IByy", "IBzz", "IBxz"),
+                 "H": ("IHxx", "IHyy", "IHzz", "IHxz"), "F": ("IFxx", "IFyy")}  # fmt: skip
+INERTIAS = tuple(k for ks in BODY_INERTIAS.values() for k in ks)
+TRIAL_EFFECTS = (*EFFECTS, "none")
+#: The trial classes of :func:`draw_blind_classes` and the hidden effects each cycles through.
+CLASSES = {"library": LIBRARY_EFFECTS, "outside": OUTSIDE_EFFECTS, "none": ("none",)}
+
+
+@dataclass(frozen=True)
+class Nuisance:
+    """The randomized nuisances of one blind trial (JSON-friendly).
+
+    Attributes
+    ----------
+    plant : str
+        ``"independent_linear"`` or ``"bikeid_nonlinear"``.
+    push : str
+        ``"state"`` (initial state) or ``"pulse"`` (half-sine roll-torque pulse).
+    pulse_duration, pulse_torque : float
+        Pulse length [s] and peak [N m] (pulse pushes).
+    noise : float
+        Roll-rate white-noise std [rad/s] (marginal std of the coloured noise).
+    colour : float
+        AR(1) coefficient of the roll-rate and roll-angle noise [-], 0 = white.
+    steer_noise : float
+        Steer-angle white-noise std before quantization [rad].
+    encoder_counts : int
+        Steer encoder counts per turn.
+    gyro_bias : float
+        Constant roll-rate bias [rad/s].
+    gyro_walk : float
+        Roll-rate bias random-walk intensity [rad/s per sqrt(s)].
+    steer_rate : str
+        ``"encoder_difference"`` (backward difference of the quantized steer angle) or
+        ``"gyro"`` (true rate + roll-rate-sized white noise).
+    speed_wander : float
+        Relative amplitude of the treadmill speed sine [-].
+    wander_freq : float
+        Its frequency [Hz].
+    inertia_scale : dict
+        Scale of each body's inertia tensor (body R, B, H or F -> factor; one factor per
+        body keeps the tensor physical).
+    trail_shift : float
+        Trail perturbation [m].
+    """
+
+    plant: str
+    push: str
+    pulse_duration: float
+    pulse_torque: float
+    noise: float
+    colour: float
+    steer_noise: float
+    encoder_counts: int
+    gyro_bias: float
+    gyro_walk: float
+    steer_rate: str
+    speed_wander: float
+    wander_freq: float
+    inertia_scale: dict = field(default_factory=dict)
+    trail_shift: float = 0.0
+
+
+@dataclass(frozen=True)
+class BlindTrial:
+    """One blind trial: hidden effect, speeds, nuisances and seed (JSON-friendly).
+
+    Attributes
+    ----------
+    index, seed : int
+        Trial number and simulation seed.
+    effect : str
+        Hidden effect (a key of :data:`bikeid.experiments.measured.effect_trials.EFFECTS`) or
+        ``"none"``.
+    value : float
+        Its value [registry unit] (NaN for ``"none"``).
+    fit_speeds, eval_speeds : tuple of float
+        Treadmill speeds [m/s] of the decays fitted and held out.
+    nuisance : Nuisance
+        The nuisances.
+    """
+
+    index: int
+    seed: int
+    effect: str
+    value: float
+    fit_speeds: tuple[float, float]
+    eval_speeds: tuple[float, float]
+    nuisance: Nuisance
+
+
+def _perturbed(p, nz: Nuisance):
+    kw = {k: getattr(p, k) * s for b, s in nz.inertia_scale.items() for k in BODY_INERTIAS[b]}
+    return replace(p, c=p.c + nz.trail_shift, **kw)
+
+
+def linear_plant_matrices(p) -> tuple[np.ndarray, ...]:
+    """M, C1, K0, K2 of the bicycle ``p`` from ``bicycleparameters`` (independent code).
+
+    Parameters
+    ----------
+    p : bikeid.sim.parameters.BicycleParameters
+        Meijaard 2007 parameters, SI units.
+
+    Returns
+    -------
+    tuple of (2, 2) ndarray
+        M [kg m^2], C1 [kg m^2/s... per m/s], K0 [per g], K2 [per v^2], in the roll/steer
+        order of Meijaard 2007 (positive to the right).
+    """
+    from bicycleparameters.bicycle import benchmark_par_to_canonical
+
+    par = {k: float(getattr(p, k)) for k in ("w", "c", "lam", "g", "rR", "mR", "xB", "zB", "mB",
+                                              "xH", "zH", "mH", "rF", "mF", *INERTIAS)}  # fmt: skip
+    M, C1, K0, K2 = benchmark_par_to_canonical(par)
+    return tuple(np.asarray(x, dtype=float) for x in (M, C1, K0, K2))
+
+
+def draw_blind_trials(
+    n: int, seed: int = 0, effects: tuple[str, ...] | None = None, first: int = 0
+) -> list[BlindTrial]:
+    """``n`` blind trials, effects cycling through ``effects`` (default all and "none").
+
+    Trial i depends only on (seed, i), as
+    :func:`bikeid.experiments.measured.effect_trials.draw_trials`.
+
+    Parameters
+    ----------
+    n : int
+        Number of trials (>= 1).
+    seed : int, optional
+        Grid seed (>= 0).
+    effects : tuple of str, optional
+        Names from :data:`TRIAL_EFFECTS`.
+    first : int, optional
+        Index of the first trial (>= 0): the trials are ``first .. first + n - 1``, each
+        drawn from (seed, its index), the effects cycling from the first name.
+
+    Returns
+    -------
+    list of BlindTrial
+
+    Raises
+    ------
+    ValueError
+        If ``n`` or ``seed`` is not a valid integer, or an effect name is unknown.
+    """
+    if int(n) != n or n < 1:
+        raise ValueError(f"number of trials must be a positive integer, got {n!r}")
+    if int(seed) != seed or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    names = tuple(effects) if effects else TRIAL_EFFECTS
+    bad = [e for e in names if e not in TRIAL_EFFECTS]
+    if bad:
+        raise ValueError(f"unknown effects {bad}; choose from {list(TRIAL_EFFECTS)}")
+    if int(first) != first or first < 0:
+        raise ValueError(f"first index must be a non-negative integer, got {first!r}")
+    from bikeid.experiments.measured.effect_trials import _speeds
+
+    out = []
+    for i in range(int(first), int(first) + int(n)):
+        rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
+        name = names[(i - int(first)) % len(names)]
+        if name == "none":
+            value = float("nan")
+            v = _speeds(rng, "command_gain", 1.0)  # stability of the nominal loop
+        else:
+            value = EFFECTS[name].draw(rng)
+            v = _speeds(rng, name, value)
+        nz = Nuisance(
+            plant="independent_linear" if rng.random() < 0.75 else "bikeid_nonlinear",
+            push="state" if rng.random() < 0.5 else "pulse",
+            pulse_duration=float(rng.uniform(0.1, 0.4)),
+            pulse_torque=float(rng.uniform(15.0, 45.0)),
+            noise=float(rng.uniform(0.004, 0.02)),
+            colour=float(rng.uniform(0.0, 0.7)),
+            steer_noise=float(rng.uniform(1e-4, 5e-4)),
+            encoder_counts=int(rng.choice([4096, 8192, 16384])),
+            gyro_bias=float(rng.uniform(-0.005, 0.005)),
+            gyro_walk=float(rng.uniform(0.0, 0.003)),
+            steer_rate="gyro" if rng.random() < 0.5 else "encoder_difference",
+            speed_wander=float(rng.uniform(0.0, 0.03)),
+            wander_freq=float(rng.uniform(0.2, 1.0)),
+            inertia_scale={
+                b: float(1 + rng.uniform(-1, 1) * INERTIA_UNCERTAINTY) for b in BODY_INERTIAS
+            },  # fmt: skip
+            trail_shift=float(rng.uniform(-1, 1) * TRAIL_UNCERTAINTY),
+        )
+        out.append(BlindTrial(i, int(rng.integers(2**31)), name, value, (v[0], v[1]),
+                              (v[2], v[3]), nz))  # fmt: skip
+    return out
+
+
+def parse_per_class(text: str) -> dict[str, int]:
+    """``--per-class`` text ``CLASS=N,...`` as an ordered dict of class -> count.
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated ``CLASS=N`` pairs; a class is a key of :data:`CLASSES` (``library``,
+        ``outside``, ``none``) or one hidden effect of :data:`TRIAL_EFFECTS`; N >= 1.
+
+    Returns
+    -------
+    dict of str to int
+        The counts, in the order given.
+
+    Raises
+    ------
+    ValueError
+        One line naming the bad pair and the allowed classes.
+    """
+    allowed = [*CLASSES, *(e for e in TRIAL_EFFECTS if e != "none")]
+    out: dict[str, int] = {}
+    for pair in (p.strip() for p in text.split(",")):
+        if not pair:
+            continue
+        name, sep, num = (x.strip() for x in pair.partition("="))
+        if not sep or name not in allowed or not num.isdigit() or int(num) < 1 or name in out:
+            raise ValueError(f"--per-class: {pair!r} is not CLASS=N with N >= 1 and a class "
+                             f"given once, out of {', '.join(allowed)}")  # fmt: skip
+        out[name] = int(num)
+    if not out:
+        raise ValueError("--per-class: give CLASS=N pairs, e.g. none=24,outside=24")
+    return out
+
+
+def draw_blind_classes(counts: dict[str, int], seed: int = 0) -> list[BlindTrial]:
+    """Blind trials of chosen classes: ``counts[c]`` trials of each class ``c`` in turn.
+
+    Each class cycles through its hidden effects (:data:`CLASSES`, or one effect), the
+    classes taking consecutive index ranges in the order given, so that every trial has its
+    own index and depends only on (seed, index, the counts before it): the draw is
+    reproducible by seed, as :func:`draw_blind_trials`.
+
+    Parameters
+    ----------
+    counts : dict of str to int
+        Class (``library``, ``outside``, ``none`` or an effect name) -> number of trials.
+    seed : int, optional
+        Grid seed (>= 0).
+
+    Returns
+    -------
+    list of BlindTrial
+    """
+    out: list[BlindTrial] = []
+    for name, k in counts.items():
+        effects = CLASSES.get(name, (name,))
+        out += draw_blind_trials(k, seed, effects, first=len(out))
+    return out
+
+
+def _ar1(rng: np.random.Generator, n: int, std: float, a: float) -> np.ndarray:
+    """AR(1) noise with marginal std ``std`` and coefficient ``a``."""
+    from scipy.signal import lfilter
+
+    e = rng.normal(0.0, std * math.sqrt(1 - a * a), n)
+    x = rng.normal(0.0, std)  # stationary start
+    return lfilter([1.0], [1.0, -a], e, zi=[a * x])[0]
+
+
+class _LinearPlant:
+    """The independent linear plant with the hidden effect (module docstring)."""
+
+    def __init__(self, p, effect: str, value: float):
+        self.M, self.C1, self.K0, self.K2 = linear_plant_matrices(p)
+        self.Minv = np.linalg.inv(self.M)
+        self.g = float(p.g)
+        fx = {} if effect == "none" else {effect: value}
+        self.c = fx.get("steer_viscous_damping", 0.0)
+        self.tc = fx.get("steer_coulomb_friction", 0.0)
+        self.k = fx.get("steer_stiffness", 0.0)
+        self.gain = fx.get("command_gain", 1.0)
+        self.tau = fx.get("actuator_lag", 0.0)
+        self.delay = int(round(fx.get("input_delay", 0.0) / DT))
+        self.cr = fx.get("roll_viscous_damping", 0.0)
+        self.kr = fx.get("roll_stiffness", 0.0)
+
+    def rhs(self, x: np.ndarray, v: float, T_cmd: float, T_phi: float) -> np.ndarray:
+        """x = [phi, delta, phidot, deltadot, T_applied]."""
+        q, qd, Ta = x[:2], x[2:4], x[4]
+        T_target = self.gain * T_cmd
+        Td = T_target if self.tau == 0.0 else Ta
+        tq = np.array([
+            T_phi - self.cr * qd[0] - self.kr * q[0],
+            Td - self.c * qd[1] - self.tc * math.tanh(qd[1] / 0.01) - self.k * q[1],
+        ])  # fmt: skip
+        qdd = self.Minv @ (tq - v * self.C1 @ qd - (self.g * self.K0 + v * v * self.K2) @ q)
+        dTa = 0.0 if self.tau == 0.0 else (T_target - Ta) / self.tau
+        return np.array([qd[0], qd[1], qdd[0], qdd[1], dTa])
+
+
+def _linear_decay(plant: _LinearPlant, v0: float, nz: Nuisance, init: dict, rng) -> dict:
+    """One push + 1 s window on the independent linear plant; measured signals."""
+    n_pre = int(round(nz.pulse_duration / DT)) if nz.push == "pulse" else 0
+    n_all = HIST + n_pre + N_SAMPLES
+    t = np.arange(n_all) * DT
+    phase = rng.uniform(0, 2 * math.pi)
+    v_true = v0 * (1 + nz.speed_wander * np.sin(2 * math.pi * nz.wander_freq * t + phase))
+    x = np.zeros(5)
+    if nz.push == "state":
+        x[:4] = [init["phi"], init["delta"], init["phidot"], init["deltadot"]]
+    noise_pr = _ar1(rng, n_all, nz.noise, nz.colour)
+    noise_phi = _ar1(rng, n_all, nz.noise / 5, nz.colour)
+    walk = nz.gyro_bias + np.cumsum(rng.normal(0.0, nz.gyro_walk * math.sqrt(DT), n_all))
+    step = 2 * math.pi / nz.encoder_counts
+    cmd = np.zeros(n_all)
+    queue = [0.0] * plant.delay
+    meas = {k: np.zeros(n_all) for k in ("phi", "delta", "phidot", "deltadot", "v")}
+    h = DT / SUBSTEPS
+    prev_enc = None
+    rate_noise = rng.normal(0.0, nz.noise, n_all)
+    for k in range(n_all):
+        live = k >= HIST  # the first HIST samples are upright running: nothing moves
+        enc = step * np.round((x[1] + rng.normal(0, nz.steer_noise)) / step)
+        meas["delta"][k] = enc
+        if nz.steer_rate == "gyro":
+            meas["deltadot"][k] = x[3] + rate_noise[k]
+        elif prev_enc is None or (nz.push == "state" and k == HIST):  # moving before the push
+            meas["deltadot"][k] = (enc - step * np.round((x[1] - x[3] * DT) / step)) / DT
+        else:
+            meas["deltadot"][k] = (enc - prev_enc) / DT
+        prev_enc = enc
+        meas["phi"][k] = x[0] + noise_phi[k]
+        meas["phidot"][k] = x[2] + noise_pr[k] + walk[k]
+        vs = SPEED_CALIBRATION[0] * v_true[k] + SPEED_CALIBRATION[1]
+        meas["v"][k] = vs
+        cmd[k] = CONTROL_GAIN * (CONTROL_SPEED - vs) * meas["phidot"][k] if live else 0.0
+        queue.append(cmd[k])
+        T_cmd = queue.pop(0)
+        if not live:
+            continue
+        for j in range(SUBSTEPS):
+            tt = (k - HIST) * DT + j * h
+            pulse = 0.0
+            if nz.push == "pulse" and k < HIST + n_pre:
+                pulse = nz.pulse_torque * init["sign"]
+                T_phi = [pulse * math.sin(math.pi * (tt + a) / nz.pulse_duration)
+                         for a in (0.0, h / 2, h)]  # fmt: skip
+            else:
+                T_phi = [0.0, 0.0, 0.0]
+            k1 = plant.rhs(x, v_true[k], T_cmd, T_phi[0])
+            k2 = plant.rhs(x + h / 2 * k1, v_true[k], T_cmd, T_phi[1])
+            k3 = plant.rhs(x + h / 2 * k2, v_true[k], T_cmd, T_phi[1])
+            k4 = plant.rhs(x + h * k3, v_true[k], T_cmd, T_phi[2])
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(x)) or abs(x[0]) > 1.0:
+            raise RuntimeError("blind-trial plant fell")
+    s = HIST + n_pre
+    out = {k: a[s : s + N_SAMPLES].copy() for k, a in meas.items()}
+    out["hist"] = cmd[s - HIST : s].copy()
+    return out
+
+
+def _nonlinear_decay(p, effects, v0: float, nz: Nuisance, init: dict, seed: int) -> dict:
+    from bikeid.controllers.steer_into_lean import SteerIntoLean
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.sensors import Channel, Sensors
+
+    step = 2 * math.pi / nz.encoder_counts
+    sensors = Sensors({
+        "v": Channel(scale=SPEED_CALIBRATION[0], bias=SPEED_CALIBRATION[1]),
+        "phi": Channel(std=nz.noise / 5),
+        "phidot": Channel(std=nz.noise, bias=nz.gyro_bias),
+        "delta": Channel(std=nz.steer_noise, step=step),
+        "deltadot": Channel(std=nz.noise, step=step / DT),
+    })  # fmt: skip
+    st = {k: init[k] for k in ("phi", "delta", "phidot", "deltadot")}
+    run = simulate_run(p, SteerIntoLean(), float(v0), duration=N_SAMPLES * DT, substeps=4,
+                       sensors=sensors, effects=effects, seed=seed, initial=st)  # fmt: skip
+    if run.meta["fell_at"] is not None or run.n < N_SAMPLES:
+        raise RuntimeError("blind-trial plant fell")
+    sl = slice(0, N_SAMPLES)
+    out = {k: run[k][sl].copy() for k in ("phi", "delta", "phidot", "deltadot", "v")}
+    out["hist"] = np.zeros(HIST)
+    return out
+
+
+def generate_windows(trial: BlindTrial, speeds, per_speed: int, seed: int, label: str) -> list:
+    """Free decays of the blind generator as experiment-model windows.
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        Hidden effect and nuisances.
+    speeds : iterable of float
+        Treadmill speeds [m/s].
+    per_speed : int
+        Decays per speed.
+    seed : int
+        Generator seed of the decays.
+    label : str
+        File-name prefix.
+
+    Returns
+    -------
+    list of bikeid.dataset.windows.Window
+        1 s windows: measured angles [rad], rates [rad/s], sensor speed [m/s], zero external
+        torque, the commands of the 20 samples before the start [N m].
+    """
+    from bikeid.dataset.windows import Window
+    from bikeid.sim.effect_registry import nonlinear_effects
+    from bikeid.sim.parameters import steer_by_wire
+
+    nz = trial.nuisance
+    p = _perturbed(steer_by_wire(), nz)
+    rng = np.random.default_rng(seed)
+    lin = None
+    fx: list = []
+    if nz.plant == "independent_linear":
+        lin = _LinearPlant(p, trial.effect, trial.value)
+    elif trial.effect != "none":
+        fx, _ = nonlinear_effects({trial.effect: trial.value}, 1.0, DT, 0.01)
+    out = []
+    for v in speeds:
+        for j in range(per_speed):
+            sgn = float(rng.choice([-1.0, 1.0]))
+            init = {"phi": float(rng.normal(0.0, 0.01)),
+                    "delta": float(-sgn * rng.uniform(0.0, DELTA0 / v)),
+                    "phidot": float(sgn * rng.uniform(0.35, 0.95)),
+                    "deltadot": float(sgn * rng.uniform(0.4, 1.5)), "sign": sgn}  # fmt: skip
+            sub = int(rng.integers(2**31))
+            for _ in range(4):
+                try:
+                    if lin is not None:
+                        d = _linear_decay(lin, float(v), nz, init, np.random.default_rng(sub))
+                    else:
+                        d = _nonlinear_decay(p, fx, float(v), nz, init, sub)
+                    break
+                except RuntimeError:
+                    init = {k: (0.7 * x if k != "sign" else x) for k, x in init.items()}
+            else:
+                raise RuntimeError(f"blind-trial plant fell at {v} m/s ({trial.effect})")
+            out.append(Window(file=f"{label}_{v:.2f}mps", speed=float(v), start=j * N_SAMPLES,
+                              phi=d["phi"], delta=d["delta"], phidot=d["phidot"],
+                              deltadot=d["deltadot"], v_sensor=d["v"],
+                              T_ext=np.zeros(N_SAMPLES), hist=d["hist"]))  # fmt: skip
+    return out
+
+
+def _kind(effect: str) -> str:
+    """The class of a hidden effect: "none", "library" or "outside"."""
+    if effect == "none":
+        return "none"
+    return "library" if EFFECTS[effect].in_library else "outside"
+
+
+def score(trial: BlindTrial, verdict: list[str], estimates: dict[str, float]) -> dict:
+    """What a user suffers in one trial (module docstring).
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        The truth.
+    verdict : list of str
+        The pipeline's verdict (``"unexplained"`` first when it says so).
+    estimates : dict
+        Accepted effects -> value [registry unit].
+
+    Returns
+    -------
+    dict
+        ``kind`` ("library", "outside" or "none"), ``extras`` (int) and the kind's verdict:
+        ``right_first`` (library), ``misattributed`` (outside), ``false_positive`` (none).
+    """
+    accepted = list(estimates)
+    kind = _kind(trial.effect)
+    if kind == "none":
+        return {"kind": "none", "extras": len(accepted), "false_positive": bool(accepted)}
+    es = EFFECTS[trial.effect]
+    if kind == "outside":
+        return {"kind": "outside", "extras": len(accepted),
+                "misattributed": bool(verdict and verdict[0] != "unexplained")}  # fmt: skip
+    first = bool(verdict and verdict[0] == trial.effect)
+    x = estimates.get(trial.effect)
+    band = 0.2 * abs(trial.value - es.absent)
+    ok = bool(first and x is not None and abs(x - trial.value) <= band)
+    extras = len([n for n in accepted if n != trial.effect])
+    return {"kind": "library", "extras": extras, "right_first": ok}
+
+
+def run_blind_trial(
+    trial: BlindTrial,
+    nonlinear: bool | str = "auto",
+    max_effects: int = 2,
+    plant_margin: float | None = None,
+    **select_kw,
+) -> dict:
+    """Generate, select (not told), evaluate on held-out speeds, score.
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        The trial.
+    nonlinear : bool or "auto", optional
+        Nominal plant of the pipeline: "auto" (default, as ``bikeid measured fit``): the
+        linear plant only when its nominal cost on the fit windows is lower by more than
+        :data:`bikeid.ident.effects.selection.LINEAR_PLANT_MARGIN`
+        (:func:`bikeid.ident.effects.selection.choose_nominal_plant`); True: nonlinear;
+        False: linear.
+    max_effects : int, optional
+        Selection rounds.
+    plant_margin : float, optional
+        The margin of "auto" (default
+        :data:`bikeid.ident.effects.selection.LINEAR_PLANT_MARGIN`; 1 takes whichever plant
+        fits better, the "auto" of earlier runs).
+    **select_kw
+        Further options of :func:`bikeid.ident.effects.selection.select_effects` (e.g.
+        ``min_heldout_gain``, ``unexplained_rule``, ``unexplained_threshold``).
+
+    Returns
+    -------
+    dict
+        The trial, verdict, estimates, held-out errors before/after (NRMSE), score, seconds,
+        the nominal costs (``nominal_costs``), the plant used (``nominal_plant``) and why
+        (``plant_reason``), the selection's ``evidence`` and round log (``rounds``);
+        ``error`` is the pipeline's message when it failed (verdict ``["error"]``, scored as
+        not right and not a false positive, and counted by :func:`summarize_blind`).
+    """
+    from bikeid.ident.effects.diagnostics import evaluate
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.selection import (
+        choose_nominal_plant,
+        compare_nominal_plants,
+        select_effects,
+    )
+
+    t0 = time.perf_counter()
+    fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
+    held = generate_windows(trial, trial.eval_speeds, EVAL_PER_SPEED, trial.seed + 1, "eval")
+    nominal = ExperimentModel()
+    plants = compare_nominal_plants(nominal, fit)
+    if nonlinear == "auto":
+        choice = choose_nominal_plant(plants, *(() if plant_margin is None else (plant_margin,)))
+        nonlinear, why = choice["plant"] == "nonlinear", choice["reason"]
+    else:
+        why = f"{'nonlinear' if nonlinear else 'linear'} plant as asked"
+    try:
+        res = select_effects(
+            nominal, fit, max_effects=max_effects, nonlinear=nonlinear, **select_kw
+        )
+        ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
+    except (ValueError, ArithmeticError) as exc:  # e.g. a candidate's nonlinear run fell
+        row = {**asdict(trial), "verdict": ["error"], "estimates": {}, "error": str(exc)}
+        row.update(score(trial, ["error"], {}))
+        row["seconds"] = time.perf_counter() - t0
+        return row
+    est = {e.name: float(e.value) for e in res.effects}
+    row = {**asdict(trial), "verdict": res.verdict, "estimates": est,
+           "error_before": ev["error_before"], "error_after": ev["error_after"],
+           "explained_fraction": res.explained, "error": None, "nominal_costs": plants,
+           "nominal_plant": "nonlinear" if nonlinear else "linear", "plant_reason": why,
+           "evidence": res.evidence, "rounds": res.rounds}  # fmt: skip
+    row.update(score(trial, res.verdict, est))
+    row["seconds"] = time.perf_counter() - t0
+    return row
+
+
+def nominal_comparison(trial: BlindTrial) -> dict:
+    """The nominal plants' costs on a trial's fit decays, without any selection.
+
+    The same decays :func:`run_blind_trial` fits (a fraction of its time), so the ratios of
+    many trials calibrate :data:`bikeid.ident.effects.selection.LINEAR_PLANT_MARGIN`.
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        The trial.
+
+    Returns
+    -------
+    dict
+        ``index``, ``effect``, ``kind`` (``library``, ``outside``, ``none``), ``plant`` (the
+        truth: ``nuisance.plant``) and, from
+        :func:`bikeid.ident.effects.selection.compare_nominal_plants`, ``linear``,
+        ``nonlinear`` (summed squared NRMSE) and ``ratio`` (nonlinear / linear).
+    """
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.selection import compare_nominal_plants
+
+    fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
+    c = compare_nominal_plants(ExperimentModel(), fit)
+    return {"index": trial.index, "effect": trial.effect, "kind": _kind(trial.effect),
+            "plant": trial.nuisance.plant, "linear": c["linear"], "nonlinear": c["nonlinear"],
+            "ratio": c["ratio"]}  # fmt: skip
+
+
+def rescore_unexplained(rows: list[dict], rule: str, threshold: float) -> list[dict]:
+    """The trials rescored with another ``unexplained`` rule, the accepted effects kept.
+
+    The verdict ``unexplained`` is decided after the selection from numbers every trial
+    logs (``evidence.unexplained`` of :func:`run_blind_trial`), so the trade-off between
+    right answers and misattributions over a rule's threshold is exact without rerunning.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_blind_trial` results (with ``evidence``; failed trials are kept as they
+        are).
+    rule : str
+        ``"floor"`` or ``"coloured"`` (unexplained when the explained fraction is below
+        ``threshold``) or ``"residual"`` (when the final cost over the residual noise floor
+        is above it); see :func:`bikeid.ident.effects.selection.select_effects`.
+    threshold : float
+        The rule's threshold (dimensionless).
+
+    Returns
+    -------
+    list of dict
+        New rows with the verdict and the scores of :func:`score` recomputed.
+    """
+    key = {"floor": "explained", "coloured": "explained_coloured",
+           "residual": "final_over_residual_floor"}[rule]  # fmt: skip
+    out = []
+    for r in rows:
+        ev = (r.get("evidence") or {}).get("unexplained")
+        if r.get("error") or not ev:
+            out.append(dict(r))
+            continue
+        x = ev[key]
+        flag = x > threshold if rule == "residual" else x < threshold
+        names = [n for n in r["verdict"] if n != "unexplained"]
+        verdict = (["unexplained"] if flag or not names else []) + names
+        nz = Nuisance(**r["nuisance"])
+        value = float("nan") if r["value"] is None else float(r["value"])  # JSON null
+        tr = BlindTrial(r["index"], r["seed"], r["effect"], value,
+                        tuple(r["fit_speeds"]), tuple(r["eval_speeds"]), nz)  # fmt: skip
+        out.append({**r, "verdict": verdict, **score(tr, verdict, r["estimates"])})
+    return out
+
+
+def summarize_blind(rows: list[dict]) -> dict:
+    """The four rates of the blind trials with exact 95 % intervals.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_blind_trial` results.
+
+    Returns
+    -------
+    dict
+        ``right_first`` (library trials), ``with_extras`` (library trials with >= 1 extra
+        effect) and ``mean_extras`` (per library trial, with a normal-approximation 95 %
+        interval), ``false_positive`` (no-effect trials), ``misattributed`` (outside trials),
+        each ``{k, n, rate, ci95}``; ``pipeline_errors`` (trials the pipeline failed on);
+        ``per_plant`` splits the first four by plant.
+    """
+    lib = [r for r in rows if r["kind"] == "library"]
+    none = [r for r in rows if r["kind"] == "none"]
+    outside = [r for r in rows if r["kind"] == "outside"]
+    for r in lib:
+        r["has_extra"] = r["extras"] > 0
+    ex = np.array([r["extras"] for r in lib], dtype=float)
+    half = 1.96 * ex.std(ddof=1) / math.sqrt(len(ex)) if len(ex) > 1 else float("nan")
+    s = {
+        "trials": len(rows),
+        "right_first": rate(lib, "right_first"),
+        "with_extras": rate(lib, "has_extra"),
+        "mean_extras": {
+            "mean": float(ex.mean()) if len(ex) else float("nan"),
+            "ci95": [float(ex.mean() - half), float(ex.mean() + half)] if len(ex) > 1 else None,
+            "n": len(ex),
+        },  # fmt: skip
+        "false_positive": rate(none, "false_positive"),
+        "misattributed": rate(outside, "misattributed"),
+        "pipeline_errors": sum(1 for r in rows if r.get("error")),
+    }
+    per = {}
+    for plant in ("independent_linear", "bikeid_nonlinear"):
+        rs = [r for r in rows if r["nuisance"]["plant"] == plant]
+        per[plant] = {
+            "right_first": rate([r for r in rs if r["kind"] == "library"], "right_first"),
+            "false_positive": rate([r for r in rs if r["kind"] == "none"], "false_positive"),
+            "misattributed": rate([r for r in rs if r["kind"] == "outside"], "misattributed"),
+        }
+    s["per_plant"] = per
+    return s

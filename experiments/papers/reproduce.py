@@ -1,0 +1,356 @@
+"""``bikeid reproduce``: every figure and table of Chen & Dao (2010) and Moore & Hubbard, redone
+on the testbed with paper | bikeid identified | ground truth side by side.
+
+:func:`reproduce` runs all stages (progress: one line per stage on stderr), writes PNG figures,
+``report.md`` and ``summary.json`` into ``out``.  Ground truth = the linearization of the
+simulated plant (:mod:`sim.linear`) unless a table says otherwise.  :data:`QUICK` and
+:data:`FULL` hold every setting (speeds, durations); the report lists the ones used.
+This module runs the studies (numerics in :mod:`experiments.papers.chen_dao` and
+:mod:`experiments.papers.moore_hubbard`, Chen & Dao's figures in
+:mod:`experiments.papers.chen_dao_figures`); :mod:`experiments.papers.report`
+renders ``report.md``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bikeid.controllers.registry import STUDY_CONTROLLERS
+from bikeid.experiments.papers.chen_dao import ANOMALY_SPEEDS
+from bikeid.experiments.papers.report import build_report
+from bikeid.experiments.report import write
+
+__all__ = ["FULL", "QUICK", "Settings", "reproduce"]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What a reproduction computes (speeds in m/s, durations in s).
+
+    Attributes
+    ----------
+    name : str
+        ``"full"`` or ``"quick"``.
+    fig3_speeds : tuple of float
+        Speeds [m/s] of the fuzzy-controller identifications for Chen & Dao Fig. 3.
+    zoom_speeds : tuple of float
+        Extra PEM-only speeds [m/s] of Fig. 3(b): the paper's anomaly speeds and a grid over
+        3.1-4.0 m/s, where the capsize-anomaly verdict is computed.
+    sweep_speeds : tuple of float
+        Speeds [m/s] of the controller sweep summary.
+    id_duration : float
+        Length of each identification run [s].
+    fig2_duration : float
+        Length of the Fig. 2 run at 4.2 m/s [s].
+    fig7_duration : float
+        Length of the Fig. 7 roll-tracking run [s].
+    limit_cycle_duration : float
+        Length of each coasting run of Figs. 4-5 and of the speed scan [s].
+    scan_speeds : tuple of float
+        Initial speeds [m/s] of the coasting speed scan (where periodic orbits are reached).
+    scan_refine : int
+        Bisection steps on each edge of the periodic speed range.
+    mh_speeds : tuple of float
+        Speeds [m/s] of the Moore & Hubbard reproduction.
+    mh_duration : float
+        Length of each Moore & Hubbard run [s].
+    """
+
+    name: str
+    fig3_speeds: tuple[float, ...]
+    zoom_speeds: tuple[float, ...]
+    sweep_speeds: tuple[float, ...]
+    id_duration: float
+    fig2_duration: float
+    fig7_duration: float
+    limit_cycle_duration: float
+    scan_speeds: tuple[float, ...]
+    scan_refine: int
+    mh_speeds: tuple[float, ...]
+    mh_duration: float
+
+
+def _grid(lo: float, hi: float, step: float) -> tuple[float, ...]:
+    return tuple(float(round(v, 6)) for v in np.arange(lo, hi + step / 2, step))
+
+
+SCAN_SPEEDS = _grid(2.5, 5.0, 0.25)
+FULL = Settings(
+    name="full",
+    fig3_speeds=tuple(float(v) for v in np.arange(1.0, 15.01, 0.5)),
+    zoom_speeds=ANOMALY_SPEEDS + _grid(3.1, 4.0, 0.05),
+    sweep_speeds=tuple(float(v) for v in range(1, 16)),
+    id_duration=50.0,
+    fig2_duration=50.0,
+    fig7_duration=50.0,
+    limit_cycle_duration=300.0,
+    scan_speeds=SCAN_SPEEDS,
+    scan_refine=5,
+    mh_speeds=(2.5, 4.5, 7.0),
+    mh_duration=30.0,
+)
+QUICK = Settings(
+    name="quick",
+    fig3_speeds=(1.0, 2.0, 3.0, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0),
+    zoom_speeds=ANOMALY_SPEEDS + _grid(3.1, 4.0, 0.1),
+    sweep_speeds=(2.0, 5.0, 10.0),
+    id_duration=30.0,
+    fig2_duration=50.0,
+    fig7_duration=50.0,
+    limit_cycle_duration=100.0,
+    scan_speeds=SCAN_SPEEDS,
+    scan_refine=4,
+    mh_speeds=(3.0, 6.0),
+    mh_duration=20.0,
+)
+
+#: Controllers studied, by their stored names (``controllers.registry``).
+CONTROLLERS = STUDY_CONTROLLERS
+#: Controllers identified only for the sweep summary (Fig. 3's fuzzy runs are reused there).
+SWEEP_ONLY = tuple(c for c in CONTROLLERS if c != "fuzzy")
+METHODS = ("pem", "direct")
+
+
+def _stderr_log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def default_workers() -> int:
+    """Worker processes by default: the CPU count, at most 2."""
+    return max(1, min(2, os.cpu_count() or 1))
+
+
+def reproduce(
+    out: str | Path,
+    quick: bool = False,
+    workers: int | None = None,
+    log: Callable[[str], None] = _stderr_log,
+    bicycle: str = "benchmark",
+    progress: Callable[[int, int, str], None] | None = None,
+) -> dict[str, Any]:
+    """Run every study into ``out``: figures, ``report.md`` and ``summary.json``.
+
+    Parameters
+    ----------
+    out : str or path-like
+        Output folder (created if missing).
+    quick : bool
+        :data:`QUICK` settings instead of :data:`FULL`.
+    workers : int, optional
+        Worker processes for the identification runs (default :func:`default_workers`).
+    log : callable
+        Progress lines (default: stderr).
+    bicycle : str
+        ``sim.parameters.by_name`` name of the simulated bicycle.
+    progress : callable, optional
+        ``progress(done, 7, label)`` before each of the 7 stages and at the end
+        (:mod:`bikeid.experiments.progress`).
+
+    Returns
+    -------
+    dict
+        The summary (numbers; speeds [m/s], eigenvalues [1/s], times [s]) as written to
+        ``summary.json``, with private keys (``_model``) that the file leaves out.
+    """
+    from bikeid.experiments.papers import chen_dao as cd
+    from bikeid.experiments.papers import chen_dao_figures as cdf
+    from bikeid.experiments.papers import moore_hubbard as mh
+    from bikeid.sim.linear import critical_speeds
+    from bikeid.sim.parameters import by_name
+
+    st = QUICK if quick else FULL
+    workers = default_workers() if workers is None else int(workers)
+    if workers < 1:
+        raise ValueError(f"workers={workers}: need at least 1 process")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    p = by_name(bicycle)
+    times: dict[str, float] = {}
+    t_all = time.perf_counter()
+
+    stages_done = 0
+
+    def stage(name: str):
+        nonlocal stages_done
+        log(f"[reproduce] {name} ...")
+        if progress:
+            progress(stages_done, 7, name.split(":")[0].split(" (")[0])
+        stages_done += 1
+        return time.perf_counter()
+
+    t0 = stage("Chen & Dao Fig. 2 / eqs. 5-6 (identification at 4.2 m/s)")
+    f2 = cdf.fig2(p, out, st.fig2_duration)
+    times["fig2"] = time.perf_counter() - t0
+    t0 = stage(
+        f"identification runs (one process pool): fuzzy at {len(st.fig3_speeds)} speeds for "
+        f"Fig. 3, pid and pole placement at {len(st.sweep_speeds)} speeds for the sweep summary"
+    )
+    zoom_speeds = sorted({v for v in st.zoom_speeds if v not in st.fig3_speeds})
+    jobs = [("fuzzy", float(v), st.id_duration, bicycle, METHODS) for v in st.fig3_speeds]
+    jobs += [("fuzzy", float(v), st.id_duration, bicycle, ("pem",)) for v in zoom_speeds]
+    jobs += [
+        (c, float(v), st.id_duration, bicycle, METHODS) for c in SWEEP_ONLY for v in st.sweep_speeds
+    ]
+    results = cd.run_jobs(jobs, workers)
+    n3 = len(st.fig3_speeds)
+    grid, zoom = results[:n3], results[n3 : n3 + len(zoom_speeds)]
+    rest = results[n3 + len(zoom_speeds) :]
+    # the direct method: one regression over all speeds of a controller (K0dd vs K2dd)
+    direct = {"fuzzy": cd.direct_stacked(grid, p)}
+    for c in SWEEP_ONLY:
+        direct[c] = cd.direct_stacked([g for g in rest if g["controller"] == c], p)
+    times["identification_runs"] = time.perf_counter() - t0
+    t0 = stage("Chen & Dao Fig. 3: eigenvalues against speed")
+    f3 = cdf.fig3(p, grid, out, zoom)
+    times["fig3"] = time.perf_counter() - t0
+    log(
+        f"  identified v_w={f3['critical_identified']['v_w']}, v_c="
+        f"{f3['critical_identified']['v_c']} (true {f3['critical_true']['v_w']:.4f}, "
+        f"{f3['critical_true']['v_c']:.4f})"
+    )
+    t0 = stage("Chen & Dao Figs. 4-5: coasting at 3.5 m/s, periodicity")
+    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log, workers)
+    times["figs4_5"] = time.perf_counter() - t0
+    t0 = stage(
+        f"Chen & Dao v_l..v_w: coasting speed scan ({len(st.scan_speeds)} speeds, "
+        f"{st.scan_refine} bisections per edge)"
+    )
+    from bikeid.experiments.papers import limit_cycles as lcm
+
+    scan = lcm.speed_scan(p, st.scan_speeds, st.limit_cycle_duration, refine=st.scan_refine)
+    scan["paper"] = cd.PAPER["periodic_range"]
+    log(f"  periodic orbits reached for initial speeds {scan['range']} m/s (paper 3.152-3.994)")
+    times["periodic_range"] = time.perf_counter() - t0
+    t0 = stage("Chen & Dao Fig. 7: pole-placement roll tracking at 15 km/h")
+    f7 = cdf.fig7(p, f2["_model"], out, st.fig7_duration)
+    times["fig7"] = time.perf_counter() - t0
+    t0 = stage("Moore & Hubbard: 3 riders x 2 environments, Tables 2-5, Figs. 2-4")
+    mhr = mh.reproduce(out, st.mh_speeds, st.mh_duration, workers, log)
+    times["moore_hubbard"] = time.perf_counter() - t0
+    t0 = stage("sweep summary")
+    sweep = {"fuzzy": [g for g in grid if g["speed"] in st.sweep_speeds]}
+    for c in SWEEP_ONLY:
+        sweep[c] = [g for g in rest if g["controller"] == c]
+    sw = _sweep_summary(sweep, out, direct)
+    times["sweep"] = time.perf_counter() - t0
+    if progress:
+        progress(7, 7, "report")
+    times["total"] = time.perf_counter() - t_all
+    crit = critical_speeds(p)
+    summary = {
+        "settings": asdict(st),
+        "bicycle": bicycle,
+        "workers": workers,
+        "seconds": times,
+        "truth": {
+            "critical_speeds": {k: crit[k] for k in ("v_d", "v_w", "v_c")},
+            "weave_frequency_at_v_w": crit["weave_frequency"],
+        },
+        "chen_dao": {
+            "fig2": f2,
+            "fig3": f3,
+            "figs4_5": lc,
+            "periodic_range": scan,
+            "fig7": f7,
+        },
+        "limit_cycles": lc["limit_cycles"],
+        "moore_hubbard": mhr,
+        "sweep": sw,
+    }
+    rep = build_report(summary)
+    md, js = write(out, rep, summary)
+    log(f"[reproduce] done in {times['total']:.1f} s: {md} and {js}")
+    return summary
+
+
+# -- sweep summary -------------------------------------------------------------------------------
+def _sweep_summary(
+    sweep: dict[str, list[dict]], out: Path, direct: dict[str, dict] | None = None
+) -> dict[str, Any]:
+    """Identified vs true eigenvalues per controller and method, and their figure; the
+    direct method's entry carries its one stacked regression (``direct[controller]``,
+    :func:`experiments.papers.chen_dao.direct_stacked`) as ``stacked``."""
+    from bikeid.experiments.plots import plt, save
+
+    res: dict[str, Any] = {}
+    fig, axs = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
+    for j, c in enumerate(CONTROLLERS):
+        rows = sweep.get(c, [])
+        for m, mk in zip(METHODS, ("x", "+"), strict=True):
+            errs, per = [], []
+            for g in rows:
+                r = g["methods"].get(m, {})
+                if r.get("error") is not None or "eig" not in r:
+                    per.append({"speed": g["speed"], "error": r.get("error", "not run")})
+                    continue
+                d = np.abs(np.asarray(r["eig"]) - g["truth"])
+                errs.append(float(d.max()))
+                per.append(
+                    {
+                        "speed": g["speed"],
+                        "max_abs_error": float(d.max()),
+                        "max_rel_error": float(np.max(d / np.abs(g["truth"]))),
+                        "identified": r["eig"],
+                        "true": g["truth"],
+                        "fell_at": g["fell_at"],
+                        "max_abs_deg": g.get("max_abs_deg"),
+                    }
+                )
+                axs[0, j].plot(
+                    [g["speed"]] * 4,
+                    np.real(r["eig"]),
+                    mk,
+                    ms=5,
+                    color="tab:blue" if m == "pem" else "tab:red",
+                )
+                axs[1, j].plot(
+                    [g["speed"]] * 4,
+                    np.abs(np.imag(r["eig"])),
+                    mk,
+                    ms=5,
+                    color="tab:blue" if m == "pem" else "tab:red",
+                )
+            res[f"{c}/{m}"] = {
+                "controller": c,
+                "method": m,
+                "n_ok": len(errs),
+                "n": len(rows),
+                "median_max_abs_error": float(np.median(errs)) if errs else None,
+                "worst": max(errs) if errs else None,
+                "per_speed": per,
+            }
+            if m == "direct" and direct is not None:
+                res[f"{c}/{m}"]["stacked"] = direct.get(c)
+        sp = [g["speed"] for g in rows]
+        if sp:
+            from bikeid.sim.linear import eigenvalues_vs_speed
+            from bikeid.sim.parameters import benchmark
+
+            fine = np.linspace(min(sp), max(sp), 300)
+            ev = eigenvalues_vs_speed(benchmark(), fine).values
+            axs[0, j].plot(fine, ev.real, color="0.5", lw=0.8)
+            axs[1, j].plot(fine, np.abs(ev.imag), color="0.5", lw=0.8)
+        axs[0, j].set_title(f"{c}: x PEM, + direct", fontsize=9)
+        axs[0, j].set_ylim(-30, 8)
+        axs[1, j].set_xlabel("speed v [m/s]")
+        for a in axs[:, j]:
+            a.grid(alpha=0.3)
+            a.axhline(0, color="k", lw=0.5)
+    axs[0, 0].set_ylabel("real part [1/s]")
+    axs[1, 0].set_ylabel("|imag part| [rad/s]")
+    fig.suptitle(
+        "Sweep summary: identified vs true eigenvalues (benchmark, nonlinear plant)\n"
+        "x PEM: one model per speed; + direct: one regression over all speeds; grey: truth",
+        fontsize=10,
+    )
+    save(fig, out / "sweep_eigenvalues.png")
+    res["figure"] = "sweep_eigenvalues.png"
+    return res

@@ -1,0 +1,315 @@
+"""The weave eigenvalue of free decays: its fit, its uncertainty, and a fit term for it.
+
+The measured weave of a speed is the median (real and imaginary parts separately) of the
+damped-oscillation fits :func:`decay_eigenvalue` to its decays; :func:`weave_uncertainty`
+is its bootstrap standard error.  A model is compared with it through the *same* estimator
+applied to the model's simulated decays (:func:`simulated_weave`, :func:`weave_error`), so
+the estimator's bias on large nonlinear decays cancels.  :class:`WeaveTerm` adds the
+measured weave of each speed as extra data of an output-error fit
+(:func:`bikeid.ident.effects.fit.fit_effects`).
+
+Eigenvalues are in 1/s (sigma + i omega, omega in rad/s).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from bikeid.dataset.windows import Window
+from bikeid.ident.effects.experiment_model import ExperimentModel
+
+__all__ = [
+    "WeaveTerm",
+    "decay_eigenvalue",
+    "median_complex",
+    "simulated_weave",
+    "weave_error",
+    "weave_targets",
+    "weave_uncertainty",
+]
+
+
+@dataclass(frozen=True)
+class WeaveTerm:
+    """The measured weave eigenvalues as extra data of an output-error fit.
+
+    ``targets``: per speed (speed key, mean sensor speed [m/s], measured weave [1/s], its
+    standard error [1/s]) from :func:`weave_targets`; ``weight``: the factor on the
+    residuals (lambda_model + offset - lambda_data) / standard error (real and imaginary
+    parts), lambda_model the loop root nearest to the data (:meth:`ExperimentModel.weave`).
+    ``offsets`` (see :meth:`at`) carry the difference between the estimator used on the data
+    (damped-oscillation fit of nonlinear decays) and the linear loop root.
+
+    Attributes
+    ----------
+    weight : float
+        Factor on the normalized weave residuals (dimensionless; 0 switches the term off).
+    targets : tuple of (float, float, complex, float)
+        Per speed: speed key, mean sensor speed [m/s], measured weave eigenvalue [1/s]
+        and its standard error [1/s].
+    offsets : tuple of complex
+        Per target: estimator offset [1/s] added to the model's loop root (empty: none).
+    """
+
+    weight: float
+    targets: tuple[tuple[float, float, complex, float], ...]
+    offsets: tuple[complex, ...] = ()
+
+    def residuals(self, model: ExperimentModel) -> np.ndarray:
+        """The weighted weave residuals of ``model``.
+
+        Parameters
+        ----------
+        model : ExperimentModel
+            The model whose loop roots (:meth:`ExperimentModel.weave`) are compared.
+
+        Returns
+        -------
+        (2 * len(targets),) ndarray
+            ``weight`` (lambda_model + offset - lambda_data) / standard error, real parts then
+            imaginary parts (dimensionless).
+        """
+        off = self.offsets or (0j,) * len(self.targets)
+        d = [(model.weave(vs, lam) + o - lam) / unc
+             for (_k, vs, lam, unc), o in zip(self.targets, off, strict=True)]  # fmt: skip
+        return self.weight * np.concatenate([np.real(d), np.imag(d)])
+
+    def at(self, model: ExperimentModel, windows: list[Window]) -> WeaveTerm:
+        """Offsets at ``model``: per speed, the median decay fit of the model's simulated
+        decays (windows corrected at ``model`` when the plant is nonlinear) minus the loop
+        root, so that the term compares like with like at ``model`` and to first order near
+        it (the defect correction of the signals, applied to the eigenvalue estimator).
+
+        Parameters
+        ----------
+        model : ExperimentModel
+            Where the offsets are taken.
+        windows : list of Window
+            The decays the targets came from.
+
+        Returns
+        -------
+        WeaveTerm
+            A copy with ``offsets`` [1/s], one per target.
+        """
+        sims = model.simulate(windows)
+        off = []
+        for key, vs, lam, _unc in self.targets:
+            idx = [i for i, w in enumerate(windows) if w.kind == "decay" and _key(w) == key]
+            fitted = simulated_weave([windows[i] for i in idx], [sims[i] for i in idx])
+            off.append(fitted - model.weave(vs, lam))
+        return replace(self, offsets=tuple(off))
+
+
+def _key(w: Window) -> float:
+    return round(w.speed, 1)
+
+
+def weave_targets(
+    windows: list[Window], lams: list[complex] | None = None
+) -> tuple[tuple[float, float, complex, float], ...]:
+    """(speed key, mean sensor speed, measured weave, standard error) of each speed with
+    >= 3 decays: the median of :func:`decay_eigenvalue` over the decays and
+    :func:`weave_uncertainty`.  ``lams``: the windows' decay fits if already computed.
+
+    Parameters
+    ----------
+    windows : list of Window
+        Decays (other kinds are ignored), grouped by speed to 0.1 m/s.
+    lams : list of complex, optional
+        :func:`decay_eigenvalue` of each window [1/s].
+
+    Returns
+    -------
+    tuple of (float, float, complex, float)
+        Speed key [m/s], mean sensor speed [m/s], measured weave [1/s], standard error [1/s].
+    """
+    if lams is None:
+        lams = [decay_eigenvalue(w) if w.kind == "decay" else 0j for w in windows]
+    groups: dict[float, list[int]] = {}
+    for i, w in enumerate(windows):
+        if w.kind == "decay":
+            groups.setdefault(_key(w), []).append(i)
+    out = []
+    for key, idx in groups.items():
+        if len(idx) >= 3:
+            g = [lams[i] for i in idx]
+            lam = median_complex(g)
+            vs = float(np.mean([np.mean(windows[i].v_sensor) for i in idx]))
+            out.append((key, vs, lam, weave_uncertainty(g) * abs(lam)))
+    return tuple(out)
+
+
+def decay_eigenvalue(w: Window) -> complex:
+    """Weave eigenvalue sigma + i omega fitted to one free decay.
+
+    Model (both channels share sigma, omega): y_c(t) = e^{sigma t}(a_c cos wt + b_c sin wt)
+    + d_c e^{-p t} + o_c; sigma, omega, p by nonlinear LS, the rest linear (variable
+    projection).  Start: omega from the steer-angle zero crossings.
+
+    Parameters
+    ----------
+    w : Window
+        A free decay (roll rate [rad/s] and steer angle [rad], 0.01 s samples).
+
+    Returns
+    -------
+    complex
+        sigma + i omega [1/s].
+
+    Raises
+    ------
+    ValueError
+        If the steer angle or roll rate of the window is non-finite, overflows in its
+        standard deviation, or is constant (the fit would be nan), naming the file and the
+        window.
+    """
+    t = np.arange(w.n) * 0.01
+    for name in ("delta", "phidot"):
+        y = np.asarray(getattr(w, name), dtype=float)
+        sd = float(np.std(y)) if np.all(np.isfinite(y)) else float("nan")
+        if not (np.isfinite(sd) and sd > 0):
+            what = "no variation" if sd == 0 else "non-finite samples or spread (overflow)"
+            raise ValueError(
+                f"decay_eigenvalue: {w.file}: window at row {w.start}: {name!r} has {what}; "
+                "no weave can be fitted (load windows through bikeid.dataset)"
+            )
+    ys = [w.delta / np.std(w.delta), w.phidot / np.std(w.phidot)]
+
+    def resid(th):
+        sg, om, pp = th
+        basis = np.column_stack(
+            [np.exp(sg * t) * np.cos(om * t), np.exp(sg * t) * np.sin(om * t),
+             np.exp(-pp * t), np.ones_like(t)]
+        )  # fmt: skip
+        out = []
+        for y in ys:
+            c, *_ = np.linalg.lstsq(basis, y, rcond=None)
+            out.append(basis @ c - y)
+        return np.concatenate(out)
+
+    best = None
+    for om0 in (5.0, 7.5, 10.0, 12.5):
+        sol = least_squares(resid, [-2.0, om0, 1.0], bounds=([-30, 1.0, 0.0], [10, 40, 60]))
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return complex(best.x[0], best.x[1])
+
+
+def weave_error(windows: list[Window], sims, lam_data) -> float:
+    """Mean relative weave-eigenvalue error of simulated decays against measured ones.
+
+    Windows are grouped by (file, speed to 0.1 m/s); per group the weave of the data is
+    the median (real, imaginary parts) of ``lam_data`` (:func:`decay_eigenvalue` of each
+    measured window) and that of the model the median of the same fit applied to the
+    simulated decays ``sims`` from the same initial states.  Returns the mean over groups
+    of |lambda_model - lambda_data| / |lambda_data| (the ``weave_error`` of
+    :func:`bikeid.ident.effects.diagnostics.evaluate`).
+
+    Parameters
+    ----------
+    windows : list of Window
+        The measured decays.
+    sims : list of dict
+        :meth:`ExperimentModel.simulate` of each window.
+    lam_data : list of complex
+        :func:`decay_eigenvalue` of each window [1/s].
+
+    Returns
+    -------
+    float
+        Mean relative error (dimensionless).
+    """
+    groups: dict[tuple, list[int]] = {}
+    for i, w in enumerate(windows):
+        groups.setdefault((w.file, round(w.speed, 1)), []).append(i)
+    errs = []
+    for idx in groups.values():
+        lam_d = median_complex([lam_data[i] for i in idx])
+        lam_m = simulated_weave([windows[i] for i in idx], [sims[i] for i in idx])
+        errs.append(abs(lam_m - lam_d) / abs(lam_d))
+    return float(np.mean(errs))
+
+
+def simulated_weave(windows: list[Window], sims: list[dict[str, np.ndarray]]) -> complex:
+    """Median weave of the damped-oscillation fits to simulated decays.
+
+    The same estimator as for the measured ones (:func:`decay_eigenvalue`).
+
+    Parameters
+    ----------
+    windows : list of Window
+        The decays (their timing and speed; the signals are replaced).
+    sims : list of dict
+        :meth:`ExperimentModel.simulate` output per window (``phidot`` [rad/s], ``delta``
+        [rad]).
+
+    Returns
+    -------
+    complex
+        Median (real, imaginary parts) of the fitted weave eigenvalues [1/s].
+    """
+    return median_complex(
+        [decay_eigenvalue(replace(w, phidot=s["phidot"], delta=s["delta"]))
+         for w, s in zip(windows, sims, strict=True)]
+    )  # fmt: skip
+
+
+def weave_uncertainty(lams, resamples: int = 2000, seed: int = 0) -> float:
+    """Relative standard error of the measured weave (the median of the per-decay fits
+    ``lams``): rms of |median(resample) - median| / |median| over bootstrap resamples of
+    the decays (fixed seed).  A model equal to the truth would still show a weave error
+    of about this size; nan with fewer than 3 decays.
+
+    Parameters
+    ----------
+    lams : array_like of complex
+        Per-decay weave fits [1/s].
+    resamples : int, optional
+        Bootstrap resamples.
+    seed : int, optional
+        Generator seed.
+
+    Returns
+    -------
+    float
+        Relative standard error (dimensionless), nan with fewer than 3 decays.
+    """
+    lams = np.asarray(lams, complex)
+    if lams.size < 3:
+        return float("nan")
+    med = median_complex(lams)
+    idx = np.random.default_rng(seed).integers(0, lams.size, (resamples, lams.size))
+    res = lams[idx]
+    bs = np.median(res.real, axis=1) + 1j * np.median(res.imag, axis=1)
+    return float(np.sqrt(np.mean(np.abs(bs - med) ** 2)) / abs(med))
+
+
+def median_complex(lams) -> complex:
+    """Median of the real and of the imaginary parts, separately.
+
+    Parameters
+    ----------
+    lams : array_like of complex
+        Eigenvalues [1/s].
+
+    Returns
+    -------
+    complex
+        median(Re) + i median(Im) [1/s].
+
+    Raises
+    ------
+    ValueError
+        If ``lams`` is empty or holds a non-finite eigenvalue.
+    """
+    lams = np.asarray(lams, dtype=complex)
+    if lams.size == 0 or not np.all(np.isfinite(lams)):
+        raise ValueError(
+            f"median_complex: need finite eigenvalues, got {lams.size} values with "
+            f"{int((~np.isfinite(lams)).sum())} non-finite"
+        )
+    return complex(np.median(np.real(lams)), np.median(np.imag(lams)))
