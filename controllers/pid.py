@@ -1,5 +1,7 @@
 """PID roll-angle tracker.
 
+The law::
+
     T = Kp e + Ki I + D,   e = phi_ref - phi,   I = int e dt,
     D = -Kd phidot              (derivative="measurement", default)
     D =  Kd (phi_ref' - phidot) (derivative="error"; phi_ref' is the reference's exact

@@ -49,7 +49,7 @@ What the loader does, and why
   controller: the relayed handlebar torque in the Bode runs, zero in the eigen runs).
 
 Sign conventions (checked against the physics, see ``docs/measured.md``)
------------------------------------------------------------------------
+------------------------------------------------------------------------
 ``sil_command`` equals ``+2 (6.5 - speed) lean_rate`` to 1e-9 (correlation) in every
 file.  With roll and steer positive to the right (Meijaard 2007) a steer torque *in
 the direction of the roll rate* is the stabilizing steer-into-lean law: the Whipple

@@ -1,0 +1,152 @@
+"""Sphinx configuration of bikeid's API reference (numpydoc docstrings, autosummary).
+
+Build it from the repository root with ``python -m sphinx -b html docs docs/_build``
+(``bikeid`` must be importable: ``pip install -e .``). Autosummary walks the package
+recursively from ``api.rst``, so no module is listed here: a module added, moved or renamed
+is documented on the next build. ``tests/test_docs_build.py`` builds a copy of this folder
+with ``-W`` (every warning is an error), so a docstring that does not render fails the tests.
+
+The Markdown guides next to this file (``docs/*.md``) are read on GitHub, not by Sphinx.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import re
+
+# -- Project -------------------------------------------------------------------------------
+project = "bikeid"
+author = "the bikeid developers"
+copyright = "2026, the bikeid developers"
+release = importlib.metadata.version("bikeid")
+version = ".".join(release.split(".")[:2])
+
+# -- General -------------------------------------------------------------------------------
+extensions = [
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.mathjax",
+    "numpydoc",
+]
+root_doc = "index"
+templates_path = ["_templates"]  # autosummary: a page per function and class
+source_suffix = {".rst": "restructuredtext"}
+# The guides are Markdown for GitHub (no MyST dependency); generated pages and builds are
+# outputs, not sources.
+exclude_patterns = ["_build", "**.md", "README*"]
+default_role = "code"  # `x` in a docstring renders as code, as numpydoc writers intend
+
+# -- autosummary / autodoc -----------------------------------------------------------------
+autosummary_generate = True  # writes docs/generated/ (gitignored)
+autosummary_generate_overwrite = True
+autosummary_imported_members = False  # a name is documented in the module defining it only
+autosummary_ignore_module_all = True  # ... even when a package re-exports it in __all__
+# Private modules (``bikeid.sim._whipple_generated``, the sympy-emitted equations) and
+# private names are skipped by autosummary's recursive module template.
+autodoc_typehints = "none"  # numpydoc's Parameters/Returns sections carry the types
+autodoc_member_order = "bysource"
+
+# -- numpydoc ------------------------------------------------------------------------------
+numpydoc_show_class_members = False  # autosummary's class pages list the members
+numpydoc_class_members_toctree = False
+numpydoc_xref_param_type = False  # types are prose ("array_like, shape (n,)"), not targets
+numpydoc_validation_checks: set[str] = set()  # tests/test_docstrings.py is the style gate
+
+# -- HTML ----------------------------------------------------------------------------------
+html_theme = "alabaster"
+html_title = f"bikeid {release} API reference"
+html_static_path: list[str] = []
+
+
+# -- Plain-text absolute values ------------------------------------------------------------
+# The docstrings write formulas as plain text, and |x| is an absolute value or a norm there
+# (``|lambda|``, ``|found - truth|``, ``|E(t) - E(0)|``); in reST the same characters are a
+# substitution reference, and no docstring defines a substitution, so docutils reports
+# "Undefined substitution referenced" for every one (dozens of modules). The notation is
+# the intended one and reads correctly in ``help()``, so instead of rewriting it everywhere
+# each bar in prose is escaped before numpydoc and docutils see it: it renders as a plain
+# "|". Bars are left alone where reST gives them meaning or shows text verbatim: inline
+# literals and interpreted text (``...``, `...`, :role:`...`), literal blocks (after "::"),
+# directive bodies (e.g. ``.. math::``, where \| would be LaTeX's norm), doctest blocks, grid
+# tables and line blocks. Any other docutils warning still fails ``-W``.
+_LITERAL_SPAN = re.compile(r"``.+?``|(?::[\w:+.-]+:)?`[^`]+`_{0,2}", re.DOTALL)
+_ESCAPE_BAR = re.compile(r"(?<!\\)\|")
+
+
+def _escape_bars(text: str) -> str:
+    """Escape every ``|`` of ``text`` outside inline literals and interpreted text."""
+    out, last = [], 0
+    for m in _LITERAL_SPAN.finditer(text):
+        out.append(_ESCAPE_BAR.sub(r"\\|", text[last : m.start()]))
+        out.append(m.group())
+        last = m.end()
+    out.append(_ESCAPE_BAR.sub(r"\\|", text[last:]))
+    return "".join(out)
+
+
+def _indent(line: str) -> int:
+    return len(line) - len(line.lstrip())
+
+
+def _verbatim_line(stripped: str) -> bool:
+    """A line where a bar is reST structure: grid-table border/row, line block, doctest."""
+    return (
+        stripped.startswith(("+-", "+=", "| ", ">>>", "..."))
+        or (stripped.startswith("|") and stripped.endswith("|") and stripped.count("|") > 2)
+        or stripped == "|"
+    )
+
+
+def escape_plain_text_bars(app, what, name, obj, options, lines: list[str]) -> None:
+    """``autodoc-process-docstring`` handler: escape plain-text absolute-value bars.
+
+    Parameters
+    ----------
+    app, what, name, obj, options
+        As Sphinx passes them (unused).
+    lines : list of str
+        The docstring's lines, edited in place (a backslash added before each prose bar;
+        the number of lines is unchanged).
+    """
+    verbatim_indent = None  # inside a literal block / directive body indented past this
+    in_doctest = False
+    paragraph: list[int] = []  # indices of the prose lines of the current paragraph
+
+    def flush() -> None:
+        if paragraph:
+            escaped = _escape_bars("\n".join(lines[i] for i in paragraph)).split("\n")
+            for i, new in zip(paragraph, escaped, strict=True):
+                lines[i] = new
+            paragraph.clear()
+
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if not stripped:
+            flush()
+            in_doctest = False
+            continue
+        if verbatim_indent is not None:
+            if _indent(line) > verbatim_indent:
+                continue
+            verbatim_indent = None
+        if in_doctest or stripped.startswith(">>>"):
+            flush()
+            in_doctest = True
+            continue
+        if stripped.startswith(".. "):  # a directive (its body is verbatim here) or comment
+            flush()
+            verbatim_indent = _indent(line)
+            continue
+        if _verbatim_line(stripped):
+            flush()
+        else:
+            paragraph.append(i)
+        if stripped.endswith("::"):  # a literal block follows, indented past this line
+            flush()
+            verbatim_indent = _indent(line)
+    flush()
+
+
+def setup(app) -> None:
+    """Register :func:`escape_plain_text_bars` to run before numpydoc (priority 500)."""
+    app.connect("autodoc-process-docstring", escape_plain_text_bars, priority=400)
