@@ -57,9 +57,9 @@ def main() -> None:
 
 
 def _true(cm, name: str) -> float:
-    from bikeid.ident.direct import _parse
+    from bikeid.ident.direct import parse_entry
 
-    m, r, c = _parse(name)
+    m, r, c = parse_entry(name)
     return float(getattr(cm, m)[r, c])
 
 

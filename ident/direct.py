@@ -57,8 +57,10 @@ from bikeid.sim.parameters import BicycleParameters, from_mapping
 __all__ = [
     "MOORE_ROLL",
     "MOORE_STEER",
+    "ALL_ENTRIES",
     "DirectResult",
     "identify",
+    "parse_entry",
     "regressors",
     "vaf_moore",
     "vaf_variance",
@@ -120,14 +122,39 @@ def vaf_variance(measured: np.ndarray, predicted: np.ndarray) -> float:
     return float(1.0 - np.var(y - yp) / den) if den > 0 else float("nan")
 
 
-def _parse(name: str) -> tuple[str, int, int | None]:
-    """Entry name -> (matrix, row, column); column None for H."""
+def parse_entry(name: str) -> tuple[str, int, int | None]:
+    """Matrix, row and column of an entry name (``"Mpd"`` -> ``("M", 0, 1)``).
+
+    Parameters
+    ----------
+    name : str
+        Entry name as in the module docstring: a matrix (``M``, ``C1``, ``K0``, ``K2``)
+        followed by the row and column letters (``p`` = phi, ``d`` = delta), or ``HpF`` /
+        ``HdF`` for the lateral-force column.
+
+    Returns
+    -------
+    matrix : str
+        ``"M"``, ``"C1"``, ``"K0"``, ``"K2"`` or ``"H"``.
+    row : int
+        0 (roll equation) or 1 (steer equation).
+    column : int or None
+        0 (phi) or 1 (delta); None for ``H``.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is not one of :data:`ALL_ENTRIES`.
+    """
     if name in ("HpF", "HdF"):
         return "H", _IDX[name[1]], None
     for m in _MATS:
         if name.startswith(m) and len(name) == len(m) + 2 and set(name[len(m) :]) <= set("pd"):
             return m, _IDX[name[len(m)]], _IDX[name[len(m) + 1]]
     raise ValueError(f"unknown matrix entry {name!r}; valid names are {list(ALL_ENTRIES)}")
+
+
+_parse = parse_entry  # the former private name, kept for scripts that import it
 
 
 def _data(run: Run, source: str, derivative: str) -> dict[str, np.ndarray]:
@@ -168,7 +195,7 @@ def regressors(d: dict[str, np.ndarray], g: float) -> dict[str, np.ndarray]:
     v = d["v"]
     out = {}
     for name in ALL_ENTRIES:
-        m, _, c = _parse(name)
+        m, _, c = parse_entry(name)
         out[name] = {
             "M": lambda c=c: qdd[c],
             "C1": lambda c=c: v * qd[c],
@@ -323,7 +350,7 @@ class DirectResult:
         ValueError
             If ``name`` is not a valid entry name.
         """
-        m, r, c = _parse(name)
+        m, r, c = parse_entry(name)
         return float(self.H[r] if m == "H" else getattr(self, m)[r, c])
 
 
@@ -339,7 +366,7 @@ def _reference_values(reference, H) -> tuple[dict[str, float], float]:
         )
     vals = {}
     for name in ALL_ENTRIES:
-        m, r, c = _parse(name)
+        m, r, c = parse_entry(name)
         vals[name] = 0.0 if m == "H" else float(getattr(cm, m)[r, c])
     if H is not None:
         vals["HpF"], vals["HdF"] = (float(h) for h in H)
@@ -515,7 +542,7 @@ def identify(
         reference = from_mapping(runs[0].meta["parameters"], name="run meta")
     vals, g = _reference_values(reference, H)
     for k, val in (fixed or {}).items():
-        _parse(k)
+        parse_entry(k)
         vals[k] = float(val)
 
     data = [_data(r, source, derivative) for r in runs]
@@ -532,7 +559,7 @@ def identify(
     for row, names in (("roll", free_roll), ("steer", free_steer)):
         want = 0 if row == "roll" else 1
         for n in names:
-            if _parse(n)[1] != want:
+            if parse_entry(n)[1] != want:
                 raise ValueError(f"entry {n!r} is not in the {row} row")
         if len(set(names)) != len(names) or not names:
             raise ValueError(f"{row} free set {names} must be non-empty without repeats")
@@ -632,7 +659,7 @@ def identify(
             for a, b in (("Mdp", "Mpd"), ("K0dp", "K0pd")):
                 vals[a] = vals[b]
         rhs_name = "T_phi" if r_idx == 0 else "T_delta"
-        row_entries = [n for n in ALL_ENTRIES if _parse(n)[1] == r_idx]
+        row_entries = [n for n in ALL_ENTRIES if parse_entry(n)[1] == r_idx]
         fixed_names = [n for n in row_entries if n not in names]
 
         def rhs(i, fixed_names=fixed_names, rhs_name=rhs_name) -> np.ndarray:
@@ -671,7 +698,7 @@ def identify(
     vm, vv = {}, {}
     for row, r_idx in (("roll", 0), ("steer", 1)):
         rhs_name = "T_phi" if r_idx == 0 else "T_delta"
-        entries = [n for n in ALL_ENTRIES if _parse(n)[1] == r_idx and not n.startswith("H")]
+        entries = [n for n in ALL_ENTRIES if parse_entry(n)[1] == r_idx and not n.startswith("H")]
         ym = np.concatenate([d[rhs_name] + Hvec[r_idx] * d["F"] for d in data])
         yp = np.concatenate([sum(vals[n] * c[n] for n in entries) for c in cols])
         vm[row], vv[row] = vaf_moore(ym, yp), vaf_variance(ym, yp)

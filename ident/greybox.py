@@ -57,7 +57,7 @@ from scipy.linalg import expm, expm_frechet
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
-from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, _parse
+from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, parse_entry
 from bikeid.ident.pem import (
     DEFAULT_OUTPUTS,
     _discretize,
@@ -116,7 +116,7 @@ def _matrices(vals: Mapping[str, float], g: float) -> CanonicalMatrices:
 
 def _unit(name: str, symmetric: bool) -> dict[str, np.ndarray]:
     """Derivative of each matrix with respect to the entry ``name`` (both symmetric cells)."""
-    m, r, c = _parse(name)
+    m, r, c = parse_entry(name)
     d = {k: np.zeros((2, 2)) for k in _MATS}
     d["H"] = np.zeros(2)
     if m == "H":
@@ -502,7 +502,7 @@ class GreyboxModel:
         ValueError
             If ``name`` is not an entry name.
         """
-        m, r, c = _parse(name)
+        m, r, c = parse_entry(name)
         return float(self.H[r] if m == "H" else getattr(self, m)[r, c])
 
     def theta(self, v: float) -> np.ndarray:
@@ -863,7 +863,7 @@ def fit(
         raise InputError(f"runs have different sample periods {sorted(dts)}; resample first")
     free = _free_set(free, symmetric, forced)
     cm = _reference(reference, runs)
-    vals = {n: float(getattr(cm, _parse(n)[0])[_parse(n)[1], _parse(n)[2]])
+    vals = {n: float(getattr(cm, parse_entry(n)[0])[parse_entry(n)[1], parse_entry(n)[2]])
             for n in ALL_ENTRIES if n not in _FORCE}  # fmt: skip
     if forced:
         vals["HpF"], vals["HdF"] = _force_column(H, reference, runs)

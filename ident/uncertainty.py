@@ -66,6 +66,7 @@ __all__ = [
     "BodeBand",
     "CriticalSpeedIntervals",
     "EigenIntervals",
+    "INTERVAL_METHODS",
     "MonteCarloDraws",
     "bode_bands",
     "critical_speed_intervals",
@@ -79,8 +80,9 @@ __all__ = [
 #: Step [m/s] of the central difference dh/dv in :func:`critical_speed_intervals`.
 SPEED_STEP = 1e-4
 
-#: Interval methods: the quadratic-likelihood profile (default) and the first-order one.
-METHODS = ("profile", "delta")
+#: Interval methods: the quadratic-likelihood profile (default) and the first-order one
+#: (not the identification methods, which are :data:`bikeid.ident.methods.METHODS`).
+INTERVAL_METHODS = ("profile", "delta")
 
 
 def z_value(level: float) -> float:
@@ -141,8 +143,8 @@ def _parameters(model, v: float | None) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 def _check_method(method: str) -> None:
-    if method not in METHODS:
-        raise InputError(f"method={method!r}: choose one of {', '.join(METHODS)}")
+    if method not in INTERVAL_METHODS:
+        raise InputError(f"method={method!r}: choose one of {', '.join(INTERVAL_METHODS)}")
 
 
 def _sqrt_cov(cov: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ import pytest
 from bikeid.dataset.linear_loop import simulate
 from bikeid.ident import greybox, pem
 from bikeid.ident.canonical import theta_from_matrices
-from bikeid.ident.direct import _parse
+from bikeid.ident.direct import parse_entry
 from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.linear import canonical_matrices, lateral_force_vector, state_space
 from bikeid.sim.parameters import benchmark
@@ -29,7 +29,7 @@ Z_MAX = 4.0
 
 
 def true_entry(name: str) -> float:
-    m, r, c = _parse(name)
+    m, r, c = parse_entry(name)
     return float(getattr(CM, m)[r, c])
 
 

@@ -29,11 +29,11 @@ def _whipple() -> CanonicalMatrices:
 
 
 def _entries(cm: CanonicalMatrices) -> dict[str, float]:
-    from bikeid.ident.direct import _parse
+    from bikeid.ident.direct import parse_entry
 
     out = {}
     for n in DEFAULT_FREE:
-        m, i, j = _parse(n)
+        m, i, j = parse_entry(n)
         out[n] = float(getattr(cm, m)[i, j])
     return out
 

@@ -57,7 +57,7 @@ import numpy as np
 
 from bikeid.dataset.run import Run
 from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log, settled
-from bikeid.ident.direct import ALL_ENTRIES, _parse, vaf_moore
+from bikeid.ident.direct import ALL_ENTRIES, parse_entry, vaf_moore
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_space
@@ -443,7 +443,7 @@ def effect_footprints(
         mats = {"M": dM, "C1": dC1, "K0": dK0, "K2": dK2}
         fp = {}
         for e in ALL_ENTRIES:
-            m, i, j = _parse(e)
+            m, i, j = parse_entry(e)
             if j is not None:
                 fp[e] = float(mats[m][i, j])
         if max(abs(x) for x in fp.values()) < 1e-12:
@@ -565,7 +565,7 @@ def translate_deviations(
 
 
 def _entry(cm: CanonicalMatrices, name: str) -> float:
-    m, i, j = _parse(name)
+    m, i, j = parse_entry(name)
     return float(getattr(cm, m)[i, j])
 
 

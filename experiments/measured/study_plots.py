@@ -104,14 +104,14 @@ def _runs_table(rows: dict, models: list[str], key) -> list[str]:
 
 def _entries_table(split: dict) -> list[str]:
     w = canonical_matrices(steer_by_wire())
-    from bikeid.ident.direct import _parse
+    from bikeid.ident.direct import parse_entry
 
     names = list(dict.fromkeys([*split["models"]["direct"]["free"],
                                 *split["models"]["greybox"]["free"]]))  # fmt: skip
     lines = ["| entry | Whipple | direct (+- se) | z | grey-box (+- se) | z |",
              "|---|---|---|---|---|---|"]  # fmt: skip
     for n in names:
-        m, i, j = _parse(n)
+        m, i, j = parse_entry(n)
         wv = float(getattr(w, m)[i, j])
         cells = [n, _f(wv, ".4g")]
         for mod in ("direct", "greybox"):
@@ -168,12 +168,12 @@ def _translation_lines(split: dict) -> list[str]:
 
 def _decay_direct_line(dd: dict) -> str:
     """The direct method on the decay windows: each entry with its z against Whipple."""
-    from bikeid.ident.direct import _parse
+    from bikeid.ident.direct import parse_entry
 
     w = canonical_matrices(steer_by_wire())
     parts = []
     for n, v in dd["free"].items():
-        m, i, j = _parse(n)
+        m, i, j = parse_entry(n)
         z = (v - float(getattr(w, m)[i, j])) / dd["stderr"][n]
         parts.append(f"{n} {v:.3g} +- {dd['stderr'][n]:.2g} (z {z:+.1f})")
     return (

@@ -148,7 +148,7 @@ def make_runs(speeds: Sequence[float], duration: float, workers: int = 1) -> lis
 @functools.cache
 def _whipple_values(rider: str) -> dict[str, float]:
     """All entries (M.., C1.., K0.., K2.., HpF, HdF) of a rider's Whipple model."""
-    from bikeid.ident.direct import ALL_ENTRIES, _parse
+    from bikeid.ident.direct import ALL_ENTRIES, parse_entry
     from bikeid.sim.linear import canonical_matrices, lateral_force_vector
     from bikeid.sim.parameters import by_name
 
@@ -159,7 +159,7 @@ def _whipple_values(rider: str) -> dict[str, float]:
     H = lateral_force_vector(p, p.xB, p.zB)  # the push acts at the rear-body mass centre
     vals = {}
     for n in ALL_ENTRIES:
-        m, r, c = _parse(n)
+        m, r, c = parse_entry(n)
         vals[n] = float(H[r]) if m == "H" else float(getattr(cm, m)[r, c])
     vals["g"] = cm.g
     return vals
@@ -179,11 +179,11 @@ def _columns(run) -> dict[str, np.ndarray]:
 def _row_parts(run, free_names: Sequence[str], row: int, model: dict[str, float] | None):
     """(Gamma, Y) of one run's row; entries outside ``free_names`` (and outside the symmetric
     pair) take the rider's Whipple values; ``model`` supplies Mdp/K0dp for the steer row."""
-    from bikeid.ident.direct import ALL_ENTRIES, _parse
+    from bikeid.ident.direct import ALL_ENTRIES, parse_entry
 
     cols = _columns(run)
     wv = dict(_whipple_values(run.meta["rider"]))
-    names = [n for n in ALL_ENTRIES if _parse(n)[1] == row]
+    names = [n for n in ALL_ENTRIES if parse_entry(n)[1] == row]
     sym = {a for a, _ in SYMMETRIC} if row == 1 else set()
     Y = np.asarray(run["T_phi" if row == 0 else "T_delta"], float).copy()
     model_terms = np.zeros_like(Y)
