@@ -16,14 +16,15 @@ import csv
 import math
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from bikeid.dataset.run import Run
-from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log
+from bikeid.dataset.sbw_logs import data_dir, find_logs, load_log
 from bikeid.dataset.windows import Window, decay_windows
+from bikeid.sim.errors import InputError
 
 __all__ = [
     "DECAY_K",
@@ -31,7 +32,9 @@ __all__ = [
     "DECAY_MIN_PEAK",
     "DECAY_QUIET",
     "DECAY_RATIO",
+    "MIN_FIT_DECAYS",
     "Segment",
+    "decays_from_runs",
     "detect_decays",
     "iter_decays",
     "load_decays",
@@ -127,13 +130,17 @@ DECAY_QUIET = 0.35  # max |roll rate| in the second before the push, relative to
 DECAY_RATIO = 0.5  # max |roll rate| over the window's second half, relative to the peak
 
 
-def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
+def detect_decays(
+    run: Run, length: float = DECAY_LENGTH, rejected: list | None = None
+) -> list[Segment]:
     """Free decays in an eigen log found from the roll rate alone (no segments file).
 
     A push shows as |roll rate| rising above max(6 sigma, 0.2 rad/s), sigma the robust
-    (1.4826 MAD) scale of the whole log's roll rate.  The window starts at the extreme of
-    that first lobe (|roll rate| > half the threshold with the same sign; the hand has
-    left: from there on the motion is the loop's own) and lasts ``length`` s.  It is kept
+    (1.4826 MAD) scale of the roll rate over the settled-speed part of the log (the rows
+    the windows may come from; the whole log when it has no start-up ramp).  The window
+    starts at the extreme of that first lobe (|roll rate| > half the threshold with the
+    same sign; the hand has left: from there on the motion is the loop's own) and lasts
+    ``length`` s.  It is kept
     only if it is a clean decay from rest: within the settled-speed part of the log; in
     the second before the push (less its last 0.15 s) |roll rate| stayed below 0.35 x the
     peak; over the window's second half it stays below 0.5 x the peak; and it never
@@ -143,12 +150,19 @@ def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
     pushes the source's analysis did not use (tests/test_measured.py, docs/measured.md);
     those fit the model worse, so the curated list is the default where it exists.
 
+    Any log of :class:`~bikeid.dataset.run.Run` works (the steer-by-wire logs or a user's
+    CSV/HDF5 log): the sample period is the run's own (:attr:`Run.dt`).
+
     Parameters
     ----------
     run : Run
-        An eigen log.
+        A log with pushes and free decays (roll rate ``phidot`` [rad/s]).
     length : float, optional
         Window length [s] (default :data:`DECAY_LENGTH` = 1 s).
+    rejected : list, optional
+        When given, each push that cleared the threshold but was not kept is appended as
+        ``(row, reason)`` (file row index of its peak, a short reason: no quiet second
+        before it, does not decay, a second push, or past the end of the settled speed).
 
     Returns
     -------
@@ -159,18 +173,21 @@ def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
     Raises
     ------
     ValueError
-        If ``length`` is shorter than 0.2 s (20 samples).
+        If ``length`` is shorter than 20 samples.
     """
     pr = np.asarray(run.signals["phidot"], dtype=float)
+    dt = float(run.meta.get("dt") or run.dt)
     first = int(run.meta.get("first_index", 0))
     lo = int(run.meta.get("ramp_end_index", first)) - first
     hi = int(run.meta.get("settled_end_index", first + pr.size)) - first
-    m = int(round(length / DT))
+    m = int(round(length / dt))
     if m < 20:
-        raise ValueError(f"decay window length {length} s is too short (need >= 0.2 s)")
-    sigma = 1.4826 * float(np.median(np.abs(pr - np.median(pr))))
+        raise ValueError(f"decay window length {length} s is too short (need >= 20 samples "
+                         f"= {20 * dt:g} s)")  # fmt: skip
+    part = pr[lo:hi] if hi - lo >= 20 else pr
+    sigma = 1.4826 * float(np.median(np.abs(part - np.median(part))))
     thr = max(DECAY_K * sigma, DECAY_MIN_PEAK)
-    pre, gap = int(round(1.0 / DT)), int(round(0.15 / DT))
+    pre, gap = int(round(1.0 / dt)), int(round(0.15 / dt))
     speed = float(run.meta.get("speed", np.nan))
     out: list[Segment] = []
     i = max(lo, pre)
@@ -184,14 +201,20 @@ def detect_decays(run: Run, length: float = DECAY_LENGTH) -> list[Segment]:
         j = i + int(np.argmax(sgn * pr[i : k + 1]))
         peak = abs(pr[j])
         win = np.abs(pr[j : j + m])
-        clean = (
-            j + m <= hi
-            and np.max(np.abs(pr[i - pre : i - gap])) < DECAY_QUIET * peak
-            and np.max(win[m // 2 :]) < DECAY_RATIO * peak
-            and np.max(win) <= 1.1 * peak
-        )
-        if clean:
+        if j + m > hi:
+            why = "runs past the end of the settled speed"
+        elif np.max(np.abs(pr[i - pre : i - gap])) >= DECAY_QUIET * peak:
+            why = f"not at rest in the second before the push (>= {DECAY_QUIET} x peak)"
+        elif np.max(win[m // 2 :]) >= DECAY_RATIO * peak:
+            why = f"does not decay (second half >= {DECAY_RATIO} x peak)"
+        elif np.max(win) > 1.1 * peak:
+            why = "a second push inside the window (> 1.1 x peak)"
+        else:
+            why = ""
+        if not why:
             out.append(Segment(run.meta.get("file", "?"), speed, first + j, first + j + m))
+        elif rejected is not None:
+            rejected.append((first + j, why))
         i = j + m
     return out
 
@@ -237,6 +260,117 @@ def iter_decays(
             yield run, segs
 
 
+#: Fewest usable decays ``measured fit`` accepts: the selection fits on every second decay
+#: and checks each effect on the others, so it needs at least two in each half.
+MIN_FIT_DECAYS = 4
+
+
+def _file_of(run: Run) -> str:
+    """The log's file name: ``meta["file"]``, else the importer's, else ``"run"``."""
+    return str(run.meta.get("file") or run.meta.get("import", {}).get("file") or "run")
+
+
+def decays_from_runs(
+    runs: list[Run],
+    source: str = "detected",
+    listed: dict[str, list[Segment]] | None = None,
+    speeds: list[float] | None = None,
+    exclude: list[float] | None = None,
+    min_decays: int = 1,
+    purpose: str = "the fit",
+) -> tuple[list[Window], dict]:
+    """Free-decay windows of any logs (steer-by-wire or imported), with what was rejected.
+
+    Each run's decays are its ``listed`` segments (``source="listed"`` and the run's file has
+    some) or else detected from its roll rate (:func:`detect_decays`; no segments file
+    needed).  Windows are :func:`bikeid.dataset.windows.decay_windows` of the run, each with
+    the run's speed (``meta["speed"]``, [m/s]).
+
+    Parameters
+    ----------
+    runs : list of Run
+        The logs (:func:`bikeid.dataset.sbw_logs.load_log`, or
+        :func:`bikeid.dataset.importers.from_csv` / ``from_hdf5``).
+    source : str, optional
+        ``"detected"`` (default) or ``"listed"``.
+    listed : dict of str to list of Segment, optional
+        Listed windows by file name (``segments.csv`` rows).
+    speeds, exclude : list of float, optional
+        Keep only / drop windows within 0.25 m/s of these speeds [m/s].
+    min_decays : int, optional
+        Fewest windows accepted (default 1); fewer is refused.
+    purpose : str, optional
+        What the windows are for, in the refusal (e.g. ``"the fit"``).
+
+    Returns
+    -------
+    windows : list of Window
+        In the order of ``runs``, each run's in time order.
+    report : dict
+        ``decays`` (count kept), ``files``: per log its ``file``, ``speed`` [m/s],
+        ``source`` (``listed`` or ``detected``), ``kept`` and ``rejected`` (the detected
+        pushes not kept: ``[row, reason]``).
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        For an unknown ``source``; when fewer than ``min_decays`` windows are left (the
+        message gives how many were found per log and why the others were rejected); or
+        when the speed selection leaves none (naming the speeds the data has).
+    """
+    if source not in ("listed", "detected"):
+        raise InputError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
+    out: list[Window] = []
+    files = []
+    for run in runs:
+        name = _file_of(run)
+        if run.meta.get("file") != name:
+            run = replace(run, meta={**run.meta, "file": name})
+        segs = list((listed or {}).get(name, [])) if source == "listed" else []
+        rejected: list = []
+        how = "listed" if segs else "detected"
+        if not segs:
+            segs = detect_decays(run, rejected=rejected)
+        ws = decay_windows(run, segs) if segs else []
+        out.extend(ws)
+        files.append({"file": name, "speed": float(run.speed), "source": how, "kept": len(ws),
+                      "rejected": [[int(r), why] for r, why in rejected]})  # fmt: skip
+    have = sorted({round(w.speed, 2) for w in out})
+    if out and (speeds is not None or exclude):
+        keep = [w for w in out if (speeds is None or _near(w, speeds))
+                and not (exclude and _near(w, exclude))]  # fmt: skip
+        if not keep:
+            raise InputError(f"no decay windows at the requested speeds; the data has {have} m/s")
+        out = keep
+    if len(out) < min_decays:
+        raise InputError(_too_few(files, len(out), min_decays, purpose))
+    return out, {"decays": len(out), "files": files}
+
+
+def _near(w: Window, lst: list[float]) -> bool:
+    return any(abs(w.speed - s) < 0.25 for s in lst)
+
+
+def _too_few(files: list[dict], n: int, need: int, purpose: str) -> str:
+    """The refusal of :func:`decays_from_runs`: counts per log and the rejection reasons."""
+    parts = []
+    for f in files:
+        why: dict[str, int] = {}
+        for _, r in f["rejected"]:
+            why[r] = why.get(r, 0) + 1
+        pushes = f["kept"] + len(f["rejected"])
+        if pushes == 0:
+            parts.append(f"{f['file']}: no push found (|roll rate| never rose above "
+                         f"max({DECAY_K:g} robust sigma, {DECAY_MIN_PEAK} rad/s))")  # fmt: skip
+            continue
+        rej = "; ".join(f"{c} {r}" for r, c in why.items())
+        parts.append(f"{f['file']}: {pushes} pushes, {f['kept']} kept"
+                     + (f", rejected: {rej}" if rej else ""))  # fmt: skip
+    return (f"{n} usable free decay(s) in {len(files)} log(s); {purpose} needs at least "
+            f"{need}. " + " | ".join(parts) + ". Log more pushes, each followed by at least "
+            f"{DECAY_LENGTH:g} s of free motion from rest")  # fmt: skip
+
+
 def load_decays(
     data: str | os.PathLike | None,
     speeds: list[float] | None = None,
@@ -244,6 +378,8 @@ def load_decays(
     source: str = "listed",
 ) -> list[Window]:
     """Free-decay windows of all eigen logs, optionally only near some speeds.
+
+    The steer-by-wire folder read through :func:`decays_from_runs`, the path of any logs.
 
     Parameters
     ----------
@@ -268,24 +404,29 @@ def load_decays(
         selection (the message names the speeds the data has).
     """
     root = data_dir(data)
-    out = []
-    for run, segs in iter_decays(root, source):
-        ws = decay_windows(run, segs)
-        out.extend(ws)
-    if not out:
+    if source not in ("listed", "detected"):
+        raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
+    runs, listed = [], {}
+    lists: dict[Path, list[Segment]] = {}
+    for path in find_logs(root, "eigen"):
+        sf = path.parent / "segments.csv"
+        if source == "listed" and sf.is_file() and sf not in lists:
+            lists[sf] = read_segments(sf)
+            for sg in lists[sf]:
+                listed.setdefault(sg.file, []).append(sg)
+        runs.append(load_log(path))
+    if not runs:
         raise ValueError(
             f"{root}: no free-decay windows (need eigen*.log[.gz] logs with pushes the detector "
             "finds, or rows for them in eigen/segments.csv)"
         )
-
-    def near(w, lst):
-        return any(abs(w.speed - s) < 0.25 for s in lst)
-
-    have = sorted({round(w.speed, 2) for w in out})
-    if speeds is not None:
-        out = [w for w in out if near(w, speeds)]
-    if exclude:
-        out = [w for w in out if not near(w, exclude)]
-    if not out:
-        raise ValueError(f"no decay windows at the requested speeds; the data has {have} m/s")
+    try:
+        out, _ = decays_from_runs(runs, source, listed, speeds, exclude, min_decays=1)
+    except InputError as exc:
+        if "usable free decay" not in str(exc):
+            raise
+        raise ValueError(
+            f"{root}: no free-decay windows (need eigen*.log[.gz] logs with pushes the detector "
+            "finds, or rows for them in eigen/segments.csv)"
+        ) from None
     return out
