@@ -14,7 +14,7 @@ The matrices do not depend on speed, so one parameter vector fits runs at any nu
 speeds jointly; runs at one speed give a per-speed fit (where, e.g., K0dd and K2dd are not
 separable).
 
-Predictor: the same as the canonical PEM (:mod:`ident.pem`, whose kernel, sampling,
+Predictor: the same as the canonical PEM (:mod:`ident.predictor`, whose kernel, sampling,
 Levenberg-Marquardt solver and start gains are reused): at each run's nominal speed the
 entries give the canonical parameters theta(v) = [a1..a8, b1, b2] of
 :func:`ident.canonical.theta_from_matrices`, the model is sampled with a zero-order hold and
@@ -58,17 +58,17 @@ from scipy.linalg import expm, expm_frechet
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
 from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, parse_entry
-from bikeid.ident.pem import (
+from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
-    _discretize,
-    _discretize_with_derivatives,
-    _initial_k,
-    _kernel,
-    _lm,
-    _Problem,
-    _run_data,
-    _single_threaded_blas,
+    PredictionProblem,
+    discretize,
+    discretize_with_derivatives,
+    initial_gain,
+    levenberg_marquardt,
     output_matrix,
+    prediction_kernel,
+    run_data,
+    single_threaded_blas,
 )
 from bikeid.ident.signals import check_sampling
 from bikeid.sim.errors import InputError, UntrustworthyResult
@@ -212,11 +212,11 @@ def _discretize_force(theta: np.ndarray, dt: float, derivatives: bool):
     return E[:4, :4], E[:4, 4], E[:4, 5], dAd, dBd, dBfd
 
 
-class _GreyProblem(_Problem):
+class _GreyProblem(PredictionProblem):
     """Prediction errors of runs at several speeds, parameters [free entries, K per speed].
 
-    Reuses :class:`ident.pem._Problem`'s residual (x0 projected out) when no run has a
-    lateral force; with ``forces`` (one F array per run) the error is the superposition of
+    Reuses :class:`ident.predictor.PredictionProblem`'s residual (x0 projected out) when no run
+    has a lateral force; with ``forces`` (one F array per run) the error is the superposition of
     the kernel's passes over (T_delta, y) and (F, 0).  The Jacobian is never stored whole:
     per run its columns are accumulated into J'J and J'r (x0 eliminated), whose
     innovation-gain blocks are per speed group.
@@ -277,9 +277,9 @@ class _GreyProblem(_Problem):
                     Ad, Bd, Bfd, dAd, dBd, dBfd = _discretize_force(theta, d.dt, derivatives)
                     cache[key] = (Ad, Bd, dAd, dBd, S, Bfd, dBfd)
                 elif derivatives:
-                    cache[key] = (*_discretize_with_derivatives(theta, d.dt), S)
+                    cache[key] = (*discretize_with_derivatives(theta, d.dt), S)
                 else:
-                    cache[key] = (*_discretize(theta, d.dt), None, None, S)
+                    cache[key] = (*discretize(theta, d.dt), None, None, S)
             Ad, Bd, dAd, dBd, S, *force = cache[key]
             K = Kfree[self.groups[i]] if self.free_k else self.Ks[i]
             if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
@@ -298,9 +298,10 @@ class _GreyProblem(_Problem):
         empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
         for d, F, (Ad, Bd, _, _, K, _, Bfd, _) in zip(self.data, self.forces, models,
                                                        strict=True):  # fmt: skip
-            E0, Psi = _kernel(Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx, np.zeros(4), False)
-            Ef, _ = _kernel(Ad, Bfd, K, empty_a, empty_b, F, np.zeros_like(d.y), self.idx,
-                            np.zeros(4), False)  # fmt: skip
+            E0, Psi = prediction_kernel(Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx,
+                                        np.zeros(4), False)  # fmt: skip
+            Ef, _ = prediction_kernel(Ad, Bfd, K, empty_a, empty_b, F, np.zeros_like(d.y),
+                                      self.idx, np.zeros(4), False)  # fmt: skip
             Psi = (Psi * self.w[None, :, None]).reshape(-1, 4)
             e0 = ((E0 + Ef) * self.w).ravel()
             x0, *_ = np.linalg.lstsq(Psi, -e0, rcond=None)
@@ -321,11 +322,12 @@ class _GreyProblem(_Problem):
         start = 0
         for i, (d, x0, model) in enumerate(zip(self.data, self.x0s, models, strict=True)):
             Ad, Bd, dAd, dBd, K, S = model[:6]
-            _, J = _kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
             if self.forces is not None:  # superposition: + the pass over (F, 0) from x = 0
                 Bfd, dBfd = model[6:]
-                _, Jf = _kernel(Ad, Bfd, K, dAd, dBfd, self.forces[i], np.zeros_like(d.y),
-                                self.idx, np.zeros(4), self.free_k)  # fmt: skip
+                _, Jf = prediction_kernel(Ad, Bfd, K, dAd, dBfd, self.forces[i],
+                                          np.zeros_like(d.y), self.idx, np.zeros(4),
+                                          self.free_k)  # fmt: skip
                 J[:, :, :-4] += Jf[:, :, :-4]
             J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
             ri = r[start : start + J.shape[0]]
@@ -762,7 +764,7 @@ def _refuse(cond, weak, names, max_condition, where) -> UntrustworthyResult:
     )
 
 
-@_single_threaded_blas
+@single_threaded_blas
 def fit(
     runs: Run | Sequence[Run],
     free: Sequence[str] | None = None,
@@ -848,7 +850,7 @@ def fit(
     outputs = tuple(outputs)
     try:
         C, _ = output_matrix(outputs)
-        data = _run_data(runs, outputs)
+        data = run_data(runs, outputs)
     except ValueError as exc:
         raise InputError(str(exc)) from None
     if any(np.any(np.asarray(r["T_phi"], float)) for r in runs):
@@ -891,7 +893,7 @@ def fit(
     for gi, v in enumerate(speeds):
         th = theta_from_matrices(base, v)
         grp = [d for d, k in zip(data, groups, strict=True) if k == gi]
-        K = _initial_k(th, dt, C, grp, np.mean([np.var(d.y, axis=0) for d in grp], axis=0),
+        K = initial_gain(th, dt, C, grp, np.mean([np.var(d.y, axis=0) for d in grp], axis=0),
                        free_k)  # fmt: skip
         if K is None:
             raise UntrustworthyResult(
@@ -925,7 +927,7 @@ def fit(
     nfev = 0
     for _ in range(max(1, passes)):
         prob = problem(names, Ks)
-        sol = _lm(prob, x, max_nfev)
+        sol = levenberg_marquardt(prob, x, max_nfev)
         nfev += sol.nfev
         x = sol.x
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
