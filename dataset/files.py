@@ -56,6 +56,7 @@ __all__ = [
     "check_input_file",
     "check_output_path",
     "check_outputs",
+    "check_owned_folder",
     "owned_folder",
     "read_bounded",
     "size_text",
@@ -795,3 +796,40 @@ def _inspect(
             "bikeid does not overwrite other files: give a new or empty folder"
         )
     return doc if doc is not None else {"command": command, "files": []}
+
+
+def check_owned_folder(
+    path: str | os.PathLike, command: str, names: Iterable[str] | None = None,
+    adopt: Iterable[str] = (),
+) -> Path:
+    """The checks of :func:`owned_folder` without creating or locking anything (before work).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output folder (may not exist yet).
+    command : str
+        The owner, e.g. ``"bikeid validate"``.
+    names : iterable of str, optional
+        The files the command will write, when known (see :func:`owned_folder`).
+    adopt : iterable of str, optional
+        Files that mark a folder written before markers existed (see :func:`owned_folder`).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        If the path is a file or a link, another command owns the folder, or it holds files
+        the command did not write (named).
+    """
+    folder = Path(path)
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise InputError(f"{folder} is not a folder; give a new or empty folder for the output")
+    if folder.is_dir():
+        names = None if names is None else [Path(n).as_posix() for n in names]
+        _inspect(Path(os.path.realpath(folder)), folder, command, names, adopt)
+    return folder

@@ -74,28 +74,25 @@ def check_out_dir(out: str | Path) -> Path:
     Raises
     ------
     ValueError
-        If ``out`` is a file or a link, or a non-empty folder without a ``validation.json``
-        written by ``bikeid validate``.
+        If ``out`` is a file or a link, or holds files not written by ``bikeid validate``
+        (:func:`bikeid.dataset.files.owned_folder` makes the same check under its lock).
     """
-    from bikeid.dataset.files import check_output_path
-    from bikeid.sim.textformats import loads_json
+    from bikeid.dataset.files import check_owned_folder
 
     out = Path(out)
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise ValueError(f"--out {out} is not a folder; give a new or empty folder")
-    if out.is_dir() and any(out.iterdir()):
-        marker = out / "validation.json"
-        try:
-            ours = loads_json(marker.read_text(encoding="utf-8"), str(marker)).get("command")
-        except (OSError, ValueError, AttributeError):
-            ours = None
-        if ours != MARKER:
-            raise ValueError(
-                f"--out {out} holds files not written by bikeid validate; give a new or empty "
-                "folder (bikeid does not overwrite other files)"
-            )
-    check_output_path(out / "validation.json")
-    return out
+    return check_owned_folder(out, MARKER, adopt=("validation.json",))
+
+
+def _owned(out: Path | None):
+    import contextlib
+
+    from bikeid.dataset.files import owned_folder
+
+    if out is None:
+        return contextlib.nullcontext()
+    return owned_folder(out, MARKER, adopt=("validation.json",))
 
 
 def _model(path: str):
@@ -109,6 +106,36 @@ def _model(path: str):
             "measured decays with 'bikeid measured evaluate --model'"
         )
     return model
+
+
+def _speed_note(path: str, data_speeds) -> str | None:
+    """A note when the data are at speeds the model was not identified at (None if not).
+
+    A model of one speed (or per-speed fits) applies at those speeds; a model over speed
+    at speeds within the identified range.  Tolerance: 2 % of the speed or 0.05 m/s.
+    """
+    from bikeid.ident.model_file import read_model_file
+
+    ident = read_model_file(path).speeds
+    if not ident:
+        return None
+    over_speed = read_model_file(path).kind in ("speed-canonical-pem", "greybox", "direct")
+    outside = []
+    for v in sorted({round(float(x), 3) for x in data_speeds}):
+        tol = max(0.05, 0.02 * v)
+        if over_speed:
+            off = v < min(ident) - tol or v > max(ident) + tol
+        else:
+            off = all(abs(v - w) > tol for w in ident)
+        if off:
+            outside.append(v)
+    if not outside:
+        return None
+    span = (f"{min(ident):g}-{max(ident):g} m/s (a model over speed, extrapolated outside)"
+            if over_speed and len(ident) > 1 else f"{', '.join(f'{w:g}' for w in ident)} m/s")
+    return (f"the model was identified at {span} but the data include "
+            f"{', '.join(f'{v:g}' for v in outside)} m/s: its fit there tests an "
+            "extrapolation, not the identified model; validate on data at the identified speeds")
 
 
 def _verdict(test: dict) -> str:
@@ -172,25 +199,37 @@ def table(report, model_path: str) -> str:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
+    from bikeid.dataset.files import check_distinct_inputs, check_input_file, check_outputs
     from bikeid.experiments.cli.args import atomic_write_text
-    from bikeid.experiments.cli.identify import _load, _with_input
+    from bikeid.experiments.cli.identify import _data_files, _load, _with_input
     from bikeid.ident.validation_report import validate_model
 
     out = check_out_dir(args.out) if args.out else None
-    model = _model(args.model)
-    runs = _with_input(_load(args), args.input)
-    if not runs:
-        raise ValueError(f"{', '.join(args.file)} hold no runs")
-    report = validate_model(model, runs, k_step=args.k_step, coherence_min=args.coherence)
-    doc = {"command": MARKER, "model": str(args.model), "data": list(map(str, args.file)),
-           **report.to_json()}  # fmt: skip
-    written = []
-    if out is not None:
-        from bikeid.experiments.validation_plots import write_figures
+    check_input_file(args.model, "--model")
+    data_files = _data_files(args)
+    check_outputs([out], [args.model, *data_files])
+    check_distinct_inputs(data_files)
+    with _owned(out):
+        model = _model(args.model)
+        runs = _with_input(_load(args), args.input)
+        if not runs:
+            raise ValueError(f"{', '.join(args.file)} hold no runs")
+        report = validate_model(model, runs, k_step=args.k_step, coherence_min=args.coherence)
+        doc = {"command": MARKER, "model": str(args.model), "data": list(map(str, args.file)),
+               **report.to_json()}  # fmt: skip
+        note = _speed_note(args.model, report.speeds)
+        if note:
+            import dataclasses
 
-        written = write_figures(report, out)
-        atomic_write_text(out / "validation.json", dump_json(doc) + "\n")
-        written.append(out / "validation.json")
+            report = dataclasses.replace(report, notes=(*report.notes, note))
+            doc["notes"] = [*doc.get("notes", []), note]
+        written = []
+        if out is not None:
+            from bikeid.experiments.validation_plots import write_figures
+
+            written = write_figures(report, out)
+            atomic_write_text(out / "validation.json", dump_json(doc) + "\n")
+            written.append(out / "validation.json")
     if args.json:
         print(dump_json(doc))
     else:
