@@ -15,6 +15,8 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   values.
 - :mod:`~bikeid.ident.pem`: ``fit`` (one speed) and ``fit_speed_model``
   (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
+- :mod:`~bikeid.ident.predictor`: the innovations predictor, Levenberg-Marquardt minimizer
+  and sandwich covariance shared by ``pem`` and ``greybox``.
 - :mod:`~bikeid.ident.greybox`: grey-box PEM of entries of M, C1, K0, K2 (any free set, one
   fit over all speeds), with standard errors and the conditioning of the free set.
 - :mod:`~bikeid.ident.validate`: ``compare`` (simulation and k-step prediction),
