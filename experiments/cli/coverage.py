@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bikeid.experiments.cli.args import dump_json, integer, number
+from bikeid.experiments.cli.args import MAX_WORKERS, dump_json, integer, number
+from bikeid.experiments.parallel import DASK_HELP
 
 
 def _level(text: str) -> float:
@@ -59,6 +60,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "then ignored)",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    p.add_argument(
+        "--workers", type=integer(1, MAX_WORKERS), default=1,
+        help="local worker processes, one seed each (default 1; same numbers for any value)",
+    )  # fmt: skip
+    p.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     p.set_defaults(func=cmd_coverage)
 
 
@@ -71,13 +77,13 @@ def cmd_coverage(args: argparse.Namespace) -> int:
     if args.critical:
         result = run_critical_coverage(
             args.seeds, duration=args.duration, dither=args.dither, level=args.level,
-            covariance_scale=args.covariance_scale,
+            covariance_scale=args.covariance_scale, workers=args.workers, dask=args.dask,
         )  # fmt: skip
     else:
         result = run_coverage(
             args.seeds, speed=args.speed, duration=args.duration, dither=args.dither,
             controller=args.controller, level=args.level,
-            covariance_scale=args.covariance_scale,
+            covariance_scale=args.covariance_scale, workers=args.workers, dask=args.dask,
         )  # fmt: skip
     if result.n < 2:
         why = f" (seed {result.failed[0][0]}: {result.failed[0][1]})" if result.failed else ""

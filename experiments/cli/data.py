@@ -19,6 +19,7 @@ from bikeid.experiments.cli.args import (
     parse_range,
     range_text,
 )
+from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import on_terminal
 
 CONTROLLER_HELP = (  # "fuzzy, pid or pole (...)", from controllers.registry
@@ -98,7 +99,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         "--workers", type=integer(1, MAX_WORKERS), default=1, help="local worker processes"
     )
     p.add_argument(
-        "--dask", metavar="ADDRESS", help="run on a Dask cluster ('local' for a LocalCluster)"
+        "--dask", metavar="ADDRESS", help=DASK_HELP
     )
     p.add_argument(
         "--no-progress",

@@ -18,6 +18,7 @@ from bikeid.experiments.cli.args import (
     number,
     range_text,
 )
+from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import quiet, terminal_progress
 
 
@@ -150,6 +151,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=2,
         help="simulation processes (default 2)",
     )
+    a.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     a.add_argument("--out", default="accuracy", metavar="DIR", help="output folder")
     a.add_argument("--json", action="store_true", help="print JSON instead of the table")
     a.set_defaults(func=cmd_accuracy)  # fmt: skip
@@ -233,9 +235,15 @@ def _sorted(z):
 
 
 def cmd_export(args: argparse.Namespace) -> int:
+    from contextlib import nullcontext
     from pathlib import Path
 
-    from bikeid.dataset.files import check_output_path
+    from bikeid.dataset.files import (
+        check_output_path,
+        check_outputs,
+        check_owned_folder,
+        owned_folder,
+    )
     from bikeid.dataset.store import export_csv, list_runs, read_run
 
     if args.format == "sbw":
@@ -263,13 +271,20 @@ def cmd_export(args: argparse.Namespace) -> int:
         targets = {n: out / f"{n}.csv" for n in names}
     for target in targets.values():
         check_output_path(target)  # refuse a link or device before writing anything
+    folder = None if out.suffix.lower() == ".csv" else out
+    owned = [t.name for t in targets.values()]
+    if folder is not None:  # files of the user's of the same names are refused, by name
+        check_owned_folder(folder, "bikeid export", names=owned)
+    inputs = list(logs.values()) if args.format == "sbw" else [args.file]
+    check_outputs([folder, *targets.values()], inputs)
     if args.format == "sbw":  # all readable before the first write
         runs = {n: settled(load_log(f)) for n, f in logs.items()}
     else:
         runs = {n: read_run(args.file, n) for n in names}
-    for n, target in targets.items():
-        export_csv(runs[n], target)
-        print(target)
+    with owned_folder(folder, "bikeid export", names=owned) if folder else nullcontext():
+        for n, target in targets.items():
+            export_csv(runs[n], target)
+            print(target)
     return 0
 
 
@@ -417,10 +432,14 @@ def _settings(args: argparse.Namespace) -> dict:
 def cmd_identify(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from bikeid.dataset.files import check_distinct_inputs, check_outputs
     from bikeid.ident.model_file import file_provenance, save_model
     from bikeid.sim.linear import eigenvalues
 
     outputs = _outputs(args.outputs, args.method)
+    data_files = _data_files(args)  # no output may be an input; no data file counted twice
+    check_outputs([args.out], [*data_files, args.bicycle])
+    check_distinct_inputs(data_files)
     runs = _load(args)
     if not runs:
         raise ValueError(f"{', '.join(args.file)} hold no runs")
@@ -433,6 +452,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.out:
         per_speed_pem = args.method == "pem" and not args.speed_parameterized
         targets = _model_targets(args.out, speeds, per_speed_pem)
+        check_outputs(targets, [*data_files, args.bicycle])
         provenance = file_provenance(_data_files(args))
         settings = _settings(args)
     out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,
@@ -681,7 +701,7 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     bar = terminal_progress("accuracy", json_output=args.json, unit="stage")
     result = acc.run_accuracy(
-        out, controllers, methods, speeds, workers=args.workers,
+        out, controllers, methods, speeds, workers=args.workers, dask=args.dask,
         log=bar.write if bar else quiet, progress=bar,
     )  # fmt: skip
     atomic_write_text(out / "accuracy.json", dump_json(result))

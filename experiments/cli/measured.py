@@ -17,6 +17,7 @@ from bikeid.experiments.cli.args import (
     range_text,
     to_jsonable,
 )
+from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import terminal_progress
 from bikeid.sim.errors import InputError
 
@@ -27,45 +28,83 @@ DECAYS_HELP = (
 )
 
 
+class _RuleHelp(str):
+    """Help text whose ``{field}`` names are read from
+    :class:`bikeid.ident.effects.acceptance.AcceptanceRule` when argparse formats it (only
+    for ``--help``: importing the effect analysis at start-up would slow every command)."""
+
+    def __mod__(self, params):  # argparse formats help as text % params
+        from bikeid.ident.effects import acceptance as acc
+
+        r = acc.AcceptanceRule()
+        d = {**{k: v for k, v in r.as_dict().items() if k != "nominal_uncertainty"},
+             "heldout_gain": r.heldout_gain, "explained_min": acc.EXPLAINED_MIN,
+             "explained_min_calibrated": acc.EXPLAINED_MIN_CALIBRATED,
+             "residual_max": acc.RESIDUAL_MAX}  # fmt: skip
+        return str.__mod__(str.format(self, **d), params)
+
+
 def add_acceptance_options(p: argparse.ArgumentParser) -> None:
     """The acceptance options of the effect selection (docs/measured.md, "Blind trials").
 
-    ``--min-heldout-gain`` in [0, 1), ``--min-improved`` in [0, 1], ``--unexplained-rule``
-    and ``--unexplained-threshold`` (> 0): passed to
-    :func:`bikeid.ident.effects.selection.select_effects`; a bad value is a usage error
-    (exit status 2) naming the option and the allowed range.
+    ``--alpha`` in (0, 1), ``--correction``, ``--min-heldout-gain`` in [0, 1),
+    ``--min-improved`` in [0, 1], ``--unexplained-rule``, ``--unexplained-threshold`` (> 0)
+    and ``--nominal-uncertainty``: the fields of
+    :class:`bikeid.ident.effects.acceptance.AcceptanceRule` (:func:`acceptance_rule` builds
+    it; an option not given keeps the rule's default, which the help text reads from it); a
+    bad value is a usage error (exit status 2) naming the option and the allowed range.
     """
+    p.add_argument(
+        "--alpha",
+        type=number(0.0, 1.0, lo_open=True, hi_open=True),
+        default=None,
+        metavar="A",
+        help=_RuleHelp("family-wise level of the effect tests (cluster-robust t against "
+                       "Student t with G-1 degrees of freedom for G decay windows), in (0, 1) "
+                       "(default {alpha})"),  # fmt: skip
+    )
+    p.add_argument(
+        "--correction",
+        choices=("bonferroni", "none"),
+        default=None,
+        help=_RuleHelp("multiple-comparison correction over candidates x rounds: bonferroni "
+                       "(each test at alpha / tests) or none (each at alpha) (default "
+                       "{correction})"),  # fmt: skip
+    )
     p.add_argument(
         "--min-heldout-gain",
         type=number(0.0, 1.0, hi_open=True),
         default=None,
         metavar="G",
-        help="least fractional cost reduction an effect must bring on the held-out decays, in "
-        "[0, 1) (default 0.02, the fit gain; the blind trials' strict setting is 0.25)",
+        help=_RuleHelp("least fractional cost reduction an effect must bring on the held-out "
+                       "decays, in [0, 1) (default {heldout_gain}, the fit gain; the blind "
+                       "trials' strict setting is 0.25)"),  # fmt: skip
     )
     p.add_argument(
         "--min-improved",
         type=number(0.0, 1.0),
-        default=0.0,
+        default=None,
         metavar="F",
-        help="least share of the held-out decays whose own cost an effect must lower, in "
-        "[0, 1] (default 0: only the summed held-out cost; the strict setting is 0.75)",
+        help=_RuleHelp("least share of the held-out decays whose own cost an effect must "
+                       "lower, in [0, 1] (default {min_improved}: only the summed held-out "
+                       "cost; the strict setting is 0.75)"),  # fmt: skip
     )
     p.add_argument(
         "--unexplained-rule",
         choices=("floor", "coloured", "residual"),
-        default="floor",
-        help="how 'unexplained' is decided: explained fraction above the second-difference "
-        "(floor, default) or coloured-noise floor, or final cost over the residual's noise "
-        "floor (residual)",
+        default=None,
+        help=_RuleHelp("how 'unexplained' is decided: explained fraction above the "
+                       "second-difference (floor) or coloured-noise floor, or final cost over "
+                       "the residual's noise floor (residual) (default {unexplained_rule})"),
     )
     p.add_argument(
         "--unexplained-threshold",
         type=number(0.0, lo_open=True),
         default=None,
         metavar="X",
-        help="threshold of that rule, > 0 (default 0.85 for floor and coloured, 0.9 with "
-        "--nominal-uncertainty none; 2.0 for residual)",
+        help=_RuleHelp("threshold of that rule, > 0 (default {explained_min_calibrated} for "
+                       "floor and coloured, {explained_min} with --nominal-uncertainty none; "
+                       "{residual_max} for residual)"),  # fmt: skip
     )
     p.add_argument(
         "--nominal-uncertainty",
@@ -91,12 +130,27 @@ def uncertainty_arg(text: str):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def acceptance_kw(args: argparse.Namespace) -> dict:
-    """The ``select_effects`` keywords of :func:`add_acceptance_options`' options."""
-    return {"min_heldout_gain": args.min_heldout_gain, "min_improved": args.min_improved,
-            "unexplained_rule": args.unexplained_rule,
-            "unexplained_threshold": args.unexplained_threshold,
-            "nominal_uncertainty": args.nominal_uncertainty}  # fmt: skip
+def acceptance_rule(args: argparse.Namespace):
+    """The :class:`bikeid.ident.effects.acceptance.AcceptanceRule` of
+    :func:`add_acceptance_options`' options (an option not given keeps the rule's default).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options.
+
+    Returns
+    -------
+    AcceptanceRule
+        The rule.
+    """
+    from bikeid.ident.effects.acceptance import AcceptanceRule  # not at start-up
+
+    given = {k: getattr(args, k) for k in ("alpha", "correction", "min_heldout_gain",
+                                           "min_improved", "unexplained_rule",
+                                           "unexplained_threshold")}  # fmt: skip
+    return AcceptanceRule(nominal_uncertainty=args.nominal_uncertainty,
+                          **{k: v for k, v in given.items() if v is not None})  # fmt: skip
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -176,6 +230,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--processes", type=integer(1, MAX_WORKERS), default=2, help="worker processes (default 2)"
     )
+    t.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     t.add_argument("--effects", help="comma list of injected effects (default: all)")
     t.add_argument("--linear", action="store_true", help="linear nominal model (for comparison)")
     t.add_argument("--json", action="store_true", help="print all trials and the summary as JSON")
@@ -261,11 +316,12 @@ def cmd_fit(args) -> int:
     ww = parse_weave_weight(str(args.weave_weight))
     ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
     bar = terminal_progress("measured fit", unit="fit")
-    kw = acceptance_kw(args)
-    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, **kw)
+    rule = acceptance_rule(args)
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, rule=rule)
     out["decays"] = args.decays
     settings = {"max_effects": args.max_effects, "stability": args.stability,
-                "weave_weight": ww, "speeds": _speeds(args.speeds), **to_jsonable(kw)}  # fmt: skip
+                "weave_weight": ww, "speeds": _speeds(args.speeds),
+                **to_jsonable(rule.as_dict())}  # fmt: skip
     save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
     ch = out["plant_choice"]
     print(f"nominal plant: {out['plant']} ({ch['reason']})")
@@ -378,7 +434,8 @@ def cmd_trials(args) -> int:
 
     out = run_trials(
         args.n, args.seed, args.processes, effects, nonlinear=not args.linear, progress=progress,
-        **acceptance_kw(args),
+        dask=args.dask,
+        rule=acceptance_rule(args),
     )  # fmt: skip
     if args.json:
         print(dump_json(out))

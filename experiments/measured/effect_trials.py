@@ -47,6 +47,7 @@ from functools import partial
 import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+from bikeid.experiments.parallel import imap
 from bikeid.sim.effect_registry import RegistryFacts, effect, nonlinear_effects
 
 __all__ = [
@@ -410,7 +411,7 @@ def run_trial(
     """Simulate, identify (not told), evaluate on held-out speeds; returns a JSON-able dict.
 
     ``nonlinear``: the pipeline's nominal model is the nonlinear Whipple model
-    (:func:`ident.effects.experiment_model.attach_nonlinear_correction`); False uses the linear one.
+    (:func:`ident.effects.experiment_model.with_nonlinear_correction`); False uses the linear one.
     ``weave_weight``: as for :func:`bikeid.ident.effects.selection.select_effects` (default
     "auto").
 
@@ -425,9 +426,9 @@ def run_trial(
     weave_weight : float or "auto", optional
         Weight of the weave-eigenvalue term.
     **select_kw
-        Acceptance options of :func:`bikeid.ident.effects.selection.select_effects`
-        (``min_heldout_gain``, ``min_improved``, ``unexplained_rule``,
-        ``unexplained_threshold``).
+        Further keywords of :func:`bikeid.ident.effects.selection.select_effects`, e.g.
+        ``rule`` (an :class:`bikeid.ident.effects.acceptance.AcceptanceRule`; default: the
+        default rule with the stated bicycle taken as exact).
 
     Returns
     -------
@@ -602,6 +603,7 @@ def run_trials(
     nonlinear: bool = True,
     progress=None,
     weave_weight="auto",
+    dask: str | None = None,
     **select_kw,
 ) -> dict:
     """Run a seeded grid of ``n`` trials on a process pool; returns trials and summary.
@@ -615,7 +617,7 @@ def run_trials(
     seed : int, optional
         Grid seed (:func:`draw_trials`).
     processes : int, optional
-        Worker processes.
+        Worker processes (or the size of a ``dask="local"`` cluster).
     effects : tuple of str, optional
         Effects to cycle through (default all of :data:`EFFECTS`).
     nonlinear : bool, optional
@@ -624,6 +626,9 @@ def run_trials(
         Called with each finished trial's dict.
     weave_weight : float or "auto", optional
         Weight of the weave-eigenvalue term.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`); the
+        trials do not depend on where they run.
     **select_kw
         Acceptance options for every trial (:func:`run_trial`).
 
@@ -645,27 +650,17 @@ def run_trials(
     specs = draw_trials(n, seed, effects)
     t0 = time.perf_counter()
     rows = []
-    if processes == 1 or len(specs) == 1:
-        results = (run_trial(s, nonlinear=nonlinear, weave_weight=weave_weight, **select_kw)
-                   for s in specs)  # fmt: skip
-        for r in results:
-            rows.append(r)
-            if progress:
-                progress(r)
-    else:
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=int(processes)) as pool:
-            job = partial(run_trial, nonlinear=nonlinear, weave_weight=weave_weight, **select_kw)
-            for r in pool.map(job, specs):
-                rows.append(r)
-                if progress:
-                    progress(r)
+    job = partial(run_trial, nonlinear=nonlinear, weave_weight=weave_weight, **select_kw)
+    for _, r in imap(job, specs, int(processes), dask, ordered=True):
+        rows.append(r)
+        if progress:
+            progress(r)
     summ = summarize(rows)
     summ["wall_seconds"] = time.perf_counter() - t0
     summ["seed"] = int(seed)
     summ["processes"] = int(processes)
     summ["nominal_plant"] = "nonlinear" if nonlinear else "linear"
     summ["weave_weight"] = weave_weight
-    summ["acceptance"] = dict(select_kw)
+    summ["acceptance"] = {k: v.as_dict() if hasattr(v, "as_dict") else v
+                          for k, v in select_kw.items()}  # fmt: skip
     return {"trials": rows, "summary": summ}

@@ -210,6 +210,7 @@ def generate(
     duration: float = 50.0,
     bicycle: str = "benchmark",
     log: Callable[[str], None] | None = None,
+    dask: str | None = None,
 ) -> list[Run]:
     """Closed-loop runs of ``controller`` at ``speeds`` by :data:`DESIGN`, cached in
     ``out_dir/data`` (one resumable sweep file per band); returned in speed order.
@@ -231,6 +232,9 @@ def generate(
         Bicycle parameter set by name (``sim.parameters.by_name``).
     log : callable, optional
         Receives progress lines.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address for the sweep
+        (:mod:`bikeid.experiments.parallel`); the data do not depend on it.
 
     Returns
     -------
@@ -260,7 +264,7 @@ def generate(
             dither_hold=b.dither_hold, sensors="default", sensor_rate=100.0, sample_time=0.01,
         )  # fmt: skip
         path = data / f"{controller}_{bicycle}_band{i}.h5"
-        rep = run_sweep(spec, path, workers=workers, progress=False, log=log)
+        rep = run_sweep(spec, path, workers=workers, dask=dask, progress=False, log=log)
         if log and rep.computed:
             log(rep.summary().splitlines()[0])
         runs += read_runs(path, [t.name for t in spec.tasks()])
@@ -523,6 +527,7 @@ def run_accuracy(
     bicycle: str = "benchmark",
     log: Callable[[str], None] | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    dask: str | None = None,
 ) -> dict[str, Any]:
     """The whole experiment; returns the JSON-able result (also written by the CLI).
 
@@ -546,6 +551,9 @@ def run_accuracy(
         ``progress(done, total, label)`` before each stage (simulating, then identifying,
         per controller: ``total`` = 2 x controllers) and at the end
         (:mod:`bikeid.experiments.progress`).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address for the simulations
+        (:mod:`bikeid.experiments.parallel`); the results do not depend on it.
 
     Returns
     -------
@@ -582,7 +590,8 @@ def run_accuracy(
         if progress:
             progress(2 * k, steps, f"{c}: simulating {len(speeds)} speed(s)")
         tg = time.perf_counter()
-        runs = generate(out_dir, c, speeds, workers=workers, bicycle=bicycle, log=log)
+        runs = generate(out_dir, c, speeds, workers=workers, bicycle=bicycle, log=log,
+                        dask=dask)  # fmt: skip
         gen = time.perf_counter() - tg
         log(f"{c}: {len(runs)} runs ready in {gen:.1f} s; identifying")
         if progress:

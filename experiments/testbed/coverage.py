@@ -37,9 +37,12 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
+
+from bikeid.experiments.parallel import imap
 
 __all__ = [
     "CRITICAL_SPEEDS",
@@ -316,6 +319,15 @@ def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[st
     return z
 
 
+def _seed_job(p, settings: dict[str, Any], theta_true, targets, seed: int):
+    """:func:`_one` for one seed, as ``(seed, row, None)`` or ``(seed, None, message)``: a
+    picklable job of :func:`bikeid.experiments.parallel.imap`."""
+    try:
+        return seed, _one(p, settings, seed, theta_true, targets), None
+    except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
+        return seed, None, str(exc).splitlines()[0]
+
+
 def run_coverage(
     seeds: int = 200,
     *,
@@ -331,6 +343,8 @@ def run_coverage(
     covariance_scale: float = 1.0,
     first_seed: int = 0,
     log: Callable[[str], None] | None = None,
+    workers: int = 1,
+    dask: str | None = None,
 ) -> CoverageResult:
     """Identify ``seeds`` linear closed-loop runs and record the z-score of every quantity.
 
@@ -360,7 +374,11 @@ def run_coverage(
     first_seed : int, optional
         First seed.
     log : callable, optional
-        Receives one progress line per seed.
+        Receives one progress line per seed, in seed order.
+    workers : int, optional
+        Local worker processes (default 1); the result does not depend on it.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`).
 
     Returns
     -------
@@ -391,19 +409,40 @@ def run_coverage(
                 "estimator": "ident.pem.fit, 4 outputs, free K"}  # fmt: skip
     rows: list[dict[str, float]] = []
     failed: list[tuple[int, str]] = []
-    for s in range(int(first_seed), int(first_seed + seeds)):
-        try:
-            rows.append(_one(p, settings, s, theta_true, targets))
-        except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
-            failed.append((s, str(exc).splitlines()[0]))
+    job = partial(_seed_job, p, settings, theta_true, targets)
+    seed_list = range(int(first_seed), int(first_seed + seeds))
+    for _, (s, row, error) in imap(job, seed_list, workers, dask, ordered=True):
+        if error is None:
+            rows.append(row)
+        else:
+            failed.append((s, error))
         if log:
-            log(f"seed {s}: {'failed' if failed and failed[-1][0] == s else 'ok'}")
+            log(f"seed {s}: {'ok' if error is None else 'failed'}")
     z = {q: np.array([r[q] for r in rows]) for q in QUANTITIES} if rows else {}
     d2 = np.array([r["d2"] for r in rows])
     se = {q: np.array([r[f"se_{q}"] for r in rows]) for q in QUANTITIES} if rows else {}
     inside = {q: np.array([r[f"in_{q}"] for r in rows]) for q in PROFILED} if rows else {}
     return CoverageResult(settings=settings, z=z, failed=failed, mahalanobis=d2, stderr=se,
                           profile_inside=inside)  # fmt: skip
+
+
+def _critical_job(p, settings: dict[str, Any], seed: int):
+    """One seed of :func:`run_critical_coverage`: ``(seed, intervals, None)`` or
+    ``(seed, None, message)``; a picklable job of :func:`bikeid.experiments.parallel.imap`."""
+    # lazy: `bikeid --help` reads DEFAULTS from this module; scipy.optimize stays out of start-up
+    from bikeid.ident import pem
+    from bikeid.ident.uncertainty import critical_speed_intervals
+
+    sp = settings["speeds"]
+    try:
+        runs = [_closed_loop_run(p, settings, v, seed * len(sp) + k) for k, v in enumerate(sp)]
+        model = pem.fit_speed_model(runs)
+        scale = settings["covariance_scale"]
+        model = dataclasses.replace(model, covariance=model.covariance * scale)
+        ci = critical_speed_intervals(model, level=settings["level"], vmax=settings["vmax"])
+    except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
+        return seed, None, str(exc).splitlines()[0]
+    return seed, ci, None
 
 
 #: Speeds [m/s] of the critical-speed coverage: 2-8 m/s brackets the benchmark's v_w (4.29)
@@ -422,6 +461,8 @@ def run_critical_coverage(
     first_seed: int = 0,
     vmax: float = 15.0,
     log: Callable[[str], None] | None = None,
+    workers: int = 1,
+    dask: str | None = None,
 ) -> CoverageResult:
     """Coverage of the v_w and v_c intervals of speed-parameterized PEM fits.
 
@@ -448,7 +489,11 @@ def run_critical_coverage(
     vmax : float, optional
         Highest speed searched for v_w and v_c [m/s].
     log : callable, optional
-        Receives one progress line per seed.
+        Receives one progress line per seed, in seed order.
+    workers : int, optional
+        Local worker processes (default 1); the result does not depend on it.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`).
 
     Returns
     -------
@@ -461,8 +506,6 @@ def run_critical_coverage(
         On fewer than 2 seeds or distinct speeds, a speed outside 1-15 m/s, a non-positive
         ``covariance_scale`` or a bad ``level``.
     """
-    from bikeid.ident import pem
-    from bikeid.ident.uncertainty import critical_speed_intervals
     from bikeid.sim.errors import InputError
     from bikeid.sim.linear import canonical_matrices, critical_speeds
     from bikeid.sim.parameters import benchmark
@@ -487,15 +530,11 @@ def run_critical_coverage(
     se: dict[str, list[float]] = {n: [] for n in names}
     inside: dict[str, list[bool]] = {n: [] for n in names}
     failed: list[tuple[int, str]] = []
-    for s in range(int(first_seed), int(first_seed + seeds)):
-        try:
-            runs = [_closed_loop_run(p, settings, v, s * len(sp) + k) for k, v in enumerate(sp)]
-            model = pem.fit_speed_model(runs)
-            model = dataclasses.replace(model, covariance=model.covariance * covariance_scale)
-            ci = critical_speed_intervals(model, level=level, vmax=vmax)
-        except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
-            failed.append((s, str(exc).splitlines()[0]))
-            ci = None
+    job = partial(_critical_job, p, settings)
+    seed_list = range(int(first_seed), int(first_seed + seeds))
+    for _, (s, ci, error) in imap(job, seed_list, workers, dask, ordered=True):
+        if error is not None:
+            failed.append((s, error))
         for n in names if ci is not None else ():
             val, sd, iv = getattr(ci, n), getattr(ci, f"std_{n}"), ci.interval(n)
             z[n].append((val - truth[n]) / sd if val is not None and sd > 0 else math.nan)

@@ -19,7 +19,7 @@ A sweep is one controller run at every (speed, seed) of a grid.  Guarantees:
   removed when the sweep ends or is refused.
 - **Honest.**  A run that ended early keeps its stop (``meta["stop"]``, see
   :mod:`dataset.closed_loop`); the report counts falls and numerical failures apart.
-- **Parallel.**  ``workers`` local processes (:class:`concurrent.futures.ProcessPoolExecutor`),
+- **Parallel.**  Through :mod:`bikeid.experiments.parallel`: ``workers`` local processes,
   or a Dask cluster (``dask="local"`` starts a ``LocalCluster`` of ``workers`` processes;
   otherwise a scheduler address).  Results travel back to this process, which alone
   writes files, so Dask workers need no shared file system.
@@ -35,8 +35,8 @@ import sys
 import time
 import zlib
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +45,7 @@ import numpy as np
 from bikeid.controllers.registry import STUDY_CONTROLLERS, canonical_name
 from bikeid.dataset.run import Run, run_stop
 from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
+from bikeid.experiments.parallel import check_workers, imap
 
 __all__ = [
     "CONTROLLERS",
@@ -459,65 +460,9 @@ def _execute(
     workers: int,
     dask: str | None,
 ) -> Iterator[tuple[Task, Any]]:
-    """``fn(spec, task)`` for every task, in completion order."""
-    if dask:
-        yield from _execute_dask(fn, spec, todo, workers, dask)
-    elif workers == 1:
-        for task in todo:
-            yield task, fn(spec, task)
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(fn, spec, task): task for task in todo}
-            try:
-                for fut in as_completed(futures):
-                    yield futures[fut], fut.result()
-            except BaseException:
-                for fut in futures:
-                    fut.cancel()
-                raise
-
-
-def _execute_dask(
-    fn: Callable[[SweepSpec, Task], Any],
-    spec: SweepSpec,
-    todo: Sequence[Task],
-    workers: int,
-    address: str,
-) -> Iterator[tuple[Task, Any]]:
-    try:
-        from distributed import Client, LocalCluster
-        from distributed import wait as dask_wait
-    except ImportError:
-        raise ValueError("--dask needs 'distributed': pip install 'bikeid[dask]'") from None
-    cluster = None
-    if address == "local":
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-        )
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(address, timeout=30)
-        except OSError as exc:
-            raise ValueError(f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
-    try:
-        futures = [
-            client.submit(fn, spec, task, pure=False, key=f"bikeid-{fn.__name__}-{task.name}")
-            for task in todo
-        ]
-        by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
-        # distributed.as_completed(with_results=True) hung now and then on this 2-core VM
-        # with every future finished and both workers idle (about 1 sweep in 20);
-        # wait(FIRST_COMPLETED) + result() passed 60 runs in a row
-        pending = set(futures)
-        while pending:
-            done, pending = dask_wait(pending, return_when="FIRST_COMPLETED")
-            for fut in done:
-                yield by_key[fut.key], fut.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    """``fn(spec, task)`` for every task, in completion order (:func:`parallel.imap`)."""
+    for i, result in imap(partial(fn, spec), todo, workers, dask):
+        yield todo[i], result
 
 
 def run_sweep(
@@ -558,9 +503,7 @@ def run_sweep(
         settings, Dask is missing or unreachable, or a run's simulation raises.
     """
     t0 = time.perf_counter()
-    if int(workers) != workers or workers < 1:
-        raise ValueError(f"--workers must be a positive integer, got {workers}")
-    workers = int(workers)
+    workers = check_workers(workers)
     out = Path(out)
     if out.suffix not in (".h5", ".hdf5"):
         raise ValueError(f"sweep output {out} must end in .h5 or .hdf5")
