@@ -4,7 +4,8 @@ Initial angles and rates are given in degrees (and deg/s); the file holds SI
 units (rad, rad/s, m/s, N m) in the columns of :meth:`sim.integrate.Trajectory.columns`.
 A run that ends early (a fall, or a numerical failure such as a step too coarse for
 the dynamics: ``sim.integrate.STOP_CAUSES``) is reported in one line naming the cause;
-the samples before the stop are written, nothing after it.
+the samples before the stop are written, nothing after it.  A numerical failure (not a
+fall) ends with exit status 4 (no trustworthy answer), a fall with 0.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from bikeid.experiments.cli.args import (
     speed_value,
     to_jsonable,
 )
-from bikeid.sim.errors import InputError
+from bikeid.sim.errors import InputError, UntrustworthyResult
 
 #: Initial angles [deg], initial rates [deg/s], steer torque [N m]: finite, bounded.
 ANGLE = number(-90.0, 90.0, unit="deg")
@@ -85,6 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from bikeid.dataset.files import check_output_path, check_outputs
     from bikeid.sim.integrate import simulate
     from bikeid.sim.nonlinear import WhippleBicycle
     from bikeid.sim.parameters import by_name
@@ -92,6 +94,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"--out {args.out!r}: use a .csv or .json file (HDF5: bikeid sweep)")
+    check_output_path(out)
+    check_outputs([out], [args.bicycle])  # a parameter file is an input too
     if abs(args.phi0) >= args.fall_limit:
         raise InputError(
             f"--phi0 {args.phi0} deg is at or beyond the fall limit {args.fall_limit} deg; "
@@ -137,10 +141,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         atomic_write_text(out, dump_json({"meta": meta, "signals": cols}) + "\n")
     if tr.stop is not None and tr.stop.physical:
         print(f"bikeid: {tr.stop.message} [{tr.stop.cause}]; wrote {len(tr.t)} samples to {out}")
-    elif tr.stop is not None:
-        print(
-            f"bikeid: stopped early, not a fall [{tr.stop.cause}]: {tr.stop.message}; wrote "
-            f"{len(tr.t)} samples (to t={tr.t[-1]:.3f} s) to {out}"
+    elif tr.stop is not None:  # a numerical failure: the samples are written, exit status 4
+        raise UntrustworthyResult(
+            f"stopped early, not a fall [{tr.stop.cause}]: {tr.stop.message}; wrote "
+            f"{len(tr.t)} samples (to t={tr.t[-1]:.3f} s, before the failure) to {out}"
         )
     else:
         print(f"wrote {len(tr.t)} samples ({tr.t[-1]:.3f} s) to {out}")

@@ -218,7 +218,7 @@ def identify_speed(args: tuple) -> dict[str, Any]:
 
 
 def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
-    """:func:`identify_speed` for every job (one process pool for all), in job order.
+    """:func:`identify_speed` for every job (:func:`bikeid.experiments.parallel.map_jobs`).
 
     Parameters
     ----------
@@ -226,6 +226,8 @@ def run_jobs(jobs: Sequence[tuple], workers: int = 1) -> list[dict[str, Any]]:
         Arguments of :func:`identify_speed`.
     workers : int
         Worker processes (1: in this process).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address; the results do not depend on it.
 
     Returns
     -------

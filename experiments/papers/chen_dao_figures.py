@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from bikeid.experiments.parallel import map_jobs
 from bikeid.experiments.papers import chen_dao as cd
 from bikeid.sim.parameters import BicycleParameters
 
@@ -293,21 +294,13 @@ def _coast_entry(args: tuple) -> tuple[dict, dict]:
     return r.as_dict(), lc.summary_entry(p, ic, r)
 
 
-def _map(fn, jobs: list, workers: int) -> list:
-    if workers <= 1 or len(jobs) <= 1:
-        return [fn(j) for j in jobs]
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(fn, jobs, chunksize=1))
-
-
 def limit_cycle_study(
     p: BicycleParameters,
     out: Path,
     duration: float,
     log: Callable[[str], None] = lambda s: None,
     workers: int = 1,
+    dask: str | None = None,
 ) -> dict[str, Any]:
     """Figs. 4-5: coasting runs from the paper's initial conditions + periodicity check.
 
@@ -323,6 +316,8 @@ def limit_cycle_study(
         Progress lines.
     workers : int, optional
         Worker processes for the runs and their Floquet multipliers (1: in this process).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`).
 
     Returns
     -------
@@ -348,7 +343,7 @@ def limit_cycle_study(
     # every run and its exact mirror image in one pool (a mirror is only kept for a
     # periodic original; the mirrors of falls are short runs)
     mirrors = [lc.mirrored(ic) for ic in conds]
-    done = _map(_coast_entry, [(p, ic, duration) for ic in conds + mirrors], workers)
+    done = map_jobs(_coast_entry, [(p, ic, duration) for ic in conds + mirrors], workers, dask)
     by_label = {ic.label: d for ic, d in zip(conds + mirrors, done, strict=True)}
     for name, cs in figs:
         res[name] = [by_label[ic.label][0] for ic in cs]

@@ -39,6 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from bikeid.experiments.parallel import map_jobs
+
 __all__ = [
     "ENVIRONMENTS",
     "RIDERS",
@@ -111,7 +113,9 @@ def _one_run(args: tuple) -> Any:
     return run
 
 
-def make_runs(speeds: Sequence[float], duration: float, workers: int = 1) -> list:
+def make_runs(
+    speeds: Sequence[float], duration: float, workers: int = 1, dask: str | None = None
+) -> list:
     """One run per rider x environment x speed (seeded by their position).
 
     Parameters
@@ -122,6 +126,9 @@ def make_runs(speeds: Sequence[float], duration: float, workers: int = 1) -> lis
         Length of each run [s].
     workers : int, optional
         Worker processes (1: in this process).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`); the
+        runs do not depend on where they are computed.
 
     Returns
     -------
@@ -136,12 +143,7 @@ def make_runs(speeds: Sequence[float], duration: float, workers: int = 1) -> lis
         for j, e in enumerate(ENVIRONMENTS):
             for k, v in enumerate(speeds):
                 jobs.append((r, e, float(v), duration, 100 * i + 10 * j + k))
-    if workers <= 1:
-        return [_one_run(j) for j in jobs]
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(_one_run, jobs))
+    return map_jobs(_one_run, jobs, workers, dask)
 
 
 # -- regression ------------------------------------------------------------------------------
@@ -341,6 +343,7 @@ def reproduce(
     duration: float,
     workers: int = 1,
     log: Callable[[str], None] = lambda s: None,
+    dask: str | None = None,
 ) -> dict[str, Any]:
     """Runs, 12 identified models, Tables 2-5 and Figs. 2-4 analogues.
 
@@ -356,6 +359,8 @@ def reproduce(
         Worker processes of the simulation.
     log : callable, optional
         Receives progress lines.
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address for the simulation.
 
     Returns
     -------
@@ -367,7 +372,7 @@ def reproduce(
         ``table5`` (M, C1, K0, K2, H of B-N, B-S, A-A and the benchmark Whipple model),
         ``figures`` (file names) and ``sim_window`` [s].
     """
-    runs = make_runs(speeds, duration, workers)
+    runs = make_runs(speeds, duration, workers, dask)
     fell = [
         f"{r.meta['rider']}-{r.meta['environment']} at {r.speed} m/s"
         for r in runs
