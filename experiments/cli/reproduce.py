@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from bikeid.experiments.cli.args import MAX_WORKERS, integer
+from bikeid.experiments.parallel import DASK_HELP
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,6 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="N",
         help="worker processes for the identification runs (default min(2, cores))",
     )
+    p.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     p.add_argument(
         "--bicycle",
         default="benchmark",
@@ -50,6 +52,6 @@ def _run(args: argparse.Namespace) -> int:
     bar = terminal_progress("reproduce", unit="stage")
     reproduce(
         args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
-        log=bar.write if bar else quiet, progress=bar,
+        log=bar.write if bar else quiet, progress=bar, dask=args.dask,
     )  # fmt: skip
     return 0

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.experiments.parallel import map_jobs
 from bikeid.experiments.papers import chen_dao as cd
+from bikeid.experiments.parallel import map_jobs
 from bikeid.sim.parameters import BicycleParameters
 
 __all__ = ["fig2", "fig3", "fig7", "limit_cycle_study"]

@@ -16,8 +16,10 @@ then steer row free {Mdd, C1dp, C1dd, K0dd, K2dd, HdF} with Mdp := Mpd, K0dp := 
 fixed entries of each run come from that run's own rider (Whipple values; HpF from the push
 point), as Moore & Hubbard used each rider's measured parameters, so runs of different riders
 stack in one regression.  For a single rider this is :func:`ident.direct.identify` (the tests
-check the two agree).  Accelerations: forward differences of the 15 Hz low-passed rates
-(:func:`ident.signals.prepare`, ``derivative="forward"`` for zero-order-hold data).
+check the two agree).  Accelerations: Moore & Hubbard's own processing, central differences
+of the 15 Hz low-passed rates (:func:`ident.signals.prepare`, ``derivative="central"``,
+:data:`DERIVATIVE`; forward differences, exact for zero-order-hold torques, are the
+accuracy table's comparison, :mod:`bikeid.experiments.testbed.accuracy`).
 
 VAF (Tables 2-3): Moore's eq. 6, 1 - ||Gamma Theta - Y|| / ||Y - mean(Y)||, with Y the torque
 minus the entries fixed in every model; in the steer row Mdp and K0dp count as model terms.
@@ -58,6 +60,10 @@ ROLL_FREE = ("Mpd", "C1pd", "K0pd")
 STEER_FREE = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd", "HdF")
 SYMMETRIC = (("Mdp", "Mpd"), ("K0dp", "K0pd"))
 SIM_WINDOW = 2.0  # s
+#: Moore & Hubbard's data processing (paper §4): 2nd-order Butterworth low-pass at 15 Hz,
+#: accelerations by central differences of the filtered rates.
+CUTOFF_HZ = 15.0
+DERIVATIVE = "central"
 BODE_SPEEDS = (2.0, 4.0, 6.0, 9.0)
 
 
@@ -108,7 +114,7 @@ def _one_run(args: tuple) -> Any:
     )
     # the load cell: F is logged exactly, like the steer torque
     run.signals["F"] = run.true("F").copy()
-    run = prepare(run, derivative="forward")
+    run = prepare(run, cutoff=CUTOFF_HZ, derivative=DERIVATIVE)
     run.meta.update({"rider": rider, "environment": env})
     return run
 
@@ -133,7 +139,7 @@ def make_runs(
     Returns
     -------
     list of Run
-        Prepared runs (15 Hz low-pass, forward-difference accelerations ``phiddot``,
+        Prepared runs (15 Hz low-pass, central-difference accelerations ``phiddot``,
         ``deltaddot`` [rad/s^2]; lateral force ``F`` [N] logged exactly), in the order
         rider, environment, speed; ``meta["rider"]`` and ``meta["environment"]`` name
         the cell.

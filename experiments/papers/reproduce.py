@@ -135,6 +135,7 @@ def reproduce(
     log: Callable[[str], None] = _stderr_log,
     bicycle: str = "benchmark",
     progress: Callable[[int, int, str], None] | None = None,
+    dask: str | None = None,
 ) -> dict[str, Any]:
     """Run every study into ``out``: figures, ``report.md`` and ``summary.json``.
 
@@ -153,6 +154,9 @@ def reproduce(
     progress : callable, optional
         ``progress(done, 7, label)`` before each of the 7 stages and at the end
         (:mod:`bikeid.experiments.progress`).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address for the batch jobs
+        (:mod:`bikeid.experiments.parallel`); the numbers do not depend on it.
 
     Returns
     -------
@@ -199,7 +203,7 @@ def reproduce(
     jobs += [
         (c, float(v), st.id_duration, bicycle, METHODS) for c in SWEEP_ONLY for v in st.sweep_speeds
     ]
-    results = cd.run_jobs(jobs, workers)
+    results = cd.run_jobs(jobs, workers, dask)
     n3 = len(st.fig3_speeds)
     grid, zoom = results[:n3], results[n3 : n3 + len(zoom_speeds)]
     rest = results[n3 + len(zoom_speeds) :]
@@ -217,7 +221,7 @@ def reproduce(
         f"{f3['critical_true']['v_c']:.4f})"
     )
     t0 = stage("Chen & Dao Figs. 4-5: coasting at 3.5 m/s, periodicity")
-    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log, workers)
+    lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log, workers, dask)
     times["figs4_5"] = time.perf_counter() - t0
     t0 = stage(
         f"Chen & Dao v_l..v_w: coasting speed scan ({len(st.scan_speeds)} speeds, "
@@ -233,7 +237,7 @@ def reproduce(
     f7 = cdf.fig7(p, f2["_model"], out, st.fig7_duration)
     times["fig7"] = time.perf_counter() - t0
     t0 = stage("Moore & Hubbard: 3 riders x 2 environments, Tables 2-5, Figs. 2-4")
-    mhr = mh.reproduce(out, st.mh_speeds, st.mh_duration, workers, log)
+    mhr = mh.reproduce(out, st.mh_speeds, st.mh_duration, workers, log, dask)
     times["moore_hubbard"] = time.perf_counter() - t0
     t0 = stage("sweep summary")
     sweep = {"fuzzy": [g for g in grid if g["speed"] in st.sweep_speeds]}
