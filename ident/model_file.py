@@ -553,6 +553,30 @@ class _Reader:
         v = self.get(obj, key, prefix)
         return self._array(v, prefix + key, shape)
 
+    def covariance(self, obj: dict, key: str, prefix: str, shape: tuple) -> np.ndarray:
+        """A covariance matrix: symmetric and positive semi-definite.
+
+        Tolerances: asymmetry up to 1e-9 and eigenvalues down to -1e-8 times the largest
+        absolute entry / eigenvalue (round-off of a covariance computed in float64 is ~1e-16
+        relative; the files keep every digit); a negative variance is never accepted.
+        """
+        c = self.array(obj, key, prefix, shape)
+        if c.size == 0:
+            return c
+        scale = float(np.max(np.abs(c)))
+        if np.any(np.diag(c) < 0):
+            i = int(np.argmin(np.diag(c)))
+            raise self.fail(prefix + key, f"has a negative variance {float(c[i, i]):.6g} at "
+                            f"[{i}, {i}] (not a covariance)")  # fmt: skip
+        if np.max(np.abs(c - c.T)) > 1e-9 * scale:
+            raise self.fail(prefix + key, "is not symmetric (not a covariance)")
+        if scale > 0:
+            low = float(np.linalg.eigvalsh((c + c.T) / 2)[0])
+            if low < -1e-8 * scale:
+                raise self.fail(prefix + key, f"is not positive semi-definite (eigenvalue "
+                                f"{low:.3g}; not a covariance)")  # fmt: skip
+        return c
+
     def _array(self, v: Any, name: str, shape: tuple) -> np.ndarray:
         want = "x".join("n" if s is None else str(s) for s in shape)
 
@@ -613,7 +637,7 @@ def _canonical_model(r: _Reader, sec: Any, prefix: str) -> CanonicalModel:
         raise r.fail(prefix + "x0", "must be a list of initial states")
     return CanonicalModel(
         theta=r.array(sec, "theta", prefix, (10,)),
-        covariance=r.array(sec, "covariance", prefix, (10, 10)),
+        covariance=r.covariance(sec, "covariance", prefix, (10, 10)),
         K=r.array(sec, "K", prefix, (4, n_out)),
         dt=dt,
         speed=r.number(sec, "speed", prefix),
@@ -638,7 +662,7 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     dt = r.sample_period(sec, prefix)
     return SpeedCanonicalModel(
         params=r.array(sec, "params", prefix, (14,)),
-        covariance=r.array(sec, "covariance", prefix, (14, 14)),
+        covariance=r.covariance(sec, "covariance", prefix, (14, 14)),
         per_speed={round(m.speed, 6): m for m in models},
         dt=dt,
         g=r.number(sec, "g", prefix),
@@ -675,7 +699,7 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
     for row, c in covs_in.items():
         names = r.texts(c, "names", f"{prefix}covariance.{row}.")
         n = len(names)
-        covs[row] = (names, r.array(c, "matrix", f"{prefix}covariance.{row}.", (n, n)))
+        covs[row] = (names, r.covariance(c, "matrix", f"{prefix}covariance.{row}.", (n, n)))
     return DirectResult(
         **fields,
         covariance=covs,
@@ -737,7 +761,7 @@ def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
     P = len(names)
     return GreyboxModel(
         **fields,
-        covariance=r.array(sec, "covariance", prefix, (P, P)),
+        covariance=r.covariance(sec, "covariance", prefix, (P, P)),
         condition=r.number(sec, "condition", prefix),
         inflation=r.numbers(sec, "inflation", prefix),
         weakest=r.numbers(sec, "weakest", prefix),

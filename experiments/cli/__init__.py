@@ -129,6 +129,12 @@ def _check_empty_values(parser: argparse.ArgumentParser, args: argparse.Namespac
 
 def _message(exc: BaseException) -> str:
     text = str(exc).strip()
+    if isinstance(exc, OSError) and exc.filename and exc.errno is not None:
+        from bikeid.dataset.files import storage_error
+
+        err = storage_error(exc, exc.filename)  # a full or read-only disk: the fix too
+        if err is not exc:
+            return str(err)
     if isinstance(exc, OSError) and exc.strerror:  # "[Errno 2] No such file ...: 'x'"
         text = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
     elif isinstance(exc, MemoryError):
