@@ -147,6 +147,27 @@ class ModelFile:
 
 
 # -- provenance --------------------------------------------------------------------------
+def relative_path(path: str | os.PathLike) -> str:
+    """A file's path relative to the working directory, as stored in provenance.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+
+    Returns
+    -------
+    str
+        ``os.path.relpath`` of the resolved path (POSIX separators); the file name alone
+        when there is none (another drive).
+    """
+    resolved = Path(path).resolve()
+    try:
+        return Path(os.path.relpath(resolved)).as_posix()
+    except ValueError:  # another drive (Windows)
+        return resolved.name
+
+
 def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
     """Path, size and SHA-256 of each data file, as saved in ``provenance``.
 
@@ -158,7 +179,9 @@ def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
     Returns
     -------
     list of dict
-        Per file ``{"path": absolute path, "size": bytes, "sha256": hex digest}``.
+        Per file ``{"path": path relative to the working directory (never a machine's
+        absolute path; the file name alone when no relative path exists), "size": bytes,
+        "sha256": hex digest}``.
 
     Raises
     ------
@@ -176,7 +199,7 @@ def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
             size = path.stat().st_size
         except OSError as exc:
             raise InputError(f"cannot hash data file {str(path)!r}: {exc.strerror}") from None
-        out.append({"path": str(path), "size": int(size), "sha256": h.hexdigest()})
+        out.append({"path": relative_path(path), "size": int(size), "sha256": h.hexdigest()})
     return out
 
 
