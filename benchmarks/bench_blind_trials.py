@@ -34,7 +34,7 @@ from functools import partial
 import numpy as np
 
 from bikeid.experiments.cli.args import dump_json, to_jsonable
-from bikeid.experiments.cli.measured import acceptance_kw, add_acceptance_options
+from bikeid.experiments.cli.measured import acceptance_rule, add_acceptance_options
 from bikeid.experiments.measured.blind_trials import (
     draw_blind_classes,
     draw_blind_trials,
@@ -115,9 +115,10 @@ def main() -> None:
     trials = [t for t in drawn if t.index not in done]
     rows = [done[i] for i in sorted(done) if i < len(drawn)]
     t0 = time.perf_counter()
+    rule = acceptance_rule(args)
     job = partial(
         run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
-        plant_margin=args.plant_margin, **acceptance_kw(args),
+        plant_margin=args.plant_margin, rule=rule,
     )  # fmt: skip
     with ProcessPoolExecutor(max_workers=args.processes) as pool:
         for r in pool.map(job, trials):
@@ -137,11 +138,7 @@ def main() -> None:
         f"nominal plant {args.plant} (margin {args.plant_margin or LINEAR_PLANT_MARGIN}), "
         f"seed {args.seed}, "
         f"{'classes ' + str(args.per_class) if args.per_class else f'{args.n} trials'}, "
-        f"min held-out gain "
-        f"{args.min_heldout_gain}, min improved {args.min_improved}, unexplained rule "
-        f"{args.unexplained_rule} "
-        f"{args.unexplained_threshold}, nominal uncertainty "
-        f"{to_jsonable(args.nominal_uncertainty)}"
+        f"acceptance rule {to_jsonable(rule.as_dict())}"
     )
     print(_fmt("right effect first, value in band", s["right_first"]))
     print(_fmt("library trials with extra effects", s["with_extras"]))

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from bikeid.dataset.decays import load_decays
-from bikeid.ident.effects.experiment_model import attach_nonlinear_correction
+from bikeid.ident.effects.experiment_model import with_nonlinear_correction
 from bikeid.ident.effects.pipeline import evaluate_json, fit_effect_set, fit_model
 
 CHANNELS = ("phi", "delta", "phidot", "deltadot")
@@ -46,7 +46,7 @@ def setup(data: str | None, truth_set: list[str]) -> dict:
     """Fit the truth on all decays; keep its simulation of each decay."""
     ws = load_decays(data)
     truth = fit_effect_set(ws, truth_set).model
-    attach_nonlinear_correction(ws, truth)
+    ws = with_nonlinear_correction(ws, truth)
     return {"windows": ws, "truth": truth, "sims": truth.simulate(ws)}
 
 

@@ -26,6 +26,8 @@ import time
 
 from bikeid.dataset.decays import load_decays
 from bikeid.experiments.cli.measured import parse_weave_weight, uncertainty_arg
+from bikeid.ident.effects.acceptance import AcceptanceRule
+from bikeid.ident.effects.nominal_uncertainty import NominalUncertainty
 from bikeid.ident.effects.pipeline import evaluate_json, fit_model
 
 
@@ -39,9 +41,11 @@ def run_split(
 ) -> dict:
     """Fit on ``fit_speeds``, evaluate on every other speed; the row of the table."""
     t0 = time.perf_counter()
+    if isinstance(nominal_uncertainty, str):
+        nominal_uncertainty = NominalUncertainty.parse(nominal_uncertainty)
     model = fit_model(
         load_decays(data, fit_speeds, source=decays), weave_weight=weave_weight, plant=plant,
-        nominal_uncertainty=nominal_uncertainty,
+        rule=AcceptanceRule(nominal_uncertainty=nominal_uncertainty),
     )  # fmt: skip
     ev = evaluate_json(model, load_decays(data, exclude=fit_speeds, source=decays))
     s = ev["summary"]

@@ -12,7 +12,7 @@ control loop, :data:`bikeid.dataset.sbw_logs.DT`); units SI (rad, rad/s, m/s, N 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -22,9 +22,14 @@ from bikeid.dataset.sbw_logs import BOUNDS_AS, DT, SIGNAL_COLUMNS, treadmill_spe
 __all__ = ["Window", "bode_window", "decay_windows"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Window:
     """One stretch of an experiment to simulate: a free decay or a Bode record.
+
+    A value: frozen, so a variant (another drive, the nonlinear plant's defect correction of
+    :func:`bikeid.ident.effects.experiment_model.with_nonlinear_correction`) is a new window
+    made with :func:`dataclasses.replace`, and fitting twice on the same windows sees the
+    same data.
 
     Measured arrays (length n, sample time 0.01 s): phi, delta, phidot, deltadot,
     v_sensor, T_ext (external steer torque relayed to the motor), T_phi (roll torque,
@@ -59,7 +64,8 @@ class Window:
     meta : dict
         Free-form metadata.
     correction : dict or None
-        Nonlinear minus linear nominal outputs (``ident.effects.experiment_model``), or None.
+        Nonlinear minus linear outputs at the model the correction was taken at
+        (:func:`bikeid.ident.effects.experiment_model.with_nonlinear_correction`), or None.
     T_logged : (n,) ndarray or None
         Logged total steer-motor command over the window [N m] (the plant input; None when
         unknown).
@@ -204,8 +210,7 @@ def decay_windows(run: Run, segments) -> list[Window]:
             )
     out = [_window(run, s.start, s.end, "decay") for s in segments]
     if "speed" in run.meta:  # one treadmill speed per file (settled plateau)
-        for w in out:
-            w.speed = float(run.meta["speed"])
+        out = [replace(w, speed=float(run.meta["speed"])) for w in out]
     return out
 
 

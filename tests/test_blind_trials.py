@@ -23,6 +23,7 @@ from bikeid.experiments.measured.blind_trials import (
     summarize_blind,
 )
 from bikeid.experiments.measured.effect_trials import EFFECTS
+from bikeid.ident.effects.acceptance import AcceptanceRule
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.sim import linear
 from bikeid.sim.parameters import benchmark, steer_by_wire
@@ -210,7 +211,8 @@ def test_auto_plant_choice_both_ways(plant):
     out = fit_model(ws, max_effects=0)
     assert out["plant"] == expected and out["plant_choice"]["asked"] == "auto"
     assert f"so the {expected} plant" in out["plant_choice"]["reason"]
-    forced = fit_model(ws, max_effects=0, plant="nonlinear", min_heldout_gain=0.25)
+    forced = fit_model(ws, max_effects=0, plant="nonlinear",
+                       rule=AcceptanceRule(min_heldout_gain=0.25))  # fmt: skip
     assert forced["plant"] == "nonlinear" and "as asked" in forced["plant_choice"]["reason"]
     assert forced["plant_choice"]["auto"] == expected
     assert forced["identification"]["evidence"]["min_heldout_gain"] == 0.25

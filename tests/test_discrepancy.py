@@ -4,6 +4,8 @@ trials on the nonlinear plant are in tests/test_effect_trials.py."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from bikeid.ident.effects.diagnostics import evaluate
@@ -59,8 +61,8 @@ def test_weave_error_same_estimator_cancels_fit_bias():
     number) is larger."""
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.3})
     ws = synthetic_windows(truth, [2.5], 3, noise=0.0, seed=4)
-    for w in ws:  # synthetic_windows quantizes the steer angle; undo for a clean check
-        w.delta = truth.simulate([w], nsub=10)[0]["delta"]
+    # synthetic_windows quantizes the steer angle; undo for a clean check
+    ws = [replace(w, delta=truth.simulate([w], nsub=10)[0]["delta"]) for w in ws]
     ev = evaluate(truth, truth, ws)["summary"]
     assert ev["weave_error_before"] < 1e-3 and ev["weave_error_after"] < 1e-3
     assert ev["weave_root_error_before"] > ev["weave_error_before"]
@@ -97,8 +99,8 @@ def test_weave_error_is_relative_root_shift():
     truth = ExperimentModel(effects={"steer_viscous_damping": 0.3})
     other = truth.with_effects(steer_viscous_damping=0.6)
     ws = synthetic_windows(truth, [3.5], 3, noise=0.0, seed=5)
-    for w in ws:  # undo the encoder quantization for a clean check
-        w.delta = truth.simulate([w], nsub=10)[0]["delta"]
+    # undo the encoder quantization for a clean check
+    ws = [replace(w, delta=truth.simulate([w], nsub=10)[0]["delta"]) for w in ws]
     from bikeid.ident.effects.weave import decay_eigenvalue
 
     lam = [decay_eigenvalue(w) for w in ws]

@@ -100,14 +100,14 @@ def test_evidence_verdicts_both_ways(effect, value, accepted, unexplained):
     start-state error); a no-effect log gets no effect under the held-out rule; an
     outside-library roll damping leaves structure the residual rule calls unexplained,
     whatever library effect absorbs part of it."""
+    from bikeid.ident.effects.acceptance import AcceptanceRule
     from bikeid.ident.effects.experiment_model import ExperimentModel
     from bikeid.ident.effects.selection import RESIDUAL_MAX, select_effects
 
     ws = _quiet_trial(effect, value)
-    res = select_effects(
-        ExperimentModel(), ws, max_effects=2, nonlinear=False, min_heldout_gain=0.1,
-        min_improved=1.0, unexplained_rule="residual",
-    )  # fmt: skip
+    rule = AcceptanceRule.exact(min_heldout_gain=0.1, min_improved=1.0,
+                                unexplained_rule="residual")  # fmt: skip
+    res = select_effects(ExperimentModel(), ws, max_effects=2, nonlinear=False, rule=rule)
     ev = res.evidence
     names = [e.name for e in res.effects]
     if accepted is None:

@@ -22,8 +22,8 @@ from bikeid.ident.effects.experiment_model import (
     COULOMB_EPS,
     DT,
     ExperimentModel,
-    attach_nonlinear_correction,
     window_errors,
+    with_nonlinear_correction,
 )
 from bikeid.sim.effect_registry import nonlinear_effects
 
@@ -109,7 +109,7 @@ def test_defect_correction_makes_nominal_exact_on_noise_free_plant():
     samples: bound 0.01)."""
     ws = decay_windows([], [1.5], 2, 1e-12, seed=5)
     lin = window_errors(ws, ExperimentModel().simulate(ws))
-    attach_nonlinear_correction(ws)
+    ws = with_nonlinear_correction(ws)
     nl = window_errors(ws, ExperimentModel().simulate(ws))
     assert lin.max() > 0.05 and nl.max() < 0.01
 

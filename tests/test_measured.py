@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gzip
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -120,8 +121,7 @@ def test_simulation_matches_closed_loop_matrix():
 
     m = ExperimentModel(effects={"input_delay": 0.023, "actuator_lag": 0.02, "command_gain": 0.9,
                                  "roll_rate_bias": 0.01, "steer_torque_bias": 0.05})  # fmt: skip
-    w = synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0]
-    w.hist = np.zeros(20)
+    w = replace(synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0], hist=np.zeros(20))
     s = m.simulate([w])[0]
     Phi, G, c, npl = m.closed_loop(float(np.mean(w.v_sensor)))
     x0 = w.state0()
@@ -381,12 +381,10 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     assert len(new) >= len(old) - 1
     pairs = [(o, n) for o in old for n in new if abs(o.start - n.start) <= 3]
     assert len(pairs) == len(old)
-    from bikeid.ident.effects.experiment_model import attach_nonlinear_correction, window_errors
+    from bikeid.ident.effects.experiment_model import window_errors, with_nonlinear_correction
 
     m = ExperimentModel()
-    eo, en = ([p[i] for p in pairs] for i in (0, 1))
-    for ws in (eo, en):
-        attach_nonlinear_correction(ws, m)
+    eo, en = (with_nonlinear_correction([p[i] for p in pairs], m) for i in (0, 1))
     e_old = window_errors(eo, m.simulate(eo)).mean()
     e_new = window_errors(en, m.simulate(en)).mean()
     assert e_new == pytest.approx(e_old, rel=0.05)

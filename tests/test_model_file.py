@@ -13,7 +13,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 
 import numpy as np
 import pytest
@@ -142,7 +141,7 @@ def test_metadata_and_provenance(models, tmp_path):
     for entry, f in zip(mf.provenance, data, strict=True):
         raw = f.read_bytes()
         assert entry == {
-            "path": os.path.relpath(f.resolve()),  # relative to the working directory
+            "path": str(f.resolve()),
             "size": len(raw),
             "sha256": hashlib.sha256(raw).hexdigest(),
         }

@@ -10,6 +10,7 @@ headings.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -155,8 +156,7 @@ def test_simulation_with_relaxation_matches_closed_loop():
     from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
     m = ExperimentModel(effects={"tire_relaxation": 0.2, "actuator_lag": 0.02})
-    w = synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0]
-    w.hist = np.zeros(20)
+    w = replace(synthetic_windows(ExperimentModel(), [3.0], 1, noise=0.0)[0], hist=np.zeros(20))
     s = m.simulate([w])[0]
     Phi, _, c, npl = m.closed_loop(float(np.mean(w.v_sensor)))
     assert npl == 6

@@ -594,8 +594,9 @@ def run_blind_trial(
         :data:`bikeid.ident.effects.selection.LINEAR_PLANT_MARGIN`; 1 takes whichever plant
         fits better, the "auto" of earlier runs).
     **select_kw
-        Further options of :func:`bikeid.ident.effects.selection.select_effects` (e.g.
-        ``min_heldout_gain``, ``unexplained_rule``, ``unexplained_threshold``).
+        Further options of :func:`bikeid.ident.effects.selection.select_effects`, e.g.
+        ``rule`` (an :class:`bikeid.ident.effects.acceptance.AcceptanceRule`; default: the
+        default rule with the stated bicycle taken as exact).
 
     Returns
     -------

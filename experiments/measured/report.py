@@ -8,6 +8,7 @@ speed (fitted to the decays, nominal, augmented), and the Bode response at 4 m/s
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -116,7 +117,7 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     from bikeid.dataset.decays import load_decays
     from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir
     from bikeid.experiments.plots import save
-    from bikeid.ident.effects.experiment_model import ExperimentModel, attach_nonlinear_correction
+    from bikeid.ident.effects.experiment_model import ExperimentModel, with_nonlinear_correction
     from bikeid.ident.effects.pipeline import (
         DEFAULT_PLANT,
         evaluate_json,
@@ -142,14 +143,9 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     firsts = [next(w for w in allw if round(w.speed, 1) == s) for s in speeds]
     fig, axes = plt.subplots(2, len(firsts), figsize=(3.2 * len(firsts), 5), squeeze=False)
     nonlinear = obj.get("plant", DEFAULT_PLANT) == "nonlinear"  # as measured fit
-    for w in firsts:
-        w.correction = None
-    if nonlinear:
-        attach_nonlinear_correction(firsts, nom)
-    s0 = nom.simulate(firsts)
-    if nonlinear:
-        attach_nonlinear_correction(firsts, aug)
-    s1 = aug.simulate(firsts)
+    firsts = [replace(w, correction=None) for w in firsts]
+    s0 = nom.simulate(with_nonlinear_correction(firsts, nom) if nonlinear else firsts)
+    s1 = aug.simulate(with_nonlinear_correction(firsts, aug) if nonlinear else firsts)
     for j, w in enumerate(firsts):
         t = np.arange(w.n) * 0.01
         for i, (c, lab) in enumerate((("phidot", "roll rate [rad/s]"), ("delta", "steer [rad]"))):

@@ -5,6 +5,9 @@ Front door:
 
 - :func:`select_effects`: greedy forward selection of effects from the library, with
   significance and out-of-sample checks, ending in a named set or ``unexplained``.
+- :class:`AcceptanceRule`: when an effect is accepted (significance level and its
+  multiple-comparison correction, fit and held-out gains, the ``unexplained`` rule, the
+  stated bicycle's uncertainty), one value with its defaults stated once.
 - :func:`fit_model`: the whole pipeline on decay windows (nominal calibration, selection,
   joint fit), returning a :class:`FittedModel`-like record that saves to JSON.
 - :func:`evaluate`: before/after errors of a model on held-out decays.
@@ -13,16 +16,18 @@ Front door:
   :mod:`bikeid.sim.effect_registry`).
 
 Modules: :mod:`.experiment_model`, :mod:`.library` (the candidate effects and their fit
-settings), :mod:`.fit` (fitting effect values, standard errors), :mod:`.nominal_uncertainty`
+settings), :mod:`.acceptance` (the acceptance rule and its test), :mod:`.fit` (fitting
+effect values, standard errors), :mod:`.nominal_uncertainty`
 (the stated bicycle's uncertainty and its calibration), :mod:`.selection`,
 :mod:`.diagnostics` (equation error, residual spectra, push asymmetry, ``evaluate``),
 :mod:`.weave` (the measured weave eigenvalue of decays), :mod:`.synthetic_decays` (decays of
 a known model, for tests) and :mod:`.pipeline` (fit, save, load, evaluate).
 """
 
+from bikeid.ident.effects.acceptance import AcceptanceRule
 from bikeid.ident.effects.diagnostics import evaluate
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.pipeline import fit_model
 from bikeid.ident.effects.selection import select_effects
 
-__all__ = ["ExperimentModel", "evaluate", "fit_model", "select_effects"]
+__all__ = ["AcceptanceRule", "ExperimentModel", "evaluate", "fit_model", "select_effects"]

@@ -18,7 +18,7 @@ from scipy import signal
 
 from bikeid.dataset.windows import Window
 from bikeid.ident.effects.experiment_model import COULOMB_EPS, ExperimentModel, window_errors
-from bikeid.ident.effects.fit import attach_correction
+from bikeid.ident.effects.fit import corrected
 from bikeid.ident.effects.weave import (
     decay_eigenvalue,
     median_complex,
@@ -26,7 +26,14 @@ from bikeid.ident.effects.weave import (
     weave_uncertainty,
 )
 
-__all__ = ["equation_error", "err_ranking", "evaluate", "push_asymmetry", "spectrum"]
+__all__ = [
+    "equation_error",
+    "err_ranking",
+    "evaluate",
+    "evaluate_windows",
+    "push_asymmetry",
+    "spectrum",
+]
 
 
 def _deriv(y: np.ndarray, dt: float = 0.01, fc: float = 15.0) -> np.ndarray:
@@ -254,7 +261,7 @@ def evaluate(
     nominal, augmented : ExperimentModel
         The models before and after (e.g. the selected effects added).
     windows : list of Window
-        The decays (left corrected at ``augmented`` when ``nonlinear``).
+        The decays (not changed; :func:`evaluate_windows` also returns them corrected).
     nonlinear : bool, optional
         Simulate both as the nonlinear plant by defect correction.
 
@@ -271,11 +278,43 @@ def evaluate(
         error or weave value comes out non-finite (naming the file and the quantity), so that
         no "nan" is ever reported as a result.
     """
+    return evaluate_windows(nominal, augmented, windows, nonlinear)[0]
+
+
+def evaluate_windows(
+    nominal: ExperimentModel,
+    augmented: ExperimentModel,
+    windows: list[Window],
+    nonlinear: bool = False,
+) -> tuple[dict, list[Window]]:
+    """:func:`evaluate`, and the windows with the defect correction at ``augmented``.
+
+    Parameters
+    ----------
+    nominal, augmented : ExperimentModel
+        The models before and after.
+    windows : list of Window
+        The decays (not changed).
+    nonlinear : bool, optional
+        Simulate both as the nonlinear plant by defect correction.
+
+    Returns
+    -------
+    result : dict
+        As :func:`evaluate`.
+    windows : list of Window
+        The decays corrected at ``augmented`` when ``nonlinear`` (else as given), e.g. for
+        the validation of the augmented model on them.
+
+    Raises
+    ------
+    ValueError
+        As :func:`evaluate`.
+    """
     _check_finite_windows(windows)
-    attach_correction(windows, nominal, nonlinear)
-    s0 = nominal.simulate(windows)
+    s0 = nominal.simulate(corrected(windows, nominal, nonlinear))
     e0 = window_errors(windows, s0)
-    attach_correction(windows, augmented, nonlinear)
+    windows = corrected(windows, augmented, nonlinear)
     s1 = augmented.simulate(windows)
     e1 = window_errors(windows, s1)
 
@@ -332,4 +371,4 @@ def evaluate(
     summ["weave_data_rel_std"] = float(np.mean(unc)) if unc else float("nan")  # files with >= 3
     summ["push_asymmetry_before"] = push_asymmetry(windows, e0.mean(axis=1))
     summ["push_asymmetry_after"] = push_asymmetry(windows, e1.mean(axis=1))
-    return {"files": files, "summary": summ}
+    return {"files": files, "summary": summ}, windows

@@ -84,7 +84,8 @@ __all__ = [
     "COULOMB_EPS",
     "DT",
     "ExperimentModel",
-    "attach_nonlinear_correction",
+    "nonlinear_correction",
+    "with_nonlinear_correction",
     "window_errors",
     "yaw_coupling",
 ]
@@ -636,38 +637,33 @@ class ExperimentModel:
         return out
 
 
-def attach_nonlinear_correction(
-    windows: list[Window], model: ExperimentModel | None = None
-) -> list[Window]:
-    """Make the model nonlinear: store y_nl(m') - y_lin(m') in each window (in place).
+def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -> dict:
+    """The defect correction of one window at ``model``: y_nl(m') - y_lin(m').
 
     m' is the part of ``model`` (default: the nominal) that the nonlinear plant can carry
     (:func:`bikeid.sim.effect_registry.nonlinear_effects`, Coulomb smoothing COULOMB_EPS).
-    For each window the nonlinear Whipple plant
-    (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms, speed held at the true
-    speed) and the linear model are both run with m' from the window's measured initial
-    state, zero command history, and the same sampled loop ``T = K (V - v_s) phidot``
-    (v_s the window's mean sensor speed), or, for a window with ``drive == "logged"``, the
-    same logged command replayed open loop.  Their difference is added to every later
-    :meth:`ExperimentModel.simulate` of the window, so a model m simulates as
-    y_lin(m) + y_nl(m') - y_lin(m'): exactly the nonlinear plant at m = m', and to first
-    order in (m - m') near it (defect correction;
-    :func:`bikeid.ident.effects.selection.select_effects` re-attaches at the current model
-    after each accepted effect).  Needed because the logs' decays reach steer angles of
-    0.3-0.6 rad at 1.5 m/s, where the linear and the nonlinear plant differ by 0.1-0.45 in
-    NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+    The nonlinear Whipple plant (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms,
+    speed held at the true speed) and the linear model are both run with m' from the
+    window's measured initial state, zero command history, and the same sampled loop
+    ``T = K (V - v_s) phidot`` (v_s the window's mean sensor speed), or, for a window with
+    ``drive == "logged"``, the same logged command replayed open loop.
 
     Parameters
     ----------
-    windows : list of Window
-        Corrected in place.
+    window : Window
+        The window (its own correction, if any, is ignored).
     model : ExperimentModel, optional
         The linearization point (default: the nominal model).
 
     Returns
     -------
-    list of Window
-        ``windows``.
+    dict of str to ndarray
+        ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s]: nonlinear minus linear.
+
+    Raises
+    ------
+    ValueError
+        If the nonlinear simulation stops before the window's end (naming the window).
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.sim.integrate import simulate
@@ -675,29 +671,58 @@ def attach_nonlinear_correction(
 
     model = model or ExperimentModel()
     bike = WhippleBicycle(model.plant_params())
-    for w in windows:
-        vs = float(np.mean(w.v_sensor))
-        v = model.true_speed(vs)
-        fx, eq = nonlinear_effects(model.effects, v, DT, COULOMB_EPS)
-        keep = {k: model.e(k) for k in model.effects if EFFECTS[k].layer == "parameter"}
-        lin_m = ExperimentModel(p=model.p, effects={**eq, **keep}, K=model.K, V=model.V)
-        w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
-        sl = lin_m.simulate([w0])[0]
-        if w.drive == "logged":  # replay the logged command, sample by sample
-            cmd = np.asarray(w.T_logged, dtype=float)
+    w = window
+    vs = float(np.mean(w.v_sensor))
+    v = model.true_speed(vs)
+    fx, eq = nonlinear_effects(model.effects, v, DT, COULOMB_EPS)
+    keep = {k: model.e(k) for k in model.effects if EFFECTS[k].layer == "parameter"}
+    lin_m = ExperimentModel(p=model.p, effects={**eq, **keep}, K=model.K, V=model.V)
+    w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
+    sl = lin_m.simulate([w0])[0]
+    if w.drive == "logged":  # replay the logged command, sample by sample
+        cmd = np.asarray(w.T_logged, dtype=float)
 
-            def ctrl(t, y, cmd=cmd):
-                return cmd[min(int(round(t / DT)), cmd.size - 1)]
-        else:
-            ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)
-        tr = simulate(
-            bike, bike.state(v, *map(float, w.state0())), (w.n - 1) * DT, controller=ctrl,
-            mode="held", substeps=4, effects=fx or None,
-        )  # fmt: skip
-        if tr.stop_reason is not None or tr.t.size != w.n:
-            raise ValueError(f"{w.file}@{w.start}: nonlinear simulation failed: {tr.stop_reason}")
-        w.correction = {c: tr.signal(c) - sl[c] for c in ("phi", "delta", "phidot", "deltadot")}
-    return windows
+        def ctrl(t, y, cmd=cmd):
+            return cmd[min(int(round(t / DT)), cmd.size - 1)]
+    else:
+        ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)
+    tr = simulate(
+        bike, bike.state(v, *map(float, w.state0())), (w.n - 1) * DT, controller=ctrl,
+        mode="held", substeps=4, effects=fx or None,
+    )  # fmt: skip
+    if tr.stop_reason is not None or tr.t.size != w.n:
+        raise ValueError(f"{w.file}@{w.start}: nonlinear simulation failed: {tr.stop_reason}")
+    return {c: tr.signal(c) - sl[c] for c in ("phi", "delta", "phidot", "deltadot")}
+
+
+def with_nonlinear_correction(
+    windows: list[Window], model: ExperimentModel | None = None
+) -> list[Window]:
+    """Make the model nonlinear: new windows carrying the defect correction at ``model``.
+
+    Each returned window is its input with ``correction`` = :func:`nonlinear_correction` at
+    ``model`` (the inputs are values and stay as they are).  The correction is added to
+    every later :meth:`ExperimentModel.simulate` of the window, so a model m simulates as
+    y_lin(m) + y_nl(m') - y_lin(m'): exactly the nonlinear plant at m = m', and to first
+    order in (m - m') near it (defect correction;
+    :func:`bikeid.ident.effects.selection.select_effects` takes it again at the current
+    model after each accepted effect).  Needed because the logs' decays reach steer angles of
+    0.3-0.6 rad at 1.5 m/s, where the linear and the nonlinear plant differ by 0.1-0.45 in
+    NRMSE (0.02-0.1 at 2.5-4.5 m/s).
+
+    Parameters
+    ----------
+    windows : list of Window
+        The windows.
+    model : ExperimentModel, optional
+        The linearization point (default: the nominal model).
+
+    Returns
+    -------
+    list of Window
+        New windows, in order, each with its correction at ``model``.
+    """
+    return [replace(w, correction=nonlinear_correction(w, model)) for w in windows]
 
 
 def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:

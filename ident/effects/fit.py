@@ -5,8 +5,9 @@ steer angle of each decay, divided per window and channel by ||y - mean y||, so 
 sum of squares is a sum of NRMSE^2 (dimensionless).  :func:`fit_effects` fits named effects
 by least squares on them (optionally with the weave term of :mod:`bikeid.ident.effects.weave`);
 :func:`joint_fit` adds the nonlinear plant through the defect correction
-(:func:`bikeid.ident.effects.experiment_model.attach_nonlinear_correction`).  Standard errors are
-clustered by window (:func:`effect_std`).
+(:func:`bikeid.ident.effects.experiment_model.with_nonlinear_correction`), returning the windows
+corrected at the fit (windows are values: nothing is changed in place).  Standard errors are
+clustered by window (:func:`effect_std`), with the degrees of freedom of :func:`effect_dof`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from bikeid.dataset.windows import Window
-from bikeid.ident.effects.experiment_model import ExperimentModel, attach_nonlinear_correction
+from bikeid.ident.effects.experiment_model import ExperimentModel, with_nonlinear_correction
 from bikeid.ident.effects.library import LIBRARY, Candidate
 from bikeid.ident.effects.nominal_uncertainty import Calibration
 from bikeid.ident.effects.weave import WeaveTerm
@@ -25,7 +26,8 @@ from bikeid.ident.effects.weave import WeaveTerm
 __all__ = [
     "EffectEstimate",
     "FitResult",
-    "attach_correction",
+    "corrected",
+    "effect_dof",
     "effect_std",
     "fit_effects",
     "joint_fit",
@@ -211,6 +213,11 @@ class EffectEstimate:
         the final model's explained fraction (the same for all of them).
     accepted : bool
         Whether the selection kept the effect.
+    p_value : float
+        Two-sided p-value of ``t`` against Student's t with ``dof`` degrees of freedom
+        (:func:`bikeid.ident.effects.acceptance.t_p_value`; nan when not tested).
+    dof : float
+        Degrees of freedom of the standard error (:func:`effect_dof`).
     """
 
     name: str
@@ -220,6 +227,8 @@ class EffectEstimate:
     t: float
     explained: float = 0.0  # fraction of the nominal cost removed when added
     accepted: bool = False
+    p_value: float = float("nan")
+    dof: float = float("inf")
 
     def as_dict(self) -> dict:
         """The estimate as a JSON-able dict (the keys of the attributes).
@@ -227,11 +236,13 @@ class EffectEstimate:
         Returns
         -------
         dict
-            ``name``, ``value``, ``std``, ``unit``, ``t``, ``explained``, ``accepted``.
+            ``name``, ``value``, ``std``, ``unit``, ``t``, ``explained``, ``accepted``,
+            ``p_value``, ``dof``.
         """
         return {
             "name": self.name, "value": self.value, "std": self.std, "unit": self.unit,
             "t": self.t, "explained": self.explained, "accepted": self.accepted,
+            "p_value": self.p_value, "dof": self.dof,
         }  # fmt: skip
 
 
@@ -254,6 +265,12 @@ class FitResult:
     calibration : Calibration or None
         The nominal parameters' offsets fitted with the effects (``calibration=`` of
         :func:`fit_effects`), None when they were not fitted.
+    windows : list of Window or None
+        The windows the fit ran on, with the defect correction it used (for
+        :func:`joint_fit` with ``nonlinear``: taken at the fit before the last refit).
+    dof : float
+        Degrees of freedom of the standard errors (:func:`effect_dof`; inf when none were
+        computed).
     """
 
     model: ExperimentModel
@@ -261,6 +278,8 @@ class FitResult:
     std: dict[str, float]
     cost: float
     calibration: Calibration | None = None
+    windows: list[Window] | None = None
+    dof: float = float("inf")
 
 
 def fit_effects(
@@ -307,7 +326,7 @@ def fit_effects(
         r = output_residuals(model, windows)
         if extra:
             r = np.concatenate([r, weave.residuals(model)])
-        return FitResult(model, {}, {}, float(r @ r))
+        return FitResult(model, {}, {}, float(r @ r), windows=windows)
     norms = _norms(windows)
     cands = [LIBRARY[n] if n in LIBRARY else Candidate(n, "additive", 0.1) for n in names]
     start = start or {}
@@ -351,12 +370,14 @@ def fit_effects(
     free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)
     is_effect = np.arange(sol.x.size) < k
     std = np.where(is_effect, np.inf, 0.0)
+    dof = float("inf")
     if free.any():
         std[free] = effect_std(sol.jac[:, free], r, sizes, np.where(is_effect, 0.0, 3.0)[free])
+        dof = effect_dof(r, sizes, int(free.sum()))
     vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x[:k], strict=True)}
     stds = {c.name: c.scale * si for c, si in zip(cands, std[:k], strict=True)}
     cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None
-    return FitResult(mk(sol.x), vals, stds, float(r @ r), cal)
+    return FitResult(mk(sol.x), vals, stds, float(r @ r), cal, windows, dof)
 
 
 def joint_fit(
@@ -370,9 +391,10 @@ def joint_fit(
 ) -> FitResult:
     """Fit the named effects jointly on all windows (and ``weave``, see
     :func:`fit_effects`); with ``nonlinear`` the defect
-    correction is attached at the nominal first and re-attached at the fitted model twice
-    (each re-attachment moves the linearization point of the correction to the fit).
-    Leaves the windows corrected at the returned model.
+    correction is taken at ``model`` first (unless a window already carries one) and again
+    at the fitted model twice (each moves the linearization point of the correction to the
+    fit).  The windows given are not changed; the result's ``windows`` are those of the last
+    refit (corrected at the fit before it).
 
     Parameters
     ----------
@@ -384,15 +406,45 @@ def joint_fit(
     Returns
     -------
     FitResult
-        As :func:`fit_effects`, of the last refit.
+        As :func:`fit_effects`, of the last refit, with the windows it ran on.
     """
     if nonlinear and all(w.correction is None for w in windows):
-        attach_correction(windows, model, True)
+        windows = corrected(windows, model, True)
     res = fit_effects(model, windows, names, start, weave, calibration)
     for _ in range(2 if nonlinear and (names or calibration) else 0):
-        attach_correction(windows, res.model, True)
+        windows = corrected(windows, res.model, True)
         res = fit_effects(model, windows, names, res.values, weave, res.calibration)
     return res
+
+
+def effect_dof(r: np.ndarray, sizes: list[int], p: int) -> float:
+    """Degrees of freedom of :func:`effect_std`'s standard errors.
+
+    The cluster-robust sandwich over G clusters has G - 1 degrees of freedom (the
+    small-cluster reference distribution of Cameron, Gelbach & Miller 2008 is Student's t
+    with G - 1); the fallback of fewer than p + 2 clusters has N_eff - p, N_eff the sample
+    count reduced for the residual's lag-one autocorrelation (as :func:`effect_std`).
+
+    Parameters
+    ----------
+    r : (n,) ndarray
+        Residuals at the estimate.
+    sizes : list of int
+        Residual count of each cluster, in order.
+    p : int
+        Number of estimated parameters.
+
+    Returns
+    -------
+    float
+        Degrees of freedom (> 0).
+    """
+    n, g = r.size, len(sizes)
+    if g >= p + 2 and sum(sizes) == n:
+        return float(g - 1)
+    r1 = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if n > 3 else 0.0
+    neff = max(n * (1 - r1) / (1 + r1), p + 1)
+    return float(neff - p)
 
 
 def effect_std(
@@ -448,18 +500,22 @@ def effect_std(
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
-def attach_correction(windows: list[Window], model: ExperimentModel, nonlinear: bool) -> None:
-    """Attach the nonlinear plant's defect correction at ``model`` when ``nonlinear``.
+def corrected(windows: list[Window], model: ExperimentModel, nonlinear: bool) -> list[Window]:
+    """The windows with the nonlinear plant's defect correction at ``model`` when ``nonlinear``.
 
     Parameters
     ----------
     windows : list of Window
-        Corrected in place
-        (:func:`bikeid.ident.effects.experiment_model.attach_nonlinear_correction`).
+        The windows (not changed).
     model : ExperimentModel
         The linearization point of the correction.
     nonlinear : bool
-        False: nothing is done (the linear experiment model stays as it is).
+        False: the windows are returned as they are (in a new list).
+
+    Returns
+    -------
+    list of Window
+        New windows (:func:`bikeid.ident.effects.experiment_model.with_nonlinear_correction`)
+        or the same ones.
     """
-    if nonlinear:
-        attach_nonlinear_correction(windows, model)
+    return with_nonlinear_correction(windows, model) if nonlinear else list(windows)

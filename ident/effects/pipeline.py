@@ -12,17 +12,18 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from bikeid.dataset.sbw_logs import DT
 from bikeid.dataset.windows import Window
-from bikeid.ident.effects.diagnostics import evaluate
+from bikeid.ident.effects.acceptance import AcceptanceRule
+from bikeid.ident.effects.diagnostics import evaluate_windows
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.fit import FitResult, joint_fit
 from bikeid.ident.effects.library import LIBRARY
-from bikeid.ident.effects.nominal_uncertainty import NominalUncertainty
 from bikeid.ident.effects.selection import (
     choose_nominal_plant,
     compare_nominal_plants,
@@ -236,8 +237,7 @@ def fit_model(
     stability: int = 0,
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
-    nominal_uncertainty: NominalUncertainty | str | None = "default",
-    **select_kw,
+    rule: AcceptanceRule | None = None,
 ) -> dict:
     """Select effects on ``windows`` and return the model object ``measured fit`` writes.
 
@@ -262,14 +262,11 @@ def fit_model(
     progress : callable, optional
         ``progress(done, total, label)`` through the subsamples, then the candidate fits
         (:mod:`bikeid.experiments.progress`).
-    nominal_uncertainty : NominalUncertainty, str or None, optional
-        The stated bicycle's uncertainty (:mod:`bikeid.ident.effects.nominal_uncertainty`; text as
-        :meth:`~bikeid.ident.effects.nominal_uncertainty.NominalUncertainty.parse`); default
-        ``"default"``, as ``measured fit``; None takes the bicycle as exact.
-    **select_kw
-        Acceptance options of :func:`bikeid.ident.effects.selection.select_effects`
-        (``min_heldout_gain``, ``min_improved``, ``unexplained_rule``,
-        ``unexplained_threshold``), also used by the stability subsamples.
+    rule : AcceptanceRule, optional
+        The acceptance rule (:class:`bikeid.ident.effects.acceptance.AcceptanceRule`: the
+        significance level, gains, ``unexplained`` rule and the stated bicycle's
+        uncertainty), also used by the stability subsamples; default ``AcceptanceRule()``,
+        as ``measured fit`` (the nominal calibrated within its default uncertainty).
 
     Returns
     -------
@@ -291,9 +288,7 @@ def fit_model(
     """
     if plant not in PLANT_CHOICES:
         raise ValueError(f"plant must be one of {', '.join(PLANT_CHOICES)}, got {plant!r}")
-    if isinstance(nominal_uncertainty, str):
-        nominal_uncertainty = NominalUncertainty.parse(nominal_uncertainty)
-    select_kw["nominal_uncertainty"] = nominal_uncertainty
+    select_kw = {"rule": AcceptanceRule() if rule is None else rule}
     nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
     auto = choose_nominal_plant(nominal_fit)
     choice = {"asked": plant, **auto, "auto": auto["plant"]}
@@ -363,9 +358,9 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         plant = "linear"
         note = ("replayed with the linear plant: open loop, the nonlinear plant falls inside "
                 "some windows (the model's effects are kept)")  # fmt: skip
-    ev = evaluate(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
-    # the validation of `bikeid validate` on the decays (windows left corrected at `aug`)
-    validation = validate_decays(aug, windows)
+    ev, at_aug = evaluate_windows(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
+    # the validation of `bikeid validate` on the decays (corrected at `aug`)
+    validation = validate_decays(aug, at_aug)
     ident = model_obj.get("identification", {})
     std = {e["name"]: e for e in ident.get("effects", [])}
     effects = [
@@ -400,7 +395,7 @@ def fit_effect_set(windows: list[Window], names: list[str], nonlinear: bool = Tr
     Parameters
     ----------
     windows : list of Window
-        The decays; their defect correction is reset and re-attached (left at the fit).
+        The decays (not changed; the fit starts from the nominal's defect correction).
     names : list of str
         Registry names; each starts one library scale from absent (1 from absent for an
         effect outside the library).
@@ -414,8 +409,7 @@ def fit_effect_set(windows: list[Window], names: list[str], nonlinear: bool = Tr
     """
     start = {n: LIBRARY[n].absent + LIBRARY[n].scale if n in LIBRARY else effect(n).absent + 1.0
              for n in names}  # fmt: skip
-    for w in windows:  # start from the nominal's defect correction
-        w.correction = None
+    windows = [replace(w, correction=None) for w in windows]  # from the nominal's correction
     return joint_fit(ExperimentModel(), windows, names, start, nonlinear)
 
 

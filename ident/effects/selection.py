@@ -14,19 +14,24 @@ Workflow (identification.md section 5, approaches A/B/E):
    output error on the decays; the structural ones by a scan of their parameter
    followed by a local refinement.  Candidates are ordered by the fraction of the
    output-error cost they remove.
-3. **Acceptance.**  An effect is accepted only if |value - absent| / std > 3
-   (standard errors clustered by window, :func:`bikeid.ident.effects.fit.effect_std`) *and*
-   it lowers the error on held-out windows (every other window is held out while
-   selecting); among those, a round takes the smallest product of held-out cost ratio and
-   held-out weave-error ratio.  Accepted effects are refitted jointly on all fit windows,
-   and effects with t <= 3 there are pruned.
+3. **Acceptance** (:class:`bikeid.ident.effects.acceptance.AcceptanceRule`).  An effect is
+   accepted only if its t = |value - absent| / std (standard errors clustered by window,
+   :func:`bikeid.ident.effects.fit.effect_std`) is significant against Student's t with
+   G - 1 degrees of freedom at the level alpha / m (Bonferroni over the m candidate tests
+   of all rounds: family-wise error rate alpha) *and* it lowers the error on held-out
+   windows (every other window is held out while selecting); among those, a round takes the
+   smallest product of held-out cost ratio and held-out weave-error ratio.  Accepted effects
+   are refitted jointly on all fit windows, and those no longer significant there are
+   pruned.  Each accepted effect's p-value is reported; with the nominal calibrated on its
+   box's edge, the tests are marked as conditional on that edge.
 4. **"unexplained".**  The measurement-noise floor of each window is estimated from
    second differences (sigma^2 = mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6).  If the
-   accepted effects remove less than ``EXPLAINED_MIN`` = 90 % of the nominal cost
+   accepted effects remove less than the rule's threshold (``EXPLAINED_MIN`` = 90 %; 85 %
+   with the nominal calibrated) of the nominal cost
    above that floor, the verdict is ``unexplained`` (listed first), with the
    accepted effects reported as partial.
-5. **Options and evidence.**  ``min_heldout_gain`` and ``min_improved`` (share of held-out
-   decays improved) make acceptance stricter; ``unexplained_rule`` decides ``unexplained``
+5. **Options and evidence.**  The rule's ``min_heldout_gain`` and ``min_improved`` (share of
+   held-out decays improved) make acceptance stricter; ``unexplained_rule`` decides ``unexplained``
    from the second-difference floor (default), a coloured-noise floor, or the final
    residual's own noise floor.  :attr:`Identification.evidence` records, per accepted effect
    and for ``unexplained``, the numbers behind the verdict (:func:`evidence_lines` prints
@@ -49,11 +54,19 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from bikeid.dataset.windows import Window
+from bikeid.ident.effects.acceptance import (
+    EXPLAINED_MIN,
+    EXPLAINED_MIN_CALIBRATED,
+    RESIDUAL_MAX,
+    AcceptanceRule,
+    t_p_value,
+)
 from bikeid.ident.effects.diagnostics import err_ranking
 from bikeid.ident.effects.experiment_model import ExperimentModel, window_errors
 from bikeid.ident.effects.fit import (
     EffectEstimate,
-    attach_correction,
+    FitResult,
+    corrected,
     fit_effects,
     joint_fit,
     noise_floor,
@@ -65,6 +78,7 @@ from bikeid.ident.effects.nominal_uncertainty import Calibration, NominalUncerta
 from bikeid.ident.effects.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_targets
 
 __all__ = [
+    "AcceptanceRule",
     "EXPLAINED_MIN",
     "EXPLAINED_MIN_CALIBRATED",
     "LINEAR_PLANT_MARGIN",
@@ -72,24 +86,12 @@ __all__ = [
     "choose_nominal_plant",
     "compare_nominal_plants",
     "evidence_lines",
-    "T_MIN",
     "WEAVE_EPS",
     "Identification",
     "select_effects",
     "selection_frequencies",
 ]
 
-EXPLAINED_MIN = 0.9
-#: The "floor" rule's default threshold when the nominal is calibrated within its
-#: uncertainty (``nominal_uncertainty``).  Chosen on the blind trials (seed 3: 48 library, 72
-#: outside-library logs, rescored exactly from the log): 0.85 names the right effect first
-#: in 26 of 48 against 21 at 0.9, with 0 of 72 outside effects misattributed at both (0.8:
-#: 28 and 1 of 72); seed 2 is unchanged by it (15 of 24, 0 of 12); seed 4, out of sample:
-#: 30 of 48 and 1 of 72 against 29 and 0 (docs/measured.md, "The nominal within its
-#: uncertainty").
-EXPLAINED_MIN_CALIBRATED = 0.85
-RESIDUAL_MAX = 2.0  # final cost over the noise part of the final residual ("residual" rule)
-T_MIN = 3.0
 WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter, ~2 %)
 #: Least factor by which the linear nominal plant's cost must undercut the nonlinear one's
 #: before ``plant="auto"`` (the default of ``bikeid measured fit``) fits from the linear
@@ -178,6 +180,7 @@ class Identification:
     rounds: list[dict] = field(default_factory=list)  # forward-selection log, per round
     weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
     evidence: dict = field(default_factory=dict)  # why each name is in the verdict
+    windows: list[Window] = field(default_factory=list)  # with the final defect correction
 
     def as_dict(self) -> dict:
         """The identification's JSON record (``identification`` of a model file).
@@ -204,22 +207,251 @@ class Identification:
         }
 
 
+def _merge(fit_w: list[Window], val_w: list[Window]) -> list[Window]:
+    """The windows in their original order from the fit (even) and held-out (odd) halves."""
+    out: list[Window] = [None] * (len(fit_w) + len(val_w))  # type: ignore[list-item]
+    out[0::2], out[1::2] = fit_w, val_w
+    return out
+
+
+@dataclass
+class _Search:
+    """The state of one forward selection: the halves of the windows (values, each replaced
+    when its defect correction is taken at another model), the current model and
+    calibration, the held-out costs, the weave terms and the log.  Each step of
+    :func:`select_effects` is a method."""
+
+    model: ExperimentModel
+    names: list[str]
+    rule: AcceptanceRule
+    nonlinear: bool
+    fit_w: list[Window]
+    val_w: list[Window]
+    tests: int  # candidate tests of all rounds: the Bonferroni family
+    cur: ExperimentModel = None  # type: ignore[assignment]
+    cal: Calibration | None = None
+    wv_fit: WeaveTerm | None = None
+    wv_all: WeaveTerm | None = None
+    lam_val: list = field(default_factory=list)
+    accepted: list[str] = field(default_factory=list)
+    ranking: list[EffectEstimate] = field(default_factory=list)
+    rounds: list[dict] = field(default_factory=list)
+    ev_effects: dict[str, dict] = field(default_factory=dict)
+    ev_nominal: dict | None = None
+    cur_val: float = 0.0
+    cur_wv: float = 0.0
+    cur_val_w: np.ndarray = None  # type: ignore[assignment]
+
+    @property
+    def windows(self) -> list[Window]:
+        return _merge(self.fit_w, self.val_w)
+
+    def correct_all(self, m: ExperimentModel) -> None:
+        """Both halves with the defect correction at ``m``."""
+        ws = corrected(self.windows, m, self.nonlinear)
+        self.fit_w, self.val_w = ws[0::2], ws[1::2]
+
+    def estimate(self, n: str, res: FitResult, gain: float) -> EffectEstimate:
+        """Candidate ``n``'s estimate in ``res``: t, its p-value on ``res.dof``."""
+        v, sd = res.values[n], res.std[n]
+        t = _t_value(n, v, sd, self.cal)
+        return EffectEstimate(n, v, sd, LIBRARY[n].unit, t, gain, p_value=t_p_value(t, res.dof),
+                              dof=res.dof)  # fmt: skip
+
+    def calibrate_nominal(self, uncertainty: NominalUncertainty) -> None:
+        """The nominal within its uncertainty, fitted on the fit half (no effect yet)."""
+        cal0 = Calibration(uncertainty, self.model.p)
+        c = joint_fit(self.model, self.fit_w, [], None, self.nonlinear, self.wv_fit, cal0)
+        self.cur, self.cal, self.fit_w = c.model, c.calibration, c.windows
+        held = []
+        for m in (self.model, self.cur):  # held-out cost of the stated and calibrated nominal
+            self.val_w = corrected(self.val_w, m, self.nonlinear)
+            held.append(fit_effects(m, self.val_w, []).cost)
+        self.ev_nominal = {"fit_half": self.cal.as_dict(), "heldout_cost_stated": held[0],
+                           "heldout_cost_calibrated": held[1],
+                           "heldout_gain": 1 - held[1] / max(held[0], 1e-300)}  # fmt: skip
+        self.fit_w = corrected(self.fit_w, self.cur, self.nonlinear)  # held-out: already at cur
+        if self.wv_fit:
+            self.wv_fit = self.wv_fit.at(self.cur, self.fit_w)
+
+    def heldout_state(self) -> None:
+        """The held-out cost (total and per window) and weave error of the current model."""
+        sims = self.cur.simulate(self.val_w)
+        self.cur_val_w = np.sum(window_errors(self.val_w, sims) ** 2, axis=1)
+        self.cur_val = float(np.sum(self.cur_val_w))
+        self.cur_wv = weave_error(self.val_w, sims, self.lam_val)
+
+    def fit_candidates(self, base_cost: float, progress, counter: list[int], _round: int):
+        """Every remaining candidate fitted on the fit half with the accepted ones:
+        (gain, name, fit, estimate), by gain."""
+        trials = []
+        for n in self.names:
+            if n in self.accepted:
+                continue
+            if progress:
+                progress(counter[0], counter[1], f"round {_round + 1}: {n}")
+                counter[0] += 1
+            cand = LIBRARY[n]
+            start = {}
+            if cand.kind == "structural":
+                start[n] = _scan_start(self.cur, self.fit_w, cand, self.accepted, {})
+            res = fit_effects(self.cur, self.fit_w, self.accepted + [n], start, self.wv_fit)
+            gain = (base_cost - res.cost) / max(base_cost, 1e-300)
+            trials.append((gain, n, res, self.estimate(n, res, gain)))
+        trials.sort(key=lambda z: -z[0])
+        return trials
+
+    def rerank_leaders(self, trials: list, base_cost: float) -> list:
+        """Nonlinear plant: the three leaders refitted with the correction taken at each."""
+        top = []
+        for _gain, n, res, _est in trials[:3]:
+            self.correct_all(res.model)
+            wv_n = self.wv_fit.at(res.model, self.fit_w) if self.wv_fit else None
+            res = fit_effects(self.cur, self.fit_w, self.accepted + [n], res.values, wv_n)
+            gain = (base_cost - res.cost) / max(base_cost, 1e-300)
+            top.append((gain, n, res, self.estimate(n, res, gain)))
+        return sorted(top, key=lambda z: -z[0]) + trials[3:]
+
+    def heldout_checks(self, trials: list) -> tuple[list, list[dict]]:
+        """The candidates that pass the significance test, the fit gain and the held-out
+        checks, with their selection score; and the round's log rows."""
+        rule, level = self.rule, self.rule.level(self.tests)
+        passing, log = [], []
+        for gain, n, res, est in trials:
+            row = {"name": n, "value": est.value, "t": est.t, "dof": est.dof,
+                   "p_value": est.p_value, "fit_gain": gain}  # fmt: skip
+            log.append(row)
+            if not est.p_value <= level or gain < rule.min_gain:
+                continue
+            self.val_w = corrected(self.val_w, res.model, self.nonlinear)  # held-out only
+            sims = res.model.simulate(self.val_w)
+            val_wn = np.sum(window_errors(self.val_w, sims) ** 2, axis=1)
+            val = float(np.sum(val_wn))
+            row["heldout_cost_ratio"] = val / self.cur_val
+            row["heldout_improved"] = int(np.sum(val_wn < self.cur_val_w))
+            if val >= self.cur_val * (1 - rule.heldout_gain):
+                continue
+            if row["heldout_improved"] < rule.min_improved * len(self.val_w) - 1e-9:
+                continue
+            wv = weave_error(self.val_w, sims, self.lam_val)
+            score = val / self.cur_val * (wv + WEAVE_EPS) / (self.cur_wv + WEAVE_EPS)
+            row.update(heldout_weave_error=wv, heldout_weave_before=self.cur_wv, score=score)
+            passing.append((score, n, res, val, wv, val_wn, gain, est))
+        return passing, log
+
+    def accept(self, passing: list, _round: int) -> None:
+        """Take the passing candidate of least score; with a calibration, refit the offsets
+        with it."""
+        _score, n, res, val, wv, val_wn, gain, est = min(passing, key=lambda z: z[0])
+        self.ev_effects[n] = {
+            "round": _round + 1, "fit_gain": gain, "heldout_cost_ratio": val / self.cur_val,
+            "heldout_gain": 1 - val / self.cur_val,
+            "heldout_windows_improved": int(np.sum(val_wn < self.cur_val_w)),
+            "heldout_windows": len(self.val_w), "heldout_weave_error_before": self.cur_wv,
+            "heldout_weave_error_after": wv, "t_round": est.t, "dof_round": est.dof,
+            "p_value_round": est.p_value,
+        }  # fmt: skip
+        self.cur_val, self.cur_wv, self.cur_val_w = val, wv, val_wn
+        self.accepted.append(n)
+        self.cur = res.model
+        if self.cal is not None:  # the offsets move with the accepted effects
+            res = fit_effects(self.cur, self.fit_w, self.accepted, res.values, self.wv_fit,
+                              self.cal)  # fmt: skip
+            self.cur, self.cal = res.model, res.calibration
+            self.val_w = corrected(self.val_w, self.cur, self.nonlinear)
+            self.heldout_state()
+
+    def run_round(self, _round: int, progress, counter: list[int]) -> bool:
+        """One round of forward selection; True when an effect was accepted."""
+        base_cost = fit_effects(self.cur, self.fit_w, [], weave=self.wv_fit).cost
+        trials = self.fit_candidates(base_cost, progress, counter, _round)
+        if self.nonlinear:  # re-rank the leaders with the correction taken at each of them
+            trials = self.rerank_leaders(trials, base_cost)
+        if _round == 0:
+            self.ranking = [z[3] for z in trials]
+        passing, log = self.heldout_checks(trials)
+        if passing:
+            self.accept(passing, _round)
+        self.rounds.append({"accepted": self.accepted[-1] if passing else None,
+                            "candidates": log})  # fmt: skip
+        self.correct_all(self.cur)
+        if passing and self.wv_fit:  # the estimator offsets follow the current model
+            self.wv_fit = self.wv_fit.at(self.cur, self.fit_w)
+        return bool(passing)
+
+    def joint_fit_and_prune(self) -> tuple[FitResult, list[Window]]:
+        """The accepted effects refitted jointly on all windows, then pruned backwards of
+        any whose joint-fit p-value is above the test's level."""
+        windows = self.windows
+        if self.wv_all:
+            self.wv_all = self.wv_all.at(self.cur, windows)
+        accepted = self.accepted
+        final = joint_fit(self.model, windows, accepted, {n: self.cur.e(n) for n in accepted},
+                          self.nonlinear, self.wv_all, self.cal)  # fmt: skip
+        windows = final.windows
+        level = self.rule.level(self.tests)
+
+        def pval(n):
+            v, sd, cal = final.values[n], final.std[n], final.calibration
+            return t_p_value(_t_value(n, v, sd, cal), final.dof)
+
+        while accepted and max(pval(n) for n in accepted) > level:  # backward pruning
+            accepted.remove(max(accepted, key=pval))
+            final = fit_effects(self.model, windows, accepted, final.values, self.wv_all,
+                                final.calibration)  # fmt: skip
+            windows = corrected(windows, final.model, self.nonlinear)
+        return final, windows
+
+    def conditional_on(self, cal: Calibration | None) -> list[str]:
+        """The calibrated offsets held on their box's edge (the tests are conditional on)."""
+        return list(cal.as_dict()["at_edge"]) if cal is not None else []
+
+
+def _unexplained(rule: AcceptanceRule, cost0: float, cost_sig: float, floor: float,
+                 windows: list[Window], r_sig: np.ndarray) -> dict:  # fmt: skip
+    """The ``unexplained`` test of the final model (module docstring, step 4)."""
+    explained = (cost0 - cost_sig) / max(cost0 - floor, 1e-12 * cost0)
+    floor_c = noise_floor(windows, "coloured")
+    explained_c = (cost0 - cost_sig) / max(cost0 - floor_c, 1e-12 * cost0)
+    floor_r = residual_noise_floor(r_sig, [w.n for w in windows for _ in range(2)])
+    left_r = cost_sig / max(floor_r, 1e-300)
+    thr = rule.threshold
+    if rule.unexplained_rule == "residual":
+        structured = left_r > thr
+    else:
+        structured = (explained if rule.unexplained_rule == "floor" else explained_c) < thr
+    return {
+        "rule": rule.unexplained_rule, "threshold": thr, "structured": bool(structured),
+        "cost_nominal": cost0, "cost_final": cost_sig,
+        "floor_second_difference": floor, "floor_coloured": floor_c,
+        "floor_residual": floor_r, "explained": float(explained),
+        "explained_coloured": float(explained_c), "final_over_residual_floor": left_r,
+    }  # fmt: skip
+
+
 def select_effects(
     model: ExperimentModel,
     windows: list[Window],
     candidates: list[str] | None = None,
     max_effects: int = 3,
-    min_gain: float = 0.02,
     nonlinear: bool = False,
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
-    min_heldout_gain: float | None = None,
-    min_improved: float = 0.0,
-    unexplained_rule: str = "floor",
-    unexplained_threshold: float | None = None,
-    nominal_uncertainty: NominalUncertainty | None = None,
+    rule: AcceptanceRule | None = None,
 ) -> Identification:
     """Greedy forward selection of library effects by output error (module docstring).
+
+    The steps, each a method of the search state: the nominal calibrated within its
+    uncertainty (with ``rule.nominal_uncertainty``), then per round every candidate fitted on
+    the fit half, the leaders re-ranked (nonlinear plant), the significance test and the
+    held-out checks, the acceptance of the least score; then the joint fit on all windows with
+    backward pruning, the ``unexplained`` test and the evidence.
+
+    Significance (:mod:`bikeid.ident.effects.acceptance`): an effect's t (window-clustered
+    standard error) is referred to Student's t with the fit's degrees of freedom (G - 1 for
+    G clusters), and its p-value must be at most ``rule.alpha / m`` (Bonferroni over the m
+    candidate tests of all ``max_effects`` rounds) in its round and again after the joint fit
+    (else it is pruned).  The p-values are reported in the evidence.
 
     ``weave_weight``: every fit also matches the measured weave eigenvalue of each speed
     with >= 3 decays (:class:`WeaveTerm`, targets from the windows being fitted, offsets
@@ -228,13 +460,14 @@ def select_effects(
     the decay signals (w^2 chi2_weave = output-error cost); 0 fits the decay signals only.
 
     ``nonlinear``: the model is the nonlinear plant through the per-window defect
-    correction (:func:`ident.effects.experiment_model.attach_nonlinear_correction`), re-attached
-    at the current model after each accepted effect, at each of the three leading
-    candidates of a round before they are re-ranked (first-order corrections favoured a
-    fractional input delay over a true actuator lag), and twice in the final joint fit; the
-    windows are left corrected at the returned model.  After the joint fit, effects with
-    t <= 3 are dropped (backward pruning) and the rest are listed by their contribution
-    (increase of the cost when the effect alone is set back to absent).
+    correction (:func:`bikeid.ident.effects.experiment_model.with_nonlinear_correction`),
+    taken again at the current model after each accepted effect, at each of the three
+    leading candidates of a round before they are re-ranked (first-order corrections favoured
+    a fractional input delay over a true actuator lag), and twice in the final joint fit.
+    The windows given are values and are not changed; the returned identification's
+    ``windows`` carry the correction of the final fit.  After the joint fit, effects whose
+    p-value is above the level are dropped (backward pruning) and the rest are listed by
+    their contribution (increase of the cost when the effect alone is set back to absent).
 
     Parameters
     ----------
@@ -246,8 +479,6 @@ def select_effects(
         Library names to try (default: all of :data:`bikeid.ident.effects.library.LIBRARY`).
     max_effects : int, optional
         At most this many rounds.
-    min_gain : float, optional
-        Least fractional cost reduction (fit and held-out) for acceptance.
     nonlinear : bool, optional
         Nonlinear plant by defect correction.
     weave_weight : float or "auto", optional
@@ -255,75 +486,39 @@ def select_effects(
     progress : callable, optional
         ``progress(done, total, label)`` before each candidate fit; ``total`` counts the
         candidate fits of ``max_effects`` full rounds (an early stop jumps to the end).
-    min_heldout_gain : float, optional
-        Least fractional reduction of the held-out cost for acceptance (default
-        ``min_gain``); a larger value asks each effect to beat what corrections of the
-        nominal parameters within their uncertainty gain on held-out decays.
-    min_improved : float, optional
-        Least fraction of the held-out decays whose own cost the effect must lower (a paired
-        sign criterion; 1.0 = every one, a one-sided sign-test p of 2^-n for n held-out
-        decays); 0 (default) asks only for the summed held-out cost.
-    unexplained_rule : str, optional
-        How ``"unexplained"`` is decided: ``"floor"`` (default): explained fraction of the
-        cost above the second-difference noise floor below the threshold (default
-        :data:`EXPLAINED_MIN`, :data:`EXPLAINED_MIN_CALIBRATED` with ``nominal_uncertainty``);
-        ``"coloured"``: the same with the coloured-noise floor
-        (:func:`bikeid.ident.effects.fit.noise_floor` ``method="coloured"``);
-        ``"residual"``: final cost over the noise part of the final residual
-        (:func:`bikeid.ident.effects.fit.residual_noise_floor`) above the threshold
-        (default :data:`RESIDUAL_MAX`).
-    unexplained_threshold : float, optional
-        The rule's threshold (dimensionless).
-    nominal_uncertainty : NominalUncertainty, optional
-        The stated parameters' uncertainty (:mod:`bikeid.ident.effects.nominal_uncertainty`).  When
-        given, the nominal is first calibrated within it on the fit half (bounded least
-        squares of the body inertias and the trail, weave term included), every accepted
-        effect is refitted with the offsets, and the final joint fit moves them too; a
-        library parameter correction along a calibrated direction is tested by its t
-        *beyond* the band (a parameter off by its uncertainty is not an effect).  None
-        (default): the stated parameters are taken as exact.
+    rule : AcceptanceRule, optional
+        When an effect is accepted and when the verdict is ``unexplained``
+        (:class:`bikeid.ident.effects.acceptance.AcceptanceRule`: the significance level
+        and correction, the fit and held-out gains, the share of held-out decays improved,
+        the ``unexplained`` rule and threshold, the nominal uncertainty).  Default:
+        :meth:`AcceptanceRule.exact` (the default rule with the stated bicycle taken as
+        exact); ``bikeid measured fit`` passes :class:`AcceptanceRule` built from its
+        options (by default with the nominal uncertainty).
 
     Returns
     -------
     Identification
-        The final model, accepted effects with values [registry units], standard errors and
-        t, the first round's ranking, the verdict, costs (dimensionless) and the round log.
+        The final model, accepted effects with values [registry units], standard errors,
+        t and p-values, the first round's ranking, the verdict, costs (dimensionless), the
+        round log and the final windows.
 
     Raises
     ------
     ValueError
-        If a candidate is not in the library, fewer than 2 windows are given,
-        ``weave_weight`` is negative or not finite, ``unexplained_rule`` is unknown,
-        ``min_heldout_gain`` is outside [0, 1), ``min_improved`` outside [0, 1] or
-        ``unexplained_threshold`` not a finite number > 0.
+        If a candidate is not in the library, fewer than 2 windows are given or
+        ``weave_weight`` is negative or not finite.
     """
-    if unexplained_rule not in ("floor", "coloured", "residual"):
-        raise ValueError(f"unknown unexplained_rule {unexplained_rule!r}; use 'floor', "
-                         "'coloured' or 'residual'")  # fmt: skip
-    if min_heldout_gain is not None and not 0.0 <= min_heldout_gain < 1.0:
-        raise ValueError(f"min_heldout_gain must be in [0, 1) (a fraction of the held-out "
-                         f"cost), got {min_heldout_gain!r}")  # fmt: skip
-    if not 0.0 <= min_improved <= 1.0:
-        raise ValueError(f"min_improved must be in [0, 1] (a share of the held-out decays), "
-                         f"got {min_improved!r}")  # fmt: skip
-    if unexplained_threshold is not None and not (
-        math.isfinite(unexplained_threshold) and unexplained_threshold > 0
-    ):
-        raise ValueError(f"unexplained_threshold must be a finite number > 0, got "
-                         f"{unexplained_threshold!r}")  # fmt: skip
-    min_val_gain = min_gain if min_heldout_gain is None else float(min_heldout_gain)
+    rule = AcceptanceRule.exact() if rule is None else rule
     names = list(candidates or LIBRARY)
     bad = [n for n in names if n not in LIBRARY]
     if bad:
         raise ValueError(f"unknown candidate effects {bad}; the library has {sorted(LIBRARY)}")
     if len(windows) < 2:
         raise ValueError("identification needs at least 2 windows (one is held out)")
-    fit_w, val_w = windows[0::2], windows[1::2]
-    attach_correction(windows, model, nonlinear)
+    windows = corrected(windows, model, nonlinear)
     cost0 = cost_stated = fit_effects(model, windows, []).cost  # decay signals ("explained")
     floor = noise_floor(windows)
     lam_all = [decay_eigenvalue(w) for w in windows]  # measured weave of each decay
-    lam_val = lam_all[1::2]
     unit = WeaveTerm(1.0, weave_targets(windows, lam_all))
     if weave_weight == "auto":
         unit = unit.at(model, windows) if unit.targets else unit
@@ -332,183 +527,86 @@ def select_effects(
     weave_weight = float(weave_weight)
     if not (weave_weight >= 0 and math.isfinite(weave_weight)):
         raise ValueError(f"weave_weight must be 'auto' or a finite number >= 0, got {weave_weight}")
-    wv_fit = wv_all = None
+    tests = sum(max(len(names) - r, 0) for r in range(max_effects))
+    st = _Search(model, names, rule, nonlinear, windows[0::2], windows[1::2], tests, cur=model,
+                 lam_val=lam_all[1::2])  # fmt: skip
     if weave_weight > 0:
-        wv_fit = WeaveTerm(weave_weight, weave_targets(fit_w, lam_all[0::2])).at(model, fit_w)
-        wv_all = replace(unit, weight=weave_weight)  # offsets taken at the final model below
-    accepted: list[str] = []
-    cur, cal, ev_nominal = model, None, None
-    if nominal_uncertainty is not None:  # the nominal within its uncertainty, on the fit half
-        cal0 = Calibration(nominal_uncertainty, model.p)
-        c = joint_fit(model, fit_w, [], None, nonlinear, wv_fit, cal0)
-        cur, cal = c.model, c.calibration
-        held = []
-        for m in (model, cur):  # held-out cost of the stated and the calibrated nominal
-            attach_correction(val_w, m, nonlinear)
-            held.append(fit_effects(m, val_w, []).cost)
-        ev_nominal = {"fit_half": cal.as_dict(), "heldout_cost_stated": held[0],
-                      "heldout_cost_calibrated": held[1],
-                      "heldout_gain": 1 - held[1] / max(held[0], 1e-300)}  # fmt: skip
-        attach_correction(fit_w, cur, nonlinear)  # the held-out half is already at cur
-        cost0 = fit_effects(cur, windows, []).cost
-        if wv_fit:
-            wv_fit = wv_fit.at(cur, fit_w)
-    cur_val = fit_effects(cur, val_w, []).cost
-    cur_val_w = np.sum(window_errors(val_w, cur.simulate(val_w)) ** 2, axis=1)
-    ev_effects: dict[str, dict] = {}
-    cur_wv = weave_error(val_w, cur.simulate(val_w), lam_val)
-    ranking: list[EffectEstimate] = []
-    rounds: list[dict] = []
-    steps, done = sum(max(len(names) - r, 0) for r in range(max_effects)), 0
+        st.wv_fit = WeaveTerm(weave_weight, weave_targets(st.fit_w, lam_all[0::2])).at(
+            model, st.fit_w
+        )
+        st.wv_all = replace(unit, weight=weave_weight)  # offsets taken at the final model
+    if rule.nominal_uncertainty is not None:  # the nominal within its uncertainty, fit half
+        st.calibrate_nominal(rule.nominal_uncertainty)
+        cost0 = fit_effects(st.cur, st.windows, []).cost
+    st.heldout_state()
+    st.cur_val = fit_effects(st.cur, st.val_w, []).cost  # the same sum, as it was computed
+    counter = [0, tests]
     for _round in range(max_effects):
-        trials = []
-        base_cost = fit_effects(cur, fit_w, [], weave=wv_fit).cost
-        for n in names:
-            if n in accepted:
-                continue
-            if progress:
-                progress(done, steps, f"round {_round + 1}: {n}")
-                done += 1
-            cand = LIBRARY[n]
-            start = {}
-            if cand.kind == "structural":
-                start[n] = _scan_start(cur, fit_w, cand, accepted, {})
-            res = fit_effects(cur, fit_w, accepted + [n], start, wv_fit)
-            v, sd = res.values[n], res.std[n]
-            t = _t_value(n, v, sd, cal)
-            gain = (base_cost - res.cost) / max(base_cost, 1e-300)
-            trials.append((gain, n, res, EffectEstimate(n, v, sd, cand.unit, t, gain)))
-        trials.sort(key=lambda z: -z[0])
-        if nonlinear:  # re-rank the leaders with the correction re-attached at each of them
-            top = []
-            for _gain, n, res, _est in trials[:3]:
-                attach_correction(windows, res.model, True)
-                wv_n = wv_fit.at(res.model, fit_w) if wv_fit else None
-                res = fit_effects(cur, fit_w, accepted + [n], res.values, wv_n)
-                v, sd = res.values[n], res.std[n]
-                t = _t_value(n, v, sd, cal)
-                gain = (base_cost - res.cost) / max(base_cost, 1e-300)
-                top.append((gain, n, res, EffectEstimate(n, v, sd, LIBRARY[n].unit, t, gain)))
-            trials = sorted(top, key=lambda z: -z[0]) + trials[3:]
-        if _round == 0:
-            ranking = [z[3] for z in trials]
-        passing = []  # (score, name, result, validation cost, validation weave error)
-        log = []
-        for gain, n, res, est in trials:
-            row = {"name": n, "value": est.value, "t": est.t, "fit_gain": gain}
-            log.append(row)
-            if est.t <= T_MIN or gain < min_gain:
-                continue
-            attach_correction(
-                val_w, res.model, nonlinear
-            )  # only the held-out half is simulated here
-            sims = res.model.simulate(val_w)
-            val_wn = np.sum(window_errors(val_w, sims) ** 2, axis=1)
-            val = float(np.sum(val_wn))
-            row["heldout_cost_ratio"] = val / cur_val
-            row["heldout_improved"] = int(np.sum(val_wn < cur_val_w))
-            if val >= cur_val * (1 - min_val_gain):
-                continue
-            if row["heldout_improved"] < min_improved * len(val_w) - 1e-9:
-                continue
-            wv = weave_error(val_w, sims, lam_val)
-            score = val / cur_val * (wv + WEAVE_EPS) / (cur_wv + WEAVE_EPS)
-            row.update(heldout_weave_error=wv, heldout_weave_before=cur_wv, score=score)
-            passing.append((score, n, res, val, wv, val_wn, gain))
-        if passing:
-            _score, n, res, val, wv, val_wn, gain = min(passing, key=lambda z: z[0])
-            ev_effects[n] = {
-                "round": _round + 1, "fit_gain": gain, "heldout_cost_ratio": val / cur_val,
-                "heldout_gain": 1 - val / cur_val,
-                "heldout_windows_improved": int(np.sum(val_wn < cur_val_w)),
-                "heldout_windows": len(val_w), "heldout_weave_error_before": cur_wv,
-                "heldout_weave_error_after": wv,
-            }  # fmt: skip
-            cur_val, cur_wv, cur_val_w = val, wv, val_wn
-            accepted.append(n)
-            cur = res.model
-            if cal is not None:  # the offsets move with the accepted effects
-                res = fit_effects(cur, fit_w, accepted, res.values, wv_fit, cal)
-                cur, cal = res.model, res.calibration
-                attach_correction(val_w, cur, nonlinear)
-                sims = cur.simulate(val_w)
-                cur_val_w = np.sum(window_errors(val_w, sims) ** 2, axis=1)
-                cur_val, cur_wv = float(np.sum(cur_val_w)), weave_error(val_w, sims, lam_val)
-        rounds.append({"accepted": n if passing else None, "candidates": log})
-        attach_correction(windows, cur, nonlinear)
-        if not passing:
+        if not st.run_round(_round, progress, counter):
             break
-        if wv_fit:  # the estimator offsets follow the current model, like the correction
-            wv_fit = wv_fit.at(cur, fit_w)
     if progress:
-        progress(steps, steps, "joint fit")
-    if wv_all:
-        wv_all = wv_all.at(cur, windows)
-    final = joint_fit(
-        model, windows, accepted, {n: cur.e(n) for n in accepted}, nonlinear, wv_all, cal
-    )
-
-    def tval(n):
-        return _t_value(n, final.values[n], final.std[n], final.calibration)
-
-    while accepted and min(tval(n) for n in accepted) <= T_MIN:  # backward pruning
-        accepted.remove(min(accepted, key=tval))
-        final = fit_effects(model, windows, accepted, final.values, wv_all, final.calibration)
-        attach_correction(windows, final.model, nonlinear)
+        progress(tests, tests, "joint fit")
+    final, windows = st.joint_fit_and_prune()
+    accepted = st.accepted
     contrib = {}  # increase of the fitted cost (signals + weave term) without the effect
     for n in accepted:
         without = final.model.with_effects(**{n: LIBRARY[n].absent})
-        contrib[n] = fit_effects(without, windows, [], weave=wv_all).cost - final.cost
+        contrib[n] = fit_effects(without, windows, [], weave=st.wv_all).cost - final.cost
     accepted.sort(key=lambda n: -contrib[n])
     r_sig = output_residuals(final.model, windows)
     cost_sig = float(r_sig @ r_sig)  # decay signals only, as cost0 and the floor
+    unexpl = _unexplained(rule, cost0, cost_sig, floor, windows, r_sig)
+    edge = st.conditional_on(final.calibration)
     effects = []
     for n in accepted:
-        cand = LIBRARY[n]
         v, sd = final.values[n], final.std[n]
-        effects.append(EffectEstimate(n, v, sd, cand.unit, tval(n), accepted=True))
-    explained = (cost0 - cost_sig) / max(cost0 - floor, 1e-12 * cost0)
-    floor_c = noise_floor(windows, "coloured")
-    explained_c = (cost0 - cost_sig) / max(cost0 - floor_c, 1e-12 * cost0)
-    floor_r = residual_noise_floor(r_sig, [w.n for w in windows for _ in range(2)])
-    left_r = cost_sig / max(floor_r, 1e-300)
-    if unexplained_rule == "residual":
-        thr = RESIDUAL_MAX if unexplained_threshold is None else float(unexplained_threshold)
-        structured = left_r > thr
-    else:
-        default = EXPLAINED_MIN if nominal_uncertainty is None else EXPLAINED_MIN_CALIBRATED
-        thr = default if unexplained_threshold is None else float(unexplained_threshold)
-        structured = (explained if unexplained_rule == "floor" else explained_c) < thr
+        t = _t_value(n, v, sd, final.calibration)
+        effects.append(EffectEstimate(n, v, sd, LIBRARY[n].unit, t, unexpl["explained"],
+                                      accepted=True, p_value=t_p_value(t, final.dof),
+                                      dof=final.dof))  # fmt: skip
     verdict = [e.name for e in effects]
-    if structured or not effects:
+    if unexpl.pop("structured") or not effects:
         verdict = ["unexplained"] + verdict
+    unexpl["unexplained"] = verdict[0] == "unexplained"
     for e in effects:
-        ev_effects[e.name]["t_joint"] = e.t
+        st.ev_effects[e.name].update(
+            t_joint=e.t, dof_joint=e.dof, p_value=e.p_value,
+            p_adjusted=rule.adjusted(e.p_value, tests), conditional_on=edge,
+        )  # fmt: skip
     evidence = {
-        "effects": {e.name: ev_effects[e.name] for e in effects},
-        "unexplained": {
-            "rule": unexplained_rule, "threshold": thr, "unexplained": verdict[0] == "unexplained",
-            "cost_nominal": cost0, "cost_final": cost_sig,
-            "floor_second_difference": floor, "floor_coloured": floor_c,
-            "floor_residual": floor_r, "explained": float(explained),
-            "explained_coloured": float(explained_c), "final_over_residual_floor": left_r,
-        },
-        "min_heldout_gain": min_val_gain,
-        "min_improved": min_improved,
-    }  # fmt: skip
+        "effects": {e.name: st.ev_effects[e.name] for e in effects},
+        "unexplained": unexpl,
+        "min_heldout_gain": rule.heldout_gain,
+        "min_improved": rule.min_improved,
+        "test": {"alpha": rule.alpha, "correction": rule.correction, "tests": tests,
+                 "level": rule.level(tests), "reference": "Student t, G - 1 degrees of "
+                 "freedom for G window clusters (weave term one more)",
+                 "conditional_on_edge_offsets": edge},  # fmt: skip
+        "rule": rule.as_dict(),
+    }
     if final.calibration is not None:
         evidence["nominal_calibration"] = {
-            **ev_nominal, **final.calibration.as_dict(), "cost_stated": cost_stated,
+            **st.ev_nominal, **final.calibration.as_dict(), "cost_stated": cost_stated,
             "cost_calibrated": cost0,
         }  # fmt: skip
-    for e in effects:
-        e.explained = float(explained)
     return Identification(
-        model=final.model, effects=effects, ranking=ranking, verdict=verdict,
-        cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor, explained=float(explained),
-        eq_ranking=err_ranking(model, windows), rounds=rounds, weave_weight=weave_weight,
-        evidence=evidence,
+        model=final.model, effects=effects, ranking=st.ranking, verdict=verdict,
+        cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor,
+        explained=unexpl["explained"], eq_ranking=err_ranking(model, windows), rounds=st.rounds,
+        weave_weight=weave_weight, evidence=evidence, windows=windows,
     )  # fmt: skip
+
+
+def _p_text(e: dict, test: dict | None) -> str:
+    """The p-value part of an effect's evidence line (empty for records without one)."""
+    if not test or "p_value" not in e:
+        return ""
+    out = (f" ({e['dof_joint']:g} degrees of freedom), p = {e['p_value']:.2g}, "
+           f"{test['correction']}-adjusted {e['p_adjusted']:.2g} over {test['tests']} tests "
+           f"(level {test['alpha']:g})")  # fmt: skip
+    if e.get("conditional_on"):
+        out += f"; conditional on the calibration's edge offsets {', '.join(e['conditional_on'])}"
+    return out
 
 
 def evidence_lines(evidence: dict) -> list[str]:
@@ -524,7 +622,9 @@ def evidence_lines(evidence: dict) -> list[str]:
     list of str
         With a nominal calibration, first a line with its offsets, which sit on the band's
         edge, and its cost and held-out gain; one line per accepted effect (held-out cost
-        ratio and gain, held-out windows improved, fit gain, t after the joint fit), then
+        ratio and gain, held-out windows improved, fit gain, t after the joint fit, its
+        degrees of freedom, p-value, adjusted p-value and any edge offsets it is conditional
+        on), then
         one for ``unexplained`` (the final
         cost against the noise floors, the rule, its threshold and its answer).
     """
@@ -548,6 +648,7 @@ def evidence_lines(evidence: dict) -> list[str]:
             f"%), {e['heldout_windows_improved']}/{e['heldout_windows']} held-out decays "
             f"improved, fit gain {100 * e['fit_gain']:.1f} % (round {e['round']}), t "
             f"{e.get('t_joint', float('nan')):.1f} after the joint fit"
+            + _p_text(e, evidence.get("test"))
         )
     u = evidence.get("unexplained")
     if u:
@@ -592,8 +693,7 @@ def compare_nominal_plants(model: ExperimentModel, windows: list[Window]) -> dic
     """
     out: dict = {}
     for name, nonlinear in (("linear", False), ("nonlinear", True)):
-        ws = [replace(w, correction=None) for w in windows]
-        attach_correction(ws, model, nonlinear)
+        ws = corrected([replace(w, correction=None) for w in windows], model, nonlinear)
         out[name] = float(np.sum(window_errors(ws, model.simulate(ws)) ** 2))
     out["preferred"] = "nonlinear" if out["nonlinear"] <= out["linear"] else "linear"
     out["ratio"] = out["nonlinear"] / max(out["linear"], 1e-300)

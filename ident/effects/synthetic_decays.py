@@ -8,6 +8,8 @@ hidden effect are :mod:`bikeid.experiments.measured.effect_trials`.)
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
@@ -55,16 +57,15 @@ def synthetic_windows(
             z = np.zeros(100)
             w = Window("synthetic", float(v), 0, z + x0[0], z + x0[1], z + x0[2], z + x0[3],
                        z + vs, z.copy(), np.zeros(20))  # fmt: skip
-            w.phi, w.delta, w.phidot, w.deltadot = (np.full(100, x) for x in x0)
             clean.append(w)
     sims = truth.simulate(clean, nsub=10)
     out = []
     q = 0.000767
     for w, s in zip(clean, sims, strict=True):
-        w.phi = s["phi"] + rng.normal(0, noise / 5, w.n)
-        w.delta = np.round((s["delta"] + rng.normal(0, noise / 5, w.n)) / q) * q
-        w.phidot = s["phidot"] + rng.normal(0, noise, w.n)
-        w.deltadot = s["deltadot"] + rng.normal(0, noise * 3, w.n)
-        w.file = f"synthetic_{w.speed:g}mps"
-        out.append(w)
+        phi = s["phi"] + rng.normal(0, noise / 5, w.n)
+        delta = np.round((s["delta"] + rng.normal(0, noise / 5, w.n)) / q) * q
+        phidot = s["phidot"] + rng.normal(0, noise, w.n)
+        deltadot = s["deltadot"] + rng.normal(0, noise * 3, w.n)
+        out.append(replace(w, phi=phi, delta=delta, phidot=phidot, deltadot=deltadot,
+                           file=f"synthetic_{w.speed:g}mps"))  # fmt: skip
     return out
