@@ -39,6 +39,7 @@ __all__ = [
     "iter_decays",
     "load_decays",
     "read_segments",
+    "steer_by_wire_logs",
 ]
 
 
@@ -371,6 +372,42 @@ def _too_few(files: list[dict], n: int, need: int, purpose: str) -> str:
             f"{DECAY_LENGTH:g} s of free motion from rest")  # fmt: skip
 
 
+def steer_by_wire_logs(
+    paths: list[Path], source: str = "listed"
+) -> tuple[list[Run], dict[str, list[Segment]]]:
+    """Steer-by-wire eigen logs read, with the ``segments.csv`` rows beside them.
+
+    Parameters
+    ----------
+    paths : list of Path
+        ``*.log[.gz]`` files (:func:`bikeid.dataset.sbw_logs.find_logs`).
+    source : str, optional
+        ``"listed"``: read the ``segments.csv`` in each log's folder; ``"detected"``: none.
+
+    Returns
+    -------
+    runs : list of Run
+        :func:`bikeid.dataset.sbw_logs.load_log` of each path.
+    listed : dict of str to list of Segment
+        The listed windows by file name (empty for ``"detected"``).
+
+    Raises
+    ------
+    ValueError
+        A log or a ``segments.csv`` that cannot be read (naming it).
+    """
+    runs, listed = [], {}
+    lists: dict[Path, list[Segment]] = {}
+    for path in map(Path, paths):
+        sf = path.parent / "segments.csv"
+        if source == "listed" and sf.is_file() and sf not in lists:
+            lists[sf] = read_segments(sf)
+            for sg in lists[sf]:
+                listed.setdefault(sg.file, []).append(sg)
+        runs.append(load_log(path))
+    return runs, listed
+
+
 def load_decays(
     data: str | os.PathLike | None,
     speeds: list[float] | None = None,
@@ -406,15 +443,7 @@ def load_decays(
     root = data_dir(data)
     if source not in ("listed", "detected"):
         raise ValueError(f"unknown decay source {source!r}; use 'listed' or 'detected'")
-    runs, listed = [], {}
-    lists: dict[Path, list[Segment]] = {}
-    for path in find_logs(root, "eigen"):
-        sf = path.parent / "segments.csv"
-        if source == "listed" and sf.is_file() and sf not in lists:
-            lists[sf] = read_segments(sf)
-            for sg in lists[sf]:
-                listed.setdefault(sg.file, []).append(sg)
-        runs.append(load_log(path))
+    runs, listed = steer_by_wire_logs(find_logs(root, "eigen"), source)
     if not runs:
         raise ValueError(
             f"{root}: no free-decay windows (need eigen*.log[.gz] logs with pushes the detector "

@@ -12,6 +12,7 @@ from bikeid.experiments.cli.args import (
     MAX_WORKERS,
     dump_json,
     integer,
+    mapping_arg,
     number,
     parse_range,
     range_text,
@@ -158,6 +159,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     msub = p.add_subparsers(dest="measured_command", metavar="SUBCOMMAND")
     f = msub.add_parser("fit", help="identify missing effects on some speeds, write MODEL.json")
     f.add_argument("--data", help=DATA_HELP)
+    add_log_options(f)
     f.add_argument("--out", required=True, help="model JSON to write")
     f.add_argument(
         "--speeds",
@@ -201,6 +203,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--input logged)",
     )
     e.add_argument("--data", help=DATA_HELP)
+    add_log_options(e)
     e.add_argument(
         "--speeds",
         type=range_text("--speeds", 0.0),
@@ -208,14 +211,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     e.add_argument("--json", action="store_true", help="print JSON")
     e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
-    e.add_argument(
-        "--input",
-        choices=("loop", "logged"),
-        default="loop",
-        help="what drives the model over each window: 'loop' (default) the known "
-        "steer-into-lean law closed around the model; 'logged' the logged total steer "
-        "command replayed open loop (no controller needed; unstable models grow)",
-    )
     e.set_defaults(func=cmd_evaluate)
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
@@ -309,20 +304,39 @@ def _fit_files(data: str | None, obj: dict, decays: str) -> list[Path]:
     return files
 
 
+def _log_files(report: dict, obj: dict) -> list[Path]:
+    """The logs a fit used (and the segments.csv beside them): its provenance."""
+    used = set(obj["fit_files"])
+    return [Path(p) for p in report["read"]
+            if Path(p).name in used or Path(p).name == "segments.csv"]  # fmt: skip
+
+
 def cmd_fit(args) -> int:
-    from bikeid.dataset.decays import load_decays
-    from bikeid.ident.effects.pipeline import fit_model, save_fit
+    from bikeid.dataset.decays import MIN_FIT_DECAYS
+    from bikeid.ident.effects.pipeline import evaluate_json, fit_model, save_fit
 
     ww = parse_weave_weight(str(args.weave_weight))
-    ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
+    ws, base, law, report = load_log_decays(args, _speeds(args.speeds),
+                                            min_decays=MIN_FIT_DECAYS)  # fmt: skip
     bar = terminal_progress("measured fit", unit="fit")
     rule = acceptance_rule(args)
-    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, rule=rule)
-    out["decays"] = args.decays
+    out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, rule=rule,
+                    model=base, law=law)  # fmt: skip
+    out["decays"] = args.decays if args.format == "sbw" else "detected"
+    out["experiment"]["bicycle"] = args.bicycle or "steer-by-wire"
+    out["experiment"]["input"] = ws[0].drive
+    out["decay_report"] = report
     settings = {"max_effects": args.max_effects, "stability": args.stability,
-                "weave_weight": ww, "speeds": _speeds(args.speeds),
+                "weave_weight": ww, "speeds": _speeds(args.speeds), "format": args.format,
                 **to_jsonable(rule.as_dict())}  # fmt: skip
-    save_fit(out, args.out, settings, _fit_files(args.data, out, args.decays))
+    if args.format != "sbw":
+        settings.update(columns=args.columns, units=args.units, time=args.time, flip=args.flip)
+    save_fit(out, args.out, settings, _log_files(report, out))
+    for note in out["notes"]:
+        print(f"note: {note}")
+    print(f"decays: {len(ws)} in {len(report['files'])} log(s), "
+          f"{sum(len(f['rejected']) for f in report['files'])} detected pushes rejected; "
+          f"input {ws[0].drive}")  # fmt: skip
     ch = out["plant_choice"]
     print(f"nominal plant: {out['plant']} ({ch['reason']})")
     if ch["auto"] != out["plant"]:
@@ -339,6 +353,14 @@ def cmd_fit(args) -> int:
     if "selection_frequency" in out:
         freq = ", ".join(f"{k} {v:.2f}" for k, v in out["selection_frequency"].items())
         print(f"selected in {args.stability} subsamples (fraction): {freq}")
+    if out["effects"]:  # the selection's own held-out half (every second decay), with interval
+        from bikeid.ident.effects.before_after import verdict_text
+
+        kept = {(w["file"], w["start"]) for w in out["fit_windows"]}
+        held = [w for w in ws if (w.file, w.start) in kept][1::2]
+        s = evaluate_json(out, held)["summary"]
+        print(f"held-out half of the fit decays ({len(held)}; used by the selection, so not "
+              f"out of sample): {verdict_text({**s, 'level': 0.95})}")  # fmt: skip
     return 0
 
 
@@ -359,6 +381,10 @@ def cmd_evaluate(args) -> int:
 
     plant_model = plant_model_file(args.model)
     if plant_model is not None:  # an identified plant model (bikeid identify --out)
+        if args.format != "sbw":
+            raise InputError("an identified plant model is evaluated on the steer-by-wire "
+                             "logs (--format sbw); on your logs evaluate a 'measured fit' "
+                             "model")  # fmt: skip
         if args.input != "logged":
             raise InputError(
                 f"{args.model} holds an identified plant model, which knows no controller: "
@@ -383,24 +409,25 @@ def cmd_evaluate(args) -> int:
             file=sys.stderr,
         )
     sp = _speeds(args.speeds)
-    ws = load_decays(
-        args.data, sp, exclude=None if sp else obj.get("fit_speeds"), source=args.decays
-    )
-    if args.input == "logged":
-        from dataclasses import replace
-
-        ws = [replace(w, drive="logged") for w in ws]
+    ws, _, _, _ = load_log_decays(
+        args, sp, exclude=None if sp else obj.get("fit_speeds"), purpose="the evaluation",
+        experiment=obj.get("experiment") or {},
+    )  # fmt: skip
     out = evaluate_json(obj, ws)
     if out.get("note"):
         print(f"bikeid measured evaluate: {out['note']}", file=sys.stderr)
     if args.json:
         print(dump_json(out))
     else:
+        from bikeid.ident.effects.before_after import verdict_text
+
         _print_file_errors(out)
         s = out["summary"]
         print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
               f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f}; the "
               f"measured weave is uncertain by {s['weave_data_rel_std']:.3f})")  # fmt: skip
+        print(f"before/after: {verdict_text({**s, 'level': 0.95})}")
+        print(f"  ({s['interval']})")
         for when in ("before", "after"):
             a = s[f"push_asymmetry_{when}"]
             print(f"error by push direction {when}: {_asymmetry_text(a)}")
@@ -505,3 +532,185 @@ def cmd_fetch(args) -> int:
     sums = fetch(args.dest, files=PINNED | CAMPAIGN if args.all_speeds else PINNED)
     print(f"fetched {len(sums)} files into {Path(args.dest) / 'tudelft-sbw'}")
     return 0
+
+
+#: ``--format`` of ``measured fit|evaluate``: the steer-by-wire logs or your own.
+LOG_FORMATS = {
+    "sbw": "TU Delft steer-by-wire logs: --data FOLDER (default $BIKEID_DATA) or log files; "
+    "listed or detected decays (--decays)",
+    "csv": "your own CSV logs, read with --columns as bikeid identify reads them; decays "
+    "detected from the roll rate",
+    "hdf5": "your own HDF5 logs, read with --columns as bikeid identify reads them",
+}
+INPUT_HELP = (
+    "what drives the model over each window: 'loop' the known controller law closed around "
+    "the model (the steer-by-wire logs' steer-into-lean law, or --controller); 'logged' the "
+    "logged steer torque replayed open loop (no controller needed; unstable models grow). "
+    "Default: loop for the steer-by-wire logs and with --controller, else logged"
+)
+
+
+def add_log_options(p: argparse.ArgumentParser) -> None:
+    """The data options of ``measured fit|evaluate``: ``bikeid identify``'s, and the experiment.
+
+    FILE... with ``--format csv|hdf5`` and ``--columns``, ``--units``, ``--time``, ``--flip``
+    and the time-window and speed-splitting options of
+    :func:`bikeid.experiments.cli.identify.add_data_options` (the same reader), or the
+    steer-by-wire folder (``--format sbw``, the default, ``--data``); plus ``--bicycle`` (the
+    nominal parameters), ``--controller``/``--gains`` (a known law) and ``--input``.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The subcommand's parser.
+
+    Returns
+    -------
+    None
+    """
+    from bikeid.experiments.cli.identify import add_data_options
+
+    add_data_options(p, LOG_FORMATS, None, files="*")
+    p.add_argument(
+        "--bicycle", default=None, metavar="NAME|FILE",
+        help="nominal bicycle parameters: a name (see bikeid eig -h) or a .yaml/.json file "
+        "(default: steer-by-wire for --format sbw; required for your own logs)",
+    )  # fmt: skip
+    p.add_argument(
+        "--controller", choices=("steer-into-lean",), default=None,
+        help="the logs' controller law, T = K (V - v) phidot, with --gains (default: none for "
+        "your own logs: the logged steer torque is replayed; the steer-by-wire logs' law "
+        "K=2, V=6.5 for --format sbw)",
+    )  # fmt: skip
+    p.add_argument(
+        "--gains", type=mapping_arg("--gains"), default=None, metavar="K=..,V=..",
+        help="the law's parameters: K [N s^2/rad] and V [m/s] (default K=2,V=6.5)",
+    )  # fmt: skip
+    p.add_argument("--input", choices=("loop", "logged"), default=None, help=INPUT_HELP)
+
+
+def _law(args: argparse.Namespace, sbw: bool) -> tuple[str | None, float, float]:
+    """(law name or None, K, V) of ``--controller``/``--gains``."""
+    law = args.controller or ("steer-into-lean" if sbw else None)
+    gains = dict(args.gains or {})
+    if gains and law is None:
+        raise InputError("--gains needs --controller steer-into-lean (the law they belong to)")
+    bad = sorted(set(gains) - {"K", "V"})
+    if bad:
+        raise InputError(f"--gains {','.join(bad)}: the steer-into-lean law has K [N s^2/rad] "
+                         "and V [m/s]; give --gains K=2,V=6.5")  # fmt: skip
+    try:
+        k, v = float(gains.get("K", 2.0)), float(gains.get("V", 6.5))
+    except ValueError:
+        raise InputError(f"--gains {gains}: K and V must be numbers") from None
+    if not (math.isfinite(k) and math.isfinite(v)):
+        raise InputError(f"--gains {gains}: K and V must be finite numbers")
+    return law, k, v
+
+
+def load_log_decays(
+    args: argparse.Namespace,
+    speeds: list[float] | None = None,
+    exclude: list[float] | None = None,
+    min_decays: int = 1,
+    purpose: str = "the fit",
+    experiment: dict | None = None,
+) -> tuple[list, object, str | None, dict]:  # fmt: skip
+    """The decay windows of the logs of :func:`add_log_options` and their experiment.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options.
+    speeds, exclude : list of float, optional
+        Keep only / drop windows near these speeds [m/s].
+    min_decays : int, optional
+        Fewest usable decays (fewer: a refusal counting them and the rejections).
+    purpose : str, optional
+        What the decays are for (in the refusal).
+    experiment : dict, optional
+        A model file's ``experiment`` (evaluate): its sample period must match the logs'.
+
+    Returns
+    -------
+    windows : list of Window
+        The decays, each with its ``drive`` (``--input``).
+    model : ExperimentModel
+        The nominal experiment: bicycle, sample period [s] and speed calibration of the logs,
+        the law's gains.
+    law : str or None
+        The controller law, None when the logged torque is replayed.
+    report : dict
+        :func:`bikeid.dataset.decays.decays_from_runs`'s report, plus ``files`` read.
+    """
+    from dataclasses import replace
+    from pathlib import Path
+
+    from bikeid.dataset.decays import decays_from_runs, steer_by_wire_logs
+    from bikeid.dataset.sbw_logs import DT, SPEED_CALIBRATION, data_dir, find_logs
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.sim.parameters import by_name, steer_by_wire
+
+    sbw = args.format == "sbw"
+    files = list(args.file or [])
+    if sbw:
+        for opt in ("columns", "units", "speed"):
+            if getattr(args, opt) is not None:
+                raise InputError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
+        if args.flip:
+            raise InputError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
+        if files and args.data:
+            raise InputError("give either --data FOLDER or log files, not both")
+        paths = []
+        for f in map(Path, files) if files else [data_dir(args.data)]:
+            found = find_logs(f, "eigen") if f.is_dir() else [f]
+            if f.is_dir() and not found:
+                raise InputError(f"{f} holds no steer-by-wire eigen logs (eigen*.log[.gz])")
+            paths += found
+        runs, listed = steer_by_wire_logs(paths, args.decays)
+        read = [str(p) for p in paths] + sorted(
+            {str(p.parent / "segments.csv") for p in paths
+             if args.decays == "listed" and (p.parent / "segments.csv").is_file()})  # fmt: skip
+        dt, cal = DT, SPEED_CALIBRATION
+    else:
+        if args.data:
+            raise InputError(f"--data is the steer-by-wire folder; with --format {args.format} "
+                             "give your log files as FILE...")  # fmt: skip
+        if not files:
+            raise InputError(f"--format {args.format} needs log files: FILE... with --columns")
+        if not args.columns:
+            raise InputError(f"--format {args.format} needs --columns NAME=COL,... mapping phi, "
+                             "delta, phidot, deltadot, T_delta (and v, or --speed)")  # fmt: skip
+        from bikeid.experiments.cli.identify import load_runs
+
+        runs, listed, read = load_runs(args), {}, files
+        dts = [r.dt for r in runs]
+        dt = sorted(dts)[len(dts) // 2]
+        if max(abs(d / dt - 1) for d in dts) > 0.01:
+            raise InputError(f"the logs' sample periods differ ({min(dts):g}-{max(dts):g} s); "
+                             "fit logs of one sample period together")  # fmt: skip
+        cal = (1.0, 0.0)  # the logged speed is the bicycle's speed
+    if experiment and experiment.get("dt") and abs(experiment["dt"] / dt - 1) > 0.01:
+        raise InputError(f"the model was fitted at a sample period of {experiment['dt']:g} s, "
+                         f"the logs have {dt:g} s; evaluate on logs like the fit's")  # fmt: skip
+    if args.bicycle:
+        p = by_name(args.bicycle)
+    elif sbw or experiment is not None:  # evaluate: the model file holds the bicycle
+        p = steer_by_wire()
+    else:
+        raise InputError("your own logs need --bicycle NAME|FILE: the nominal parameters of "
+                         "the bicycle (a name of bikeid eig -h, or a .yaml/.json)")  # fmt: skip
+    law, k, v = _law(args, sbw)
+    if experiment and not args.controller and experiment.get("law"):  # the model's own law
+        law, k, v = experiment["law"], float(experiment["K"]), float(experiment["V"])
+    drive = args.input or ("loop" if law else "logged")
+    if drive == "loop" and law is None:
+        raise InputError("--input loop needs the controller law: give --controller "
+                         "steer-into-lean --gains K=..,V=.. or use --input logged")  # fmt: skip
+    model = ExperimentModel(p=p, K=k, V=v, dt=dt, speed_calibration=tuple(cal))
+    windows, report = decays_from_runs(runs, "listed" if sbw else "detected", listed, speeds,
+                                       exclude, min_decays, purpose)  # fmt: skip
+    if drive == "logged":
+        windows = [replace(w, drive="logged") for w in windows]
+    report["read"] = read
+    return windows, model, law, report

@@ -27,6 +27,7 @@ from bikeid.ident.effects.weave import (
 )
 
 __all__ = [
+    "before_after_summary",
     "equation_error",
     "err_ranking",
     "evaluate",
@@ -371,4 +372,38 @@ def evaluate_windows(
     summ["weave_data_rel_std"] = float(np.mean(unc)) if unc else float("nan")  # files with >= 3
     summ["push_asymmetry_before"] = push_asymmetry(windows, e0.mean(axis=1))
     summ["push_asymmetry_after"] = push_asymmetry(windows, e1.mean(axis=1))
+    summ.update(before_after_summary(windows, e0.mean(axis=1), e1.mean(axis=1)))
     return {"files": files, "summary": summ}, windows
+
+
+def before_after_summary(windows: list[Window], before: np.ndarray, after: np.ndarray) -> dict:
+    """The interval, paired test, verdict and trivial baselines of a before/after error.
+
+    :func:`bikeid.ident.effects.before_after.before_after` on the per-window errors
+    (decays resampled within their file), plus the absolute levels of two trivial
+    predictions in the same metric: the mean of each signal (``baseline_mean``, exactly 1)
+    and zero motion (``baseline_zero``, mean over files of the file means, >= 1).
+
+    Parameters
+    ----------
+    windows : list of Window
+        The decays (their ``file`` is the bootstrap's stratum).
+    before, after : (len(windows),) ndarray
+        Each window's error before and after (mean NRMSE of roll rate and steer angle).
+
+    Returns
+    -------
+    dict
+        ``ratio_ci`` [low, high], ``p_value``, ``verdict``, ``interval`` (what the interval
+        covers), ``goal`` (0.5), ``baseline_mean``, ``baseline_zero`` (dimensionless).
+    """
+    from bikeid.ident.effects.before_after import before_after, zero_motion_error
+
+    files = [w.file for w in windows]
+    ba = before_after(before, after, files)
+    zero = np.array([np.mean([zero_motion_error(getattr(w, c)) for c in ("phidot", "delta")])
+                     for w in windows])  # fmt: skip
+    per_file = [zero[[i for i, f in enumerate(files) if f == n]].mean() for n in set(files)]
+    return {"ratio_ci": ba["ratio_ci"], "p_value": ba["p_value"], "verdict": ba["verdict"],
+            "interval": ba["interval"], "goal": ba["goal"], "baseline_mean": 1.0,
+            "baseline_zero": float(np.mean(per_file))}  # fmt: skip

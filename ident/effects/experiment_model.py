@@ -73,7 +73,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from bikeid.dataset.sbw_logs import treadmill_speed
+from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.dataset.windows import Window
 from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, effect, nonlinear_effects
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
@@ -84,14 +84,27 @@ __all__ = [
     "COULOMB_EPS",
     "DT",
     "ExperimentModel",
+    "SimulationFailed",
     "nonlinear_correction",
     "with_nonlinear_correction",
     "window_errors",
     "yaw_coupling",
 ]
 
-DT = 0.01  # s, one control loop
+DT = 0.01  # s, one control loop of the steer-by-wire logs (the default sample period)
 COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
+
+
+class SimulationFailed(ValueError):
+    """The nonlinear plant could not simulate a window (it fell, or a wheel lifted).
+
+    A ValueError naming the window (``file``, ``start``: its log file and first row) and the
+    simulation's stop reason, so a caller can drop that window and go on.
+    """
+
+    def __init__(self, file: str, start: int, reason: str) -> None:
+        super().__init__(f"{file}@{start}: nonlinear simulation failed: {reason}")
+        self.file, self.start, self.reason = file, start, reason
 
 
 @dataclass(frozen=True)
@@ -111,6 +124,13 @@ class ExperimentModel:
         stabilizes, roll and steer positive to the right).
     V : float, optional
         Speed [m/s] at which the controller's gain vanishes.
+    dt : float, optional
+        Sample period of the logs and of the sampled loop [s] (default :data:`DT`, the
+        steer-by-wire logs' 10 ms); a log of another period needs its own.
+    speed_calibration : tuple of float, optional
+        (a, b) of the logged speed: sensor = a * true + b [m/s]; default the steer-by-wire
+        treadmill's (:data:`bikeid.dataset.sbw_logs.SPEED_CALIBRATION`); (1, 0) for a log
+        whose speed column is the true speed.
 
     Raises
     ------
@@ -123,8 +143,16 @@ class ExperimentModel:
     effects: dict = field(default_factory=dict)
     K: float = 2.0
     V: float = 6.5
+    dt: float = DT
+    speed_calibration: tuple[float, float] = SPEED_CALIBRATION
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"sample period dt must be a finite number > 0 s, got {self.dt!r}")
+        a, b = self.speed_calibration
+        if not (math.isfinite(a) and a > 0 and math.isfinite(b)):
+            raise ValueError(f"speed_calibration (a, b) needs a finite a > 0 and a finite b, "
+                             f"got {self.speed_calibration!r}")  # fmt: skip
         for k, v in self.effects.items():
             unit = effect(k).unit  # ValueError naming the known effects
             try:
@@ -342,7 +370,7 @@ class ExperimentModel:
         A[2:4, 2:4] = -Minv @ C
         return E, A, B
 
-    def discrete(self, v: float, h: float = DT, cm: CanonicalMatrices | None = None):
+    def discrete(self, v: float, h: float | None = None, cm: CanonicalMatrices | None = None):
         """ZOH discretization over step h [s]: (Ad, Bd) (:func:`bikeid.sim.sampling.zoh`).
 
         Parameters
@@ -350,7 +378,7 @@ class ExperimentModel:
         v : float
             True speed [m/s].
         h : float, optional
-            Step [s].
+            Step [s] (default the model's sample period ``dt``).
         cm : CanonicalMatrices, optional
             :meth:`canonical` (computed when not given).
 
@@ -362,7 +390,7 @@ class ExperimentModel:
             Sampled input matrix for [u, w, T_phi] held over h [state units per N m].
         """
         A, B = self.continuous(v, cm)
-        return zoh(A, B, h, small=True)
+        return zoh(A, B, self.dt if h is None else h, small=True)
 
     def true_speed(self, v_sensor: float) -> float:
         """True speed [m/s] from the sensor speed [m/s]: calibration, then speed_scale.
@@ -375,12 +403,13 @@ class ExperimentModel:
         Returns
         -------
         float
-            speed_scale * :func:`bikeid.dataset.sbw_logs.treadmill_speed` (v_sensor) [m/s].
+            speed_scale * (v_sensor - b) / a [m/s], (a, b) the model's ``speed_calibration``.
         """
-        return float(self.e("speed_scale") * treadmill_speed(v_sensor))
+        a, b = self.speed_calibration
+        return float(self.e("speed_scale") * (v_sensor - b) / a)
 
     def _delay(self) -> tuple[int, float]:
-        d = self.e("input_delay") / DT
+        d = self.e("input_delay") / self.dt
         m = int(math.floor(d + 1e-12))
         return m, d - m
 
@@ -463,7 +492,7 @@ class ExperimentModel:
         Phi = self.closed_loop(v_sensor)[0]
         z = np.linalg.eigvals(Phi)
         z = z[np.abs(z) > 1e-6]
-        lam = np.log(z.astype(complex)) / DT
+        lam = np.log(z.astype(complex)) / self.dt
         return lam[np.argsort(-lam.real)]
 
     def oscillatory_roots(self, v_sensor: float) -> np.ndarray:
@@ -481,7 +510,7 @@ class ExperimentModel:
             real part.
         """
         lam = self.eigenvalues(v_sensor)
-        return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / DT)]
+        return lam[(lam.imag > 1e-6) & (lam.imag < 0.8 * math.pi / self.dt)]
 
     def weave(self, v_sensor: float, near: complex | None = None) -> complex:
         """An oscillatory closed-loop root (:meth:`oscillatory_roots`).
@@ -528,7 +557,7 @@ class ExperimentModel:
         s = self.e("roll_rate_scale")
         out = []
         for fr in np.atleast_1d(freqs):
-            z = np.exp(2j * math.pi * fr * DT)
+            z = np.exp(2j * math.pi * fr * self.dt)
             X = np.linalg.solve(z * np.eye(Phi.shape[0]) - Phi, G)
             out.append([s * X[2], X[1]])
         return np.array(out)
@@ -564,7 +593,7 @@ class ExperimentModel:
         nmax = max(w.n for w in windows)
         cms = self.canonical()
         vs = np.array([np.mean(w.v_sensor) for w in windows])
-        mats = [self.discrete(self.true_speed(v), DT / nsub, cms) for v in vs]
+        mats = [self.discrete(self.true_speed(v), self.dt / nsub, cms) for v in vs]
         Ad = np.stack([m[0] for m in mats])
         Bd = np.stack([m[1] for m in mats])
         npl = Ad.shape[1]
@@ -662,8 +691,9 @@ def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -
 
     Raises
     ------
-    ValueError
-        If the nonlinear simulation stops before the window's end (naming the window).
+    SimulationFailed
+        A ValueError, if the nonlinear simulation stops before the window's end (naming
+        the window and why).
     """
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.sim.integrate import simulate
@@ -674,24 +704,25 @@ def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -
     w = window
     vs = float(np.mean(w.v_sensor))
     v = model.true_speed(vs)
-    fx, eq = nonlinear_effects(model.effects, v, DT, COULOMB_EPS)
+    dt = model.dt
+    fx, eq = nonlinear_effects(model.effects, v, dt, COULOMB_EPS)
     keep = {k: model.e(k) for k in model.effects if EFFECTS[k].layer == "parameter"}
-    lin_m = ExperimentModel(p=model.p, effects={**eq, **keep}, K=model.K, V=model.V)
+    lin_m = replace(model, effects={**eq, **keep})
     w0 = replace(w, hist=np.zeros_like(w.hist), correction=None)
     sl = lin_m.simulate([w0])[0]
     if w.drive == "logged":  # replay the logged command, sample by sample
         cmd = np.asarray(w.T_logged, dtype=float)
 
         def ctrl(t, y, cmd=cmd):
-            return cmd[min(int(round(t / DT)), cmd.size - 1)]
+            return cmd[min(int(round(t / dt)), cmd.size - 1)]
     else:
         ctrl = SteerIntoLean(model.K, model.V, design_speed=vs)
     tr = simulate(
-        bike, bike.state(v, *map(float, w.state0())), (w.n - 1) * DT, controller=ctrl,
-        mode="held", substeps=4, effects=fx or None,
+        bike, bike.state(v, *map(float, w.state0())), (w.n - 1) * dt, controller=ctrl,
+        mode="held", substeps=4, effects=fx or None, dt=dt,
     )  # fmt: skip
     if tr.stop_reason is not None or tr.t.size != w.n:
-        raise ValueError(f"{w.file}@{w.start}: nonlinear simulation failed: {tr.stop_reason}")
+        raise SimulationFailed(w.file, w.start, str(tr.stop_reason or "ended early"))
     return {c: tr.signal(c) - sl[c] for c in ("phi", "delta", "phidot", "deltadot")}
 
 

@@ -72,7 +72,123 @@ def _experiment_model(obj: dict, where: str = "model object") -> ExperimentModel
         p = None if params is None else from_mapping(params, name="steer-by-wire (calibrated)")
     except (TypeError, ValueError) as exc:
         raise InputError(f"{where}: 'parameters': {exc}") from None
-    return ExperimentModel(effects=dict(obj["effects"]), **({} if p is None else {"p": p}))
+    kw = experiment_settings(obj.get("experiment"), where)
+    return ExperimentModel(effects=dict(obj["effects"]), **kw, **({} if p is None else {"p": p}))
+
+
+def experiment_settings(exp: dict | None, where: str = "model object") -> dict:
+    """The :class:`ExperimentModel` keywords of a model object's ``experiment`` entry.
+
+    Parameters
+    ----------
+    exp : dict or None
+        ``{"dt": s, "speed_calibration": [a, b], "K": N s^2/rad, "V": m/s, ...}`` as
+        :func:`fit_model` records it; None (files written before it was recorded): the
+        steer-by-wire experiment's defaults.
+    where : str, optional
+        What error messages call the object.
+
+    Returns
+    -------
+    dict
+        ``dt`` [s], ``speed_calibration`` (a, b), ``K``, ``V`` where given.
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        If an entry is not a finite number (or a pair of them).
+    """
+    if exp is None:
+        return {}
+    if not isinstance(exp, dict):
+        raise InputError(f"{where}: 'experiment' must be an object, got {type(exp).__name__}")
+    kw: dict = {}
+    for k in ("dt", "K", "V"):
+        if exp.get(k) is not None:
+            if not _is_number(exp[k]):
+                raise InputError(f"{where}: experiment '{k}' must be a finite number")
+            kw[k] = float(exp[k])
+    cal = exp.get("speed_calibration")
+    if cal is not None:
+        if not (isinstance(cal, list) and len(cal) == 2 and all(map(_is_number, cal))):
+            raise InputError(f"{where}: experiment 'speed_calibration' must be [a, b]")
+        kw["speed_calibration"] = (float(cal[0]), float(cal[1]))
+    return kw
+
+
+def experiment_record(model: ExperimentModel, law: str | None, bicycle: str) -> dict:
+    """What a model object records of the experiment its windows come from.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal experiment (sample period, speed calibration, loop gains).
+    law : str or None
+        The controller law's name (``"steer-into-lean"``) or None when it is unknown (the
+        logged steer torque replayed).
+    bicycle : str
+        The nominal bicycle's name or file.
+
+    Returns
+    -------
+    dict
+        ``dt`` [s], ``speed_calibration`` [a, b] (sensor = a true + b), ``law``, ``K``
+        [N s^2/rad] and ``V`` [m/s] (None without a law), ``bicycle`` and
+        ``stated_parameters`` (the nominal bicycle before any calibration, SI).
+    """
+    return {"dt": model.dt, "speed_calibration": list(model.speed_calibration), "law": law,
+            "K": model.K if law else None, "V": model.V if law else None,
+            "bicycle": bicycle, "stated_parameters": model.p.as_dict()}  # fmt: skip
+
+
+def _nominal(obj: dict, where: str = "model object") -> ExperimentModel:
+    """The stated nominal of a model object (the 'before' of evaluate): its experiment's
+    stated bicycle and settings, no effects; the steer-by-wire experiment by default."""
+    exp = obj.get("experiment")
+    kw = experiment_settings(exp, where)
+    stated = exp.get("stated_parameters") if isinstance(exp, dict) else None
+    if stated is not None:
+        try:
+            kw["p"] = from_mapping(stated, name=str(exp.get("bicycle") or "stated"))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{where}: experiment 'stated_parameters': {exc}") from None
+    return ExperimentModel(**kw)
+
+
+def simulable_windows(
+    model: ExperimentModel, windows: list[Window]
+) -> tuple[list[Window], list[dict]]:
+    """Split the windows into those the nominal nonlinear plant can simulate and the rest.
+
+    A window whose nonlinear simulation at ``model`` stops early (a rear wheel lifts, the
+    bicycle falls) cannot be scored by any candidate that starts from it, so it is dropped
+    for all candidates alike and counted (never an abort of the whole fit).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model.
+    windows : list of Window
+        The decays.
+
+    Returns
+    -------
+    kept : list of Window
+        The windows simulated to their end (unchanged).
+    dropped : list of dict
+        ``file``, ``start`` (row) and ``reason`` of each dropped window.
+    """
+    from bikeid.ident.effects.experiment_model import SimulationFailed, nonlinear_correction
+
+    kept, dropped = [], []
+    for w in windows:
+        try:
+            nonlinear_correction(w, model)
+        except SimulationFailed as exc:
+            dropped.append({"file": w.file, "start": int(w.start), "reason": exc.reason})
+            continue
+        kept.append(w)
+    return kept, dropped
 
 
 def save_fit(
@@ -238,6 +354,8 @@ def fit_model(
     weave_weight: float | str = "auto",
     progress: Callable[[int, int, str], None] | None = None,
     rule: AcceptanceRule | None = None,
+    model: ExperimentModel | None = None,
+    law: str | None = "steer-into-lean",
 ) -> dict:
     """Select effects on ``windows`` and return the model object ``measured fit`` writes.
 
@@ -267,6 +385,13 @@ def fit_model(
         significance level, gains, ``unexplained`` rule and the stated bicycle's
         uncertainty), also used by the stability subsamples; default ``AcceptanceRule()``,
         as ``measured fit`` (the nominal calibrated within its default uncertainty).
+    model : ExperimentModel, optional
+        The nominal experiment: the stated bicycle, the logs' sample period ``dt`` and speed
+        calibration, the loop gains (default: the steer-by-wire experiment).
+    law : str or None, optional
+        The controller law of the logs (default ``"steer-into-lean"``, the gains of
+        ``model``); None when it is unknown and the windows replay the logged steer torque
+        (``drive == "logged"``): the weave term, which needs the closed loop, is then off.
 
     Returns
     -------
@@ -278,7 +403,11 @@ def fit_model(
         ``auto`` takes, the cost ratio nonlinear / linear, the margin and a sentence) and both
         nominal fits
         (``nominal_fit``: summed squared NRMSE of roll rate and steer angle as linear and
-        as nonlinear plant).
+        as nonlinear plant); ``experiment`` (:func:`experiment_record`); ``dropped_windows``
+        (file, start row, reason of each window no candidate could be scored on: the
+        nominal nonlinear plant cannot simulate it, so it is dropped for all candidates
+        alike, :func:`simulable_windows`; a window that fails at an accepted effect is
+        dropped too and the selection rerun) and ``notes`` (sentences saying so).
 
     Raises
     ------
@@ -289,7 +418,18 @@ def fit_model(
     if plant not in PLANT_CHOICES:
         raise ValueError(f"plant must be one of {', '.join(PLANT_CHOICES)}, got {plant!r}")
     select_kw = {"rule": AcceptanceRule() if rule is None else rule}
-    nominal_fit = compare_nominal_plants(ExperimentModel(), windows)
+    base = ExperimentModel() if model is None else model
+    notes = []
+    if law is None and weave_weight != 0:
+        weave_weight = 0.0
+        notes.append("weave term off: no controller law given, so the model has no closed "
+                     "loop whose weave eigenvalue could be compared")  # fmt: skip
+    windows, dropped = simulable_windows(base, windows)
+    if dropped:
+        notes.append(f"{len(dropped)} window(s) dropped for all candidates alike: the nominal "
+                     "nonlinear plant cannot simulate them (" + "; ".join(
+                         f"{d['file']}@{d['start']}: {d['reason']}" for d in dropped) + ")")
+    nominal_fit = compare_nominal_plants(base, windows)
     auto = choose_nominal_plant(nominal_fit)
     choice = {"asked": plant, **auto, "auto": auto["plant"]}
     if plant == "auto":
@@ -301,17 +441,26 @@ def fit_model(
     extra = {}
     if stability:
         freq = selection_frequencies(
-            ExperimentModel(), windows, stability, max_effects=max_effects, nonlinear=nl,
+            base, windows, stability, max_effects=max_effects, nonlinear=nl,
             progress=progress, **select_kw,
         )  # fmt: skip
         extra = {"selection_frequency": freq,
                  "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
-    res = select_effects(
-        ExperimentModel(), windows, max_effects=max_effects, nonlinear=nl,
-        weave_weight=weave_weight, progress=progress, **select_kw,
-    )  # fmt: skip
+    res, more = _select_dropping(base, windows, max_effects, nl, weave_weight, progress,
+                                 select_kw)  # fmt: skip
+    if more:
+        dropped += more
+        notes.append(f"{len(more)} more window(s) dropped for all candidates alike and the "
+                     "selection rerun: the nonlinear plant could not simulate them at an "
+                     "accepted effect (" + "; ".join(
+                         f"{d['file']}@{d['start']}: {d['reason']}" for d in more) + ")")
+        windows = [w for w in windows
+                   if not any(d["file"] == w.file and d["start"] == w.start for d in more)]
     return {
-        "bicycle": "steer-by-wire",
+        "bicycle": base.p.name,
+        "experiment": experiment_record(base, law, base.p.name),
+        "dropped_windows": dropped,
+        "notes": notes,
         "parameters": res.model.p.as_dict(),
         "plant": plant,
         "plant_choice": choice,
@@ -323,6 +472,27 @@ def fit_model(
         "nominal_fit": nominal_fit,
         **extra,
     }
+
+
+def _select_dropping(base, windows, max_effects, nl, weave_weight, progress, select_kw):
+    """:func:`select_effects`, rerun without a window the nonlinear plant cannot simulate at
+    an accepted effect (at most 5 times); returns the result and the windows dropped."""
+    from bikeid.ident.effects.experiment_model import SimulationFailed
+
+    more: list[dict] = []
+    for _ in range(6):
+        try:
+            res = select_effects(
+                base, windows, max_effects=max_effects, nonlinear=nl,
+                weave_weight=weave_weight, progress=progress, **select_kw,
+            )  # fmt: skip
+            return res, more
+        except SimulationFailed as exc:
+            if len(more) == 5:
+                raise
+            more.append({"file": exc.file, "start": int(exc.start), "reason": exc.reason})
+            windows = [w for w in windows if not (w.file == exc.file and w.start == exc.start)]
+    raise AssertionError("unreachable")
 
 
 def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
@@ -358,7 +528,8 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         plant = "linear"
         note = ("replayed with the linear plant: open loop, the nonlinear plant falls inside "
                 "some windows (the model's effects are kept)")  # fmt: skip
-    ev, at_aug = evaluate_windows(ExperimentModel(), aug, windows, nonlinear=plant == "nonlinear")
+    ev, at_aug = evaluate_windows(_nominal(model_obj), aug, windows,
+                                  nonlinear=plant == "nonlinear")  # fmt: skip
     # the validation of `bikeid validate` on the decays (corrected at `aug`)
     validation = validate_decays(aug, at_aug)
     ident = model_obj.get("identification", {})
