@@ -28,7 +28,25 @@ Conventions (state order, signal names, units, signs) are stated once in
 y right, z down; roll, steer and steer torque positive to the right).
 """
 
+import _signal as _sig  # the C module: already loaded, so this costs nothing
+import sys as _sys
+
 __all__ = ["__version__"]
+
+
+def _interrupted_while_starting(signum, frame):  # noqa: ARG001 - a signal handler
+    """Ctrl-C while the ``bikeid`` command imports its modules: one line, exit status 130
+    (:func:`bikeid.experiments.cli.main` restores Python's handler when it starts)."""
+    _sys.stderr.write("bikeid: interrupted\n")
+    raise SystemExit(130)
+
+
+if (
+    _sys.argv
+    and _sys.argv[0].rsplit("/", 1)[-1] in ("bikeid", "-m")  # the console script, python -m
+    and _sig.getsignal(_sig.SIGINT) is _sig.default_int_handler
+):
+    _sig.signal(_sig.SIGINT, _interrupted_while_starting)
 
 
 def __getattr__(name: str) -> str:

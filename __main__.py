@@ -1,5 +1,7 @@
 """``python -m bikeid``: the ``bikeid`` command."""
 
+# Ctrl-C while the command's modules are imported: one line and exit status 130, by the
+# handler the package installs first (bikeid/__init__.py); main() restores Python's.
 from bikeid.experiments.cli import main
 
 raise SystemExit(main())

@@ -54,7 +54,10 @@ from .run import Run
 from .sensors import Sensors, channel_noise
 from .store import package_version
 
-__all__ = ["simulate_run"]
+__all__ = ["PLANTS", "simulate_run"]
+
+#: Plants :func:`simulate_run` runs (``plant=``).
+PLANTS = ("nonlinear", "linear")
 
 
 def _describe(obj: Any) -> Any:
@@ -136,13 +139,18 @@ def simulate_run(
     mode: str = "held",
     initial: dict[str, float] | None = None,
     lateral_force: Callable[[float], float] | None = None,
+    plant: str = "nonlinear",
     **integrator_options: Any,
 ) -> Run:
     """Simulate one closed-loop run of ``duration`` [s] at ``speed`` [m/s].
 
     The nonlinear Whipple plant (``sim.nonlinear.WhippleBicycle``) is integrated by
     ``sim.integrate.simulate`` under the controller, sampled as described in the module
-    docstring.
+    docstring.  With ``plant="linear"`` the same controller, reference, dither, sensors
+    and lateral force drive the exact zero-order-hold linear plant instead
+    (:func:`dataset.linear_loop.run_loop`: x[k+1] = Ad x[k] + Bd u[k] at the controller
+    period, speed held, the lateral force at the rear body's mass centre as in the
+    nonlinear plant); it takes no effects and no integrator options.
 
     Parameters
     ----------
@@ -179,6 +187,8 @@ def simulate_run(
     lateral_force : callable, optional
         Lateral force t [s] -> F [N] (positive to the right) on the rear frame, sampled on
         the controller grid; None for none.
+    plant : {"nonlinear", "linear"}, optional
+        The nonlinear Whipple plant (default) or the exact ZOH linear one.
     **integrator_options
         Passed to ``sim.integrate.simulate`` (``substeps``, ``fall_limit``, ``method``,
         ``energy``); ``controller``, ``dt``, ``inputs``, ``measure``, ``effects`` and
@@ -192,9 +202,10 @@ def simulate_run(
         the controller received them, the logged ``T_delta`` [N m] and, with a lateral
         force, the load cell's ``F`` [N]; ``truth`` has the true MEASURED channels, the
         applied ``T_delta`` [N m] (and ``F`` [N]), pitch ``theta`` [rad] and contact
-        points ``x``, ``y``, ``xF``, ``yF`` [m]; ``dither`` [N m] and ``reference`` [rad]
-        at t_k; ``meta`` with the speed, seed, ``fell_at`` [s] (None if upright), the
-        bicycle, the descriptions of controller, reference, dither, lateral force,
+        points ``x``, ``y``, ``xF``, ``yF`` [m] (linear plant: instead the exact
+        accelerations ``phiddot``, ``deltaddot`` [rad/s^2]); ``dither`` [N m] and
+        ``reference`` [rad] at t_k; ``meta`` with the speed, seed, ``fell_at`` [s] (None
+        if upright), the bicycle, the descriptions of controller, reference, dither, lateral force,
         sensors and effects, ``sampling`` (``controller_period``, ``logging_period``,
         ``dither_hold`` [s]) and ``plant``.
 
@@ -203,9 +214,15 @@ def simulate_run(
     ValueError
         If ``speed`` or ``duration`` is not positive and finite, the sensors are faster
         than the controller or their period is not a whole multiple of it, ``initial``
-        has an unknown key, an integrator option set here is passed, or the run ended
-        (fell) before its second sensor sample.
+        has an unknown key, an integrator option set here is passed, ``plant`` is
+        unknown, or the linear plant is given effects, ``mode="coast"`` or integrator
+        options.
+    UntrustworthyResult
+        If the run ended (fell) before its second sensor sample, or the linear plant left
+        the small-angle range (|phi| or |delta| > 1 rad).
     """
+    if plant not in PLANTS:
+        raise ValueError(f"plant={plant!r}: choose one of {', '.join(PLANTS)}")
     speed = float(speed)
     if not (math.isfinite(speed) and speed > 0):
         raise ValueError(f"speed must be > 0 m/s, got {speed}")
@@ -226,10 +243,16 @@ def simulate_run(
                  f"{1 / ctrl_dt:g} Hz", "shorten the duration")  # loop records + trajectory
     n_sensor = int(round(duration * sensors.rate)) + 1
     loop = SampledLoop(controller, sensors, seed, ctrl_dt, n_sensor, dither)
-    traj = _integrate(
-        p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force,
-        integrator_options,
-    )  # fmt: skip
+    if plant == "linear":
+        traj = _linear(
+            p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force,
+            integrator_options,
+        )  # fmt: skip
+    else:
+        traj = _integrate(
+            p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force,
+            integrator_options,
+        )  # fmt: skip
     n = loop.n_rec
     while n > 0 and not math.isfinite(loop.u[n - 1]):  # the sample where the controller failed
         n -= 1
@@ -245,7 +268,7 @@ def simulate_run(
     torque = loop.u[:n].copy()
     ch = sensors.channel("T_delta")
     signals["T_delta"] = torque if ch.ideal else ch.apply(torque, channel_noise(seed, "T_delta", n))
-    truth.update(_trajectory_extras(traj, t))
+    truth.update(traj.extras(t) if plant == "linear" else _trajectory_extras(traj, t))
     if "F" in truth:  # a load cell logs the applied lateral force (Moore & Hubbard's F_cl)
         chf = sensors.channel("F")
         signals["F"] = (
@@ -274,7 +297,7 @@ def simulate_run(
             "dither_hold": None if getattr(dither, "hold", None) is None else float(dither.hold),
         },
         "effects": [_describe(e) for e in effects],
-        "plant": {"model": "whipple-nonlinear", "initial": initial or {}, **traj.meta},
+        "plant": {"model": f"whipple-{plant}", "initial": initial or {}, **traj.meta},
     }
     return Run(
         t=t,
@@ -294,12 +317,7 @@ def _integrate(
     from bikeid.sim.nonlinear import WhippleBicycle
 
     bike = WhippleBicycle(p)
-    init = dict(initial or {})
-    unknown = set(init) - {"phi", "delta", "phidot", "deltadot"}
-    if unknown:
-        raise ValueError(
-            f"unknown initial values {sorted(unknown)}; use phi, delta, phidot, deltadot"
-        )
+    init = _initial_state(initial)
     x0 = bike.state(speed, **init)
     inputs = None
     if lateral_force is not None:
@@ -319,6 +337,72 @@ def _integrate(
         if traj.stop is None or str(w.message) != traj.stop.message:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return traj
+
+
+def _initial_state(initial: dict[str, float] | None) -> dict[str, float]:
+    init = dict(initial or {})
+    unknown = set(init) - {"phi", "delta", "phidot", "deltadot"}
+    if unknown:
+        raise ValueError(
+            f"unknown initial values {sorted(unknown)}; use phi, delta, phidot, deltadot"
+        )
+    return init
+
+
+class _LinearTrajectory:
+    """What :func:`simulate_run` reads of a plant's trajectory, for the linear plant."""
+
+    stop = None
+    fell_at = None
+
+    def __init__(self, out: dict[str, np.ndarray], dt: float, meta: dict[str, Any]) -> None:
+        self.out = out
+        self.dt = dt
+        self.meta = meta
+        self.stop_reason = "the linear loop stopped"
+
+    def extras(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        """Applied inputs and exact accelerations at the sensor instants ``t`` [s]."""
+        idx = np.rint(t / self.dt).astype(int)
+        out = {"T_delta": self.out["T_delta"][idx]}
+        if np.any(self.out["F"] != 0):
+            out["F"] = self.out["F"][idx]
+        for name in ("phiddot", "deltaddot"):
+            out[name] = self.out[name][idx]
+        return out
+
+
+def _linear(p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options):
+    """The exact ZOH linear plant (``linear_loop.run_loop``) under ``loop``."""
+    # lazy: linear_loop imports this module (a cycle) and numba, which nonlinear runs need not
+    from .linear_loop import run_loop
+
+    for what, bad, fix in (
+        ("effects", bool(list(effects)), "drop them"),
+        ("mode='coast'", mode != "held", "the linear plant holds the speed"),
+        (f"integrator options {sorted(options)}", bool(options), "drop them"),
+    ):
+        if bad:
+            raise ValueError(f"plant='linear' takes no {what}; {fix}, or use plant='nonlinear'")
+    if mode not in ("held", "coast"):
+        raise ValueError(f"mode={mode!r}: choose 'held' or 'coast'")
+    init = _initial_state(initial)
+    x0 = [float(init.get(k, 0.0)) for k in ("phi", "delta", "phidot", "deltadot")]
+    n = int(round(duration / ctrl_dt)) + 1
+    force = None
+    if lateral_force is not None:
+        force = np.array([float(lateral_force(k * ctrl_dt)) for k in range(n)])
+    out = run_loop(p, loop, speed, n, ctrl_dt, x0, force)
+    angles = np.abs(np.column_stack([out["phi"], out["delta"]]))
+    if not np.all(np.isfinite(angles)) or angles.max() > 1.0:
+        raise UntrustworthyResult(
+            f"the linear loop left the small-angle range (max |angle| "
+            f"{np.nanmax(angles):.3g} rad) at v={speed:g} m/s; reduce dither or noise, or check "
+            "that the controller stabilizes this bicycle"
+        )
+    meta = {"engine": "exact zero-order hold (dataset.linear_loop.run_loop)",
+            "lateral_force_point": [float(p.xB), float(p.zB)]}  # fmt: skip
+    return _LinearTrajectory(out, ctrl_dt, meta)
 
 
 def _trajectory_extras(traj, t: np.ndarray) -> dict[str, np.ndarray]:

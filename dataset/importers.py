@@ -38,8 +38,9 @@ steer-by-wire logs are (:func:`bikeid.dataset.sbw_logs.load_log` is a mapping on
 :func:`from_csv`).  A ``.gz`` CSV is decompressed.
 
 The run's ``meta`` gets ``source = "imported"``, ``speed`` (mean of v) [m/s] and
-``import``: the file name, absolute path, SHA-256 of its bytes, format, the column mapping,
-the time column, the unit conversions (user unit, SI unit, factor) and the flipped signals.
+``import``: the file name, its path relative to the working directory, SHA-256 of its
+bytes, format, the column mapping, the time column, the unit conversions (user unit, SI
+unit, factor) and the flipped signals.
 """
 
 from __future__ import annotations
@@ -107,6 +108,15 @@ class _Table:
         self.path = path
         self.digest = digest
         self.first = first  # leading data rows skipped (skip_leading): the time base's offset
+
+
+def _relative(path: Path) -> str:
+    """The path relative to the working directory (provenance never holds a machine's
+    absolute path); the file name alone when there is none."""
+    try:
+        return Path(os.path.relpath(path.resolve())).as_posix()
+    except ValueError:  # another drive (Windows)
+        return path.name
 
 
 def _sha256(path: Path) -> str:
@@ -315,7 +325,7 @@ def _build(
         "source": "imported",
         "import": {
             "file": None if table.path is None else table.path.name,
-            "path": None if table.path is None else str(table.path.resolve()),
+            "path": None if table.path is None else _relative(table.path),
             "sha256": table.digest,
             "format": table.fmt,
             "columns": dict(columns),

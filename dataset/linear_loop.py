@@ -61,7 +61,7 @@ from bikeid.sim.sampling import zoh
 from .closed_loop import _describe
 from .run import Run
 
-__all__ = ["PATHS", "closed_loop_matrix", "simulate", "sweep"]
+__all__ = ["PATHS", "closed_loop_matrix", "run_loop", "simulate", "sweep"]
 
 #: Loop implementations of :func:`simulate` (``path=``).
 PATHS = ("auto", "compiled", "python")
@@ -181,6 +181,104 @@ def _python_loop(p, Ad, Bd, Ac, Bc, x0, controller, t, v, dither, w, tphi, force
         Qdd[k] = Ac[ka, 2:4] @ x + Bc[ka, 2:4] @ inp
         x = Ad[ka] @ x + Bd[ka] @ inp
     return X, U, Qdd
+
+
+def _plant(
+    p: BicycleParameters, v: np.ndarray | float, dt: float, Hcol: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous (Ac, Bc) and ZOH-sampled (Ad, Bd) plant with inputs [T_phi, T_delta, F],
+    stacked over the speeds ``v`` (an array: one per sample) or of one speed (a float)."""
+    if np.ndim(v):
+        AB = [state_matrices(p, vk) for vk in v]
+        Ac = np.array([a for a, _ in AB])
+        Bc = np.array([np.hstack([b, (b[:, :2] @ Hcol)[:, None]]) for _, b in AB])
+    else:
+        A, B = state_matrices(p, float(v))
+        Ac, Bc = A[None], np.hstack([B, (B[:, :2] @ Hcol)[:, None]])[None]
+    Ad, Bd = zoh(Ac, Bc, dt)
+    return Ac, Bc, Ad, Bd
+
+
+def run_loop(
+    p: BicycleParameters,
+    controller: Callable[[float, Sequence[float]], float],
+    speed: float,
+    n: int,
+    dt: float,
+    x0: Sequence[float],
+    force: np.ndarray | None = None,
+    lateral_force_point: tuple[float, float] | None = None,
+    limit: float = 1.0,
+) -> dict[str, np.ndarray]:
+    """The exact ZOH linear plant under any controller callable, one call per sample.
+
+    The loop of :func:`simulate`'s Python path with nothing added by the engine: the
+    controller receives the *true* measurement vector (``sim.conventions.MEASURED`` order)
+    and returns the steer torque the plant holds over [t_k, t_k+1), so sensors and dither
+    are the controller callable's business (``dataset.closed_loop.simulate_run(...,
+    plant="linear")`` passes its sampled loop, the one the nonlinear plant runs under).
+
+    Parameters
+    ----------
+    p : BicycleParameters
+        The bicycle.
+    controller : callable
+        ``controller(t [s], y_true)`` -> applied steer torque [N m] (positive to the right).
+    speed : float
+        Forward speed [m/s], held.
+    n : int
+        Samples t_k = k dt, k = 0 .. n-1 (>= 2).
+    dt : float
+        Sample (= controller) period [s].
+    x0 : sequence of 4 floats
+        Initial [phi, delta, phidot, deltadot] [rad, rad/s].
+    force : (n,) ndarray, optional
+        Lateral force F [N] held over each sample (positive right); None for none.
+    lateral_force_point : (float, float), optional
+        (x_F, z_F) [m] where F acts on the rear frame (benchmark axes); default the rear
+        body's mass centre (xB, zB), as the nonlinear plant (``sim.nonlinear``).
+    limit : float, optional
+        The loop stops (the rest NaN) once |phi| or |delta| exceeds it [rad].
+
+    Returns
+    -------
+    dict of str to (n,) ndarray
+        ``t`` [s], the states ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s],
+        ``phiddot``, ``deltaddot`` (the exact right-limit accelerations [rad/s^2]),
+        ``psi`` [rad], ``psidot`` [rad/s] (linearized yaw), ``T_delta`` (applied [N m])
+        and ``F`` [N]; NaN after a stop.
+
+    Raises
+    ------
+    ValueError
+        If ``n`` < 2, ``dt`` or ``speed`` is not positive and finite, ``x0`` is not 4
+        values or ``force`` has another length.
+    """
+    n = int(n)
+    if n < 2 or not (math.isfinite(dt) and dt > 0) or not (math.isfinite(speed) and speed > 0):
+        raise ValueError(f"need n >= 2, dt > 0 and speed > 0; got n={n}, dt={dt}, speed={speed}")
+    x_init = np.asarray(x0, dtype=float)
+    if x_init.shape != (4,):
+        raise ValueError(f"x0 has shape {x_init.shape}; need [phi, delta, phidot, deltadot]")
+    force = np.zeros(n) if force is None else np.asarray(force, dtype=float)
+    if force.shape != (n,):
+        raise ValueError(f"force has shape {force.shape}, expected ({n},)")
+    point = (p.xB, p.zB) if lateral_force_point is None else lateral_force_point
+    Ac, Bc, Ad, Bd = _plant(p, speed, dt, lateral_force_vector(p, *point))
+    t = np.arange(n) * dt
+    v = np.full(n, float(speed))
+    zero = np.zeros(n)
+    X, U, Qdd = _python_loop(
+        p, Ad, Bd, Ac, Bc, x_init, controller, t, v, zero, zero, zero, force,
+        np.zeros((n, 4)), zero, zero, limit,
+    )  # fmt: skip
+    psidot = yaw_rate(p, v, X[:, 1], X[:, 3])
+    psi = np.concatenate([[0.0], np.cumsum(0.5 * (psidot[1:] + psidot[:-1]) * dt)])
+    return {
+        "t": t, "phi": X[:, 0], "delta": X[:, 1], "phidot": X[:, 2], "deltadot": X[:, 3],
+        "phiddot": Qdd[:, 0], "deltaddot": Qdd[:, 1], "psi": psi, "psidot": psidot,
+        "T_delta": U, "F": force,
+    }  # fmt: skip
 
 
 def _held(rng: np.random.Generator, n: int, amplitude: float, hold: int) -> np.ndarray:
@@ -405,14 +503,7 @@ def simulate(
 
     v = speed + speed_variation * np.sin(2 * np.pi * t / speed_period)
     Hcol = lateral_force_vector(p, *lateral_force_point)
-    if speed_variation:
-        AB = [state_matrices(p, vk) for vk in v]
-        Ac = np.array([a for a, _ in AB])
-        Bc = np.array([np.hstack([b, (b[:, :2] @ Hcol)[:, None]]) for _, b in AB])
-    else:
-        A, B = state_matrices(p, speed)
-        Ac, Bc = A[None], np.hstack([B, (B[:, :2] @ Hcol)[:, None]])[None]
-    Ad, Bd = zoh(Ac, Bc, dt)
+    Ac, Bc, Ad, Bd = _plant(p, v if speed_variation else speed, dt, Hcol)
     x_init = np.array([0.01, 0.0, 0.0, 0.0] if x0 is None else x0, dtype=float)
     if x_init.shape != (4,):
         raise ValueError(f"x0 has shape {x_init.shape}; need [phi, delta, phidot, deltadot]")

@@ -22,6 +22,7 @@ __all__ = [
     "check_finite",
     "check_plausible",
     "run_stop",
+    "split_by_speed",
 ]
 
 REQUIRED = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
@@ -244,6 +245,19 @@ def _at(i: int, t) -> str:
     return "" if t is None else f" at t = {float(t[i]):.3f} s"
 
 
+#: The usual wrong unit of a column in each SI unit (the importers' name for it).
+_OTHER_UNIT = {"rad": "deg", "rad/s": "deg/s", "m/s": "km/h", "N m": "N cm"}
+
+
+def _unit_hint(key: str, unit: str) -> str:
+    """'check the unit first: ...; ' for a signal whose column may be in another unit."""
+    other = _OTHER_UNIT.get(unit)
+    if other is None:
+        return "check the column's unit and sign first; "
+    return (f"check the column's unit first (in {other}? give --units {key}={other}, "
+            f"units={{{key!r}: {other!r}}}); ")
+
+
 def check_finite(arr: np.ndarray, source: str, column: str, rows=None, t=None) -> None:
     """Refuse NaN or infinite samples, naming the source, column and first bad row.
 
@@ -357,8 +371,8 @@ def check_plausible(
                 raise ValueError(
                     f"{source}: {_where(i, rows)}, column {label}: value {arr[i]:.6g} {unit}"
                     f"{_at(i, run.t)} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
-                    f"(sim.conventions.PLAUSIBLE; {_count(bad)}); "
-                    "the data is corrupt: fix or cut these rows"
+                    f"(sim.conventions.PLAUSIBLE; {_count(bad)}); {_unit_hint(key, unit)}"
+                    "otherwise the data is corrupt: fix or cut these rows"
                 )
     for name in () if failed else CONSTANT_CHECKED:
         if name in run.signals and np.ptp(run.signals[name]) == 0.0:
@@ -426,3 +440,59 @@ def run_stop(run: Run) -> dict[str, Any] | None:
             "physical": True,
         }
     return None
+
+
+def split_by_speed(
+    run: Run,
+    tolerance: float = 0.25,
+    min_duration: float = 10.0,
+    min_speed: float = 0.5,
+    smoothing: float = 1.0,
+) -> list[Run]:
+    """A run whose speed varies, cut into its constant-speed stretches.
+
+    The speed is smoothed by a centred moving average over ``smoothing`` s (sensor noise is
+    not a change of speed); walking forward from the first sample, a stretch grows while the
+    smoothed speed's range within it stays at most ``tolerance``.  Stretches shorter than
+    ``min_duration`` or slower (mean of the logged v) than ``min_speed`` are dropped.
+
+    Parameters
+    ----------
+    run : Run
+        The run; its signal ``v`` [m/s] is the speed.
+    tolerance : float, optional
+        Largest range of the smoothed speed within a stretch [m/s].
+    min_duration : float, optional
+        Shortest stretch kept [s].
+    min_speed : float, optional
+        Slowest mean speed of a stretch kept [m/s].
+    smoothing : float, optional
+        Width of the moving average applied to v first [s].
+
+    Returns
+    -------
+    list of Run
+        The stretches in time order (:meth:`Run.window`), each with ``meta["speed"]`` the
+        mean of its v [m/s] and ``meta["stretch"]`` its [start, stop) [s]; empty when none
+        qualifies.
+    """
+    v = run.signals["v"]
+    w = max(1, min(run.n, int(round(smoothing / run.dt))))
+    pad = np.concatenate([np.full(w // 2, v[0]), v, np.full(w - 1 - w // 2, v[-1])])
+    vs = np.convolve(pad, np.ones(w) / w, mode="valid")
+    out: list[Run] = []
+    i = 0
+    while i < run.n:
+        lo = hi = vs[i]
+        j = i + 1
+        while j < run.n and max(hi, vs[j]) - min(lo, vs[j]) <= tolerance:
+            lo, hi = min(lo, vs[j]), max(hi, vs[j])
+            j += 1
+        mean = float(np.mean(v[i:j]))
+        if (j - i) * run.dt >= min_duration and mean >= min_speed and j - i >= 3:
+            t0, t1 = float(run.t[i]), float(run.t[j - 1] + 0.5 * run.dt)
+            part = run.window(t0, t1)
+            part.meta.update(speed=mean, stretch=[t0, t1])
+            out.append(part)
+        i = j
+    return out

@@ -31,6 +31,7 @@ the run, column and row named.
 from __future__ import annotations
 
 import json
+import os
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -39,8 +40,9 @@ from typing import Any
 import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED, UNITS
+from bikeid.sim.errors import InputError, check_memory
 
-from .files import atomic_path
+from .files import MAX_EXPANSION, atomic_path, check_free_space, check_input_file, size_text
 from .run import REQUIRED, Run, check_plausible
 
 __all__ = [
@@ -58,6 +60,12 @@ __all__ = [
 
 FORMAT = "bikeid-runs"
 FORMAT_VERSION = 1
+#: Largest relative deviation of a time step from the run's median step (as the importers'
+#: ``dataset.importers.JITTER``): a larger one is a gap (or a jump) in the time base.
+TIME_JITTER = 0.01
+#: Bytes of HDF5 metadata per run on top of its data (groups, attributes, chunk indexes), for
+#: the free-space estimate of a write (a run with 27 datasets takes about 40 KiB).
+RUN_OVERHEAD = 64 * 1024
 
 
 def package_version() -> str:
@@ -182,11 +190,55 @@ def write_runs(
     runs = list(runs)
     names = _names_for(runs, names)
     path = Path(path)
-    with atomic_path(path) as tmp:
+    need = sum(_run_bytes(r) for r in runs if isinstance(r, Run))
+    check_free_space(path, need)  # HDF5 cannot always fail cleanly on a full disk: not there
+    with atomic_path(path) as tmp, _h5_write_errors(path, need):
         with _new_file(tmp, attrs) as f:
             for name, run in zip(names, runs, strict=True):
                 _write_run(f["runs"], name, run)
     return path
+
+
+def _run_bytes(run: Run) -> int:
+    """Estimated bytes of one run in a file: its arrays plus :data:`RUN_OVERHEAD`."""
+    arrays = [run.t, *run.signals.values(), *(run.truth or {}).values()]
+    arrays += [a for a in (run.dither, run.reference) if a is not None]
+    return sum(int(np.asarray(a).size) * 8 for a in arrays) + RUN_OVERHEAD
+
+
+class _h5_write_errors:
+    """Turn h5py's storage errors while writing ``path`` (RuntimeError or OSError, often
+    without an errno: recognized by the errno or HDF5's "write failed") into one line naming
+    the file and the space; other errors pass unchanged.  The temporary file is removed by
+    :func:`atomic_path`."""
+
+    def __init__(self, path: Path, need: float) -> None:
+        self.path, self.need = path, need
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        if exc is None or isinstance(exc, (ValueError, KeyboardInterrupt, SystemExit)):
+            return False
+        if isinstance(exc, (OSError, RuntimeError)):
+            import errno
+
+            from .files import storage_error
+
+            text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            code = getattr(exc, "errno", None)
+            if code is None and ("errno = 28" in text or "No space left" in text):
+                code = errno.ENOSPC
+            if code is not None:
+                err = storage_error(OSError(code, os.strerror(code)), self.path, self.need)
+                if isinstance(err, InputError):
+                    raise err from None
+            if "write failed" in text or "Can't write" in text or "unable to write" in text:
+                raise InputError(
+                    f"cannot write {self.path} ({text}); check the disk and rerun"
+                ) from None
+        return False
 
 
 def copy_runs(
@@ -228,7 +280,9 @@ def copy_runs(
     h5py = _h5()
     path = Path(path)
     seen: set[str] = set()
-    with atomic_path(path) as tmp:
+    need = sum(Path(src).stat().st_size for src in dict.fromkeys(s for s, _ in sources))
+    check_free_space(path, need)  # HDF5 cannot always fail cleanly on a full disk: not there
+    with atomic_path(path) as tmp, _h5_write_errors(path, need):
         with _new_file(tmp, attrs) as f:
             for src, name in sources:
                 if name in seen:
@@ -246,6 +300,7 @@ def _open(path: str | Path):
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such run file")
+    check_input_file(path, "run file")  # a device or FIFO could block or never end
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
@@ -273,6 +328,11 @@ def _open(path: str | Path):
             )
         if "runs" not in f:
             raise ValueError(f"{path}: the group /runs is missing; the file is malformed")
+        if not isinstance(f["runs"], h5py.Group):
+            raise ValueError(
+                f"{path}: /runs is a {type(f['runs']).__name__.lower()}, not a group of runs; "
+                "the file is malformed: write it again with bikeid"
+            )
     except ValueError:
         f.close()
         raise
@@ -282,8 +342,40 @@ def _open(path: str | Path):
     return f
 
 
+def _check_dataset(where: str, ds) -> None:
+    """Refuse, before reading, a dataset bikeid did not write: not a dataset, virtual or
+    external storage, or a declared size its file cannot hold (memory estimate first)."""
+    h5py = _h5()
+    if not isinstance(ds, h5py.Dataset):
+        raise ValueError(f"{where} is a {type(ds).__name__.lower()} where a dataset is expected; "
+                         "the file is malformed: write it again with bikeid")  # fmt: skip
+    if ds.is_virtual:
+        raise ValueError(
+            f"{where} is a virtual dataset (its data live in other files, read as fill values "
+            "where they are missing); bikeid run files hold their own data: write it again "
+            "with bikeid"
+        )
+    if ds.external:
+        raise ValueError(
+            f"{where} keeps its data in external files {[e[0] for e in ds.external][:3]}; "
+            "bikeid run files hold their own data: write it again with bikeid"
+        )
+    size = int(np.prod(ds.shape, dtype=float)) if ds.shape else 1
+    check_memory(size, 1, where, "the file declares more samples than memory holds; it is "
+                 "not a run file bikeid wrote")  # fmt: skip
+    nbytes = size * ds.dtype.itemsize
+    stored = ds.id.get_storage_size()
+    if nbytes > 1 << 16 and stored * MAX_EXPANSION < nbytes:
+        raise ValueError(
+            f"{where} declares {size:,} samples ({size_text(nbytes)}) but stores "
+            f"{size_text(stored)}; the file is damaged or was not written by bikeid"
+        )
+
+
 def _read_array(path, gname: str, ds, n: int | None) -> np.ndarray:
-    where = f"{path}: run {gname!r}: dataset {ds.name.split('/', 3)[-1]!r}"
+    name = getattr(ds, "name", None) or "?"
+    where = f"{path}: run {gname!r}: dataset {name.split('/', 3)[-1]!r}"
+    _check_dataset(where, ds)
     if ds.dtype.kind != "f":
         raise ValueError(f"{where} has dtype {ds.dtype}, expected float64")
     try:
@@ -326,10 +418,16 @@ def _read_group(path, g, gname: str) -> Run:
         raise ValueError(f"{where}: metadata is not valid JSON; the file is corrupt") from None
     if not isinstance(meta, dict):
         raise ValueError(f"{where}: metadata is not a JSON object")
+    h5py = _h5()
+    for key in ("signals", "truth"):
+        if key in g and not isinstance(g[key], h5py.Group):
+            raise ValueError(f"{where}: {key!r} is not a group; the file is malformed: write "
+                             "it again with bikeid")  # fmt: skip
     if "t" not in g:
         raise ValueError(f"{where} has no dataset 't'; the file is malformed")
     t = _read_array(path, gname, g["t"], None)
     n = t.size
+    _check_time_base(where, t)
     if "n" in g.attrs and int(g.attrs["n"]) != n:
         raise ValueError(
             f"{where}: 't' has {n} samples but the run was written with {int(g.attrs['n'])}; "
@@ -357,16 +455,41 @@ def _read_group(path, g, gname: str) -> Run:
     return check_plausible(run, where, columns=columns)
 
 
+def _check_time_base(where: str, t: np.ndarray) -> None:
+    """Refuse a time base that does not increase or has a gap (as the importers do)."""
+    if t.size < 2:
+        return
+    step = np.diff(t)
+    if np.any(step <= 0):
+        i = int(np.argmax(step <= 0)) + 1
+        raise ValueError(f"{where}: time does not increase at row {i} (t = {float(t[i])!r} s "
+                         f"after {float(t[i - 1])!r} s); the run is damaged")  # fmt: skip
+    h = float(np.median(step))
+    dev = np.abs(step - h) / h
+    worst = int(np.argmax(dev))
+    if dev[worst] > TIME_JITTER:
+        raise ValueError(
+            f"{where}: a gap in time at row {worst + 1}: the step {float(step[worst]):.6g} s "
+            f"differs from the median {h:.6g} s by {100 * float(dev[worst]):.3g} % (tolerance "
+            f"{100 * TIME_JITTER:g} %); split the run at the gap (bikeid identify reads runs "
+            "sampled uniformly)"
+        )
+
+
 def _read_damaged(path, f, name: str) -> Run:
     """:func:`_read_group` of run ``name``, with h5py's errors on damaged objects (KeyError,
     RuntimeError, OSError, TypeError, UnicodeDecodeError) turned into a ValueError naming the
     file and the run."""
     g = _group(path, f, name)
+    if not isinstance(g, _h5().Group):
+        raise ValueError(f"{path}: run {name!r} is a dataset, not a group; the file is "
+                         "malformed: write it again with bikeid")  # fmt: skip
     try:
         return _read_group(path, g, name)
     except ValueError:
         raise
-    except (OSError, RuntimeError, KeyError, TypeError, UnicodeDecodeError) as exc:
+    except (OSError, RuntimeError, KeyError, TypeError, UnicodeDecodeError,
+            AttributeError) as exc:  # fmt: skip
         raise ValueError(
             f"{path}: run {name!r} cannot be read ({type(exc).__name__}: "
             f"{str(exc).splitlines()[0] if str(exc) else ''}); the file is corrupt"

@@ -1,4 +1,4 @@
-"""Progress of the long commands on the terminal: one bar on stderr, only when stderr is a TTY.
+"""Progress of the long commands: a bar on a terminal, one line per stage elsewhere.
 
 Library functions with long loops (effect selection, the accuracy table, the reproduction)
 take a callback ``progress(done, total, label)`` instead of printing: ``done`` of ``total``
@@ -10,10 +10,12 @@ is None, so a script or a test that passes nothing gets no output.  (The sweeps,
 :func:`on_terminal` is true.)
 
 The command handlers make the callback with :func:`terminal_progress`: a ``tqdm`` bar on
-stderr when stderr is a terminal and the command is not printing JSON, None otherwise
-(piped into a file, under CI, or ``--json``: stdout is the JSON and stderr stays empty
-unless there is an error).  Log lines go through the bar's :meth:`TerminalProgress.write`
-(or :func:`quiet` without a terminal).  ``bikeid`` closes open bars when a command ends
+stderr when stderr is a terminal, one line per stage (:class:`LineProgress`) when it is not
+(a batch job or a notebook sees what ran), None with ``--json`` or ``--quiet`` (stdout is
+the JSON and stderr stays empty unless there is an error).  :func:`stage_lines` prints a
+command's own stage lines and the files it wrote the same way.  Log lines go through the
+bar's :meth:`TerminalProgress.write` (or :func:`quiet` without one).  ``bikeid`` closes
+open bars when a command ends
 (:func:`close_all`).  ``tqdm`` is imported only when a bar is drawn, so start-up
 is unchanged.
 """
@@ -29,7 +31,9 @@ __all__ = [
     "TerminalProgress",
     "close_all",
     "on_terminal",
+    "LineProgress",
     "quiet",
+    "stage_lines",
     "terminal_progress",
 ]
 
@@ -50,6 +54,9 @@ def quiet(msg: str) -> None:
     msg : str
         The message, ignored.
     """
+
+
+_drop = quiet  # (the name ``quiet`` is an argument of the functions below)
 
 
 class TerminalProgress:
@@ -124,9 +131,97 @@ class TerminalProgress:
         self.close()
 
 
+class LineProgress:
+    """Progress as plain lines (a batch job, a notebook): ``desc: [done/total] label``.
+
+    A line is printed when the label or the stage (``total``) changes, so a step is
+    reported once when it starts, not at every call; :meth:`write` prints a log line.
+
+    Parameters
+    ----------
+    desc : str
+        What is counted (e.g. ``"identify"``), the prefix of every line.
+    stream : text stream
+        Where the lines go (stderr).
+    """
+
+    def __init__(self, desc: str, stream: TextIO) -> None:
+        self._desc, self._stream, self._last = desc, stream, None
+
+    def __call__(self, done: int, total: int, label: str = "") -> None:
+        """Print ``desc: [done/total] label`` when the label or the stage changed.
+
+        Parameters
+        ----------
+        done : int
+            Steps finished.
+        total : int
+            Steps in this stage.
+        label : str, optional
+            The current step.
+        """
+        key = (total, label)
+        if key != self._last:
+            self._last = key
+            print(f"{self._desc}: [{done}/{total}] {label}".rstrip(), file=self._stream,
+                  flush=True)  # fmt: skip
+
+    def write(self, msg: str) -> None:
+        """Print a log line.
+
+        Parameters
+        ----------
+        msg : str
+            The line, without its newline.
+        """
+        print(msg, file=self._stream, flush=True)
+
+    def close(self) -> None:
+        """Nothing to close (kept for the interface of :class:`TerminalProgress`)."""
+
+
+def stage_lines(
+    desc: str, *, json_output: bool = False, quiet: bool = False, stream: TextIO | None = None
+) -> Callable[[str], None]:
+    """A ``say(msg)`` callback for a command's stages: ``desc: msg`` on stderr.
+
+    Lines are printed whether or not stderr is a terminal (a batch job sees what ran and
+    the files written), except with ``--json`` or ``--quiet``.
+
+    Parameters
+    ----------
+    desc : str
+        The command (prefix of every line).
+    json_output : bool, optional
+        The command prints JSON: no lines.
+    quiet : bool, optional
+        ``--quiet``: no lines.
+    stream : text stream, optional
+        Where to print (default ``sys.stderr``, looked up at call time).
+
+    Returns
+    -------
+    callable
+        ``say(msg)``; :func:`quiet` when the lines are off.
+    """
+    if json_output or quiet:
+        return _drop
+
+    def say(msg: str) -> None:
+        print(f"{desc}: {msg}", file=sys.stderr if stream is None else stream, flush=True)
+
+    return say
+
+
 def terminal_progress(
-    desc: str, *, json_output: bool = False, unit: str = "step", stream: TextIO | None = None
-) -> TerminalProgress | None:
+    desc: str,
+    *,
+    json_output: bool = False,
+    unit: str = "step",
+    stream: TextIO | None = None,
+    quiet: bool = False,
+    lines: bool = True,
+) -> TerminalProgress | LineProgress | None:
     """A progress bar for a command, or None where a bar would get in the way.
 
     Parameters
@@ -139,16 +234,24 @@ def terminal_progress(
         Name of one step.
     stream : text stream, optional
         Where to draw (default ``sys.stderr``, looked up at call time).
+    quiet : bool, optional
+        ``--quiet``: no progress at all.
+    lines : bool, optional
+        Off a terminal, report each stage as a line (:class:`LineProgress`); False keeps
+        stderr empty there.
 
     Returns
     -------
-    TerminalProgress or None
-        A bar when ``stream`` is a terminal (``isatty()``) and ``json_output`` is false;
-        otherwise None (pass it on: the library functions then report nothing).
+    TerminalProgress or LineProgress or None
+        A bar when ``stream`` is a terminal (``isatty()``); stage lines when it is not and
+        ``lines`` is true; None with ``json_output`` or ``quiet`` (pass it on: the library
+        functions then report nothing).
     """
     stream = sys.stderr if stream is None else stream
-    if not on_terminal(json_output=json_output, stream=stream):
+    if json_output or quiet:
         return None
+    if not on_terminal(json_output=json_output, stream=stream):
+        return LineProgress(desc, stream) if lines else None
     return TerminalProgress(desc, stream, unit)
 
 

@@ -147,6 +147,27 @@ class ModelFile:
 
 
 # -- provenance --------------------------------------------------------------------------
+def relative_path(path: str | os.PathLike) -> str:
+    """A file's path relative to the working directory, as stored in provenance.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+
+    Returns
+    -------
+    str
+        ``os.path.relpath`` of the resolved path (POSIX separators); the file name alone
+        when there is none (another drive).
+    """
+    resolved = Path(path).resolve()
+    try:
+        return Path(os.path.relpath(resolved)).as_posix()
+    except ValueError:  # another drive (Windows)
+        return resolved.name
+
+
 def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
     """Path, size and SHA-256 of each data file, as saved in ``provenance``.
 
@@ -158,7 +179,9 @@ def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
     Returns
     -------
     list of dict
-        Per file ``{"path": absolute path, "size": bytes, "sha256": hex digest}``.
+        Per file ``{"path": path relative to the working directory (never a machine's
+        absolute path; the file name alone when no relative path exists), "size": bytes,
+        "sha256": hex digest}``.
 
     Raises
     ------
@@ -176,7 +199,7 @@ def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
             size = path.stat().st_size
         except OSError as exc:
             raise InputError(f"cannot hash data file {str(path)!r}: {exc.strerror}") from None
-        out.append({"path": str(path), "size": int(size), "sha256": h.hexdigest()})
+        out.append({"path": relative_path(path), "size": int(size), "sha256": h.hexdigest()})
     return out
 
 
@@ -553,6 +576,30 @@ class _Reader:
         v = self.get(obj, key, prefix)
         return self._array(v, prefix + key, shape)
 
+    def covariance(self, obj: dict, key: str, prefix: str, shape: tuple) -> np.ndarray:
+        """A covariance matrix: symmetric and positive semi-definite.
+
+        Tolerances: asymmetry up to 1e-9 and eigenvalues down to -1e-8 times the largest
+        absolute entry / eigenvalue (round-off of a covariance computed in float64 is ~1e-16
+        relative; the files keep every digit); a negative variance is never accepted.
+        """
+        c = self.array(obj, key, prefix, shape)
+        if c.size == 0:
+            return c
+        scale = float(np.max(np.abs(c)))
+        if np.any(np.diag(c) < 0):
+            i = int(np.argmin(np.diag(c)))
+            raise self.fail(prefix + key, f"has a negative variance {float(c[i, i]):.6g} at "
+                            f"[{i}, {i}] (not a covariance)")  # fmt: skip
+        if np.max(np.abs(c - c.T)) > 1e-9 * scale:
+            raise self.fail(prefix + key, "is not symmetric (not a covariance)")
+        if scale > 0:
+            low = float(np.linalg.eigvalsh((c + c.T) / 2)[0])
+            if low < -1e-8 * scale:
+                raise self.fail(prefix + key, f"is not positive semi-definite (eigenvalue "
+                                f"{low:.3g}; not a covariance)")  # fmt: skip
+        return c
+
     def _array(self, v: Any, name: str, shape: tuple) -> np.ndarray:
         want = "x".join("n" if s is None else str(s) for s in shape)
 
@@ -613,7 +660,7 @@ def _canonical_model(r: _Reader, sec: Any, prefix: str) -> CanonicalModel:
         raise r.fail(prefix + "x0", "must be a list of initial states")
     return CanonicalModel(
         theta=r.array(sec, "theta", prefix, (10,)),
-        covariance=r.array(sec, "covariance", prefix, (10, 10)),
+        covariance=r.covariance(sec, "covariance", prefix, (10, 10)),
         K=r.array(sec, "K", prefix, (4, n_out)),
         dt=dt,
         speed=r.number(sec, "speed", prefix),
@@ -638,7 +685,7 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
     dt = r.sample_period(sec, prefix)
     return SpeedCanonicalModel(
         params=r.array(sec, "params", prefix, (14,)),
-        covariance=r.array(sec, "covariance", prefix, (14, 14)),
+        covariance=r.covariance(sec, "covariance", prefix, (14, 14)),
         per_speed={round(m.speed, 6): m for m in models},
         dt=dt,
         g=r.number(sec, "g", prefix),
@@ -675,7 +722,7 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
     for row, c in covs_in.items():
         names = r.texts(c, "names", f"{prefix}covariance.{row}.")
         n = len(names)
-        covs[row] = (names, r.array(c, "matrix", f"{prefix}covariance.{row}.", (n, n)))
+        covs[row] = (names, r.covariance(c, "matrix", f"{prefix}covariance.{row}.", (n, n)))
     return DirectResult(
         **fields,
         covariance=covs,
@@ -737,7 +784,7 @@ def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
     P = len(names)
     return GreyboxModel(
         **fields,
-        covariance=r.array(sec, "covariance", prefix, (P, P)),
+        covariance=r.covariance(sec, "covariance", prefix, (P, P)),
         condition=r.number(sec, "condition", prefix),
         inflation=r.numbers(sec, "inflation", prefix),
         weakest=r.numbers(sec, "weakest", prefix),

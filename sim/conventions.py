@@ -80,6 +80,12 @@ PLAUSIBLE = {
 #: the upper bound of ``PLAUSIBLE["v"]`` (every bikeid model needs v > 0).
 NOMINAL_SPEED = (0.0, 30.0)
 
+#: Sample periods [s] a bicycle logger produces: 0.1 ms (10 kHz, beyond any IMU or encoder
+#: logger of a bicycle) to 0.1 s (10 Hz, below which the weave, up to ~1 Hz, and the caster
+#: mode, ~10 1/s, are not resolved).  A period outside is a time column in the wrong unit
+#: (ms read as s gives 10 s for a 100 Hz log), checked by ``bikeid.dataset.plausibility``.
+SAMPLE_PERIOD = (1e-4, 0.1)
+
 #: Largest forward speed any command accepts [m/s] (360 km/h: beyond any bicycle; the
 #: linear model's v^2 K2 stays far from overflow).
 MAX_SPEED = 100.0

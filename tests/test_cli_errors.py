@@ -386,17 +386,15 @@ def test_unidentifiable_is_exit_4(monkeypatch, capsys, tmp_path):
     monkeypatch.setattr(direct, "identify", refuse)
     monkeypatch.setattr(cmd_ident, "_truth", lambda runs: benchmark())
     import bikeid.dataset.store as store
+    from bikeid.dataset.linear_loop import simulate
 
-    monkeypatch.setattr(store, "read_runs", lambda path: [_FakeRun()])
+    run = simulate(benchmark(), 5.0, duration=5.0)  # dithered: passes the data checks
+    monkeypatch.setattr(store, "read_runs", lambda path: [run])
     import bikeid.ident.signals as signals
 
     monkeypatch.setattr(signals, "prepare", lambda run, **kw: run)
-    fails(capsys, tmp_path, ["identify", "x.h5"], EXIT_UNTRUSTWORTHY, "unidentifiable")
-
-
-class _FakeRun:
-    speed = 5.0
-    meta: dict = {}
+    fails(capsys, tmp_path, ["identify", "x.h5", "--method", "direct", "--quiet"],
+          EXIT_UNTRUSTWORTHY, "unidentifiable")
 
 
 def test_report_refuses_a_bad_model_before_making_its_folder(capsys, tmp_path):

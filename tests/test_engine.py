@@ -26,11 +26,14 @@ import pytest
 from scipy.signal import cont2discrete, dlsim
 
 from bikeid.controllers import PID, PolePlacement, SteerIntoLean, make
-from bikeid.controllers.excitation import ChirpReference, StepReference
+from bikeid.controllers.excitation import ChirpReference, StepReference, UniformDither
 from bikeid.controllers.pole_placement import SLOW_POLES
+from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.linear_loop import closed_loop_matrix, simulate
+from bikeid.dataset.sensors import Channel, Sensors
 from bikeid.dataset.windows import Window
 from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.sim.effects import SteerDamping
 from bikeid.sim.linear import canonical_matrices, lateral_force_vector, state_matrices
 from bikeid.sim.parameters import benchmark, steer_by_wire
 
@@ -219,3 +222,96 @@ def test_defaults_and_metadata():
     fz = simulate(P, 5.0, duration=2, controller=make("fuzzy"), dither=0.5)
     assert fz.meta["engine"] == "python"
     assert np.abs(fz.true("phi")).max() < 0.1
+
+
+# -- one closed-loop vocabulary: simulate_run(..., plant="linear") ---------------------------
+class _Samples:
+    """A signal given by its values on the controller grid (held), as a callable of t."""
+
+    def __init__(self, values: np.ndarray, dt: float) -> None:
+        self.values, self.dt = values, dt
+
+    def __call__(self, t: float) -> float:
+        k = int(round(t / self.dt))
+        return float(self.values[k]) if k < self.values.size else 0.0
+
+
+@pytest.mark.parametrize("name", ["pid", "pole-placement", "steer-into-lean", "fuzzy"])
+def test_simulate_run_linear_is_the_linear_engine(name):
+    """``simulate_run(..., plant="linear")`` (controller, reference, dither and lateral force
+    as objects, ideal sensors) against ``linear_loop.simulate`` (the same inputs given as
+    its scalar vocabulary: its own seeded dither and force, replayed into the objects) on
+    the same initial state: equal to round-off (module docstring: ROUND_OFF).  For the
+    linear laws the old engine runs its compiled loop, so two implementations are compared;
+    the fuzzy controller compares the Python paths."""
+    dt, v, dur = 0.01, 5.0, 10.0
+
+    def ref():
+        return ChirpReference(math.radians(2.0), 0.05, 0.5, dur)
+
+    old = simulate(
+        P, v, duration=dur, controller=make(name, P, sample_time=dt), seed=3, dither=0.5,
+        dither_hold=5, lateral_force=2.0, lateral_force_point=(P.xB, P.zB), reference=ref(),
+        x0=(0.01, 0, 0, 0),
+    )  # fmt: skip
+    new = simulate_run(
+        P, make(name, P, sample_time=dt), v, dur, reference=ref(),
+        dither=_Samples(old.dither, dt), sensors=Sensors.ideal(100.0),
+        lateral_force=_Samples(old.true("F"), dt), initial={"phi": 0.01}, plant="linear",
+    )  # fmt: skip
+    n = old.n
+    assert new.n == n + 1  # simulate_run also records t = duration
+    np.testing.assert_array_equal(new.t[:n], old.t)
+    for s in (*STATE, "psi", "psidot", "T_delta"):
+        np.testing.assert_allclose(new[s][:n], old[s], rtol=0, atol=ROUND_OFF, err_msg=s)
+    for s in (*STATE, "T_delta", "F", "phiddot", "deltaddot"):
+        np.testing.assert_allclose(new.true(s)[:n], old.true(s), rtol=0, atol=ROUND_OFF,
+                                   err_msg=s)  # fmt: skip
+    np.testing.assert_array_equal(new.dither[:n], old.dither)
+    np.testing.assert_array_equal(new.reference[:n], old.reference)
+    assert new.meta["plant"]["model"] == "whipple-linear"
+    assert np.abs(old.true("phi")).max() > 0.01  # a run that moves, not the rest state
+
+
+def test_simulate_run_linear_and_nonlinear_share_the_objects():
+    """The same controller, dither and sensors objects drive both plants.
+
+    - Sensors: the measurement noise (measured - true) is drawn from the sensor object and
+      the seed only, so it is identical on both plants (exact).
+    - Physics: at these small angles (|delta| < 0.01 rad) the nonlinear plant differs from
+      its linearization by terms of order angle^2 ~ 1e-4 relative (observed 2e-5, which
+      includes the nonlinear integrator's error); a bound of 1e-3 relative still fails for
+      a wrong plant (e.g. a torque one sample late changes phi by ~1e-2 relative here).
+    """
+    sensors = Sensors({"phi": Channel(std=1e-3), "deltadot": Channel(std=1e-2)}, rate=100.0)
+    runs = {
+        plant: simulate_run(P, PID(sample_time=0.01), 5.0, 10.0,
+                            dither=UniformDither(0.2, 0.05, seed=1), sensors=sensors, seed=4,
+                            plant=plant)  # fmt: skip
+        for plant in ("linear", "nonlinear")
+    }
+    lin, non = runs["linear"], runs["nonlinear"]
+    np.testing.assert_array_equal(lin.t, non.t)
+    np.testing.assert_array_equal(lin.dither, non.dither)
+    for s in ("phi", "deltadot"):
+        noise = lin[s] - lin.true(s)
+        np.testing.assert_allclose(noise, non[s] - non.true(s), rtol=0, atol=1e-15)
+        assert 0.5 < np.std(noise) / sensors.channel(s).std < 1.5  # the noise is there
+    for s in ("phi", "delta", "phidot", "T_delta"):
+        scale = np.abs(non.true(s)).max()
+        assert np.abs(lin.true(s) - non.true(s)).max() < 1e-3 * scale, s
+
+
+def test_simulate_run_linear_refuses_what_it_cannot_do():
+    c = PID(sample_time=0.01)
+    with pytest.raises(ValueError, match="plant="):
+        simulate_run(P, c, 5.0, 1.0, plant="quadratic")
+    with pytest.raises(ValueError, match="holds the speed"):
+        simulate_run(P, c, 5.0, 1.0, mode="coast", plant="linear")
+    with pytest.raises(ValueError, match="integrator options"):
+        simulate_run(P, c, 5.0, 1.0, substeps=4, plant="linear")
+    with pytest.raises(ValueError, match="no effects"):
+        simulate_run(P, c, 5.0, 1.0, effects=[SteerDamping(1.0)],
+                     plant="linear")  # fmt: skip
+    with pytest.raises(ValueError, match="small-angle range"):
+        simulate_run(P, PID(0.0, 0.0, 0.0), 2.0, 20.0, initial={"phi": 0.05}, plant="linear")

@@ -13,6 +13,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -141,7 +142,7 @@ def test_metadata_and_provenance(models, tmp_path):
     for entry, f in zip(mf.provenance, data, strict=True):
         raw = f.read_bytes()
         assert entry == {
-            "path": str(f.resolve()),
+            "path": os.path.relpath(f.resolve()),  # relative to the working directory
             "size": len(raw),
             "sha256": hashlib.sha256(raw).hexdigest(),
         }

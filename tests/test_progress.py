@@ -48,12 +48,26 @@ def folder(tmp_path_factory) -> Path:
 
 
 def test_bar_only_on_a_terminal_without_json():
-    """Known both ways: a terminal gets a bar; a file, or a terminal under --json, none."""
+    """Known both ways: a terminal gets a bar; a file gets plain stage lines (or nothing
+    with lines=False); --json or --quiet nothing anywhere."""
+    from bikeid.experiments.progress import LineProgress
+
     assert on_terminal(stream=FakeTerminal()) is True
     assert on_terminal(stream=io.StringIO()) is False
     assert on_terminal(json_output=True, stream=FakeTerminal()) is False
-    assert terminal_progress("x", stream=io.StringIO()) is None
+    assert terminal_progress("x", stream=io.StringIO(), lines=False) is None
     assert terminal_progress("x", json_output=True, stream=FakeTerminal()) is None
+    assert terminal_progress("x", quiet=True, stream=FakeTerminal()) is None
+    assert terminal_progress("x", quiet=True, stream=io.StringIO()) is None
+    log = io.StringIO()
+    lines = terminal_progress("fits", stream=log)
+    assert isinstance(lines, LineProgress)
+    lines(0, 2, "PEM at 4 m/s")
+    lines(0, 2, "PEM at 4 m/s")  # the same step again: no second line
+    lines(1, 2, "PEM at 6 m/s")
+    lines.write("wrote m.json")
+    assert log.getvalue() == ("fits: [0/2] PEM at 4 m/s\nfits: [1/2] PEM at 6 m/s\n"
+                              "wrote m.json\n")
     tty = FakeTerminal()
     bar = terminal_progress("fits", stream=tty, unit="fit")
     assert isinstance(bar, TerminalProgress)
@@ -71,14 +85,19 @@ def test_bar_only_on_a_terminal_without_json():
 def test_identify_shows_progress_on_a_terminal_only(folder):
     """``identify --method pem --speed-parameterized`` on 2 speeds: 3 fits, so the bar
     reaches 3/3 on a terminal; the printed eigenvalues equal those of the run without a
-    terminal, where stderr stays empty."""
+    terminal, where stderr holds one line per stage (a batch job sees what ran), and is
+    empty with --quiet."""
     argv = ["identify", "runs.h5", "--method", "pem", "--speed-parameterized"]
     rc, out_tty, err_tty = _run(argv, folder, FakeTerminal())
     assert rc == 0, err_tty
     assert "identify" in err_tty and "3/3" in err_tty and "speed-parameterized" in err_tty
     rc, out_file, err_file = _run(argv, folder, io.StringIO())
-    assert rc == 0 and err_file == ""
+    assert rc == 0, err_file
+    assert "identify: [0/3] PEM at 4 m/s" in err_file and "[3/3] done" in err_file
+    assert "\r" not in err_file  # lines, not a bar
     assert out_tty == out_file
+    rc, out_quiet, err_quiet = _run([*argv, "--quiet"], folder, io.StringIO())
+    assert rc == 0 and err_quiet == "" and out_quiet == out_file
 
 
 def test_identify_json_keeps_stderr_empty_on_a_terminal(folder):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 import traceback
 
@@ -128,6 +129,12 @@ def _check_empty_values(parser: argparse.ArgumentParser, args: argparse.Namespac
 
 def _message(exc: BaseException) -> str:
     text = str(exc).strip()
+    if isinstance(exc, OSError) and exc.filename and exc.errno is not None:
+        from bikeid.dataset.files import storage_error
+
+        err = storage_error(exc, exc.filename)  # a full or read-only disk: the fix too
+        if err is not exc:
+            return str(err)
     if isinstance(exc, OSError) and exc.strerror:  # "[Errno 2] No such file ...: 'x'"
         text = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
     elif isinstance(exc, MemoryError):
@@ -153,11 +160,29 @@ def main(argv: list[str] | None = None) -> int:
         0 success, 1 internal failure, 2 usage error, 3 invalid input data or parameters,
         4 no trustworthy answer, 130 interrupted (:data:`EXIT_CODES`).
     """
+    handler = signal.getsignal(signal.SIGINT)
+    if getattr(handler, "__name__", "") == "_interrupted_while_starting":  # ours or __main__'s
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # KeyboardInterrupt again
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # while the parser was built (command modules imported)
+        print("bikeid: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv
     if debug:
         argv.remove("--debug")
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except Exception as exc:  # noqa: BLE001 - a broken installation: one line, not a traceback
+        if debug:
+            traceback.print_exc()
+        print(f"bikeid: internal error ({type(exc).__name__}): {_message(exc)}; rerun with "
+              "--debug and report it", file=sys.stderr)  # fmt: skip
+        return EXIT_INTERNAL
     try:
         args = parser.parse_args(argv)
         chosen = _chosen(parser, args)

@@ -108,6 +108,26 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
 
 
+#: Most runs one sweep or stabilization table may hold (the product of its options).
+MAX_RUNS = 100_000
+#: Bytes a stored run takes per sample (about 27 float64 datasets: signals, truth, dither,
+#: reference, time; measured: 215 bytes per sample), for the free-space check.
+BYTES_PER_SAMPLE = 27 * 8
+
+
+def _check_grid(n_a: int, n_b: int, what: str) -> int:
+    """Refuse a grid whose options are each within their caps but whose product is not."""
+    from bikeid.sim.errors import InputError
+
+    runs = n_a * n_b
+    if runs > MAX_RUNS:
+        raise InputError(
+            f"{what} make {n_a:,} x {n_b:,} = {runs:,} runs, more than {MAX_RUNS:,}; use a "
+            "larger --speeds step or fewer values"
+        )
+    return runs
+
+
 def _options(args: argparse.Namespace) -> dict:
     from bikeid.sim.errors import check_memory
     from bikeid.sim.parameters import by_name
@@ -179,10 +199,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                 f"--out {args.out!r} exists and is not an HDF5 file; a sweep resumes only its "
                 "own output: give another name, or delete or rename the file"
             )
+    from bikeid.dataset.files import check_free_space, check_output_path, check_outputs
+
+    check_output_path(out)
+    check_outputs([out, Path(f"{out}.parts")], [args.bicycle])
     speeds = parse_range(args.speeds, "--speeds", minimum=1e-6)
-    spec = SweepSpec(
-        args.controller, tuple(speeds), _seeds(args.seeds), args.duration, **_options(args)
-    )
+    seeds = _seeds(args.seeds)
+    runs = _check_grid(len(speeds), len(seeds), "--speeds x --seeds")
+    # the parts and the assembled file exist together for a moment: both must fit
+    check_free_space(out, 2 * runs * (args.duration * args.rate + 1) * BYTES_PER_SAMPLE)
+    spec = SweepSpec(args.controller, tuple(speeds), seeds, args.duration, **_options(args))
     report = run_sweep(
         spec, args.out, workers=args.workers, dask=args.dask,
         progress=not args.no_progress and on_terminal(),
@@ -204,6 +230,8 @@ def cmd_stabilization(args: argparse.Namespace) -> int:
     bad = [c for c in controllers if c not in CONTROLLERS]
     if bad or not controllers:
         raise ValueError(f"--controllers: unknown {bad}; choose from {', '.join(CONTROLLERS)}")
+    _check_grid(len(speeds), len(controllers), "--speeds x --controllers")
+    targets = _stabilization_targets(args.out, args.bicycle)
     if args.chirp_deg is None:
         args.chirp_deg = 3.0  # a tracking test: the same 3 deg chirp at every speed
     options = _options(args)
@@ -226,9 +254,7 @@ def cmd_stabilization(args: argparse.Namespace) -> int:
         if r.get("stop") and not r["stop"]["physical"]:
             print(f"{r['controller']} at {r['speed']:g} m/s: {r['stop']['message']}",
                   file=sys.stderr)  # fmt: skip
-    out = Path(args.out)
-    if out.suffix in (".json", ".md"):
-        out = out.with_suffix("")
+    out = targets[0].with_suffix("")
     settings = {"speeds": list(speeds), "duration": args.duration, **options}
     atomic_write_text(
         out.with_name(out.name + ".json"), dump_json({"settings": settings, "rows": rows}) + "\n"
@@ -243,3 +269,36 @@ def cmd_stabilization(args: argparse.Namespace) -> int:
     atomic_write_text(out.with_name(out.name + ".md"), header + table)
     print(f"wrote {out}.json and {out}.md", file=sys.stderr)
     return 0
+
+
+#: First line of the markdown ``bikeid stabilization`` writes (how it knows its own file).
+STABILIZATION_HEAD = "# Stabilization on the nonlinear Whipple model"
+
+
+def _stabilization_targets(text: str, bicycle: str) -> list[Path]:
+    """OUT.json and OUT.md, said on stderr, refused if either is a file bikeid did not write."""
+    from bikeid.dataset.files import check_output_path, check_outputs
+    from bikeid.sim.errors import InputError
+
+    out = Path(text)
+    if out.suffix in (".json", ".md"):
+        out = out.with_suffix("")
+    targets = [out.with_name(out.name + ".json"), out.with_name(out.name + ".md")]
+    for t in targets:
+        check_output_path(t)
+        if t.is_file():
+            try:
+                with open(t, encoding="utf-8") as fh:
+                    head = fh.read(4096)
+            except (OSError, UnicodeDecodeError):
+                head = ""
+            ours = head.startswith(STABILIZATION_HEAD) if t.suffix == ".md" else (
+                head.startswith("{") and '"settings"' in head)  # fmt: skip
+            if not ours:
+                raise InputError(
+                    f"{t} exists and was not written by bikeid stabilization; bikeid does not "
+                    "overwrite it: give --out NAME (writes NAME.json and NAME.md)"
+                )
+    check_outputs(targets, [bicycle])
+    print(f"bikeid stabilization: will write {targets[0]} and {targets[1]}", file=sys.stderr)
+    return targets

@@ -19,19 +19,24 @@ from bikeid.experiments.cli.args import (
     range_text,
 )
 from bikeid.experiments.parallel import DASK_HELP
-from bikeid.experiments.progress import quiet, terminal_progress
+from bikeid.experiments.progress import quiet, stage_lines, terminal_progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "identify",
+        formatter_class=DefaultsFormatter,
         help="identify the bicycle from runs: bikeid HDF5 files or your own CSV/HDF5 logs",
         description=(
             "Identify from bikeid run files (the default format) or from your own logs: "
             "--format csv|hdf5 with --columns mapping bikeid signals (phi, delta, phidot, "
             "deltadot, T_delta, and v unless --speed is given) to your columns or datasets, "
             "--units for non-SI columns (deg, deg/s, km/h, N cm, ms), --flip for signals "
-            "logged positive to the left. Each log file becomes one run."
+            "logged positive to the left. Each log file becomes one run; a log whose speed "
+            "varies is split into constant-speed stretches, and runs whose mean speeds lie "
+            "within --speed-tolerance pool into one model at their weighted mean speed. "
+            "Before any fit the sample period, each rate against its angle's derivative and "
+            "the input's excitation are checked (--skip-check, --no-checks)."
         ),
     )
     add_data_options(
@@ -40,11 +45,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         input_help="the runs' torque signal [N m] used as the model's steer-torque input "
         "(default T_delta; e.g. sil_command of the steer-by-wire logs)",
     )  # fmt: skip
-    p.add_argument("--method", choices=("direct", "pem", "greybox"), default="direct")
+    p.add_argument(
+        "--method", choices=("direct", "pem", "greybox"), default="pem",
+        help="pem: canonical prediction-error model per speed (Chen & Dao); greybox: PEM of "
+        "chosen matrix entries over all speeds; direct: least squares of the equations of "
+        "motion (Moore & Hubbard; biased on stiff loops, README)",
+    )  # fmt: skip
     p.add_argument(
         "--free", default=None, metavar="NAME,...",
-        help="greybox: free matrix entries, e.g. Mpd,K0pd,Mdd,K0dd,K2dd (default Moore & "
-        "Hubbard's set, ident.greybox.DEFAULT_FREE); the rest fixed at --bicycle's values",
+        help="greybox/direct: free matrix entries, e.g. Mpd,K0pd,Mdd,K0dd,K2dd (default Moore "
+        "& Hubbard's set, ident.greybox.DEFAULT_FREE / ident.direct.MOORE_ROLL, MOORE_STEER); "
+        "the rest fixed at --bicycle's values",
     )  # fmt: skip
     p.add_argument(
         "--drop-unidentifiable", action="store_true",
@@ -84,7 +95,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "hashes, settings; any --method); per-speed pem over several speeds writes "
         "MODEL-v<speed>.json",
     )  # fmt: skip
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--json", action="store_true", help="print JSON (no progress lines)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=cmd_identify)
 
     e = sub.add_parser(
@@ -157,6 +169,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.set_defaults(func=cmd_accuracy)  # fmt: skip
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help text that states each option's default unless the text already names it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if (not action.option_strings or "default" in text
+                or action.default in (None, False, argparse.SUPPRESS)):  # fmt: skip
+            return action.help
+        return f"{text} (default: %(default)s)"
+
+
 #: Data formats ``bikeid identify`` reads, and what each is.
 FORMATS = {
     "bikeid": "files written by bikeid (sweep, store)",
@@ -168,8 +191,9 @@ FORMATS = {
 
 
 def add_data_options(
-    p: argparse.ArgumentParser, formats: Mapping[str, str], input_help: str
-) -> None:
+    p: argparse.ArgumentParser, formats: Mapping[str, str], input_help: str | None,
+    files: str = "+",
+) -> None:  # fmt: skip
     """The data arguments of ``identify`` and ``validate``, read by :func:`_load`.
 
     Adds FILE..., ``--format``, the importer options ``--columns``, ``--units``, ``--time``,
@@ -183,14 +207,18 @@ def add_data_options(
     formats : mapping of str to str
         The ``--format`` choices (a subset of :data:`FORMATS`) and their help; the first is
         the default.
-    input_help : str
-        Help text of ``--input``.
+    input_help : str or None
+        Help text of ``--input``; None: no ``--input`` (a command with its own, e.g.
+        ``measured evaluate``).
+    files : str, optional
+        ``nargs`` of FILE (default ``"+"``; ``"*"`` where the files may come from elsewhere,
+        e.g. ``measured fit --data``).
 
     Returns
     -------
     None
     """
-    p.add_argument("file", nargs="+", help="run files (bikeid HDF5) or logs (--format)")
+    p.add_argument("file", nargs=files, help="run files (bikeid HDF5) or logs (--format)")
     p.add_argument(
         "--format", choices=tuple(formats), default=next(iter(formats)),
         help="; ".join(f"{k}: {v}" for k, v in formats.items()),
@@ -205,14 +233,64 @@ def add_data_options(
     )  # fmt: skip
     p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
     p.add_argument(
-        "--speed", type=number(0.0, 100.0, lo_open=True, unit="m/s"), default=None,
-        help="csv/hdf5: constant speed [m/s] when the log has no speed column",
+        "--speed", type=speed_arg, default=None, metavar="SPEED",
+        help="csv/hdf5: constant speed when the log has no speed column, with a unit: 5m/s, "
+        "14.4km/h (a bare number is m/s)",
     )  # fmt: skip
+    p.add_argument(
+        "--start", type=number(-1e9, 1e9, unit="s"), default=None,
+        help="keep the samples at t >= START [s, the run's own time base] (default: all)",
+    )  # fmt: skip
+    p.add_argument(
+        "--stop", type=number(-1e9, 1e9, unit="s"), default=None,
+        help="keep the samples at t < STOP [s] (default: all)",
+    )  # fmt: skip
+    p.add_argument(
+        "--speed-tolerance", type=number(0.0, 10.0, unit="m/s"), default=0.25,
+        help="runs whose mean speeds lie within this of each other pool into one model at "
+        "their weighted mean speed; also the speed range of a constant-speed stretch when a "
+        "log's speed varies [m/s] (default 0.25; 0 pools equal speeds only)",
+    )  # fmt: skip
+    p.add_argument(
+        "--min-stretch", type=number(0.0, 1e6, unit="s"), default=10.0,
+        help="shortest constant-speed stretch kept when a log's speed varies [s] (default 10)",
+    )  # fmt: skip
+    p.add_argument(
+        "--min-speed", type=number(0.0, 100.0, unit="m/s"), default=0.5,
+        help="stretches slower than this are dropped when a log's speed varies [m/s] "
+        "(default 0.5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--skip-check", default="", metavar="NAME,...",
+        help="checks not to run on a log you know is odd (a note says so): "
+        "sample-period, rate-derivative, informativity (default: none)",
+    )  # fmt: skip
+    p.add_argument("--no-checks", action="store_true", help="skip every check of --skip-check")
     p.add_argument(
         "--flip", default="", metavar="NAME,...",
         help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
     )  # fmt: skip
-    p.add_argument("--input", default="T_delta", metavar="SIGNAL", help=input_help)
+    if input_help is not None:
+        p.add_argument("--input", default="T_delta", metavar="SIGNAL", help=input_help)
+
+
+def load_runs(args: argparse.Namespace, note=None) -> list:
+    """The runs of :func:`add_data_options`' files, read as ``bikeid identify`` reads them.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options of :func:`add_data_options`.
+    note : callable, optional
+        ``note(msg)`` receives what was done beyond reading (windowing, speed splits,
+        skipped checks); default: printed on stderr.
+
+    Returns
+    -------
+    list of Run
+        One per log (or constant-speed stretch), checked for plausibility.
+    """
+    return _load(args, note)
 
 
 def _truth(runs):
@@ -288,15 +366,73 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load(args: argparse.Namespace) -> list:
-    """The runs of every file: bikeid run files, or logs through ``dataset.importers``."""
+def speed_arg(text: str) -> float:
+    """``--speed``: a speed with an optional unit (``5``, ``5m/s``, ``14.4km/h``) in m/s.
+
+    Parameters
+    ----------
+    text : str
+        The option's value.
+
+    Returns
+    -------
+    float
+        The speed [m/s], in (0, MAX_SPEED].
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        For a value that is not a positive speed with a known unit.
+    """
+    import math
+    import re
+
+    from bikeid.sim.conventions import MAX_SPEED
+
+    m = re.fullmatch(r"\s*([-+0-9.eE]+)\s*(m/s|km/h|kph|mph)?\s*", text)
+    factor = {None: 1.0, "m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704}
+    try:
+        value = float(m.group(1)) * factor[m.group(2)] if m else math.nan
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0 < value <= MAX_SPEED):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give a speed in (0, {MAX_SPEED:g}] m/s, optionally with a unit: 5, "
+            "5m/s, 14.4km/h"
+        )
+    return value
+
+
+def _skipped(args: argparse.Namespace) -> list[str]:
+    """The checks ``--skip-check``/``--no-checks`` turn off."""
+    from bikeid.dataset.plausibility import CHECKS
+    from bikeid.sim.errors import InputError
+
+    if getattr(args, "no_checks", False):
+        return list(CHECKS)
+    names = [n.strip() for n in (getattr(args, "skip_check", "") or "").split(",") if n.strip()]
+    bad = [n for n in names if n not in CHECKS]
+    if bad:
+        raise InputError(f"--skip-check {','.join(bad)}: unknown check; choose from "
+                         f"{', '.join(CHECKS)}")  # fmt: skip
+    return list(dict.fromkeys(names))
+
+
+def _read(args: argparse.Namespace) -> tuple[list, list[str]]:
+    """The runs of every file and what each came from: run files or logs."""
     if args.format == "bikeid":
-        from bikeid.dataset.store import read_runs
+        from bikeid.dataset.store import list_runs, read_runs
 
         for opt in ("columns", "units", "speed"):
             if getattr(args, opt) is not None:
                 raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
-        return [r for f in args.file for r in read_runs(f)]
+        runs, sources = [], []
+        for f in args.file:
+            got = read_runs(f)
+            runs += got
+            names = list_runs(f) if len(got) > 1 else [None]
+            sources += [f"{f}: run {n!r}" if n else str(f) for n in names]
+        return runs, sources
     if args.format == "sbw":
         from bikeid.dataset.sbw_logs import load_log, settled
 
@@ -305,7 +441,8 @@ def _load(args: argparse.Namespace) -> list:
                 raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
         if args.flip:
             raise ValueError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
-        return [settled(load_log(p)) for p in _data_files(args)]
+        files = _data_files(args)
+        return [settled(load_log(p)) for p in files], [str(p) for p in files]
     from bikeid.dataset import importers
 
     if not args.columns:
@@ -315,10 +452,140 @@ def _load(args: argparse.Namespace) -> list:
         )
     read = importers.from_csv if args.format == "csv" else importers.from_hdf5
     flip = [f.strip() for f in args.flip.split(",") if f.strip()]
-    return [
-        read(f, args.columns, args.units, time=args.time, speed=args.speed, flip=flip)
-        for f in args.file
-    ]
+    runs = [read(f, args.columns, args.units, time=args.time, speed=args.speed, flip=flip,
+                 speed_range=None) for f in args.file]  # fmt: skip
+    return runs, [str(f) for f in args.file]
+
+
+def _window(runs: list, sources: list[str], args: argparse.Namespace) -> list:
+    """``--start``/``--stop``: each run cut to the time window."""
+    from bikeid.sim.errors import InputError
+
+    start, stop = getattr(args, "start", None), getattr(args, "stop", None)
+    if start is None and stop is None:
+        return runs
+    if start is not None and stop is not None and not start < stop:
+        raise InputError(f"--start {start:g} s is not before --stop {stop:g} s; swap them")
+    out = []
+    for r, src in zip(runs, sources, strict=True):
+        t0 = r.t[0] if start is None else start
+        t1 = r.t[-1] + r.dt if stop is None else stop
+        if ((r.t >= t0) & (r.t < t1)).sum() < 3:
+            raise InputError(
+                f"{src}: --start/--stop keep fewer than 3 samples of its {r.t[0]:.6g}.."
+                f"{r.t[-1]:.6g} s; give a window inside the run"
+            )
+        w = r.window(t0, t1)
+        w.meta["window"] = [float(t0), float(t1)]
+        if w.meta.get("source") == "imported" and w.meta.get("import", {}).get(
+            "speed_source"
+        ) == "column":
+            w.meta["speed"] = float(w.signals["v"].mean())
+        out.append(w)
+    return out
+
+
+def _split(runs: list, sources: list[str], args: argparse.Namespace, note) -> tuple[list, list]:
+    """Logs whose speed varies beyond the importer's limit, split into constant-speed stretches."""
+    import numpy as np
+
+    from bikeid.dataset.importers import SPEED_RANGE
+    from bikeid.dataset.run import split_by_speed
+    from bikeid.sim.errors import InputError
+
+    tol = getattr(args, "speed_tolerance", 0.25)
+    out, out_src = [], []
+    for r, src in zip(runs, sources, strict=True):
+        v = r.signals["v"]
+        mean = float(np.mean(v))
+        if r.meta.get("source") != "imported" or np.ptp(v) <= SPEED_RANGE * mean:
+            out.append(r)
+            out_src.append(src)
+            continue
+        parts = split_by_speed(r, tolerance=max(tol, 1e-9), min_duration=args.min_stretch,
+                               min_speed=args.min_speed)  # fmt: skip
+        if not parts:
+            raise InputError(
+                f"{src}: speed varies {v.min():.3g}..{v.max():.3g} m/s and no stretch of "
+                f"{args.min_stretch:g} s stays within --speed-tolerance {tol:g} m/s above "
+                f"--min-speed {args.min_speed:g} m/s; raise --speed-tolerance, lower "
+                "--min-stretch, or cut the log with --start/--stop"
+            )
+        spans = ", ".join(f"{p.t[0]:.1f}..{p.t[-1]:.1f} s at {p.speed:.3g} m/s" for p in parts)
+        note(f"{src}: speed varies {v.min():.3g}..{v.max():.3g} m/s: split into "
+             f"{len(parts)} constant-speed stretch{'es' if len(parts) > 1 else ''} ({spans})")
+        out += parts
+        out_src += [f"{src} [{p.t[0]:.1f}..{p.t[-1]:.1f} s]" for p in parts]
+    return out, out_src
+
+
+def _load(args: argparse.Namespace, note=None) -> list:
+    """The runs of every file, windowed, split into constant-speed stretches and checked.
+
+    ``note(msg)`` receives what was done beyond reading (splits, skipped checks); default:
+    printed on stderr.
+    """
+    import sys
+
+    from bikeid.dataset.plausibility import check_runs
+
+    if note is None:
+        def note(msg: str) -> None:
+            print(f"note: {msg}", file=sys.stderr, flush=True)
+
+    runs, sources = _read(args)
+    runs = _window(runs, sources, args)
+    if getattr(args, "min_stretch", None) is not None:
+        runs, sources = _split(runs, sources, args, note)
+    skip = _skipped(args)
+    for msg in check_runs(runs, sources, [s for s in skip if s != "informativity"]):
+        note(msg)
+    return runs
+
+
+def pool_speeds(speeds: list[float], weights: list[float], tolerance: float) -> list[int]:
+    """Group index of each speed: sorted speeds within ``tolerance`` of a group's lowest pool.
+
+    Parameters
+    ----------
+    speeds : list of float
+        Mean speed of each run [m/s].
+    weights : list of float
+        Weight of each run (its number of samples).
+    tolerance : float
+        Largest speed difference within a group [m/s]; 0 pools equal speeds (to 1e-6 m/s).
+
+    Returns
+    -------
+    list of int
+        For each run, the index of its group (groups numbered by increasing speed).
+    """
+    order = sorted(range(len(speeds)), key=lambda i: speeds[i])
+    group, lowest, k = [0] * len(speeds), None, -1
+    for i in order:
+        if lowest is None or speeds[i] - lowest > max(tolerance, 1e-6):
+            k, lowest = k + 1, speeds[i]
+        group[i] = k
+    return group
+
+
+def _pool(runs: list, tolerance: float) -> list:
+    """The runs with each pooled group's weighted mean speed as their nominal speed."""
+    import dataclasses
+
+    speeds = [r.speed for r in runs]
+    group = pool_speeds(speeds, [r.n for r in runs], tolerance)
+    out = []
+    for g in sorted(set(group)):
+        idx = [i for i in range(len(runs)) if group[i] == g]
+        n = sum(runs[i].n for i in idx)
+        mean = round(sum(speeds[i] * runs[i].n for i in idx) / n, 6)
+        for i in idx:
+            meta = {**runs[i].meta, "speed": mean}
+            if len(idx) > 1 or abs(speeds[i] - mean) > 1e-9:
+                meta["measured_speed"] = speeds[i]
+            out.append((i, dataclasses.replace(runs[i], meta=meta)))
+    return [r for _, r in sorted(out, key=lambda x: x[0])]
 
 
 def _outputs(text: str | None, method: str) -> tuple[str, ...] | None:
@@ -418,9 +685,12 @@ def _settings(args: argparse.Namespace) -> dict:
     if args.format != "bikeid":
         s.update(columns=args.columns, units=args.units, time=args.time, speed=args.speed,
                  flip=[f.strip() for f in args.flip.split(",") if f.strip()])  # fmt: skip
+    s.update(start=args.start, stop=args.stop, speed_tolerance=args.speed_tolerance,
+             min_stretch=args.min_stretch, min_speed=args.min_speed,
+             skipped_checks=_skipped(args))  # fmt: skip
     if args.method == "direct":
         s.update(bicycle=args.bicycle, iv=args.iv, derivative=args.derivative,
-                 cutoff=args.cutoff)  # fmt: skip
+                 cutoff=args.cutoff, free=args.free)  # fmt: skip
     elif args.method == "greybox":
         s.update(bicycle=args.bicycle, free=args.free, noise_model="free",
                  drop_unidentifiable=args.drop_unidentifiable)  # fmt: skip
@@ -430,6 +700,8 @@ def _settings(args: argparse.Namespace) -> dict:
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
+    import sys
+
     import numpy as np
 
     from bikeid.dataset.files import check_distinct_inputs, check_outputs
@@ -440,14 +712,29 @@ def cmd_identify(args: argparse.Namespace) -> int:
     data_files = _data_files(args)  # no output may be an input; no data file counted twice
     check_outputs([args.out], [*data_files, args.bicycle])
     check_distinct_inputs(data_files)
-    runs = _load(args)
+    if args.method == "pem" and (args.free or args.drop_unidentifiable):
+        raise ValueError("--free applies to --method greybox or direct, --drop-unidentifiable "
+                         "to greybox")  # fmt: skip
+    if args.method == "direct" and args.drop_unidentifiable:
+        raise ValueError("--drop-unidentifiable applies to --method greybox")
+    say = stage_lines("identify", json_output=args.json, quiet=args.quiet)
+    notes: list[str] = []
+
+    def note(msg: str) -> None:  # never silent: on stderr even with --quiet/--json
+        notes.append(msg)
+        print(f"note: {msg}", file=sys.stderr, flush=True)
+
+    runs = _load(args, note)
     if not runs:
         raise ValueError(f"{', '.join(args.file)} hold no runs")
     runs = _with_input(runs, args.input)
+    runs = _pool(runs, args.speed_tolerance)
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
-    if args.method != "greybox" and (args.free or args.drop_unidentifiable):
-        raise ValueError("--free and --drop-unidentifiable apply to --method greybox")
+    informativity = _check_informative(args, runs, speeds, note)
+    # stage lines start once the data passed every check: a refusal stays one line
+    say(f"{len(runs)} run(s) from {len(data_files)} file(s) at "
+        f"{', '.join(f'{v:g}' for v in speeds)} m/s passed the checks")
     targets, provenance, settings = [], [], {}
     if args.out:
         per_speed_pem = args.method == "pem" and not args.speed_parameterized
@@ -456,7 +743,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         provenance = file_provenance(_data_files(args))
         settings = _settings(args)
     out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,
-                 "input": args.input}  # fmt: skip
+                 "input": args.input, "informativity": informativity}  # fmt: skip
+    say(f"fitting ({args.method})")
     if args.method == "direct":
         from bikeid.ident.direct import identify
         from bikeid.ident.signals import prepare
@@ -473,7 +761,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
             cutoff = 3.0 if args.derivative == "interval" else 15.0
         settings["cutoff"] = cutoff
         prepared = [prepare(r, cutoff=cutoff or None, derivative=args.derivative) for r in runs]
-        res = identify(prepared, reference, method="iv" if args.iv else "ls")
+        res = identify(prepared, reference, method="iv" if args.iv else "ls",
+                       **_direct_free(args.free))  # fmt: skip
         saved = [(res, targets[0])] if targets else []
         out["outputs"] = ["phi", "delta", "phidot", "deltadot"]
         out.update(
@@ -517,7 +806,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         # reuses them as its start, as in ``bikeid accuracy``.
         per: dict = {}
         prev = None
-        bar = terminal_progress("identify", json_output=args.json, unit="fit")
+        bar = terminal_progress("identify", json_output=args.json, unit="fit",
+                                quiet=args.quiet)  # fmt: skip
         steps = len(speeds) + bool(args.speed_parameterized)
         for k, v in enumerate(speeds):
             if bar:
@@ -556,6 +846,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for model, target in saved:
         save_model(model, target, provenance=provenance, settings=settings, speeds=speeds)
     out["model_files"] = [str(t) for _, t in saved]
+    for f in out["model_files"]:
+        say(f"wrote {f}")
+    if notes:
+        out["notes"] = notes
     per_speed = []
     for v in speeds:
         row = {"speed": v, "eigenvalues": eig[v]}
@@ -611,6 +905,60 @@ def cmd_identify(args: argparse.Namespace) -> int:
         for line in _interval_lines(out["intervals"]):
             print(line)
     return 0
+
+
+def _direct_free(text: str | None) -> dict:
+    """``--free`` for direct: the entries split into roll-row and steer-row free sets."""
+    from bikeid.ident.direct import parse_entry
+
+    if not text:
+        return {}
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    try:
+        rows = [parse_entry(n)[1] for n in names]
+    except ValueError as exc:
+        raise ValueError(f"--free {text!r}: {exc}") from None
+    return {"free_roll": [n for n, r in zip(names, rows, strict=True) if r == 0],
+            "free_steer": [n for n, r in zip(names, rows, strict=True) if r == 1]}  # fmt: skip
+
+
+def _n_params(args: argparse.Namespace, runs: list) -> int:
+    """Free parameters of the model ``args`` asks for (the informativity check's count)."""
+    from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
+
+    force = any(r["F"].any() for r in runs)
+    if args.method == "pem":
+        return len(SPEED_NAMES if args.speed_parameterized else THETA_NAMES)
+    if args.free:
+        return len([n for n in args.free.split(",") if n.strip()])
+    if args.method == "greybox":
+        from bikeid.ident.greybox import DEFAULT_FREE
+
+        return len(DEFAULT_FREE) + force
+    from bikeid.ident.direct import MOORE_ROLL, MOORE_STEER
+
+    return len(MOORE_ROLL) + len(MOORE_STEER) - (not force)
+
+
+def _check_informative(args: argparse.Namespace, runs: list, speeds: list, note) -> dict | None:
+    """Refuse data that cannot determine the model (ident.informativity), before the fit."""
+    from bikeid.ident.informativity import check
+
+    if "informativity" in _skipped(args):
+        note("check informativity skipped on request: the model may be determined by "
+             "feedback, not by the data")  # fmt: skip
+        return None
+    n = _n_params(args, runs)
+    if args.method == "pem" and not args.speed_parameterized:
+        per = {}
+        for v in speeds:
+            at_v = [r for r in runs if round(r.speed, 6) == v]
+            per[v] = check(at_v, n, what=f"the canonical PEM model at {v:g} m/s",
+                           min_speeds=1).to_json()  # fmt: skip
+        return {"per_speed": per}
+    what = {"pem": "the speed-parameterized PEM model", "greybox": "the grey-box model",
+            "direct": "the direct least-squares model"}[args.method]  # fmt: skip
+    return check(runs, n, what=what, min_speeds=2 if len(speeds) >= 2 else 1).to_json()
 
 
 def _intervals(models: dict, speed_model) -> dict:

@@ -44,6 +44,8 @@ from bikeid.sim.parameters import BicycleParameters
 __all__ = [
     "FIG4_CONDITIONS",
     "FIG5_CONDITIONS",
+    "FAMILIES",
+    "FAMILY_REL",
     "Classification",
     "InitialCondition",
     "Periodicity",
@@ -51,7 +53,9 @@ __all__ = [
     "coast",
     "periodicity",
     "mirrored",
+    "orbit_family",
     "plot_energy_speed",
+    "scan_windows",
     "plot_phase_portraits",
     "section_points",
     "speed_scan",
@@ -361,6 +365,10 @@ class Periodicity:
         Initial total energy [J].
     energy_drift : float
         (max - min) / |mean| of the total energy (dimensionless; NaN without energy).
+    roll_range_last_half : (float, float)
+        Minimum and maximum roll over the second half [deg].
+    family : {"symmetric", "turning"} or None
+        Orbit family of a periodic run (:func:`orbit_family`), None otherwise.
     """
 
     label: str
@@ -383,6 +391,8 @@ class Periodicity:
     turn_radius: float | None
     energy: float
     energy_drift: float
+    roll_range_last_half: tuple[float, float] = (0.0, 0.0)
+    family: str | None = None
 
     def as_dict(self) -> dict:
         """The outcome as a JSON-able dict.
@@ -461,6 +471,9 @@ def periodicity(traj, label: str = "", closure_rel: float = CLOSURE_REL) -> Peri
         k, p = n // 2, cl.period_n
         period = float(np.mean(tc[k + p :] - tc[k : n - p]))
     r = float(np.mean(v[half]) / psidot[half].mean()) if abs(psidot[half].mean()) > 1e-6 else None
+    ph = np.degrees(phi[half])
+    roll_mean = float(ph.mean())
+    fam = orbit_family(float(ph.min()), float(ph.max()), roll_mean) if cl.period_n else None
     return Periodicity(
         label=label,
         verdict=cl.outcome,
@@ -475,13 +488,15 @@ def periodicity(traj, label: str = "", closure_rel: float = CLOSURE_REL) -> Peri
         decay_rate=cl.decay_rate,
         last_section_point=tuple(float(x) for x in pts[-1]) if n else None,
         roll_range=(float(np.degrees(phi.min())), float(np.degrees(phi.max()))),
-        roll_mean=float(np.degrees(phi[half].mean())),
+        roll_mean=roll_mean,
         speed_range=(float(v.min()), float(v.max())),
         speed_mean=float(v[half].mean()),
         yaw_rate_mean=float(psidot[half].mean()),
         turn_radius=None if r is None else abs(r),
         energy=float(E[0]),
         energy_drift=float(np.ptp(E) / abs(np.mean(E))),
+        roll_range_last_half=(float(ph.min()), float(ph.max())),
+        family=fam,
     )
 
 
@@ -519,6 +534,7 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
     -------
     dict
         ``phi0_deg``, ``delta0_deg``, ``phidot0_deg_s``, ``outcome``, ``period_n``,
+        ``family`` (:func:`orbit_family`, null unless periodic), ``roll_mean_last_half_deg``,
         ``fall_time_s``, ``fall_cause``, ``period_s``, ``floquet_multipliers`` ([re, im]
         pairs), ``unit_multiplier_error``, ``orbit_energy_J``, ``orbit_section_point``
         (deg, deg, deg/s, m/s), ``closure_rel``, ``decay_rate_per_return``,
@@ -533,6 +549,8 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
         "phidot0_deg_s": ic.phidot,
         "outcome": res.verdict,
         "period_n": res.returns_per_period,
+        "family": res.family,
+        "roll_mean_last_half_deg": res.roll_mean,
         "fall_time_s": res.fell_at,
         "fall_cause": res.fall_cause,
         "period_s": None,
@@ -563,11 +581,61 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
 SCAN_CONDITION = InitialCondition("delta0=0.1, phidot0=0", delta=0.1)
 
 
-def _scan_point(p: BicycleParameters, ic: InitialCondition, v: float, duration: float) -> dict:
-    """Class of one coasting run at initial speed v; a numerical stop is rerun at a 4x
-    finer RK4 step before it is reported as ``numerical``."""
+#: Orbit families (Chen & Dao's turning orbits of Figs. 4-5 and the weave cycles about
+#: upright born at v_w).  A periodic run is ``symmetric`` when over its last half the
+#: mean roll and the sum of the roll extrema are both within :data:`FAMILY_REL` of the roll
+#: amplitude (max - min) / 2, else ``turning`` (lopsided: a mean lean, a mean turn).
+FAMILIES = ("symmetric", "turning")
+#: Benchmark bicycle, 0.1 deg steer start, 300 s runs on a 0.02 m/s grid over 3.2-4.3 m/s:
+#: the symmetric cycles have |mean roll| / amplitude <= 0.006 (the half-run mean over a
+#: non-integer number of periods) and |max + min| / amplitude < 1e-5; the lopsided ones
+#: have both >= 0.12.  0.03 lies between with a margin of 4-5 both ways.
+FAMILY_REL = 0.03
+
+
+def orbit_family(
+    roll_min: float, roll_max: float, roll_mean: float, rel: float = FAMILY_REL
+) -> str:
+    """Family of a periodic coasting orbit from its roll statistics (last half of the run).
+
+    Parameters
+    ----------
+    roll_min, roll_max : float
+        Minimum and maximum roll over the last half [deg].
+    roll_mean : float
+        Mean roll over the last half [deg].
+    rel : float, optional
+        Tolerance relative to the amplitude (roll_max - roll_min) / 2 (default
+        :data:`FAMILY_REL`).
+
+    Returns
+    -------
+    str
+        ``"symmetric"`` (about upright: |mean| and |max + min| both below ``rel`` times the
+        amplitude) or ``"turning"`` (lopsided).
+
+    Raises
+    ------
+    ValueError
+        If ``roll_max < roll_min``.
+    """
+    if roll_max < roll_min:
+        raise ValueError(f"roll_max {roll_max} below roll_min {roll_min}: pass (min, max, mean)")
+    amp = 0.5 * (roll_max - roll_min)
+    if amp <= 0:
+        return "turning"
+    sym = abs(roll_mean) < rel * amp and abs(roll_max + roll_min) < rel * 2 * amp
+    return "symmetric" if sym else "turning"
+
+
+def _scan_point(args: tuple) -> dict:
+    """Class of one coasting run at initial speed v (picklable worker: parameters, initial
+    condition, speed [m/s], duration [s]); a numerical stop is rerun at a 4x finer RK4 step
+    before it is reported as ``numerical``."""
     import warnings
 
+    p, ic, v, duration = args
+    msg = ""
     for substeps in (None, 8):
         with warnings.catch_warnings():  # a numerical stop is handled here, not warned about
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -578,15 +646,71 @@ def _scan_point(p: BicycleParameters, ic: InitialCondition, v: float, duration: 
             msg = str(exc)
             continue
         return {
-            "speed": float(v),
+            "v0": float(v),
             "outcome": r.verdict,
             "period_n": r.returns_per_period,
+            "family": r.family,
+            "period_s": r.period,
             "fall_time_s": r.fell_at,
             "fall_cause": r.fall_cause,
+            "roll_range_last_half_deg": r.roll_range_last_half,
+            "roll_mean_last_half_deg": r.roll_mean,
             "speed_range": r.speed_range,
             "rk4_substeps": substeps,
         }
-    return {"speed": float(v), "outcome": "numerical", "message": msg}
+    return {"v0": float(v), "outcome": "numerical", "period_n": None, "family": None,
+            "message": msg}  # fmt: skip
+
+
+def scan_windows(points) -> dict[str, list]:
+    """Windows of a speed scan: runs of neighbouring initial speeds with the same class.
+
+    A pure function of the scan's entries.  Entries are sorted by ``v0``; consecutive
+    entries with the same ``outcome`` and ``family`` form one window.  A window's ends are
+    the first and last grid speeds in it (the true edge lies within one grid step outside).
+
+    Parameters
+    ----------
+    points : sequence of dict
+        Scan entries with at least ``v0`` [m/s], ``outcome`` (``decays``, ``periodic``,
+        ``irregular``, ``falls``, ``numerical``), ``period_n`` (int or None) and
+        ``family`` (``"symmetric"``, ``"turning"`` or None).
+
+    Returns
+    -------
+    dict
+        ``periodic``: list of [low, high, family] [m/s] for the periodic windows (the
+        ``chen_dao.periodic_windows`` of summary.json); ``all``: every window as a dict
+        (``low``, ``high`` [m/s], ``outcome``, ``family``, ``period_n``: sorted distinct
+        period numbers in it, ``n``: number of grid speeds).
+
+    Raises
+    ------
+    ValueError
+        If an entry lacks ``v0`` or ``outcome``, or two entries share a speed.
+    """
+    pts = sorted(points, key=lambda q: q["v0"])
+    for q in pts:
+        if "v0" not in q or "outcome" not in q:
+            raise ValueError(f"scan entry {q} needs 'v0' and 'outcome'")
+    vs = [q["v0"] for q in pts]
+    if len(set(vs)) != len(vs):
+        raise ValueError("two scan entries share an initial speed: one entry per speed")
+    runs: list[dict] = []
+    for q in pts:
+        key = (q["outcome"], q.get("family"))
+        if runs and (runs[-1]["outcome"], runs[-1]["family"]) == key:
+            w = runs[-1]
+            w["high"] = q["v0"]
+            w["n"] += 1
+        else:
+            w = {"low": q["v0"], "high": q["v0"], "outcome": key[0], "family": key[1],
+                 "period_n": [], "n": 1}  # fmt: skip
+            runs.append(w)
+        if q.get("period_n") is not None and q["period_n"] not in w["period_n"]:
+            w["period_n"] = sorted(w["period_n"] + [q["period_n"]])
+    per = [[w["low"], w["high"], w["family"]] for w in runs if w["outcome"] == "periodic"]
+    return {"periodic": per, "all": runs}
 
 
 def speed_scan(
@@ -594,70 +718,59 @@ def speed_scan(
     speeds,
     duration: float,
     ic: InitialCondition = SCAN_CONDITION,
-    refine: int = 4,
+    workers: int = 1,
+    dask: str | None = None,
 ) -> dict:
-    """Speeds at which coasting from ``ic`` reaches a periodic orbit (Chen & Dao's v_l .. v_w).
+    """Class of coasting from ``ic`` at every initial speed of a grid (Chen & Dao's v_l .. v_w).
 
-    Every speed of ``speeds`` is run (:func:`coast`, :func:`periodicity`); each boundary
-    between a periodic grid speed and a neighbouring non-periodic one is then bisected
-    ``refine`` times (assuming one change of class inside the bracket), so the edges are
-    known to (grid step) / 2**refine.  Runs that stop for a numerical reason are rerun at a
-    4x finer step; if that also fails they are ``numerical`` (not periodic).
+    Every speed is run (:func:`coast`, :func:`periodicity`; the runs in parallel through
+    :func:`bikeid.experiments.parallel.map_jobs`, the reproduction's pool), classified
+    (``decays``, ``periodic`` with its period number and orbit family
+    (:func:`orbit_family`), ``irregular``, ``falls`` with time and cause) and the grid is
+    cut into windows of one class (:func:`scan_windows`).  No bisection: a class can change
+    more than once between two grid speeds, so the windows are as fine as the grid and no
+    finer.  Runs that stop for a numerical reason are rerun at a 4x finer step; if that
+    also fails they are ``numerical``.
 
     Parameters
     ----------
     p : BicycleParameters
         The bicycle.
     speeds : sequence of float
-        Increasing initial speeds [m/s].
+        Initial speeds [m/s].
     duration : float
         Length of each run [s]; a motion still growing at the end is ``irregular``.
     ic : InitialCondition, optional
         Initial roll, steer and rates (default :data:`SCAN_CONDITION`).
-    refine : int, optional
-        Bisection steps per edge.
+    workers : int, optional
+        Worker processes (1: in this process).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`); the
+        classes do not depend on it.
 
     Returns
     -------
     dict
-        ``condition`` (label), ``duration`` [s], ``points`` (speed [m/s], outcome,
-        ``period_n``, fall time [s] and cause, speed range [m/s]; grid and bisection runs
-        sorted by speed), ``edges`` (per change between periodic and not: ``lower`` or
-        ``upper``, the bracketing speeds [m/s] and the outcome outside), ``range``
-        ((lowest, highest) periodic speed [m/s] or None) and ``resolution`` [m/s].
+        ``condition`` (label), ``duration`` [s], ``step`` (smallest grid step [m/s]),
+        ``points`` (one entry per speed, sorted: ``v0`` [m/s], ``outcome``, ``period_n``,
+        ``family``, ``period_s`` [s], fall time [s] and cause, roll range and mean over the
+        last half [deg], speed range [m/s]), ``windows`` (every window of
+        :func:`scan_windows`) and ``periodic_windows`` (list of [low, high, family] [m/s]).
     """
-    grid = [float(v) for v in speeds]
-    pts = {v: _scan_point(p, ic, v, duration) for v in grid}
-    edges = []
-    for a, b in zip(grid[:-1], grid[1:], strict=True):
-        pa, pb = pts[a]["outcome"] == "periodic", pts[b]["outcome"] == "periodic"
-        if pa == pb:
-            continue
-        lo, hi = a, b
-        for _ in range(refine):
-            m = 0.5 * (lo + hi)
-            pts[m] = _scan_point(p, ic, m, duration)
-            if (pts[m]["outcome"] == "periodic") == (pts[lo]["outcome"] == "periodic"):
-                lo = m
-            else:
-                hi = m
-        outside = pts[hi]["outcome"] if pa else pts[lo]["outcome"]
-        edges.append(
-            {
-                "kind": "lower" if pb else "upper",
-                "bracket": (lo, hi),
-                "outside": outside,
-            }
-        )
-    per = sorted(v for v, e in pts.items() if e["outcome"] == "periodic")
-    step = float(np.min(np.diff(grid))) if len(grid) > 1 else float("nan")
+    grid = sorted({float(v) for v in speeds})
+    if not grid:
+        raise ValueError("speed scan needs at least one initial speed")
+    from bikeid.experiments.parallel import map_jobs
+
+    pts = map_jobs(_scan_point, [(p, ic, v, duration) for v in grid], workers, dask)
+    w = scan_windows(pts)
     return {
         "condition": ic.label,
         "duration": duration,
-        "points": [pts[v] for v in sorted(pts)],
-        "edges": edges,
-        "range": (per[0], per[-1]) if per else None,
-        "resolution": step / 2**refine,
+        "step": float(np.min(np.diff(grid))) if len(grid) > 1 else None,
+        "points": pts,
+        "windows": w["all"],
+        "periodic_windows": w["periodic"],
     }
 
 

@@ -1,0 +1,389 @@
+"""Can the data determine the model?  Feedback share and order of excitation of the input.
+
+Closed-loop data identify a plant only when the input carries something the loop's own
+feedback does not put there: an external dither, a reference, a push measured as an
+input.  A steer torque that a law of the measured states reproduces is feedback, and a
+fit to it returns whatever model makes the closed loop's equations hold (the issue's
+example: three unstable real poles from push logs under the steer-by-wire bicycle's own
+balance controller).  MATLAB's System Identification Toolbox has ``feedback`` and
+``pexcit`` for this; :func:`assess` does both, and :func:`check` refuses
+(:class:`~bikeid.sim.errors.UntrustworthyResult`, exit 4) before any estimator returns a
+model from data that cannot determine it.
+
+1. **Feedback share.**  Per run, the steer torque T is regressed by least squares on a
+   low-order linear law of the measured states: a constant, phi, delta, phidot,
+   deltadot, their products with the speed's deviation from its mean (a gain scheduled on
+   the speed, e.g. ``K (V - v) phidot`` of the steer-by-wire logs), and the running
+   integrals of phi and delta (the integral action of a PI/PID law).  R^2 is the share of
+   T's variance the law reproduces; a run with R^2 >= :data:`FEEDBACK_R2` carries feedback
+   only, no excitation.  The law has no lagged states on purpose: two consecutive samples
+   of the full state give the held input between them through the plant's own equation
+   (x_k = A x_{k-1} + B T_{k-1}), so a lagged law would "explain" any slowly varying
+   external input and refuse good data.
+2. **Order of excitation** of the part of T the law does not reproduce (the residual):
+   the number of distinct frequencies in its Hann-windowed periodogram whose power is
+   within :data:`LINE_LEVEL` (30 dB) of the strongest, pooled over runs on a common
+   frequency grid: each band of adjacent excited bins counts as one frequency, or as
+   several when it is wider than the bins one pure tone covers at that level
+   (:func:`tone_bins`); the order is 2 per frequency (a sinusoid is persistently exciting of
+   order 2, MATLAB's ``pexcit``).  The input itself is counted the same way first, so a
+   single sinusoid is named as such, not as feedback.
+3. **Verdict.**  The data determine a model of ``n_params`` free parameters when some run
+   is not feedback-only and the order of excitation of the residual is at least
+   ``n_params`` (:data:`ORDER_PER_PARAMETER` = 1: a sufficient condition for a SISO model
+   with as many numerator and denominator parameters).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bikeid.sim.errors import InputError, UntrustworthyResult
+
+__all__ = [
+    "FEEDBACK_R2",
+    "LINE_LEVEL",
+    "ORDER_PER_PARAMETER",
+    "Informativity",
+    "assess",
+    "check",
+    "excited_frequencies",
+    "feedback_share",
+    "tone_bins",
+]
+
+#: R^2 of the state law above which a run's steer torque counts as feedback only [-].  The
+#: steer-by-wire push logs reach 0.995-1.000 (their balance law reproduces the command to
+#: rounding); the testbed's dithered runs stay below 0.9 (tests/test_informativity.py).
+FEEDBACK_R2 = 0.98
+#: Power of a periodogram bin relative to the strongest bin above which the bin counts as
+#: excited [-] (1e-3: 30 dB, an amplitude 3 % of the strongest component).
+LINE_LEVEL = 1e-3
+#: Order of persistent excitation required per free parameter of the model [-].
+ORDER_PER_PARAMETER = 1
+
+_STATES = ("phi", "delta", "phidot", "deltadot")
+
+
+def _law(run: Any, name: str) -> np.ndarray:
+    """Regressors of the state law (module docstring, point 1), one column each."""
+    cols = [np.ones(run.n)] + [np.asarray(run[s], float) for s in _STATES]
+    v = np.asarray(run["v"], float)
+    dv = v - v.mean()
+    if np.ptp(dv) > 0:
+        cols += [dv] + [dv * np.asarray(run[s], float) for s in _STATES]
+    dt = run.dt
+    for s in ("phi", "delta"):
+        integral = np.cumsum(np.asarray(run[s], float)) * dt
+        cols.append(integral - integral.mean())
+    X = np.column_stack(cols)
+    scale = np.linalg.norm(X, axis=0)
+    scale[scale == 0] = 1.0
+    return X / scale
+
+
+def feedback_share(run: Any, input_name: str = "T_delta") -> tuple[float, np.ndarray]:
+    """R^2 of the steer torque reproduced by the state law, and the unexplained part.
+
+    Parameters
+    ----------
+    run : Run
+        One run (``phi``, ``delta``, ``phidot``, ``deltadot``, ``v`` and the input).
+    input_name : str, optional
+        The input signal [N m] (default ``T_delta``).
+
+    Returns
+    -------
+    r2 : float
+        Share of the input's variance (about its mean) the law reproduces, 0..1 [-];
+        1.0 for an input without variance.
+    residual : (N,) ndarray
+        The input minus the law's least-squares fit [N m].
+    """
+    u = np.asarray(run[input_name], float)
+    X = _law(run, input_name)
+    coef, *_ = np.linalg.lstsq(X, u, rcond=None)
+    res = u - X @ coef
+    tot = float(np.sum((u - u.mean()) ** 2))
+    if tot == 0.0:
+        return 1.0, res
+    return float(max(0.0, 1.0 - np.sum(res**2) / tot)), res
+
+
+def _periodogram(u: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.signal import periodogram
+
+    f, p = periodogram(np.asarray(u, float), fs=1.0 / dt, window="hann", detrend="constant")
+    return f[1:], p[1:]  # DC (a constant input, order 1) is not a frequency that excites
+
+
+def tone_bins(n: int, level: float = LINE_LEVEL) -> int:
+    """Bins one pure tone covers in an ``n``-sample Hann periodogram at ``level``.
+
+    Parameters
+    ----------
+    n : int
+        Record length [samples], >= 16.
+    level : float, optional
+        Relative power threshold [-] (:data:`LINE_LEVEL`).
+
+    Returns
+    -------
+    int
+        The largest count over tones on a bin and half-way between bins (>= 1).
+    """
+    k = np.arange(n)
+    best = 1
+    for cycles in (n / 8.0, n / 8.0 + 0.5, n / 8.0 + 0.25):
+        _, p = _periodogram(np.sin(2 * np.pi * cycles * k / n), 1.0)
+        best = max(best, int(np.sum(p >= level * p.max())))
+    return best
+
+
+def excited_frequencies(u: np.ndarray, dt: float, level: float = LINE_LEVEL) -> np.ndarray:
+    """Frequencies of the periodogram bins of ``u`` within ``level`` of its strongest bin.
+
+    Parameters
+    ----------
+    u : (N,) array_like
+        The signal (mean removed here).
+    dt : float
+        Sample period [s].
+    level : float, optional
+        Relative power threshold [-].
+
+    Returns
+    -------
+    ndarray
+        Frequencies [Hz] of the excited bins (DC excluded); empty for a constant signal.
+    """
+    f, p = _periodogram(u, dt)
+    if p.size == 0 or not np.any(p > 0):
+        return np.empty(0)
+    return f[p >= level * p.max()]
+
+
+def _distinct(speeds: Sequence[float], tolerance: float) -> list[float]:
+    """Speeds more than ``tolerance`` apart (the lowest of each cluster)."""
+    out: list[float] = []
+    for v in sorted(speeds):
+        if not out or v - out[-1] > tolerance:
+            out.append(round(float(v), 6))
+    return out
+
+
+def _order(freqs: Sequence[np.ndarray], resolutions: Sequence[float], bins: int) -> int:
+    """2 x distinct frequencies of the pooled excited bins (on the coarsest grid)."""
+    if not freqs or all(len(f) == 0 for f in freqs):
+        return 0
+    df = max(resolutions)
+    grid = sorted({int(round(x / df)) for f in freqs for x in f})
+    # contiguous excited bins are one line, or several when wider than one tone
+    lines, start = 0, 0
+    for i in range(1, len(grid) + 1):
+        if i == len(grid) or grid[i] != grid[i - 1] + 1:
+            lines += math.ceil((i - start) / bins)
+            start = i
+    return 2 * lines
+
+
+@dataclass(frozen=True)
+class Informativity:
+    """What the data can determine: feedback share and order of excitation of the input.
+
+    Attributes
+    ----------
+    n_params : int
+        Free parameters of the model to be fitted.
+    r2 : tuple of float
+        Per run, the share of the input's variance a state law reproduces [-].
+    feedback_only : tuple of int
+        Indices of the runs with ``r2 >= threshold``.
+    input_order : int
+        Order of persistent excitation of the input itself, pooled over runs.
+    order : int
+        Order of persistent excitation of the input's part no state law reproduces,
+        pooled over the runs that are not feedback-only (0 when all are).
+    threshold : float
+        The R^2 threshold used [-].
+    cause : str or None
+        Why the data cannot determine the model, with the fix; None when they can.
+    """
+
+    n_params: int
+    r2: tuple[float, ...]
+    feedback_only: tuple[int, ...]
+    input_order: int
+    order: int
+    threshold: float = FEEDBACK_R2
+    cause: str | None = field(default=None)
+
+    @property
+    def informative(self) -> bool:
+        """bool: True when the data can determine the model (``cause`` is None)."""
+        return self.cause is None
+
+    def to_json(self) -> dict:
+        """The assessment as JSON-ready values.
+
+        Returns
+        -------
+        dict
+            ``n_params``, ``r2`` (per run), ``feedback_only``, ``input_order``, ``order``,
+            ``threshold``, ``informative``, ``cause``.
+        """
+        return {"n_params": self.n_params, "r2": list(self.r2),
+                "feedback_only": list(self.feedback_only), "input_order": self.input_order,
+                "order": self.order, "threshold": self.threshold,
+                "informative": self.informative, "cause": self.cause}  # fmt: skip
+
+
+_FIX = ("add an external steer-torque dither or reference (broadband, independent of the "
+        "states) to the experiment, pool more runs, or fit a grey-box model with fewer free "
+        "entries (--method greybox --free ...)")  # fmt: skip
+
+
+def assess(
+    runs: Sequence[Any],
+    n_params: int,
+    *,
+    input_name: str = "T_delta",
+    threshold: float = FEEDBACK_R2,
+    level: float = LINE_LEVEL,
+    min_speeds: int = 1,
+    speed_tolerance: float = 0.25,
+) -> Informativity:
+    """Whether ``runs`` can determine a model with ``n_params`` free parameters.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        The runs a model is to be fitted to (with phi, delta, phidot, deltadot, v and the
+        input).
+    n_params : int
+        Free parameters of the model (e.g. 10 for the canonical PEM at one speed).
+    input_name : str, optional
+        The input signal [N m].
+    threshold : float, optional
+        R^2 at or above which a run's input counts as feedback only (0 < threshold <= 1).
+    level : float, optional
+        Relative periodogram power of an excited bin [-].
+    min_speeds : int, optional
+        Distinct speeds (``run.speed`` more than ``speed_tolerance`` apart) the runs that
+        are not feedback-only must cover: 2 for a model over speed (its v and v^2 terms).
+    speed_tolerance : float, optional
+        Speeds closer than this count as one [m/s].
+
+    Returns
+    -------
+    Informativity
+        The assessment; ``cause`` names the problem and the fix when the data cannot
+        determine the model.
+
+    Raises
+    ------
+    InputError
+        If there are no runs, ``n_params`` < 1, or ``threshold`` is outside (0, 1].
+    """
+    if not runs:
+        raise InputError("no runs to assess")
+    if int(n_params) < 1:
+        raise InputError(f"n_params={n_params}: a model has at least one free parameter")
+    if not (0.0 < threshold <= 1.0):
+        raise InputError(f"threshold={threshold}: give an R^2 in (0, 1]")
+    r2s, residuals, res_f, in_f, res_df = [], [], [], [], []
+    bins = 1
+    for r in runs:
+        r2, res = feedback_share(r, input_name)
+        r2s.append(r2)
+        residuals.append(res)
+        in_f.append(excited_frequencies(r[input_name], r.dt, level))
+        res_df.append(1.0 / (r.n * r.dt))
+        bins = max(bins, tone_bins(min(r.n, 4096), level))
+    feedback = tuple(i for i, x in enumerate(r2s) if x >= threshold)
+    for i, (r, res) in enumerate(zip(runs, residuals, strict=True)):
+        if i not in feedback:
+            res_f.append(excited_frequencies(res, r.dt, level))
+    input_order = _order(in_f, res_df, bins)
+    keep = [d for i, d in enumerate(res_df) if i not in feedback]
+    order = _order(res_f, keep, bins) if res_f else 0
+    need = ORDER_PER_PARAMETER * int(n_params)
+    cause = None
+    n = len(runs)
+    if input_order < need:
+        cause = (f"the input {input_name} excites {input_order // 2} distinct frequenc"
+                 f"{'y' if input_order // 2 == 1 else 'ies'} (order of excitation "
+                 f"{input_order}; a single sinusoid has 2), fewer than the model's {n_params} "
+                 f"free parameters need; excite more frequencies (a broadband dither or a "
+                 f"multisine), pool runs at other frequencies, or fit a grey-box model with "
+                 f"fixed entries")  # fmt: skip
+    elif len(feedback) == n:
+        worst = min(r2s)
+        cause = (f"the input {input_name} is feedback only: a linear law of the measured "
+                 f"states reproduces {100 * worst:.4g} % or more of its variance in "
+                 f"{'the run' if n == 1 else f'all {n} runs'} (threshold {100 * threshold:g} "
+                 f"%), so the data show the closed loop, not the plant; {_FIX}")  # fmt: skip
+    elif len(_distinct([runs[i].speed for i in range(n) if i not in feedback],
+                       speed_tolerance)) < min(min_speeds, len(_distinct([r.speed for r in runs],
+                                                                          speed_tolerance))):
+        excited = _distinct([runs[i].speed for i in range(n) if i not in feedback],
+                            speed_tolerance)
+        cause = (f"only the runs at {', '.join(f'{v:g}' for v in excited)} m/s carry "
+                 f"excitation (the input of the others is feedback only: R^2 >= "
+                 f"{100 * threshold:g} %), and a model over speed needs excited runs at "
+                 f"{min_speeds} or more speeds; {_FIX}")  # fmt: skip
+    elif order < need:
+        cause = (f"the part of the input {input_name} that no state law reproduces excites "
+                 f"{order // 2} distinct frequenc{'y' if order // 2 == 1 else 'ies'} (order "
+                 f"of excitation {order}), fewer than the model's {n_params} free parameters "
+                 f"need; {_FIX}")  # fmt: skip
+    return Informativity(int(n_params), tuple(r2s), feedback, input_order, order, threshold,
+                         cause)  # fmt: skip
+
+
+def check(
+    runs: Sequence[Any],
+    n_params: int,
+    *,
+    what: str = "the model",
+    input_name: str = "T_delta",
+    threshold: float = FEEDBACK_R2,
+    min_speeds: int = 1,
+) -> Informativity:
+    """:func:`assess`, refusing data that cannot determine the model.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        The runs a model is to be fitted to.
+    n_params : int
+        Free parameters of the model.
+    what : str, optional
+        The model, for the message (e.g. ``"the canonical PEM model at 4.5 m/s"``).
+    input_name : str, optional
+        The input signal [N m].
+    threshold : float, optional
+        R^2 at or above which an input counts as feedback only.
+    min_speeds : int, optional
+        Distinct speeds the excited runs must cover (:func:`assess`).
+
+    Returns
+    -------
+    Informativity
+        The assessment (informative).
+
+    Raises
+    ------
+    UntrustworthyResult
+        ``the logs cannot determine <what>: <cause and fix>``.
+    """
+    info = assess(runs, n_params, input_name=input_name, threshold=threshold,
+                  min_speeds=min_speeds)
+    if info.cause is not None:
+        raise UntrustworthyResult(f"the logs cannot determine {what}: {info.cause}")
+    return info
