@@ -15,6 +15,10 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   values.
 - :mod:`~bikeid.ident.pem`: ``fit`` (one speed) and ``fit_speed_model``
   (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
+- :mod:`~bikeid.ident.linear_model`: the one base of every linear model class
+  (``state_space(speed, dt)`` with named states, inputs and outputs in bikeid's order,
+  ``eigenvalues(speed)`` in one order with mode names, and over speed
+  ``eigenvalues_vs_speed``, ``critical_speeds``).
 - :mod:`~bikeid.ident.predictor`: the innovations predictor, Levenberg-Marquardt minimizer
   and sandwich covariance shared by ``pem`` and ``greybox``.
 - :mod:`~bikeid.ident.greybox`: grey-box PEM of entries of M, C1, K0, K2 (any free set, one

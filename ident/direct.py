@@ -45,10 +45,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-import control
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.ident.linear_model import SpeedDependentModel
 from bikeid.ident.signals import check_sampling, differentiate
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_matrices
@@ -207,7 +207,7 @@ def regressors(d: dict[str, np.ndarray], g: float) -> dict[str, np.ndarray]:
 
 
 @dataclass(frozen=True)
-class DirectResult:
+class DirectResult(SpeedDependentModel):
     """Identified canonical matrices with the statistics of the fit.
 
     ``M, C1, K0, K2`` (2x2, rows/cols [phi, delta]), ``H`` (2,) [m], gravity ``g``:
@@ -281,56 +281,16 @@ class DirectResult:
         """
         return CanonicalMatrices(M=self.M, C1=self.C1, K0=self.K0, K2=self.K2, g=self.g)
 
-    def state_space(
-        self, v: float, inputs: Sequence[str] = ("T_phi", "T_delta", "F")
-    ) -> control.StateSpace:
-        """python-control model at speed v; states [phi, delta, phidot, deltadot], all output.
+    #: Inputs of :meth:`state_space` by default: roll and steer torque, lateral force.
+    INPUTS = ("T_phi", "T_delta", "F")
 
-        Parameters
-        ----------
-        v : float
-            Forward speed [m/s].
-        inputs : sequence of str, optional
-            Input columns in this order, from ``"T_phi"`` [N m], ``"T_delta"`` [N m] and
-            ``"F"`` [N] (lateral force, positive to the right, through ``H``).
+    def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        A, B = state_matrices(self.canonical(), speed)
+        Bf = np.concatenate([np.zeros(2), np.linalg.solve(self.M, self.H)])
+        return A, {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf}
 
-        Returns
-        -------
-        control.StateSpace
-            Continuous-time model; states and outputs x = [phi, delta, phidot, deltadot]
-            [rad, rad, rad/s, rad/s] (C = I, D = 0), inputs named as ``inputs``.
-
-        Raises
-        ------
-        ValueError
-            If an input name is not one of the three above.
-        """
-        A, B = state_matrices(self.canonical(), v)
-        Bf = np.vstack([np.zeros((2, 1)), (np.linalg.inv(self.M) @ self.H)[:, None]])
-        cols = {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf[:, 0]}
-        bad = [u for u in inputs if u not in cols]
-        if bad:
-            raise ValueError(f"unknown inputs {bad}; choose from {list(cols)}")
-        Bs = np.column_stack([cols[u] for u in inputs])
-        names = ["phi", "delta", "phidot", "deltadot"]
-        return control.ss(A, Bs, np.eye(4), np.zeros((4, len(inputs))),
-                          inputs=list(inputs), outputs=names, states=names)  # fmt: skip
-
-    def eigenvalues(self, v: float) -> np.ndarray:
-        """Eigenvalues of the identified state matrix A(v).
-
-        Parameters
-        ----------
-        v : float
-            Forward speed [m/s].
-
-        Returns
-        -------
-        (4,) complex ndarray
-            Eigenvalues [1/s] of A for x = [phi, delta, phidot, deltadot], in the order
-            ``numpy.linalg.eigvals`` returns them (unsorted).
-        """
-        return np.linalg.eigvals(state_matrices(self.canonical(), v)[0])
+    def _speed_matrices(self) -> CanonicalMatrices:
+        return self.canonical()
 
     def entry(self, name: str) -> float:
         """Value of one matrix entry by name.

@@ -51,13 +51,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-import control
 import numpy as np
 from scipy.linalg import expm, expm_frechet
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
 from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, parse_entry
+from bikeid.ident.linear_model import SpeedDependentModel
 from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
     PredictionProblem,
@@ -75,8 +75,6 @@ from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.linear import (
     CanonicalMatrices,
     canonical_matrices,
-    critical_speeds,
-    eigenvalues_vs_speed,
     lateral_force_vector,
     state_matrices,
 )
@@ -383,7 +381,7 @@ def _conditioning(H: np.ndarray, P: int) -> tuple[float, np.ndarray, np.ndarray,
 
 
 @dataclass(frozen=True)
-class GreyboxModel:
+class GreyboxModel(SpeedDependentModel):
     """Grey-box estimate of the Whipple matrices (free entries estimated, others fixed).
 
     Attributes
@@ -599,54 +597,13 @@ class GreyboxModel:
             outputs=self.outputs,
         )  # fmt: skip
 
-    def state_space(self, v: float, inputs: Sequence[str] = ("T_delta",)) -> control.StateSpace:
-        """python-control model at speed ``v``, all four states output.
-
-        Parameters
-        ----------
-        v : float
-            Forward speed [m/s].
-        inputs : sequence of str, optional
-            Input columns in this order, from ``"T_phi"``, ``"T_delta"`` [N m, positive to
-            the right] and ``"F"`` [N, lateral force through ``H``].
-
-        Returns
-        -------
-        control.StateSpace
-            Continuous time, states and outputs [phi, delta, phidot, deltadot] [rad, rad,
-            rad/s, rad/s] (bikeid's order, C = I, D = 0); A [1/s], B the columns of M^-1
-            (and M^-1 H) below zeros.
-
-        Raises
-        ------
-        ValueError
-            If an input name is not one of the three above.
-        """
-        A, B = state_matrices(self.canonical(), v)
+    def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        A, B = state_matrices(self.canonical(), speed)
         Bf = np.concatenate([np.zeros(2), np.linalg.solve(self.M, self.H)])
-        cols = {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf}
-        bad = [u for u in inputs if u not in cols]
-        if bad:
-            raise ValueError(f"unknown inputs {bad}; choose from {list(cols)}")
-        names = ["phi", "delta", "phidot", "deltadot"]
-        return control.ss(A, np.column_stack([cols[u] for u in inputs]), np.eye(4),
-                          np.zeros((4, len(inputs))), inputs=list(inputs), outputs=names,
-                          states=names)  # fmt: skip
+        return A, {"T_phi": B[:, 0], "T_delta": B[:, 1], "F": Bf}
 
-    def eigenvalues(self, v: float) -> np.ndarray:
-        """Eigenvalues of the estimated state matrix A(v).
-
-        Parameters
-        ----------
-        v : float
-            Forward speed [m/s].
-
-        Returns
-        -------
-        (4,) complex ndarray
-            Eigenvalues [1/s] (unsorted).
-        """
-        return np.linalg.eigvals(state_matrices(self.canonical(), v)[0])
+    def _speed_matrices(self) -> CanonicalMatrices:
+        return self.canonical()
 
     def steer_zeros(self) -> np.ndarray:
         """Zeros of delta/T_delta: roots of Mpp s^2 + v C1pp s + g K0pp + v^2 K2pp at v = 0.
@@ -659,36 +616,6 @@ class GreyboxModel:
         """
         z = np.sqrt(complex(-self.g * self.K0[0, 0] / self.M[0, 0]))
         return np.array([z, -z])
-
-    def eigenvalues_vs_speed(self, speeds):
-        """Eigenvalues over a speed grid (:func:`bikeid.sim.linear.eigenvalues_vs_speed`).
-
-        Parameters
-        ----------
-        speeds : (n,) array_like
-            Forward speeds [m/s].
-
-        Returns
-        -------
-        EigenSweep
-            Eigenvalues [1/s] of the estimated matrices, labelled by mode.
-        """
-        return eigenvalues_vs_speed(self.canonical(), speeds)
-
-    def critical_speeds(self, vmax: float = 30.0) -> dict:
-        """Weave, capsize (and other) critical speeds of the estimated matrices.
-
-        Parameters
-        ----------
-        vmax : float, optional
-            Upper end [m/s] of the speed range searched.
-
-        Returns
-        -------
-        dict
-            :func:`bikeid.sim.linear.critical_speeds` of :meth:`canonical` (m/s).
-        """
-        return critical_speeds(self.canonical(), vmax)
 
 
 def _meta_bicycle(runs) -> BicycleParameters | None:

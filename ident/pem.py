@@ -50,19 +50,19 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-import control
 import numpy as np
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import (
+    PERM,
     SPEED_NAMES,
     THETA_NAMES,
     canonical_ab,
     matrices_from_speed_params,
     speed_map,
-    to_bikeid_order,
     to_canonical_form,
 )
+from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
     INPUT,
@@ -83,8 +83,7 @@ from bikeid.ident.predictor import (
 )
 from bikeid.ident.signals import check_sampling
 from bikeid.ident.subspace import d2c, decimate, pbsid
-from bikeid.sim.conventions import CANONICAL_STATE
-from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
+from bikeid.sim.linear import CanonicalMatrices
 
 __all__ = [
     "CanonicalModel",
@@ -113,12 +112,14 @@ _single_threaded_blas = single_threaded_blas
 
 
 @dataclass(frozen=True)
-class CanonicalModel:
+class CanonicalModel(LinearModel):
     """A fixed-speed canonical model.
 
-    ``theta``, ``A``, ``B``, ``C``, ``K`` and :meth:`predictor` are in Chen & Dao's state
-    order [phi, phidot, delta, deltadot] (the canonical form's); :meth:`state_space`
-    returns bikeid's order [phi, delta, phidot, deltadot] unless ``order="chen_dao"``.
+    ``A``, ``B``, ``C`` and :meth:`state_space` are in bikeid's state order [phi, delta,
+    phidot, deltadot], as every bikeid model (:mod:`ident.linear_model`); Chen & Dao's
+    order [phi, phidot, delta, deltadot] (the canonical form's) only by name:
+    ``A_chen_dao``, ``B_chen_dao``, ``C_chen_dao``, ``state_space(order="chen_dao")``,
+    and the predictor's ``K`` and :meth:`predictor`, which are stated in it.
 
     ``theta`` = [a1..a8, b1, b2] (:data:`ident.canonical.THETA_NAMES`), ``covariance``
     (10x10), ``outputs`` the measured states used, ``K`` the discrete innovation gain
@@ -169,63 +170,56 @@ class CanonicalModel:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     @property
-    def A(self) -> np.ndarray:
-        """(4, 4) ndarray: canonical state matrix for [phi, phidot, delta, deltadot].
+    def A_chen_dao(self) -> np.ndarray:
+        """(4, 4) ndarray: state matrix in Chen & Dao's order [phi, phidot, delta, deltadot].
 
         a1, a3, a5, a7 in 1/s^2, a2, a4, a6, a8 in 1/s (:func:`ident.canonical.canonical_ab`).
         """
         return canonical_ab(self.theta)[0]
 
     @property
-    def B(self) -> np.ndarray:
-        """(4, 1) ndarray: canonical input matrix for T_delta, b1, b2 in rows 1, 3 [1/(kg m^2)]."""
+    def B_chen_dao(self) -> np.ndarray:
+        """(4, 1) ndarray: input matrix for T_delta in Chen & Dao's order, b1, b2 in rows 1, 3
+        [1/(kg m^2)]."""
         return canonical_ab(self.theta)[1]
 
     @property
-    def C(self) -> np.ndarray:
-        """(L, 4) ndarray: 0/1 output matrix selecting ``outputs`` from the canonical state."""
+    def C_chen_dao(self) -> np.ndarray:
+        """(L, 4) ndarray: 0/1 output matrix selecting ``outputs`` (rows in that order) from
+        Chen & Dao's state [phi, phidot, delta, deltadot]."""
         return output_matrix(self.outputs)[0]
+
+    @property
+    def A(self) -> np.ndarray:
+        """(4, 4) ndarray: state matrix for bikeid's state [phi, delta, phidot, deltadot]
+        [1/s, 1/s^2 by position] (:attr:`A_chen_dao` permuted)."""
+        return PERM @ self.A_chen_dao @ PERM.T
+
+    @property
+    def B(self) -> np.ndarray:
+        """(4, 1) ndarray: input matrix for T_delta, bikeid's state order, b1, b2 in rows 2,
+        3 [1/(kg m^2)]."""
+        return PERM @ self.B_chen_dao
+
+    @property
+    def C(self) -> np.ndarray:
+        """(L, 4) ndarray: 0/1 output matrix selecting ``outputs`` (rows in that order) from
+        bikeid's state [phi, delta, phidot, deltadot]."""
+        return self.C_chen_dao @ PERM.T
 
     @property
     def stderr(self) -> dict[str, float]:
         """dict of str to float: standard error of each theta entry, by name (units of theta)."""
         return dict(zip(THETA_NAMES, np.sqrt(np.diag(self.covariance)), strict=True))
 
+    @property
     def params(self) -> dict[str, float]:
-        """The estimated parameters by name.
-
-        Returns
-        -------
-        dict of str to float
-            ``{"a1": ..., "b2": ...}`` in :data:`ident.canonical.THETA_NAMES` order, units
-            as in ``theta``.
-        """
+        """dict of str to float: the estimated parameters by name, ``{"a1": ..., "b2": ...}``
+        in :data:`ident.canonical.THETA_NAMES` order (units as in ``theta``)."""
         return dict(zip(THETA_NAMES, self.theta, strict=True))
 
-    def state_space(self, order: str = "bikeid") -> control.StateSpace:
-        """Continuous-time model with input ``T_delta`` [N m] and outputs ``self.outputs``.
-
-        Parameters
-        ----------
-        order : {"bikeid", "chen_dao"}
-            State order: bikeid's [phi, delta, phidot, deltadot] (rad, rad/s; the default,
-            as every bikeid model) or Chen & Dao's canonical [phi, phidot, delta, deltadot]
-            (the order of ``theta``, ``A``, ``B``, ``C`` and ``K``).
-
-        Returns
-        -------
-        control.StateSpace
-            The model with its states labelled in the chosen order (A [1/s], B [rad/(N m s^2)]
-            rows of the accelerations, C selecting the outputs, D = 0).
-        """
-        C = self.C
-        sys = control.ss(self.A, self.B, C, np.zeros((C.shape[0], 1)), inputs=[INPUT],
-                         outputs=list(self.outputs), states=list(CANONICAL_STATE))  # fmt: skip
-        if order == "chen_dao":
-            return sys
-        if order == "bikeid":
-            return to_bikeid_order(sys)
-        raise ValueError(f"order={order!r}: use 'bikeid' or 'chen_dao'")
+    def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        return self.A, {INPUT: self.B[:, 0]}
 
     def predictor(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Ad, Bd, C, K) of the discrete innovations predictor at ``dt``.
@@ -239,26 +233,16 @@ class CanonicalModel:
             Zero-order-hold input matrix for T_delta [rad/(N m) in rows 0, 2; rad/(N m s)
             in rows 1, 3].
         C : (L, 4) ndarray
-            Output matrix (:attr:`C`).
+            Output matrix (:attr:`C_chen_dao`).
         K : (4, L) ndarray
             Innovation gain; xhat[k+1] = Ad xhat[k] + Bd u[k] + K (y[k] - C xhat[k]).
         """
         Ad, Bd = _discretize(self.theta, self.dt)
-        return Ad, Bd[:, None], self.C, self.K
-
-    def eigenvalues(self) -> np.ndarray:
-        """Eigenvalues of the continuous-time state matrix.
-
-        Returns
-        -------
-        (4,) complex ndarray
-            Eigenvalues [1/s] of :attr:`A` (unsorted; the same in either state order).
-        """
-        return np.linalg.eigvals(self.A)
+        return Ad, Bd[:, None], self.C_chen_dao, self.K
 
 
 @dataclass(frozen=True)
-class SpeedCanonicalModel:
+class SpeedCanonicalModel(SpeedDependentModel):
     """Speed-parameterized canonical model: a_odd = alpha + beta v^2, a_even = gamma v.
 
     ``params`` in :data:`ident.canonical.SPEED_NAMES` order with ``covariance``
@@ -339,43 +323,12 @@ class SpeedCanonicalModel:
             noise_covariance=self.per_speed[near].noise_covariance, outputs=self.outputs,
         )  # fmt: skip
 
-    def state_space(self, v: float, order: str = "bikeid") -> control.StateSpace:
-        """The fixed-speed model at ``v`` [m/s] (:meth:`CanonicalModel.state_space`; ``order``
-        "bikeid" [phi, delta, phidot, deltadot] by default, or "chen_dao").
+    def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        A, B = canonical_ab(self.theta(speed))
+        return PERM @ A @ PERM.T, {INPUT: (PERM @ B)[:, 0]}
 
-        Parameters
-        ----------
-        v : float
-            Forward speed [m/s].
-        order : {"bikeid", "chen_dao"}, optional
-            State order of the result.
-
-        Returns
-        -------
-        control.StateSpace
-            Continuous-time model with input ``T_delta`` [N m] and outputs ``outputs``.
-
-        Raises
-        ------
-        ValueError
-            If ``order`` is neither choice.
-        """
-        return self.at(v).state_space(order=order)
-
-    def eigenvalues(self, v: float) -> np.ndarray:
-        """Eigenvalues of A(v).
-
-        Parameters
-        ----------
-        v : float
-            Forward speed [m/s].
-
-        Returns
-        -------
-        (4,) complex ndarray
-            Eigenvalues [1/s] (unsorted).
-        """
-        return np.linalg.eigvals(canonical_ab(self.theta(v))[0])
+    def _speed_matrices(self) -> CanonicalMatrices:
+        return self.canonical_matrices()
 
     def scaled_matrices(self) -> dict[str, np.ndarray]:
         """M^-1 g K0, M^-1 K2, M^-1 C1 (2x2 each) and the second column of M^-1.
@@ -391,7 +344,7 @@ class SpeedCanonicalModel:
         return {"Minv_gK0": cm.K0 * self.g, "Minv_K2": cm.K2, "Minv_C1": cm.C1,
                 "Minv_col_delta": self.params[12:14].copy()}  # fmt: skip
 
-    def canonical_matrices(self):
+    def canonical_matrices(self) -> CanonicalMatrices:
         """Equivalent ``CanonicalMatrices`` with M = I (same A(v), same eigenvalues).
 
         Returns
@@ -401,38 +354,6 @@ class SpeedCanonicalModel:
             M = I, K0 = -alpha / g, K2 = -beta, C1 = -gamma (its B is not the true one).
         """
         return matrices_from_speed_params(self.params, self.g)
-
-    def eigenvalues_vs_speed(self, speeds):
-        """Eigenvalues over a speed grid (:func:`bikeid.sim.linear.eigenvalues_vs_speed`).
-
-        Parameters
-        ----------
-        speeds : (n,) array_like
-            Forward speeds [m/s].
-
-        Returns
-        -------
-        EigenSweep
-            The sweep of :func:`bikeid.sim.linear.eigenvalues_vs_speed` on
-            :meth:`canonical_matrices` (eigenvalues [1/s]).
-        """
-        return eigenvalues_vs_speed(self.canonical_matrices(), speeds)
-
-    def critical_speeds(self, vmax: float = 30.0) -> dict:
-        """Weave, capsize (and other) critical speeds of the identified model.
-
-        Parameters
-        ----------
-        vmax : float, optional
-            Upper end [m/s] of the speed range searched.
-
-        Returns
-        -------
-        dict
-            :func:`bikeid.sim.linear.critical_speeds` on :meth:`canonical_matrices`
-            (speeds in m/s).
-        """
-        return critical_speeds(self.canonical_matrices(), vmax)
 
 
 def subspace_start(

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, matrices_from_speed_params, speed_map
+from bikeid.ident.linear_model import mode_names
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import (
     CanonicalMatrices,
@@ -260,7 +261,8 @@ def eigenvalue_jacobian(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     Returns
     -------
     values : (4,) complex ndarray
-        Eigenvalues [1/s], sorted by real then imaginary part (``numpy.sort_complex``).
+        Eigenvalues [1/s], sorted by real then imaginary part (``numpy.sort_complex``,
+        :data:`bikeid.ident.linear_model.EIGENVALUE_ORDER`).
     jacobian : (4, 10) complex ndarray
         d lambda_i / d theta_j = conj(w_i[r]) x_i[c] / (w_i^H x_i) for a_j at A[r, c]
         (units 1/s per unit of theta_j); zero for b1, b2.
@@ -295,7 +297,9 @@ class EigenIntervals:
     level : float
         Confidence level of the intervals (e.g. 0.95).
     values : (4,) complex ndarray
-        Eigenvalues [1/s], sorted by real then imaginary part.
+        Eigenvalues [1/s] in bikeid's one order
+        (:data:`bikeid.ident.linear_model.EIGENVALUE_ORDER`: real part, then imaginary
+        part), the order of the models' ``eigenvalues``.
     std_real, std_imag : (4,) ndarray
         First-order standard errors of the real and imaginary parts [1/s] (zero
         imaginary-part error for a real eigenvalue of a real matrix).
@@ -311,6 +315,9 @@ class EigenIntervals:
         [lower, upper] of the real and imaginary parts [1/s] for ``method="profile"``.
     converged : (4, 2) bool ndarray or None
         Whether the profile ascents of the real and imaginary parts converged.
+    modes : tuple of str
+        Mode name of each eigenvalue (``weave``, ``capsize``, ``caster``, or ``""``;
+        :func:`bikeid.ident.linear_model.mode_names`).
     """
 
     speed: float
@@ -324,6 +331,7 @@ class EigenIntervals:
     real_bounds: np.ndarray | None = None
     imag_bounds: np.ndarray | None = None
     converged: np.ndarray | None = None
+    modes: tuple[str, ...] = ()
 
     @property
     def z(self) -> float:
@@ -387,12 +395,14 @@ class EigenIntervals:
         Returns
         -------
         dict
-            ``speed`` [m/s], ``level``, ``z``, ``method`` and per eigenvalue ``value``
-            ({re, im} [1/s]), ``std`` ({re, im}, first order), ``real`` and ``imag``
-            ([lower, upper] [1/s]), ``condition`` and, for the profile, ``converged``.
+            ``speed`` [m/s], ``level``, ``z``, ``method`` and per eigenvalue (in
+            :attr:`values` order) ``mode`` (name or ""), ``value`` ({re, im} [1/s]),
+            ``std`` ({re, im}, first order), ``real`` and ``imag`` ([lower, upper] [1/s]),
+            ``condition`` and, for the profile, ``converged``.
         """
+        modes = self.modes or ("",) * self.values.size
         rows = [
-            {"value": self.values[i],
+            {"mode": modes[i], "value": self.values[i],
              "std": {"re": self.std_real[i], "im": self.std_imag[i]},
              "real": [self.real_lower[i], self.real_upper[i]],
              "imag": [self.imag_lower[i], self.imag_upper[i]],
@@ -429,8 +439,9 @@ def eigenvalue_intervals(
     Returns
     -------
     EigenIntervals
-        Eigenvalues with first-order standard errors and the intervals of their real and
-        imaginary parts.
+        Eigenvalues in bikeid's one order (real part, then imaginary part, as the models'
+        ``eigenvalues``) with their mode names, first-order standard errors and the
+        intervals of their real and imaginary parts.
 
     Raises
     ------
@@ -446,8 +457,10 @@ def eigenvalue_intervals(
     J = np.vstack([Jp.real, Jp.imag])
     C = J @ cov @ J.T
     sd = np.sqrt(np.maximum(np.diag(C), 0.0))
+    matrices = model.canonical_matrices() if hasattr(model, "per_speed") else None
     ei = EigenIntervals(speed=speed, level=level, values=lam, std_real=sd[:4],
-                        std_imag=sd[4:], covariance=C, condition=cond)  # fmt: skip
+                        std_imag=sd[4:], covariance=C, condition=cond,
+                        modes=mode_names(lam, matrices, speed))  # fmt: skip
     if method == "delta":
         return ei
     bounds = np.empty((2, 4, 2))

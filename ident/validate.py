@@ -34,6 +34,8 @@ import numpy as np
 
 from bikeid.dataset.run import Run
 from bikeid.ident.direct import DirectResult, vaf_variance
+from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
+from bikeid.ident.pem import CanonicalModel
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
@@ -515,19 +517,14 @@ def resid(
 def _ss(model, v: float | None = None) -> control.StateSpace:
     # poles, zeros and transfer functions do not depend on the state order; the canonical
     # model's own (Chen & Dao) order is used, as the identification computed it
-    if hasattr(model, "predictor") and hasattr(model, "theta"):
-        return model.state_space(order="chen_dao")
-    if not hasattr(model, "state_space"):
+    if not isinstance(model, LinearModel):
         return model
-    import inspect
-
-    if "v" in inspect.signature(model.state_space).parameters:  # defined over speed
-        if v is None:
-            raise ValueError(
-                f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
-            )
-        return model.state_space(v)
-    return model.state_space()
+    if isinstance(model, SpeedDependentModel) and v is None:
+        raise ValueError(
+            f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
+        )
+    order = "chen_dao" if isinstance(model, CanonicalModel) else "bikeid"
+    return model.state_space(v if isinstance(model, SpeedDependentModel) else None, order=order)
 
 
 def poles(model, v: float | None = None) -> np.ndarray:

@@ -833,7 +833,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             interval_models, speed_model = {v: model.at(v) for v in speeds}, model
         else:
             out["models"] = {
-                v: {"theta": m.params(), "stderr": m.stderr, "A": m.A, "B": m.B}
+                v: {"theta": m.params, "stderr": m.stderr, "A": m.A, "B": m.B}
                 for v, m in per.items()
             }
             eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
