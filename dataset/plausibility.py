@@ -142,7 +142,8 @@ def check_run(run: Any, source: str, skip: Iterable[str] = ()) -> None:
     skip = set(skip)
     lo, hi = SAMPLE_PERIOD
     dt = run.dt
-    if "sample-period" not in skip and not (lo <= dt <= hi):
+    # (a relative 1e-9 for the round-off of a time base t = k dt)
+    if "sample-period" not in skip and not (lo * (1 - 1e-9) <= dt <= hi * (1 + 1e-9)):
         duration = dt * (run.n - 1)
         hint = ("the time column is probably in milliseconds read as seconds: give --units "
                 "t=ms" if dt > hi else "the time column is probably in seconds declared as "
