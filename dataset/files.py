@@ -279,8 +279,8 @@ def storage_error(exc: OSError, path: str | os.PathLike, need: float | None = No
         errno.EIO: "check the medium (an I/O error) or write elsewhere",
     }.get(exc.errno, "free some space or write to another disk")
     return InputError(
-        f"cannot write {path}: {exc.strerror or os.strerror(exc.errno)}{want}{have}; {fix} "
-        "(nothing was written there: rerun the same command to resume)"
+        f"cannot write {path}: {exc.strerror or os.strerror(exc.errno)}{want}{have}; {fix}, "
+        "then rerun (the target is left as it was, finished parts of a sweep are kept)"
     )
 
 

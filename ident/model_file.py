@@ -593,11 +593,15 @@ class _Reader:
                             f"[{i}, {i}] (not a covariance)")  # fmt: skip
         if np.max(np.abs(c - c.T)) > 1e-9 * scale:
             raise self.fail(prefix + key, "is not symmetric (not a covariance)")
-        if scale > 0:
-            low = float(np.linalg.eigvalsh((c + c.T) / 2)[0])
-            if low < -1e-8 * scale:
+        if scale > 0:  # scaled first: a covariance of huge entries must not overflow
+            u = c / scale
+            try:
+                low = float(np.linalg.eigvalsh(u / 2 + u.T / 2)[0])
+            except np.linalg.LinAlgError:
+                low = -np.inf
+            if low < -1e-8:
                 raise self.fail(prefix + key, f"is not positive semi-definite (eigenvalue "
-                                f"{low:.3g}; not a covariance)")  # fmt: skip
+                                f"{low * scale:.3g}; not a covariance)")  # fmt: skip
         return c
 
     def _array(self, v: Any, name: str, shape: tuple) -> np.ndarray:
