@@ -1051,6 +1051,10 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     else:
         speeds = acc.QUICK_SPEEDS if args.quick else acc.FULL_SPEEDS
     out = Path(args.out)
+    import sys
+
+    print(f"bikeid accuracy: writing into {out}/ (data cache, accuracy.json, accuracy.md)",
+          file=sys.stderr)  # a default location: say where  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
     bar = terminal_progress("accuracy", json_output=args.json, unit="stage")
     result = acc.run_accuracy(

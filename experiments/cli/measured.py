@@ -316,6 +316,7 @@ def cmd_fit(args) -> int:
     from bikeid.ident.effects.pipeline import evaluate_json, fit_model, save_fit
 
     ww = parse_weave_weight(str(args.weave_weight))
+    _check_model_output(args)  # before minutes of fitting
     ws, base, law, report = load_log_decays(args, _speeds(args.speeds),
                                             min_decays=MIN_FIT_DECAYS)  # fmt: skip
     bar = terminal_progress("measured fit", unit="fit")
@@ -473,6 +474,24 @@ def cmd_trials(args) -> int:
     return 0
 
 
+def _check_model_output(args) -> None:
+    """``measured fit --out``: a regular file that is none of the inputs (before the fit)."""
+    from bikeid.dataset.files import check_output_path, check_outputs
+
+    check_output_path(args.out)
+    check_outputs([args.out], [*(getattr(args, "file", None) or []), args.data])
+
+
+def _owned_output(args, command: str, inputs: list):
+    """The ``--out`` folder of report/study: none of the inputs in it, owned by ``command``
+    (:func:`bikeid.dataset.files.owned_folder`); checked before any work."""
+    from bikeid.dataset.files import check_outputs, check_owned_folder, owned_folder
+
+    check_owned_folder(args.out, command)
+    check_outputs([args.out], inputs)
+    return owned_folder(args.out, command)
+
+
 def cmd_report(args) -> int:
     from bikeid.dataset.sbw_logs import data_dir
     from bikeid.experiments.measured.report import write_report
@@ -481,8 +500,9 @@ def cmd_report(args) -> int:
         from bikeid.ident.effects.pipeline import model_from_json
 
         model_from_json(args.model)
-    data_dir(args.data)
-    path = write_report(args.out, args.data, args.model)
+    data = data_dir(args.data)
+    with _owned_output(args, "bikeid measured report", [data, args.model]):
+        path = write_report(args.out, args.data, args.model)
     print(path)
     return 0
 
@@ -499,8 +519,10 @@ def cmd_study(args) -> int:
                          "for report.md, study.json and the figures")  # fmt: skip
     check_output_path(Path(args.out) / "report.md")
     say = None if args.json else (lambda t: print(f"fitting: {t}", file=sys.stderr))
-    study = run_study(args.data, fit_effects=args.fit_effects, quick=args.quick, progress=say)
-    path = write_study(study, args.out)
+    with _owned_output(args, "bikeid measured study", [data_dir(args.data)]):
+        study = run_study(args.data, fit_effects=args.fit_effects, quick=args.quick,
+                          progress=say)  # fmt: skip
+        path = write_study(study, args.out)
     if args.json:
         print(dump_json({**{k: v for k, v in study.items() if k != "_models"},
                          "headline": headline(study)}))  # fmt: skip

@@ -53,6 +53,11 @@ def cmd_eig(args: argparse.Namespace) -> int:
     from bikeid.sim.linear import eigenvalues_vs_speed
 
     speeds = parse_range(args.speeds, "--speeds", minimum=0.0)
+    if args.plot:  # before any work: a link or device refused, the parameter file never hit
+        from bikeid.dataset.files import check_output_path, check_outputs
+
+        check_output_path(args.plot)
+        check_outputs([args.plot], [args.bicycle])
     p = _bicycle(args.bicycle)
     sweep = eigenvalues_vs_speed(p, speeds)
     if args.plot:

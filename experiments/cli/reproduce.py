@@ -46,12 +46,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    import sys
+
+    from bikeid.dataset.files import check_outputs, check_owned_folder, owned_folder
     from bikeid.experiments.papers.reproduce import reproduce
     from bikeid.experiments.progress import quiet, terminal_progress
 
+    check_owned_folder(args.out, "bikeid reproduce")  # another's report.md is never replaced
+    check_outputs([args.out], [args.bicycle])
+    print(f"bikeid reproduce: writing into {args.out}/", file=sys.stderr)
     bar = terminal_progress("reproduce", unit="stage")
-    reproduce(
-        args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
-        log=bar.write if bar else quiet, progress=bar, dask=args.dask,
-    )  # fmt: skip
+    with owned_folder(args.out, "bikeid reproduce"):
+        reproduce(
+            args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
+            log=bar.write if bar else quiet, progress=bar, dask=args.dask,
+        )  # fmt: skip
     return 0
