@@ -79,3 +79,39 @@ def test_t_p_value_against_tables():
     assert t_p_value(-2.447, 6) == pytest.approx(0.05, abs=1e-3)
     assert t_p_value(1.960, float("inf")) == pytest.approx(0.05, abs=1e-3)
     assert t_p_value(float("inf"), 3) == 0.0 and t_p_value(float("nan"), 3) == 1.0
+
+
+def test_paired_p_value_closed_form():
+    """The paired t test of the ambiguity sets against the closed form of Student t with 2
+    degrees of freedom, two-sided p = 1 - t / sqrt(t^2 + 2) (exact; tolerance 1e-12):
+    d = [1, 2, 3] gives t = 2 sqrt(3); differences that cancel give p = 1, equal non-zero
+    ones p = 0."""
+    from bikeid.ident.effects.acceptance import paired_p_value
+
+    t = 2 * np.sqrt(3.0)
+    assert paired_p_value([1.0, 2.0, 3.0]) == pytest.approx(1 - t / np.sqrt(t * t + 2), abs=1e-12)
+    assert paired_p_value([1.0, -1.0, 1.0, -1.0]) == pytest.approx(1.0)
+    assert paired_p_value([0.5, 0.5, 0.5]) == 0.0 and paired_p_value([0.0, 0.0]) == 1.0
+
+
+def test_evidence_lines_print_p_values_and_the_ambiguity_set():
+    """An accepted effect's line carries its degrees of freedom, p-value, adjusted p-value
+    and the edge offsets it is conditional on; a candidate the held-out decays cannot tell
+    from it gets its own line with its numbers."""
+    from bikeid.ident.effects.selection import evidence_lines
+
+    ev = {"min_heldout_gain": 0.02,
+          "test": {"alpha": 0.05, "correction": "bonferroni", "tests": 54, "level": 0.05 / 54},
+          "effects": {"input_delay": {
+              "round": 1, "fit_gain": 0.6, "heldout_cost_ratio": 0.4, "heldout_gain": 0.6,
+              "heldout_windows_improved": 6, "heldout_windows": 6, "t_joint": 9.0,
+              "dof_joint": 12.0, "p_value": 1.1e-6, "p_adjusted": 5.9e-5,
+              "conditional_on": ["trail"],
+              "alike": [{"name": "actuator_lag", "heldout_cost_ratio": 0.41, "fit_gain": 0.59,
+                         "t_round": 8.0, "p_value_round": 1e-4, "paired_p_value": 0.62,
+                         "value": 0.03}]}}}  # fmt: skip
+    lines = evidence_lines(ev)
+    assert "(12 degrees of freedom), p = 1.1e-06, bonferroni-adjusted 5.9e-05 over 54" in lines[0]
+    assert "conditional on the calibration's edge offsets trail" in lines[0]
+    assert "input_delay cannot be told apart" in lines[1] and "actuator_lag" in lines[1]
+    assert "paired p = 0.62" in lines[1]

@@ -45,6 +45,7 @@ __all__ = [
     "RESIDUAL_MAX",
     "UNEXPLAINED_RULES",
     "CORRECTIONS",
+    "paired_p_value",
     "t_p_value",
 ]
 
@@ -89,6 +90,35 @@ def t_p_value(t: float, dof: float) -> float:
     if not dof > 0:
         return 1.0
     return float(2.0 * (stats.norm.sf(t) if math.isinf(dof) else stats.t.sf(t, dof)))
+
+
+def paired_p_value(d) -> float:
+    """Two-sided p-value of a paired t test that the mean of the differences ``d`` is zero.
+
+    Used to tell two candidate effects apart by their held-out decays: ``d`` holds, per
+    held-out decay, one candidate's cost minus the other's; t = mean / (sd / sqrt(n)) is
+    referred to Student's t with n - 1 degrees of freedom (the decays are independent pushes).
+
+    Parameters
+    ----------
+    d : array_like
+        Paired differences (any unit; at least 2).
+
+    Returns
+    -------
+    float
+        The p-value in [0, 1]; 1 with fewer than 2 differences or all of them zero, 0 when
+        they are all equal and not zero.
+    """
+    import numpy as np
+
+    d = np.asarray(d, dtype=float)
+    if d.size < 2 or not np.any(d):
+        return 1.0
+    sd = float(np.std(d, ddof=1))
+    if sd == 0.0:
+        return 0.0
+    return t_p_value(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)
 
 
 @dataclass(frozen=True)

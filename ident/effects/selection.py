@@ -59,6 +59,7 @@ from bikeid.ident.effects.acceptance import (
     EXPLAINED_MIN_CALIBRATED,
     RESIDUAL_MAX,
     AcceptanceRule,
+    paired_p_value,
     t_p_value,
 )
 from bikeid.ident.effects.diagnostics import err_ranking
@@ -160,7 +161,13 @@ class Identification:
         the round it was accepted in, its fit gain, held-out cost ratio and held-out gain
         (1 - ratio), the held-out windows it improved, its held-out weave error before and
         after, and its t after the joint fit (for a parameter correction along a calibrated
-        direction, t beyond the band); ``nominal_calibration`` (with ``nominal_uncertainty``)
+        direction, t beyond the band), its degrees of freedom and p-values (``p_value``,
+        ``p_adjusted``; ``conditional_on``: calibration offsets held on the box's edge), and
+        ``alike``: the other candidates of its round that passed every check and whose
+        held-out decay costs a paired t test (Student t, n - 1 degrees of freedom over the n
+        held-out decays) cannot tell from its own at ``alpha`` (their held-out cost ratio, fit
+        gain, t, p-values and value: the evidence for each); ``test``: the level, correction
+        and number of tests; ``nominal_calibration`` (with ``nominal_uncertainty``)
         the offsets of the fit half and of the final fit, which sit on the band's edge,
         the held-out cost before and after the calibration and the cost of the stated and
         the calibrated nominal; ``unexplained`` holds the final cost, the noise
@@ -182,6 +189,18 @@ class Identification:
     evidence: dict = field(default_factory=dict)  # why each name is in the verdict
     windows: list[Window] = field(default_factory=list)  # with the final defect correction
 
+    @property
+    def ambiguity(self) -> dict[str, list[str]]:
+        """Each accepted effect's ambiguity set: itself and the candidates its held-out decays
+        cannot tell it from (``evidence["effects"][name]["alike"]``), in order of held-out
+        cost ratio; an effect told apart from every other has a set of one."""
+        out = {}
+        for e in self.effects:
+            alike = self.evidence.get("effects", {}).get(e.name, {}).get("alike", [])
+            out[e.name] = [e.name] + [a["name"] for a in
+                                      sorted(alike, key=lambda a: a["heldout_cost_ratio"])]
+        return out
+
     def as_dict(self) -> dict:
         """The identification's JSON record (``identification`` of a model file).
 
@@ -190,7 +209,8 @@ class Identification:
         dict
             ``selection_rounds``, ``verdict``, ``effects``, ``ranking``,
             ``equation_error_ranking``, ``cost_nominal``, ``cost_final``,
-            ``cost_noise_floor``, ``explained_fraction``, ``weave_weight``, ``evidence``.
+            ``cost_noise_floor``, ``explained_fraction``, ``weave_weight``, ``evidence``,
+            ``ambiguity`` (:attr:`ambiguity`).
         """
         return {
             "selection_rounds": self.rounds,
@@ -204,6 +224,7 @@ class Identification:
             "explained_fraction": self.explained,
             "weave_weight": self.weave_weight,
             "evidence": self.evidence,
+            "ambiguity": self.ambiguity,
         }
 
 
@@ -343,13 +364,21 @@ class _Search:
         """Take the passing candidate of least score; with a calibration, refit the offsets
         with it."""
         _score, n, res, val, wv, val_wn, gain, est = min(passing, key=lambda z: z[0])
+        alike = []  # passing candidates the held-out decays cannot tell from the chosen one
+        for _s, m, _r, val_m, _wv, wn_m, gain_m, est_m in passing:
+            p = paired_p_value(wn_m - val_wn) if m != n else 0.0
+            if p > self.rule.alpha:
+                alike.append({"name": m, "heldout_cost_ratio": val_m / self.cur_val,
+                              "fit_gain": gain_m, "t_round": est_m.t,
+                              "p_value_round": est_m.p_value, "paired_p_value": p,
+                              "value": est_m.value})  # fmt: skip
         self.ev_effects[n] = {
             "round": _round + 1, "fit_gain": gain, "heldout_cost_ratio": val / self.cur_val,
             "heldout_gain": 1 - val / self.cur_val,
             "heldout_windows_improved": int(np.sum(val_wn < self.cur_val_w)),
             "heldout_windows": len(self.val_w), "heldout_weave_error_before": self.cur_wv,
             "heldout_weave_error_after": wv, "t_round": est.t, "dof_round": est.dof,
-            "p_value_round": est.p_value,
+            "p_value_round": est.p_value, "alike": alike,
         }  # fmt: skip
         self.cur_val, self.cur_wv, self.cur_val_w = val, wv, val_wn
         self.accepted.append(n)
@@ -650,6 +679,11 @@ def evidence_lines(evidence: dict) -> list[str]:
             f"{e.get('t_joint', float('nan')):.1f} after the joint fit"
             + _p_text(e, evidence.get("test"))
         )
+        if e.get("alike"):
+            out.append(f"  {name} cannot be told apart (paired held-out test) from: " + "; ".join(
+                f"{a['name']} (held-out cost ratio {a['heldout_cost_ratio']:.3f}, fit gain "
+                f"{100 * a['fit_gain']:.1f} %, paired p = {a['paired_p_value']:.2g})"
+                for a in e["alike"]))  # fmt: skip
     u = evidence.get("unexplained")
     if u:
         if u["rule"] == "residual":
