@@ -338,7 +338,8 @@ H5COLS = ("phi=sensors/imu/roll,phidot=sensors/imu/roll_rate,delta=sensors/steer
 @pytest.mark.parametrize(
     "kw, code, words",
     [
-        ({}, 0, []),  # the testbed's dither: identified
+        # the testbed's dither: identified, then validated (~25 s with validate)
+        pytest.param({}, 0, [], marks=pytest.mark.slow),
         ({"dither": 0.0, "disturbance": 0.5}, 4, ["feedback only"]),
         ({"dither": 0.0, "reference": lambda t: 0.02 * np.sin(2 * np.pi * 0.7 * t),
           "rate_noise": 0.0, "angle_noise": 0.0}, 4,
@@ -365,6 +366,28 @@ def test_nested_hdf5_excitation_known_both_ways(tmp_path, kw, code, words):
         truth = eigenvalues(benchmark(), row["speed"])
         got = match_eigenvalues(_complex(row["eigenvalues"]), truth)
         assert np.all(np.abs(got - truth) <= [eigen_tolerance(z) for z in truth]), (got, truth)
+        _validate_reuses_the_import_settings(tmp_path, argv)
+
+
+def _validate_reuses_the_import_settings(tmp_path: Path, argv: list) -> None:
+    """``validate`` reads the data as the model was identified (the model file's format,
+    columns, units, time, flip) unless told otherwise; its fit equals the one it computes
+    with every option repeated."""
+    rc, _, err = _cli([*argv, "--out", "m.json"], tmp_path)
+    assert rc == 0, err
+    rc, short, err = _cli(["validate", "ride.h5", "--model", "m.json", "--json"], tmp_path)
+    assert rc == 0, err
+    doc = json.loads(short)
+    assert "--format hdf5" in doc["settings_from_model"]
+    assert "--time logger/clock/time_ms" in doc["settings_from_model"]
+    full = ["validate", "ride.h5", "--model", "m.json", *argv[2:]]
+    rc, long, err = _cli(full, tmp_path)
+    assert rc == 0, err
+    assert json.loads(long)["fit"] == doc["fit"] and json.loads(long)["settings_from_model"] == []
+    # an option given again wins: the HDF5 read as a bikeid run file is refused
+    rc, _, err = _cli(["validate", "ride.h5", "--model", "m.json", "--format", "bikeid"],
+                      tmp_path)  # fmt: skip
+    assert rc == 3, err
 
 
 def test_pooled_runs_give_one_model(tmp_path):

@@ -31,16 +31,24 @@ def register(sub: argparse._SubParsersAction) -> None:
             "at 1 %), and a nonparametric frequency response from T_delta to each output "
             "where the coherence shows excitation, with the model's 95 % Bode band (models with "
             "a parameter covariance). Data are read as by 'bikeid identify' "
-            "(--format bikeid|csv|hdf5 and its options)."
+            "(--format bikeid|csv|hdf5|sbw and its options); the data options the model "
+            "file stores (format, columns, units, time, speed, flip, input, window) are "
+            "reused unless given again."
         ),
     )
     p.add_argument("--model", required=True, metavar="MODEL.json", help="model file to validate")
     add_data_options(
         p,
-        {k: FORMATS[k] for k in ("bikeid", "csv", "hdf5")},
+        {k: FORMATS[k] for k in ("bikeid", "csv", "hdf5", "sbw")},
         input_help="the runs' torque signal [N m] used as the model's input T_delta (default "
         "T_delta)",
     )
+    for action in p._actions:  # unset: taken from the model file (reuse_settings)
+        if action.dest in REUSED:
+            action.default = None
+            action.help = (action.help or "").split(" (default")[0].split("; default")[0] + (
+                f" (default: the model file's setting, else "
+                f"{'none' if REUSED[action.dest] is None else repr(REUSED[action.dest])})")
     p.add_argument(
         "--k-step", type=integer(1, 1_000_000), default=10, metavar="K",
         help="horizon of the k-step-ahead prediction [samples] (default 10)",
@@ -56,6 +64,47 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
     p.set_defaults(func=cmd_validate)
+
+
+#: Data options ``validate`` takes from the model file when not given, with the fallback
+#: when the file stores none (models saved before the settings were stored, Python API).
+REUSED = {"format": "bikeid", "columns": None, "units": None, "time": "t", "speed": None,
+          "flip": "", "input": "T_delta", "start": None, "stop": None}  # fmt: skip
+
+
+def reuse_settings(args: argparse.Namespace, settings: dict) -> list[str]:
+    """Fill the data options not given on the command line from the model file's settings.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options (unset data options are None).
+    settings : dict
+        The model file's ``settings`` (``bikeid identify``'s data options among them).
+
+    Returns
+    -------
+    list of str
+        ``--option value`` of each option taken from the model file.
+    """
+    taken = []
+    for key, fallback in REUSED.items():
+        if getattr(args, key, None) is not None:
+            continue
+        stored = settings.get(key)
+        if key == "format" and stored not in (None, "bikeid", "csv", "hdf5", "sbw"):
+            stored = None
+        if key == "flip" and isinstance(stored, list):
+            stored = ",".join(stored)
+        if stored in (None, "", [], {}):
+            setattr(args, key, fallback)
+            continue
+        setattr(args, key, stored)
+        if stored != fallback:
+            text = (",".join(f"{k}={v}" for k, v in stored.items())
+                    if isinstance(stored, dict) else stored)  # fmt: skip
+            taken.append(f"--{key.replace('_', '-')} {text}")
+    return taken
 
 
 def check_out_dir(out: str | Path) -> Path:
@@ -202,10 +251,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from bikeid.dataset.files import check_distinct_inputs, check_input_file, check_outputs
     from bikeid.experiments.cli.args import atomic_write_text
     from bikeid.experiments.cli.identify import _data_files, _load, _with_input
+    from bikeid.ident.model_file import read_model_file
     from bikeid.ident.validation_report import validate_model
 
     out = check_out_dir(args.out) if args.out else None
     check_input_file(args.model, "--model")
+    taken = reuse_settings(args, dict(read_model_file(args.model).settings or {}))
     data_files = _data_files(args)
     check_outputs([out], [args.model, *data_files])
     check_distinct_inputs(data_files)
@@ -216,7 +267,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             raise ValueError(f"{', '.join(args.file)} hold no runs")
         report = validate_model(model, runs, k_step=args.k_step, coherence_min=args.coherence)
         doc = {"command": MARKER, "model": str(args.model), "data": list(map(str, args.file)),
-               **report.to_json()}  # fmt: skip
+               "settings_from_model": taken, **report.to_json()}  # fmt: skip
         note = _speed_note(args.model, report.speeds)
         if note:
             import dataclasses
@@ -233,6 +284,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     if args.json:
         print(dump_json(doc))
     else:
+        if taken:
+            print(f"data read with the model file's settings: {' '.join(taken)}")
         print(table(report, args.model), end="")
         if written:
             print(f"wrote {', '.join(str(p) for p in written)}")
