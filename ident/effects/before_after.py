@@ -153,7 +153,7 @@ def before_after(
         raise ValueError("before/after errors must be finite (a simulation diverged?)")
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
-    names = list(dict.fromkeys(g))
+    names = sorted(set(g))  # the draws do not depend on the order the decays come in
     idx = [np.flatnonzero(np.array(g, dtype=object) == n) for n in names]
     b0, b1 = float(_stat(e0, idx)), float(_stat(e1, idx))
     if b0 <= 0:
@@ -222,4 +222,6 @@ def verdict_text(s: dict) -> str:
     if s.get("baseline_zero") is not None and math.isfinite(s["baseline_zero"]):
         base = (f"; trivial baselines: predicting the mean 1.000, zero motion "
                 f"{s['baseline_zero']:.3f}")  # fmt: skip
+        if s["error_after"] > min(1.0, s["baseline_zero"]):
+            base += " (the model after is still worse than a trivial prediction)"
     return f"{head}: {why}{base}"
