@@ -49,6 +49,7 @@ __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "atomic_path",
+    "check_h5_dataset",
     "copy_runs",
     "export_csv",
     "file_attrs",
@@ -342,40 +343,58 @@ def _open(path: str | Path):
     return f
 
 
-def _check_dataset(where: str, ds) -> None:
-    """Refuse, before reading, a dataset bikeid did not write: not a dataset, virtual or
-    external storage, or a declared size its file cannot hold (memory estimate first)."""
+def check_h5_dataset(ds, where: str, fix: str = "write it again with bikeid") -> None:
+    """Refuse, before reading, an HDF5 object bikeid cannot trust to be its data.
+
+    Parameters
+    ----------
+    ds : h5py object
+        What a path in the file resolved to (links followed).
+    where : str
+        The file and the path, named in messages.
+    fix : str, optional
+        What the user can do (default: rewrite the file with bikeid).
+
+    Raises
+    ------
+    ValueError
+        If it is not a dataset (a group where a dataset is expected), a virtual dataset
+        (its data in other files, missing ones read as fill values) or one with external
+        storage, or declares more samples than the file stores (over
+        :data:`~bikeid.dataset.files.MAX_EXPANSION` times, e.g. unwritten chunks);
+        :class:`~bikeid.sim.errors.InputError` if it would not fit in memory.
+    """
     h5py = _h5()
     if not isinstance(ds, h5py.Dataset):
         raise ValueError(f"{where} is a {type(ds).__name__.lower()} where a dataset is expected; "
-                         "the file is malformed: write it again with bikeid")  # fmt: skip
+                         f"the file is malformed: {fix}")  # fmt: skip
     if ds.is_virtual:
         raise ValueError(
             f"{where} is a virtual dataset (its data live in other files, read as fill values "
-            "where they are missing); bikeid run files hold their own data: write it again "
-            "with bikeid"
+            f"where they are missing); give a file that holds its own data: {fix}"
         )
     if ds.external:
         raise ValueError(
-            f"{where} keeps its data in external files {[e[0] for e in ds.external][:3]}; "
-            "bikeid run files hold their own data: write it again with bikeid"
+            f"{where} keeps its data in external files {[e[0] for e in ds.external][:3]}; give "
+            f"a file that holds its own data: {fix}"
         )
     size = int(np.prod(ds.shape, dtype=float)) if ds.shape else 1
-    check_memory(size, 1, where, "the file declares more samples than memory holds; it is "
-                 "not a run file bikeid wrote")  # fmt: skip
+    check_memory(size, 1, where, "the file declares more samples than memory holds; split "
+                 "the data")  # fmt: skip
     nbytes = size * ds.dtype.itemsize
     stored = ds.id.get_storage_size()
     if nbytes > 1 << 16 and stored * MAX_EXPANSION < nbytes:
         raise ValueError(
             f"{where} declares {size:,} samples ({size_text(nbytes)}) but stores "
-            f"{size_text(stored)}; the file is damaged or was not written by bikeid"
+            f"{size_text(stored)} (more than {MAX_EXPANSION} times less); the file is damaged "
+            f"or its data were never written: {fix}"
         )
 
 
 def _read_array(path, gname: str, ds, n: int | None) -> np.ndarray:
     name = getattr(ds, "name", None) or "?"
     where = f"{path}: run {gname!r}: dataset {name.split('/', 3)[-1]!r}"
-    _check_dataset(where, ds)
+    check_h5_dataset(ds, where)
     if ds.dtype.kind != "f":
         raise ValueError(f"{where} has dtype {ds.dtype}, expected float64")
     try:
