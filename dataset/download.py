@@ -7,6 +7,7 @@ upstream bytes is recorded in ``checksums.json`` and checked on every later down
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import hashlib
 import json
@@ -78,8 +79,9 @@ def fetch(
     Each file is fetched from ``url_pattern`` (upstream raw GitHub at the pinned
     commit), gzip-compressed and written atomically (:mod:`bikeid.dataset.files`).  The SHA-256
     of the upstream bytes is recorded in ``checksums.json`` on first download and
-    checked on every later one (a mismatch raises ValueError and writes nothing for that
-    file; files fetched before it in the same call stay written).
+    checked on every later one.  Every file is downloaded and checked before anything is
+    written: a failed download or a checksum mismatch (ValueError) writes nothing, and a
+    failure while writing (a full disk) removes the files and folders the call made.
     ``segments.csv`` is not an upstream file (it was transcribed from the source's
     analysis script) and is not fetched: in a fetched folder the decay windows are
     detected (:func:`bikeid.dataset.decays.detect_decays`).  Returns {local path: sha256}.
@@ -112,10 +114,9 @@ def fetch(
     opener = opener or _urlopen
     files = PINNED if files is None else files
     root = Path(dest) / DATASET
-    root.mkdir(parents=True, exist_ok=True)
     sums_path = root / "checksums.json"
-    sums = json.loads(sums_path.read_text()) if sums_path.exists() else {}
-    out = {}
+    sums = json.loads(sums_path.read_text()) if sums_path.is_file() else {}
+    fetched = {}  # everything is downloaded and checked before anything is written
     for local, remote in files.items():
         url = url_pattern.format(repo=UPSTREAM_REPO, commit=commit, path=remote)
         data = opener(url)
@@ -125,13 +126,31 @@ def fetch(
                 f"checksum mismatch for {local}: recorded {sums[local][:12]}..., got "
                 f"{digest[:12]}...; delete {sums_path} only if the upstream file really changed"
             )
-        target = root / local
-        target.parent.mkdir(parents=True, exist_ok=True)
-        payload = gzip.compress(data, mtime=0) if local.endswith(".gz") else data
-        atomic_write_bytes(target, payload)
-        sums[local] = digest
-        out[local] = digest
-    atomic_write_text(sums_path, json.dumps(sums, indent=2, sort_keys=True) + "\n")
+        fetched[local] = (data, digest)
+    made: list[Path] = []  # folders and files this call creates, removed again on a failure
+    try:
+        for folder in (root, *sorted({(root / local).parent for local in fetched})):
+            missing = [q for q in (folder, *folder.parents) if not q.exists()]
+            for q in reversed(missing):
+                q.mkdir()
+                made.append(q)
+        out = {}
+        for local, (data, digest) in fetched.items():
+            target = root / local
+            if not target.exists():
+                made.append(target)
+            payload = gzip.compress(data, mtime=0) if local.endswith(".gz") else data
+            atomic_write_bytes(target, payload)
+            sums[local] = digest
+            out[local] = digest
+        if not sums_path.exists():
+            made.append(sums_path)
+        atomic_write_text(sums_path, json.dumps(sums, indent=2, sort_keys=True) + "\n")
+    except BaseException:
+        for q in reversed(made):  # a failed fetch leaves nothing it made behind
+            with contextlib.suppress(OSError):
+                q.rmdir() if q.is_dir() else q.unlink()
+        raise
     return out
 
 
