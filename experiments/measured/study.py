@@ -340,7 +340,8 @@ def _pem_model(runs: list[Run], label: str) -> StudyModel:
     eig = m.eigenvalues()
     return StudyModel("pem", label, ab, None, speeds=(float(m.speed),),
                       info={"speed": float(m.speed), "eigenvalues": [complex(x) for x in eig],
-                            "notes": list(m.notes)})  # fmt: skip
+                            "notes": list(m.notes),
+                            **_informativity(runs, 10, 1)})  # fmt: skip
 
 
 def _direct_model(runs: list[Run], label: str) -> StudyModel:
@@ -355,7 +356,22 @@ def _direct_model(runs: list[Run], label: str) -> StudyModel:
     return matrix_model("direct", label, d.canonical(), free=dict(d.free), stderr=dict(d.stderr),
                         covariance=cov, info={"condition": dict(d.condition),
                                               "vaf_in_sample": dict(d.vaf_moore),
-                                              "notes": list(d.notes)})  # fmt: skip
+                                              "notes": list(d.notes),
+                                              **_informativity(runs, len(names), 2)})  # fmt: skip
+
+
+def _informativity(runs: list[Run], n_params: int, min_speeds: int) -> dict:
+    """Whether the logs can determine a model of ``n_params`` parameters
+    (:func:`bikeid.ident.informativity.assess`): ``informativity`` always, ``undetermined``
+    (the cause) when they cannot, so the rows say so instead of reporting numbers."""
+    from bikeid.ident.informativity import assess
+
+    speeds = {round(r.speed, 1) for r in runs}
+    info = assess(runs, n_params, min_speeds=min(min_speeds, len(speeds)))
+    out: dict = {"informativity": info.to_json()}
+    if info.cause is not None:
+        out["undetermined"] = f"the logs cannot determine this model: {info.cause}"
+    return out
 
 
 def _greybox_model(runs: list[Run], label: str, max_nfev: int = 100) -> StudyModel:
@@ -652,6 +668,9 @@ def _evaluate(models: dict[str, StudyModel], run: Run, windows: list) -> dict:
         if m is None:
             continue
         if m.speeds is not None and not any(abs(run.speed - s) < 1e-6 for s in m.speeds):
+            continue
+        if m.info.get("undetermined"):  # no numbers for a model the logs cannot determine
+            out[name] = {"undetermined": m.info["undetermined"]}
             continue
         out[name] = {
             "equation_vaf": equation_vaf(m, run),

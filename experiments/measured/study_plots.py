@@ -83,7 +83,8 @@ def headline(study: dict) -> dict:
         tag = "+".join(f"{v:g}" for v in s["fit_speeds"])
         med = {}
         for m in MODEL_ORDER:
-            vals = [r[m]["decay_nrmse"] for r in s["runs"].values() if m in r]
+            vals = [r[m]["decay_nrmse"] for r in s["runs"].values()
+                    if m in r and "decay_nrmse" in r[m]]  # (not for undetermined models)
             if vals:
                 med[m] = float(np.median(vals))
         finite = {k: v for k, v in med.items() if math.isfinite(v)}
@@ -97,7 +98,8 @@ def _runs_table(rows: dict, models: list[str], key) -> list[str]:
     lines = ["| run (speed) | " + " | ".join(models) + " |",
              "|---|" + "---|" * len(models)]  # fmt: skip
     for f, r in rows.items():
-        cells = [_f(key(r[m])) if m in r else "-" for m in models]
+        cells = [("logs cannot determine it" if "undetermined" in r[m] else _f(key(r[m])))
+                 if m in r else "-" for m in models]  # fmt: skip
         lines.append(f"| {f} ({r['speed']:g} m/s) | " + " | ".join(cells) + " |")
     return lines
 
