@@ -522,3 +522,62 @@ def test_dither_column_becomes_the_runs_dither(tmp_path):
     with pytest.raises(ValueError) as exc:
         from_csv(path, {**MAP, "dithr": "excite"}, time="time")
     assert_names(str(exc.value), "dithr", "dither")
+
+
+# -- provenance and speed stretches -----------------------------------------------------
+def test_provenance_path_is_relative_to_the_working_directory(tmp_path, monkeypatch):
+    """meta['import']['path'] is the file's path relative to where the command runs (never a
+    machine's absolute path), with the SHA-256 of its bytes."""
+    import os
+
+    sub = tmp_path / "logs"
+    sub.mkdir()
+    f = write_csv(sub / "ride.csv", good_table())
+    monkeypatch.chdir(tmp_path)
+    meta = read(f).meta["import"]
+    assert meta["path"] == "logs/ride.csv"
+    assert meta["sha256"] == hashlib.sha256(f.read_bytes()).hexdigest()
+    monkeypatch.chdir(sub)
+    assert read(f).meta["import"]["path"] == "ride.csv"
+    assert not os.path.isabs(read(f).meta["import"]["path"])
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.lists(st.tuples(st.floats(0.6, 8.0), st.integers(1200, 3000)), min_size=1, max_size=4),
+    st.integers(0, 1000),
+)
+def test_split_by_speed_finds_the_plateaus(plateaus, seed):
+    """Piecewise-constant speeds (0.6-8 m/s plateaus of 12-30 s, 1 cm/s sensor noise) joined
+    by 2 s linear ramps: every plateau whose speed differs from its neighbours by more than
+    the tolerance comes back as one stretch (within 2.5 s of its true ends: 1 s smoothing
+    plus the ramp), with its mean speed to 1 cm/s; the ramps, shorter than min_duration,
+    are dropped."""
+    from bikeid.dataset.run import Run, split_by_speed
+
+    rng = np.random.default_rng(seed)
+    merged = []  # plateaus closer than the tolerance are one stretch
+    for v, n in plateaus:
+        if merged and abs(merged[-1][0] - v) <= 0.6:
+            continue
+        merged.append((v, n))
+    v_parts, ends, t0 = [], [], 0
+    for k, (v, n) in enumerate(merged):
+        if k:
+            ramp = np.linspace(merged[k - 1][0], v, 200)
+            v_parts.append(ramp)
+            t0 += 200
+        v_parts.append(np.full(n, v))
+        ends.append((t0 * 0.01, (t0 + n) * 0.01, v))
+        t0 += n
+    v = np.concatenate(v_parts)
+    n = v.size
+    sig = {k: rng.standard_normal(n) for k in CORE}
+    sig["v"] = v + 0.01 * rng.standard_normal(n)
+    run = Run(t=np.arange(n) * 0.01, signals=sig)
+    parts = split_by_speed(run, tolerance=0.25, min_duration=8.0)
+    assert len(parts) == len(ends), ([p.speed for p in parts], ends)
+    for p, (a, b, speed) in zip(parts, ends, strict=True):
+        assert abs(p.speed - speed) < 0.01 and abs(p.t[0] - a) < 2.5 and abs(p.t[-1] - b) < 2.5
+        assert p.meta["stretch"][0] == p.t[0]
+    assert split_by_speed(run, tolerance=0.25, min_duration=8.0, min_speed=9.0) == []

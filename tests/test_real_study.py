@@ -124,7 +124,7 @@ def test_study_on_real_logs(tmp_path):
     report and figures are written.
     """
     from bikeid.dataset.sbw_logs import data_dir
-    from bikeid.experiments.measured.study import _second_half_windows, run_study
+    from bikeid.experiments.measured.study import _second_half_windows, decay_nrmse, run_study
     from bikeid.experiments.measured.study_plots import headline, write_study
     from bikeid.ident import direct
     from bikeid.ident.effects.pipeline import evaluate_plant_model
@@ -147,7 +147,12 @@ def test_study_on_real_logs(tmp_path):
         ws = _second_half_windows(decays, eig[f])
         ev = evaluate_plant_model(d, ws)["summary"]
         assert row["whipple"]["decay_nrmse"] == pytest.approx(ev["error_before"], rel=1e-9)
-        assert row["direct"]["decay_nrmse"] == pytest.approx(ev["error_after"], rel=1e-9)
+        # the direct model's row says the push logs cannot determine it (the torque at
+        # 4.5 m/s is the balance law: only 2.5 m/s is excited, ident.informativity); its
+        # decay error is still checked against the second implementation
+        assert "logs cannot determine" in row["direct"]["undetermined"]
+        model = study["_models"]["splits"][0]["direct"]
+        assert decay_nrmse(model, ws) == pytest.approx(ev["error_after"], rel=1e-9)
     # (2) documented numbers (docs/measured.md table; the command there)
     documented = {  # file -> (Whipple, effects) decay error, fit 2.5+4.5
         "eigen_normal_sil6.5n2_5.4kph.log.gz": (15.045, 1.583),
