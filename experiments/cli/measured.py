@@ -194,6 +194,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the weight, 0 fits the decay signals only (docs/measured.md)",
     )
     add_acceptance_options(f)
+    f.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument(
@@ -312,6 +313,8 @@ def _log_files(report: dict, obj: dict) -> list[Path]:
 
 
 def cmd_fit(args) -> int:
+    import sys
+
     from bikeid.dataset.decays import MIN_FIT_DECAYS
     from bikeid.ident.effects.pipeline import evaluate_json, fit_model, save_fit
 
@@ -319,7 +322,7 @@ def cmd_fit(args) -> int:
     _check_model_output(args)  # before minutes of fitting
     ws, base, law, report = load_log_decays(args, _speeds(args.speeds),
                                             min_decays=MIN_FIT_DECAYS)  # fmt: skip
-    bar = terminal_progress("measured fit", unit="fit")
+    bar = terminal_progress("measured fit", unit="fit", quiet=args.quiet)
     rule = acceptance_rule(args)
     out = fit_model(ws, args.max_effects, args.plant, args.stability, ww, progress=bar, rule=rule,
                     model=base, law=law)  # fmt: skip
@@ -333,6 +336,8 @@ def cmd_fit(args) -> int:
     if args.format != "sbw":
         settings.update(columns=args.columns, units=args.units, time=args.time, flip=args.flip)
     save_fit(out, args.out, settings, _log_files(report, out))
+    if not args.quiet:  # the file written, also when stderr is not a terminal
+        print(f"measured fit: wrote {args.out}", file=sys.stderr, flush=True)
     for note in out["notes"]:
         print(f"note: {note}")
     print(f"decays: {len(ws)} in {len(report['files'])} log(s), "

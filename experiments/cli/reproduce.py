@@ -37,6 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="worker processes for the identification runs (default min(2, cores))",
     )
     p.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--bicycle",
         default="benchmark",
@@ -54,11 +55,18 @@ def _run(args: argparse.Namespace) -> int:
 
     check_owned_folder(args.out, "bikeid reproduce")  # another's report.md is never replaced
     check_outputs([args.out], [args.bicycle])
-    print(f"bikeid reproduce: writing into {args.out}/", file=sys.stderr)
-    bar = terminal_progress("reproduce", unit="stage")
+    if not args.quiet:
+        print(f"bikeid reproduce: writing into {args.out}/", file=sys.stderr)
+    bar = terminal_progress("reproduce", unit="stage", quiet=args.quiet)
     with owned_folder(args.out, "bikeid reproduce"):
         reproduce(
             args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
             log=bar.write if bar else quiet, progress=bar, dask=args.dask,
         )  # fmt: skip
+    if not args.quiet:  # the files written, also when stderr is not a terminal
+        from pathlib import Path
+
+        files = sorted(str(p) for p in Path(args.out).rglob("*") if p.is_file())
+        print(f"bikeid reproduce: wrote {len(files)} files: {', '.join(files)}",
+              file=sys.stderr)  # fmt: skip
     return 0
