@@ -65,6 +65,7 @@ from bikeid.ident.direct import DirectResult
 from bikeid.ident.effects.experiment_model import DT as EXPERIMENT_DT
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.greybox import GreyboxModel
+from bikeid.ident.methods import model_kinds
 from bikeid.ident.pem import INPUT, CanonicalModel, SpeedCanonicalModel
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import loads_json
@@ -84,14 +85,10 @@ FORMAT = "bikeid-model"
 #: The format version written; :func:`read_model_file` reads exactly these versions.
 VERSION = 1
 READABLE_VERSIONS = (1,)
-#: Model kinds and the class each is read back as.
-KINDS = {
-    "canonical-pem": CanonicalModel,
-    "speed-canonical-pem": SpeedCanonicalModel,
-    "direct": DirectResult,
-    "experiment-model": ExperimentModel,
-    "greybox": GreyboxModel,
-}
+#: Model kinds and the class each is read back as: every identification method's
+#: (:func:`bikeid.ident.methods.model_kinds`, from the one table of methods) and the
+#: measured-data experiment model.
+KINDS = {**model_kinds(), "experiment-model": ExperimentModel}
 #: Largest model file read [bytes] (a PEM model with covariances is ~10 kB).
 MAX_BYTES = 20_000_000
 #: Inputs and outputs of the experiment model (external handlebar torque; measured states).

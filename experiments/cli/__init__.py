@@ -139,6 +139,13 @@ def _message(exc: BaseException) -> str:
         text = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
     elif isinstance(exc, MemoryError):
         text = f"out of memory ({text or 'MemoryError'}); use a smaller problem"
+    elif "set_int_max_str_digits" in text:  # Python's own advice: no use to a bikeid user
+        text = ("a number with more than 4300 digits in the input; write numbers of a physical "
+                "size (at most 17 significant digits)")  # fmt: skip
+    if "np." in text:  # numpy's repr leaks into f-strings ({x!r}): np.float64(9.98) -> 9.98
+        import re
+
+        text = re.sub(r"np\.(?:float|int|uint|complex)\d*\(([^()]*)\)", r"\1", text)
     elif isinstance(exc, OverflowError):
         text = f"a value is too large ({text}); use values of a physical size"
     lines = text.splitlines()

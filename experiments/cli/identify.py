@@ -684,7 +684,7 @@ def _model_targets(out: str, speeds: list[float], per_speed: bool) -> list:
 
 
 def _settings(args: argparse.Namespace) -> dict:
-    """The method and options saved with the model."""
+    """The method, its settings (ident.methods) and the data options saved with the model."""
     s: dict = {"command": "bikeid identify", "method": args.method, "format": args.format,
                "input": args.input}  # fmt: skip
     if args.format != "bikeid":
@@ -693,14 +693,12 @@ def _settings(args: argparse.Namespace) -> dict:
     s.update(start=args.start, stop=args.stop, speed_tolerance=args.speed_tolerance,
              min_stretch=args.min_stretch, min_speed=args.min_speed,
              skipped_checks=_skipped(args))  # fmt: skip
-    if args.method == "direct":
-        s.update(bicycle=args.bicycle, iv=args.iv, derivative=args.derivative,
-                 cutoff=args.cutoff, free=args.free)  # fmt: skip
-    elif args.method == "greybox":
-        s.update(bicycle=args.bicycle, free=args.free, noise_model="free",
-                 drop_unidentifiable=args.drop_unidentifiable)  # fmt: skip
-    else:
-        s.update(speed_parameterized=args.speed_parameterized, noise_model="free")
+    method, run_settings = _method_settings(args)
+    s.update(run_settings.to_json())
+    if method.fixed_entries:
+        s.update(bicycle=args.bicycle)
+    if method.free_entries:
+        s.update(free=args.free)
     return s
 
 
@@ -717,11 +715,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     data_files = _data_files(args)  # no output may be an input; no data file counted twice
     check_outputs([args.out], [*data_files, args.bicycle])
     check_distinct_inputs(data_files)
-    if args.method == "pem" and (args.free or args.drop_unidentifiable):
-        raise ValueError("--free applies to --method greybox or direct, --drop-unidentifiable "
-                         "to greybox")  # fmt: skip
-    if args.method == "direct" and args.drop_unidentifiable:
-        raise ValueError("--drop-unidentifiable applies to --method greybox")
+    method, run_settings = _method_settings(args)  # ident.methods.METHODS; options checked
     say = stage_lines("identify", json_output=args.json, quiet=args.quiet)
     notes: list[str] = []
 
@@ -742,111 +736,26 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f"{', '.join(f'{v:g}' for v in speeds)} m/s passed the checks")
     targets, provenance, settings = [], [], {}
     if args.out:
-        per_speed_pem = args.method == "pem" and not args.speed_parameterized
-        targets = _model_targets(args.out, speeds, per_speed_pem)
+        targets = _model_targets(args.out, speeds, method.one_file_per_speed(run_settings))
         check_outputs(targets, [*data_files, args.bicycle])
         provenance = file_provenance(_data_files(args))
         settings = _settings(args)
     out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,
                  "input": args.input, "informativity": informativity}  # fmt: skip
-    say(f"fitting ({args.method})")
-    if args.method == "direct":
-        from bikeid.ident.direct import identify
-        from bikeid.ident.signals import prepare
-        from bikeid.sim.parameters import by_name
-
-        if args.speed_parameterized:
-            raise ValueError("--speed-parameterized applies to --method pem (direct is always)")
-        bicycle = args.bicycle or (runs[0].meta.get("bicycle") if truth is None else None)
-        reference = by_name(bicycle) if isinstance(bicycle, str) else truth
-        if reference is None:
-            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
-        cutoff = args.cutoff
-        if cutoff is None:
-            cutoff = 3.0 if args.derivative == "interval" else 15.0
-        settings["cutoff"] = cutoff
-        prepared = [prepare(r, cutoff=cutoff or None, derivative=args.derivative) for r in runs]
-        res = identify(prepared, reference, method="iv" if args.iv else "ls",
-                       **_direct_free(args.free))  # fmt: skip
-        saved = [(res, targets[0])] if targets else []
-        out["outputs"] = ["phi", "delta", "phidot", "deltadot"]
-        out.update(
-            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H,
-            free={k: {"value": v, "stderr": res.stderr[k]} for k, v in res.free.items()},
-            condition=res.condition, vaf_moore=res.vaf_moore, vaf_variance=res.vaf_variance,
-            notes=list(res.notes),
-        )  # fmt: skip
-        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
-    elif args.method == "greybox":
-        from bikeid.ident import greybox
-        from bikeid.sim.parameters import by_name
-
-        if args.speed_parameterized:
-            raise ValueError("--speed-parameterized applies to --method pem (greybox is always)")
-        reference = by_name(args.bicycle) if args.bicycle else truth
-        if reference is None:
-            raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
-        free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
-        res = greybox.fit(runs, free, reference, drop_unidentifiable=args.drop_unidentifiable,
-                          **({"outputs": outputs} if outputs else {}))  # fmt: skip
-        saved = [(res, targets[0])] if targets else []
-        out["outputs"] = list(res.outputs)
-        out.update(
-            M=res.M, C1=res.C1, K0=res.K0, K2=res.K2, H=res.H, condition=res.condition,
-            free={k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
-                  for k, v in res.free.items()},
-            least_determined=list(res.least_determined), dropped=list(res.dropped),
-            notes=list(res.notes),
-        )  # fmt: skip
-        if len(speeds) >= 2:
-            out["critical_speeds"] = res.critical_speeds()
-        eig = {v: _sorted(res.eigenvalues(v)) for v in speeds}
-        interval_models = {v: res.at(v) for v in speeds}
-        speed_model = res.speed_model() if len(speeds) >= 2 else None
-    else:
-        from bikeid.ident import pem
-
-        # Per-speed fits, each also started from the next lower speed's model (robust
-        # against local minima on low-SNR closed-loop data); the speed-parameterized model
-        # reuses them as its start, as in ``bikeid accuracy``.
-        per: dict = {}
-        prev = None
-        bar = terminal_progress("identify", json_output=args.json, unit="fit",
-                                quiet=args.quiet)  # fmt: skip
-        steps = len(speeds) + bool(args.speed_parameterized)
-        for k, v in enumerate(speeds):
-            if bar:
-                bar(k, steps, f"PEM at {v:g} m/s")
-            at_v = [r for r in runs if round(r.speed, 6) == v]
-            prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,),
-                                    **({"outputs": outputs} if outputs else {}))  # fmt: skip
-        if args.speed_parameterized:
-            if len(speeds) < 2:
-                raise ValueError(
-                    "--speed-parameterized needs runs at two or more speeds to separate "
-                    f"alpha from beta v^2; the data hold speed {speeds[0]} m/s only"
-                )
-            if bar:
-                bar(len(speeds), steps, "speed-parameterized model")
-            model = pem.fit_speed_model(runs, per_speed=per,
-                                        **({"outputs": outputs} if outputs else {}))  # fmt: skip
-            saved = [(model, targets[0])] if targets else []
-            out["params"] = dict(zip(pem.SPEED_NAMES, model.params, strict=True))
-            out["stderr"] = model.stderr
-            out["critical_speeds"] = model.critical_speeds()
-            eig = {v: _sorted(model.eigenvalues(v)) for v in speeds}
-            interval_models, speed_model = {v: model.at(v) for v in speeds}, model
-        else:
-            out["models"] = {
-                v: {"theta": m.params, "stderr": m.stderr, "A": m.A, "B": m.B}
-                for v, m in per.items()
-            }
-            eig = {v: _sorted(m.eigenvalues()) for v, m in per.items()}
-            saved = list(zip(per.values(), targets, strict=True)) if targets else []
-            interval_models, speed_model = per, None
-        out["outputs"] = list(next(iter(per.values())).outputs)
-        if bar:
-            bar(steps, steps, "done")
+    say(f"fitting ({args.method}: {run_settings.describe()})")
+    reference = _reference(args, runs, truth) if method.fixed_entries else None
+    free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
+    bar = terminal_progress("identify", json_output=args.json, unit="fit",
+                            quiet=args.quiet)  # fmt: skip
+    fitted = method.fit(runs, run_settings, reference=reference, free=free, outputs=outputs,
+                        progress=bar)  # fmt: skip
+    out["settings"] = {"method": args.method, **run_settings.to_json(),
+                       "description": run_settings.describe()}  # fmt: skip
+    out["outputs"] = list(fitted.outputs)
+    out.update(fitted.details)
+    saved = list(zip(fitted.models, targets, strict=True)) if targets else []
+    eig = {v: fitted.eigenvalues(v) for v in speeds}
+    interval_models, speed_model = fitted.interval_models, fitted.speed_model
     settings["outputs"] = out["outputs"]  # as fitted (the method's default when not given)
     for model, target in saved:
         save_model(model, target, provenance=provenance, settings=settings, speeds=speeds)
@@ -857,11 +766,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
         out["notes"] = notes
     per_speed = []
     for v in speeds:
-        row = {"speed": v, "eigenvalues": eig[v]}
+        row = {"speed": v, "eigenvalues": eig[v], "modes": list(eig[v].modes)}
         if truth is not None:
             row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
         per_speed.append(row)
-    if args.method != "direct":
+    if interval_models is not None:
         out["intervals"] = _intervals(interval_models, speed_model)
         for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
             row["eigenvalue_intervals"] = ei
@@ -875,25 +784,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         return 0
     np.set_printoptions(precision=5, suppress=True, linewidth=110)
     print(f"{', '.join(args.file)}: {len(runs)} runs, method {args.method}")
-    if args.method == "greybox":
-        for k in ("M", "C1", "K0", "K2", "H"):
-            print(f"{k} =\n{out[k]}")
-        for k, d in out["free"].items():
-            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g} (SE inflation "
-                  f"{d['inflation']:.3g})")  # fmt: skip
-        print(f"condition number {out['condition']:.3g} (weakest direction: "
-              f"{', '.join(out['least_determined'])}); fixed as poorly determined: "
-              f"{out['dropped'] or 'none'}")  # fmt: skip
-    if args.method == "direct":
-        for k in ("M", "C1", "K0", "K2", "H"):
-            print(f"{k} =\n{out[k]}")
-        for k, d in out["free"].items():
-            print(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g}")
-        vaf = ", ".join(
-            f"{k} {v:.4f}" if isinstance(v, float) and np.isfinite(v) else f"{k} n/a"
-            for k, v in out["vaf_moore"].items()
-        )
-        print(f"VAF (Moore eq. 6): {vaf}; condition: {out['condition']}")
+    print(f"settings: {run_settings.describe()}")
+    for line in _detail_lines(out):
+        print(line)
     for f in out["model_files"]:
         print(f"model saved to {f}")
     for row in per_speed:
@@ -912,19 +805,55 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _direct_free(text: str | None) -> dict:
-    """``--free`` for direct: the entries split into roll-row and steer-row free sets."""
-    from bikeid.ident.direct import parse_entry
+def _method_settings(args: argparse.Namespace):
+    """The table entry of ``--method`` and its settings from the options (ident.methods)."""
+    from bikeid.ident.methods import method
 
-    if not text:
-        return {}
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    try:
-        rows = [parse_entry(n)[1] for n in names]
-    except ValueError as exc:
-        raise ValueError(f"--free {text!r}: {exc}") from None
-    return {"free_roll": [n for n, r in zip(names, rows, strict=True) if r == 0],
-            "free_steer": [n for n, r in zip(names, rows, strict=True) if r == 1]}  # fmt: skip
+    m = method(args.method)
+    if args.free and not m.free_entries:
+        raise ValueError("--free applies to --method greybox or direct")
+    if args.drop_unidentifiable and args.method != "greybox":
+        raise ValueError("--drop-unidentifiable applies to --method greybox")
+    if args.speed_parameterized and args.method != "pem":
+        raise ValueError(f"--speed-parameterized applies to --method pem ({args.method} is "
+                         "always one model over all speeds)")  # fmt: skip
+    if args.iv and args.method != "direct":
+        raise ValueError("--iv applies to --method direct")
+    return m, m.settings(vars(args))
+
+
+def _reference(args: argparse.Namespace, runs: list, truth):
+    """Values of the fixed matrix entries: --bicycle, the logs' bicycle name, or the truth."""
+    from bikeid.sim.parameters import by_name
+
+    bicycle = args.bicycle or (runs[0].meta.get("bicycle") if truth is None else None)
+    reference = by_name(bicycle) if isinstance(bicycle, str) else truth
+    if reference is None:
+        raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
+    return reference
+
+
+def _detail_lines(out: dict) -> list[str]:
+    """The method's numbers as text: matrices, free entries with standard errors, fits."""
+    import numpy as np
+
+    lines = []
+    if "M" in out:
+        lines += [f"{k} =\n{out[k]}" for k in ("M", "C1", "K0", "K2", "H")]
+    for k, d in out.get("free", {}).items():
+        infl = f" (SE inflation {d['inflation']:.3g})" if "inflation" in d else ""
+        lines.append(f"  {k:5s} = {d['value']:+.5g} +- {d['stderr']:.2g}{infl}")
+    if "least_determined" in out:
+        lines.append(f"condition number {out['condition']:.3g} (weakest direction: "
+                     f"{', '.join(out['least_determined'])}); fixed as poorly determined: "
+                     f"{out['dropped'] or 'none'}")  # fmt: skip
+    if "vaf_moore" in out:
+        vaf = ", ".join(
+            f"{k} {v:.4f}" if isinstance(v, float) and np.isfinite(v) else f"{k} n/a"
+            for k, v in out["vaf_moore"].items()
+        )
+        lines.append(f"VAF (Moore eq. 6): {vaf}; condition: {out['condition']}")
+    return lines
 
 
 def _n_params(args: argparse.Namespace, runs: list) -> int:

@@ -1,0 +1,804 @@
+"""The identification methods as one table: name -> fit function, model class, file kind.
+
+:data:`METHODS` maps each method name to a :class:`Method`: its fit function (one signature
+for all, returning an :class:`Identified`), its settings type (a frozen dataclass with named
+defaults), the model classes it returns, the model-file kinds they are saved as
+(:mod:`bikeid.ident.model_file`) and a one-line description.  ``bikeid identify``,
+``bikeid identify accuracy``, the Moore & Hubbard reproduction, the measured-data study and
+the model loader read it, so a name means one estimator everywhere:
+
+- ``"direct"``: Moore & Hubbard's least squares (or instrumental variables) of the equations
+  of motion, :func:`bikeid.ident.direct.identify`, on signals prepared by
+  :func:`bikeid.ident.signals.prepare`.  Its settings (:class:`DirectSettings`) are the
+  derivative (``interval``, ``central``, ``forward``, ``backward``), the low-pass cut-off
+  [Hz] and the instruments (none = least squares); the named presets
+  (:data:`DIRECT_PRESETS`) are bikeid's default, Moore & Hubbard's published processing
+  (central differences, 15 Hz) and the testbed's IV on the external signals.
+- ``"pem"``: Chen & Dao's canonical prediction-error model per speed
+  (:func:`bikeid.ident.pem.fit`), or one over all speeds (``speed_parameterized``,
+  :func:`bikeid.ident.pem.fit_speed_model`); :class:`PemSettings`.
+- ``"greybox"``: prediction-error fit of chosen entries of M, C1, K0, K2
+  (:func:`bikeid.ident.greybox.fit`), one over all speeds; :class:`GreyboxSettings`.
+
+A new method is one module (its estimator and model class, the model on the
+:class:`~bikeid.ident.linear_model.LinearModel` base), one entry here (a fit function of the
+signature of :func:`fit_direct`, a settings dataclass, its model classes and file kinds) and
+its tests (``tests/test_methods.py`` runs every entry on the same simulated runs).
+
+Every :class:`Identified` carries the settings it ran (``settings.describe()``), which every
+command prints and saves with the model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from bikeid.dataset.run import Run
+from bikeid.ident import greybox, pem
+from bikeid.ident.canonical import SPEED_NAMES
+from bikeid.ident.direct import DirectResult, identify, parse_entry
+from bikeid.ident.greybox import GreyboxModel
+from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
+from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
+from bikeid.ident.signals import prepare
+from bikeid.ident.tailored_iv import identify_tailored
+from bikeid.sim.errors import InputError
+from bikeid.sim.linear import canonical_matrices
+
+__all__ = [
+    "DIRECT_PRESETS",
+    "METHODS",
+    "DirectSettings",
+    "GreyboxSettings",
+    "Identified",
+    "Method",
+    "PemSettings",
+    "fit_direct",
+    "fit_greybox",
+    "fit_pem",
+    "method",
+    "model_kinds",
+    "split_free",
+]
+
+#: Differences the direct method can form accelerations with (:func:`ident.signals.prepare`).
+DERIVATIVES = ("interval", "central", "forward", "backward")
+#: Instrument sets of the direct method (None = least squares).
+INSTRUMENTS = ("lagged", "dither", "external", "tailored")
+
+
+def _choice(name: str, value: Any, allowed: Sequence[Any]) -> None:
+    if value not in allowed:
+        raise InputError(f"{name}={value!r}: choose one of {', '.join(map(str, allowed))}")
+
+
+@dataclass(frozen=True)
+class DirectSettings:
+    """Settings of the direct method, each with its named default.
+
+    Parameters
+    ----------
+    derivative : {"interval", "central", "forward", "backward"}
+        How the accelerations are formed (:func:`bikeid.ident.signals.prepare`):
+        ``"interval"`` (default) the equation averaged over each sample interval, exact for
+        zero-order-held torques; ``"central"`` Moore & Hubbard's central differences.
+    cutoff_hz : float or None
+        Zero-phase 2nd-order Butterworth low-pass [Hz] on every signal, 0 = none; None
+        (default) means 3 Hz with ``"interval"`` and Moore & Hubbard's 15 Hz otherwise.
+    iv : str or None
+        Instrumental variables: None (default) is ordinary least squares; ``"lagged"``,
+        ``"dither"``, ``"external"`` (:func:`bikeid.ident.direct.identify` instruments) or
+        ``"tailored"`` (:func:`bikeid.ident.tailored_iv.identify_tailored`, 3 iterations).
+    lags : int
+        Instrument lags [samples] (default 1).
+    covariance : {"white", "run"}
+        Standard-error formula (default ``"white"``, the paper's; ``"run"``
+        cluster-robust over runs).
+
+    Attributes
+    ----------
+    derivative, cutoff_hz, iv, lags, covariance
+        As the parameters.
+    """
+
+    derivative: str = "interval"
+    cutoff_hz: float | None = None
+    iv: str | None = None
+    lags: int = 1
+    covariance: str = "white"
+
+    def __post_init__(self) -> None:
+        _choice("derivative", self.derivative, DERIVATIVES)
+        _choice("iv", self.iv, (None, *INSTRUMENTS))
+        _choice("covariance", self.covariance, ("white", "run"))
+        if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz >= 0):
+            raise InputError(f"cutoff_hz={self.cutoff_hz}: give a frequency >= 0 [Hz] (0: none)")
+        if int(self.lags) != self.lags or self.lags < 1:
+            raise InputError(f"lags={self.lags}: give a whole number of samples >= 1")
+
+    @property
+    def cutoff(self) -> float:
+        """float: the cut-off actually used [Hz] (0 = no filter): ``cutoff_hz``, or its
+        default for the derivative (3 Hz interval, 15 Hz otherwise)."""
+        if self.cutoff_hz is not None:
+            return float(self.cutoff_hz)
+        return 3.0 if self.derivative == "interval" else 15.0
+
+    def describe(self) -> str:
+        """One line naming every setting that ran.
+
+        Returns
+        -------
+        str
+            E.g. ``"least squares, interval-averaged equation, 3 Hz low-pass"``.
+        """
+        est = "least squares" if self.iv is None else f"instrumental variables ({self.iv}"
+        if self.iv not in (None, "tailored"):
+            est += f", {self.lags} lag{'s' * (self.lags != 1)}"
+        est += "" if self.iv is None else ")"
+        der = {"interval": "interval-averaged equation"}.get(
+            self.derivative, f"{self.derivative} differences"
+        )
+        cut = f"{self.cutoff:g} Hz low-pass" if self.cutoff else "no low-pass"
+        se = "" if self.covariance == "white" else ", run-clustered standard errors"
+        return f"{est}, {der}, {cut}{se}"
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as plain JSON types, the resolved cut-off included.
+
+        Returns
+        -------
+        dict
+            ``derivative``, ``cutoff`` [Hz] (resolved), ``iv``, ``lags``, ``covariance``.
+        """
+        d = asdict(self)
+        d["cutoff"] = self.cutoff
+        del d["cutoff_hz"]
+        return d
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> DirectSettings:
+        """Settings from command-line style options (missing ones keep their defaults).
+
+        Parameters
+        ----------
+        options : mapping
+            May hold ``derivative``, ``cutoff`` [Hz] (or ``cutoff_hz``), ``iv`` (True =
+            lagged instruments, False/None = least squares, or an instrument name),
+            ``lags``, ``covariance`` and, by name, ``preset`` (:data:`DIRECT_PRESETS`,
+            the base the other options change).
+
+        Returns
+        -------
+        DirectSettings
+            The settings.
+        """
+        base = DIRECT_PRESETS[options.get("preset") or "default"]
+        kw: dict[str, Any] = {}
+        if options.get("derivative") is not None:
+            kw["derivative"] = options["derivative"]
+        cut = options.get("cutoff_hz", options.get("cutoff"))
+        if cut is not None:
+            kw["cutoff_hz"] = float(cut)
+        iv = options.get("iv")
+        if iv is True:
+            kw["iv"] = "lagged"
+        elif isinstance(iv, str):
+            kw["iv"] = iv
+        for k in ("lags", "covariance"):
+            if options.get(k) is not None:
+                kw[k] = options[k]
+        return replace(base, **kw)
+
+
+#: Named direct-method settings: bikeid's default (interval-averaged equation, 3 Hz, least
+#: squares), Moore & Hubbard's published processing (central differences of the 15 Hz
+#: low-passed rates, least squares; their paper §4) and the testbed's instrumental variables
+#: on the dither and roll reference (``bikeid identify accuracy``'s ``direct`` row).
+DIRECT_PRESETS: dict[str, DirectSettings] = {
+    "default": DirectSettings(),
+    "moore-hubbard": DirectSettings(derivative="central", cutoff_hz=15.0),
+    "testbed-iv": DirectSettings(
+        derivative="interval", cutoff_hz=3.0, iv="external", lags=40, covariance="run"
+    ),
+}
+
+
+@dataclass(frozen=True)
+class PemSettings:
+    """Settings of the canonical prediction-error method.
+
+    Parameters
+    ----------
+    speed_parameterized : bool
+        One model over all speeds (a_odd = alpha + beta v^2, a_even = gamma v; needs runs at
+        two or more speeds) instead of one model per speed (default False).
+    noise_model : {"free", "none"}
+        Innovation gain estimated (default, consistent in closed loop) or zero.
+
+    Attributes
+    ----------
+    speed_parameterized, noise_model
+        As the parameters.
+    """
+
+    speed_parameterized: bool = False
+    noise_model: str = "free"
+
+    def __post_init__(self) -> None:
+        _choice("noise_model", self.noise_model, ("free", "none"))
+
+    def describe(self) -> str:
+        """One line naming every setting that ran.
+
+        Returns
+        -------
+        str
+            E.g. ``"one canonical model per speed, innovation gain estimated"``.
+        """
+        what = ("one speed-parameterized canonical model" if self.speed_parameterized
+                else "one canonical model per speed")  # fmt: skip
+        k = "innovation gain estimated" if self.noise_model == "free" else "output error"
+        return f"{what}, {k}"
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as plain JSON types.
+
+        Returns
+        -------
+        dict
+            ``speed_parameterized``, ``noise_model``.
+        """
+        return asdict(self)
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> PemSettings:
+        """Settings from command-line style options (missing ones keep their defaults).
+
+        Parameters
+        ----------
+        options : mapping
+            May hold ``speed_parameterized`` and ``noise_model``.
+
+        Returns
+        -------
+        PemSettings
+            The settings.
+        """
+        kw = {f.name: options[f.name] for f in fields(cls) if options.get(f.name) is not None}
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class GreyboxSettings:
+    """Settings of the grey-box prediction-error method.
+
+    Parameters
+    ----------
+    drop_unidentifiable : bool
+        Fix the worst-determined free entries until the condition number is below
+        :data:`bikeid.ident.greybox.MAX_CONDITION` (default False: refuse, exit 4).
+    mode : {"joint", "per_speed"}
+        One fit over all runs (default) or one per run (K2dd then fixed: K0dd and K2dd are
+        not separable at one speed).
+
+    Attributes
+    ----------
+    drop_unidentifiable, mode
+        As the parameters.
+    """
+
+    drop_unidentifiable: bool = False
+    mode: str = "joint"
+
+    def __post_init__(self) -> None:
+        _choice("mode", self.mode, ("joint", "per_speed"))
+
+    def describe(self) -> str:
+        """One line naming every setting that ran.
+
+        Returns
+        -------
+        str
+            E.g. ``"one fit over all speeds, innovation gain per speed, refuse an
+            ill-conditioned free set"``.
+        """
+        what = "one fit over all speeds" if self.mode == "joint" else "one fit per run"
+        drop = ("fix ill-determined entries" if self.drop_unidentifiable
+                else "refuse an ill-conditioned free set")  # fmt: skip
+        return f"{what}, innovation gain per speed, {drop}"
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as plain JSON types.
+
+        Returns
+        -------
+        dict
+            ``drop_unidentifiable``, ``mode``, ``noise_model`` (always ``"free"``).
+        """
+        return {**asdict(self), "noise_model": "free"}
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> GreyboxSettings:
+        """Settings from command-line style options (missing ones keep their defaults).
+
+        Parameters
+        ----------
+        options : mapping
+            May hold ``drop_unidentifiable`` and ``mode``.
+
+        Returns
+        -------
+        GreyboxSettings
+            The settings.
+        """
+        kw = {f.name: options[f.name] for f in fields(cls) if options.get(f.name) is not None}
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class Identified:
+    """What a method returns: the models, the settings that ran and a summary.
+
+    Attributes
+    ----------
+    method : str
+        The method's name in :data:`METHODS`.
+    settings : DirectSettings, PemSettings or GreyboxSettings
+        The settings that ran (``settings.describe()`` names them).
+    models : tuple of LinearModel
+        The identified models, one per model file (per-speed PEM: one per speed).
+    speeds : tuple of float
+        Nominal speeds [m/s] of the runs (sorted, distinct, rounded to 1e-6 m/s).
+    outputs : tuple of str
+        Measured states fitted.
+    at_speed : dict of float to LinearModel
+        The model that describes each speed (a model over speed, or that speed's model).
+    interval_models : dict of float to CanonicalModel or None
+        Per speed a canonical model with a parameter covariance (for eigenvalue intervals);
+        None where the method gives none (direct).
+    speed_model : SpeedCanonicalModel or None
+        A speed-parameterized canonical model with covariance (critical-speed intervals).
+    details : dict
+        Method-specific numbers as JSON types (matrices and free entries with standard
+        errors, canonical parameters, condition numbers, torque fits, notes).
+    """
+
+    method: str
+    settings: Any
+    models: tuple[LinearModel, ...]
+    speeds: tuple[float, ...]
+    outputs: tuple[str, ...]
+    at_speed: dict[float, LinearModel]
+    interval_models: dict[float, CanonicalModel] | None = None
+    speed_model: SpeedCanonicalModel | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def eigenvalues(self, speed: float) -> np.ndarray:
+        """Eigenvalues at one of the fitted speeds, ordered and named.
+
+        Parameters
+        ----------
+        speed : float
+            One of :attr:`speeds` [m/s].
+
+        Returns
+        -------
+        Eigenvalues
+            :meth:`bikeid.ident.linear_model.LinearModel.eigenvalues` of the model at that
+            speed [1/s].
+        """
+        m = self.at_speed[round(float(speed), 6)]
+        return m.eigenvalues(speed if isinstance(m, SpeedDependentModel) else None)
+
+
+def _speeds(runs: Sequence[Run]) -> list[float]:
+    return sorted({round(r.speed, 6) for r in runs})
+
+
+def split_free(free: Sequence[str] | None) -> tuple[list[str] | None, list[str] | None]:
+    """Free entry names split into the roll row's and the steer row's.
+
+    Parameters
+    ----------
+    free : sequence of str or None
+        Entry names (:func:`bikeid.ident.direct.parse_entry`), or None for the defaults.
+
+    Returns
+    -------
+    free_roll, free_steer : list of str or None
+        The names of each row (None, None for ``free=None``).
+
+    Raises
+    ------
+    InputError
+        If a name is not an entry name.
+    """
+    if free is None:
+        return None, None
+    try:
+        rows = [parse_entry(n)[1] for n in free]
+    except ValueError as exc:
+        raise InputError(f"free entries {list(free)}: {exc}") from None
+    return ([n for n, r in zip(free, rows, strict=True) if r == 0],
+            [n for n, r in zip(free, rows, strict=True) if r == 1])  # fmt: skip
+
+
+def _matrix_details(res: DirectResult | GreyboxModel) -> dict[str, Any]:
+    return {"M": res.M, "C1": res.C1, "K0": res.K0, "K2": res.K2, "H": res.H}
+
+
+def fit_direct(
+    runs: Run | Sequence[Run],
+    settings: DirectSettings | None = None,
+    *,
+    reference=None,
+    free: Sequence[str] | None = None,
+    outputs: Sequence[str] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> Identified:
+    """The direct method: prepare the signals, then least squares or IV of both rows.
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        Raw runs (all four states, ``T_delta`` [N m], ``v`` [m/s]).
+    settings : DirectSettings, optional
+        Derivative, cut-off and instruments (default :data:`DIRECT_PRESETS` "default").
+    reference : BicycleParameters or CanonicalMatrices, optional
+        Values of the fixed entries (default the runs' ``meta["parameters"]``).
+    free : sequence of str, optional
+        Entries to estimate, both rows (default Moore & Hubbard's sets).
+    outputs : sequence of str, optional
+        Must be all four states if given (the regressors use every state).
+    progress : callable, optional
+        Not used (one step).
+
+    Returns
+    -------
+    Identified
+        One :class:`~bikeid.ident.direct.DirectResult` over all speeds; ``details`` holds
+        the matrices, the free entries with standard errors, condition numbers, Moore's
+        VAF of each row's torque and notes.
+
+    Raises
+    ------
+    InputError
+        If ``outputs`` is not all four states or a free name is unknown;
+        ValueError / UntrustworthyResult as :func:`bikeid.ident.direct.identify`.
+    """
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    s = settings or DirectSettings()
+    if outputs is not None and set(outputs) != {"phi", "delta", "phidot", "deltadot"}:
+        raise InputError(
+            f"outputs {tuple(outputs)}: direct least squares needs phi, delta, phidot and "
+            "deltadot (its regressors use every state and both accelerations)"
+        )
+    free_roll, free_steer = split_free(free)
+    if reference is None and runs and "parameters" not in runs[0].meta:
+        raise InputError("runs carry no parameters: give the reference bicycle for the fixed "
+                         "entries")  # fmt: skip
+    cutoff = s.cutoff or None
+
+    def prep(r: Run) -> Run:
+        return prepare(r, cutoff=cutoff, derivative=s.derivative)
+
+    if s.iv == "tailored":
+        from bikeid.sim.parameters import BicycleParameters, from_mapping
+
+        ref = reference if reference is not None else from_mapping(
+            runs[0].meta["parameters"], name="run meta")  # fmt: skip
+        start = canonical_matrices(ref) if isinstance(ref, BicycleParameters) else ref
+        res = identify_tailored(runs, ref, free_roll, free_steer, prepare=prep, start=start,
+                                iterations=3, covariance=s.covariance)  # fmt: skip
+    else:
+        res = identify([prep(r) for r in runs], reference, free_roll, free_steer,
+                       method="ls" if s.iv is None else "iv", instruments=s.iv or "lagged",
+                       lags=s.lags, covariance=s.covariance)  # fmt: skip
+    speeds = _speeds(runs)
+    details = {
+        **_matrix_details(res),
+        "free": {k: {"value": v, "stderr": res.stderr[k]} for k, v in res.free.items()},
+        "condition": res.condition, "vaf_moore": res.vaf_moore,
+        "vaf_variance": res.vaf_variance, "notes": list(res.notes),
+    }  # fmt: skip
+    if len(speeds) >= 2:
+        details["critical_speeds"] = res.critical_speeds()
+    return Identified(
+        method="direct", settings=s, models=(res,), speeds=tuple(speeds),
+        outputs=("phi", "delta", "phidot", "deltadot"), at_speed=dict.fromkeys(speeds, res),
+        details=details,
+    )  # fmt: skip
+
+
+def fit_pem(
+    runs: Run | Sequence[Run],
+    settings: PemSettings | None = None,
+    *,
+    reference=None,
+    free: Sequence[str] | None = None,
+    outputs: Sequence[str] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> Identified:
+    """Canonical PEM per speed (each started from the next lower speed's model), and with
+    ``speed_parameterized`` one model over all speeds started from them.
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        Runs at one or more nominal speeds.
+    settings : PemSettings, optional
+        Per speed or speed-parameterized; noise model.
+    reference : optional
+        Not used (the canonical model has no fixed entries).
+    free : sequence of str, optional
+        Must be None (every canonical parameter is free).
+    outputs : sequence of str, optional
+        Measured states fitted (default :data:`bikeid.ident.pem.DEFAULT_OUTPUTS`).
+    progress : callable, optional
+        ``progress(done, total, label)`` before each fit.
+
+    Returns
+    -------
+    Identified
+        Per-speed :class:`~bikeid.ident.pem.CanonicalModel` (one file each), or one
+        :class:`~bikeid.ident.pem.SpeedCanonicalModel`; ``details`` the parameters and
+        standard errors (and critical speeds of a model over speed).
+
+    Raises
+    ------
+    InputError
+        If ``free`` is given, or ``speed_parameterized`` with runs at one speed only.
+    """
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    s = settings or PemSettings()
+    if free:
+        raise InputError("free entries apply to the greybox and direct methods (every "
+                         "canonical parameter of pem is free)")  # fmt: skip
+    speeds = _speeds(runs)
+    if s.speed_parameterized and len(speeds) < 2:
+        raise InputError(
+            "a speed-parameterized model needs runs at two or more speeds to separate alpha "
+            f"from beta v^2; the data hold speed {speeds[0] if speeds else '-'} m/s only"
+        )
+    kw: dict[str, Any] = {"noise_model": s.noise_model}
+    if outputs:
+        kw["outputs"] = tuple(outputs)
+    steps = len(speeds) + bool(s.speed_parameterized)
+    per: dict[float, CanonicalModel] = {}
+    prev = None
+    for k, v in enumerate(speeds):
+        if progress:
+            progress(k, steps, f"PEM at {v:g} m/s")
+        at_v = [r for r in runs if round(r.speed, 6) == v]
+        prev = per[v] = pem.fit(at_v, starts=() if prev is None else (prev.theta,), **kw)
+    out_names = next(iter(per.values())).outputs
+    if s.speed_parameterized:
+        if progress:
+            progress(len(speeds), steps, "speed-parameterized model")
+        model = pem.fit_speed_model(runs, per_speed=per, **kw)
+        details = {
+            "params": dict(zip(SPEED_NAMES, model.params, strict=True)),
+            "stderr": model.stderr,
+            "critical_speeds": model.critical_speeds(),
+        }
+        result = Identified(
+            method="pem", settings=s, models=(model,), speeds=tuple(speeds),
+            outputs=out_names, at_speed=dict.fromkeys(speeds, model),
+            interval_models={v: model.at(v) for v in speeds}, speed_model=model,
+            details=details,
+        )  # fmt: skip
+    else:
+        details = {"models": {v: {"theta": m.params, "stderr": m.stderr, "A": m.A, "B": m.B}
+                              for v, m in per.items()}}  # fmt: skip
+        result = Identified(
+            method="pem", settings=s, models=tuple(per.values()), speeds=tuple(speeds),
+            outputs=out_names, at_speed=dict(per), interval_models=dict(per), details=details,
+        )  # fmt: skip
+    if progress:
+        progress(steps, steps, "done")
+    return result
+
+
+def fit_greybox(
+    runs: Run | Sequence[Run],
+    settings: GreyboxSettings | None = None,
+    *,
+    reference=None,
+    free: Sequence[str] | None = None,
+    outputs: Sequence[str] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> Identified:
+    """Grey-box PEM of the free matrix entries, one fit over all speeds (or one per run).
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        Runs at one or more speeds.
+    settings : GreyboxSettings, optional
+        Joint or per run; whether ill-determined entries are fixed or refused.
+    reference : BicycleParameters or CanonicalMatrices, optional
+        Values of the fixed entries and the start (default the runs' meta).
+    free : sequence of str, optional
+        Entries to estimate (default :data:`bikeid.ident.greybox.DEFAULT_FREE`; per run
+        without K2dd).
+    outputs : sequence of str, optional
+        Measured states fitted.
+    progress : callable, optional
+        ``progress(done, total, label)`` before each fit.
+
+    Returns
+    -------
+    Identified
+        :class:`~bikeid.ident.greybox.GreyboxModel` (one, or one per run); ``details`` the
+        matrices, free entries with standard errors and inflation, condition number, the
+        least-determined entries, dropped entries, notes (and critical speeds over 2+
+        speeds).
+
+    Raises
+    ------
+    ValueError, UntrustworthyResult
+        As :func:`bikeid.ident.greybox.fit`.
+    """
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    s = settings or GreyboxSettings()
+    kw: dict[str, Any] = {"drop_unidentifiable": s.drop_unidentifiable}
+    if outputs:
+        kw["outputs"] = tuple(outputs)
+    speeds = _speeds(runs)
+    if s.mode == "joint":
+        groups = [runs]
+    else:
+        groups = [[r] for r in runs]
+        if free is None:
+            free = tuple(n for n in greybox.DEFAULT_FREE if n != "K2dd")
+    fits = []
+    for k, group in enumerate(groups):
+        if progress:
+            progress(k, len(groups), f"grey-box fit {k + 1} of {len(groups)}")
+        fits.append(greybox.fit(group, list(free) if free else None, reference, **kw))
+    res = fits[-1]
+    details = {
+        **_matrix_details(res), "condition": max(f.condition for f in fits),
+        "free": {k: {"value": v, "stderr": res.stderr[k], "inflation": res.inflation[k]}
+                 for k, v in res.free.items()},
+        "least_determined": list(res.least_determined), "dropped": list(res.dropped),
+        "notes": list(res.notes),
+    }  # fmt: skip
+    at = {round(r.speed, 6): f for f, g in zip(fits, groups, strict=True) for r in g}
+    speed_model = None
+    if s.mode == "joint" and len(speeds) >= 2:
+        details["critical_speeds"] = res.critical_speeds()
+        speed_model = res.speed_model()
+    if progress:
+        progress(len(groups), len(groups), "done")
+    return Identified(
+        method="greybox", settings=s, models=tuple(fits), speeds=tuple(speeds),
+        outputs=tuple(res.outputs), at_speed=at,
+        interval_models={v: at[v].at(v) for v in speeds}, speed_model=speed_model,
+        details=details,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Method:
+    """One identification method of the table.
+
+    Attributes
+    ----------
+    name : str
+        The name used everywhere (``--method``, model files, reports).
+    description : str
+        One line: what the method estimates.
+    fit : callable
+        ``fit(runs, settings=None, *, reference=None, free=None, outputs=None,
+        progress=None) -> Identified``.
+    settings_type : type
+        The frozen settings dataclass (``describe()``, ``to_json()``,
+        ``from_options(mapping)``).
+    model_classes : tuple of type
+        Classes of the models it returns.
+    kinds : tuple of str
+        Model-file kind of each class, in the same order (:mod:`bikeid.ident.model_file`).
+    fixed_entries : bool
+        Whether it needs the values of fixed matrix entries (a reference bicycle).
+    free_entries : bool
+        Whether ``free`` (matrix entries to estimate) applies.
+    """
+
+    name: str
+    description: str
+    fit: Callable[..., Identified]
+    settings_type: type
+    model_classes: tuple[type, ...]
+    kinds: tuple[str, ...]
+    fixed_entries: bool
+    free_entries: bool
+
+    def settings(self, options: Mapping[str, Any] | None = None) -> Any:
+        """The method's settings from options (missing ones at their defaults).
+
+        Parameters
+        ----------
+        options : mapping, optional
+            Options by name (``settings_type.from_options``).
+
+        Returns
+        -------
+        DirectSettings, PemSettings or GreyboxSettings
+            The settings value.
+        """
+        return self.settings_type.from_options(dict(options or {}))
+
+    def one_file_per_speed(self, settings: Any) -> bool:
+        """Whether the method writes one model file per speed with these settings.
+
+        Parameters
+        ----------
+        settings : DirectSettings, PemSettings or GreyboxSettings
+            The settings.
+
+        Returns
+        -------
+        bool
+            True for per-speed PEM.
+        """
+        return self.name == "pem" and not settings.speed_parameterized
+
+
+#: Every identification method by name.
+METHODS: dict[str, Method] = {
+    "pem": Method(
+        "pem", "canonical prediction-error model per speed or over speed (Chen & Dao)",
+        fit_pem, PemSettings, (CanonicalModel, SpeedCanonicalModel),
+        ("canonical-pem", "speed-canonical-pem"), fixed_entries=False, free_entries=False,
+    ),
+    "greybox": Method(
+        "greybox", "prediction-error fit of chosen entries of M, C1, K0, K2 over all speeds",
+        fit_greybox, GreyboxSettings, (GreyboxModel,), ("greybox",), fixed_entries=True,
+        free_entries=True,
+    ),
+    "direct": Method(
+        "direct", "least squares or IV of the equations of motion (Moore & Hubbard)",
+        fit_direct, DirectSettings, (DirectResult,), ("direct",), fixed_entries=True,
+        free_entries=True,
+    ),
+}  # fmt: skip
+
+
+def method(name: str) -> Method:
+    """The table entry of a method name.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`METHODS`.
+
+    Returns
+    -------
+    Method
+        Its entry.
+
+    Raises
+    ------
+    InputError
+        Naming the known methods, if ``name`` is not one.
+    """
+    if name not in METHODS:
+        raise InputError(f"method {name!r}: choose one of {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def model_kinds() -> dict[str, type]:
+    """Model-file kind -> model class of every method (what the model loader reads).
+
+    Returns
+    -------
+    dict of str to type
+        E.g. ``{"canonical-pem": CanonicalModel, ..., "direct": DirectResult}``.
+    """
+    return {k: c for m in METHODS.values() for k, c in zip(m.kinds, m.model_classes, strict=True)}
