@@ -147,6 +147,42 @@ def test_real_part_verdict_flips_at_the_tolerance():
     assert real_part_verdict(-12.534 * 1.15, -12.534).endswith("(15 %): outside")
 
 
+def test_free_speed_verdict_both_ways():
+    """The free-speed verdict is computed: estimates that close at least half the gap to the
+    paper's v_w 3.994 and v_c 10.525 m/s for both, or a capsize dip, explain; small moves
+    (or moves away) with no dip do not; the reason quotes the numbers."""
+    paper = {"v_w": 3.994, "v_c": 10.525}
+
+    def f3(vw, vc, dip="absent"):
+        return {"critical_identified": {"v_w": vw, "v_c": vc}, "anomaly": {"verdict": dip}}
+
+    held = f3(4.27, 6.00)
+    c = cd.free_speed_verdict(held, f3(4.25, 6.01), paper)
+    assert c["verdict"] == "does not explain"
+    assert c["v_w"]["gap_closed"] == pytest.approx(0.02 / 0.276)
+    assert "v_w held 4.270, free 4.250, paper 3.994 m/s (free closes 7 % of the gap)" in c["reason"]
+    c = cd.free_speed_verdict(held, f3(4.10, 9.0), paper)
+    assert c["verdict"] == "explains" and c["v_c"]["gap_closed"] == pytest.approx(3.0 / 4.525)
+    c = cd.free_speed_verdict(held, f3(4.10, 6.0), paper)  # v_c not moved
+    assert c["verdict"] == "does not explain"
+    assert cd.free_speed_verdict(held, f3(4.27, 6.0, "present"), paper)["verdict"] == "explains"
+    c = cd.free_speed_verdict(held, f3(4.27, None), paper)
+    assert c["verdict"] == "does not explain" and c["v_c"]["gap_closed"] is None
+
+
+def test_identification_run_with_the_speed_free():
+    """``identify_speed`` with mode "coast": the rear wheel coasts from the initial speed, so
+    the speed drifts (the fuzzy loop's steer torque and the dither do work: here by a few
+    cm/s in 10 s), while the held run's speed is exactly the set speed; both fit PEM."""
+    held = cd.identify_speed(("fuzzy", 4.2, 10.0, "benchmark", ("pem",)))
+    free = cd.identify_speed(("fuzzy", 4.2, 10.0, "benchmark", ("pem",), "coast"))
+    assert held["mode"] == "held" and free["mode"] == "coast"
+    assert held["speed_range"] == (4.2, 4.2)
+    lo, hi = free["speed_range"]
+    assert lo < hi and 0.005 < hi - lo < 0.2
+    assert free["methods"]["pem"]["error"] is None and held["methods"]["pem"]["error"] is None
+
+
 def test_family_sentence_and_lowest_periodic_follow_the_data():
     """The Figs. 4-5 sentence names the turning orbits as not about upright only when they
     are turning, and counts symmetric ones; the v_l row's lowest periodic speed is the
@@ -575,6 +611,14 @@ def test_quick_reproduction_end_to_end(tmp_path):
     assert "coarser" in s["chen_dao"]["speed_scan"]["grid_note"]
     md = (tmp_path / "report.md").read_text()
     assert "Periodic windows: " + "; ".join(f"{a:.2f}-{b:.2f} m/s ({f})" for a, b, f in wins) in md
+    # the free-speed experiment: fits at every Fig. 3 speed with the speed free, and a
+    # verdict that is the one its numbers give
+    fs = s["chen_dao"]["free_speed"]
+    assert len(fs["speed_ranges"]) >= len(s["settings"]["fig3_speeds"])
+    c = fs["comparison"]
+    assert c["verdict"] in md and c["verdict"] == cd.free_speed_verdict(
+        s["chen_dao"]["fig3"], {"critical_identified": fs["critical_identified"],
+                                "anomaly": fs["anomaly"]})["verdict"]  # fmt: skip
     # every Markdown table row has as many cells as its header
     for header, row in _table_rows(md):
         assert _cells(row) == _cells(header), (header, row)

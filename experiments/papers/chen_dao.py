@@ -38,6 +38,7 @@ __all__ = [
     "fig2_identification",
     "fig3_summary",
     "fig7_tracking",
+    "free_speed_verdict",
     "identify_speed",
     "paper_eq5_reading",
     "run_jobs",
@@ -103,8 +104,11 @@ PREDICTION_HORIZON = 1.0  # s, k-step prediction used when the identified model 
 
 
 # -- identification runs ---------------------------------------------------------------------
-def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: str):
-    """The sweep specification of the identification runs (module doc)."""
+def _spec(
+    controller: str, speeds: Sequence[float], duration: float, bicycle: str, mode: str = "held"
+):
+    """The sweep specification of the identification runs (module doc); ``mode="coast"``
+    lets the speed free from its initial value (the rear wheel coasts)."""
     from bikeid.experiments.testbed.sweep import SweepSpec
 
     return SweepSpec(
@@ -119,6 +123,7 @@ def _spec(controller: str, speeds: Sequence[float], duration: float, bicycle: st
         dither_hold=0.01,
         sensors="default",
         sample_time=0.01,
+        extra={} if mode == "held" else {"mode": mode},
     )
 
 
@@ -156,16 +161,19 @@ def identify_speed(args: tuple) -> dict[str, Any]:
     Parameters
     ----------
     args : tuple
-        (controller, speed [m/s], duration [s], bicycle name, methods), controller a
+        (controller, speed [m/s], duration [s], bicycle name, methods[, mode]), controller a
         ``controllers.registry.STUDY_CONTROLLERS`` name, methods a subset of
-        ("pem", "direct").
+        ("pem", "direct"), mode ``"held"`` (default: the rear drive holds the speed) or
+        ``"coast"`` (speed free from its initial value, Chen & Dao's "initial forward
+        speed").
 
     Returns
     -------
     dict
         ``truth`` (sorted true eigenvalues [1/s]), ``methods["pem"]`` with ``eig``
         (identified, paired with ``truth``), ``stderr`` and ``theta``, or ``error``; run facts
-        (``fell_at``, ``seconds``).  With "direct": ``_prepared``, the complete run prepared
+        (``fell_at``, ``seconds``, ``mode``, ``speed_range`` of the true speed [m/s]).
+        With "direct": ``_prepared``, the complete run prepared
         for :func:`direct_stacked`, and ``_prepared_truth``, its noise-free signals prepared
         alike (or ``methods["direct"]["error"]`` if it ended early).
     """
@@ -174,8 +182,9 @@ def identify_speed(args: tuple) -> dict[str, Any]:
     from bikeid.sim.linear import eigenvalues, match_eigenvalues
     from bikeid.sim.parameters import by_name
 
-    controller, speed, duration, bicycle, methods = args
-    spec = _spec(controller, [speed], duration, bicycle)
+    controller, speed, duration, bicycle, methods = args[:5]
+    mode = args[5] if len(args) > 5 else "held"
+    spec = _spec(controller, [speed], duration, bicycle, mode)
     task = Task(f"{controller}_{speed}", float(speed), 0)
     run = simulate_task(spec, task)
     p = by_name(bicycle)
@@ -186,6 +195,8 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         "fell_at": run.meta.get("fell_at"),
         "seconds": float(run.t[-1]),
         "max_abs_deg": {k: float(np.degrees(np.abs(run.true(k)).max())) for k in ("phi", "delta")},
+        "mode": mode,
+        "speed_range": (float(run.true("v").min()), float(run.true("v").max())),
         "truth": truth,
         "methods": {},
     }
@@ -892,6 +903,60 @@ def fig3_summary(
         "_ok": ok,
         "_zoom": zoom_ok,
     }
+
+
+# -- speed free vs held -------------------------------------------------------------------------
+def free_speed_verdict(
+    held: dict[str, Any], free: dict[str, Any], paper: dict[str, float] | None = None
+) -> dict[str, Any]:
+    """Does letting the speed free (Chen & Dao's runs start at a speed) explain the paper's
+    shifted v_w, v_c and its capsize dip?  A verdict computed from two Fig. 3 summaries.
+
+    For v_w and v_c the fraction of the gap between the held-speed estimate and the paper's
+    value that the free-speed estimate closes: (free - held) / (paper - held); 1 reaches the
+    paper, 0 no change, negative away from it.  The capsize dip: the free-speed anomaly
+    verdict (:func:`capsize_anomaly`).  ``explains``: both fractions at least 0.5 or the dip
+    present; ``does not explain`` otherwise.
+
+    Parameters
+    ----------
+    held, free : dict
+        :func:`fig3_summary` of the held-speed and the free-speed fits (``critical_identified``
+        with ``v_w``, ``v_c`` [m/s] or None; ``anomaly`` with ``verdict``).
+    paper : dict, optional
+        The paper's ``v_w``, ``v_c`` [m/s] (default :data:`PAPER` ``critical``).
+
+    Returns
+    -------
+    dict
+        ``verdict`` ("explains" or "does not explain"), ``reason`` (one line with the deciding
+        numbers), per critical speed ``held``, ``free``, ``paper`` [m/s] and
+        ``gap_closed`` (fraction or None), and ``anomaly`` (the free-speed verdict).
+    """
+    paper = PAPER["critical"] if paper is None else paper
+    out: dict[str, Any] = {}
+    parts, fracs = [], []
+    for k in ("v_w", "v_c"):
+        h, f, pp = held["critical_identified"].get(k), free["critical_identified"].get(k), paper[k]
+        frac = None
+        if h is not None and f is not None and abs(pp - h) > 1e-12:
+            frac = float((f - h) / (pp - h))
+        fracs.append(frac)
+        out[k] = {"held": h, "free": f, "paper": pp, "gap_closed": frac}
+        parts.append(
+            f"{k} held {_num(h)}, free {_num(f)}, paper {pp:.3f} m/s"
+            + ("" if frac is None else f" (free closes {100 * frac:.0f} % of the gap)")
+        )
+    dip = free["anomaly"]["verdict"]
+    out["anomaly"] = dip
+    explains = all(fr is not None and fr >= 0.5 for fr in fracs) or dip == "present"
+    out["verdict"] = "explains" if explains else "does not explain"
+    out["reason"] = "; ".join(parts) + f"; capsize dip with the speed free: {dip}"
+    return out
+
+
+def _num(x: float | None) -> str:
+    return "-" if x is None else f"{x:.3f}"
 
 
 # -- Fig. 7 ------------------------------------------------------------------------------------

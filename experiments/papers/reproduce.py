@@ -204,7 +204,8 @@ def reproduce(
     times["fig2"] = time.perf_counter() - t0
     t0 = stage(
         f"identification runs (one process pool): fuzzy at {len(st.fig3_speeds)} speeds for "
-        f"Fig. 3, pid and pole placement at {len(st.sweep_speeds)} speeds for the sweep summary"
+        f"Fig. 3 (speed held, and free from its initial value), pid and pole placement at "
+        f"{len(st.sweep_speeds)} speeds for the sweep summary"
     )
     zoom_speeds = sorted({v for v in st.zoom_speeds if v not in st.fig3_speeds})
     jobs = [("fuzzy", float(v), st.id_duration, bicycle, METHODS) for v in st.fig3_speeds]
@@ -212,10 +213,16 @@ def reproduce(
     jobs += [
         (c, float(v), st.id_duration, bicycle, METHODS) for c in SWEEP_ONLY for v in st.sweep_speeds
     ]
+    n_rest = len(jobs) - len(st.fig3_speeds) - len(zoom_speeds)
+    # Chen & Dao's runs start at a speed ("initial forward speed"): the same fits with the
+    # speed free (the rear wheel coasting), for the free-speed experiment
+    free_speeds = [float(v) for v in st.fig3_speeds] + [float(v) for v in zoom_speeds]
+    jobs += [("fuzzy", v, st.id_duration, bicycle, ("pem",), "coast") for v in free_speeds]
     results = cd.run_jobs(jobs, workers, dask)
     n3 = len(st.fig3_speeds)
     grid, zoom = results[:n3], results[n3 : n3 + len(zoom_speeds)]
-    rest = results[n3 + len(zoom_speeds) :]
+    rest = results[n3 + len(zoom_speeds) : n3 + len(zoom_speeds) + n_rest]
+    free = results[n3 + len(zoom_speeds) + n_rest :]
     # the direct method: one regression over all speeds of a controller (K0dd vs K2dd)
     direct = {"fuzzy": cd.direct_stacked(grid, p)}
     for c in SWEEP_ONLY:
@@ -223,12 +230,23 @@ def reproduce(
     times["identification_runs"] = time.perf_counter() - t0
     t0 = stage("Chen & Dao Fig. 3: eigenvalues against speed")
     f3 = cdf.fig3(p, grid, out, zoom)
-    times["fig3"] = time.perf_counter() - t0
     log(
         f"  identified v_w={f3['critical_identified']['v_w']}, v_c="
         f"{f3['critical_identified']['v_c']} (true {f3['critical_true']['v_w']:.4f}, "
         f"{f3['critical_true']['v_c']:.4f})"
     )
+    fs = cd.fig3_summary(p, free[:n3], free[n3:])
+    free_speed = {
+        "critical_identified": fs["critical_identified"],
+        "anomaly": {k: v for k, v in fs["anomaly"].items() if k != "at_paper_speeds"},
+        "rows": fs["rows"],
+        "speed_ranges": [{"speed": g["speed"], "speed_range": g["speed_range"]} for g in free],
+        "failed": fs["failed"],
+    }
+    free_speed["comparison"] = cd.free_speed_verdict(f3, fs)
+    log(f"  speed free from the initial speed: {free_speed['comparison']['verdict']} the "
+        f"paper's shifts ({free_speed['comparison']['reason']})")  # fmt: skip
+    times["fig3"] = time.perf_counter() - t0
     t0 = stage("Chen & Dao Figs. 4-5: coasting at 3.5 m/s, periodicity")
     lc = cdf.limit_cycle_study(p, out, st.limit_cycle_duration, log, workers, dask)
     times["figs4_5"] = time.perf_counter() - t0
@@ -279,6 +297,7 @@ def reproduce(
         "chen_dao": {
             "fig2": f2,
             "fig3": f3,
+            "free_speed": free_speed,
             "figs4_5": lc,
             "periodic_windows": scan["periodic_windows"],
             "speed_scan": {k: v for k, v in scan.items() if k != "points"},
