@@ -15,6 +15,8 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   values.
 - :mod:`~bikeid.ident.pem`: ``fit`` (one speed) and ``fit_speed_model``
   (speed-parameterized); models give ``control.StateSpace`` in bikeid's state order.
+- :mod:`~bikeid.ident.methods`: the identification methods as one table (``METHODS``: name
+  -> fit function, settings with named defaults, model classes, model-file kinds).
 - :mod:`~bikeid.ident.linear_model`: the one base of every linear model class
   (``state_space(speed, dt)`` with named states, inputs and outputs in bikeid's order,
   ``eigenvalues(speed)`` in one order with mode names, and over speed
