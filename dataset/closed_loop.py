@@ -50,6 +50,7 @@ from bikeid.sim.conventions import MEASURED
 from bikeid.sim.errors import UntrustworthyResult, check_memory
 from bikeid.sim.parameters import BicycleParameters
 
+from .linear_loop import _describe, run_loop
 from .run import Run
 from .sensors import Sensors, channel_noise
 from .store import package_version
@@ -58,14 +59,6 @@ __all__ = ["PLANTS", "simulate_run"]
 
 #: Plants :func:`simulate_run` runs (``plant=``).
 PLANTS = ("nonlinear", "linear")
-
-
-def _describe(obj: Any) -> Any:
-    if obj is None:
-        return None
-    if hasattr(obj, "describe"):
-        return obj.describe()
-    return {"name": getattr(obj, "__name__", type(obj).__name__)}
 
 
 class SampledLoop:
@@ -374,9 +367,6 @@ class _LinearTrajectory:
 
 def _linear(p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options):
     """The exact ZOH linear plant (``linear_loop.run_loop``) under ``loop``."""
-    # lazy: linear_loop imports this module (a cycle) and numba, which nonlinear runs need not
-    from .linear_loop import run_loop
-
     for what, bad, fix in (
         ("effects", bool(list(effects)), "drop them"),
         ("mode='coast'", mode != "held", "the linear plant holds the speed"),

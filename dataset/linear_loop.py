@@ -58,13 +58,21 @@ from bikeid.sim.linear import lateral_force_vector, state_matrices, yaw_rate
 from bikeid.sim.parameters import BicycleParameters
 from bikeid.sim.sampling import zoh
 
-from .closed_loop import _describe
 from .run import Run
 
 __all__ = ["PATHS", "closed_loop_matrix", "run_loop", "simulate", "sweep"]
 
 #: Loop implementations of :func:`simulate` (``path=``).
 PATHS = ("auto", "compiled", "python")
+
+
+def _describe(obj: Any) -> Any:
+    """The description stored in a run's meta of a controller, reference, dither, ..."""
+    if obj is None:
+        return None
+    if hasattr(obj, "describe"):
+        return obj.describe()
+    return {"name": getattr(obj, "__name__", type(obj).__name__)}
 
 
 def _law(controller: Controller, v: float) -> LinearLaw | None:

@@ -12,7 +12,9 @@
 Rendering shared by all of them: :mod:`bikeid.experiments.report` (Markdown tables and
 ``summary.json``), :mod:`bikeid.experiments.plots` and
 :mod:`bikeid.experiments.validation_plots` (matplotlib figures);
-:mod:`bikeid.experiments.progress` shows progress of long work.
+:mod:`bikeid.experiments.progress` shows progress of long work;
+:mod:`bikeid.experiments.parallel` runs the many independent jobs of a study (local
+processes or a Dask cluster, the same numbers either way).
 
 Nothing is imported here; import the modules.
 """

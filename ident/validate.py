@@ -31,9 +31,10 @@ from dataclasses import dataclass, field
 
 import control
 import numpy as np
+from scipy.stats import binomtest
 
 from bikeid.dataset.run import Run
-from bikeid.ident.direct import DirectResult, vaf_variance
+from bikeid.ident.direct import DirectResult, vaf_moore, vaf_variance
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.pem import CanonicalModel
 from bikeid.sim.errors import UntrustworthyResult
@@ -748,3 +749,110 @@ def cross_correlation(
     test = independence_test(r[max_lag + 1 :], _acf(u, range(max_lag)), e.size, confidence)
     return {"lags": lags, "ccf": r, "band": band,
             "fraction_outside": float(np.mean(np.abs(r) > band)), "test": test}  # fmt: skip
+
+
+# -- Moore & Hubbard's VAF measures and the binomial interval of a rate ---------------------
+__all__ += ["binomial_interval", "vaf_moore", "vaf_variance", "windowed_simulation_vaf"]
+
+
+def windowed_simulation_vaf(
+    Ad: np.ndarray,
+    Bd: np.ndarray,
+    y: np.ndarray,
+    u: np.ndarray,
+    window: int,
+    initial: str = "measured",
+    names: Sequence[str] = ("phi", "delta", "phidot", "deltadot"),
+) -> dict[str, float]:
+    """Moore & Hubbard's simulation VAF: eq. 6 (:func:`vaf_moore`) on open-loop
+    simulations of the model over consecutive windows of the record.
+
+    The models are open-loop unstable, so each window of ``window`` samples is simulated
+    on its own (:func:`simulation`, all states observed: C = I) from an initial state that
+    is either the measured state at its first sample (``initial="measured"``) or the least
+    squares fit to the window's measured outputs (``"estimate"``).
+
+    Parameters
+    ----------
+    Ad : (4, 4) ndarray
+        Discrete state matrix of the model at the record's sample period [-].
+    Bd : (4, m) ndarray
+        Discrete input matrix [state units per input unit].
+    y : (N, 4) ndarray
+        Measured states, in the order of ``names`` (e.g. rad, rad/s).
+    u : (N,) or (N, m) ndarray
+        Inputs driving the model (e.g. the logged T_delta [N m], F [N]).
+    window : int
+        Window length [samples], >= 2 (the last window may be shorter).
+    initial : {"measured", "estimate"}, optional
+        Initial state of each window.
+    names : sequence of str, optional
+        Names of the states (keys of the result).
+
+    Returns
+    -------
+    dict of str to float
+        Per state, eq. 6 over all windows, dimensionless (1: exact); ``-inf`` where the
+        simulation overflowed (a model far from the data).
+
+    Raises
+    ------
+    ValueError
+        If ``window`` < 2, ``initial`` is unknown, or the shapes disagree.
+    """
+    y = np.asarray(y, dtype=float)
+    U = _as_columns(u)
+    n = int(window)
+    if n < 2:
+        raise ValueError(f"window={window}: need at least 2 samples per window")
+    if initial not in ("measured", "estimate"):
+        raise ValueError(f"initial={initial!r}: use 'measured' or 'estimate'")
+    if y.ndim != 2 or y.shape[1] != Ad.shape[0] or U.shape[0] != y.shape[0]:
+        raise ValueError(f"y {y.shape} and u {U.shape}: need (N, {Ad.shape[0]}) and (N, m)")
+    if len(names) != y.shape[1]:
+        raise ValueError(f"{len(names)} names for {y.shape[1]} states")
+    C = np.eye(Ad.shape[0])
+    sim = np.empty_like(y)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for s in range(0, y.shape[0], n):
+            sl = slice(s, min(s + n, y.shape[0]))
+            ic = y[s] if initial == "measured" else "estimate"
+            sim[sl], _ = simulation(Ad, Bd, C, U[sl], y[sl], ic=ic)
+    return {
+        nm: vaf_moore(y[:, j], sim[:, j]) if np.all(np.isfinite(sim[:, j])) else -np.inf
+        for j, nm in enumerate(names)
+    }
+
+
+def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) interval of a success probability from ``k`` of ``n``.
+
+    Parameters
+    ----------
+    k : int
+        Successes, 0 <= k <= n.
+    n : int
+        Trials, >= 0.
+    level : float, optional
+        Confidence level, 0 < level < 1 (default 0.95).
+
+    Returns
+    -------
+    (float, float)
+        Lower and upper bound of the probability; (0, 1) when ``n`` is 0 (no trials, no
+        information).
+
+    Raises
+    ------
+    ValueError
+        If ``k`` or ``n`` is not a whole number with 0 <= k <= n, or ``level`` is not in
+        (0, 1).
+    """
+    if int(k) != k or int(n) != n or not 0 <= k <= n:
+        raise ValueError(f"{k} successes of {n} trials: need whole numbers 0 <= k <= n")
+    if not 0 < level < 1:
+        raise ValueError(f"level={level}: need 0 < level < 1")
+    if n == 0:
+        return (0.0, 1.0)
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="exact")
+    return (float(ci.low), float(ci.high))

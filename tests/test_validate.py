@@ -7,9 +7,18 @@ import pytest
 from bikeid.dataset.linear_loop import simulate
 from bikeid.ident.canonical import theta_from_matrices
 from bikeid.ident.pem import CanonicalModel
-from bikeid.ident.validate import compare, goodness_of_fit, resid, transfer_functions, zeros
+from bikeid.ident.validate import (
+    binomial_interval,
+    compare,
+    goodness_of_fit,
+    resid,
+    transfer_functions,
+    windowed_simulation_vaf,
+    zeros,
+)
 from bikeid.sim.linear import canonical_matrices, state_space, transfer_function
 from bikeid.sim.parameters import benchmark
+from bikeid.sim.sampling import zoh
 
 P = benchmark()
 
@@ -156,3 +165,67 @@ def test_poles_of_models_defined_over_speed():
     np.testing.assert_allclose(got, eigenvalues(p, 5.0), rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="v="):
         poles(res)
+
+
+# -- Moore & Hubbard's simulation VAF and the binomial interval ------------------------------
+def _windowed_by_hand(Ad, Bd, y, u, n, initial):
+    """Second implementation: scipy.signal.dlsim per window; the estimated initial state by
+    least squares on the stacked free responses built column by column."""
+    from scipy import signal
+
+    sys = (Ad, Bd, np.eye(4), np.zeros((4, Bd.shape[1])), 1.0)
+    sim = np.empty_like(y)
+    for s in range(0, y.shape[0], n):
+        uu, yy = u[s : s + n], y[s : s + n]
+        if initial == "measured":
+            x0 = yy[0]
+        else:
+            _, forced, _ = signal.dlsim(sys, uu, x0=np.zeros(4))
+            free = np.column_stack([
+                signal.dlsim(sys, np.zeros_like(uu), x0=e)[1].ravel() for e in np.eye(4)
+            ])  # fmt: skip
+            x0 = np.linalg.lstsq(free, (yy - forced).ravel(), rcond=None)[0]
+        sim[s : s + n] = signal.dlsim(sys, uu, x0=x0)[1]
+    return [1 - np.linalg.norm(sim[:, j] - y[:, j]) / np.linalg.norm(y[:, j] - y[:, j].mean())
+            for j in range(4)]  # fmt: skip
+
+
+@pytest.mark.parametrize("initial", ["measured", "estimate"])
+def test_windowed_simulation_vaf_against_dlsim(initial):
+    """Exact data of the model: VAF 1 (round-off over 1 s windows: 1e-9); data of another
+    model: the same numbers as a dlsim implementation to round-off (1e-9 on VAFs of order
+    1, the windows' free responses grow by at most ~e^(4 s^-1 x 1 s) here)."""
+    P = benchmark()
+    ss = state_space(canonical_matrices(P), 5.0, inputs=("T_delta",))
+    Ad, Bd = zoh(np.asarray(ss.A), np.asarray(ss.B), 0.01)
+    rng = np.random.default_rng(3)
+    u = np.repeat(rng.normal(0, 0.5, 40), 10)[:, None]
+    x, y = np.array([0.01, 0, 0, 0.02]), np.empty((400, 4))
+    for k in range(400):
+        y[k] = x
+        x = Ad @ x + Bd @ u[k]
+    exact = windowed_simulation_vaf(Ad, Bd, y, u, 100, initial=initial)
+    assert all(v == pytest.approx(1.0, abs=1e-9) for v in exact.values())
+    Ad2 = Ad + 0.002 * rng.normal(size=(4, 4))  # another model
+    got = windowed_simulation_vaf(Ad2, Bd, y, u, 100, initial=initial)
+    want = _windowed_by_hand(Ad2, Bd, y, u, 100, initial)
+    np.testing.assert_allclose(list(got.values()), want, rtol=0, atol=1e-9)
+    assert min(got.values()) < 0.999  # the other model is seen to fit worse
+    with pytest.raises(ValueError, match="window"):
+        windowed_simulation_vaf(Ad, Bd, y, u, 1)
+
+
+def test_binomial_interval_closed_forms():
+    """Clopper & Pearson (1934): k = n gives [(alpha/2)^(1/n), 1] and k = 0 gives
+    [0, 1 - (alpha/2)^(1/n)]; the interval of k of n is the mirror of that of n-k."""
+    lo, hi = binomial_interval(20, 20)
+    assert lo == pytest.approx(0.025 ** (1 / 20), rel=1e-9) and hi == 1.0
+    lo, hi = binomial_interval(0, 14, level=0.9)
+    assert lo == 0.0 and hi == pytest.approx(1 - 0.05 ** (1 / 14), rel=1e-9)
+    a, b = binomial_interval(7, 30)
+    c, d = binomial_interval(23, 30)
+    assert a == pytest.approx(1 - d, abs=1e-12) and b == pytest.approx(1 - c, abs=1e-12)
+    assert binomial_interval(0, 0) == (0.0, 1.0)
+    for bad in ((5, 4), (-1, 4), (1.5, 4)):
+        with pytest.raises(ValueError, match="successes"):
+            binomial_interval(*bad)

@@ -48,6 +48,7 @@ import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.experiments.parallel import imap
+from bikeid.ident.validate import binomial_interval as binomial_ci
 from bikeid.sim.effect_registry import RegistryFacts, effect, nonlinear_effects
 
 __all__ = [
@@ -478,29 +479,6 @@ def run_trial(
         out["unexplained"] = first == "unexplained"
         out["success"] = out["unexplained"]
     return out
-
-
-def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Exact (Clopper-Pearson) interval for a success probability from k of n.
-
-    Parameters
-    ----------
-    k, n : int
-        Successes and trials.
-    level : float, optional
-        Confidence level.
-
-    Returns
-    -------
-    (float, float)
-        Lower and upper bounds of the success probability ((0, 1) when ``n`` is 0).
-    """
-    from scipy.stats import binomtest
-
-    if n == 0:
-        return (0.0, 1.0)
-    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="exact")
-    return (float(ci.low), float(ci.high))
 
 
 def rate(rows: list[dict], key: str) -> dict:

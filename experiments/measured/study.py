@@ -57,8 +57,9 @@ import numpy as np
 
 from bikeid.dataset.run import Run
 from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log, settled
-from bikeid.ident.direct import ALL_ENTRIES, parse_entry, vaf_moore
+from bikeid.ident.direct import ALL_ENTRIES, parse_entry
 from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.validate import windowed_simulation_vaf
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_space
 from bikeid.sim.parameters import steer_by_wire
@@ -271,19 +272,15 @@ def simulation_vaf(model: StudyModel, run: Run, window: float = SIM_WINDOW) -> d
     -------
     dict
         Per output (phi, delta, phidot, deltadot): 1 - ||y_sim - y|| / ||y - mean(y)||
-        over all windows of the run; ``mean``: their mean.
+        over all windows of the run (:func:`bikeid.ident.validate.windowed_simulation_vaf`,
+        -inf where the simulation overflowed); ``mean``: their mean.
     """
     A, b = model.ab(run.speed)
-    n = int(round(window / DT))
+    Ad, Bd = zoh(A, b[:, None], DT)
     Y = np.vstack([run[o] for o in OUTPUTS]).T
-    sim = np.empty_like(Y)
-    for s in range(0, run.n, n):
-        e = min(run.n, s + n)
-        sim[s:e] = _replay(A, b, Y[s], run["T_delta"][s:e])
-    out = {}
-    for j, o in enumerate(OUTPUTS):
-        v = vaf_moore(Y[:, j], sim[:, j]) if np.all(np.isfinite(sim[:, j])) else -math.inf
-        out[o] = float(v)
+    out = windowed_simulation_vaf(Ad, Bd, Y, run["T_delta"], int(round(window / DT)),
+                                  initial="measured", names=OUTPUTS)  # fmt: skip
+    out = {o: float(v) for o, v in out.items()}
     out["mean"] = float(np.mean([out[o] for o in OUTPUTS]))
     return out
 

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from bikeid.experiments.parallel import map_jobs
+from bikeid.ident.validate import windowed_simulation_vaf
 
 __all__ = [
     "ENVIRONMENTS",
@@ -51,7 +52,7 @@ __all__ = [
     "make_runs",
     "reproduce",
     "row_vaf",
-    "simulation_vaf",
+    "table4_vaf",
 ]
 
 RIDERS = {"B": "benchmark", "R": "Browser", "F": "Fisher"}
@@ -285,8 +286,9 @@ def _model_matrices(rider: str, model: dict[str, float] | None):
     return CanonicalMatrices(g=vals["g"], **mats), np.array([vals["HpF"], vals["HdF"]])
 
 
-def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
-    """Eq.-6 VAF of phi, delta, phidot, deltadot for a windowed simulation (module doc).
+def table4_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
+    """Table 4's entries: eq.-6 VAF of phi, delta, phidot, deltadot for a windowed
+    simulation driven by T_delta and F (module doc).
 
     Parameters
     ----------
@@ -301,9 +303,8 @@ def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WIND
     -------
     dict of str to float
         Moore's eq. 6 fit per state ``phi``, ``delta``, ``phidot``, ``deltadot``
-        (dimensionless).
+        (dimensionless; :func:`bikeid.ident.validate.windowed_simulation_vaf`).
     """
-    from bikeid.ident.direct import vaf_moore
     from bikeid.sim.linear import state_matrices
     from bikeid.sim.sampling import zoh
 
@@ -318,28 +319,7 @@ def simulation_vaf(run, model: dict[str, float] | None, window: float = SIM_WIND
     y = np.column_stack([run[n] for n in names])
     u = np.column_stack([run["T_delta"], run["F"]])
     n = max(2, int(round(window / dt)))
-    sim = np.empty_like(y)
-    for i0 in range(0, y.shape[0], n):
-        sl = slice(i0, min(i0 + n, y.shape[0]))
-        # fold the two inputs into one by simulating the forced part with both
-        sim[sl] = _window_sim(Ad, Bd, u[sl], y[sl])
-    return {nm: vaf_moore(y[:, i], sim[:, i]) for i, nm in enumerate(names)}
-
-
-def _window_sim(Ad, Bd, u, y):
-    """Open-loop window simulation with two inputs (T_delta, F), initial state by least
-    squares (:func:`ident.validate.simulation`): the response to F from rest is taken out of
-    ``y`` first and added back, so the fit sees the T_delta-driven part."""
-    from bikeid.ident.validate import simulation
-
-    N = u.shape[0]
-    xf = np.zeros(4)
-    forced_F = np.empty((N, 4))
-    for k in range(N):
-        forced_F[k] = xf
-        xf = Ad @ xf + Bd[:, 1] * u[k, 1]
-    ysim, _ = simulation(Ad, Bd[:, :1], np.eye(4), u[:, 0], y - forced_F)
-    return ysim + forced_F
+    return windowed_simulation_vaf(Ad, Bd, y, u, n, initial="estimate", names=names)
 
 
 # -- the whole reproduction -------------------------------------------------------------------
@@ -403,7 +383,7 @@ def reproduce(
     log("  Tables 2-3 (equation VAF) done")
     table4 = {}
     for mname in cols:
-        per = [simulation_vaf(r, None if mname == "Whipple" else models[mname]) for r in runs]
+        per = [table4_vaf(r, None if mname == "Whipple" else models[mname]) for r in runs]
         med = {k: float(np.median([p[k] for p in per])) for k in per[0]}
         med["mean"] = float(np.mean(list(med.values())))
         table4[mname] = med

@@ -22,7 +22,7 @@ for each quantity q with printed standard error s the harness records z = (q_hat
 Per quantity it reports the mean and standard deviation of z (about 0 and 1 for an
 unbiased estimator with correct standard errors) and how many of the N intervals at
 ``level`` contain the truth, with the Clopper-Pearson interval of that fraction
-(``scipy.stats.binomtest(...).proportion_ci(method="exact")``).  The verdict is computed
+(:func:`bikeid.ident.validate.binomial_interval`).  The verdict is computed
 from that interval: ``consistent`` if it contains the nominal level, ``too narrow`` if it
 lies below, ``too wide`` if above.  ``covariance_scale`` multiplies every covariance before
 the intervals are formed, to check that the verdict can fail (0.1 must give ``too narrow``).
@@ -109,18 +109,19 @@ def binomial_verdict(
     ValueError
         If ``n`` < 1 or ``count`` is outside 0..n.
     """
-    from scipy.stats import binomtest
+    # lazy: `bikeid --help` reads DEFAULTS from this module; scipy.stats stays out of start-up
+    from bikeid.ident.validate import binomial_interval
 
     if n < 1 or not 0 <= count <= n:
         raise ValueError(f"coverage count {count} of {n}: need 0 <= count <= n, n >= 1")
-    ci = binomtest(int(count), int(n)).proportion_ci(confidence_level=confidence, method="exact")
-    if ci.high < level:
+    low, high = binomial_interval(count, n, confidence)
+    if high < level:
         verdict = "too narrow"
-    elif ci.low > level:
+    elif low > level:
         verdict = "too wide"
     else:
         verdict = "consistent"
-    return float(ci.low), float(ci.high), verdict
+    return low, high, verdict
 
 
 @dataclass
