@@ -12,7 +12,10 @@ The Markdown guides next to this file (``docs/*.md``) are read on GitHub, not by
 from __future__ import annotations
 
 import importlib.metadata
+import pkgutil
 import re
+
+import bikeid
 
 # -- Project -------------------------------------------------------------------------------
 project = "bikeid"
@@ -43,6 +46,15 @@ autosummary_imported_members = False  # a name is documented in the module defin
 autosummary_ignore_module_all = True  # ... even when a package re-exports it in __all__
 # Private modules (``bikeid.sim._whipple_generated``, the sympy-emitted equations) and
 # private names are skipped by autosummary's recursive module template.
+# Autosummary imports every submodule it finds, private ones included, before it skips
+# them. A ``__main__`` module (``python -m bikeid``, ``python -m bikeid.experiments.cli``)
+# runs the command line on import, with sphinx-build's own arguments; mocking each one (found
+# by walking the package, which imports packages only) keeps it from running.
+autosummary_mock_imports = [
+    m.name
+    for m in pkgutil.walk_packages(bikeid.__path__, "bikeid.", onerror=lambda name: None)
+    if m.name.rsplit(".", 1)[-1] == "__main__"
+]
 autodoc_typehints = "none"  # numpydoc's Parameters/Returns sections carry the types
 autodoc_member_order = "bysource"
 
@@ -56,6 +68,12 @@ numpydoc_validation_checks: set[str] = set()  # tests/test_docstrings.py is the 
 html_theme = "alabaster"
 html_title = f"bikeid {release} API reference"
 html_static_path: list[str] = []
+# No global navigation tree in the sidebar: with one page per function and class it lists
+# ~700 entries on every page and is most of the write time; pages link up via breadcrumbs
+# (relations) and the module pages' tables.
+html_sidebars = {"**": ["about.html", "relations.html", "searchbox.html"]}
+html_copy_source = False  # the sources are generated stubs; nothing to show
+html_show_sourcelink = False
 
 
 # -- Plain-text absolute values ------------------------------------------------------------
