@@ -2,8 +2,9 @@
 
 Semantics follow MATLAB's System Identification Toolbox (reference §2):
 ``compare`` simulates (horizon ``None`` = infinite) or k-step predicts each run and
-reports the NRMSE fit 1 - ||y - yhat|| / ||y - mean(y)|| per output (a fraction;
-MATLAB prints it x100) and the variance VAF beside it; ``ic="estimate"`` picks
+reports the NRMSE fit 100 (1 - ||y - yhat|| / ||y - mean(y)||) per output in percent (as
+MATLAB prints it, and as ``bikeid validate`` and ``validation.json`` give it) and the
+variance VAF beside it, also in percent; ``ic="estimate"`` picks
 the initial state that minimizes the error (MATLAB ``InitialCondition 'e'``).
 ``resid`` computes one-step residuals and their autocorrelation and the
 residual-input cross-correlation at lags -25..25 with the 99 % band
@@ -163,9 +164,9 @@ class CompareResult:
     yhat : tuple of (N_i, p) ndarray
         Simulated or predicted outputs per run, columns in ``outputs`` order (rad, rad/s).
     fit : dict of str to float
-        NRMSE fit per output over all runs stacked (fraction; MATLAB prints it x100).
+        NRMSE fit per output over all runs stacked [%] (100 = perfect; MATLAB's ``compare``).
     vaf : dict of str to float
-        Variance accounted for per output over all runs stacked (fraction).
+        Variance accounted for per output over all runs stacked [%].
     x0 : tuple of (n,) ndarray
         Initial state used per run (the model's state order and units).
     outputs : tuple of str
@@ -343,7 +344,7 @@ def compare(
     Returns
     -------
     CompareResult
-        Predictions per run and NRMSE fit and VAF per output (fractions).
+        Predictions per run and NRMSE fit and VAF per output [%].
 
     Raises
     ------
@@ -386,8 +387,9 @@ def compare(
         x0_all.append(x0)
         ys.append(Y)
     Yc, Yh = np.vstack(ys), np.vstack(yh_all)
-    fit = {o: goodness_of_fit(Yc[:, j], Yh[:, j])["nrmse_fit"] for j, o in enumerate(outputs)}
-    vaf = {o: vaf_variance(Yc[:, j], Yh[:, j]) for j, o in enumerate(outputs)}
+    fit = {o: 100 * goodness_of_fit(Yc[:, j], Yh[:, j])["nrmse_fit"]
+           for j, o in enumerate(outputs)}  # fmt: skip
+    vaf = {o: 100 * vaf_variance(Yc[:, j], Yh[:, j]) for j, o in enumerate(outputs)}
     return CompareResult(tuple(yh_all), fit, vaf, tuple(x0_all), tuple(outputs), horizon)
 
 

@@ -728,8 +728,8 @@ def validate_model(
         simulation_note=sim_note,
         prediction=pred,
         k_step=int(k_step),
-        fit={o: (100 * sim.fit[o] if sim is not None else None) for o in outputs},
-        fit_k_step={o: 100 * pred.fit[o] for o in outputs},
+        fit={o: (sim.fit[o] if sim is not None else None) for o in outputs},  # percent
+        fit_k_step={o: pred.fit[o] for o in outputs},
         fit_per_run=tuple(per_run),
         residuals=rr,
         frequency_responses=tuple(frf),
