@@ -183,6 +183,27 @@ def test_identification_run_with_the_speed_free():
     assert free["methods"]["pem"]["error"] is None and held["methods"]["pem"]["error"] is None
 
 
+def test_three_riders_on_one_bicycle():
+    """Moore & Hubbard's rider analogue: three riders on one bicycle.  The benchmark rider is
+    the benchmark exactly (Meijaard 2007: mB 85 kg, IBxx 9.2 kg m^2); the light and heavy
+    riders (72 kg x 0.8, x 1.2) change the rear body by -14.4 and +14.4 kg and its inertia
+    by the same factor (70.6 / 85, 99.4 / 85), and nothing else: every other parameter
+    (wheels, front frame, geometry, the rear body's mass centre) is the benchmark's."""
+    from bikeid.experiments.papers import moore_hubbard as mh
+
+    b = benchmark()
+    assert mh.rider_parameters("B") == b
+    for r, dm in (("L", -14.4), ("H", 14.4)):
+        q = mh.rider_parameters(r)
+        assert q.mB - b.mB == pytest.approx(dm, abs=1e-12)
+        for k in ("IBxx", "IByy", "IBzz", "IBxz"):
+            assert getattr(q, k) == pytest.approx(getattr(b, k) * (85 + dm) / 85, rel=1e-12)
+        other = {k: v for k, v in b.as_dict().items()
+                 if k not in ("mB", "IBxx", "IByy", "IBzz", "IBxz", "name")}  # fmt: skip
+        assert {k: q.as_dict()[k] for k in other} == other
+    assert set(mh.RIDERS) == set(mh.RIDER_SCALES) == {"B", "L", "H"}
+
+
 def test_family_sentence_and_lowest_periodic_follow_the_data():
     """The Figs. 4-5 sentence names the turning orbits as not about upright only when they
     are turning, and counts symmetric ones; the v_l row's lowest periodic speed is the

@@ -2,8 +2,13 @@
 
 Analogue of the paper's data set (stated in the report):
 
-- "riders" = bicycle parameter sets (:data:`RIDERS`: benchmark, Browser, Fisher from
-  bicycleparameters), each with its own Whipple model;
+- "riders" = three riders on one bicycle, as the paper (:data:`RIDERS`,
+  :func:`rider_parameters`): the benchmark bicycle's rear body (85 kg, frame and rider) is
+  taken as a 13 kg rear frame plus a 72 kg nominal rider at the rear body's mass centre whose
+  share of the rear body's inertia equals its mass share; a light and a heavy rider scale the
+  rider's mass and inertia by 0.8 and 1.2 (57.6 and 86.4 kg, same shape and position), the
+  bicycle unchanged.  Each rider has its own Whipple model (an assumption of the analogue:
+  the benchmark does not split frame and rider);
 - "environments" = :data:`ENVIRONMENTS`: ``N`` nominal Whipple plant, ``S`` the plant plus
   steer damping 0.3 N m s/rad and steer Coulomb friction 0.1 N m (an effect the Whipple
   model lacks, like tyre scrub);
@@ -34,7 +39,6 @@ from __future__ import annotations
 
 import functools
 import math
-import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -51,11 +55,52 @@ __all__ = [
     "fit_subset",
     "make_runs",
     "reproduce",
+    "rider_parameters",
     "row_vaf",
     "table4_vaf",
 ]
 
-RIDERS = {"B": "benchmark", "R": "Browser", "F": "Fisher"}
+RIDERS = {
+    "B": "benchmark rider (72 kg)",
+    "L": "light rider (57.6 kg)",
+    "H": "heavy rider (86.4 kg)",
+}
+#: Rider mass and inertia scale factors on the nominal rider (:func:`rider_parameters`).
+RIDER_SCALES = {"B": 1.0, "L": 0.8, "H": 1.2}
+#: The nominal rider's mass [kg] within the benchmark's 85 kg rear body.
+RIDER_MASS = 72.0
+
+
+def rider_parameters(rider: str):
+    """The benchmark bicycle with rider ``rider`` (module docstring: the rider's mass and
+    inertia scaled, the bicycle and the rider's position fixed).
+
+    Parameters
+    ----------
+    rider : str
+        A key of :data:`RIDERS`.
+
+    Returns
+    -------
+    BicycleParameters
+        Rear body mass mB = 85 - 72 + 72 s [kg] and inertia (IBxx, IByy, IBzz, IBxz) times
+        (13 + 72 s) / 85 [kg m^2], s = :data:`RIDER_SCALES` [rider]; all else the benchmark's.
+
+    Raises
+    ------
+    KeyError
+        If ``rider`` is not a key of :data:`RIDERS`.
+    """
+    from bikeid.sim.parameters import benchmark
+
+    s = RIDER_SCALES[rider]
+    p = benchmark()
+    f = (p.mB - RIDER_MASS + RIDER_MASS * s) / p.mB
+    return p.replace(
+        mB=p.mB * f, IBxx=p.IBxx * f, IByy=p.IByy * f, IBzz=p.IBzz * f, IBxz=p.IBxz * f
+    )
+
+
 ENVIRONMENTS = {"N": "nominal Whipple plant", "S": "steer damping 0.3 N m s/rad + Coulomb 0.1 N m"}
 ROLL_FREE = ("Mpd", "C1pd", "K0pd")
 STEER_FREE = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd", "HdF")
@@ -95,12 +140,9 @@ def _one_run(args: tuple) -> Any:
     from bikeid.dataset.closed_loop import simulate_run
     from bikeid.dataset.sensors import Sensors
     from bikeid.ident.signals import prepare
-    from bikeid.sim.parameters import by_name
 
     rider, env, speed, duration, seed = args
-    with warnings.catch_warnings():  # Browser's IByy is clipped by sim.parameters (stated)
-        warnings.simplefilter("ignore", UserWarning)
-        p = by_name(RIDERS[rider])
+    p = rider_parameters(rider)
     ctrl = make("pid", p, sample_time=0.01)
     run = simulate_run(
         p,
@@ -159,11 +201,8 @@ def _whipple_values(rider: str) -> dict[str, float]:
     """All entries (M.., C1.., K0.., K2.., HpF, HdF) of a rider's Whipple model."""
     from bikeid.ident.direct import ALL_ENTRIES, parse_entry
     from bikeid.sim.linear import canonical_matrices, lateral_force_vector
-    from bikeid.sim.parameters import by_name
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        p = by_name(RIDERS[rider])
+    p = rider_parameters(rider)
     cm = canonical_matrices(p)
     H = lateral_force_vector(p, p.xB, p.zB)  # the push acts at the rear-body mass centre
     vals = {}

@@ -746,7 +746,8 @@ def _report_mh(rep: Report, m: dict) -> None:
 
     rep.heading("Moore & Hubbard: direct identification")
     rep.para(
-        "Analogue data set: riders = bicycles "
+        "Analogue data set: three riders on one bicycle (the benchmark; the rider's mass and "
+        "inertia scaled, the bicycle fixed: `moore_hubbard.rider_parameters`) "
         + ", ".join(f"{k} = {v}" for k, v in RIDERS.items())
         + "; environments "
         + ", ".join(f"{k} = {v}" for k, v in ENVIRONMENTS.items())
