@@ -101,7 +101,9 @@ def rate_factor(angle: np.ndarray, rate: np.ndarray, dt: float) -> tuple[float, 
     correlation : float
         Their correlation coefficient [-]; NaN when either does not move.
     """
+    n = np.asarray(angle).size
     w = max(1, int(round(SMOOTHING / dt))) if dt > 0 else 1
+    w = w if 3 * w <= n else 1  # a run shorter than three smoothing windows: unsmoothed
     a = _smooth(np.asarray(angle, float), w)
     r = _smooth(np.asarray(rate, float), w)
     if a.size < 3:
