@@ -213,6 +213,8 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
                                         for j, c in enumerate(("phidot", "delta"))]))  # fmt: skip
             bode_rows.append(r)
 
+    from bikeid.ident.effects.before_after import verdict_text
+
     s = ev["summary"]
     lines = [
         "# Steer-by-wire bicycle: nominal vs augmented experiment model", "",
@@ -231,6 +233,8 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
         f"(ratio {s['ratio']:.2f}); weave {s['weave_error_before']:.3f} -> "
         f"{s['weave_error_after']:.3f} (the measured weave itself is uncertain by "
         f"{s['weave_data_rel_std']:.3f}, bootstrap over the decays).", "",
+        f"Before/after with its interval: {verdict_text({**s, 'level': 0.95})} "
+        f"({s['interval']}).", "",
         *_asymmetry_lines(s), "",
         "![free decays](decays.png)", "", "![weave eigenvalue](eigenvalues.png)", "",
     ]  # fmt: skip
