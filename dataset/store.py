@@ -88,9 +88,9 @@ def _h5():
     return h5py
 
 
-def _new_file(path: Path, attrs: Mapping[str, Any] | None):
+def _new_file(path: Path | str, attrs: Mapping[str, Any] | None, **driver: Any):
     h5py = _h5()
-    f = h5py.File(path, "w", libver=("v110", "latest"), track_order=True)
+    f = h5py.File(path, "w", libver=("v110", "latest"), track_order=True, **driver)
     f.attrs["format"] = FORMAT
     f.attrs["format_version"] = FORMAT_VERSION
     f.attrs["bikeid_version"] = package_version()
@@ -193,11 +193,50 @@ def write_runs(
     path = Path(path)
     need = sum(_run_bytes(r) for r in runs if isinstance(r, Run))
     check_free_space(path, need)  # HDF5 cannot always fail cleanly on a full disk: not there
-    with atomic_path(path) as tmp, _h5_write_errors(path, need):
-        with _new_file(tmp, attrs) as f:
-            for name, run in zip(names, runs, strict=True):
-                _write_run(f["runs"], name, run)
+    with atomic_path(path) as tmp, _h5_write_errors(path, need), _h5_target(tmp, attrs,
+                                                                             need) as f:
+        for name, run in zip(names, runs, strict=True):
+            _write_run(f["runs"], name, run)
     return path
+
+
+class _h5_target:
+    """A new bikeid run file for ``tmp``, built in memory (HDF5's core driver) when it is at
+    most a quarter of the memory limit and then written with Python's own ``write``: a full
+    disk is then an :class:`OSError` Python sees, never an error inside the HDF5 library
+    (which can leave the interpreter in a bad state).  Larger files are written by HDF5
+    directly, after the free-space check."""
+
+    def __init__(self, tmp: Path, attrs: Mapping[str, Any] | None, need: float) -> None:
+        from bikeid.sim.errors import memory_limit
+
+        self.tmp, self.attrs = tmp, attrs
+        self.in_memory = need <= memory_limit() / 4
+
+    def __enter__(self):
+        import uuid
+
+        if self.in_memory:
+            self.f = _new_file(f"bikeid-{uuid.uuid4().hex}.h5", self.attrs, driver="core",
+                               backing_store=False)  # fmt: skip
+        else:
+            self.f = _new_file(self.tmp, self.attrs)
+        return self.f
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        if exc is not None or not self.in_memory:
+            self.f.close()
+            return False
+        self.f.flush()
+        image = self.f.id.get_file_image()
+        self.f.close()
+        try:
+            with open(self.tmp, "wb") as fh:  # a full disk: an OSError Python sees
+                fh.write(image)
+        except OSError:
+            os.truncate(self.tmp, 0)  # free the space now: the message then states it right
+            raise
+        return False
 
 
 def _run_bytes(run: Run) -> int:
@@ -283,15 +322,15 @@ def copy_runs(
     seen: set[str] = set()
     need = sum(Path(src).stat().st_size for src in dict.fromkeys(s for s, _ in sources))
     check_free_space(path, need)  # HDF5 cannot always fail cleanly on a full disk: not there
-    with atomic_path(path) as tmp, _h5_write_errors(path, need):
-        with _new_file(tmp, attrs) as f:
-            for src, name in sources:
-                if name in seen:
-                    raise ValueError(f"duplicate run name {name!r} while copying")
-                seen.add(name)
-                read_run(src, name)  # validates
-                with h5py.File(src, "r") as s:
-                    s.copy(s["runs"][name], f["runs"], name=name)
+    with atomic_path(path) as tmp, _h5_write_errors(path, need), _h5_target(tmp, attrs,
+                                                                             need) as f:
+        for src, name in sources:
+            if name in seen:
+                raise ValueError(f"duplicate run name {name!r} while copying")
+            seen.add(name)
+            read_run(src, name)  # validates
+            with h5py.File(src, "r") as s:
+                s.copy(s["runs"][name], f["runs"], name=name)
     return path
 
 

@@ -319,6 +319,22 @@ def test_real_full_disk(work, small_fs):
     assert sorted(p.name for p in small_fs.iterdir()) == ["filler"]
 
 
+def test_real_full_disk_after_the_check(work, small_fs, monkeypatch):
+    """The disk fills between the free-space check and an HDF5 write (the check bypassed):
+    the file is built in memory and written by Python, so the failure is one InputError
+    naming the file, the interpreter survives and no partial file is left."""
+    from bikeid.dataset import store
+
+    runs = store.read_runs(work / "runs.h5")
+    with open(small_fs / "filler", "wb") as fh, contextlib.suppress(OSError):
+        while True:  # another process fills the disk after the check
+            fh.write(b"\0" * 65536)
+    monkeypatch.setattr(store, "check_free_space", lambda *a, **k: None)
+    with pytest.raises(InputError, match="w.h5: No space left on device"):
+        store.write_runs(small_fs / "w.h5", runs)
+    assert sorted(p.name for p in small_fs.iterdir()) == ["filler"]
+
+
 # -- 4. bounded reads ------------------------------------------------------------------------
 @SETTINGS
 @given(ratio=st.integers(101, 5000))
