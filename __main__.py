@@ -4,4 +4,5 @@
 # handler the package installs first (bikeid/__init__.py); main() restores Python's.
 from bikeid.experiments.cli import main
 
-raise SystemExit(main())
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -378,6 +378,7 @@ def _print_file_errors(out: dict) -> None:
 
 def cmd_evaluate(args) -> int:
     from bikeid.dataset.decays import load_decays
+    from bikeid.dataset.files import check_input_file
     from bikeid.ident.effects.pipeline import (
         evaluate_json,
         evaluate_plant_model,
@@ -385,6 +386,7 @@ def cmd_evaluate(args) -> int:
         plant_model_file,
     )
 
+    check_input_file(args.model, "--model")  # /dev/zero or a FIFO would never end
     plant_model = plant_model_file(args.model)
     if plant_model is not None:  # an identified plant model (bikeid identify --out)
         if args.format != "sbw":
@@ -502,6 +504,9 @@ def cmd_report(args) -> int:
     from bikeid.experiments.measured.report import write_report
 
     if args.model:  # refuse a bad model, then a missing data folder, before making the folder
+        from bikeid.dataset.files import check_input_file
+
+        check_input_file(args.model, "--model")  # /dev/zero or a FIFO would never end
         from bikeid.ident.effects.pipeline import model_from_json
 
         model_from_json(args.model)
