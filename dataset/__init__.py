@@ -26,6 +26,8 @@ Modules:
 - :mod:`~bikeid.dataset.importers`: a user's own logs (CSV, any HDF5 file, a data frame)
   -> :class:`Run`, with a column mapping, unit conversion, sign flips and checked data.
 - :mod:`~bikeid.dataset.files`: safe atomic file writing used by every output of bikeid.
+- :mod:`~bikeid.dataset.plausibility`: checks of a run's units and signs before any fit
+  (sample period, each rate against its angle's derivative).
 
 Nothing is imported here; import the modules.
 """

@@ -34,6 +34,8 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   format of every identified model (parameters bit for bit, covariance, provenance).
 - :mod:`~bikeid.ident.uncertainty`: profile and delta-method intervals on eigenvalues, v_w,
   v_c, Bode.
+- :mod:`~bikeid.ident.informativity`: whether data can determine a model (the steer
+  torque's feedback share and the order of excitation of the rest); ``check`` refuses.
 
 The measured-data analysis, :mod:`bikeid.ident.effects` (one subpackage with a small front
 door: the experiment model, the effect library, the fit, the nominal calibration, the
