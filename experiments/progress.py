@@ -73,6 +73,7 @@ class TerminalProgress:
     """
 
     def __init__(self, desc: str, stream: TextIO, unit: str = "step") -> None:
+        # lazy: `bikeid --help` imports this module; tqdm loads only when a bar is drawn
         from tqdm import tqdm
 
         self._tqdm = tqdm

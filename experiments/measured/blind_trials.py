@@ -49,8 +49,14 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
+from bicycleparameters.bicycle import benchmark_par_to_canonical
+from scipy.signal import lfilter
 
+from bikeid.controllers.steer_into_lean import SteerIntoLean
+from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+from bikeid.dataset.sensors import Channel, Sensors
+from bikeid.dataset.windows import Window
 from bikeid.experiments.measured.effect_trials import (
     DELTA0,
     DT,
@@ -60,8 +66,18 @@ from bikeid.experiments.measured.effect_trials import (
     LIBRARY_EFFECTS,
     N_SAMPLES,
     OUTSIDE_EFFECTS,
+    _speeds,
     rate,
 )
+from bikeid.ident.effects.diagnostics import evaluate
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.selection import (
+    choose_nominal_plant,
+    compare_nominal_plants,
+    select_effects,
+)
+from bikeid.sim.effect_registry import nonlinear_effects
+from bikeid.sim.parameters import steer_by_wire
 
 __all__ = [
     "INERTIA_UNCERTAINTY",
@@ -196,7 +212,6 @@ def linear_plant_matrices(p) -> tuple[np.ndarray, ...]:
         M [kg m^2], C1 [kg m^2/s... per m/s], K0 [per g], K2 [per v^2], in the roll/steer
         order of Meijaard 2007 (positive to the right).
     """
-    from bicycleparameters.bicycle import benchmark_par_to_canonical
 
     par = {k: float(getattr(p, k)) for k in ("w", "c", "lam", "g", "rR", "mR", "xB", "zB", "mB",
                                               "xH", "zH", "mH", "rF", "mF", *INERTIAS)}  # fmt: skip
@@ -243,7 +258,6 @@ def draw_blind_trials(
         raise ValueError(f"unknown effects {bad}; choose from {list(TRIAL_EFFECTS)}")
     if int(first) != first or first < 0:
         raise ValueError(f"first index must be a non-negative integer, got {first!r}")
-    from bikeid.experiments.measured.effect_trials import _speeds
 
     out = []
     for i in range(int(first), int(first) + int(n)):
@@ -341,7 +355,6 @@ def draw_blind_classes(counts: dict[str, int], seed: int = 0) -> list[BlindTrial
 
 def _ar1(rng: np.random.Generator, n: int, std: float, a: float) -> np.ndarray:
     """AR(1) noise with marginal std ``std`` and coefficient ``a``."""
-    from scipy.signal import lfilter
 
     e = rng.normal(0.0, std * math.sqrt(1 - a * a), n)
     x = rng.normal(0.0, std)  # stationary start
@@ -442,10 +455,6 @@ def _linear_decay(plant: _LinearPlant, v0: float, nz: Nuisance, init: dict, rng)
 
 
 def _nonlinear_decay(p, effects, v0: float, nz: Nuisance, init: dict, seed: int) -> dict:
-    from bikeid.controllers.steer_into_lean import SteerIntoLean
-    from bikeid.dataset.closed_loop import simulate_run
-    from bikeid.dataset.sensors import Channel, Sensors
-
     step = 2 * math.pi / nz.encoder_counts
     sensors = Sensors({
         "v": Channel(scale=SPEED_CALIBRATION[0], bias=SPEED_CALIBRATION[1]),
@@ -487,9 +496,6 @@ def generate_windows(trial: BlindTrial, speeds, per_speed: int, seed: int, label
         1 s windows: measured angles [rad], rates [rad/s], sensor speed [m/s], zero external
         torque, the commands of the 20 samples before the start [N m].
     """
-    from bikeid.dataset.windows import Window
-    from bikeid.sim.effect_registry import nonlinear_effects
-    from bikeid.sim.parameters import steer_by_wire
 
     nz = trial.nuisance
     p = _perturbed(steer_by_wire(), nz)
@@ -607,13 +613,6 @@ def run_blind_trial(
         ``error`` is the pipeline's message when it failed (verdict ``["error"]``, scored as
         not right and not a false positive, and counted by :func:`summarize_blind`).
     """
-    from bikeid.ident.effects.diagnostics import evaluate
-    from bikeid.ident.effects.experiment_model import ExperimentModel
-    from bikeid.ident.effects.selection import (
-        choose_nominal_plant,
-        compare_nominal_plants,
-        select_effects,
-    )
 
     t0 = time.perf_counter()
     fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
@@ -665,8 +664,6 @@ def nominal_comparison(trial: BlindTrial) -> dict:
         :func:`bikeid.ident.effects.selection.compare_nominal_plants`, ``linear``,
         ``nonlinear`` (summed squared NRMSE) and ``ratio`` (nonlinear / linear).
     """
-    from bikeid.ident.effects.experiment_model import ExperimentModel
-    from bikeid.ident.effects.selection import compare_nominal_plants
 
     fit = generate_windows(trial, trial.fit_speeds, FIT_PER_SPEED, trial.seed, "fit")
     c = compare_nominal_plants(ExperimentModel(), fit)

@@ -46,10 +46,18 @@ from functools import partial
 
 import numpy as np
 
+from bikeid.controllers.steer_into_lean import SteerIntoLean
+from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
+from bikeid.dataset.sensors import Channel, Sensors
+from bikeid.dataset.windows import Window
 from bikeid.experiments.parallel import imap
+from bikeid.ident.effects.diagnostics import evaluate
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.selection import select_effects
 from bikeid.ident.validate import binomial_interval as binomial_ci
 from bikeid.sim.effect_registry import RegistryFacts, effect, nonlinear_effects
+from bikeid.sim.parameters import steer_by_wire
 
 __all__ = [
     "EFFECTS",
@@ -244,7 +252,6 @@ def _stable(name: str, value: float, speeds) -> bool:
     An unstable combination (e.g. a 40 ms delay at 3.5 m/s) cannot be logged: the bicycle
     falls or oscillates.
     """
-    from bikeid.ident.effects.experiment_model import ExperimentModel
 
     m = ExperimentModel(effects={name: value})
     for v in speeds:
@@ -312,8 +319,6 @@ def draw_trials(n: int, seed: int = 0, effects: tuple[str, ...] | None = None) -
 
 
 def _sensors(noise: float):
-    from bikeid.dataset.sensors import Channel, Sensors
-
     return Sensors(
         {
             "v": Channel(scale=SPEED_CALIBRATION[0], bias=SPEED_CALIBRATION[1]),
@@ -355,10 +360,6 @@ def decay_windows(
         roll and steer angles [rad] and rates [rad/s], sensor speed [m/s], zero external
         torque.
     """
-    from bikeid.controllers.steer_into_lean import SteerIntoLean
-    from bikeid.dataset.closed_loop import simulate_run
-    from bikeid.dataset.windows import Window
-    from bikeid.sim.parameters import steer_by_wire
 
     p = steer_by_wire()
     rng = np.random.default_rng(seed)
@@ -437,9 +438,6 @@ def run_trial(
         The spec, verdict, estimate [unit] and its std, errors before/after (NRMSE) and the
         scores.
     """
-    from bikeid.ident.effects.diagnostics import evaluate
-    from bikeid.ident.effects.experiment_model import ExperimentModel
-    from bikeid.ident.effects.selection import select_effects
 
     t0 = time.perf_counter()
     es = EFFECTS[spec.effect]

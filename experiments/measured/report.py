@@ -11,9 +11,18 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 
+from bikeid.dataset.decays import load_decays
+from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir, find_logs, load_log
+from bikeid.dataset.windows import bode_window
 from bikeid.experiments.cli.args import atomic_write_text, dump_json
+from bikeid.experiments.plots import save
+from bikeid.ident.effects.before_after import verdict_text
+from bikeid.ident.effects.experiment_model import ExperimentModel, with_nonlinear_correction
+from bikeid.ident.effects.pipeline import DEFAULT_PLANT, evaluate_json, fit_model, model_from_json
+from bikeid.ident.effects.weave import decay_eigenvalue
 
 
 def sine_fit(y: np.ndarray, u: np.ndarray, freq: float, dt: float = 0.01) -> complex:
@@ -79,8 +88,6 @@ def bode_points(root: str | Path) -> list[dict]:
         ``file``, ``freq`` [Hz], ``v_sensor`` [m/s] and the complex responses ``phidot``
         [rad/s per N m] and ``delta`` [rad per N m] at the file's frequency.
     """
-    from bikeid.dataset.sbw_logs import find_logs, load_log
-    from bikeid.dataset.windows import bode_window
 
     out = []
     for p in find_logs(root, "bode"):
@@ -112,19 +119,6 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     Path
         The report.md written.
     """
-    import matplotlib.pyplot as plt
-
-    from bikeid.dataset.decays import load_decays
-    from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir
-    from bikeid.experiments.plots import save
-    from bikeid.ident.effects.experiment_model import ExperimentModel, with_nonlinear_correction
-    from bikeid.ident.effects.pipeline import (
-        DEFAULT_PLANT,
-        evaluate_json,
-        fit_model,
-        model_from_json,
-    )
-    from bikeid.ident.effects.weave import decay_eigenvalue
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -212,8 +206,6 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
                 r[lab] = float(np.mean([abs(H[j] - p[c]) / abs(p[c])
                                         for j, c in enumerate(("phidot", "delta"))]))  # fmt: skip
             bode_rows.append(r)
-
-    from bikeid.ident.effects.before_after import verdict_text
 
     s = ev["summary"]
     lines = [

@@ -49,17 +49,28 @@ of effects by generalized least squares with the estimate's covariance.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import control
 import numpy as np
 
+from bikeid.dataset.decays import load_decays
 from bikeid.dataset.run import Run
 from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log, settled
+from bikeid.ident import direct, greybox, pem
 from bikeid.ident.direct import ALL_ENTRIES, parse_entry
-from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.experiment_model import ExperimentModel, window_errors
+from bikeid.ident.effects.library import LIBRARY
+from bikeid.ident.effects.pipeline import fit_model
+from bikeid.ident.effects.weave import decay_eigenvalue, median_complex, weave_uncertainty
+from bikeid.ident.informativity import assess
+from bikeid.ident.signals import prepare
 from bikeid.ident.validate import windowed_simulation_vaf
+from bikeid.ident.validation_report import frequency_response_estimate, model_frequency_response
+from bikeid.sim.effect_registry import effect
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices, state_space
 from bikeid.sim.parameters import steer_by_wire
@@ -222,7 +233,6 @@ def equation_vaf(model: StudyModel, run: Run) -> dict[str, float]:
         equation error M q'' + D q' + K q - T, Y = T minus the terms every model fixes
         (roll: the Whipple Mpp phi'' + g K0pp phi; steer: none).
     """
-    from bikeid.ident.signals import prepare
 
     if model.torque_form is None:
         return {"roll": math.nan, "steer": math.nan}
@@ -301,7 +311,6 @@ def decay_nrmse(model: StudyModel, windows: list) -> float:
         Mean over windows of the mean NRMSE of roll rate and steer angle
         (:func:`bikeid.ident.effects.experiment_model.window_errors`); NaN without windows.
     """
-    from bikeid.ident.effects.experiment_model import window_errors
 
     if not windows:
         return math.nan
@@ -326,7 +335,6 @@ def _halves(run: Run) -> tuple[Run, Run]:
 
 def _pem_model(runs: list[Run], label: str) -> StudyModel:
     """Canonical PEM at the runs' (single) speed as a StudyModel."""
-    from bikeid.ident import pem
 
     m = pem.fit(runs)
 
@@ -342,8 +350,6 @@ def _pem_model(runs: list[Run], label: str) -> StudyModel:
 
 
 def _direct_model(runs: list[Run], label: str) -> StudyModel:
-    from bikeid.ident import direct
-
     d = direct.identify(runs, reference=steer_by_wire())
     names = list(d.free)
     cov = np.zeros((len(names), len(names)))
@@ -361,7 +367,6 @@ def _informativity(runs: list[Run], n_params: int, min_speeds: int) -> dict:
     """Whether the logs can determine a model of ``n_params`` parameters
     (:func:`bikeid.ident.informativity.assess`): ``informativity`` always, ``undetermined``
     (the cause) when they cannot, so the rows say so instead of reporting numbers."""
-    from bikeid.ident.informativity import assess
 
     speeds = {round(r.speed, 1) for r in runs}
     info = assess(runs, n_params, min_speeds=min(min_speeds, len(speeds)))
@@ -372,8 +377,6 @@ def _informativity(runs: list[Run], n_params: int, min_speeds: int) -> dict:
 
 
 def _greybox_model(runs: list[Run], label: str, max_nfev: int = 100) -> StudyModel:
-    from bikeid.ident import greybox
-
     g = greybox.fit(runs, reference=steer_by_wire(), drop_unidentifiable=True, max_nfev=max_nfev)
     info = {"condition": float(g.condition), "dropped": list(g.dropped),
             "inflation": dict(g.inflation), "notes": list(g.notes)}  # fmt: skip
@@ -384,8 +387,6 @@ def _greybox_model(runs: list[Run], label: str, max_nfev: int = 100) -> StudyMod
 def _effects_for(split: tuple[float, ...], decays: list, fit_effects: bool) -> tuple[dict, str]:
     """The effect set of the split: refitted (``measured fit``) or the documented one."""
     if fit_effects:
-        from bikeid.ident.effects.pipeline import fit_model
-
         fit_ws = [w for w in decays if any(abs(w.speed - s) < 0.25 for s in split)]
         obj = fit_model(fit_ws)
         return dict(obj["effects"]), "bikeid measured fit (refitted here)"
@@ -428,7 +429,6 @@ def effect_footprints(
         Effects without a footprint and why (no change of the plant matrices: sensor,
         bias and input-path effects; or extra plant states).
     """
-    from bikeid.ident.effects.library import LIBRARY
 
     names = list(LIBRARY) if names is None else list(names)
     speeds = np.asarray(sorted(set(float(s) for s in speeds)), float)
@@ -555,7 +555,6 @@ def translate_deviations(
                 break
             chosen.append(trial[0])
             best = trial[1]
-    from bikeid.sim.effect_registry import effect
 
     effects = {}
     for i, n in enumerate(chosen):
@@ -721,7 +720,6 @@ def run_study(
     bikeid.sim.errors.InputError
         If the data has no eigen logs, or a split's speeds are not in the data.
     """
-    from bikeid.dataset.decays import load_decays
 
     say = progress or (lambda s: None)
     root = data_dir(data)
@@ -790,7 +788,6 @@ def _model_json(m: StudyModel) -> dict:
 
 def _measured_weave(decays: list) -> dict:
     """Per speed: median decay eigenvalue of the free decays and its bootstrap uncertainty."""
-    from bikeid.ident.effects.weave import decay_eigenvalue, median_complex, weave_uncertainty
 
     by: dict[float, list[complex]] = {}
     for w in decays:
@@ -834,7 +831,6 @@ def _bode_part(root: Path, split_models: list, say) -> dict:
 
 def _bode_frequency(run: Run) -> float:
     """Excitation frequency [Hz] of a Bode log from its name (``..._<f>Hz.log[.gz]``)."""
-    import re
 
     m = re.search(r"_([0-9.]+)Hz", run.meta["file"])
     return float(m.group(1)) if m else math.nan
@@ -845,9 +841,6 @@ def _frf(runs: list[Run], models: dict) -> dict:
     signal of the joint input-output estimate, one point per run at its excitation
     frequency, kept where the coherence passes) beside each model's sampled response, with
     each model's median relative complex error |H_model - H| / |H| over those points."""
-    import control
-
-    from bikeid.ident.validation_report import frequency_response_estimate
 
     ex = [Run(t=r.t, signals=r.signals, dither=r["T_ext"], meta=r.meta) for r in runs]
     v = float(np.median([r.speed for r in runs]))
@@ -875,7 +868,6 @@ def _frf(runs: list[Run], models: dict) -> dict:
                     ("f", "H", "coherence", "rel_error", "file"), vals, strict=True
                 ):
                     d[key].append(val)
-    from bikeid.ident.validation_report import model_frequency_response
 
     fgrid = np.geomspace(0.3, 10.0, 200)
     out["models"] = {}

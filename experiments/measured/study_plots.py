@@ -13,11 +13,14 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.experiments.cli.args import atomic_write_text, dump_json
 from bikeid.experiments.measured.study import MODEL_ORDER, Z_SIGNIFICANT
+from bikeid.experiments.plots import save
+from bikeid.ident.direct import parse_entry
 from bikeid.sim.linear import canonical_matrices
 from bikeid.sim.parameters import steer_by_wire
 
@@ -106,7 +109,6 @@ def _runs_table(rows: dict, models: list[str], key) -> list[str]:
 
 def _entries_table(split: dict) -> list[str]:
     w = canonical_matrices(steer_by_wire())
-    from bikeid.ident.direct import parse_entry
 
     names = list(dict.fromkeys([*split["models"]["direct"]["free"],
                                 *split["models"]["greybox"]["free"]]))  # fmt: skip
@@ -170,7 +172,6 @@ def _translation_lines(split: dict) -> list[str]:
 
 def _decay_direct_line(dd: dict) -> str:
     """The direct method on the decay windows: each entry with its z against Whipple."""
-    from bikeid.ident.direct import parse_entry
 
     w = canonical_matrices(steer_by_wire())
     parts = []
@@ -310,10 +311,6 @@ def _speed_models(study: dict) -> dict:
 
 
 def _eigen_figure(study: dict, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-
-    from bikeid.experiments.plots import save
-
     v = np.linspace(0.5, 6.0, 111)
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.5))
     for i, (name, m) in enumerate(_speed_models(study).items()):
@@ -350,10 +347,6 @@ def _eigen_figure(study: dict, path: Path) -> Path:
 
 
 def _bode_figure(frf: dict, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-
-    from bikeid.experiments.plots import save
-
     outs = list(frf["outputs"])
     fig, ax = plt.subplots(2, len(outs), figsize=(6 * len(outs), 6), squeeze=False)
     for j, o in enumerate(outs):

@@ -22,10 +22,37 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import control
 import numpy as np
+from scipy.signal import ss2tf
 
+from bikeid.controllers.excitation import ChirpReference
+from bikeid.controllers.pole_placement import (
+    PolePlacement,
+    augmented_system,
+    to_bikeid_order,
+    tracking_poles,
+)
+from bikeid.dataset.closed_loop import simulate_run
+from bikeid.dataset.run import run_stop
+from bikeid.dataset.sensors import Sensors
 from bikeid.experiments.parallel import map_jobs
-from bikeid.sim.parameters import BicycleParameters
+from bikeid.experiments.testbed.sweep import SweepSpec, Task, simulate_task
+from bikeid.ident import pem
+from bikeid.ident.canonical import canonical_ab, theta_from_matrices
+from bikeid.ident.direct import identify
+from bikeid.ident.signals import prepare
+from bikeid.ident.uncertainty import eigenvalue_jacobian
+from bikeid.ident.validate import k_step_prediction, simulation
+from bikeid.sim.linear import (
+    canonical_matrices,
+    critical_speeds,
+    eigenvalues,
+    match_eigenvalues,
+    state_matrices,
+    transfer_function,
+)
+from bikeid.sim.parameters import BicycleParameters, by_name
 
 __all__ = [
     "ANOMALY_MIN_DEPTH",
@@ -109,7 +136,6 @@ def _spec(
 ):
     """The sweep specification of the identification runs (module doc); ``mode="coast"``
     lets the speed free from its initial value (the rear wheel coasts)."""
-    from bikeid.experiments.testbed.sweep import SweepSpec
 
     return SweepSpec(
         controller=controller,
@@ -147,7 +173,6 @@ def eigen_stderr(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
         Standard errors of Re and Im [1/s], rows in the order of
         ``np.sort_complex(eig(A(theta)))``.
     """
-    from bikeid.ident.uncertainty import eigenvalue_jacobian
 
     jac = eigenvalue_jacobian(np.asarray(theta, float))[1]
     J = np.vstack([jac.real, jac.imag])
@@ -177,10 +202,6 @@ def identify_speed(args: tuple) -> dict[str, Any]:
         for :func:`direct_stacked`, and ``_prepared_truth``, its noise-free signals prepared
         alike (or ``methods["direct"]["error"]`` if it ended early).
     """
-    from bikeid.experiments.testbed.sweep import Task, simulate_task
-    from bikeid.ident import pem
-    from bikeid.sim.linear import eigenvalues, match_eigenvalues
-    from bikeid.sim.parameters import by_name
 
     controller, speed, duration, bicycle, methods = args[:5]
     mode = args[5] if len(args) > 5 else "held"
@@ -217,9 +238,6 @@ def identify_speed(args: tuple) -> dict[str, Any]:
     if "direct" in methods:
         # one speed cannot separate K0dd from K2dd (ident.direct refuses it): the run is kept,
         # prepared, for the regression over all speeds (:func:`direct_stacked`)
-        from bikeid.dataset.run import run_stop
-        from bikeid.ident.signals import prepare
-
         stop = run_stop(run)
         if stop is None:
             # Moore & Hubbard's processing: 15 Hz low-pass, central differences
@@ -287,8 +305,6 @@ def direct_stacked(results: list[dict[str, Any]], p: BicycleParameters) -> dict[
         bias); ``derivative`` (the difference scheme, :data:`DIRECT_DERIVATIVE`); ``condition`` and
         ``vaf_moore`` per row; ``notes``; or ``error`` (why no model).
     """
-    from bikeid.ident.direct import identify
-    from bikeid.sim.linear import canonical_matrices, match_eigenvalues
 
     used = [g for g in results if "_prepared" in g]
     runs = [g.pop("_prepared") for g in used]
@@ -364,9 +380,6 @@ def paper_eq5_reading() -> dict[str, Any]:
         polynomial and numerators, poles and zeros [1/s] and the polynomial's largest
         relative error against eq. 6.
     """
-    from scipy.signal import ss2tf
-
-    from bikeid.ident.canonical import canonical_ab
 
     a, b = np.array(PAPER["eq5_abs"]["a"]), np.array(PAPER["eq5_abs"]["b"])
     den = np.array(PAPER["den"])
@@ -420,7 +433,6 @@ def transfer_functions(A: np.ndarray, B: np.ndarray) -> dict[str, Any]:
         [rad/(N m)]), ``num``/``den`` coefficients (descending powers of s) and ``zeros``
         [1/s].  Transfer functions do not depend on the state order.
     """
-    import control
 
     C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
     sys = control.ss(A, B, C, np.zeros((2, 1)))
@@ -428,7 +440,6 @@ def transfer_functions(A: np.ndarray, B: np.ndarray) -> dict[str, Any]:
     for i, name in enumerate(("phi", "delta")):
         siso = sys[i, 0]
         z = np.sort_complex(control.zeros(siso))
-        from scipy.signal import ss2tf
 
         num, den = ss2tf(A, B, C[i : i + 1], np.zeros((1, 1)))
         num = np.trim_zeros(np.where(np.abs(num[0]) < 1e-9 * np.abs(num[0]).max(), 0, num[0]), "f")
@@ -454,16 +465,6 @@ def fig2_identification(p: BicycleParameters, duration: float = 50.0) -> dict[st
         private keys ``_model`` (the :class:`ident.pem.CanonicalModel`) and ``_series`` (time
         series for the figure: t [s], u [N m], y and the model's y [rad]).
     """
-    from bikeid.experiments.testbed.sweep import Task, simulate_task
-    from bikeid.ident import pem
-    from bikeid.ident.canonical import theta_from_matrices
-    from bikeid.ident.validate import k_step_prediction, simulation
-    from bikeid.sim.linear import (
-        canonical_matrices,
-        eigenvalues,
-        match_eigenvalues,
-        transfer_function,
-    )
 
     v = FIG2_SPEED
     run = simulate_task(_spec("fuzzy", [v], duration, p.name), Task("fig2", v, 0))
@@ -844,7 +845,6 @@ def fig3_summary(
         speed: identified and true eigenvalues [1/s], standard errors), ``failed``; private
         ``_ok`` and ``_zoom``, the successful fits of the main grid and of the zoom range.
     """
-    from bikeid.sim.linear import critical_speeds
 
     ok = [g for g in grid if g["methods"].get("pem", {}).get("error") is None]
     speeds = np.array([g["speed"] for g in ok])
@@ -989,16 +989,6 @@ def fig7_tracking(
         Poles requested and achieved on the true linearization [1/s], gains, tracking errors
         [deg], peak torque [N m] and steer [deg]; private ``_run`` (the simulated run).
     """
-    from bikeid.controllers.excitation import ChirpReference
-    from bikeid.controllers.pole_placement import (
-        PolePlacement,
-        augmented_system,
-        to_bikeid_order,
-        tracking_poles,
-    )
-    from bikeid.dataset.closed_loop import simulate_run
-    from bikeid.dataset.sensors import Sensors
-    from bikeid.sim.linear import state_matrices
 
     v = FIG7_SPEED
     sys_id = model.state_space(order="chen_dao")

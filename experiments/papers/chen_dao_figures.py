@@ -14,7 +14,10 @@ from typing import Any
 import numpy as np
 
 from bikeid.experiments.papers import chen_dao as cd
+from bikeid.experiments.papers import limit_cycles as lc
 from bikeid.experiments.parallel import map_jobs
+from bikeid.experiments.plots import MODE_STYLE, plt, save
+from bikeid.sim.linear import critical_speeds, eigenvalues, eigenvalues_vs_speed
 from bikeid.sim.parameters import BicycleParameters
 
 __all__ = ["fig2", "fig3", "fig7", "limit_cycle_study"]
@@ -40,7 +43,6 @@ def fig2(p: BicycleParameters, out: Path, duration: float = 50.0) -> dict[str, A
         time
         series) and ``figure``, the PNG's file name.
     """
-    from bikeid.experiments.plots import plt, save
 
     res = cd.fig2_identification(p, duration)
     ser = res.pop("_series")
@@ -113,8 +115,6 @@ def fig3(
         :func:`~bikeid.experiments.papers.chen_dao.fig3_summary` and ``figures``, the PNG file
         names.
     """
-    from bikeid.experiments.plots import MODE_STYLE, plt, save
-    from bikeid.sim.linear import eigenvalues_vs_speed
 
     res = cd.fig3_summary(p, grid, zoom)
     ok, zoom_ok = res.pop("_ok"), res.pop("_zoom")
@@ -253,7 +253,6 @@ def fig7(
     dict
         The numbers of :func:`~bikeid.experiments.papers.chen_dao.fig7_tracking` and ``figure``.
     """
-    from bikeid.experiments.plots import plt, save
 
     res = cd.fig7_tracking(p, model, duration, poles)
     run = res.pop("_run")
@@ -287,7 +286,6 @@ def fig7(
 def _coast_entry(args: tuple) -> tuple[dict, dict]:
     """One coasting run's analysis and summary entry (with its Floquet multipliers when
     periodic); picklable worker: (parameters, initial condition, duration [s])."""
-    from bikeid.experiments.papers import limit_cycles as lc
 
     p, ic, duration = args
     r = lc.periodicity(lc.coast(p, ic, duration), ic.label)
@@ -329,8 +327,6 @@ def limit_cycle_study(
         the linear eigenvalues at 3.5 m/s [1/s], the true critical speeds [m/s] and the
         figure file names.
     """
-    from bikeid.experiments.papers import limit_cycles as lc
-    from bikeid.sim.linear import critical_speeds, eigenvalues
 
     res: dict[str, Any] = {
         "speed": lc.SPEED,
@@ -376,7 +372,6 @@ def limit_cycle_study(
 def _mirror_checks(entries: list[dict], by_label: dict[str, tuple[dict, dict]]) -> list[dict]:
     """The exact mirror image of every periodic case (``by_label``: label -> the
     :func:`_coast_entry` result, mirrors included); its multipliers must agree."""
-    from bikeid.experiments.papers import limit_cycles as lc
 
     conds = {ic.label: ic for ic in lc.FIG4_CONDITIONS + lc.FIG5_CONDITIONS}
     out = []

@@ -35,11 +35,17 @@ what the measurement shows for each initial condition.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from bikeid.experiments.parallel import map_jobs
+from bikeid.experiments.plots import plt, save
+from bikeid.sim.integrate import DEFAULT_SUBSTEPS, simulate
+from bikeid.sim.nonlinear import WhippleBicycle
 from bikeid.sim.parameters import BicycleParameters
+from bikeid.sim.periodic_orbits import orbit_stability
 
 __all__ = [
     "FIG4_CONDITIONS",
@@ -146,8 +152,6 @@ def coast(
         The run (``mode="coast"``: rear wheel free, speed a state) with total energy
         ``energy`` [J] per sample.
     """
-    from bikeid.sim.integrate import DEFAULT_SUBSTEPS, simulate
-    from bikeid.sim.nonlinear import WhippleBicycle
 
     bike = WhippleBicycle(p)
     x0 = bike.state(speed, **ic.radians())
@@ -540,7 +544,6 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
         (deg, deg, deg/s, m/s), ``closure_rel``, ``decay_rate_per_return``,
         ``floquet_seconds`` [s]; null where not applicable.
     """
-    from bikeid.sim.periodic_orbits import orbit_stability
 
     e = {
         "label": ic.label,
@@ -632,7 +635,6 @@ def _scan_point(args: tuple) -> dict:
     """Class of one coasting run at initial speed v (picklable worker: parameters, initial
     condition, speed [m/s], duration [s]); a numerical stop is rerun at a 4x finer RK4 step
     before it is reported as ``numerical``."""
-    import warnings
 
     p, ic, v, duration = args
     msg = ""
@@ -760,7 +762,6 @@ def speed_scan(
     grid = sorted({float(v) for v in speeds})
     if not grid:
         raise ValueError("speed scan needs at least one initial speed")
-    from bikeid.experiments.parallel import map_jobs
 
     pts = map_jobs(_scan_point, [(p, ic, v, duration) for v in grid], workers, dask)
     w = scan_windows(pts)
@@ -794,7 +795,6 @@ def plot_phase_portraits(trajs, labels, path, title: str):
     pathlib.Path
         ``path``.
     """
-    from bikeid.experiments.plots import plt, save
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.6))
     for tr, lab in zip(trajs, labels, strict=True):
@@ -857,7 +857,6 @@ def plot_energy_speed(trajs, labels, path, title: str):
     pathlib.Path
         ``path``.
     """
-    from bikeid.experiments.plots import plt, save
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
     for tr, lab in zip(trajs, labels, strict=True):

@@ -43,10 +43,31 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import control
 import numpy as np
 
+from bikeid.controllers.excitation import ChirpReference, LateralForcePulses
+from bikeid.controllers.registry import make
+from bikeid.dataset.closed_loop import simulate_run
+from bikeid.dataset.sensors import Sensors
 from bikeid.experiments.parallel import map_jobs
+from bikeid.experiments.plots import phase_deg, plt, save
+from bikeid.ident.direct import ALL_ENTRIES, parse_entry, regressors, vaf_moore
+from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.signals import prepare
 from bikeid.ident.validate import windowed_simulation_vaf
+from bikeid.sim.effects import SteerCoulomb, SteerDamping
+from bikeid.sim.linear import (
+    CanonicalMatrices,
+    canonical_matrices,
+    eigenvalues_vs_speed,
+    lateral_force_vector,
+    match_eigenvalues,
+    state_matrices,
+    state_space,
+)
+from bikeid.sim.parameters import benchmark
+from bikeid.sim.sampling import zoh
 
 __all__ = [
     "ENVIRONMENTS",
@@ -91,7 +112,6 @@ def rider_parameters(rider: str):
     KeyError
         If ``rider`` is not a key of :data:`RIDERS`.
     """
-    from bikeid.sim.parameters import benchmark
 
     s = RIDER_SCALES[rider]
     p = benchmark()
@@ -129,18 +149,10 @@ SUBSETS = _subsets()
 
 
 def _effects(env: str) -> list:
-    from bikeid.sim.effects import SteerCoulomb, SteerDamping
-
     return [] if env == "N" else [SteerDamping(0.3), SteerCoulomb(0.1, smoothing=0.05)]
 
 
 def _one_run(args: tuple) -> Any:
-    from bikeid.controllers.excitation import ChirpReference, LateralForcePulses
-    from bikeid.controllers.registry import make
-    from bikeid.dataset.closed_loop import simulate_run
-    from bikeid.dataset.sensors import Sensors
-    from bikeid.ident.signals import prepare
-
     rider, env, speed, duration, seed = args
     p = rider_parameters(rider)
     ctrl = make("pid", p, sample_time=0.01)
@@ -199,8 +211,6 @@ def make_runs(
 @functools.cache
 def _whipple_values(rider: str) -> dict[str, float]:
     """All entries (M.., C1.., K0.., K2.., HpF, HdF) of a rider's Whipple model."""
-    from bikeid.ident.direct import ALL_ENTRIES, parse_entry
-    from bikeid.sim.linear import canonical_matrices, lateral_force_vector
 
     p = rider_parameters(rider)
     cm = canonical_matrices(p)
@@ -214,8 +224,6 @@ def _whipple_values(rider: str) -> dict[str, float]:
 
 
 def _columns(run) -> dict[str, np.ndarray]:
-    from bikeid.ident.direct import regressors
-
     d = {
         k: np.asarray(run[k], float)
         for k in ("phi", "delta", "phidot", "deltadot", "v", "T_phi", "T_delta", "F")
@@ -227,7 +235,6 @@ def _columns(run) -> dict[str, np.ndarray]:
 def _row_parts(run, free_names: Sequence[str], row: int, model: dict[str, float] | None):
     """(Gamma, Y) of one run's row; entries outside ``free_names`` (and outside the symmetric
     pair) take the rider's Whipple values; ``model`` supplies Mdp/K0dp for the steer row."""
-    from bikeid.ident.direct import ALL_ENTRIES, parse_entry
 
     cols = _columns(run)
     wv = dict(_whipple_values(run.meta["rider"]))
@@ -295,7 +302,6 @@ def row_vaf(runs: Sequence, model: dict[str, float] | None) -> dict[str, float]:
         ``"roll"`` and ``"steer"``: Moore's eq. 6 (:func:`bikeid.ident.direct.vaf_moore`)
         of the row's torque [N m] over all runs stacked (dimensionless).
     """
-    from bikeid.ident.direct import vaf_moore
 
     out = {}
     for row, free in ((0, ROLL_FREE), (1, STEER_FREE)):
@@ -311,7 +317,6 @@ def row_vaf(runs: Sequence, model: dict[str, float] | None) -> dict[str, float]:
 
 def _model_matrices(rider: str, model: dict[str, float] | None):
     """CanonicalMatrices and H of ``model``'s free entries over the rider's Whipple values."""
-    from bikeid.sim.linear import CanonicalMatrices
 
     vals = dict(_whipple_values(rider))
     if model is not None:
@@ -344,8 +349,6 @@ def table4_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
         Moore's eq. 6 fit per state ``phi``, ``delta``, ``phidot``, ``deltadot``
         (dimensionless; :func:`bikeid.ident.validate.windowed_simulation_vaf`).
     """
-    from bikeid.sim.linear import state_matrices
-    from bikeid.sim.sampling import zoh
 
     cm, H = _model_matrices(run.meta["rider"], model)
     v = float(np.mean(run["v"]))
@@ -456,9 +459,6 @@ def _truth_eigenvalues(env: str, speeds: np.ndarray) -> np.ndarray:
     at each speed, tracked continuously across speeds: the Whipple model for N; for S plus
     the steer damping (``ident.effects.experiment_model``; the Coulomb friction has no linear term).
     """
-    from bikeid.ident.effects.experiment_model import ExperimentModel
-    from bikeid.sim.linear import match_eigenvalues
-    from bikeid.sim.parameters import benchmark
 
     fx = {} if env == "N" else {"steer_viscous_damping": 0.3}
     m = ExperimentModel(p=benchmark(), effects=fx)
@@ -471,10 +471,6 @@ def _truth_eigenvalues(env: str, speeds: np.ndarray) -> np.ndarray:
 
 def _truth_tf(env: str, v: float):
     """python-control T_delta -> phi transfer function of the true plant in ``env``."""
-    import control
-
-    from bikeid.ident.effects.experiment_model import ExperimentModel
-    from bikeid.sim.parameters import benchmark
 
     fx = {} if env == "N" else {"steer_viscous_damping": 0.3}
     A, B = ExperimentModel(p=benchmark(), effects=fx).continuous(v)
@@ -484,11 +480,6 @@ def _truth_tf(env: str, v: float):
 
 
 def _figures(out: Path, models: dict[str, Any]) -> list[str]:
-    import control
-
-    from bikeid.experiments.plots import phase_deg, plt, save
-    from bikeid.sim.linear import eigenvalues_vs_speed, state_space
-
     speeds = np.linspace(0.5, 10.0, 200)
     styles = {"B-N": ("tab:blue", "--"), "B-S": ("tab:red", "--")}
     truth = {

@@ -13,7 +13,10 @@ from typing import Any
 import numpy as np
 
 from bikeid.experiments.papers.chen_dao import PAPER
+from bikeid.experiments.papers.moore_hubbard import ENVIRONMENTS, RIDERS, SIM_WINDOW
 from bikeid.experiments.report import Report, fmt, fmt_complex
+from bikeid.experiments.testbed.accuracy import real_tolerance
+from bikeid.ident.canonical import THETA_NAMES
 
 PAPER_ANOMALY = PAPER["anomaly"]
 
@@ -154,7 +157,6 @@ def _report_speed_scan(rep: Report, info: dict, points: list[dict]) -> None:
 
 def _b_ratio(f2: dict, i: int) -> str:
     """|paper b_i| / |our true b_i| at Fig. 2's speed (eq. 5 input column), as text."""
-    from bikeid.experiments.papers.chen_dao import PAPER
 
     ours = abs(float(f2["theta_true"][8 + i]))
     paper = PAPER["eq5_abs"]["b"][i]
@@ -175,7 +177,6 @@ def real_part_verdict(identified: complex, true: complex) -> str:
         ``"Re off by X (Y %): within"`` or ``"...: outside"`` the real-part tolerance of
         :func:`bikeid.experiments.testbed.accuracy.real_tolerance`.
     """
-    from bikeid.experiments.testbed.accuracy import real_tolerance
 
     err = abs(complex(identified).real - complex(true).real)
     rel = err / abs(complex(true).real) if complex(true).real != 0 else float("inf")
@@ -184,8 +185,6 @@ def real_part_verdict(identified: complex, true: complex) -> str:
 
 
 def _report_fig2(rep: Report, f2: dict) -> None:
-    from bikeid.ident.canonical import THETA_NAMES
-
     rep.heading("Chen & Dao Fig. 2 and eqs. 5-6: identification at 4.2 m/s")
     rep.para(
         "Data: nonlinear plant at held speed 4.2 m/s, fuzzy roll controller, 5 deg roll chirp "
@@ -742,8 +741,6 @@ def _report_fig7(rep: Report, f7: dict) -> None:
 
 
 def _report_mh(rep: Report, m: dict) -> None:
-    from bikeid.experiments.papers.moore_hubbard import ENVIRONMENTS, RIDERS, SIM_WINDOW
-
     rep.heading("Moore & Hubbard: direct identification")
     rep.para(
         "Analogue data set: three riders on one bicycle (the benchmark; the rider's mass and "

@@ -24,9 +24,16 @@ from typing import Any
 import numpy as np
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
+from bikeid.experiments.papers import chen_dao as cd
+from bikeid.experiments.papers import chen_dao_figures as cdf
+from bikeid.experiments.papers import limit_cycles as lcm
+from bikeid.experiments.papers import moore_hubbard as mh
 from bikeid.experiments.papers.chen_dao import ANOMALY_SPEEDS
 from bikeid.experiments.papers.report import build_report
+from bikeid.experiments.plots import plt, save
 from bikeid.experiments.report import write
+from bikeid.sim.linear import critical_speeds, eigenvalues_vs_speed
+from bikeid.sim.parameters import benchmark, by_name
 
 __all__ = ["FULL", "QUICK", "Settings", "reproduce"]
 
@@ -173,11 +180,6 @@ def reproduce(
         The summary (numbers; speeds [m/s], eigenvalues [1/s], times [s]) as written to
         ``summary.json``, with private keys (``_model``) that the file leaves out.
     """
-    from bikeid.experiments.papers import chen_dao as cd
-    from bikeid.experiments.papers import chen_dao_figures as cdf
-    from bikeid.experiments.papers import moore_hubbard as mh
-    from bikeid.sim.linear import critical_speeds
-    from bikeid.sim.parameters import by_name
 
     st = QUICK if quick else FULL
     workers = default_workers() if workers is None else int(workers)
@@ -258,7 +260,6 @@ def reproduce(
         f"{st.scan_speeds[0]:g}-{st.scan_speeds[-1]:g} m/s, step {st.scan_step:g} m/s{coarser}, "
         f"{st.scan_duration:g} s runs)"
     )
-    from bikeid.experiments.papers import limit_cycles as lcm
 
     scan = lcm.speed_scan(p, st.scan_speeds, st.scan_duration, workers=workers, dask=dask)
     scan["paper"] = cd.PAPER["periodic_range"]
@@ -321,7 +322,6 @@ def _sweep_summary(
     """Identified vs true eigenvalues per controller and method, and their figure; the
     direct method's entry carries its one stacked regression (``direct[controller]``,
     :func:`experiments.papers.chen_dao.direct_stacked`) as ``stacked``."""
-    from bikeid.experiments.plots import plt, save
 
     res: dict[str, Any] = {}
     fig, axs = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
@@ -374,9 +374,6 @@ def _sweep_summary(
                 res[f"{c}/{m}"]["stacked"] = direct.get(c)
         sp = [g["speed"] for g in rows]
         if sp:
-            from bikeid.sim.linear import eigenvalues_vs_speed
-            from bikeid.sim.parameters import benchmark
-
             fine = np.linspace(min(sp), max(sp), 300)
             ev = eigenvalues_vs_speed(benchmark(), fine).values
             axs[0, j].plot(fine, ev.real, color="0.5", lw=0.8)

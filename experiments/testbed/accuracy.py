@@ -54,10 +54,24 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
-from bikeid.dataset.run import Run
-from bikeid.experiments.testbed.sweep import EXCITATION_BANDS
+from bikeid.dataset.run import Run, run_stop
+from bikeid.dataset.store import read_runs
+from bikeid.experiments.testbed.sweep import EXCITATION_BANDS, SweepSpec, run_sweep
+from bikeid.ident import greybox, pem
+from bikeid.ident.canonical import steer_zeros, theta_from_matrices
+from bikeid.ident.direct import identify
+from bikeid.ident.signals import prepare
+from bikeid.ident.tailored_iv import identify_tailored
+from bikeid.sim.linear import (
+    canonical_matrices,
+    critical_speeds,
+    eigenvalues_vs_speed,
+    match_eigenvalues,
+)
+from bikeid.sim.parameters import by_name
 
 __all__ = [
     "CONTROLLERS",
@@ -178,7 +192,6 @@ def true_modes(p, speeds: Sequence[float]) -> dict[float, dict[str, complex]]:
         :func:`bikeid.sim.linear.eigenvalues_vs_speed` (a mode missing at a speed is
         absent from its dict).
     """
-    from bikeid.sim.linear import eigenvalues_vs_speed
 
     es = eigenvalues_vs_speed(p, np.asarray(speeds, float))
     out = {}
@@ -220,7 +233,6 @@ def eigen_errors(identified: Sequence[complex], truth: dict[str, complex]) -> di
     KeyError
         If ``truth`` lacks one of the three modes.
     """
-    from bikeid.sim.linear import match_eigenvalues
 
     targets = [truth["weave"], np.conj(truth["weave"]), truth["capsize"], truth["caster"]]
     names = ["weave", "weave", "capsize", "caster"]
@@ -288,8 +300,6 @@ def generate(
     StopIteration
         If a speed is not below any band's ``vmax``.
     """
-    from bikeid.dataset.store import read_runs
-    from bikeid.experiments.testbed.sweep import SweepSpec, run_sweep
 
     data = Path(out_dir) / "data"
     data.mkdir(parents=True, exist_ok=True)
@@ -334,7 +344,6 @@ def direct_prepare(run: Run, cutoff: float = 3.0) -> Run:
         :func:`bikeid.ident.signals.prepare` result: one sample shorter, with ``phiddot``
         and ``deltaddot`` [rad/s^2].
     """
-    from bikeid.ident.signals import prepare
 
     return prepare(run, cutoff=cutoff, derivative="interval")
 
@@ -349,9 +358,6 @@ def _direct(runs: Sequence[Run], p, cutoff: float, lags: int, instruments: str):
     (``ident.tailored_iv``), instruments simulated through the fitted controller and the
     current model, started from the Whipple model of the reference (the prior Moore &
     Hubbard use for the fixed entries), 3 refinements; run-clustered standard errors."""
-    from bikeid.ident.direct import identify
-    from bikeid.ident.tailored_iv import identify_tailored
-    from bikeid.sim.linear import canonical_matrices
 
     if instruments == "external":
         return identify(
@@ -369,8 +375,6 @@ def _direct(runs: Sequence[Run], p, cutoff: float, lags: int, instruments: str):
 def _direct_ls(runs: Sequence[Run], p):
     """Moore & Hubbard's least squares (``direct_ls``): 15 Hz low-pass, central differences,
     ordinary least squares on all runs stacked, the free sets of ``direct``."""
-    from bikeid.ident.direct import identify
-    from bikeid.ident.signals import prepare
 
     prepared = [prepare(r, cutoff=MH_CUTOFF, derivative=MH_DERIVATIVE) for r in runs]
     return identify(prepared, p, DIRECT_ROLL, DIRECT_STEER)
@@ -378,7 +382,6 @@ def _direct_ls(runs: Sequence[Run], p):
 
 def _greybox(runs: Sequence[Run], p, mode: str) -> list[tuple[Any, list[Run]]]:
     """Grey-box fits: ``"joint"`` one over all runs, ``"per_speed"`` one per run (K2dd fixed)."""
-    from bikeid.ident import greybox
 
     free = DIRECT_ROLL + DIRECT_STEER
     if mode == "joint":
@@ -439,14 +442,8 @@ def identify_controller(
         setup, but also an unknown ``direct_instruments``) is recorded in ``error``
         instead of raised.
     """
-    from threadpoolctl import threadpool_limits
-
-    from bikeid.ident import pem
-    from bikeid.ident.canonical import steer_zeros
-    from bikeid.sim.linear import critical_speeds
 
     log = log or (lambda msg: None)
-    from bikeid.dataset.run import run_stop
 
     stops = [run_stop(r) for r in runs]
     ok = [r for r, st in zip(runs, stops, strict=True) if st is None]
@@ -554,8 +551,6 @@ def steer_zeros_true(p) -> np.ndarray:
     ndarray
         Zeros [1/s] (:func:`bikeid.ident.canonical.steer_zeros`).
     """
-    from bikeid.ident.canonical import steer_zeros, theta_from_matrices
-    from bikeid.sim.linear import canonical_matrices
 
     return steer_zeros(theta_from_matrices(canonical_matrices(p), 5.0))
 
@@ -627,7 +622,6 @@ def run_accuracy(
     ValueError
         If a controller or method is unknown or none is given.
     """
-    from bikeid.sim.parameters import by_name
 
     log = log or (lambda msg: print(msg, file=sys.stderr))
     bad = [c for c in controllers if c not in CONTROLLERS]

@@ -43,6 +43,8 @@ from typing import Any
 import numpy as np
 
 from bikeid.experiments.parallel import imap
+from bikeid.sim.errors import InputError
+from bikeid.sim.parameters import benchmark
 
 __all__ = [
     "CRITICAL_SPEEDS",
@@ -174,6 +176,7 @@ class CoverageResult:
         int
             Count of seeds with |z| <= z_level (z_level = Phi^-1((1 + level) / 2)).
         """
+        # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
         from bikeid.ident.uncertainty import z_value
 
         return int(np.sum(np.abs(self.z[name]) <= z_value(self.settings["level"])))
@@ -195,6 +198,7 @@ class CoverageResult:
             instead of the z statistics, and entries ``<part> profile`` only the counts of
             the profile intervals.
         """
+        # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
         from scipy.stats import chi2
 
         out: dict[str, dict[str, Any]] = {}
@@ -242,12 +246,11 @@ class CoverageResult:
 
 
 def _mode_targets(p, speed: float) -> tuple[list[complex], list[str]]:
+    # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
     from bikeid.experiments.testbed.accuracy import true_modes
 
     modes = true_modes(p, [speed])[round(float(speed), 6)]
     if set(modes) != {"weave", "capsize", "caster"}:
-        from bikeid.sim.errors import InputError
-
         raise InputError(
             f"at {speed} m/s the benchmark has no weave pair with two real roots (modes "
             f"{sorted(modes)}); choose a speed between 1 and 15 m/s"
@@ -263,8 +266,8 @@ def _mode_targets(p, speed: float) -> tuple[list[complex], list[str]]:
 
 def _check_settings(seeds: int, covariance_scale: float, level: float) -> None:
     """The checks both harnesses share (InputError naming the bad value)."""
+    # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
     from bikeid.ident.uncertainty import z_value
-    from bikeid.sim.errors import InputError
 
     if int(seeds) != seeds or seeds < 2:
         raise InputError(f"seeds={seeds}: need at least 2 runs")
@@ -275,6 +278,7 @@ def _check_settings(seeds: int, covariance_scale: float, level: float) -> None:
 
 def _closed_loop_run(p, settings: dict[str, Any], speed: float, seed: int):
     """One run of the linear closed loop of ``settings`` at ``speed`` [m/s]."""
+    # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
     from bikeid.controllers.registry import make
     from bikeid.dataset.linear_loop import simulate
 
@@ -288,6 +292,7 @@ def _closed_loop_run(p, settings: dict[str, Any], speed: float, seed: int):
 
 
 def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[str, float]:
+    # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
     from bikeid.ident import pem
     from bikeid.ident.uncertainty import eigenvalue_intervals
     from bikeid.sim.linear import match_eigenvalues
@@ -392,9 +397,9 @@ def run_coverage(
         On fewer than 2 seeds, a non-positive ``covariance_scale``, a bad ``level`` or a
         speed without the three modes.
     """
+    # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
     from bikeid.ident.canonical import theta_from_matrices
     from bikeid.sim.linear import canonical_matrices
-    from bikeid.sim.parameters import benchmark
 
     _check_settings(seeds, covariance_scale, level)
     p = benchmark()
@@ -507,9 +512,7 @@ def run_critical_coverage(
         On fewer than 2 seeds or distinct speeds, a speed outside 1-15 m/s, a non-positive
         ``covariance_scale`` or a bad ``level``.
     """
-    from bikeid.sim.errors import InputError
     from bikeid.sim.linear import canonical_matrices, critical_speeds
-    from bikeid.sim.parameters import benchmark
 
     sp = tuple(float(v) for v in speeds)
     _check_settings(seeds, covariance_scale, level)

@@ -41,11 +41,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
-from bikeid.controllers.registry import STUDY_CONTROLLERS, canonical_name
+from bikeid.controllers.excitation import ChirpReference, UniformDither, ZeroReference
+from bikeid.controllers.registry import STUDY_CONTROLLERS, canonical_name, make
+from bikeid.dataset.closed_loop import simulate_run
 from bikeid.dataset.run import Run, run_stop
-from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, write_runs
+from bikeid.dataset.sensors import Sensors
+from bikeid.dataset.store import copy_runs, file_attrs, list_runs, read_run, read_runs, write_runs
 from bikeid.experiments.parallel import check_workers, imap
+from bikeid.sim.parameters import by_name
 
 __all__ = [
     "CONTROLLERS",
@@ -267,11 +272,6 @@ def simulate_task(spec: SweepSpec, task: Task) -> Run:
         If the controller cannot be designed at this speed or the simulation refuses its
         options.
     """
-    from bikeid.controllers.excitation import ChirpReference, UniformDither, ZeroReference
-    from bikeid.controllers.registry import make
-    from bikeid.dataset.closed_loop import simulate_run
-    from bikeid.dataset.sensors import Sensors
-    from bikeid.sim.parameters import by_name
 
     seed = run_seed(task.seed, task.speed, spec.controller)
     child = np.random.SeedSequence(seed).spawn(2)
@@ -515,8 +515,6 @@ def run_sweep(
         todo = [t for t in tasks if t.name not in done]
         reused = len(tasks) - len(todo)
         if todo:
-            from tqdm import tqdm
-
             bar = tqdm(
                 total=len(todo),
                 desc=f"sweep {spec.controller}",
@@ -539,7 +537,6 @@ def run_sweep(
     fell: dict[str, float] = {}
     causes: dict[str, str] = {}
     failed: dict[str, dict[str, Any]] = {}
-    from bikeid.dataset.store import read_runs
 
     for name, run in zip(names, read_runs(out, names), strict=True):
         stop = run_stop(run)
@@ -629,7 +626,6 @@ def stabilization_table(
     ValueError
         If a :class:`SweepSpec` is invalid.
     """
-    from tqdm import tqdm
 
     spec_options.setdefault("chirp_amplitude", math.radians(3.0))
     spec_options.setdefault("dither_hold", 0.01)
