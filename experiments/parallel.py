@@ -179,6 +179,7 @@ def _processes(fn, jobs: list, workers: int) -> Iterator[tuple[int, Any]]:
 
 
 def _dask(fn, jobs: list, workers: int, address: str) -> Iterator[tuple[int, Any]]:
+    # lazy: distributed is an optional dependency (the dask extra), needed only with --dask
     try:
         from distributed import Client, LocalCluster
         from distributed import wait as dask_wait
