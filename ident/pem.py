@@ -111,6 +111,17 @@ _initial_k = initial_gain
 _single_threaded_blas = single_threaded_blas
 
 
+class _ParamsDict(dict):
+    """The parameters by name; calling it (the former ``params()`` method) warns."""
+
+    def __call__(self) -> dict[str, float]:
+        import warnings  # only on the deprecated path
+
+        warnings.warn("CanonicalModel.params is an attribute now: drop the parentheses",
+                      DeprecationWarning, stacklevel=2)  # fmt: skip
+        return dict(self)
+
+
 @dataclass(frozen=True)
 class CanonicalModel(LinearModel):
     """A fixed-speed canonical model.
@@ -215,8 +226,9 @@ class CanonicalModel(LinearModel):
     @property
     def params(self) -> dict[str, float]:
         """dict of str to float: the estimated parameters by name, ``{"a1": ..., "b2": ...}``
-        in :data:`ident.canonical.THETA_NAMES` order (units as in ``theta``)."""
-        return dict(zip(THETA_NAMES, self.theta, strict=True))
+        in :data:`ident.canonical.THETA_NAMES` order (units as in ``theta``).  Calling it,
+        ``params()``, the former method, still works and warns (deprecated)."""
+        return _ParamsDict(zip(THETA_NAMES, self.theta, strict=True))
 
     def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         return self.A, {INPUT: self.B[:, 0]}
