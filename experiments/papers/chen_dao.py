@@ -945,7 +945,7 @@ def free_speed_verdict(
         out[k] = {"held": h, "free": f, "paper": pp, "gap_closed": frac}
         parts.append(
             f"{k} held {_num(h)}, free {_num(f)}, paper {pp:.3f} m/s"
-            + ("" if frac is None else f" (free closes {100 * frac:.0f} % of the gap)")
+            + ("" if frac is None else f" (free closes {round(100 * frac):d} % of the gap)")
         )
     dip = free["anomaly"]["verdict"]
     out["anomaly"] = dip

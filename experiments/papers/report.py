@@ -560,7 +560,7 @@ def _report_free_speed(rep: Report, fs: dict) -> None:
                 fmt(c[k]["paper"], 3),
                 fmt(c[k]["held"], 3),
                 fmt(c[k]["free"], 3),
-                "-" if c[k]["gap_closed"] is None else f"{100 * c[k]['gap_closed']:.0f} %",
+                "-" if c[k]["gap_closed"] is None else f"{round(100 * c[k]['gap_closed']):d} %",
             ]
             for k in ("v_w", "v_c")
         ],
