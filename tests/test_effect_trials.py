@@ -6,9 +6,12 @@ Budget: the cheap tests take a few seconds; the rate test runs 24 trials on 2 pr
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from bikeid.dataset.windows import Window
 from bikeid.experiments.measured.effect_trials import (
     EFFECTS,
     LIBRARY_EFFECTS,
@@ -82,7 +85,6 @@ def _small_push_windows(fx, scale: float):
     from bikeid.controllers.steer_into_lean import SteerIntoLean
     from bikeid.dataset.closed_loop import simulate_run
     from bikeid.dataset.sensors import Channel, Sensors
-    from bikeid.dataset.windows import Window
     from bikeid.sim.parameters import steer_by_wire
 
     out = []
@@ -93,13 +95,21 @@ def _small_push_windows(fx, scale: float):
                            effects=fx, initial=init, substeps=4)  # fmt: skip
         sl = slice(0, 100)
         sig = [run[k][sl] for k in ("phi", "delta", "phidot", "deltadot", "v")]
-        w = Window("small", v, 0, *sig, np.zeros(100), np.zeros(20))
         # exact initial state: the 5-sample quadratic fit of Window.state0 is biased by the
         # kink where a delayed torque switches on (5 % on deltadot for a 10 ms delay)
         x0 = np.array([init[k] for k in ("phi", "delta", "phidot", "deltadot")])
-        w.state0 = lambda x0=x0: x0
-        out.append(w)
+        out.append(_KnownStart("small", v, 0, *sig, np.zeros(100), np.zeros(20), x0=x0))
     return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _KnownStart(Window):
+    """A window whose initial state is given (a value too: ``replace`` keeps it)."""
+
+    x0: np.ndarray | None = None
+
+    def state0(self) -> np.ndarray:
+        return self.x0
 
 
 def test_defect_correction_makes_nominal_exact_on_noise_free_plant():
