@@ -71,6 +71,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+import numba
 import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
@@ -609,7 +610,7 @@ class ExperimentModel:
         H = max(m + 2, 2)
         hist = np.stack([w.command_history(H) for w in windows])  # oldest first
         x = np.zeros((nw, npl))
-        x0 = np.stack([w.state0() for w in windows])
+        x0 = initial_states(windows)
         x[:, 0] = x0[:, 0] - bphi
         x[:, 1] = x0[:, 1] - bdel
         x[:, 2] = (x0[:, 2] - brr) / s
@@ -635,20 +636,12 @@ class ExperimentModel:
             text[i, : w.n] = w.T_ext
             if w.T_phi is not None:
                 tphi[i, : w.n] = w.T_phi
-        X = np.zeros((nw, nmax, npl))
-        U = np.zeros((nw, nmax))
-        buf = hist  # Tc_{k-H} .. Tc_{k-1}
-        for k in range(nmax):
-            X[:, k] = x
-            tc_k = np.where(logged, tlog[:, k], Kc * (s * x[:, 2] + brr) + text[:, k])
-            seq = np.concatenate([buf, tc_k[:, None]], axis=1)  # ..., Tc_{k-1}, Tc_k
-            u = g * ((1 - f) * seq[:, -1 - m] + f * seq[:, -2 - m])
-            U[:, k] = u
-            for _ in range(nsub):
-                wtq = bias_T - (tc * np.tanh(x[:, 3] / COULOMB_EPS) if tc else 0.0)
-                inp = np.stack([u, wtq + 0.0 * u, tphi[:, k]], axis=1)
-                x = np.einsum("wij,wj->wi", Ad, x) + np.einsum("wij,wj->wi", Bd, inp)
-            buf = seq[:, 1:]
+        cmd = np.zeros((nw, H + nmax))  # Tc_{k-H} .. Tc_{-1} (history), then Tc_0, Tc_1, ...
+        cmd[:, :H] = hist
+        X, U = _sampled_loop(
+            np.ascontiguousarray(Ad), np.ascontiguousarray(Bd), x, cmd, H, logged, tlog, text,
+            tphi, Kc, s, brr, g, f, m, nsub, bias_T, tc, COULOMB_EPS,
+        )  # fmt: skip
         out = []
         for i, w in enumerate(windows):
             n = w.n
@@ -754,6 +747,73 @@ def with_nonlinear_correction(
         New windows, in order, each with its correction at ``model``.
     """
     return [replace(w, correction=nonlinear_correction(w, model)) for w in windows]
+
+
+@numba.njit(cache=True)
+def _sampled_loop(Ad, Bd, x, cmd, H, logged, tlog, text, tphi, Kc, s, brr, g, f, m, nsub,
+                  bias_T, tc, eps):  # fmt: skip
+    """The sampled loop of :meth:`ExperimentModel.simulate`, compiled (same arithmetic).
+
+    Per window i and loop k: the command Tc_k (logged, or the law on the measured-equivalent
+    roll rate plus T_ext) goes into ``cmd[i, H + k]``; the plant input is the delayed,
+    interpolated command times the gain; ``nsub`` ZOH substeps with the Coulomb torque
+    re-evaluated.  Returns the states X (nw, nmax, npl) at each loop start and the inputs U.
+    """
+    nw, npl = x.shape
+    nmax = tlog.shape[1]
+    X = np.zeros((nw, nmax, npl))
+    U = np.zeros((nw, nmax))
+    xn = np.zeros(npl)
+    for i in range(nw):
+        for k in range(nmax):
+            for j in range(npl):
+                X[i, k, j] = x[i, j]
+            if logged[i]:
+                tck = tlog[i, k]
+            else:
+                tck = Kc[i] * (s * x[i, 2] + brr) + text[i, k]
+            cmd[i, H + k] = tck
+            u = g * ((1 - f) * cmd[i, H + k - m] + f * cmd[i, H + k - m - 1])
+            U[i, k] = u
+            for _ in range(nsub):
+                wtq = bias_T - tc * np.tanh(x[i, 3] / eps) if tc != 0.0 else bias_T
+                for r in range(npl):
+                    acc = 0.0
+                    for c in range(npl):
+                        acc += Ad[i, r, c] * x[i, c]
+                    xn[r] = acc + Bd[i, r, 0] * u + Bd[i, r, 1] * wtq + Bd[i, r, 2] * tphi[i, k]
+                for r in range(npl):
+                    x[i, r] = xn[r]
+    return X, U
+
+
+#: Weights of the first 5 samples giving a quadratic least-squares fit's value at the first:
+#: :meth:`bikeid.dataset.windows.Window.state0` as one dot product (the fit is linear in the
+#: samples and does not depend on the sample period).
+_STATE0_WEIGHTS = np.linalg.pinv(np.vander(np.arange(5.0), 3))[-1]
+
+
+def initial_states(windows: list[Window]) -> np.ndarray:
+    """The measured start state of each window, as :meth:`Window.state0` (vectorized).
+
+    Parameters
+    ----------
+    windows : list of Window
+        The windows.
+
+    Returns
+    -------
+    (len(windows), 4) ndarray
+        phi [rad], delta [rad], phidot [rad/s], deltadot [rad/s] at each first sample: the
+        quadratic least-squares fit over the first 5 samples, equal to ``state0`` to
+        round-off (windows shorter than 5 samples use ``state0`` itself).
+    """
+    if not windows:
+        return np.zeros((0, 4))
+    if min(w.n for w in windows) < 5:
+        return np.stack([w.state0() for w in windows])
+    first = np.array([[w.phi[:5], w.delta[:5], w.phidot[:5], w.deltadot[:5]] for w in windows])
+    return first @ _STATE0_WEIGHTS
 
 
 def yaw_coupling(p: BicycleParameters) -> tuple[np.ndarray, float]:
