@@ -387,9 +387,6 @@ def cmd_evaluate(args) -> int:
     )
 
     check_input_file(args.model, "--model")  # /dev/zero or a FIFO would never end
-    from bikeid.dataset.files import check_input_file
-
-    check_input_file(args.model, "--model")  # /dev/zero or a FIFO would never end
     plant_model = plant_model_file(args.model)
     if plant_model is not None:  # an identified plant model (bikeid identify --out)
         if args.format != "sbw":
