@@ -5,6 +5,7 @@
         [--resume blind.jsonl] [--min-heldout-gain G] [--min-improved F]
         [--unexplained-rule floor|coloured|residual] [--unexplained-threshold X]
         [--nominal-uncertainty default|none|inertia=F,trail=M] [--tradeoff] [--nominal-only]
+        [--dask ADDRESS]
 
 Draws ``n`` trials of :mod:`bikeid.experiments.measured.blind_trials` (effects cycle through six
 library effects, two outside the library and none; every nuisance randomized), runs the
@@ -28,7 +29,6 @@ import json
 import os
 import platform
 import time
-from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 
 import numpy as np
@@ -44,6 +44,7 @@ from bikeid.experiments.measured.blind_trials import (
     run_blind_trial,
     summarize_blind,
 )
+from bikeid.experiments.parallel import DASK_HELP, imap, map_jobs
 from bikeid.ident.effects.selection import LINEAR_PLANT_MARGIN
 
 
@@ -64,6 +65,7 @@ def main() -> None:
     )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--processes", type=int, default=2)
+    ap.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     ap.add_argument(
         "--plant",
         choices=("auto", "nonlinear", "linear"),
@@ -110,7 +112,7 @@ def main() -> None:
     drawn = (draw_blind_classes(args.per_class, args.seed) if args.per_class
              else draw_blind_trials(args.n, args.seed))  # fmt: skip
     if args.nominal_only:
-        _nominal_only(drawn, args.processes)
+        _nominal_only(drawn, args.processes, args.dask)
         return
     trials = [t for t in drawn if t.index not in done]
     rows = [done[i] for i in sorted(done) if i < len(drawn)]
@@ -120,18 +122,17 @@ def main() -> None:
         run_blind_trial, nonlinear="auto" if args.plant == "auto" else args.plant == "nonlinear",
         plant_margin=args.plant_margin, rule=rule,
     )  # fmt: skip
-    with ProcessPoolExecutor(max_workers=args.processes) as pool:
-        for r in pool.map(job, trials):
-            r = to_jsonable(r)
-            rows.append(r)
-            print(
-                f"{r['index']:4d} {r['effect']:24s} {r['nuisance']['plant']:18s} -> "
-                f"{r['verdict']} {r['seconds']:.1f} s",
-                flush=True,
-            )
-            if args.log:
-                with open(args.log, "a") as fh:
-                    fh.write(json.dumps(r) + "\n")
+    for _, r in imap(job, trials, args.processes, args.dask, ordered=True):
+        r = to_jsonable(r)
+        rows.append(r)
+        print(
+            f"{r['index']:4d} {r['effect']:24s} {r['nuisance']['plant']:18s} -> "
+            f"{r['verdict']} {r['seconds']:.1f} s",
+            flush=True,
+        )
+        if args.log:
+            with open(args.log, "a") as fh:
+                fh.write(json.dumps(r) + "\n")
     s = summarize_blind(rows)
     print(
         f"{len(trials)} trials run in {time.perf_counter() - t0:.0f} s wall; "
@@ -160,10 +161,9 @@ def _per_class_arg(text: str) -> dict[str, int]:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("--per-class: ")) from None
 
 
-def _nominal_only(trials: list, processes: int) -> None:
+def _nominal_only(trials: list, processes: int, dask: str | None = None) -> None:
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=processes) as pool:
-        rows = list(pool.map(nominal_comparison, trials))
+    rows = map_jobs(nominal_comparison, trials, processes, dask)
     for r in rows:
         print(f"{r['index']:4d} {r['effect']:24s} {r['plant']:18s} linear {r['linear']:8.4g} "
               f"nonlinear {r['nonlinear']:8.4g} ratio {r['ratio']:8.4g}")  # fmt: skip
