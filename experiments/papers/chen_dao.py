@@ -41,6 +41,7 @@ from bikeid.experiments.testbed.sweep import SweepSpec, Task, simulate_task
 from bikeid.ident import pem
 from bikeid.ident.canonical import canonical_ab, theta_from_matrices
 from bikeid.ident.direct import identify
+from bikeid.ident.methods import DIRECT_PRESETS
 from bikeid.ident.signals import prepare
 from bikeid.ident.uncertainty import eigenvalue_jacobian
 from bikeid.ident.validate import k_step_prediction, simulation
@@ -126,7 +127,7 @@ OUTPUTS = ("phi", "delta")
 #: differences of the 15 Hz low-passed rates (their paper's processing, not forward
 #: differences: on the noise-free PID runs at 2/5/10 m/s central differences cut the Mpd
 #: error from +46 % to +1.5 % and C1dp's from -17 % to -1.7 %).
-DIRECT_DERIVATIVE = "central"
+DIRECT_DERIVATIVE = DIRECT_PRESETS["moore-hubbard"].derivative  # ident.methods' table
 PREDICTION_HORIZON = 1.0  # s, k-step prediction used when the identified model is unstable
 
 

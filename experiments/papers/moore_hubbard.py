@@ -54,6 +54,7 @@ from bikeid.experiments.parallel import map_jobs
 from bikeid.experiments.plots import phase_deg, plt, save
 from bikeid.ident.direct import ALL_ENTRIES, parse_entry, regressors, vaf_moore
 from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.methods import DIRECT_PRESETS
 from bikeid.ident.signals import prepare
 from bikeid.ident.validate import windowed_simulation_vaf
 from bikeid.sim.effects import SteerCoulomb, SteerDamping
@@ -127,9 +128,11 @@ STEER_FREE = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd", "HdF")
 SYMMETRIC = (("Mdp", "Mpd"), ("K0dp", "K0pd"))
 SIM_WINDOW = 2.0  # s
 #: Moore & Hubbard's data processing (paper §4): 2nd-order Butterworth low-pass at 15 Hz,
-#: accelerations by central differences of the filtered rates.
-CUTOFF_HZ = 15.0
-DERIVATIVE = "central"
+#: accelerations by central differences of the filtered rates: the direct method's
+#: "moore-hubbard" settings of the method table (ident.methods.DIRECT_PRESETS).
+MH_SETTINGS = DIRECT_PRESETS["moore-hubbard"]
+CUTOFF_HZ = MH_SETTINGS.cutoff
+DERIVATIVE = MH_SETTINGS.derivative
 BODE_SPEEDS = (2.0, 4.0, 6.0, 9.0)
 
 

@@ -60,11 +60,10 @@ from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.dataset.run import Run, run_stop
 from bikeid.dataset.store import read_runs
 from bikeid.experiments.testbed.sweep import EXCITATION_BANDS, SweepSpec, run_sweep
-from bikeid.ident import greybox, pem
+from bikeid.ident import methods as ident_methods
+from bikeid.ident import pem
 from bikeid.ident.canonical import steer_zeros, theta_from_matrices
-from bikeid.ident.direct import identify
 from bikeid.ident.signals import prepare
-from bikeid.ident.tailored_iv import identify_tailored
 from bikeid.sim.linear import (
     canonical_matrices,
     critical_speeds,
@@ -357,39 +356,78 @@ def _direct(runs: Sequence[Run], p, cutoff: float, lags: int, instruments: str):
     default; docs/accuracy.md).  ``"tailored"``: tailor-made IV
     (``ident.tailored_iv``), instruments simulated through the fitted controller and the
     current model, started from the Whipple model of the reference (the prior Moore &
-    Hubbard use for the fixed entries), 3 refinements; run-clustered standard errors."""
-
-    if instruments == "external":
-        return identify(
-            [direct_prepare(r, cutoff) for r in runs], p, DIRECT_ROLL, DIRECT_STEER,
-            method="iv", instruments="external", lags=lags, covariance="run",
-        )  # fmt: skip
-    if instruments != "tailored":
+    Hubbard use for the fixed entries), 3 refinements; run-clustered standard errors.
+    Run through the method table (``ident.methods``: direct with :func:`row_settings`)."""
+    if instruments not in ("external", "tailored"):
         raise ValueError(f"direct instruments {instruments!r}: choose 'tailored' or 'external'")
-    return identify_tailored(
-        runs, p, DIRECT_ROLL, DIRECT_STEER, prepare=lambda r: direct_prepare(r, cutoff),
-        start=canonical_matrices(p), iterations=3, covariance="run",
-    )  # fmt: skip
+    s = row_settings("direct", direct_cutoff=cutoff, direct_lags=lags,
+                     direct_instruments=instruments)  # fmt: skip
+    return ident_methods.METHODS["direct"].fit(runs, s, reference=p,
+                                               free=DIRECT_ROLL + DIRECT_STEER).models[0]
 
 
 def _direct_ls(runs: Sequence[Run], p):
     """Moore & Hubbard's least squares (``direct_ls``): 15 Hz low-pass, central differences,
-    ordinary least squares on all runs stacked, the free sets of ``direct``."""
+    ordinary least squares on all runs stacked, the free sets of ``direct``: the method
+    table's direct with Moore & Hubbard's preset (``ident.methods.DIRECT_PRESETS``)."""
+    s = row_settings("direct_ls")
+    return ident_methods.METHODS["direct"].fit(runs, s, reference=p,
+                                               free=DIRECT_ROLL + DIRECT_STEER).models[0]
 
-    prepared = [prepare(r, cutoff=MH_CUTOFF, derivative=MH_DERIVATIVE) for r in runs]
-    return identify(prepared, p, DIRECT_ROLL, DIRECT_STEER)
+
+def row_settings(
+    row: str,
+    direct_cutoff: float = 3.0,
+    direct_lags: int = 40,
+    direct_instruments: str = "external",
+    greybox_mode: str = "joint",
+):
+    """The method settings a row of the table scores (``ident.methods``).
+
+    Parameters
+    ----------
+    row : str
+        One of :data:`METHODS`.
+    direct_cutoff : float, optional
+        Low-pass cut-off [Hz] of the ``direct`` row.
+    direct_lags : int, optional
+        Instrument lags [samples] of the ``direct`` row.
+    direct_instruments : {"external", "tailored"}, optional
+        Instruments of the ``direct`` row.
+    greybox_mode : {"joint", "per_speed"}, optional
+        The ``greybox`` row's fits.
+
+    Returns
+    -------
+    DirectSettings, PemSettings or GreyboxSettings
+        ``direct``: IV on the external signals (the testbed preset, or tailor-made),
+        interval-averaged equation; ``direct_ls``: Moore & Hubbard's published least
+        squares (central differences, 15 Hz); ``pem``: per speed and over speed;
+        ``greybox``: one fit over all speeds (or per speed).
+    """
+    if row == "direct":
+        return ident_methods.DirectSettings(derivative="interval", cutoff_hz=direct_cutoff,
+                                            iv=direct_instruments, lags=direct_lags,
+                                            covariance="run")  # fmt: skip
+    if row == "direct_ls":
+        return ident_methods.DIRECT_PRESETS["moore-hubbard"]
+    if row == "pem":
+        return ident_methods.PemSettings(speed_parameterized=True)
+    return ident_methods.GreyboxSettings(mode=greybox_mode)
 
 
 def _greybox(runs: Sequence[Run], p, mode: str) -> list[tuple[Any, list[Run]]]:
     """Grey-box fits: ``"joint"`` one over all runs, ``"per_speed"`` one per run (K2dd fixed)."""
 
     free = DIRECT_ROLL + DIRECT_STEER
-    if mode == "joint":
-        return [(greybox.fit(runs, free, p), list(runs))]
-    if mode != "per_speed":
+    if mode not in ("joint", "per_speed"):
         raise ValueError(f"greybox mode {mode!r}: choose 'joint' or 'per_speed'")
-    one = tuple(n for n in free if n != "K2dd")
-    return [(greybox.fit(r, one, p), [r]) for r in runs]
+    if mode == "per_speed":
+        free = tuple(n for n in free if n != "K2dd")
+    res = ident_methods.METHODS["greybox"].fit(runs, row_settings("greybox", greybox_mode=mode),
+                                               reference=p, free=free)  # fmt: skip
+    groups = [list(runs)] if mode == "joint" else [[r] for r in runs]
+    return list(zip(res.models, groups, strict=True))
 
 
 def identify_controller(
@@ -666,6 +704,7 @@ def run_accuracy(
     if progress:
         progress(steps, steps, "done")
     result["seconds"] = time.perf_counter() - t0
+    result["method_settings"] = {m: row_settings(m).describe() for m in methods}
     result["summary"] = summarize(result)
     result["seed_summary"] = seed_spread({x: summarize(per_seed[x]) for x in seeds})
     return result
@@ -835,6 +874,8 @@ def _summary_lines(result: dict[str, Any]) -> list[str]:
         for key, d in spread.items():
             out.append(f"  {key}: {', '.join(str(n) for n in d['passed'])} of "
                        f"{d['mean_checks']:g}; mean {d['mean']:.1f} +- {d['std']:.1f}")  # fmt: skip
+    for m, text in result.get("method_settings", {}).items():
+        out.append(f"{m} scores ident.methods {'direct' if m == 'direct_ls' else m}: {text}")
     out.append(f"total run time {result['seconds']:.1f} s")
     return out
 
