@@ -199,3 +199,20 @@ def test_identify_prints_and_saves_the_settings_it_ran(runs, tmp_path, capsys):
     assert [r["modes"] for r in doc["per_speed"]] == [
         list(METHODS["pem"].fit(runs).eigenvalues(v).modes) for v in SPEEDS
     ]
+
+
+def test_every_caller_names_its_direct_settings():
+    """accuracy's rows and the reproductions run the table's direct with named settings: the
+    IV row is the testbed preset, the least-squares row and both reproductions are Moore &
+    Hubbard's published processing (central differences, 15 Hz)."""
+    from bikeid.experiments.papers import chen_dao, moore_hubbard
+    from bikeid.experiments.testbed import accuracy as acc
+
+    assert acc.row_settings("direct") == DIRECT_PRESETS["testbed-iv"]
+    assert acc.row_settings("direct_ls") == DIRECT_PRESETS["moore-hubbard"]
+    mh = DIRECT_PRESETS["moore-hubbard"]
+    assert (moore_hubbard.CUTOFF_HZ, moore_hubbard.DERIVATIVE) == (mh.cutoff, mh.derivative)
+    assert chen_dao.DIRECT_DERIVATIVE == mh.derivative
+    for row in acc.METHODS:
+        assert isinstance(acc.row_settings(row), METHODS[{"direct_ls": "direct"}.get(
+            row, row)].settings_type)  # fmt: skip
