@@ -340,9 +340,11 @@ def cmd_fit(args) -> int:
         print(f"measured fit: wrote {args.out}", file=sys.stderr, flush=True)
     for note in out["notes"]:
         print(f"note: {note}")
-    print(f"decays: {len(ws)} in {len(report['files'])} log(s), "
-          f"{sum(len(f['rejected']) for f in report['files'])} detected pushes rejected; "
-          f"input {ws[0].drive}")  # fmt: skip
+    print(f"decays: {len(ws)} at the fit speeds, of {sum(f['kept'] for f in report['files'])} "
+          f"usable in {len(report['files'])} log(s); "
+          f"{sum(len(f['rejected']) for f in report['files'])} detected pushes rejected "
+          f"(decay_report in the model file); {len(out['dropped_windows'])} dropped; input "
+          f"{ws[0].drive}")  # fmt: skip
     ch = out["plant_choice"]
     print(f"nominal plant: {out['plant']} ({ch['reason']})")
     if ch["auto"] != out["plant"]:
@@ -354,7 +356,7 @@ def cmd_fit(args) -> int:
     for line in evidence_lines(out["identification"]["evidence"]):
         print(f"  {line}")
     w = out["identification"]["weave_weight"]
-    if ww == "auto" and w == 0:
+    if ww == "auto" and w == 0 and law is not None:  # (no law: a note above says why)
         print("weave term off: no fit speed has >= 3 decays with a measurable weave")
     if "selection_frequency" in out:
         freq = ", ".join(f"{k} {v:.2f}" for k, v in out["selection_frequency"].items())
