@@ -709,7 +709,7 @@ _H5_DAMAGE = (OSError, RuntimeError, KeyError, TypeError, ValueError)
 
 
 def _h5_read(label: str, f, key: str) -> np.ndarray:
-    from .store import check_h5_dataset
+    from .files import check_h5_dataset
 
     where = f"{label}: dataset {key!r}"
     try:

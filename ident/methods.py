@@ -240,7 +240,8 @@ class PemSettings:
         str
             E.g. ``"one canonical model per speed, innovation gain estimated"``.
         """
-        what = ("one speed-parameterized canonical model" if self.speed_parameterized
+        what = ("canonical models per speed, then one speed-parameterized model started "
+                "from them" if self.speed_parameterized
                 else "one canonical model per speed")  # fmt: skip
         k = "innovation gain estimated" if self.noise_model == "free" else "output error"
         return f"{what}, {k}"

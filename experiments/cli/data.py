@@ -207,8 +207,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     seeds = _seeds(args.seeds)
     runs = _check_grid(len(speeds), len(seeds), "--speeds x --seeds")
     # the parts and the assembled file exist together for a moment: both must fit
+    options = _options(args)  # one run must fit in memory (checked first)
     check_free_space(out, 2 * runs * (args.duration * args.rate + 1) * BYTES_PER_SAMPLE)
-    spec = SweepSpec(args.controller, tuple(speeds), seeds, args.duration, **_options(args))
+    spec = SweepSpec(args.controller, tuple(speeds), seeds, args.duration, **options)
     report = run_sweep(
         spec, args.out, workers=args.workers, dask=args.dask,
         progress=not args.no_progress and on_terminal(),

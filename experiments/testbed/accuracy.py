@@ -61,7 +61,6 @@ from bikeid.dataset.run import Run, run_stop
 from bikeid.dataset.store import read_runs
 from bikeid.experiments.testbed.sweep import EXCITATION_BANDS, SweepSpec, run_sweep
 from bikeid.ident import methods as ident_methods
-from bikeid.ident import pem
 from bikeid.ident.canonical import steer_zeros, theta_from_matrices
 from bikeid.ident.signals import prepare
 from bikeid.sim.linear import (
@@ -516,17 +515,17 @@ def identify_controller(
         for method in methods:
             t0 = time.perf_counter()
             rows, glob = [], {}
-            if method == "pem" and ok:
-                prev = None
-                per = {}
+            if method == "pem" and ok:  # per speed (warm starts), then over speed
+                fitted = ident_methods.METHODS["pem"].fit(
+                    ok, ident_methods.PemSettings(speed_parameterized=len(ok) >= 2))
+                sm = fitted.speed_model
+                per = sm.per_speed if sm is not None else fitted.at_speed
                 for r in ok:
                     v = round(r.speed, 6)
-                    m = pem.fit(r, starts=() if prev is None else (prev.theta,))
-                    per[v] = prev = m
+                    m = per[v]
                     z = steer_zeros(m.theta)
                     rows.append(_row(v, m.eigenvalues(), truth[v], z, true_zero))
-                if len(per) >= 2:
-                    sm = pem.fit_speed_model(ok, per_speed=per)
+                if sm is not None:
                     glob["critical_speeds"] = sm.critical_speeds()
             elif method in ("direct", "direct_ls") and ok:
                 try:
