@@ -23,6 +23,11 @@ run's speed; K = 0 for the direct method's model), or any continuous python-cont
 take discrete matrices and arrays and are public: :func:`simulation` (open-loop simulation, initial
 state by least squares) and :func:`k_step_prediction` (innovations predictor, then k
 open-loop steps); the reproductions of Chen & Dao and Moore & Hubbard use them.
+Moore & Hubbard's VAF measures live here too: eq. 6 (:func:`vaf_moore`, the variance form
+:func:`vaf_variance`) and its windowed simulation form (:func:`windowed_simulation_vaf`,
+used by the reproduction's Table 4 and the measured-data study); and the exact
+(Clopper-Pearson) interval of a rate (:func:`binomial_interval`) that the coverage and
+trial studies report.
 """
 
 from __future__ import annotations
