@@ -53,6 +53,7 @@ __all__ = [
     "atomic_write_text",
     "check_distinct_inputs",
     "check_free_space",
+    "check_h5_dataset",
     "check_input_file",
     "check_output_path",
     "check_outputs",
@@ -310,6 +311,58 @@ def check_free_space(path: str | os.PathLike, need: float, margin: float = 1.1) 
         raise InputError(
             f"cannot write {path}: it needs about {size_text(want)} but only "
             f"{size_text(free)} is free there; free some space or write to another disk"
+        )
+
+
+def check_h5_dataset(ds, where: str, fix: str = "write it again with bikeid") -> None:
+    """Refuse, before reading, an HDF5 object bikeid cannot trust to be its data.
+
+    Parameters
+    ----------
+    ds : h5py object
+        What a path in the file resolved to (links followed).
+    where : str
+        The file and the path, named in messages.
+    fix : str, optional
+        What the user can do (default: rewrite the file with bikeid).
+
+    Raises
+    ------
+    ValueError
+        If it is not a dataset (a group where a dataset is expected), a virtual dataset
+        (its data in other files, missing ones read as fill values) or one with external
+        storage, or declares more samples than the file stores (over
+        :data:`~bikeid.dataset.files.MAX_EXPANSION` times, e.g. unwritten chunks);
+        :class:`~bikeid.sim.errors.InputError` if it would not fit in memory.
+    """
+    import h5py
+    import numpy as np
+
+    from bikeid.sim.errors import check_memory
+
+    if not isinstance(ds, h5py.Dataset):
+        raise ValueError(f"{where} is a {type(ds).__name__.lower()} where a dataset is expected; "
+                         f"the file is malformed: {fix}")  # fmt: skip
+    if ds.is_virtual:
+        raise ValueError(
+            f"{where} is a virtual dataset (its data live in other files, read as fill values "
+            f"where they are missing); give a file that holds its own data: {fix}"
+        )
+    if ds.external:
+        raise ValueError(
+            f"{where} keeps its data in external files {[e[0] for e in ds.external][:3]}; give "
+            f"a file that holds its own data: {fix}"
+        )
+    size = int(np.prod(ds.shape, dtype=float)) if ds.shape else 1
+    check_memory(size, 1, where, "the file declares more samples than memory holds; split "
+                 "the data")  # fmt: skip
+    nbytes = size * ds.dtype.itemsize
+    stored = ds.id.get_storage_size()
+    if nbytes > 1 << 16 and stored * MAX_EXPANSION < nbytes:
+        raise ValueError(
+            f"{where} declares {size:,} samples ({size_text(nbytes)}) but stores "
+            f"{size_text(stored)} (more than {MAX_EXPANSION} times less); the file is damaged "
+            f"or its data were never written: {fix}"
         )
 
 
