@@ -17,6 +17,7 @@ from bikeid.experiments.papers.moore_hubbard import ENVIRONMENTS, RIDERS, SIM_WI
 from bikeid.experiments.report import Report, fmt, fmt_complex
 from bikeid.experiments.testbed.accuracy import real_tolerance
 from bikeid.ident.canonical import THETA_NAMES
+from bikeid.ident.methods import DIRECT_PRESETS
 
 PAPER_ANOMALY = PAPER["anomaly"]
 
@@ -906,8 +907,9 @@ def _report_sweep(rep: Report, sw: dict) -> None:
         rep.para(
             "Direct method, free entries against the truth (Whipple values of the simulated "
             "bicycle; M kg m^2, C1 kg m, K0 kg m, K2 kg; std = the white-noise formula, which "
-            "understates the spread with filtered, closed-loop data). Accelerations as Moore & "
-            "Hubbard: central differences of the 15 Hz low-passed rates. The noise-free column "
+            "understates the spread with filtered, closed-loop data). Settings: Moore & Hubbard's "
+            f"published processing (the direct method's 'moore-hubbard' settings): "
+            f"{DIRECT_PRESETS['moore-hubbard'].describe()}. The noise-free column "
             "is the same regression on the same runs' noise-free signals: where it is as far "
             "from the truth, sensor noise is not the cause of the bias; the forward column is "
             "that noise-free regression with forward differences instead: where it differs, "
