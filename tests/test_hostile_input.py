@@ -542,3 +542,25 @@ def test_messages_carry_no_numpy_reprs_or_python_advice():
     text = _message(ValueError("Exceeds the limit (4300 digits) for integer string "
                                "conversion; use sys.set_int_max_str_digits()"))  # fmt: skip
     assert "set_int_max_str_digits" not in text and "physical size" in text
+
+
+@pytest.mark.parametrize("library, cli", [
+    ("the file is not separated by ',': pass delimiter=';' (or the separator it uses)",
+     "save it with commas as separators"),
+    ("no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
+     "neighbouring speed)", "--speed-parameterized"),
+    ("collinear. Fix one of them (free=...), add runs at other speeds, or pass "
+     "drop_unidentifiable=True (CLI: --drop-unidentifiable).", "leave it out of --free"),
+])  # fmt: skip
+def test_messages_name_fixes_this_cli_can_apply(library, cli):
+    """Library advice in keyword arguments (delimiter=, theta0=, free=) is shown on the
+    command line as the option or data change that applies there; every option named
+    exists in the parser."""
+    from bikeid.experiments.cli import _message, build_parser
+
+    text = _message(ValueError(library))
+    assert cli in text and "=" not in text.replace("--", ""), text
+    options = {o for a in build_parser()._subparsers._group_actions[0].choices["identify"]
+               ._actions for o in a.option_strings}  # fmt: skip
+    for opt in {w.strip("().,;") for w in text.split() if w.startswith(("--", "(--"))}:
+        assert opt in options, opt

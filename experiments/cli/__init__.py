@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import signal
 import sys
 import traceback
@@ -127,6 +128,20 @@ def _check_empty_values(parser: argparse.ArgumentParser, args: argparse.Namespac
                 )
 
 
+#: Library messages name keyword arguments; on the command line the fix is an option or a
+#: change of the data.  (pattern, replacement) applied to every error line.
+_CLI_FIXES = (
+    (r"pass delimiter=('[^']*') \(or the separator it uses\)",
+     r"save it with commas as separators (bikeid reads comma-separated files; it looks "
+     r"separated by \1)"),
+    (r"; pass theta0=(?: \([^)]*\))?", "; give more informative data (longer runs, more "
+     "excitation) or fit this speed with its neighbours (--speed-parameterized)"),
+    (r"Fix one of them \(free=\.\.\.\)", "Fix one of them (leave it out of --free)"),
+    (r"pass drop_unidentifiable=True \(CLI: --drop-unidentifiable\)",
+     "give --drop-unidentifiable"),
+)
+
+
 def _message(exc: BaseException) -> str:
     text = str(exc).strip()
     if isinstance(exc, OSError) and exc.filename and exc.errno is not None:
@@ -142,9 +157,9 @@ def _message(exc: BaseException) -> str:
     elif "set_int_max_str_digits" in text:  # Python's own advice: no use to a bikeid user
         text = ("a number with more than 4300 digits in the input; write numbers of a physical "
                 "size (at most 17 significant digits)")  # fmt: skip
+    for pattern, cli_fix in _CLI_FIXES:  # the library's keyword advice, as this CLI's options
+        text = re.sub(pattern, cli_fix, text)
     if "np." in text:  # numpy's repr leaks into f-strings ({x!r}): np.float64(9.98) -> 9.98
-        import re
-
         text = re.sub(r"np\.(?:float|int|uint|complex)\d*\(([^()]*)\)", r"\1", text)
     elif isinstance(exc, OverflowError):
         text = f"a value is too large ({text}); use values of a physical size"
