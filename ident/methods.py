@@ -98,10 +98,13 @@ class DirectSettings:
     covariance : {"white", "run"}
         Standard-error formula (default ``"white"``, the paper's; ``"run"``
         cluster-robust over runs).
+    remove_means : bool
+        Subtract each signal's time mean before the regression (default True, Moore &
+        Hubbard's; not from v, F).
 
     Attributes
     ----------
-    derivative, cutoff_hz, iv, lags, covariance
+    derivative, cutoff_hz, iv, lags, covariance, remove_means
         As the parameters.
     """
 
@@ -110,6 +113,7 @@ class DirectSettings:
     iv: str | None = None
     lags: int = 1
     covariance: str = "white"
+    remove_means: bool = True
 
     def __post_init__(self) -> None:
         _choice("derivative", self.derivative, DERIVATIVES)
@@ -145,7 +149,8 @@ class DirectSettings:
         )
         cut = f"{self.cutoff:g} Hz low-pass" if self.cutoff else "no low-pass"
         se = "" if self.covariance == "white" else ", run-clustered standard errors"
-        return f"{est}, {der}, {cut}{se}"
+        means = "" if self.remove_means else ", means kept"
+        return f"{est}, {der}, {cut}{means}{se}"
 
     def to_json(self) -> dict[str, Any]:
         """The settings as plain JSON types, the resolved cut-off included.
@@ -153,10 +158,11 @@ class DirectSettings:
         Returns
         -------
         dict
-            ``derivative``, ``cutoff`` [Hz] (resolved), ``iv``, ``lags``, ``covariance``.
+            ``derivative``, ``cutoff`` [Hz] (resolved), ``iv``, ``lags``, ``covariance``,
+            ``remove_means``.
         """
         d = asdict(self)
-        d["cutoff"] = self.cutoff
+        d["cutoff"] = self.cutoff  # resolved: what ran
         del d["cutoff_hz"]
         return d
 
@@ -189,7 +195,7 @@ class DirectSettings:
             kw["iv"] = "lagged"
         elif isinstance(iv, str):
             kw["iv"] = iv
-        for k in ("lags", "covariance"):
+        for k in ("lags", "covariance", "remove_means"):
             if options.get(k) is not None:
                 kw[k] = options[k]
         return replace(base, **kw)
@@ -198,13 +204,16 @@ class DirectSettings:
 #: Named direct-method settings: bikeid's default (interval-averaged equation, 3 Hz, least
 #: squares), Moore & Hubbard's published processing (central differences of the 15 Hz
 #: low-passed rates, least squares; their paper §4) and the testbed's instrumental variables
-#: on the dither and roll reference (``bikeid identify accuracy``'s ``direct`` row).
+#: on the dither and roll reference (``bikeid identify accuracy``'s ``direct`` row); and the
+#: regression on the logged signals as they are (central differences of the unfiltered
+#: rates, means kept: the measured-data study's ``direct`` model).
 DIRECT_PRESETS: dict[str, DirectSettings] = {
     "default": DirectSettings(),
     "moore-hubbard": DirectSettings(derivative="central", cutoff_hz=15.0),
     "testbed-iv": DirectSettings(
         derivative="interval", cutoff_hz=3.0, iv="external", lags=40, covariance="run"
     ),
+    "unfiltered": DirectSettings(derivative="central", cutoff_hz=0.0, remove_means=False),
 }
 
 
@@ -486,7 +495,7 @@ def fit_direct(
     cutoff = s.cutoff or None
 
     def prep(r: Run) -> Run:
-        return prepare(r, cutoff=cutoff, derivative=s.derivative)
+        return prepare(r, cutoff=cutoff, derivative=s.derivative, subtract_mean=s.remove_means)
 
     if s.iv == "tailored":
         from bikeid.sim.parameters import BicycleParameters, from_mapping

@@ -78,6 +78,8 @@ def test_cli_defaults_are_the_settings_defaults():
 def test_direct_settings_resolve_describe_and_refuse():
     assert DirectSettings().cutoff == 3.0 and DirectSettings(derivative="central").cutoff == 15.0
     assert DirectSettings(cutoff_hz=0.0).describe().endswith("no low-pass")
+    assert DIRECT_PRESETS["unfiltered"].describe() == (
+        "least squares, central differences, no low-pass, means kept")
     mh = DIRECT_PRESETS["moore-hubbard"]
     assert (mh.derivative, mh.cutoff, mh.iv) == ("central", 15.0, None)
     assert mh.describe() == "least squares, central differences, 15 Hz low-pass"
@@ -98,9 +100,14 @@ def test_direct_is_one_estimator_whatever_calls_it(runs, preset):
     got = METHODS["direct"].fit(runs, s, reference=P)
     if s.iv == "tailored":
         pytest.skip("no tailored preset")
-    ref = identify([prepare(r, cutoff=s.cutoff or None, derivative=s.derivative) for r in runs],
-                   P, method="ls" if s.iv is None else "iv", instruments=s.iv or "lagged",
-                   lags=s.lags, covariance=s.covariance)  # fmt: skip
+    if not s.remove_means:  # the logged signals as they are: identify's own differences
+        assert (s.cutoff, s.derivative) == (0.0, "central")
+        ref = identify(runs, P)
+    else:
+        ref = identify([prepare(r, cutoff=s.cutoff or None, derivative=s.derivative)
+                        for r in runs], P, method="ls" if s.iv is None else "iv",
+                       instruments=s.iv or "lagged", lags=s.lags,
+                       covariance=s.covariance)  # fmt: skip
     (model,) = got.models
     for k in ("M", "C1", "K0", "K2", "H"):
         np.testing.assert_array_equal(getattr(model, k), getattr(ref, k))
@@ -213,6 +220,9 @@ def test_every_caller_names_its_direct_settings():
     mh = DIRECT_PRESETS["moore-hubbard"]
     assert (moore_hubbard.CUTOFF_HZ, moore_hubbard.DERIVATIVE) == (mh.cutoff, mh.derivative)
     assert chen_dao.DIRECT_DERIVATIVE == mh.derivative
+    from bikeid.experiments.measured import study
+
+    assert study.DIRECT_SETTINGS == DIRECT_PRESETS["unfiltered"]
     for row in acc.METHODS:
         assert isinstance(acc.row_settings(row), METHODS[{"direct_ls": "direct"}.get(
             row, row)].settings_type)  # fmt: skip

@@ -4,7 +4,8 @@ What ``bikeid measured study`` computes on the TU Delft logs (``tudelft-sbw``, r
 :mod:`bikeid.dataset.sbw_logs`): Moore & Hubbard's model comparison (their Tables 2-5,
 Figs. 2-4) with the models bikeid can build from these logs:
 
-- ``direct``: the direct least-squares method (:func:`bikeid.ident.direct.identify`, their
+- ``direct``: the direct least-squares method (the method table's ``direct`` with
+  :data:`DIRECT_SETTINGS`, :func:`bikeid.ident.direct.identify`, their
   free sets; the runs of the fit speeds stacked, which K0dd + K2dd need);
 - ``pem``: the canonical PEM at one speed (:func:`bikeid.ident.pem.fit`), one per speed;
 - ``greybox``: the grey-box PEM of the same entries over all fit speeds jointly
@@ -60,13 +61,14 @@ import numpy as np
 from bikeid.dataset.decays import load_decays
 from bikeid.dataset.run import Run
 from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log, settled
-from bikeid.ident import direct, greybox, pem
+from bikeid.ident import greybox
 from bikeid.ident.direct import ALL_ENTRIES, parse_entry
 from bikeid.ident.effects.experiment_model import ExperimentModel, window_errors
 from bikeid.ident.effects.library import LIBRARY
 from bikeid.ident.effects.pipeline import fit_model
 from bikeid.ident.effects.weave import decay_eigenvalue, median_complex, weave_uncertainty
 from bikeid.ident.informativity import assess
+from bikeid.ident.methods import DIRECT_PRESETS, METHODS
 from bikeid.ident.signals import prepare
 from bikeid.ident.validate import windowed_simulation_vaf
 from bikeid.ident.validation_report import frequency_response_estimate, model_frequency_response
@@ -107,6 +109,10 @@ SIM_WINDOW = 2.0
 Z_SIGNIFICANT = 3.0
 OUTPUTS = ("phi", "delta", "phidot", "deltadot")
 MODEL_ORDER = ("whipple", "effects", "direct", "greybox", "pem")
+#: The direct model's settings (ident.methods): least squares on the logged signals as they
+#: are, central differences of the unfiltered rates, means kept; not Moore & Hubbard's
+#: published processing (15 Hz, means removed), which the equation VAF's rows use.
+DIRECT_SETTINGS = DIRECT_PRESETS["unfiltered"]
 
 
 @dataclass
@@ -334,9 +340,8 @@ def _halves(run: Run) -> tuple[Run, Run]:
 
 
 def _pem_model(runs: list[Run], label: str) -> StudyModel:
-    """Canonical PEM at the runs' (single) speed as a StudyModel."""
-
-    m = pem.fit(runs)
+    """Canonical PEM at the runs' (single) speed as a StudyModel (the method table's pem)."""
+    (m,) = METHODS["pem"].fit(runs).models
 
     def ab(v: float):
         ss = m.state_space()
@@ -350,14 +355,16 @@ def _pem_model(runs: list[Run], label: str) -> StudyModel:
 
 
 def _direct_model(runs: list[Run], label: str) -> StudyModel:
-    d = direct.identify(runs, reference=steer_by_wire())
+    """The method table's direct with the settings :data:`DIRECT_SETTINGS` names."""
+    (d,) = METHODS["direct"].fit(runs, DIRECT_SETTINGS, reference=steer_by_wire()).models
     names = list(d.free)
     cov = np.zeros((len(names), len(names)))
     for nm, C in d.covariance.values():
         idx = [names.index(x) for x in nm]
         cov[np.ix_(idx, idx)] = C
     return matrix_model("direct", label, d.canonical(), free=dict(d.free), stderr=dict(d.stderr),
-                        covariance=cov, info={"condition": dict(d.condition),
+                        covariance=cov, info={"settings": DIRECT_SETTINGS.describe(),
+                                              "condition": dict(d.condition),
                                               "vaf_in_sample": dict(d.vaf_moore),
                                               "notes": list(d.notes),
                                               **_informativity(runs, len(names), 2)})  # fmt: skip
