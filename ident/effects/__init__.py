@@ -21,7 +21,8 @@ effect values, standard errors), :mod:`.nominal_uncertainty`
 (the stated bicycle's uncertainty and its calibration), :mod:`.selection`,
 :mod:`.diagnostics` (equation error, residual spectra, push asymmetry, ``evaluate``),
 :mod:`.weave` (the measured weave eigenvalue of decays), :mod:`.synthetic_decays` (decays of
-a known model, for tests) and :mod:`.pipeline` (fit, save, load, evaluate).
+a known model, for tests), :mod:`.before_after` (a before/after error ratio with its interval,
+paired test and verdict) and :mod:`.pipeline` (fit, save, load, evaluate).
 """
 
 from bikeid.ident.effects.acceptance import AcceptanceRule

@@ -99,8 +99,17 @@ COULOMB_EPS = 0.1  # rad/s, smoothing of the Coulomb friction
 class SimulationFailed(ValueError):
     """The nonlinear plant could not simulate a window (it fell, or a wheel lifted).
 
-    A ValueError naming the window (``file``, ``start``: its log file and first row) and the
-    simulation's stop reason, so a caller can drop that window and go on.
+    A ValueError naming the window and the simulation's stop reason, so a caller can drop
+    that window and go on.
+
+    Parameters
+    ----------
+    file : str
+        The window's log file.
+    start : int
+        The window's first row (file row index).
+    reason : str
+        Why the simulation stopped (e.g. the rear wheel's normal force reached 0 N).
     """
 
     def __init__(self, file: str, start: int, reason: str) -> None:
