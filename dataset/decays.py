@@ -306,7 +306,8 @@ def decays_from_runs(
     Returns
     -------
     windows : list of Window
-        In the order of ``runs``, each run's in time order.
+        In the order of ``runs``, each run's in time order; ``meta["dt"]`` the log's sample
+        period [s].
     report : dict
         ``decays`` (count kept), ``files``: per log its ``file``, ``speed`` [m/s],
         ``source`` (``listed`` or ``detected``), ``kept`` and ``rejected`` (the detected
@@ -333,7 +334,8 @@ def decays_from_runs(
         if not segs:
             segs = detect_decays(run, rejected=rejected)
         ws = decay_windows(run, segs) if segs else []
-        out.extend(ws)
+        dt = float(run.meta.get("dt") or run.dt)
+        out.extend(replace(w, meta={**w.meta, "dt": dt}) for w in ws)  # the log's period [s]
         files.append({"file": name, "speed": float(run.speed), "source": how, "kept": len(ws),
                       "rejected": [[int(r), why] for r, why in rejected]})  # fmt: skip
     have = sorted({round(w.speed, 2) for w in out})

@@ -177,3 +177,23 @@ def test_a_window_the_nominal_cannot_simulate_is_dropped_not_fatal():
     kept, dropped = simulable_windows(model, [window("bad", 2.0, 1.0), window("ok", 0.01, 5.0)])
     assert [w.file for w in kept] == ["ok"]
     assert [d["file"] for d in dropped] == ["bad"] and dropped[0]["reason"]
+
+
+@pytest.mark.parametrize("dt", [0.005, 0.01, 0.02])
+def test_weave_fit_uses_the_logs_sample_period(dt):
+    """A decay exp(lambda t) cos(omega t) sampled at dt, lambda = -1.8 + 6j 1/s (analytic):
+    decay_eigenvalue recovers it to 1e-6 at 5, 10 and 20 ms when the window carries its
+    period (decays_from_runs sets meta['dt']); before, 0.01 s was assumed (a 5 ms log would
+    have read -0.9 + 3j)."""
+    from bikeid.dataset.windows import Window
+    from bikeid.ident.effects.weave import decay_eigenvalue
+
+    lam = complex(-1.8, 6.0)
+    t = np.arange(int(round(1.0 / dt))) * dt
+    roll_rate = np.exp(lam.real * t) * np.cos(lam.imag * t)
+    steer = 0.5 * np.exp(lam.real * t) * np.cos(lam.imag * t + 0.4)
+    z = np.zeros_like(t)
+    w = Window(file="f", speed=4.0, start=0, phi=z, delta=steer, phidot=roll_rate,
+               deltadot=z, v_sensor=z + 4.0, T_ext=z, hist=np.zeros(20),
+               meta={"dt": dt})  # fmt: skip
+    assert abs(decay_eigenvalue(w) - lam) < 1e-6

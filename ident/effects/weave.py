@@ -153,7 +153,8 @@ def decay_eigenvalue(w: Window) -> complex:
     Parameters
     ----------
     w : Window
-        A free decay (roll rate [rad/s] and steer angle [rad], 0.01 s samples).
+        A free decay (roll rate [rad/s] and steer angle [rad]; sample period
+        ``w.meta["dt"]`` [s], 0.01 s, the steer-by-wire logs', when it has none).
 
     Returns
     -------
@@ -167,7 +168,7 @@ def decay_eigenvalue(w: Window) -> complex:
         standard deviation, or is constant (the fit would be nan), naming the file and the
         window.
     """
-    t = np.arange(w.n) * 0.01
+    t = np.arange(w.n) * float(w.meta.get("dt", 0.01))
     for name in ("delta", "phidot"):
         y = np.asarray(getattr(w, name), dtype=float)
         sd = float(np.std(y)) if np.all(np.isfinite(y)) else float("nan")
