@@ -78,7 +78,8 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
         v = model.true_speed(float(np.mean(w.v_sensor)))
         q = np.vstack([w.phi, w.delta])
         qd = np.vstack([w.phidot, w.deltadot])
-        qdd = np.vstack([_deriv(w.phidot), _deriv(w.deltadot)])
+        dt = float(w.meta.get("dt", 0.01))  # the log's sample period (decays_from_runs)
+        qdd = np.vstack([_deriv(w.phidot, dt), _deriv(w.deltadot, dt)])
         T = s["T"]  # the applied command the model reconstructs (= logged law)
         lhs = cm.M @ qdd + v * cm.C1 @ qd + cm.stiffness(v) @ q
         rows["roll"].append(-lhs[0])
