@@ -513,8 +513,15 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         (NRMSE, dimensionless; weave eigenvalues [1/s]), ``input`` (``"loop"`` or
         ``"logged"``: what drove the model, :attr:`bikeid.dataset.windows.Window.drive`;
         a nonlinear-plant model is replayed with the linear plant, and ``note`` says so),
+        ``dropped_windows`` (file, start, reason of each window the nonlinear plant of the
+        nominal or of the model cannot simulate: left out of both, and ``note`` says so),
         and ``validation``: the model's fit
         [%] and residual tests per file (:func:`bikeid.ident.validation_report.validate_decays`).
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        If the nonlinear plant can simulate none of the windows.
     """
     from bikeid.ident.validation_report import validate_decays
 
@@ -528,7 +535,20 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         plant = "linear"
         note = ("replayed with the linear plant: open loop, the nonlinear plant falls inside "
                 "some windows (the model's effects are kept)")  # fmt: skip
-    ev, at_aug = evaluate_windows(_nominal(model_obj), aug, windows,
+    nominal, dropped = _nominal(model_obj), []
+    if plant == "nonlinear":  # a window either model's nonlinear plant cannot carry: dropped
+        for m in (nominal, aug):
+            windows, more = simulable_windows(m, windows)
+            dropped += more
+        if dropped:
+            note = ((note + "; ") if note else "") + (
+                f"{len(dropped)} window(s) dropped for both models: the nonlinear plant cannot "
+                "simulate them (" + "; ".join(f"{d['file']}@{d['start']}: {d['reason']}"
+                                               for d in dropped) + ")")  # fmt: skip
+        if not windows:
+            raise InputError("no window left to evaluate: the nonlinear plant cannot simulate "
+                             "any of them (see the model's plant; try --input logged)")  # fmt: skip
+    ev, at_aug = evaluate_windows(nominal, aug, windows,
                                   nonlinear=plant == "nonlinear")  # fmt: skip
     # the validation of `bikeid validate` on the decays (corrected at `aug`)
     validation = validate_decays(aug, at_aug)
@@ -552,6 +572,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         "plant": plant,
         "input": "logged" if replay else "loop",
         "note": note,
+        "dropped_windows": dropped,
         "verdict": ident.get("verdict"),
         "effects": effects,
         "fit_speeds": model_obj.get("fit_speeds"),
