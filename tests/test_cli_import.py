@@ -57,11 +57,13 @@ def test_export_then_identify_a_users_log(folder):
     rc, out, err = _run(["export", "runs.h5", "--out", "csv"], folder)
     assert rc == 0, err
     names = sorted(p.name for p in (folder / "csv").iterdir())
-    assert names == ["v4.csv", "v5.csv"]
+    assert names == [".bikeid-folder.json", ".bikeid-folder.lock", "v4.csv", "v5.csv"]
+    owned = json.loads((folder / "csv" / ".bikeid-folder.json").read_text())  # its marker
+    assert owned == {"command": "bikeid export", "files": ["v4.csv", "v5.csv"]}
     header = (folder / "csv" / "v4.csv").read_text().splitlines()[1]
     assert "phi [rad]" in header and "T_delta [N m]" in header  # units in the header
     logs = []
-    for name in names:  # the user's logger: other names, degrees, km/h, milliseconds
+    for name in names[2:]:  # the user's logger: other names, degrees, km/h, milliseconds
         rows = list(csv.reader((folder / "csv" / name).open()))
         hdr, data = rows[1], np.array(rows[2:], float)
 

@@ -707,12 +707,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from bikeid.dataset.files import check_distinct_inputs, check_outputs
+    from bikeid.dataset.files import check_distinct_inputs, check_output_path, check_outputs
     from bikeid.ident.model_file import file_provenance, save_model
     from bikeid.sim.linear import eigenvalues
 
     outputs = _outputs(args.outputs, args.method)
     data_files = _data_files(args)  # no output may be an input; no data file counted twice
+    if args.out:
+        check_output_path(args.out)  # a folder or link at --out: named as such first
     check_outputs([args.out], [*data_files, args.bicycle])
     check_distinct_inputs(data_files)
     method, run_settings = _method_settings(args)  # ident.methods.METHODS; options checked
