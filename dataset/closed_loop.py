@@ -1,4 +1,9 @@
-"""Closed-loop runs: nonlinear plant + controller + reference + dither + sensors + effects -> Run.
+"""Closed-loop runs: plant + controller + reference + dither + sensors + effects -> Run.
+
+One vocabulary for both plants: the nonlinear Whipple plant (default) or, with
+``simulate_run(..., plant="linear")``, the exact zero-order-hold linear plant
+(:func:`dataset.linear_loop.run_loop`) under the same controller, sensor and dither
+objects and the same sampled loop below.
 
 The loop, per controller sample t_j = j * Ts (Ts = ``controller.sample_time``)::
 
