@@ -21,6 +21,7 @@ from bikeid.experiments.measured.effect_trials import (
     draw_trials,
     run_trials,
 )
+from bikeid.ident.effects.acceptance import AcceptanceRule
 from bikeid.ident.effects.experiment_model import (
     COULOMB_EPS,
     DT,
@@ -139,8 +140,18 @@ def test_randomized_trials_name_library_effects_and_flag_outside_ones():
     - the right-first rate's exact 95 % interval reaches the 90 % goal (the data do not
       reject it; a rate of 9/15 would);
     - outside-library effects: "unexplained" in >= 90 % of trials (5 of 6 is 83 %, so all 6).
+
+    The goals were set for effects tested one at a time, so the trials run each effect's test
+    at 5 % alone (``correction="none"``: Student t with the 3 degrees of freedom of the 4
+    fit-half windows, t > 3.18, the level nearest the former t > 3).  The default rule
+    (Bonferroni over the 37 tests of two rounds: t > 10.2 at 3 degrees of freedom) names 16
+    of these 18 library effects and misses two (a 0.24 N m friction and a 0.59 N m/rad steer
+    spring: t 3.7 and 6.1, no effect named, error not halved), which
+    :func:`test_default_rule_misses_are_unnamed_not_wrong` holds; docs/measured-log.md,
+    "Selection with stated error rates".
     """
-    out = run_trials(3 * len(EFFECTS), seed=1, processes=2)
+    out = run_trials(3 * len(EFFECTS), seed=1, processes=2,
+                     rule=AcceptanceRule.exact(correction="none"))  # fmt: skip
     lib = [r for r in out["trials"] if r["in_library"]]
     outside = [r for r in out["trials"] if not r["in_library"]]
     assert len(lib) == 3 * len(LIBRARY_EFFECTS) and len(outside) == 3 * len(OUTSIDE_EFFECTS)
@@ -153,3 +164,20 @@ def test_randomized_trials_name_library_effects_and_flag_outside_ones():
     assert sum(r["magnitude_ok"] for r in right) >= 0.9 * len(right)
     assert binomial_ci(len(right), len(lib))[1] >= 0.9
     assert sum(r["unexplained"] for r in outside) >= 0.9 * len(outside)
+
+
+def test_default_rule_misses_are_unnamed_not_wrong():
+    """Known both ways on two trials of the documented grid (seed 1, trials 1 and 2: a
+    0.24 N m Coulomb friction and a 0.59 N m/rad steer spring, 4 decays per fit speed): each
+    effect alone at 5 % names the injected effect first (the spring with ``unexplained``
+    before it), the default rule (family-wise 5 %,
+    Bonferroni over 37 tests, 3 degrees of freedom) names nothing and says ``unexplained``:
+    the price of a stated error rate with 4 fit-half windows is a miss, not a wrong name."""
+    from bikeid.experiments.measured.effect_trials import run_trial
+
+    for spec in draw_trials(24, 1)[1:3]:
+        default = run_trial(spec)
+        assert default["verdict"] == ["unexplained"], default["verdict"]
+        alone = run_trial(spec, rule=AcceptanceRule.exact(correction="none"))
+        named = [n for n in alone["verdict"] if n != "unexplained"]
+        assert named[:1] == [spec.effect], alone["verdict"]
