@@ -28,7 +28,10 @@ Modules:
 - :mod:`~bikeid.sim.sampling`: the one exact zero-order-hold discretization (:func:`zoh`).
 - :mod:`~bikeid.sim.periodic_orbits`: periodic orbits of the uncontrolled bicycle converged
   on a Poincare map, and their Floquet multipliers.
+- :mod:`~bikeid.sim.arm_model`: the arm model (the linearized Whipple bicycle plus the
+  rider's arms, Moore & Hubbard) as M, C1, K0, K2, and its stable speed ranges.
 - ``_whipple_generated``: the equations of motion emitted by ``scripts/derive_whipple.py``
+  (private); ``_arms_generated``: the arm model's pieces emitted by ``scripts/derive_arms.py``
   (private).
 
 Nothing is imported here, so ``import bikeid.sim`` stays cheap; import the modules.

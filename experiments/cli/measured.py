@@ -642,6 +642,65 @@ def _law(args: argparse.Namespace, sbw: bool) -> tuple[str | None, float, float]
     return law, k, v
 
 
+def toppling_rate(p) -> float:
+    """The roll rate [rad/s] at which bicycle ``p``, rigid with the steer locked, reaches the
+    ground falling from upright: m g h = I w^2 / 2, I = sum(I_xx + m z^2) about the contact
+    line (the derivation of ``sim.conventions.PLAUSIBLE["phidot"]``; 4.8 rad/s for the
+    benchmark, 5.9 rad/s for the steer-by-wire bicycle).
+
+    Parameters
+    ----------
+    p : bikeid.sim.parameters.BicycleParameters
+        The bicycle (benchmark axes, z down; SI units).
+
+    Returns
+    -------
+    float
+        The toppling rate [rad/s], > 0.
+    """
+    d = p.as_dict()
+    parts = [(d["mR"], -d["rR"], d["IRxx"]), (d["mF"], -d["rF"], d["IFxx"]),
+             (d["mB"], d["zB"], d["IBxx"]), (d["mH"], d["zH"], d["IHxx"])]  # fmt: skip
+    m = sum(q[0] for q in parts)
+    h = -sum(q[0] * q[1] for q in parts) / m
+    inertia = sum(q[2] + q[0] * q[1] ** 2 for q in parts)
+    return math.sqrt(2 * m * d["g"] * h / inertia)
+
+
+def check_decay_rates(windows: list, p) -> None:
+    """Refuse a decay window whose roll rate exceeds bicycle ``p``'s toppling rate.
+
+    A free decay after a push of a few degrees never approaches the rate of a fall from
+    upright to the ground (the steer-by-wire logs stay below 1.5 rad/s, a quarter of its
+    5.9 rad/s), so a larger value is a glitch even inside the generic 20 rad/s bound.
+
+    Parameters
+    ----------
+    windows : list of bikeid.dataset.windows.Window
+        The decays (``phidot`` [rad/s], ``start`` the first row in the log).
+    p : bikeid.sim.parameters.BicycleParameters
+        The bicycle the logs are of.
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        Naming the log, the row, the value and the bound, and the fix.
+    """
+    import numpy as np
+
+    bound = toppling_rate(p)
+    for w in windows:
+        x = np.abs(np.asarray(w.phidot, float))
+        i = int(np.argmax(x)) if x.size else 0
+        if x.size and x[i] > bound:
+            raise InputError(
+                f"{w.file}: row {w.start + i} of a decay window: roll rate {float(x[i]):.3g} "
+                f"rad/s, beyond {bound:.3g} rad/s, the rate at which {p.name} hits the ground "
+                "falling from upright; a glitch in the log: cut it out (or give the right "
+                "--bicycle / --units)"
+            )
+
+
 def load_log_decays(
     args: argparse.Namespace,
     speeds: list[float] | None = None,
@@ -744,6 +803,7 @@ def load_log_decays(
     model = ExperimentModel(p=p, K=k, V=v, dt=dt, speed_calibration=tuple(cal))
     windows, report = decays_from_runs(runs, "listed" if sbw else "detected", listed, speeds,
                                        exclude, min_decays, purpose)  # fmt: skip
+    check_decay_rates(windows, p)  # a glitch inside the generic bound, beyond this bicycle's
     if drive == "logged":
         windows = [replace(w, drive="logged") for w in windows]
     report["read"] = read

@@ -1,0 +1,282 @@
+"""The arm model (Whipple bicycle + rider's arms) against its own limits and independent sources.
+
+- Massless arms give the Whipple model (Meijaard's closed-form matrices) to round-off.
+- A rigid body carried by the rear or the front frame, put through the generated body
+  contribution (Kane's generalized forces on the Whipple kinematics), equals Meijaard's
+  closed form with that body merged into the rear body or the front frame by the parallel
+  axis theorem (an independent derivation of the same physics).
+- The arms with point masses at the shoulders (rear frame) and the hands (front frame)
+  equal the Whipple model with those masses merged into the rear body and the front frame:
+  checks the arm kinematics' grip motion end to end.
+- The arms locked to the rear frame (relative motion zeroed) give the bicycle one started
+  from (the arms are part of its rear body): checks :func:`remove_arms`.
+- The closed-form arm kinematics against a numerical solution of the constraint equations
+  (hands on the grips, elbow axis perpendicular to b3) by finite differences.
+- The stability verdict on both known cases: the Whipple benchmark has its published stable
+  range (Meijaard 2007: 4.292-6.024 m/s); the arm model has none (the dissertation's
+  finding), with a real mode unstable at every speed.
+
+Round-off tolerance: the quantities are sums of products of O(1-100) numbers in double
+precision (observed differences 1e-14); we allow 1e-10 relative to the largest entry.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import fsolve
+
+from bikeid.sim import _arms_generated as gen
+from bikeid.sim.arm_model import (
+    ArmParameters,
+    arm_model_matrices,
+    body_contribution,
+    geometry_vector,
+    remove_arms,
+    segment_bodies,
+    stability_summary,
+)
+from bikeid.sim.errors import InputError
+from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
+from bikeid.sim.parameters import benchmark, by_name
+
+ROUND_OFF = 1e-10
+NAMES = ("M", "C1", "K0", "K2")
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "derive_arms.py"
+
+
+def _assert_same(a: CanonicalMatrices, b: CanonicalMatrices, tol: float = ROUND_OFF) -> None:
+    for n in NAMES:
+        x, y = getattr(a, n), getattr(b, n)
+        scale = max(1.0, float(np.max(np.abs(y))))
+        np.testing.assert_allclose(x, y, rtol=0, atol=tol * scale, err_msg=n)
+
+
+def _sum(p, bodies) -> dict[str, np.ndarray]:
+    out = {n: np.zeros((2, 2)) for n in NAMES}
+    for b in bodies:
+        d = body_contribution(p, b)
+        for n in NAMES:
+            out[n] += getattr(d, n)
+    return out
+
+
+def _plus(cm: CanonicalMatrices, add: dict) -> CanonicalMatrices:
+    return CanonicalMatrices(g=cm.g, **{n: getattr(cm, n) + add[n] for n in NAMES})
+
+
+def _rot(p):
+    cl, sl = math.cos(p.lam), math.sin(p.lam)
+    return np.array([[cl, 0.0, -sl], [0.0, 1.0, 0.0], [sl, 0.0, cl]])
+
+
+def _to_c(p, r):
+    return _rot(p) @ (np.asarray(r, float) + np.array([0.0, 0.0, p.rR]))
+
+
+def _merge(p, body: str, masses):
+    """``p`` with (mass, benchmark position, benchmark inertia) merged into body B or H."""
+    m0 = getattr(p, f"m{body}")
+    r0 = np.array([getattr(p, f"x{body}"), 0.0, getattr(p, f"z{body}")])
+    inertia0 = p.inertia_B() if body == "B" else p.inertia_H()
+    J = inertia0 + m0 * (r0 @ r0 * np.eye(3) - np.outer(r0, r0))
+    first, mt = m0 * r0, m0
+    for m, r, inertia in masses:
+        r = np.asarray(r, float)
+        J = J + inertia + m * (r @ r * np.eye(3) - np.outer(r, r))
+        first, mt = first + m * r, mt + m
+    rn = first / mt
+    inertia = J - mt * (rn @ rn * np.eye(3) - np.outer(rn, rn))
+    assert abs(inertia[0, 1]) < 1e-12 and abs(inertia[1, 2]) < 1e-12  # mirror pairs
+    return p.replace(**{
+        f"m{body}": mt, f"x{body}": rn[0], f"z{body}": rn[2],
+        f"I{body}xx": inertia[0, 0], f"I{body}yy": inertia[1, 1],
+        f"I{body}zz": inertia[2, 2], f"I{body}xz": inertia[0, 2],
+    })  # fmt: skip
+
+
+def _body(m, pc, ic, pd=(0, 0, 0), pdd=(0, 0, 0), pt=(0, 0, 0), w=(0, 0, 0)):
+    ic = np.asarray(ic, float)
+    head = [m, ic[0, 0], ic[1, 1], ic[2, 2], ic[0, 1], ic[1, 2], ic[0, 2]]
+    return np.concatenate([head, pc, pd, pdd, pt, w])
+
+
+MASSLESS = ArmParameters().scaled(0.0)
+
+
+@pytest.mark.parametrize("name", ["benchmark", "Browser"])
+@pytest.mark.parametrize("in_rear", [True, False])
+def test_massless_arms_are_the_whipple_model(name, in_rear):
+    p = by_name(name)
+    _assert_same(arm_model_matrices(p, MASSLESS, arms_in_rear_body=in_rear), canonical_matrices(p))
+
+
+pos = st.tuples(
+    st.floats(-0.3, 1.2), st.floats(0.0, 0.4), st.floats(-1.5, -0.2)
+)  # benchmark x, |y|, z [m]
+
+
+@settings(max_examples=25, deadline=None)
+@given(pos=pos, m=st.floats(0.1, 10.0), i1=st.floats(0.0, 0.2), i3=st.floats(0.0, 0.2),
+       f2=st.floats(0.0, 1.0), tilt=st.floats(-0.6, 0.6), body=st.sampled_from("BH"))  # fmt: skip
+def test_rigid_body_on_a_frame_is_meijaards_merged_body(pos, m, i1, i3, f2, tilt, body):
+    p = benchmark()
+    # a physical inertia: principal moments obeying the triangle inequality, tilted about y
+    a, c = 0.02 + i1, 0.02 + i3
+    b = abs(a - c) + f2 * (a + c - abs(a - c))
+    ct, st_ = math.cos(tilt), math.sin(tilt)
+    Ry = np.array([[ct, 0.0, st_], [0.0, 1.0, 0.0], [-st_, 0.0, ct]])
+    ib = Ry @ np.diag([a, b, c]) @ Ry.T
+    R = _rot(p)
+    ic = R @ ib @ R.T
+    d1 = p.to_moore()["d1"]
+    e3 = np.array([0.0, 0.0, 1.0])
+    bodies, masses = [], []
+    for s in (1.0, -1.0):
+        r = np.array([pos[0], s * pos[1], pos[2]])
+        mirror = np.diag([1.0, s, 1.0])
+        pc = _to_c(p, r)
+        if body == "B":
+            bodies.append(_body(m, pc, mirror @ ic @ mirror))
+        else:  # rotates with the front frame about the steer axis (C3 through d1 C1)
+            arm = pc - np.array([d1, 0.0, 0.0])
+            bodies.append(_body(m, pc, mirror @ ic @ mirror, pd=np.cross(e3, arm),
+                                pdd=np.cross(e3, np.cross(e3, arm)), w=e3))  # fmt: skip
+        masses.append((m, r, mirror @ ib @ mirror))
+    merged = canonical_matrices(_merge(p, body, masses))
+    _assert_same(_plus(canonical_matrices(p), _sum(p, bodies)), merged)
+
+
+def test_point_masses_at_shoulders_and_hands_are_merged_bodies():
+    p = benchmark()
+    arms = ArmParameters(
+        upper_com=0.0, upper_mass=2.0, upper_transverse=0.0, upper_axial=0.0,
+        lower_com=ArmParameters().lower_length, lower_mass=1.5,
+        lower_transverse=0.0, lower_axial=0.0,
+    )  # fmt: skip
+    zero = np.zeros((3, 3))
+    sh = [(2.0, (arms.shoulder_x, s * arms.shoulder_y, arms.shoulder_z), zero) for s in (1, -1)]
+    ha = [(1.5, (arms.grip_x, s * arms.grip_y, arms.grip_z), zero) for s in (1, -1)]
+    expected = canonical_matrices(_merge(_merge(p, "B", sh), "H", ha))
+    _assert_same(arm_model_matrices(p, arms, arms_in_rear_body=False), expected)
+
+
+def test_arms_locked_to_the_rear_frame_give_the_bicycle_back():
+    p = benchmark()
+    arms = ArmParameters()
+    locked = []
+    for b in segment_bodies(p, arms):
+        b = b.copy()
+        b[10:] = 0.0  # no motion relative to the rear frame
+        locked.append(b)
+    base = canonical_matrices(remove_arms(p, arms))
+    _assert_same(_plus(base, _sum(p, locked)), canonical_matrices(p))
+    assert remove_arms(p, arms).mB == pytest.approx(p.mB - arms.mass, abs=1e-12)
+
+
+def test_arm_model_mass_matrix_is_symmetric_and_forward_speed_decouples():
+    """M is a kinetic-energy Hessian (symmetric) though computed as m a . v_r row by row;
+    the forward-speed perturbation cancels between the mirror-image arms."""
+    p = benchmark()
+    cm = arm_model_matrices(p)
+    assert abs(cm.M[0, 1] - cm.M[1, 0]) < ROUND_OFF * np.max(np.abs(cm.M))
+    coupling = sum(
+        np.array(gen.body_matrices(geometry_vector(p), b)[4])
+        for b in segment_bodies(p, ArmParameters())
+    )
+    assert np.max(np.abs(coupling)) < 1e-12
+
+
+def _numerical_arm(p, arms: ArmParameters, side: float, delta: float, pitch: float):
+    """Segment mass centres and frames from a numerical solution of the constraints."""
+    R = _rot(p)
+    S = _to_c(p, (arms.shoulder_x, side * arms.shoulder_y, arms.shoulder_z))
+    g0 = _to_c(p, (arms.grip_x, side * arms.grip_y, arms.grip_z))
+    d1 = p.to_moore()["d1"]
+    c, s = math.cos(delta), math.sin(delta)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    ax_pt = np.array([d1, 0.0, 0.0])
+    grip = ax_pt + Rz @ (g0 - ax_pt)
+    k = np.array([-math.sin(p.lam + pitch), 0.0, math.cos(p.lam + pitch)])  # b3 in C
+    a, b = arms.upper_length, arms.lower_length
+
+    def res(E):
+        return [
+            (E - S) @ (E - S) - a * a,
+            (grip - E) @ (grip - E) - b * b,
+            np.cross(E - S, grip - E) @ k / (a * b),
+        ]
+
+    guess = 0.5 * (S + grip) + 0.1 * (R @ np.array([0.0, 0.0, 1.0]))  # below the line
+    E = fsolve(res, guess, xtol=1e-14)
+    assert np.max(np.abs(res(E))) < 1e-12
+    up, lo = (E - S) / a, (grip - E) / b
+    n = np.cross(up, lo)
+    n /= np.linalg.norm(n)
+    frames = [np.column_stack([np.cross(n, x), n, x]) for x in (up, lo)]
+    return [S + arms.upper_com * up, E + arms.lower_com * lo], frames
+
+
+def test_arm_kinematics_match_a_numerical_constraint_solution():
+    """Central differences (h = 1e-4 rad: truncation ~h^2 ~ 1e-8 m/rad, 1e-5 for the
+    second derivative with h = 1e-3) of the numerically solved arm against the generated
+    closed-form Taylor coefficients."""
+    p = benchmark()
+    arms = ArmParameters()
+    bodies = segment_bodies(p, arms)
+    for side, pair in ((1.0, bodies[:2]), (-1.0, bodies[2:])):
+        h, h2 = 1e-4, 1e-3
+        pos0, fr0 = _numerical_arm(p, arms, side, 0.0, 0.0)
+        pp, frp = _numerical_arm(p, arms, side, h, 0.0)
+        pm, frm = _numerical_arm(p, arms, side, -h, 0.0)
+        pp2, _ = _numerical_arm(p, arms, side, h2, 0.0)
+        pm2, _ = _numerical_arm(p, arms, side, -h2, 0.0)
+        tp, _ = _numerical_arm(p, arms, side, 0.0, h)
+        tm, _ = _numerical_arm(p, arms, side, 0.0, -h)
+        for j, b in enumerate(pair):
+            np.testing.assert_allclose(b[7:10], pos0[j], atol=1e-10)
+            np.testing.assert_allclose(b[10:13], (pp[j] - pm[j]) / (2 * h), atol=1e-7)
+            np.testing.assert_allclose(b[13:16], (pp2[j] - 2 * pos0[j] + pm2[j]) / h2**2, atol=1e-5)
+            np.testing.assert_allclose(b[16:19], (tp[j] - tm[j]) / (2 * h), atol=1e-7)
+            W = (frp[j] - frm[j]) / (2 * h) @ fr0[j].T
+            np.testing.assert_allclose(b[19:22], [W[2, 1], W[0, 2], W[1, 0]], atol=1e-7)
+
+
+def test_stability_verdict_on_both_known_cases():
+    whipple = stability_summary(canonical_matrices(benchmark()))
+    assert len(whipple["stable_ranges"]) == 1
+    low, high = whipple["stable_ranges"][0]
+    # Meijaard et al. (2007) Table 2: v_w = 4.2923825, v_c = 6.0242616 m/s (bisection 1e-6)
+    assert low == pytest.approx(4.2923825, abs=2e-6)
+    assert high == pytest.approx(6.0242616, abs=2e-6)
+    assert not whipple["real_unstable_everywhere"]
+    arm = stability_summary(arm_model_matrices(benchmark()))
+    assert arm["stable_ranges"] == []
+    assert arm["real_unstable_everywhere"]
+    assert arm["oscillatory_stable_everywhere"]
+
+
+def test_bad_arms_are_refused_in_one_line():
+    with pytest.raises(InputError, match="out of the arm's reach"):
+        ArmParameters(grip_x=2.0)
+    with pytest.raises(InputError, match="weigh as much as the rear body"):
+        remove_arms(benchmark(), ArmParameters().scaled(20.0))
+    with pytest.raises(InputError, match="upper_mass"):
+        ArmParameters(upper_mass=-1.0)
+
+
+@pytest.mark.slow
+def test_generated_code_matches_fresh_derivation():
+    """Re-derive with sympy (about 3 min) and compare with the committed code (1e-9 as
+    tests/test_derivation.py: same expressions, different common-subexpression order)."""
+    spec = importlib.util.spec_from_file_location("derive_arms", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert tuple(mod.BODY) == tuple(gen.BODY) and tuple(mod.ARM) == tuple(gen.ARM)
+    assert mod.check(mod.derive()) <= 1e-9
