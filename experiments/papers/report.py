@@ -366,7 +366,7 @@ def paper_difference(ci: dict, ct: dict, cp: dict, factor: float = 3.0) -> tuple
             "shifts are not a property of the nonlinear Whipple model near upright identified "
             "this way: they point at the paper's plant model (the eleven-coordinate model of "
             "its ref. [7]) or at its identification (roll amplitudes of several degrees, "
-            "closed loop, speed possibly free)"
+            "closed loop)"
         )
     else:
         verdict = (
