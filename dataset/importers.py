@@ -1,12 +1,15 @@
 """A user's own bicycle logs become a :class:`~bikeid.dataset.run.Run`: CSV, HDF5, data frames.
 
-Three readers share one validation step:
+The readers share one validation step:
 
 - :func:`from_csv`: a text table with one header line (lines before it that start with
   ``#`` are comments, e.g. the metadata line of :func:`bikeid.dataset.store.export_csv`);
 - :func:`from_hdf5`: any HDF5 file, one 1-D dataset per signal at paths the user names;
 - :func:`from_dataframe`: any object with ``.columns`` and ``obj[name]`` returning an
-  array-like (a :class:`pandas.DataFrame`, a dict-like table, ...; pandas is not needed).
+  array-like (a :class:`pandas.DataFrame`, a dict-like table, ...; pandas is not needed);
+- :func:`from_arrays`: numpy arrays by your own names (the data object built in memory, as
+  MATLAB's ``iddata``), and :func:`from_timeresponse`: python-control's
+  ``TimeResponseData`` (the reverse is :meth:`bikeid.dataset.run.Run.to_timeresponse`).
 
 ``columns`` (``datasets`` for HDF5) maps bikeid signal names (:data:`~bikeid.sim.conventions.UNITS`:
 ``phi``, ``delta``, ``phidot``, ``deltadot``, ``v``, ``T_delta``, ``psi``, ..., and
@@ -61,7 +64,14 @@ from bikeid.sim.conventions import UNITS
 from .files import read_bounded
 from .run import CONSTANT_CHECKED, REQUIRED, Run, check_finite, check_plausible
 
-__all__ = ["CONVERSIONS", "from_csv", "from_dataframe", "from_hdf5"]
+__all__ = [
+    "CONVERSIONS",
+    "from_arrays",
+    "from_csv",
+    "from_dataframe",
+    "from_hdf5",
+    "from_timeresponse",
+]
 
 _DEG = math.pi / 180.0
 
@@ -683,6 +693,148 @@ def from_dataframe(
         table, columns, units, flipped, time=time, speed=speed, dt=dt, meta=meta,
         jitter=jitter, speed_range=speed_range,
     )  # fmt: skip
+
+
+class _Columns:
+    """Arrays by name as a table (``.columns`` and ``[name]``) for :func:`from_dataframe`."""
+
+    def __init__(self, arrays: Mapping[str, Any]) -> None:
+        self._arrays = dict(arrays)
+        self.columns = list(self._arrays)
+
+    def __getitem__(self, name: str) -> Any:
+        return self._arrays[name]
+
+
+def from_arrays(
+    t: Any,
+    signals: Mapping[str, Any],
+    mapping: Mapping[str, str] | None = None,
+    units: Mapping[str, str] | None = None,
+    *,
+    speed: float | None = None,
+    dt: float | None = None,
+    flip: Iterable[str] = (),
+    meta: Mapping[str, Any] | None = None,
+    name: str = "arrays",
+) -> Run:
+    """A run from numpy arrays with your own signal names, units and signs.
+
+    The arrays go through the checks of every import (:func:`from_dataframe`): uniform
+    sampling (each step within 1 % of the median), ``dt`` if given, finite values, units
+    converted to SI, ``flip`` signals negated, the plausibility bounds of
+    :mod:`bikeid.sim.conventions`.
+
+    Parameters
+    ----------
+    t : (N,) array_like
+        Time, strictly increasing, uniformly sampled [s, or ``units["t"]``, e.g. "ms"].
+    signals : mapping of str to (N,) array_like
+        Your signals by your names.
+    mapping : mapping of str to str, optional
+        bikeid signal name -> your name (phi, delta, phidot, deltadot, T_delta and v, unless
+        ``speed`` is given; see :data:`bikeid.sim.conventions.UNITS`); default: your names
+        are bikeid's.
+    units : mapping of str to str, optional
+        bikeid signal name -> the unit of your array (:data:`CONVERSIONS`: "deg", "deg/s",
+        "km/h", "N cm"; ``"t"`` for the time: "ms"); default SI.
+    speed : float, optional
+        Constant nominal speed [m/s] when there is no speed signal.
+    dt : float, optional
+        Expected sample period [s], checked against ``t``.
+    flip : iterable of str, optional
+        bikeid names of signals logged positive to the left (bikeid: to the right).
+    meta : mapping, optional
+        Extra JSON-serializable metadata.
+    name : str, optional
+        What messages call the data.
+
+    Returns
+    -------
+    Run
+        In SI units and bikeid's signs; ``meta["import"]`` records the mapping, the unit
+        conversions, the flips and the sample period.
+
+    Raises
+    ------
+    ValueError
+        Naming the signal and the fix: a missing or unknown signal, an unknown unit, arrays
+        of different lengths, irregular sampling, a ``dt`` that disagrees, implausible values.
+    """
+    names = dict(signals)
+    time = TIME if TIME not in names else "__time__"
+    columns = dict(mapping) if mapping is not None else {k: k for k in names}
+    return from_dataframe(_Columns({time: t, **names}), columns, units, time=time, speed=speed,
+                          dt=dt, meta=meta, flip=flip, name=name)  # fmt: skip
+
+
+def from_timeresponse(
+    response: Any,
+    mapping: Mapping[str, str] | None = None,
+    units: Mapping[str, str] | None = None,
+    *,
+    speed: float | None = None,
+    flip: Iterable[str] = (),
+    meta: Mapping[str, Any] | None = None,
+) -> Run:
+    """A run from python-control's ``TimeResponseData`` (one trace).
+
+    Its input and output labels are the signal names; a response made by
+    :meth:`bikeid.dataset.run.Run.to_timeresponse` carries bikeid's names, units, sample
+    period and speed (``params``), which are used and checked.
+
+    Parameters
+    ----------
+    response : control.TimeResponseData
+        A single-trace response: ``time`` (N,), ``inputs`` and ``outputs`` (n, N) with their
+        labels.
+    mapping : mapping of str to str, optional
+        bikeid signal name -> label (default: the labels are bikeid's names).
+    units : mapping of str to str, optional
+        Units of the signals by bikeid name; default ``response.params["units"]`` if present,
+        else SI.
+    speed : float, optional
+        Constant nominal speed [m/s] when there is no speed signal (default
+        ``response.params["speed"]``).
+    flip : iterable of str, optional
+        bikeid names of signals with the opposite sign.
+    meta : mapping, optional
+        Extra JSON-serializable metadata.
+
+    Returns
+    -------
+    Run
+        As :func:`from_arrays`.
+
+    Raises
+    ------
+    ValueError
+        If the response holds several traces, a label repeats, or as :func:`from_arrays`.
+    """
+    params = dict(getattr(response, "params", None) or {})
+    t = np.asarray(response.time, dtype=float)
+    signals: dict[str, np.ndarray] = {}
+    for kind in ("outputs", "inputs"):
+        data = getattr(response, kind, None)
+        labels = list(getattr(response, f"{kind[:-1]}_labels", None) or [])
+        if data is None or not labels:
+            continue
+        arr = np.asarray(data, dtype=float).reshape(len(labels), -1)
+        if arr.shape[1] != t.size:
+            raise ValueError(
+                f"time response {kind} have {arr.shape[1]} samples per signal, time has "
+                f"{t.size}: pass a single-trace response"
+            )
+        for label, row in zip(labels, arr, strict=True):
+            if label in signals:
+                raise ValueError(f"time response label {label!r} repeats; rename it")
+            signals[label] = row
+    if speed is None and "v" not in (mapping or signals):
+        speed = params.get("speed")
+    if units is None:
+        units = {k: u for k, u in (params.get("units") or {}).items() if k in (mapping or signals)}
+    return from_arrays(t, signals, mapping, units, speed=speed, dt=params.get("dt"), flip=flip,
+                       meta=meta, name="time response")  # fmt: skip
 
 
 # -- HDF5 -------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ knows where the data came from.  Signal names, units and signs are those of
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -226,192 +226,7 @@ class Run:
             meta=dict(self.meta),
         )
 
-    # -- the data object: from and to arrays, data frames, python-control ------------------
-    @classmethod
-    def from_arrays(
-        cls,
-        t: Any,
-        signals: Mapping[str, Any],
-        mapping: Mapping[str, str] | None = None,
-        units: Mapping[str, str] | None = None,
-        *,
-        speed: float | None = None,
-        dt: float | None = None,
-        flip: Iterable[str] = (),
-        meta: Mapping[str, Any] | None = None,
-        name: str = "arrays",
-    ) -> Run:
-        """A run from numpy arrays with your own signal names, units and signs.
-
-        The arrays go through the same checks as a CSV log
-        (:func:`bikeid.dataset.importers.from_dataframe`): uniform sampling (each step
-        within 1 % of the median), ``dt`` if given, finite values, units converted to SI,
-        ``flip`` signals negated, the plausibility bounds of :mod:`bikeid.sim.conventions`.
-
-        Parameters
-        ----------
-        t : (N,) array_like
-            Time, strictly increasing, uniformly sampled [s, or ``units["t"]``, e.g. "ms"].
-        signals : mapping of str to (N,) array_like
-            Your signals by your names.
-        mapping : mapping of str to str, optional
-            bikeid signal name -> your name (phi, delta, phidot, deltadot, T_delta and v,
-            unless ``speed`` is given; see :data:`bikeid.sim.conventions.UNITS`); default:
-            your names are bikeid's.
-        units : mapping of str to str, optional
-            bikeid signal name -> the unit of your array ("deg", "deg/s", "km/h", "N cm";
-            ``"t"`` for the time: "ms"); default SI.
-        speed : float, optional
-            Constant nominal speed [m/s] when there is no speed signal.
-        dt : float, optional
-            Expected sample period [s], checked against ``t``.
-        flip : iterable of str, optional
-            bikeid names of signals logged positive to the left (bikeid: to the right).
-        meta : mapping, optional
-            Extra JSON-serializable metadata.
-        name : str, optional
-            What messages call the data.
-
-        Returns
-        -------
-        Run
-            In SI units and bikeid's signs; ``meta["import"]`` records the mapping, the unit
-            conversions, the flips and the sample period.
-
-        Raises
-        ------
-        ValueError
-            Naming the signal and the fix: a missing or unknown signal, an unknown unit,
-            arrays of different lengths, irregular sampling, a ``dt`` that disagrees, or
-            implausible values.
-        """
-        from bikeid.dataset.importers import from_dataframe  # importers import this module
-
-        names = dict(signals)
-        time = "t" if "t" not in names else "__time__"
-        columns = dict(mapping) if mapping is not None else {k: k for k in names}
-        return from_dataframe(_Columns({time: t, **names}), columns, units, time=time,
-                              speed=speed, dt=dt, meta=meta, flip=flip,
-                              name=name)  # fmt: skip
-
-    @classmethod
-    def from_dataframe(
-        cls,
-        df: Any,
-        mapping: Mapping[str, str],
-        units: Mapping[str, str] | None = None,
-        *,
-        time: str = "t",
-        speed: float | None = None,
-        dt: float | None = None,
-        flip: Iterable[str] = (),
-        meta: Mapping[str, Any] | None = None,
-    ) -> Run:
-        """A run from a pandas DataFrame (or any table with ``.columns`` and ``df[name]``).
-
-        Parameters
-        ----------
-        df : pandas.DataFrame or table-like
-            One column per signal and a time column.
-        mapping : mapping of str to str
-            bikeid signal name -> your column name.
-        units : mapping of str to str, optional
-            Units of your columns by bikeid name (``"t"``: the time column's).
-        time : str, optional
-            Name of the time column (default "t").
-        speed : float, optional
-            Constant nominal speed [m/s] when there is no speed column.
-        dt : float, optional
-            Expected sample period [s], checked.
-        flip : iterable of str, optional
-            bikeid names of signals logged with the opposite sign.
-        meta : mapping, optional
-            Extra JSON-serializable metadata.
-
-        Returns
-        -------
-        Run
-            As :meth:`from_arrays` (:func:`bikeid.dataset.importers.from_dataframe`).
-
-        Raises
-        ------
-        ValueError
-            As :meth:`from_arrays`.
-        """
-        from bikeid.dataset.importers import from_dataframe  # importers import this module
-
-        return from_dataframe(df, mapping, units, time=time, speed=speed, dt=dt, meta=meta,
-                              flip=flip)  # fmt: skip
-
-    @classmethod
-    def from_timeresponse(
-        cls,
-        response: Any,
-        mapping: Mapping[str, str] | None = None,
-        units: Mapping[str, str] | None = None,
-        *,
-        speed: float | None = None,
-        flip: Iterable[str] = (),
-        meta: Mapping[str, Any] | None = None,
-    ) -> Run:
-        """A run from python-control's ``TimeResponseData`` (one trace).
-
-        Its input and output labels are the signal names (a response made by
-        :meth:`to_timeresponse` carries bikeid's names, units and speed in ``params``).
-
-        Parameters
-        ----------
-        response : control.TimeResponseData
-            A single-trace response: ``time`` (N,), ``inputs`` and ``outputs`` (n, N)
-            with their labels.
-        mapping : mapping of str to str, optional
-            bikeid signal name -> label (default: the labels are bikeid's names).
-        units : mapping of str to str, optional
-            Units of the signals by bikeid name; default ``response.params["units"]`` if
-            present, else SI.
-        speed : float, optional
-            Constant nominal speed [m/s] when there is no speed signal (default
-            ``response.params["speed"]`` when there is none).
-        flip : iterable of str, optional
-            bikeid names of signals with the opposite sign.
-        meta : mapping, optional
-            Extra JSON-serializable metadata.
-
-        Returns
-        -------
-        Run
-            As :meth:`from_arrays`.
-
-        Raises
-        ------
-        ValueError
-            If the response holds several traces, a label repeats, or as
-            :meth:`from_arrays`.
-        """
-        params = dict(getattr(response, "params", None) or {})
-        t = np.asarray(response.time, dtype=float)
-        signals: dict[str, np.ndarray] = {}
-        for kind in ("outputs", "inputs"):
-            data = getattr(response, kind, None)
-            labels = list(getattr(response, f"{kind[:-1]}_labels", None) or [])
-            if data is None or not labels:
-                continue
-            arr = np.asarray(data, dtype=float).reshape(len(labels), -1)
-            if arr.shape[1] != t.size:
-                raise ValueError(
-                    f"time response {kind} have {arr.shape[1]} samples per signal, time has "
-                    f"{t.size}: pass a single-trace response"
-                )
-            for label, row in zip(labels, arr, strict=True):
-                if label in signals:
-                    raise ValueError(f"time response label {label!r} repeats; rename it")
-                signals[label] = row
-        if speed is None and "v" not in (mapping or signals):
-            speed = params.get("speed")
-        return cls.from_arrays(t, signals, mapping, units if units is not None else
-                               params.get("units"), speed=speed, dt=params.get("dt"),
-                               flip=flip, meta=meta, name="time response")  # fmt: skip
-
+    # -- the data object, to python-control (from arrays, frames, responses: importers) ----
     def to_timeresponse(
         self,
         inputs: Sequence[str] = ("T_delta",),
@@ -432,7 +247,8 @@ class Run:
         control.TimeResponseData
             ``time`` [s], ``inputs`` and ``outputs`` (n, N) in SI units, labelled with
             bikeid's names; ``params`` holds ``units`` (SI unit per label), ``dt`` [s] and
-            ``speed`` [m/s] (what :meth:`from_timeresponse` reads back).
+            ``speed`` [m/s] (what :func:`bikeid.dataset.importers.from_timeresponse` reads
+            back).
 
         Raises
         ------
@@ -449,16 +265,6 @@ class Run:
                     "speed": self.speed}, title="bikeid run",
         )  # fmt: skip
 
-
-class _Columns:
-    """Arrays by name as a table (``.columns`` and ``[name]``) for the importers."""
-
-    def __init__(self, arrays: Mapping[str, Any]) -> None:
-        self._arrays = dict(arrays)
-        self.columns = list(self._arrays)
-
-    def __getitem__(self, name: str) -> Any:
-        return self._arrays[name]
 
 
 def _where(i: int, rows) -> str:

@@ -14,6 +14,7 @@ import json
 import numpy as np
 import pytest
 
+from bikeid.dataset.importers import from_arrays
 from bikeid.dataset.linear_loop import simulate
 from bikeid.dataset.run import Run
 from bikeid.ident import greybox, pem
@@ -164,7 +165,7 @@ def _as_users_arrays(run: Run) -> Run:
                "deltadot": "steer_rate", "T_delta": "torque", "v": "kmh"}  # fmt: skip
     units = {"t": "ms", "phi": "deg", "delta": "deg", "phidot": "deg/s", "deltadot": "deg/s",
              "v": "km/h"}  # fmt: skip
-    return Run.from_arrays(run.t * 1000.0, users, mapping, units, flip=["phi", "phidot"],
+    return from_arrays(run.t * 1000.0, users, mapping, units, flip=["phi", "phidot"],
                            meta={"parameters": run.meta["parameters"]})  # fmt: skip
 
 

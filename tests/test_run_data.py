@@ -1,5 +1,6 @@
-"""The one data object: a Run from numpy arrays with the user's names, from a pandas DataFrame,
-and to and from python-control's TimeResponseData, with units and sample time checked.
+"""The one data object, a Run: from numpy arrays with the user's names, from a pandas DataFrame
+and from python-control's TimeResponseData (``dataset.importers``), to TimeResponseData
+(``Run.to_timeresponse``), with units and sample time checked.
 
 Independent sources: the SI conversions computed here with numpy (``np.radians``, / 3.6,
 / 1000) rather than the importers' table; python-control's own simulation of the benchmark
@@ -14,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bikeid.dataset.importers import from_arrays, from_dataframe, from_timeresponse
 from bikeid.dataset.run import Run
 from bikeid.sim.conventions import UNITS
 
@@ -48,7 +50,7 @@ def _check_si(run: Run) -> None:
 
 
 def test_from_arrays_with_own_names_units_and_signs():
-    run = Run.from_arrays(T * 1000.0, _users_arrays(), MAPPING, UNITS_USER,
+    run = from_arrays(T * 1000.0, _users_arrays(), MAPPING, UNITS_USER,
                           flip=["phi", "phidot"])  # fmt: skip
     _check_si(run)
     assert run.dt == pytest.approx(DT, rel=1e-9) and run.speed == pytest.approx(5.0)
@@ -59,7 +61,7 @@ def test_from_arrays_with_own_names_units_and_signs():
 
 
 def test_from_arrays_defaults_to_bikeid_names_and_si():
-    run = Run.from_arrays(T, SI)
+    run = from_arrays(T, SI)
     _check_si(run)
     assert run.meta["import"]["columns"] == {k: k for k in SI}
 
@@ -76,7 +78,7 @@ def test_from_arrays_defaults_to_bikeid_names_and_si():
 def test_from_arrays_refuses_with_the_cause(kwargs, words):
     args = {"mapping": MAPPING, "units": UNITS_USER, **kwargs}
     with pytest.raises(ValueError, match=words.replace("(", r"\(")):
-        Run.from_arrays(T * 1000.0, _users_arrays(False), args["mapping"], args["units"],
+        from_arrays(T * 1000.0, _users_arrays(False), args["mapping"], args["units"],
                         dt=kwargs.get("dt"))  # fmt: skip
 
 
@@ -84,29 +86,29 @@ def test_from_arrays_refuses_irregular_sampling_and_ragged_arrays():
     t = T.copy()
     t[300:] += 0.5 * DT  # a gap of half a sample
     with pytest.raises(ValueError, match="irregular sampling"):
-        Run.from_arrays(t, SI)
+        from_arrays(t, SI)
     with pytest.raises(ValueError, match="different lengths"):
-        Run.from_arrays(T, {**SI, "phi": SI["phi"][:-1]})
+        from_arrays(T, {**SI, "phi": SI["phi"][:-1]})
 
 
 def test_from_dataframe_reads_a_pandas_frame():
     pd = pytest.importorskip("pandas")  # in the test extra: runs in CI
     df = pd.DataFrame({"time_ms": T * 1000.0, **_users_arrays()})
-    run = Run.from_dataframe(df, MAPPING, UNITS_USER, time="time_ms", flip=["phi", "phidot"])
+    run = from_dataframe(df, MAPPING, UNITS_USER, time="time_ms", flip=["phi", "phidot"])
     _check_si(run)
     assert run.dt == pytest.approx(DT, rel=1e-9)
     with pytest.raises(ValueError, match="time_s"):
-        Run.from_dataframe(df, MAPPING, UNITS_USER, time="time_s")
+        from_dataframe(df, MAPPING, UNITS_USER, time="time_s")
 
 
 def test_timeresponse_round_trip_keeps_names_units_and_sample_time():
-    run = Run.from_arrays(T, SI)
+    run = from_arrays(T, SI)
     resp = run.to_timeresponse(outputs=("phi", "delta", "phidot", "deltadot", "v"))
     assert list(resp.output_labels) == ["phi", "delta", "phidot", "deltadot", "v"]
     assert list(resp.input_labels) == ["T_delta"]
     assert resp.params["units"] == {k: UNITS[k] for k in [*SI]}
     assert resp.params["dt"] == run.dt and resp.params["speed"] == run.speed
-    back = Run.from_timeresponse(resp)
+    back = from_timeresponse(resp)
     for k in SI:
         np.testing.assert_array_equal(back[k], run[k])
     np.testing.assert_array_equal(back.t, run.t)
@@ -128,7 +130,7 @@ def test_a_python_control_simulation_is_identified_to_round_off():
     u = np.repeat(np.random.default_rng(0).uniform(-1, 1, 300), 4)[: 1000]
     t = np.arange(u.size) * DT
     resp = control.forced_response(sysd, T=t, U=u)
-    run = Run.from_timeresponse(resp, speed=5.0)
+    run = from_timeresponse(resp, speed=5.0)
     assert run.dt == pytest.approx(DT) and run.speed == 5.0
     np.testing.assert_array_equal(run["delta"], np.asarray(resp.outputs)[1])
     res = METHODS["pem"].fit(run)
@@ -149,7 +151,7 @@ def test_timeresponse_of_several_traces_is_refused():
                                      output_labels=resp.output_labels, issiso=False,
                                      multi_trace=True)  # fmt: skip
     with pytest.raises(ValueError, match="single-trace"):
-        Run.from_timeresponse(resp2, speed=5.0)
+        from_timeresponse(resp2, speed=5.0)
 
 
 @settings(max_examples=20, deadline=None)
@@ -162,6 +164,6 @@ def test_any_declared_unit_and_sign_gives_the_same_si_run(unit, flip, ms):
               "delta": SI["delta"], "deltadot": SI["deltadot"], "T_delta": SI["T_delta"],
               "v": SI["v"]}  # fmt: skip
     units = {"phi": unit, "phidot": f"{unit}/s", **({"t": "ms"} if ms else {})}
-    run = Run.from_arrays(T * (1000.0 if ms else 1.0), arrays, None, units,
+    run = from_arrays(T * (1000.0 if ms else 1.0), arrays, None, units,
                           flip=["phi", "phidot"] if flip else [])  # fmt: skip
     _check_si(run)
