@@ -204,6 +204,23 @@ def test_three_riders_on_one_bicycle():
     assert set(mh.RIDERS) == set(mh.RIDER_SCALES) == {"B", "L", "H"}
 
 
+def test_multiplier_sentence_flips_with_the_multipliers():
+    """The Figs. 4-5 stability sentence is computed from the multipliers: the energy
+    multiplier (nearest 1) is left out; orbits whose others are all inside the unit circle
+    are called attracting only when every orbit's are; a falling run is not counted."""
+    from bikeid.experiments.papers.report import multiplier_sentence
+
+    inside = {"outcome": "periodic", "floquet_multipliers": [[1.0, 0.0], [-0.19, 0.0], [0.06, 0]]}
+    outside = {"outcome": "periodic", "floquet_multipliers": [[1.0, 1e-7], [1.3, 0.0], [0.1, 0]]}
+    fell = {"outcome": "falls", "floquet_multipliers": None}
+    t = multiplier_sentence([inside, inside, fell])
+    assert t.startswith("2 of the 2 periodic orbits") and "attracting limit cycle" in t
+    assert "largest modulus 0.19" in t
+    t = multiplier_sentence([inside, outside])
+    assert t.startswith("1 of the 2") and "unstable" in t and "attracting" not in t
+    assert multiplier_sentence([fell]) == "No periodic orbit has multipliers."
+
+
 def test_family_sentence_and_lowest_periodic_follow_the_data():
     """The Figs. 4-5 sentence names the turning orbits as not about upright only when they
     are turning, and counts symmetric ones; the v_l row's lowest periodic speed is the
