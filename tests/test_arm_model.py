@@ -280,3 +280,35 @@ def test_generated_code_matches_fresh_derivation():
     spec.loader.exec_module(mod)
     assert tuple(mod.BODY) == tuple(gen.BODY) and tuple(mod.ARM) == tuple(gen.ARM)
     assert mod.check(mod.derive()) <= 1e-9
+
+
+# -- the reproduction's use ------------------------------------------------------------------
+def test_reproduction_states_the_finding_computed_both_ways():
+    from bikeid.experiments.papers.moore_hubbard import arm_model_summary
+    from bikeid.experiments.papers.report import arm_model_verdict
+
+    s = arm_model_summary()
+    assert s["reproduces_dissertation"] and s["stable_ranges"] == []
+    assert "reproduces the dissertation's finding" in arm_model_verdict(s)
+    assert "arm model none" in arm_model_verdict(s)
+    # the Whipple model's own summary flips every part of the verdict
+    whipple = stability_summary(canonical_matrices(benchmark()))
+    keys = ("stable_ranges", "real_unstable_everywhere", "oscillatory_stable_everywhere")
+    flipped = dict(s, **{k: whipple[k] for k in keys})
+    text = arm_model_verdict(flipped)
+    assert "does not reproduce" in text
+    assert "4.29-6.02 m/s" in text
+    assert "stable speed range" in text and "no real mode is unstable" in text
+    assert "oscillatory mode is unstable" in text
+
+
+def test_reproduction_arm_model_is_the_riders_arm_model():
+    from bikeid.experiments.papers import moore_hubbard as mh
+
+    for rider in mh.RIDERS:
+        cm, H = mh._model_matrices(rider, mh.ARM)
+        arms = ArmParameters().scaled(mh.RIDER_SCALES[rider])
+        _assert_same(cm, arm_model_matrices(mh.rider_parameters(rider), arms))
+        np.testing.assert_array_equal(H, mh._model_matrices(rider, None)[1])
+    with pytest.raises(ValueError, match="unknown model"):
+        mh._model_matrices("B", "Arms")

@@ -57,6 +57,7 @@ from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.methods import DIRECT_PRESETS
 from bikeid.ident.signals import prepare
 from bikeid.ident.validate import windowed_simulation_vaf
+from bikeid.sim.arm_model import ArmParameters, arm_model_matrices, stability_summary
 from bikeid.sim.effects import SteerCoulomb, SteerDamping
 from bikeid.sim.linear import (
     CanonicalMatrices,
@@ -76,6 +77,8 @@ __all__ = [
     "SUBSETS",
     "fit_subset",
     "make_runs",
+    "ARM",
+    "arm_model_summary",
     "reproduce",
     "rider_parameters",
     "row_vaf",
@@ -318,8 +321,29 @@ def row_vaf(runs: Sequence, model: dict[str, float] | None) -> dict[str, float]:
     return out
 
 
-def _model_matrices(rider: str, model: dict[str, float] | None):
-    """CanonicalMatrices and H of ``model``'s free entries over the rider's Whipple values."""
+#: Table 4's name of the arm model (:mod:`bikeid.sim.arm_model`) among the models.
+ARM = "Arm"
+
+
+@functools.cache
+def _arm_matrices(rider: str) -> CanonicalMatrices:
+    """The rider's arm model: the default arms (72 kg rider, ``sim.arm_model``) with mass and
+    inertia scaled like the rider's (:data:`RIDER_SCALES`), taken out of the rear body and
+    added back as moving segments."""
+
+    arms = ArmParameters().scaled(RIDER_SCALES[rider])
+    return arm_model_matrices(rider_parameters(rider), arms)
+
+
+def _model_matrices(rider: str, model: dict[str, float] | str | None):
+    """CanonicalMatrices and H of ``model``'s free entries over the rider's Whipple values
+    (``model`` = :data:`ARM`: the rider's arm model, with the Whipple model's H: the push acts
+    on the rear frame, whose kinematics the arms do not change)."""
+
+    if isinstance(model, str):
+        if model != ARM:
+            raise ValueError(f"unknown model {model!r}: a dict of free entries, None or {ARM!r}")
+        return _arm_matrices(rider), _model_matrices(rider, None)[1]
 
     vals = dict(_whipple_values(rider))
     if model is not None:
@@ -333,7 +357,7 @@ def _model_matrices(rider: str, model: dict[str, float] | None):
     return CanonicalMatrices(g=vals["g"], **mats), np.array([vals["HpF"], vals["HdF"]])
 
 
-def table4_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
+def table4_vaf(run, model: dict[str, float] | str | None, window: float = SIM_WINDOW):
     """Table 4's entries: eq.-6 VAF of phi, delta, phidot, deltadot for a windowed
     simulation driven by T_delta and F (module doc).
 
@@ -341,8 +365,9 @@ def table4_vaf(run, model: dict[str, float] | None, window: float = SIM_WINDOW):
     ----------
     run : Run
         A run of :func:`make_runs`.
-    model : dict of str to float or None
-        Free-entry values, or None for the run's rider's Whipple model.
+    model : dict of str to float, str or None
+        Free-entry values, None for the run's rider's Whipple model, or :data:`ARM` for the
+        rider's arm model.
     window : float, optional
         Window length [s]; the initial state of each window is fitted by least squares.
 
@@ -400,8 +425,9 @@ def reproduce(
         ``fell`` (runs whose bicycle fell), ``models`` (subset -> free entries),
         ``table2_roll_vaf`` and ``table3_steer_vaf`` (data subset -> model -> eq.-6 VAF),
         ``table4_simulation_vaf`` (model -> median VAF per state and their mean),
-        ``table5`` (M, C1, K0, K2, H of B-N, B-S, A-A and the benchmark Whipple model),
-        ``figures`` (file names) and ``sim_window`` [s].
+        ``table5`` (M, C1, K0, K2, H of B-N, B-S, A-A, the benchmark Whipple model and the
+        benchmark rider's arm model), ``figures`` (file names), ``sim_window`` [s] and
+        ``arm_model`` (:func:`arm_model_summary`).  Table 4 has a row :data:`ARM`.
     """
     runs = make_runs(speeds, duration, workers, dask)
     fell = [
@@ -427,8 +453,9 @@ def reproduce(
             table3[data_name][mname] = vaf["steer"]
     log("  Tables 2-3 (equation VAF) done")
     table4 = {}
-    for mname in cols:
-        per = [table4_vaf(r, None if mname == "Whipple" else models[mname]) for r in runs]
+    for mname in (*cols, ARM):
+        spec = {"Whipple": None, ARM: ARM}[mname] if mname in ("Whipple", ARM) else models[mname]
+        per = [table4_vaf(r, spec) for r in runs]
         med = {k: float(np.median([p[k] for p in per])) for k in per[0]}
         med["mean"] = float(np.mean(list(med.values())))
         table4[mname] = med
@@ -439,6 +466,9 @@ def reproduce(
         table5[mname] = {"M": cm.M, "C1": cm.C1, "K0": cm.K0, "K2": cm.K2, "H": H}
     cmw, Hw = _model_matrices("B", None)
     table5["Whipple (benchmark)"] = {"M": cmw.M, "C1": cmw.C1, "K0": cmw.K0, "K2": cmw.K2, "H": Hw}
+    cma, Ha = _model_matrices("B", ARM)
+    table5["Arm model (benchmark)"] = {"M": cma.M, "C1": cma.C1, "K0": cma.K0, "K2": cma.K2,
+                                       "H": Ha}  # fmt: skip
     figs = _figures(out, {k: _model_matrices("B", models[k])[0] for k in ("B-N", "B-S")})
     return {
         "riders": RIDERS,
@@ -454,6 +484,44 @@ def reproduce(
         "table5": table5,
         "figures": figs,
         "sim_window": SIM_WINDOW,
+        "arm_model": arm_model_summary(),
+    }
+
+
+def arm_model_summary(rider: str = "B", vmax: float = 10.0) -> dict[str, Any]:
+    """Stability of the rider's arm model and Whipple model from 0.01 to ``vmax`` m/s.
+
+    Parameters
+    ----------
+    rider : str, optional
+        A key of :data:`RIDERS`. Default the benchmark rider.
+    vmax : float, optional
+        Highest speed [m/s] (the paper's figures reach 10 m/s).
+
+    Returns
+    -------
+    dict
+        ``stable_ranges`` and ``whipple_stable_ranges``: lists of [low, high] [m/s] where
+        every eigenvalue has a negative real part; ``real_unstable_everywhere``,
+        ``oscillatory_stable_everywhere`` (:func:`bikeid.sim.arm_model.stability_summary`);
+        ``reproduces_dissertation``: True if the arm model has no stable speed range, a real
+        mode unstable at every speed and a stable oscillatory mode (Moore's dissertation);
+        ``arms_mass`` [kg]; ``vmax`` [m/s].
+    """
+    arm = stability_summary(_arm_matrices(rider), vmax=vmax)
+    whipple = stability_summary(_model_matrices(rider, None)[0], vmax=vmax)
+    return {
+        "stable_ranges": arm["stable_ranges"],
+        "real_unstable_everywhere": arm["real_unstable_everywhere"],
+        "oscillatory_stable_everywhere": arm["oscillatory_stable_everywhere"],
+        "whipple_stable_ranges": whipple["stable_ranges"],
+        "reproduces_dissertation": bool(
+            not arm["stable_ranges"]
+            and arm["real_unstable_everywhere"]
+            and arm["oscillatory_stable_everywhere"]
+        ),
+        "arms_mass": ArmParameters().scaled(RIDER_SCALES[rider]).mass,
+        "vmax": vmax,
     }
 
 
@@ -494,6 +562,8 @@ def _figures(out: Path, models: dict[str, Any]) -> list[str]:
     for name, ev in ident.items():
         c, ls = styles[name]
         curves[f"identified {name}"] = (c, ls, ev)
+    arm_ev = eigenvalues_vs_speed(_arm_matrices("B"), speeds).values
+    curves["arm model (benchmark rider)"] = ("tab:green", "-.", arm_ev)
     # Fig. 2: root locus
     fig, ax = plt.subplots(figsize=(7.5, 6))
     for name, (c, ls, ev) in curves.items():
@@ -511,7 +581,8 @@ def _figures(out: Path, models: dict[str, Any]) -> list[str]:
     ax.set_ylabel("imaginary part [rad/s]")
     ax.set_title(
         "Moore & Hubbard Fig. 2 analogue: root locus 0.5-10 m/s, benchmark rider\n"
-        "(solid: truth of each environment, dashed: identified; dots at 2, 4, 6, 9 m/s)",
+        "(solid: truth of each environment, dashed: identified, dash-dot: arm model; "
+        "dots at 2, 4, 6, 9 m/s)",
         fontsize=9,
     )
     ax.grid(alpha=0.3)
@@ -547,10 +618,12 @@ def _figures(out: Path, models: dict[str, Any]) -> list[str]:
     shown = w >= 0.1
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     colors = dict(zip(BODE_SPEEDS, ("tab:blue", "tab:orange", "tab:green", "tab:red"), strict=True))
-    for name, ls in (("truth N", "-"), ("truth S", ":"), ("B-S", "--")):
+    for name, ls in (("truth N", "-"), ("truth S", ":"), ("B-S", "--"), ("arm model", "-.")):
         for v in BODE_SPEEDS:
             if name == "B-S":
                 sys = state_space(models["B-S"], v, inputs=("T_delta",))[0, 0]
+            elif name == "arm model":
+                sys = state_space(_arm_matrices("B"), v, inputs=("T_delta",))[0, 0]
             else:
                 sys = _truth_tf(name[-1], v)
             resp = control.frequency_response(sys, w).complex.ravel()
@@ -563,7 +636,7 @@ def _figures(out: Path, models: dict[str, Any]) -> list[str]:
     a1.legend(fontsize=6, ncol=3)
     a1.set_title(
         "Moore & Hubbard Fig. 4 analogue: steer torque to roll angle (solid: truth N = "
-        "Whipple, dotted: truth S, dashed: identified B-S)",
+        "Whipple, dotted: truth S, dashed: identified B-S, dash-dot: arm model)",
         fontsize=9,
     )
     for a in (a1, a2):
