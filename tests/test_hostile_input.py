@@ -564,3 +564,32 @@ def test_messages_name_fixes_this_cli_can_apply(library, cli):
                ._actions for o in a.option_strings}  # fmt: skip
     for opt in {w.strip("().,;") for w in text.split() if w.startswith(("--", "(--"))}:
         assert opt in options, opt
+
+
+def test_decay_window_roll_rate_checked_against_this_bicycles_toppling_rate():
+    """The toppling rate is sqrt(2 m g h / I) (tests/test_plausibility.py's derivation):
+    below the point-mass bound sqrt(2 g / h) and far above a real decay's (< 1.5 rad/s).
+    A 15 rad/s glitch (inside the generic 20 rad/s bound, 2.9 x the steer-by-wire
+    bicycle's 5.24 rad/s) in one decay window is refused naming file and row; the same
+    windows without it pass."""
+    import dataclasses
+    import math
+
+    from bikeid.experiments.cli.measured import check_decay_rates, toppling_rate
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
+    from bikeid.sim.parameters import steer_by_wire
+
+    p = steer_by_wire()
+    omega = toppling_rate(p)
+    d = p.as_dict()
+    masses = [(d["mR"], -d["rR"]), (d["mF"], -d["rF"]), (d["mB"], d["zB"]), (d["mH"], d["zH"])]
+    h = -sum(m * z for m, z in masses) / sum(m for m, _ in masses)
+    assert 1.5 < omega <= math.sqrt(2 * d["g"] / h)
+    ws = synthetic_windows(ExperimentModel(), [2.5], per_speed=2, seed=1)
+    check_decay_rates(ws, p)  # clean decays pass
+    bad = ws[1].phidot.copy()
+    bad[40:43] = 15.0
+    ws[1] = dataclasses.replace(ws[1], phidot=bad)
+    with pytest.raises(InputError, match=rf"row {ws[1].start + 40} .*roll rate 15 rad/s"):
+        check_decay_rates(ws, p)

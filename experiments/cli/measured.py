@@ -645,8 +645,9 @@ def _law(args: argparse.Namespace, sbw: bool) -> tuple[str | None, float, float]
 def toppling_rate(p) -> float:
     """The roll rate [rad/s] at which bicycle ``p``, rigid with the steer locked, reaches the
     ground falling from upright: m g h = I w^2 / 2, I = sum(I_xx + m z^2) about the contact
-    line (the derivation of ``sim.conventions.PLAUSIBLE["phidot"]``; 4.8 rad/s for the
-    benchmark, 5.9 rad/s for the steer-by-wire bicycle).
+    line (the derivation of ``sim.conventions.PLAUSIBLE["phidot"]``): 4.43 rad/s for the
+    benchmark, 5.24 rad/s for the steer-by-wire bicycle (below the point-mass bound
+    sqrt(2 g / h) the conventions quote, 4.8 and 5.9 rad/s).
 
     Parameters
     ----------
@@ -671,8 +672,8 @@ def check_decay_rates(windows: list, p) -> None:
     """Refuse a decay window whose roll rate exceeds bicycle ``p``'s toppling rate.
 
     A free decay after a push of a few degrees never approaches the rate of a fall from
-    upright to the ground (the steer-by-wire logs stay below 1.5 rad/s, a quarter of its
-    5.9 rad/s), so a larger value is a glitch even inside the generic 20 rad/s bound.
+    upright to the ground (the steer-by-wire logs stay below 1.5 rad/s, under a third of its
+    5.24 rad/s), so a larger value is a glitch even inside the generic 20 rad/s bound.
 
     Parameters
     ----------
