@@ -1,6 +1,6 @@
 """Derive the linearized arm model (Whipple bicycle + the rider's arms) and emit plain code.
 
-Run ``python scripts/derive_arms.py`` (well under a minute) to regenerate
+Run ``python scripts/derive_arms.py`` (one to three minutes) to regenerate
 ``sim/_arms_generated.py``; ``--check`` compares a fresh derivation with the committed
 file numerically instead of writing it.
 
