@@ -145,8 +145,9 @@ def test_randomized_trials_name_library_effects_and_flag_outside_ones():
     at 5 % alone (``correction="none"``: Student t with the 3 degrees of freedom of the 4
     fit-half windows, t > 3.18, the level nearest the former t > 3).  The default rule
     (Bonferroni over the 37 tests of two rounds: t > 10.2 at 3 degrees of freedom) names 16
-    of these 18 library effects and misses two (a 0.24 N m friction and a 0.59 N m/rad steer
-    spring: t 3.7 and 6.1, no effect named, error not halved), which
+    of these 18 library effects and misses two (a 0.24 N m friction, whose first-round
+    look-alikes reach t 3.7-5.4, and a 0.59 N m/rad steer spring, t 6.1: no effect named,
+    error not halved), which
     :func:`test_default_rule_misses_are_unnamed_not_wrong` holds; docs/measured-log.md,
     "Selection with stated error rates".
     """
