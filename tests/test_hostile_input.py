@@ -593,3 +593,25 @@ def test_decay_window_roll_rate_checked_against_this_bicycles_toppling_rate():
     ws[1] = dataclasses.replace(ws[1], phidot=bad)
     with pytest.raises(InputError, match=rf"row {ws[1].start + 40} .*roll rate 15 rad/s"):
         check_decay_rates(ws, p)
+
+
+def test_a_fit_that_explains_nothing_is_refused(work):
+    """Both ways: pure noise (N(0, s) in every column, seeded) through pem and greybox has a
+    best one-step prediction fit of about 0 % (below MIN_FIT_PERCENT = 5 %): status 4, no
+    model file; the 2 s closed-loop run prints its fit-quality figure (80-100 %) and passes."""
+    rng = np.random.default_rng(0)
+    n = 1000
+    data = np.column_stack([np.arange(n) * 0.01] + [rng.normal(0, s, n)
+                                                    for s in (0.01, 0.01, 0.1, 0.1, 1.0)])
+    np.savetxt(work / "noise.csv", data, delimiter=",", header="t,phi,delta,phidot,deltadot,"
+               "T_delta", comments="")  # fmt: skip
+    cols = "phi=phi,delta=delta,phidot=phidot,deltadot=deltadot,T_delta=T_delta"
+    for method in (["pem"], ["greybox", "--bicycle", "benchmark", "--drop-unidentifiable"]):
+        _refused(["identify", "noise.csv", "--format", "csv", "--columns", cols, "--speed",
+                  "5", "--method", *method, "--out", "m2.json"], work, status=4,
+                 words="explains none of the data")  # fmt: skip
+        assert not (work / "m2.json").exists()
+    rc, out, err = _run(["identify", "runs.h5", "--method", "pem", "--quiet"], work)
+    assert rc == 0, err
+    line = next(ln for ln in out.splitlines() if ln.startswith("one-step prediction fit"))
+    assert min(float(x.split()[-1]) for x in line.split(": ", 1)[1].split(", ")) > 50, line
