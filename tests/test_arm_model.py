@@ -12,6 +12,8 @@
   from (the arms are part of its rear body): checks :func:`remove_arms`.
 - The closed-form arm kinematics against a numerical solution of the constraint equations
   (hands on the grips, elbow axis perpendicular to b3) by finite differences.
+- The whole linear model against sympy's nonlinear KanesMethod of the Whipple bicycle plus
+  bodies with the segments' kinematics, linearized numerically (no early linearization).
 - The stability verdict on both known cases: the Whipple benchmark has its published stable
   range (Meijaard 2007: 4.292-6.024 m/s); the arm model has none (the dissertation's
   finding), with a real mode unstable at every speed.
@@ -312,3 +314,141 @@ def test_reproduction_arm_model_is_the_riders_arm_model():
         np.testing.assert_array_equal(H, mh._model_matrices(rider, None)[1])
     with pytest.raises(ValueError, match="unknown model"):
         mh._model_matrices("B", "Arms")
+
+
+# -- an independent nonlinear reference ------------------------------------------------------
+def _nonlinear_state_matrix(p, bodies, h: float = 1e-6):
+    """A function of speed v returning A of [phi, delta, phidot, deltadot] from sympy's
+    KanesMethod applied to
+    the nonlinear Whipple bicycle (numerical parameters) plus extra rigid bodies, linearized
+    by central differences of the accelerations (pitch from the holonomic constraint, the
+    dependent speeds from the velocity constraints, u6 = -v/rR held).
+
+    Each body is a body vector (:func:`segment_bodies` layout): its mass centre follows the
+    polynomial p0 + pd q7 + pdd q7^2/2 + pt (q5 - lam) in C, its frame is C rotated by
+    |w| q7 about w/|w| (so its angular velocity relative to C is w q7'), its inertia about
+    the mass centre is the given one in that frame.  The linear equations depend on nothing
+    else (the generated derivation's claim), so this tests it with sympy's own nonlinear
+    machinery: holonomic and nonholonomic constraints eliminated by KanesMethod, no early
+    linearization.
+    """
+    import sympy as sm
+    import sympy.physics.mechanics as me
+    from scipy.optimize import brentq
+
+    mo = p.to_moore()
+    P = {k: sm.Float(val) for k, val in mo.items()}
+    t = me.dynamicsymbols._t
+    q3, q4, q5, q6, q7, q8 = me.dynamicsymbols("q3:9")
+    u3, u4, u5, u6, u7, u8 = me.dynamicsymbols("u3:9")
+    N = me.ReferenceFrame("N")
+    A = N.orientnew("A", "Axis", (q3, N.z))
+    B = A.orientnew("B", "Axis", (q4, A.x))
+    C = B.orientnew("C", "Axis", (q5, B.y))
+    D = C.orientnew("D", "Axis", (q6, C.y))
+    E = C.orientnew("E", "Axis", (q7, C.z))
+    Fw = E.orientnew("F", "Axis", (q8, E.y))
+    for fr, ref, u, ax in ((A, N, u3, N.z), (B, A, u4, A.x), (C, B, u5, B.y), (D, C, u6, C.y),
+                           (E, C, u7, C.z), (Fw, E, u8, E.y)):  # fmt: skip
+        fr.set_ang_vel(ref, u * ax)
+    dn = me.Point("dn")
+    dn.set_vel(N, 0)
+    do = dn.locatenew("do", -P["rr"] * B.z)
+    co = do.locatenew("co", P["l1"] * C.x + P["l2"] * C.z)
+    ce = do.locatenew("ce", P["d1"] * C.x)
+    fo = ce.locatenew("fo", P["d2"] * E.z + P["d3"] * E.x)
+    eo = fo.locatenew("eo", P["l3"] * E.x + P["l4"] * E.z)
+    down = me.cross(E.y, me.cross(A.z, E.y))
+    fn = fo.locatenew("fn", P["rf"] * down / sm.sqrt(down.dot(down)))
+    for pt_, ref, fr in ((do, dn, D), (co, do, C), (ce, do, C), (fo, ce, E), (eo, fo, E),
+                         (fn, fo, Fw)):  # fmt: skip
+        pt_.v2pt_theory(ref, N, fr)
+    rb = [
+        me.RigidBody("C", co, C, P["mc"],
+                     (me.inertia(C, P["ic11"], P["ic22"], P["ic33"], 0, 0, P["ic31"]), co)),
+        me.RigidBody("D", do, D, P["md"], (me.inertia(C, P["id11"], P["id22"], P["id11"]), do)),
+        me.RigidBody("E", eo, E, P["me"],
+                     (me.inertia(E, P["ie11"], P["ie22"], P["ie33"], 0, 0, P["ie31"]), eo)),
+        me.RigidBody("F", fo, Fw, P["mf"], (me.inertia(E, P["if11"], P["if22"], P["if11"]), fo)),
+    ]  # fmt: skip
+    for k, b in enumerate(bodies):
+        b = np.asarray(b, float)
+        pos = [b[7 + i] + b[10 + i] * q7 + b[13 + i] * q7**2 / 2 + b[16 + i] * (q5 - p.lam)
+               for i in range(3)]  # fmt: skip
+        w = b[19:22]
+        s = float(np.linalg.norm(w))
+        axis = w / s if s > 0 else np.array([0.0, 0.0, 1.0])
+        K = C.orientnew(f"K{k}", "Axis", (s * q7, axis[0] * C.x + axis[1] * C.y + axis[2] * C.z))
+        xo = do.locatenew(f"x{k}", pos[0] * C.x + pos[1] * C.y + pos[2] * C.z)
+        xo.set_vel(N, do.vel(N) + xo.pos_from(do).dt(N))
+        inertia = me.inertia(K, b[1], b[2], b[3], b[4], b[5], b[6])
+        rb.append(me.RigidBody(f"X{k}", xo, K, b[0], (inertia, xo)))
+    loads = [(r.masscenter, r.mass * P["g"] * A.z) for r in rb]
+    qd = (q3, q4, q5, q6, q7, q8)
+    kd = [qi.diff(t) - ui for qi, ui in zip(qd, (u3, u4, u5, u6, u7, u8), strict=True)]
+    hol = fn.pos_from(dn).dot(A.z)
+    vfn = fn.vel(N)
+    nh = [vfn.dot(A.x), vfn.dot(A.y), vfn.dot(A.z)]
+    kane = me.KanesMethod(
+        N, q_ind=[q3, q4, q6, q7, q8], u_ind=[u4, u6, u7], kd_eqs=kd, q_dependent=[q5],
+        configuration_constraints=[hol], u_dependent=[u3, u5, u8], velocity_constraints=nh,
+        constraint_solver="CRAMER",
+    )  # fmt: skip
+    kane.kanes_equations(rb, loads)
+    qs, us = sm.symbols("q4 q5 q7"), sm.symbols("u4 u6 u7 u3 u5 u8")
+    sub = dict(zip((q4, q5, q7), qs, strict=True))
+    sub.update(zip((u4, u6, u7, u3, u5, u8), us, strict=True))
+    nhm = sm.Matrix(nh).xreplace(sub)
+    f_mf = sm.lambdify((qs, us), [kane.mass_matrix.xreplace(sub), kane.forcing.xreplace(sub)],
+                       cse=True)  # fmt: skip
+    f_vc = sm.lambdify((qs,), [nhm.jacobian(us[3:]), nhm.jacobian(us[:3])], cse=True)
+    f_h = sm.lambdify((qs,), hol.xreplace(sub))
+
+    def accel(x, v):
+        phi, delta, phid, deltad = x
+        q5v = brentq(lambda s: f_h((phi, s, delta)), p.lam - 0.3, p.lam + 0.3, xtol=1e-15)
+        qv = (phi, q5v, delta)
+        Ad, Ai = (np.array(a, float) for a in f_vc(qv))
+        ui = np.array([phid, -v / p.rR, deltad])
+        ud = -np.linalg.solve(Ad, Ai @ ui)
+        M, f = (np.array(a, float) for a in f_mf(qv, (*ui, *ud)))
+        acc = np.linalg.solve(M, f.ravel())
+        return np.array([acc[0], acc[2]])
+
+    def state_matrix(v):
+        out = np.zeros((4, 4))
+        out[0, 2] = out[1, 3] = 1.0
+        for j in range(4):
+            e = np.zeros(4)
+            e[j] = h
+            out[2:, j] = (accel(e, v) - accel(-e, v)) / (2 * h)
+        assert np.max(np.abs(accel(np.zeros(4), v))) < 1e-9  # upright straight running: steady
+        return out
+
+    return state_matrix
+
+
+@pytest.mark.slow
+def test_nonlinear_kane_reference_with_the_arm_segments():
+    """The arm model's A matrix (arms added to the given bicycle) against sympy's nonlinear
+    KanesMethod with the four segments' kinematics, at 2 and 6 m/s.  Tolerance: central
+    differences with h = 1e-6 leave round-off ~1e-16 * |accel| / h ~ 1e-9 (observed 1e-10);
+    we allow 1e-7 relative to the largest entry.  The Whipple model alone differs by O(1),
+    so the check sees the arms."""
+    from bikeid.sim.linear import state_matrices
+
+    p = benchmark()
+    arms = ArmParameters()
+    cm = arm_model_matrices(p, arms, arms_in_rear_body=False)
+    reference = _nonlinear_state_matrix(p, segment_bodies(p, arms))
+    for v in (2.0, 6.0):
+        ref = reference(v)
+        mine = state_matrices(cm, v)[0]
+        np.testing.assert_allclose(mine, ref, rtol=0, atol=1e-7 * np.max(np.abs(ref)))
+        assert np.max(np.abs(state_matrices(canonical_matrices(p), v)[0] - ref)) > 0.1
+    # and it sees the segments' own rotation: the same arms without it are off by far more
+    bodies = segment_bodies(p, arms)
+    for b in bodies:
+        b[19:22] = 0.0
+    no_spin = _plus(canonical_matrices(p), _sum(p, bodies))
+    assert np.max(np.abs(state_matrices(no_spin, 6.0)[0] - ref)) > 1e3 * 1e-7 * np.max(np.abs(ref))
