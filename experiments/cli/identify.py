@@ -814,7 +814,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 #: Least one-step prediction fit [%] (100 (1 - ||y - yhat|| / ||y - mean y||)) the best
 #: output must reach at every speed: a model of pure noise scores 0-1 %, the testbed's runs
-#: 80-96 %, the steer-by-wire logs 77-99.8 % (per output, docs/robustness.md).
+#: 80-96 %, five steer-by-wire logs fitted alone 77-99.8 % (per output, docs/robustness.md).
 MIN_FIT_PERCENT = 5.0
 
 
