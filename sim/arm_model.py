@@ -130,7 +130,7 @@ class ArmParameters:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise InputError(f"arm parameter {f.name!r} must be a real number, got {value!r}")
             if not math.isfinite(float(value)):
                 raise InputError(f"arm parameter {f.name!r} is {value}: it must be finite")
@@ -409,6 +409,11 @@ def stability_summary(
         ``oscillatory_stable_everywhere``: True if every complex eigenvalue at every grid
         speed has a negative real part; ``max_real``: the largest real part at each grid
         speed [1/s]; ``speeds`` [m/s].
+
+    Raises
+    ------
+    InputError
+        If not 0 < ``step`` < ``vmax``.
     """
     if not (vmax > step > 0):
         raise InputError("stability_summary needs 0 < step < vmax [m/s]")
