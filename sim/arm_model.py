@@ -130,7 +130,8 @@ class ArmParameters:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+            real = (int, float, np.integer, np.floating)
+            if isinstance(value, bool) or not isinstance(value, real):
                 raise InputError(f"arm parameter {f.name!r} must be a real number, got {value!r}")
             if not math.isfinite(float(value)):
                 raise InputError(f"arm parameter {f.name!r} is {value}: it must be finite")
