@@ -11,6 +11,14 @@ Three PNG figures, written atomically (:func:`bikeid.experiments.plots.save`):
   its 95 % band (when the model has a parameter covariance; calibrated on the linear plant
   only) under the nonparametric estimate and its error bars at the frequencies the
   coherence allows, and the coherence itself.
+
+Angles and angular rates are drawn in degrees, or in radians when the user's logs were
+(``angle``, :func:`bikeid.experiments.plots.angle_unit` of the runs); the Bode phases of
+the model, its band and the estimate lie on one 360-degree branch
+(:func:`bikeid.experiments.plots.phase_deg`, :func:`~bikeid.experiments.plots.points_on_branch`).
+Every figure uses matplotlib's constrained layout and wraps long titles, so no text is
+clipped and no labels of neighbouring axes overlap
+(:func:`bikeid.experiments.plots.layout_problems`).
 """
 
 from __future__ import annotations
@@ -19,19 +27,29 @@ from pathlib import Path
 
 import numpy as np
 
-from bikeid.experiments.plots import plt, save
+from bikeid.experiments.plots import (
+    display_scale,
+    phase_deg,
+    plt,
+    points_on_branch,
+    save,
+    wrap_title,
+)
 from bikeid.ident.validation_report import ValidationReport
 
 __all__ = ["plot_bode", "plot_compare", "plot_resid", "write_figures"]
 
-UNIT = {"phi": "rad", "delta": "rad", "phidot": "rad/s", "deltadot": "rad/s"}
+#: Characters of a 9-point title per inch of axes width (wrapping width).
+CHARS_PER_INCH = 12
 
 
 def _pct(x: float | None) -> str:
     return "n/a" if x is None or not np.isfinite(x) else f"{x:.1f} %"
 
 
-def plot_compare(report: ValidationReport, path: str | Path, run: int = 0) -> Path:
+def plot_compare(
+    report: ValidationReport, path: str | Path, run: int = 0, angle: str = "deg"
+) -> Path:
     """Measured vs simulated vs k-step-predicted outputs of one run.
 
     Parameters
@@ -42,6 +60,8 @@ def plot_compare(report: ValidationReport, path: str | Path, run: int = 0) -> Pa
         PNG file to write.
     run : int, optional
         Index of the run to show.
+    angle : {"deg", "rad"}, optional
+        Unit of angles and angular rates on the plot (default degrees).
 
     Returns
     -------
@@ -49,26 +69,28 @@ def plot_compare(report: ValidationReport, path: str | Path, run: int = 0) -> Pa
         ``path``.
     """
     p = len(report.outputs)
-    fig, axes = plt.subplots(p, 1, figsize=(8, 2.2 * p + 0.6), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(p, 1, figsize=(8, 2.2 * p + 0.6), sharex=True, squeeze=False,
+                             layout="constrained")  # fmt: skip
     t = report.t[run]
     fits = report.fit_per_run[run]
     for j, o in enumerate(report.outputs):
         ax = axes[j, 0]
-        ax.plot(t, report.measured[run][:, j], color="0.2", lw=0.8, label="measured")
+        c, unit = display_scale(o, angle)
+        ax.plot(t, c * report.measured[run][:, j], color="0.2", lw=0.8, label="measured")
         if report.simulation is not None:
-            ax.plot(t, report.simulation.yhat[run][:, j], color="tab:blue", lw=0.9,
+            ax.plot(t, c * report.simulation.yhat[run][:, j], color="tab:blue", lw=0.9,
                     label=f"simulated (fit {_pct(fits['simulation'][o])})")  # fmt: skip
         kfit = _pct(fits["k_step"][o])
-        ax.plot(t, report.prediction.yhat[run][:, j], color="tab:orange", lw=0.9, ls="--",
+        ax.plot(t, c * report.prediction.yhat[run][:, j], color="tab:orange", lw=0.9, ls="--",
                 label=f"{report.k_step}-step predicted (fit {kfit})")  # fmt: skip
-        ax.set_ylabel(f"{o} [{UNIT.get(o, '-')}]")
+        ax.set_ylabel(f"{o} [{unit}]")
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("time [s]")
     title = f"compare: {report.runs[run]} (v = {report.speeds[run]:g} m/s)"
     if report.simulation is None:
-        title += "\n" + report.simulation_note[:110]
-    axes[0, 0].set_title(title, fontsize=9)
+        title += "\n" + report.simulation_note
+    axes[0, 0].set_title(wrap_title(title, 8 * CHARS_PER_INCH), fontsize=9)
     return save(fig, path)
 
 
@@ -92,27 +114,37 @@ def plot_resid(report: ValidationReport, path: str | Path) -> Path:
     fig, axes = plt.subplots(p, 2, figsize=(9, 2.4 * p + 0.6), squeeze=False,
                              layout="constrained")  # fmt: skip
     m = int(rr.lags[-1])
+    width = int(4.0 * CHARS_PER_INCH * 9 / 8)  # a column of ~4 in at 8 pt
     for j, o in enumerate(report.outputs):
         a, c = axes[j, 0], axes[j, 1]
         w, ind = rr.whiteness_test[o], rr.independence_test[o]
         a.stem(np.arange(1, m + 1), rr.autocorr[o][1:], basefmt=" ")  # lag 0 is 1
-        a.set_title(f"{o} residual: whiteness {'passed' if w['passed'] else 'FAILED'} "
-                    f"(p = {w['p_value']:.2g}, lags 1..{m})", fontsize=8)  # fmt: skip
+        a.set_title(wrap_title(f"{o} residual: whiteness {'passed' if w['passed'] else 'FAILED'} "
+                               f"(p = {w['p_value']:.2g}, lags 1..{m})", width),
+                    fontsize=8)  # fmt: skip
         c.stem(rr.lags, rr.crosscorr[o], basefmt=" ")
-        c.set_title(f"{o} vs {rr.input}: independence {'passed' if ind['passed'] else 'FAILED'} "
-                    f"(p = {ind['p_value']:.2g}, lags 1..{m})", fontsize=8)  # fmt: skip
+        c.set_title(wrap_title(f"{o} vs {rr.input}: independence "
+                               f"{'passed' if ind['passed'] else 'FAILED'} "
+                               f"(p = {ind['p_value']:.2g}, lags 1..{m})", width),
+                    fontsize=8)  # fmt: skip
         for ax in (a, c):
             ax.axhspan(-rr.band, rr.band, color="tab:blue", alpha=0.15, lw=0)
             ax.axhline(0, color="k", lw=0.5)
             ax.grid(alpha=0.3)
         a.set_ylabel("correlation [-]")
     axes[-1, 0].set_xlabel("lag [samples]")
-    axes[-1, 1].set_xlabel(f"lag [samples] (residual at k vs {rr.input} at k - lag)")
+    axes[-1, 1].set_xlabel(wrap_title(f"lag [samples] (residual at k vs {rr.input} at k - lag)",
+                                      width))  # fmt: skip
     return save(fig, path)
 
 
-def plot_bode(report: ValidationReport, path: str | Path) -> Path:
+def plot_bode(report: ValidationReport, path: str | Path, angle: str = "deg") -> Path:
     """Model Bode plots with the nonparametric estimate where the coherence allows.
+
+    The model curve's phase is unwrapped and put on the branch whose lowest-frequency value
+    lies in (-270, 90] deg (:func:`bikeid.experiments.plots.phase_deg`); its band and the
+    estimate's points are drawn on that same branch (each point within 180 deg of the
+    curve at its frequency).
 
     Parameters
     ----------
@@ -120,6 +152,9 @@ def plot_bode(report: ValidationReport, path: str | Path) -> Path:
         The validation.
     path : str or Path
         PNG file to write.
+    angle : {"deg", "rad"}, optional
+        Unit of the outputs' angles and rates in the magnitude (default degrees); phases
+        are always in degrees.
 
     Returns
     -------
@@ -128,34 +163,38 @@ def plot_bode(report: ValidationReport, path: str | Path) -> Path:
     """
     ests = report.frequency_responses
     fig, axes = plt.subplots(3, len(ests), figsize=(4.2 * len(ests), 7.5), squeeze=False,
-                             sharex="col", gridspec_kw={"height_ratios": [3, 2, 1.3]})  # fmt: skip
+                             sharex="col", gridspec_kw={"height_ratios": [3, 2, 1.3]},
+                             layout="constrained")  # fmt: skip
+    width = int(4.0 * CHARS_PER_INCH)
     for k, e in enumerate(ests):
         mag, ph, co = axes[0, k], axes[1, k], axes[2, k]
-        curve_ph = np.unwrap(np.angle(e.model_curve))
-        mag.loglog(e.model_f, np.abs(e.model_curve), color="tab:blue", label="model (sampled)")
-        ph.semilogx(e.model_f, np.degrees(curve_ph), color="tab:blue")
+        scale, unit = display_scale(e.output, angle)
+        curve = scale * np.abs(e.model_curve)
+        curve_ph = phase_deg(e.model_curve)
+        mag.loglog(e.model_f, curve, color="tab:blue", label="model (sampled)")
+        ph.semilogx(e.model_f, curve_ph, color="tab:blue")
         if e.curve_band_db.size:  # the model's 95 % band, under the estimate
             k_db = 10.0 ** (e.curve_band_db / 20.0)
-            mag.fill_between(e.model_f, np.abs(e.model_curve) / k_db,
-                             np.abs(e.model_curve) * k_db, color="tab:blue", alpha=0.2, lw=0,
+            mag.fill_between(e.model_f, curve / k_db, curve * k_db, color="tab:blue",
+                             alpha=0.2, lw=0,
                              label="model 95 % band (linear-plant calibrated)")  # fmt: skip
-            ph.fill_between(e.model_f, np.degrees(curve_ph) - e.curve_band_deg,
-                            np.degrees(curve_ph) + e.curve_band_deg, color="tab:blue",
+            ph.fill_between(e.model_f, curve_ph - e.curve_band_deg,
+                            curve_ph + e.curve_band_deg, color="tab:blue",
                             alpha=0.2, lw=0)  # fmt: skip
         v = e.valid
         if v.any():
-            err = e.rel_error[v] * np.abs(e.H[v])
+            err = scale * e.rel_error[v] * np.abs(e.H[v])
             inside = e.in_band
             where = "" if inside is None else (
                 f", {int(inside.sum())}/{int(v.sum())} in band, "
                 f"{int(e.consistent.sum())} with own error")  # fmt: skip
-            mag.errorbar(e.f[v], np.abs(e.H[v]), yerr=err, fmt="o", ms=3, color="tab:red",
-                         lw=0.8, label=f"estimate ({e.reference}{where})")  # fmt: skip
-            # phase of the estimate on the model curve's branch (same unwrapping offset)
-            d = np.angle(e.H[v] / e.model[v])
-            model_ph = np.interp(e.f[v], e.model_f, curve_ph)
-            ph.errorbar(e.f[v], np.degrees(model_ph + d), yerr=np.degrees(e.rel_error[v]),
-                        fmt="o", ms=3, color="tab:red", lw=0.8)  # fmt: skip
+            mag.errorbar(e.f[v], scale * np.abs(e.H[v]), yerr=err, fmt="o", ms=3,
+                         color="tab:red", lw=0.8,
+                         label=f"estimate ({e.reference}{where})")  # fmt: skip
+            # each point of the estimate on the model curve's branch
+            ph.errorbar(e.f[v], points_on_branch(e.f[v], e.H[v], e.model_f, curve_ph),
+                        yerr=np.degrees(e.rel_error[v]), fmt="o", ms=3, color="tab:red",
+                        lw=0.8)  # fmt: skip
         else:
             mag.text(0.5, 0.5, "not enough excitation", transform=mag.transAxes,
                      ha="center", color="tab:red")  # fmt: skip
@@ -163,8 +202,9 @@ def plot_bode(report: ValidationReport, path: str | Path) -> Path:
             co.semilogx(e.f, e.coherence, color="0.3")
         co.axhline(e.coherence_min, color="tab:red", ls="--", lw=0.8)
         co.set_ylim(0, 1.05)
-        mag.set_title(f"{e.input} -> {e.output}, v = {e.speed:g} m/s", fontsize=9)
-        mag.set_ylabel(f"|H| [{UNIT.get(e.output, '-')}/(N m)]")
+        mag.set_title(wrap_title(f"{e.input} -> {e.output}, v = {e.speed:g} m/s", width),
+                      fontsize=9)  # fmt: skip
+        mag.set_ylabel(f"|H| [{unit}/(N m)]")
         ph.set_ylabel("phase [deg]")
         co.set_ylabel("coherence [-]")
         co.set_xlabel("frequency [Hz]")
@@ -174,7 +214,9 @@ def plot_bode(report: ValidationReport, path: str | Path) -> Path:
     return save(fig, path)
 
 
-def write_figures(report: ValidationReport, out: str | Path, max_runs: int = 6) -> list[Path]:
+def write_figures(
+    report: ValidationReport, out: str | Path, max_runs: int = 6, angle: str = "deg"
+) -> list[Path]:
     """Write compare (one per run, at most ``max_runs``), resid and Bode figures.
 
     Parameters
@@ -185,6 +227,9 @@ def write_figures(report: ValidationReport, out: str | Path, max_runs: int = 6) 
         Folder (created if missing).
     max_runs : int, optional
         At most this many compare figures (the first runs).
+    angle : {"deg", "rad"}, optional
+        Unit of angles and angular rates on the figures: degrees (default, bikeid's
+        convention) or the user's radians (:func:`bikeid.experiments.plots.angle_unit`).
 
     Returns
     -------
@@ -192,8 +237,8 @@ def write_figures(report: ValidationReport, out: str | Path, max_runs: int = 6) 
         The files written: ``compare_1.png``..., ``resid.png``, ``bode.png``.
     """
     out = Path(out)
-    paths = [plot_compare(report, out / f"compare_{i + 1}.png", i)
+    paths = [plot_compare(report, out / f"compare_{i + 1}.png", i, angle)
              for i in range(min(len(report.runs), max_runs))]  # fmt: skip
     paths.append(plot_resid(report, out / "resid.png"))
-    paths.append(plot_bode(report, out / "bode.png"))
+    paths.append(plot_bode(report, out / "bode.png", angle))
     return paths

@@ -68,8 +68,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="pem: one model over all speeds (odd a's = alpha + beta v^2, even a's = gamma v)",
     )
     p.add_argument(
-        "--bicycle", help="fixed-entry values for direct/greybox (default: the runs' meta)"
-    )
+        "--bicycle", help="fixed-entry values for direct/greybox, and the nominal bicycle of "
+        "--plot (default: the runs' meta)"
+    )  # fmt: skip
     p.add_argument("--iv", action="store_true", help="direct: instrumental variables (lagged)")
     p.add_argument(
         "--derivative", choices=("interval", "central", "forward", "backward"),
@@ -94,6 +95,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="save the identified model (ident.model_file: parameters, covariance, data file "
         "hashes, settings; any --method); per-speed pem over several speeds writes "
         "MODEL-v<speed>.json",
+    )  # fmt: skip
+    p.add_argument(
+        "--plot", default=None, metavar="FILE.png",
+        help="draw the identified eigenvalues with their 95 %% intervals against the nominal "
+        "bicycle's (--bicycle, else the runs' bicycle, else benchmark) in the complex plane "
+        "and, for several speeds or a model over speed, against speed",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON (no progress lines)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -715,7 +722,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
     data_files = _data_files(args)  # no output may be an input; no data file counted twice
     if args.out:
         check_output_path(args.out)  # a folder or link at --out: named as such first
-    check_outputs([args.out], [*data_files, args.bicycle])
+    if args.plot is not None and not str(args.plot).lower().endswith(".png"):
+        raise ValueError(f"--plot {args.plot}: give a file name ending in .png")
+    check_outputs([args.out, args.plot], [*data_files, args.bicycle])
     check_distinct_inputs(data_files)
     method, run_settings = _method_settings(args)  # ident.methods.METHODS; options checked
     say = stage_lines("identify", json_output=args.json, quiet=args.quiet)
@@ -779,6 +788,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
         for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
             row["eigenvalue_intervals"] = ei
     out["per_speed"] = per_speed
+    if args.plot is not None:
+        from bikeid.experiments.plots import plot_identified_eigenvalues
+
+        name, nominal = _nominal(args, runs, truth)
+        out["plot"] = str(plot_identified_eigenvalues(
+            per_speed, nominal, args.plot, nominal_label=name, speed_model=speed_model,
+            title=f"{', '.join(map(str, args.file))}: method {args.method}"))  # fmt: skip
+        say(f"wrote {out['plot']}")
     if truth is not None and args.method == "pem" and args.speed_parameterized:
         from bikeid.sim.linear import critical_speeds
 
@@ -796,6 +813,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(line)
     for f in out["model_files"]:
         print(f"model saved to {f}")
+    if "plot" in out:
+        print(f"eigenvalue figure saved to {out['plot']}")
     for row in per_speed:
         fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["eigenvalues"])
         print(f"v={row['speed']:6.2f}  identified {fmt}")
@@ -872,6 +891,21 @@ def _reference(args: argparse.Namespace, runs: list, truth):
     if reference is None:
         raise ValueError("runs carry no parameters: give --bicycle for the fixed entries")
     return reference
+
+
+def _nominal(args: argparse.Namespace, runs: list, truth) -> tuple:
+    """Name and parameters of the nominal bicycle of --plot: --bicycle, the runs' simulated
+    bicycle, the logs' bicycle name, else the benchmark bicycle."""
+    from bikeid.sim.parameters import benchmark, by_name
+
+    if args.bicycle:
+        return args.bicycle, by_name(args.bicycle)
+    if truth is not None:
+        return "the runs' simulated bicycle", truth
+    name = runs[0].meta.get("bicycle")
+    if isinstance(name, str):
+        return name, by_name(name)
+    return "benchmark", benchmark()
 
 
 def _detail_lines(out: dict) -> list[str]:

@@ -276,9 +276,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
             doc["notes"] = [*doc.get("notes", []), note]
         written = []
         if out is not None:
+            from bikeid.experiments.plots import angle_unit
             from bikeid.experiments.validation_plots import write_figures
 
-            written = write_figures(report, out)
+            # angles in the user's unit: degrees unless their logs were in radians
+            written = write_figures(report, out, angle=angle_unit(runs))
             atomic_write_text(out / "validation.json", dump_json(doc) + "\n")
             written.append(out / "validation.json")
     if args.json:
