@@ -440,7 +440,9 @@ def test_duplicate_inputs_refused(work):
     """The same file twice, or a copy (equal SHA-256), would count twice: refused (3)."""
     shutil.copy(work / "runs.h5", work / "copy.h5")
     for argv in (["identify", "runs.h5", "runs.h5"], ["identify", "runs.h5", "copy.h5"],
-                 ["validate", "--model", "m.json", "runs.h5", "./runs.h5"]):  # fmt: skip
+                 ["validate", "--model", "m.json", "runs.h5", "./runs.h5"],
+                 ["measured", "fit", "run.csv", "./run.csv", "--format", "csv", "--columns",
+                  COLUMNS, "--bicycle", "benchmark", "--out", "f.json"]):  # fmt: skip
         _refused(argv, work, words="give each data file once")
     check_distinct_inputs([work / "runs.h5", work / "run.csv"])  # different data: fine
 

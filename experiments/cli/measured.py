@@ -741,6 +741,7 @@ def load_log_decays(
     from pathlib import Path
 
     from bikeid.dataset.decays import decays_from_runs, steer_by_wire_logs
+    from bikeid.dataset.files import check_distinct_inputs
     from bikeid.dataset.sbw_logs import DT, SPEED_CALIBRATION, data_dir, find_logs
     from bikeid.ident.effects.experiment_model import ExperimentModel
     from bikeid.sim.parameters import by_name, steer_by_wire
@@ -761,6 +762,7 @@ def load_log_decays(
             if f.is_dir() and not found:
                 raise InputError(f"{f} holds no steer-by-wire eigen logs (eigen*.log[.gz])")
             paths += found
+        check_distinct_inputs(paths)  # a log given twice would count its decays twice
         runs, listed = steer_by_wire_logs(paths, args.decays)
         read = [str(p) for p in paths] + sorted(
             {str(p.parent / "segments.csv") for p in paths
@@ -777,6 +779,7 @@ def load_log_decays(
                              "delta, phidot, deltadot, T_delta (and v, or --speed)")  # fmt: skip
         from bikeid.experiments.cli.identify import load_runs
 
+        check_distinct_inputs(files)  # a log given twice would count its decays twice
         runs, listed, read = load_runs(args), {}, files
         dts = [r.dt for r in runs]
         dt = sorted(dts)[len(dts) // 2]
