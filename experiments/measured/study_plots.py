@@ -19,7 +19,7 @@ import numpy as np
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.experiments.cli.args import atomic_write_text, dump_json
 from bikeid.experiments.measured.study import MODEL_ORDER, Z_SIGNIFICANT
-from bikeid.experiments.plots import save
+from bikeid.experiments.plots import display_scale, phases_on_one_branch, points_on_branch, save
 from bikeid.ident.direct import parse_entry
 from bikeid.sim.linear import canonical_matrices
 from bikeid.sim.parameters import steer_by_wire
@@ -312,7 +312,7 @@ def _speed_models(study: dict) -> dict:
 
 def _eigen_figure(study: dict, path: Path) -> Path:
     v = np.linspace(0.5, 6.0, 111)
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.5))
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.5), layout="constrained")
     for i, (name, m) in enumerate(_speed_models(study).items()):
         lam = np.array([np.linalg.eigvals(m.ab(x)[0]) for x in v])
         col = f"C{i}"
@@ -347,26 +347,29 @@ def _eigen_figure(study: dict, path: Path) -> Path:
 
 
 def _bode_figure(frf: dict, path: Path) -> Path:
+    """Models' and measured Bode plots (degrees; phases on the first model curve's branch)."""
     outs = list(frf["outputs"])
-    fig, ax = plt.subplots(2, len(outs), figsize=(6 * len(outs), 6), squeeze=False)
+    fig, ax = plt.subplots(2, len(outs), figsize=(6 * len(outs), 6), squeeze=False,
+                           layout="constrained")  # fmt: skip
     for j, o in enumerate(outs):
-        for i, (n, m) in enumerate(frf["models"].items()):
-            if o not in m:
-                continue
-            H = np.asarray(m[o])
-            ax[0, j].loglog(m["f"], np.abs(H), color=f"C{i}", label=n)
-            ph = np.degrees(np.unwrap(np.angle(H)))
-            ph -= 360.0 * np.round(
-                ph[np.argmin(np.abs(m["f"] - 2.0))] / 360.0
-            )  # near 2 Hz in +-180
+        scale, unit = display_scale(o)  # bikeid's own logs: degrees in plots
+        drawn = [(i, n, m) for i, (n, m) in enumerate(frf["models"].items()) if o in m]
+        # every model curve on the first one's branch (they agree at the lowest frequency)
+        phases = phases_on_one_branch([(m["f"], np.asarray(m[o])) for _, _, m in drawn])
+        for (i, n, m), ph in zip(drawn, phases, strict=True):
+            ax[0, j].loglog(m["f"], scale * np.abs(np.asarray(m[o])), color=f"C{i}", label=n)
             ax[1, j].semilogx(m["f"], ph, color=f"C{i}")
         e = frf["outputs"][o]
         if len(e["f"]):
             H = np.asarray(e["H"])
-            ax[0, j].errorbar(e["f"], np.abs(H), yerr=np.abs(H) * np.asarray(e["rel_error"]),
+            ax[0, j].errorbar(e["f"], scale * np.abs(H),
+                              yerr=scale * np.abs(H) * np.asarray(e["rel_error"]),
                               fmt="ko", ms=3, label="measured (Bode runs)")  # fmt: skip
-            ax[1, j].plot(e["f"], np.degrees(np.angle(H)), "ko", ms=3)
-        ax[0, j].set(title=f"T_delta -> {o} at {frf['speed']:g} m/s", ylabel="|H|")
+            ph_e = (points_on_branch(e["f"], H, drawn[0][2]["f"], phases[0]) if drawn
+                    else np.degrees(np.angle(H)))  # fmt: skip
+            ax[1, j].plot(e["f"], ph_e, "ko", ms=3)
+        ax[0, j].set(title=f"T_delta -> {o} at {frf['speed']:g} m/s",
+                     ylabel=f"|H| [{unit}/(N m)]")  # fmt: skip
         ax[1, j].set(xlabel="frequency [Hz]", ylabel="phase [deg]")
     ax[0, 0].legend(fontsize=6)
     return save(fig, path)

@@ -16,7 +16,7 @@ import numpy as np
 from bikeid.experiments.papers import chen_dao as cd
 from bikeid.experiments.papers import limit_cycles as lc
 from bikeid.experiments.parallel import map_jobs
-from bikeid.experiments.plots import MODE_STYLE, plt, save
+from bikeid.experiments.plots import MODE_STYLE, plt, save, wrap_title
 from bikeid.sim.linear import critical_speeds, eigenvalues, eigenvalues_vs_speed
 from bikeid.sim.parameters import BicycleParameters
 
@@ -198,10 +198,10 @@ def fig3(
         a1.set_ylabel("real part [1/s]")
         a2.set_ylabel("|imag part| [rad/s]")
         a2.set_xlabel(
-            "speed v [m/s]   (grey dashed: true v_d, v_w, v_c; magenta dotted: identified; "
+            "speed v [m/s]\n(grey dashed: true v_d, v_w, v_c; magenta dotted: identified; "
             "orange dash-dot: the paper's)"
         )
-        a1.set_title(title, fontsize=9)
+        a1.set_title(wrap_title(title, 100), fontsize=9)  # 9 in wide: ~100 characters
         a1.legend(fontsize=6, loc="lower left", ncol=2)
 
     fig, axs = plt.subplots(2, 1, figsize=(9, 7.5), sharex=True)

@@ -635,7 +635,7 @@ def _figures(out: Path, models: dict[str, Any]) -> list[str]:
     a2.set_xlabel("frequency [rad/s]")
     a1.legend(fontsize=6, ncol=3)
     a1.set_title(
-        "Moore & Hubbard Fig. 4 analogue: steer torque to roll angle (solid: truth N = "
+        "Moore & Hubbard Fig. 4 analogue: steer torque to roll angle\n(solid: truth N = "
         "Whipple, dotted: truth S, dashed: identified B-S, dash-dot: arm model)",
         fontsize=9,
     )
