@@ -114,7 +114,7 @@ def plot_resid(report: ValidationReport, path: str | Path) -> Path:
     fig, axes = plt.subplots(p, 2, figsize=(9, 2.4 * p + 0.6), squeeze=False,
                              layout="constrained")  # fmt: skip
     m = int(rr.lags[-1])
-    width = int(4.0 * CHARS_PER_INCH * 9 / 8)  # a column of ~4 in at 8 pt
+    width = 64  # characters of an 8-point title over a column of ~4.2 in
     for j, o in enumerate(report.outputs):
         a, c = axes[j, 0], axes[j, 1]
         w, ind = rr.whiteness_test[o], rr.independence_test[o]

@@ -18,7 +18,7 @@ from bikeid.dataset.decays import load_decays
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir, find_logs, load_log
 from bikeid.dataset.windows import bode_window
 from bikeid.experiments.cli.args import atomic_write_text, dump_json
-from bikeid.experiments.plots import save
+from bikeid.experiments.plots import phases_on_one_branch, points_on_branch, save
 from bikeid.ident.effects.before_after import verdict_text
 from bikeid.ident.effects.experiment_model import ExperimentModel, with_nonlinear_correction
 from bikeid.ident.effects.pipeline import DEFAULT_PLANT, evaluate_json, fit_model, model_from_json
@@ -135,25 +135,26 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
 
     # 1. decay overlays: first window of each speed
     firsts = [next(w for w in allw if round(w.speed, 1) == s) for s in speeds]
-    fig, axes = plt.subplots(2, len(firsts), figsize=(3.2 * len(firsts), 5), squeeze=False)
+    fig, axes = plt.subplots(2, len(firsts), figsize=(3.2 * len(firsts), 5), squeeze=False,
+                             layout="constrained")  # fmt: skip
     nonlinear = obj.get("plant", DEFAULT_PLANT) == "nonlinear"  # as measured fit
     firsts = [replace(w, correction=None) for w in firsts]
     s0 = nom.simulate(with_nonlinear_correction(firsts, nom) if nonlinear else firsts)
     s1 = aug.simulate(with_nonlinear_correction(firsts, aug) if nonlinear else firsts)
     for j, w in enumerate(firsts):
         t = np.arange(w.n) * 0.01
-        for i, (c, lab) in enumerate((("phidot", "roll rate [rad/s]"), ("delta", "steer [rad]"))):
-            ax = axes[i, j]
-            ax.plot(t, getattr(w, c), "k", lw=1.2, label="measured")
-            ax.plot(t, s0[j][c], "tab:red", ls="--", label="nominal")
-            ax.plot(t, s1[j][c], "tab:blue", label="augmented")
+        for i, (c, lab) in enumerate((("phidot", "roll rate [deg/s]"), ("delta", "steer [deg]"))):
+            ax = axes[i, j]  # bikeid's own logs: degrees in plots
+            ax.plot(t, np.degrees(getattr(w, c)), "k", lw=1.2, label="measured")
+            ax.plot(t, np.degrees(s0[j][c]), "tab:red", ls="--", label="nominal")
+            ax.plot(t, np.degrees(s1[j][c]), "tab:blue", label="augmented")
             ax.set_ylabel(lab) if j == 0 else None
             ax.set_title(f"{w.speed:.2f} m/s") if i == 0 else ax.set_xlabel("t [s]")
     axes[0, 0].legend(fontsize=7)
     save(fig, out / "decays.png")
 
     # 2. weave eigenvalue against speed
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(6, 6), sharex=True)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(6, 6), sharex=True, layout="constrained")
     vv = np.linspace(min(w.speed for w in allw) - 0.2, max(w.speed for w in allw) + 0.2, 40)
     a_cal, b_cal = SPEED_CALIBRATION
     vsens = a_cal * vv + b_cal
@@ -183,16 +184,20 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
     if pts:
         vs = float(np.median([p["v_sensor"] for p in pts]))
         ff = np.linspace(0.8, 3.2, 100)
-        fig, axes = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
+        fig, axes = plt.subplots(2, 2, figsize=(9, 6), sharex=True, layout="constrained")
         for j, c in enumerate(("phidot", "delta")):
-            for mdl, col, lab in ((nom, "tab:red", "nominal"), (aug, "tab:blue", "augmented")):
-                H = mdl.frequency_response(vs, ff)[:, j]
+            curves = [(mdl, col, lab, mdl.frequency_response(vs, ff)[:, j])
+                      for mdl, col, lab in ((nom, "tab:red", "nominal"),
+                                            (aug, "tab:blue", "augmented"))]  # fmt: skip
+            # both models' phases on one branch, the measured points on the nominal's
+            phases = phases_on_one_branch([(ff, H) for *_, H in curves])
+            for (_, col, lab, H), ph in zip(curves, phases, strict=True):
                 axes[0, j].plot(ff, 20 * np.log10(np.abs(H)), col, label=lab)
-                axes[1, j].plot(ff, np.degrees(np.unwrap(np.angle(H))), col)
+                axes[1, j].plot(ff, ph, col)
             fm = np.array([p["freq"] for p in pts])
             Hm = np.array([p[c] for p in pts])
             axes[0, j].plot(fm, 20 * np.log10(np.abs(Hm)), "ko", ms=4, label="measured")
-            axes[1, j].plot(fm, np.degrees(np.angle(Hm)), "ko", ms=4)
+            axes[1, j].plot(fm, points_on_branch(fm, Hm, ff, phases[0]), "ko", ms=4)
             axes[0, j].set_title(f"T_ext -> {c}")
             axes[1, j].set_xlabel("frequency [Hz]")
         axes[0, 0].set_ylabel("gain [dB]")
