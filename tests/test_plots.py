@@ -322,3 +322,32 @@ def test_identify_plot_draws_intervals_against_the_nominal(tmp_path, monkeypatch
         np.testing.assert_allclose(ends, printed, atol=1e-9)
     rc, _, err = _cli(["identify", "r4.csv", *LOGGER, "--plot", "eig.pdf"], tmp_path)
     assert rc == 3 and "--plot eig.pdf: give a file name ending in .png" in err
+
+
+def test_validate_draws_in_the_users_unit(run, captured, tmp_path):
+    """``bikeid validate`` on the same ride logged in radians (no unit declared) and in
+    degrees (declared): the compare figure's roll axis is in the log's unit, and the drawn
+    values are the logged ones (to the CSV's 12 significant digits)."""
+    from bikeid.ident.canonical import theta_from_matrices
+    from bikeid.ident.model_file import save_model
+    from bikeid.ident.pem import CanonicalModel
+    from bikeid.sim.linear import canonical_matrices
+
+    theta = theta_from_matrices(canonical_matrices(P), 5.0)
+    model = CanonicalModel(theta=theta, covariance=np.diag((0.05 * theta) ** 2),
+                           K=np.zeros((4, 4)), dt=run.dt, speed=5.0, noise_covariance=np.eye(4),
+                           outputs=("phi", "delta", "phidot", "deltadot"))  # fmt: skip
+    save_model(model, tmp_path / "m.json")
+    cols = ",".join(f"{k}={v}" for k, v in COLS.items())
+    units = ",".join(f"{k}={v}" for k, v in DEG_UNITS.items())
+    for name, degrees, extra in (("rad", False, []), ("deg", True, ["--units", units])):
+        _csv(tmp_path / f"{name}.csv", run, degrees)
+        captured.clear()
+        rc, _, err = _cli(["validate", "--model", "m.json", f"{name}.csv", "--format", "csv",
+                           "--columns", cols, *extra, "--out", f"val_{name}"],
+                          tmp_path)  # fmt: skip
+        assert rc == 0, err
+        ax = captured["compare_1.png"].axes[0]
+        assert ax.get_ylabel() == f"phi [{name}]"
+        logged = np.loadtxt(tmp_path / f"{name}.csv", delimiter=",", skiprows=1)[:, 1]
+        np.testing.assert_allclose(ax.lines[0].get_ydata(), logged, rtol=1e-10, atol=1e-15)
