@@ -74,12 +74,24 @@ __all__ = [
     "eigenvalue_intervals",
     "eigenvalue_jacobian",
     "monte_carlo",
+    "PREDICTOR_BOUNDARY_TOL",
+    "check_predictor_interior",
+    "predictor_radius",
     "profile_interval",
     "z_value",
 ]
 
 #: Step [m/s] of the central difference dh/dv in :func:`critical_speed_intervals`.
 SPEED_STEP = 1e-4
+
+#: A fixed-speed PEM fit whose one-step predictor Ad - K C has spectral radius above
+#: 1 - PREDICTOR_BOUNDARY_TOL ended on the stability boundary the fit keeps its predictor
+#: inside (:func:`predictor_radius`).  Measured on the default path (benchmark, nonlinear
+#: plant, roll PID, 5 m/s, 1 N m dither, 20 seeds each of 30, 60, 90 and 120 s): the fits
+#: stopped there have 1 - radius of 1e-10 to 1e-8, the others 1.4e-3 and more (the slowest
+#: plant pole, exp(-0.32 dt) at K = 0, is 1 - 3.2e-3); 1e-4 lies between the two groups by
+#: more than an order of magnitude each side (docs/uncertainty.md).
+PREDICTOR_BOUNDARY_TOL = 1e-4
 
 #: Interval methods: the quadratic-likelihood profile (default) and the first-order one
 #: (not the identification methods, which are :data:`bikeid.ident.methods.METHODS`).
@@ -318,6 +330,11 @@ class EigenIntervals:
     modes : tuple of str
         Mode name of each eigenvalue (``weave``, ``capsize``, ``caster``, or ``""``;
         :func:`bikeid.ident.linear_model.mode_names`).
+    predictor_radius : float or None
+        Spectral radius of the fit's one-step predictor Ad - K C (:func:`predictor_radius`;
+        None for a speed-parameterized model).  Above 1 - :data:`PREDICTOR_BOUNDARY_TOL`
+        the fit ended on the predictor's stability boundary and the intervals are not to be
+        trusted (:attr:`at_predictor_boundary`).
     """
 
     speed: float
@@ -332,6 +349,14 @@ class EigenIntervals:
     imag_bounds: np.ndarray | None = None
     converged: np.ndarray | None = None
     modes: tuple[str, ...] = ()
+    predictor_radius: float | None = None
+
+    @property
+    def at_predictor_boundary(self) -> bool:
+        """bool: the fit ended on its predictor's stability boundary (no trustworthy
+        interval; :func:`check_predictor_interior`)."""
+        r = self.predictor_radius
+        return r is not None and r > 1.0 - PREDICTOR_BOUNDARY_TOL
 
     @property
     def z(self) -> float:
@@ -416,8 +441,77 @@ class EigenIntervals:
                           "method": self.method, "eigenvalues": rows})  # fmt: skip
 
 
+def predictor_radius(model) -> float | None:
+    """Spectral radius of the one-step predictor Ad - K C of a fixed-speed PEM fit.
+
+    A prediction-error fit keeps Ad - K C stable (radius < 1: a trial step beyond is
+    rejected).  A fit that needs a radius at 1 to lower its cost further stops *on* that
+    boundary: its estimate is not a stationary point of the cost, so the covariance from
+    the cost's curvature, and every interval built on it, describes nothing.  This happens
+    when the free innovation gain K tries to model noise the loop does not have (the
+    default testbed loop has no process noise: its optimal K is 0) and the record is short.
+
+    Parameters
+    ----------
+    model : ident.pem.CanonicalModel
+        A fixed-speed fit with ``theta``, ``K`` (4 x L), ``dt`` [s] and ``outputs``.
+
+    Returns
+    -------
+    float or None
+        max |eig(Ad - K C)| (dimensionless, per sample); None for a model without an
+        innovation gain (e.g. a speed-parameterized model).
+    """
+    from bikeid.ident.predictor import discretize, output_matrix
+
+    K, theta = getattr(model, "K", None), getattr(model, "theta", None)
+    if K is None or theta is None or callable(theta) or not hasattr(model, "outputs"):
+        return None
+    C, _ = output_matrix(model.outputs)
+    Ad, _ = discretize(np.asarray(theta, float), float(model.dt))
+    return float(np.max(np.abs(np.linalg.eigvals(Ad - np.asarray(K, float) @ C))))
+
+
+def check_predictor_interior(model) -> float | None:
+    """Refuse intervals from a fit that ended on its predictor's stability boundary.
+
+    Parameters
+    ----------
+    model : ident.pem.CanonicalModel
+        A fixed-speed fit (a model without an innovation gain passes unchecked).
+
+    Returns
+    -------
+    float or None
+        The predictor's spectral radius (:func:`predictor_radius`).
+
+    Raises
+    ------
+    UntrustworthyResult
+        If the radius exceeds 1 - :data:`PREDICTOR_BOUNDARY_TOL`; the message names the
+        fixes measured on the default path (output-error fit, a record about 4x longer).
+    """
+    from bikeid.sim.errors import UntrustworthyResult
+
+    rho = predictor_radius(model)
+    if rho is not None and rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
+        raise UntrustworthyResult(
+            f"the fit ended on the stability boundary of its one-step predictor (spectral "
+            f"radius of Ad - K C = 1 - {max(1.0 - rho, 0.0):.1e}, above 1 - "
+            f"{PREDICTOR_BOUNDARY_TOL:g}): its covariance is not the curvature of an optimum "
+            "and its intervals miss the truth; refit with noise_model='none' if the loop has "
+            "no process noise, or record about 4x longer (default path at 5 m/s: 30 s fits "
+            "end there in 19 of 20 seeds, 120 s fits in 1)"
+        )
+    return rho
+
+
 def eigenvalue_intervals(
-    model, v: float | None = None, level: float = 0.95, method: str = "profile"
+    model,
+    v: float | None = None,
+    level: float = 0.95,
+    method: str = "profile",
+    refuse_boundary: bool = False,
 ) -> EigenIntervals:
     """Confidence intervals on the eigenvalues of a fitted model.
 
@@ -435,6 +529,10 @@ def eigenvalue_intervals(
         parameters' confidence ellipsoid (:func:`profile_interval`; the mode is followed
         by :func:`bikeid.sim.linear.match_eigenvalues`), which holds its coverage where an
         eigenvalue is curved in the parameters; ``"delta"``: value -+ z std.
+    refuse_boundary : bool, optional
+        Raise instead of returning intervals when a fixed-speed fit ended on its
+        predictor's stability boundary (:func:`check_predictor_interior`); default False:
+        the radius is recorded (``predictor_radius``, ``at_predictor_boundary``).
 
     Returns
     -------
@@ -448,10 +546,14 @@ def eigenvalue_intervals(
     InputError
         If the model has no usable covariance, ``v`` is missing or inconsistent,
         ``level`` is not in (0, 1) or ``method`` is unknown.
+    UntrustworthyResult
+        With ``refuse_boundary=True``, if the fit ended on its predictor's stability
+        boundary.
     """
     z_value(level)
     _check_method(method)
     p, cov, S, speed = _parameters(model, v)
+    rho = check_predictor_interior(model) if refuse_boundary else predictor_radius(model)
     lam, jac, cond = eigenvalue_jacobian(S @ p)
     Jp = jac @ S  # d lambda / d p
     J = np.vstack([Jp.real, Jp.imag])
@@ -460,7 +562,8 @@ def eigenvalue_intervals(
     matrices = model.canonical_matrices() if hasattr(model, "per_speed") else None
     ei = EigenIntervals(speed=speed, level=level, values=lam, std_real=sd[:4],
                         std_imag=sd[4:], covariance=C, condition=cond,
-                        modes=mode_names(lam, matrices, speed))  # fmt: skip
+                        modes=mode_names(lam, matrices, speed),
+                        predictor_radius=rho)  # fmt: skip
     if method == "delta":
         return ei
     bounds = np.empty((2, 4, 2))

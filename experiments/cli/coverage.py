@@ -17,7 +17,7 @@ def _level(text: str) -> float:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from bikeid.experiments.testbed.coverage import DEFAULTS
+    from bikeid.experiments.testbed.coverage import DEFAULT_PATH, DEFAULTS
 
     p = sub.add_parser(
         "coverage",
@@ -41,8 +41,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"run length [s] (default {DEFAULTS['duration']:g})",
     )  # fmt: skip
     p.add_argument(
-        "--dither", type=number(0.0, 50.0, lo_open=True, unit="N m"),
-        default=DEFAULTS["dither"], help=f"dither amplitude [N m] (default {DEFAULTS['dither']:g})",
+        "--dither", type=number(0.0, 50.0, lo_open=True, unit="N m"), default=None,
+        help=f"dither amplitude [N m] (default {DEFAULTS['dither']:g}; "
+        f"{DEFAULT_PATH['dither']:g} with --plant)",
+    )  # fmt: skip
+    p.add_argument(
+        "--plant", choices=("nonlinear", "linear"), default=None,
+        help="instead: the README's default path (closed_loop.simulate_run on this plant, "
+        "roll PID, uniform dither, no disturbance, pem.fit, eigenvalue_intervals), counting "
+        "the caster, weave and capsize intervals over all fits and apart for the fits that "
+        "end on the predictor's stability boundary (refused by "
+        "ident.uncertainty.check_predictor_interior); --controller is then ignored",
+    )  # fmt: skip
+    p.add_argument(
+        "--noise-model", choices=("free", "none"), default="free",
+        help="with --plant: pem.fit's noise model (default free; none = output error)",
+    )  # fmt: skip
+    p.add_argument(
+        "--restart", action="store_true",
+        help="with --plant: also fit from the true parameters and count lower optima",
     )  # fmt: skip
     p.add_argument("--controller", choices=("pid", "pole"), default="pid")
     p.add_argument(
@@ -72,8 +89,33 @@ def cmd_coverage(args: argparse.Namespace) -> int:
     import os
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from bikeid.experiments.testbed.coverage import run_coverage, run_critical_coverage, table_text
+    from bikeid.experiments.testbed import coverage as cov
 
+    run_coverage, run_critical_coverage, table_text = (
+        cov.run_coverage, cov.run_critical_coverage, cov.table_text)  # fmt: skip
+    if args.plant is not None and not args.critical:
+        if args.covariance_scale != 1.0:
+            raise ValueError("--covariance-scale is not used with --plant; drop one of them")
+        res = cov.run_default_path_coverage(
+            args.seeds, duration=args.duration, plant=args.plant, speed=args.speed,
+            dither=cov.DEFAULT_PATH["dither"] if args.dither is None else args.dither,
+            noise_model=args.noise_model, restart=args.restart, level=args.level,
+            workers=args.workers, dask=args.dask,
+        )  # fmt: skip
+        if len(res["rows"]) < 2:
+            why = (
+                f" (seed {res['failed'][0]['seed']}: {res['failed'][0]['error']})"
+                if res["failed"]
+                else ""
+            )
+            raise ValueError(
+                f"only {len(res['rows'])} of {args.seeds} fits succeeded{why}; "
+                "give the fits more information (longer --duration)"
+            )
+        print(dump_json(res) if args.json else cov.default_path_table(res), file=sys.stdout)
+        return 0
+    if args.dither is None:
+        args.dither = cov.DEFAULTS["dither"]
     if args.critical:
         result = run_critical_coverage(
             args.seeds, duration=args.duration, dither=args.dither, level=args.level,

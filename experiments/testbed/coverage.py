@@ -49,11 +49,16 @@ from bikeid.sim.parameters import benchmark
 __all__ = [
     "CRITICAL_SPEEDS",
     "DEFAULTS",
+    "DEFAULT_PATH",
+    "DEFAULT_PATH_PARTS",
     "PROFILED",
     "QUANTITIES",
     "CoverageResult",
     "binomial_verdict",
+    "default_path_summary",
+    "default_path_table",
     "run_coverage",
+    "run_default_path_coverage",
     "run_critical_coverage",
     "table_text",
 ]
@@ -605,4 +610,279 @@ def table_text(result: CoverageResult) -> str:
     if result.failed:
         lines.append(f"{len(result.failed)} seeds failed: " + "; ".join(
             f"{s}: {e}" for s, e in result.failed[:3]))  # fmt: skip
+    return "\n".join(lines)
+
+
+#: The default path of the README: benchmark bicycle, roll PID at 100 Hz, uniform dither
+#: 1 N m held 10 ms (``controllers.UniformDither``), default sensors, no disturbance,
+#: ``dataset.closed_loop.simulate_run`` at 5 m/s, ``pem.fit``, ``eigenvalue_intervals``.
+DEFAULT_PATH: dict[str, Any] = {"speed": 5.0, "dither": 1.0, "controller": "pid"}
+
+#: Eigenvalue real parts counted on the default path, in table order.
+DEFAULT_PATH_PARTS = ("caster_re", "weave_re", "capsize_re")
+
+
+def _common_costs(run, models, theta_true=None) -> list[float]:
+    """Prediction cost of each model's optimum under one set of output weights.
+
+    Each fit re-estimates its own output weights, so their costs are not comparable; here
+    every model is polished (Levenberg-Marquardt, ftol 1e-9, 400 evaluations) with the
+    weights of the first model and the weighted squared prediction errors are returned
+    (whitened units: a difference of 4 is about a 95 % likelihood-ratio difference).
+    """
+    from bikeid.ident.predictor import PredictionProblem, levenberg_marquardt, run_data
+
+    outputs = models[0].outputs
+    data = run_data([run], outputs)
+    w = 1.0 / np.sqrt(np.diag(models[0].noise_covariance))
+    out = []
+    for m in models:
+        prob = PredictionProblem(data, [np.eye(10)], [m.K], True, w, outputs)
+        x0 = np.concatenate([m.theta, np.asarray(m.K).ravel()])
+        try:
+            levenberg_marquardt(prob, x0, 400, ftol=1e-9)
+            out.append(float(prob._r @ prob._r))
+        except (ValueError, TypeError):  # the polish met an unstable predictor: its start cost
+            r = prob.residual(x0)
+            out.append(float(r @ r) if r is not None else math.inf)
+    return out
+
+
+def _default_path_job(settings: dict[str, Any], targets, theta_true, seed: int):
+    """One seed of :func:`run_default_path_coverage`: ``(seed, row, None)`` or
+    ``(seed, None, message)``; a picklable job of :func:`bikeid.experiments.parallel.imap`."""
+    from bikeid.controllers import UniformDither, make
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.ident import pem
+    from bikeid.ident.uncertainty import eigenvalue_intervals
+    from bikeid.sim.linear import match_eigenvalues
+
+    p = benchmark()
+    try:
+        run = simulate_run(
+            p, make(settings["controller"], p), speed=settings["speed"],
+            duration=settings["duration"], dither=UniformDither(settings["dither"], seed=seed,
+            max_amplitude=max(1.0, settings["dither"])), seed=seed, plant=settings["plant"],
+        )  # fmt: skip
+        model = pem.fit(run, noise_model=settings["noise_model"])
+        ei = eigenvalue_intervals(model, level=settings["level"])
+    except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
+        return seed, None, str(exc).splitlines()[0]
+    _, col = match_eigenvalues(ei.values, targets, return_index=True)
+    row: dict[str, Any] = {
+        "radius": ei.predictor_radius,
+        "boundary": ei.at_predictor_boundary,
+        "rms_roll_deg": float(np.degrees(np.std(run.truth["phi"]))),
+    }
+    for name, i in zip(DEFAULT_PATH_PARTS, (3, 0, 2), strict=True):
+        j = col[i]
+        row[f"est_{name}"] = float(ei.values[j].real)
+        row[f"se_{name}"] = float(ei.std_real[j])
+        row[f"in_{name}"] = bool(ei.real_lower[j] <= targets[i].real <= ei.real_upper[j])
+    if settings["restart"]:
+        try:
+            other = pem.fit(run, noise_model=settings["noise_model"], theta0=theta_true)
+            c_def, c_tru = _common_costs(run, [model, other])
+            row["truth_start_gain"] = c_def - c_tru
+        except ValueError:
+            row["truth_start_gain"] = math.nan
+    return seed, row, None
+
+
+def run_default_path_coverage(
+    seeds: int = 20,
+    *,
+    duration: float = 30.0,
+    plant: str = "nonlinear",
+    dither: float = DEFAULT_PATH["dither"],
+    speed: float = DEFAULT_PATH["speed"],
+    noise_model: str = "free",
+    restart: bool = False,
+    level: float = 0.95,
+    first_seed: int = 0,
+    log: Callable[[str], None] | None = None,
+    workers: int = 1,
+    dask: str | None = None,
+) -> dict[str, Any]:
+    """Coverage of the default path's eigenvalue intervals, and why they miss.
+
+    Per seed s: ``simulate_run`` of the benchmark under the roll PID with
+    ``UniformDither(dither, seed=s)`` and sensor seed s, ``pem.fit`` and
+    ``eigenvalue_intervals`` (profile); the truth is the linearization
+    (``sim.linear.eigenvalues``), modes paired by ``match_eigenvalues``.  Counted for the
+    caster, weave and capsize real parts: intervals containing the truth over all fits,
+    over the fits whose one-step predictor is inside its stability boundary
+    (:func:`bikeid.ident.uncertainty.check_predictor_interior` passes), and over those it
+    refuses; the Monte Carlo scatter of the estimates over seeds against the median printed
+    standard error (the finite-sample covariance check); with ``restart``, how often a fit
+    started at the truth reaches a lower cost (local optima).
+
+    Parameters
+    ----------
+    seeds : int, optional
+        Number of runs (>= 2).
+    duration : float, optional
+        Record length [s].
+    plant : {"nonlinear", "linear"}, optional
+        ``simulate_run``'s plant (the linear one isolates the nonlinearity).
+    dither : float, optional
+        Dither amplitude [N m] (1 on the default path).
+    speed : float, optional
+        Forward speed [m/s].
+    noise_model : {"free", "none"}, optional
+        ``pem.fit``'s noise model.
+    restart : bool, optional
+        Also fit from the true parameters and compare costs under common weights.
+    level : float, optional
+        Nominal coverage of the intervals.
+    first_seed : int, optional
+        First seed.
+    log : callable, optional
+        Receives one progress line per seed.
+    workers : int, optional
+        Local worker processes (the result does not depend on it).
+    dask : str or None, optional
+        ``"local"`` or a Dask scheduler address.
+
+    Returns
+    -------
+    dict
+        ``settings``; ``rows`` (per seed: predictor ``radius``, ``boundary``,
+        ``rms_roll_deg`` [deg], per part ``est_``, ``se_`` [1/s] and ``in_``, and with
+        ``restart`` ``truth_start_gain``: default cost minus truth-start cost, positive
+        when the truth start found a lower optimum); ``failed``; ``summary`` per part:
+        ``all``, ``interior`` and ``boundary`` (each ``covered``, ``n``, ``ci``,
+        ``verdict``), ``mc_sd`` and ``se_median`` [1/s] and their ratio; ``boundary`` (count)
+        and ``lower_optimum`` (count of truth starts lower by more than 4, or None).
+
+    Raises
+    ------
+    InputError
+        On fewer than 2 seeds, a bad ``plant``, ``noise_model`` or ``level``, or a speed
+        without the three modes.
+    """
+    from bikeid.ident.canonical import theta_from_matrices
+    from bikeid.sim.linear import canonical_matrices
+
+    _check_settings(seeds, 1.0, level)
+    if plant not in ("nonlinear", "linear"):
+        raise InputError(f"plant={plant!r}: choose nonlinear or linear")
+    if noise_model not in ("free", "none"):
+        raise InputError(f"noise_model={noise_model!r}: choose free or none")
+    p = benchmark()
+    targets, _ = _mode_targets(p, speed)
+    theta_true = theta_from_matrices(canonical_matrices(p), speed)
+    settings = {"speed": float(speed), "duration": float(duration), "dither": float(dither),
+                "plant": plant, "controller": DEFAULT_PATH["controller"],
+                "noise_model": noise_model, "restart": bool(restart), "level": float(level),
+                "seeds": [int(first_seed), int(first_seed + seeds - 1)],
+                "truth": {n: float(targets[i].real) for n, i in
+                          zip(DEFAULT_PATH_PARTS, (3, 0, 2), strict=True)}}  # fmt: skip
+    job = partial(_default_path_job, settings, targets, theta_true)
+    rows, failed = [], []
+    for _, (s, row, error) in imap(job, range(first_seed, first_seed + seeds), workers, dask,
+                                   ordered=True):  # fmt: skip
+        if error is None:
+            rows.append({"seed": s, **row})
+        else:
+            failed.append({"seed": s, "error": error})
+        if log:
+            log(f"seed {s}: {'ok' if error is None else 'failed'}")
+    return {"settings": settings, "rows": rows, "failed": failed,
+            "summary": default_path_summary(rows, level)}  # fmt: skip
+
+
+def default_path_summary(rows: list[dict[str, Any]], level: float = 0.95) -> dict[str, Any]:
+    """Counts, binomial intervals and verdicts of :func:`run_default_path_coverage`'s rows.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Per-seed rows with ``boundary`` and, per part of :data:`DEFAULT_PATH_PARTS`,
+        ``in_``, ``est_`` and ``se_``.
+    level : float, optional
+        Nominal coverage.
+
+    Returns
+    -------
+    dict
+        Per part: ``all``, ``interior``, ``boundary`` (``covered``, ``n``, ``ci``,
+        ``verdict``; None where n is 0), ``mc_sd``, ``se_median`` [1/s], ``sd_ratio`` and
+        ``sd_ratio_interior`` (over the fits inside the boundary; NaN below 3 of them);
+        ``boundary`` (fits on the predictor boundary, refused by
+        ``check_predictor_interior``), ``n``, and ``lower_optimum``.
+    """
+
+    def count(sel: list[dict[str, Any]], name: str) -> dict[str, Any] | None:
+        if not sel:
+            return None
+        k = sum(bool(r[f"in_{name}"]) for r in sel)
+        lo, hi, verdict = binomial_verdict(k, len(sel), level)
+        return {"covered": k, "n": len(sel), "ci": [lo, hi], "verdict": verdict}
+
+    inner = [r for r in rows if not r["boundary"]]
+    edge = [r for r in rows if r["boundary"]]
+    out: dict[str, Any] = {"n": len(rows), "boundary": len(edge)}
+    for name in DEFAULT_PATH_PARTS:
+        est = np.array([r[f"est_{name}"] for r in rows])
+        se = np.array([r[f"se_{name}"] for r in rows])
+        sd = float(np.std(est, ddof=1)) if est.size > 1 else math.nan
+        med = float(np.median(se)) if se.size else math.nan
+        e_in = np.array([r[f"est_{name}"] for r in inner])
+        m_in = float(np.median([r[f"se_{name}"] for r in inner])) if inner else math.nan
+        r_in = float(np.std(e_in, ddof=1)) / m_in if e_in.size > 2 and m_in > 0 else math.nan
+        out[name] = {"all": count(rows, name), "interior": count(inner, name),
+                     "boundary": count(edge, name), "mc_sd": sd, "se_median": med,
+                     "sd_ratio": sd / med if med > 0 else math.nan,
+                     "sd_ratio_interior": r_in}  # fmt: skip
+    gains = [r["truth_start_gain"] for r in rows if "truth_start_gain" in r]
+    out["lower_optimum"] = sum(g > 4.0 for g in gains) if gains else None
+    return out
+
+
+def default_path_table(result: dict[str, Any]) -> str:
+    """Plain-text table of :func:`run_default_path_coverage`.
+
+    Parameters
+    ----------
+    result : dict
+        Its return value.
+
+    Returns
+    -------
+    str
+        Settings line, then per real part: covered/n over all fits, over the fits inside
+        the predictor boundary, over the fits on it, with Clopper-Pearson intervals and
+        verdicts, and the scatter over seeds against the median printed standard error.
+    """
+    s, m = result["settings"], result["summary"]
+
+    def cell(c: dict[str, Any] | None) -> str:
+        if c is None:
+            return "-"
+        return f"{c['covered']}/{c['n']} [{c['ci'][0]:.2f}, {c['ci'][1]:.2f}] {c['verdict']}"
+
+    lines = [
+        f"default path: benchmark, {s['plant']} plant, {s['controller']}, {s['speed']:g} m/s, "
+        f"{s['duration']:g} s, dither {s['dither']:g} N m, pem.fit noise_model="
+        f"{s['noise_model']}, {100 * s['level']:g} % profile intervals, seeds "
+        f"{s['seeds'][0]}..{s['seeds'][1]}",
+        f"fits ending on the predictor's stability boundary (refused by "
+        f"check_predictor_interior): {m['boundary']} of {m['n']}"
+        + ("" if m["lower_optimum"] is None else
+           f"; a start at the truth reached a lower cost (by > 4) in {m['lower_optimum']}"),
+        f"{'part (truth)':<24} {'all fits':<34} {'inside boundary':<34} {'on boundary':<34} "
+        "scatter / median SE (inside boundary)",
+    ]  # fmt: skip
+    for name in DEFAULT_PATH_PARTS:
+        r = m[name]
+        lines.append(
+            f"{name + ' (' + format(s['truth'][name], '.3f') + ')':<24} {cell(r['all']):<34} "
+            f"{cell(r['interior']):<34} {cell(r['boundary']):<34} "
+            f"{r['mc_sd']:.3f} / {r['se_median']:.3f} = {r['sd_ratio']:.2f} "
+            f"({r['sd_ratio_interior']:.2f})"
+        )
+    if result["failed"]:
+        lines.append(f"{len(result['failed'])} seeds failed: " + "; ".join(
+            f"{f['seed']}: {f['error']}" for f in result["failed"][:3]))  # fmt: skip
     return "\n".join(lines)
