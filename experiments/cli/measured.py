@@ -350,10 +350,16 @@ def cmd_fit(args) -> int:
     if ch["auto"] != out["plant"]:
         print(f"note: --plant auto would fit with the {ch['auto']} plant; a mismatch of the "
               "nominal plant can be read as an effect")  # fmt: skip
+    pc = out.get("plant_check")
+    if pc:  # the costs did not pick a plant: both selections, compared
+        print(f"plant check: the selections with the two plants "
+              f"{'agree' if pc['agree'] else 'disagree'} (up to their ambiguity sets): linear "
+              f"{pc['linear']['verdict']}, nonlinear {pc['nonlinear']['verdict']}")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     from bikeid.ident.effects.selection import evidence_lines
 
-    for line in evidence_lines(out["identification"]["evidence"]):
+    uncertain = bool(pc and not pc["agree"])  # the chosen plant's evidence names no effect
+    for line in [] if uncertain else evidence_lines(out["identification"]["evidence"]):
         print(f"  {line}")
     w = out["identification"]["weave_weight"]
     if ww == "auto" and w == 0 and law is not None:  # (no law: a note above says why)

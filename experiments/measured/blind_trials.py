@@ -72,6 +72,7 @@ from bikeid.experiments.measured.effect_trials import (
 from bikeid.ident.effects.diagnostics import evaluate
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.selection import (
+    PLANT_UNCERTAIN,
     choose_nominal_plant,
     compare_nominal_plants,
     select_effects,
@@ -80,7 +81,10 @@ from bikeid.sim.effect_registry import nonlinear_effects
 from bikeid.sim.parameters import steer_by_wire
 
 __all__ = [
+    "CLOSURE_EFFECTS",
     "INERTIA_UNCERTAINTY",
+    "LOG_OUTCOMES",
+    "LOG_COLUMNS",
     "TRAIL_UNCERTAINTY",
     "BlindTrial",
     "Nuisance",
@@ -91,10 +95,15 @@ __all__ = [
     "nominal_comparison",
     "parse_per_class",
     "linear_plant_matrices",
+    "log_import_options",
+    "log_signals",
     "rescore_unexplained",
     "run_blind_trial",
+    "run_log_trial",
+    "score_log_fit",
     "score",
     "summarize_blind",
+    "write_trial_logs",
 ]
 
 INERTIA_UNCERTAINTY = 0.05  # relative, every inertia (no published uncertainty: +-5 %)
@@ -533,6 +542,235 @@ def generate_windows(trial: BlindTrial, speeds, per_speed: int, seed: int, label
     return out
 
 
+#: The CSV log format of :func:`write_trial_logs`, a lab other than the steer-by-wire one:
+#: bikeid signal -> column, the ``--units`` and ``--flip`` that read it back (roll positive
+#: to the left, time in ms, angles in degrees, speed in km/h).
+LOG_COLUMNS = {"phi": "roll_left_deg", "phidot": "roll_rate_left_dps", "delta": "steer_deg",
+               "deltadot": "steer_rate_dps", "v": "speed_kmh", "T_delta": "steer_torque_Nm"}
+LOG_UNITS = "t=ms,phi=deg,phidot=deg/s,delta=deg,deltadot=deg/s,v=km/h"
+LOG_FLIP = "phi,phidot"
+LOG_TIME = "time_ms"
+LOG_PUSHES = 8  # pushes per log (one log per speed)
+LOG_LEAD, LOG_GAP = 1.5, 4.5  # s of upright running before the first push; s between pushes
+#: Roll-torque impulse of the largest push [N m s] (each 0.6-1 x): peak roll rates about
+#: 0.4-0.9 rad/s, like the steer-by-wire pushes (window starts 0.35-0.95 rad/s).
+LOG_IMPULSE = 10.0
+PLANTS = ("independent_linear", "bikeid_nonlinear")
+
+
+def log_import_options() -> list[str]:
+    """The ``bikeid measured fit`` options that read :func:`write_trial_logs`'s CSV logs.
+
+    Returns
+    -------
+    list of str
+        ``--format csv --time ... --columns ... --units ... --flip ... --bicycle
+        steer-by-wire --controller steer-into-lean --gains K=2,V=6.5`` as argument strings.
+    """
+    cols = ",".join(f"{k}={c}" for k, c in LOG_COLUMNS.items())
+    return ["--format", "csv", "--time", LOG_TIME, "--columns", cols, "--units", LOG_UNITS,
+            "--flip", LOG_FLIP, "--bicycle", "steer-by-wire", "--controller",
+            "steer-into-lean", "--gains", f"K={CONTROL_GAIN:g},V={CONTROL_SPEED:g}"]  # fmt: skip
+
+
+def _push_plan(nz: Nuisance, pushes: int, rng) -> tuple[list[int], list[float]]:
+    """Start samples and signed peak torques [N m] of a log's roll-torque pulses."""
+    starts = [int(round((LOG_LEAD + j * LOG_GAP) / DT)) for j in range(pushes)]
+    sign = float(rng.choice([-1.0, 1.0]))
+    peak = LOG_IMPULSE / (2.0 / math.pi * nz.pulse_duration)  # half-sine of that impulse
+    peaks = [sign * (-1) ** j * peak * float(rng.uniform(0.6, 1.0))
+             for j in range(pushes)]  # fmt: skip
+    return starts, peaks
+
+
+def _pulse(t: float, starts: list[int], peaks: list[float], dur: float) -> float:
+    """The half-sine roll-torque pulses of :func:`_push_plan` at time ``t`` [s] (N m)."""
+    for s, a in zip(starts, peaks, strict=True):
+        u = t - s * DT
+        if 0.0 <= u < dur:
+            return a * math.sin(math.pi * u / dur)
+    return 0.0
+
+
+def _linear_log(plant: _LinearPlant, v0: float, nz: Nuisance, pushes: int, scale: float,
+                rng) -> dict:  # fmt: skip
+    """A continuous log of pushes and free decays on the independent linear plant.
+
+    The loop is T = K (V - v) phidot_m on the logged speed (this lab logs the treadmill's
+    true speed); the logged torque is the command, before the hidden delay/gain/lag.
+    """
+    n_all = int(round((LOG_LEAD + pushes * LOG_GAP) / DT))
+    starts, peaks = _push_plan(nz, pushes, rng)
+    peaks = [scale * a for a in peaks]
+    t = np.arange(n_all) * DT
+    v_true = v0 * (1 + nz.speed_wander * np.sin(2 * math.pi * nz.wander_freq * t
+                                                 + rng.uniform(0, 2 * math.pi)))  # fmt: skip
+    noise_pr = _ar1(rng, n_all, nz.noise, nz.colour)
+    noise_phi = _ar1(rng, n_all, nz.noise / 5, nz.colour)
+    walk = nz.gyro_bias + np.cumsum(rng.normal(0.0, nz.gyro_walk * math.sqrt(DT), n_all))
+    rate_noise = rng.normal(0.0, nz.noise, n_all)
+    steer_noise = rng.normal(0.0, nz.steer_noise, n_all)
+    step = 2 * math.pi / nz.encoder_counts
+    out = {k: np.zeros(n_all) for k in ("phi", "delta", "phidot", "deltadot", "T_delta")}
+    out["t"], out["v"] = t, v_true.copy()
+    queue = [0.0] * plant.delay
+    x = np.zeros(5)
+    h = DT / SUBSTEPS
+    prev = 0.0
+    for k in range(n_all):
+        enc = step * np.round((x[1] + steer_noise[k]) / step)
+        out["delta"][k] = enc
+        out["deltadot"][k] = x[3] + rate_noise[k] if nz.steer_rate == "gyro" else (enc - prev) / DT
+        prev = enc
+        out["phi"][k] = x[0] + noise_phi[k]
+        out["phidot"][k] = x[2] + noise_pr[k] + walk[k]
+        cmd = CONTROL_GAIN * (CONTROL_SPEED - v_true[k]) * out["phidot"][k]
+        out["T_delta"][k] = cmd
+        queue.append(cmd)
+        T_cmd = queue.pop(0)
+        for j in range(SUBSTEPS):
+            tt = k * DT + j * h
+            f = [_pulse(tt + a, starts, peaks, nz.pulse_duration) for a in (0.0, h / 2, h)]
+            k1 = plant.rhs(x, v_true[k], T_cmd, f[0])
+            k2 = plant.rhs(x + h / 2 * k1, v_true[k], T_cmd, f[1])
+            k3 = plant.rhs(x + h / 2 * k2, v_true[k], T_cmd, f[1])
+            k4 = plant.rhs(x + h * k3, v_true[k], T_cmd, f[2])
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(x)) or abs(x[0]) > 1.0:
+            raise RuntimeError("blind-trial plant fell")
+    return out
+
+
+def _nonlinear_log(p, effects, v0: float, nz: Nuisance, pushes: int, scale: float,
+                   rng) -> dict:  # fmt: skip
+    """A continuous log of pushes and free decays on bikeid's nonlinear plant (constant
+    speed; the pulses as a lateral force at the rear frame's mass centre, torque / its
+    height)."""
+    starts, peaks = _push_plan(nz, pushes, rng)
+    height = abs(float(p.zB))
+    peaks = [scale * a / height for a in peaks]
+    step = 2 * math.pi / nz.encoder_counts
+    sensors = Sensors({
+        "phi": Channel(std=nz.noise / 5),
+        "phidot": Channel(std=nz.noise, bias=nz.gyro_bias),
+        "delta": Channel(std=nz.steer_noise, step=step),
+        "deltadot": Channel(std=nz.noise, step=step / DT),
+    })  # fmt: skip
+    dur = LOG_LEAD + pushes * LOG_GAP
+    run = simulate_run(p, SteerIntoLean(CONTROL_GAIN, CONTROL_SPEED), float(v0), duration=dur,
+                       substeps=4, sensors=sensors, effects=effects,
+                       seed=int(rng.integers(2**31)),
+                       lateral_force=lambda t: _pulse(t, starts, peaks, nz.pulse_duration),
+                       )  # fmt: skip
+    if run.meta["fell_at"] is not None or run.n < int(round(dur / DT)) - 1:
+        raise RuntimeError("blind-trial plant fell")
+    out = {k: np.asarray(run[k], float).copy()
+           for k in ("phi", "delta", "phidot", "deltadot", "v", "T_delta")}  # fmt: skip
+    out["t"] = np.arange(run.n) * DT
+    return out
+
+
+def log_signals(trial: BlindTrial, speed: float, seed: int, plant: str | None = None,
+                pushes: int = LOG_PUSHES) -> dict:  # fmt: skip
+    """One continuous log of the blind generator: upright running, pushes, free decays.
+
+    ``pushes`` half-sine roll-torque pulses (the trial's duration, an impulse of 0.6-1 x
+    :data:`LOG_IMPULSE`, signs alternating) ``LOG_GAP`` s apart after ``LOG_LEAD`` s; the
+    loop is the steer-into-lean law on the logged speed; the trial's hidden effect and
+    instrument nuisances (module docstring).  A log whose plant falls is redrawn with the
+    pulses scaled by 0.7 (up to three times).
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        Hidden effect and nuisances.
+    speed : float
+        Treadmill speed [m/s].
+    seed : int
+        Generator seed of this log.
+    plant : str, optional
+        ``"independent_linear"`` or ``"bikeid_nonlinear"`` (default: the trial's
+        ``nuisance.plant``).
+    pushes : int, optional
+        Number of pushes (>= 1).
+
+    Returns
+    -------
+    dict of ndarray
+        ``t`` [s], ``phi``, ``delta`` [rad], ``phidot``, ``deltadot`` [rad/s], ``v`` [m/s],
+        ``T_delta`` (the logged command) [N m], bikeid's signs (roll positive right).
+
+    Raises
+    ------
+    ValueError
+        If ``plant`` is not one of :data:`PLANTS`.
+    RuntimeError
+        If the plant falls with every pulse scale.
+    """
+    plant = trial.nuisance.plant if plant is None else plant
+    if plant not in PLANTS:
+        raise ValueError(f"plant must be one of {', '.join(PLANTS)}, got {plant!r}")
+    nz = trial.nuisance
+    p = _perturbed(steer_by_wire(), nz)
+    scale = 1.0
+    for _ in range(4):
+        rng = np.random.default_rng(seed)
+        try:
+            if plant == "independent_linear":
+                return _linear_log(_LinearPlant(p, trial.effect, trial.value), float(speed),
+                                   nz, int(pushes), scale, rng)  # fmt: skip
+            hidden = {} if trial.effect == "none" else {trial.effect: trial.value}
+            fx = nonlinear_effects(hidden, 1.0, DT, 0.01)[0] if hidden else []
+            return _nonlinear_log(p, fx, float(speed), nz, int(pushes), scale, rng)
+        except RuntimeError:
+            scale *= 0.7
+    raise RuntimeError(f"blind-trial plant fell at {speed} m/s ({trial.effect})")
+
+
+def write_trial_logs(trial: BlindTrial, folder, plant: str | None = None,
+                     pushes: int = LOG_PUSHES) -> list:  # fmt: skip
+    """A blind trial's fit speeds as CSV logs of another lab's format (:data:`LOG_COLUMNS`).
+
+    One log per fit speed, in the order of ``trial.fit_speeds``: time in ms, angles in
+    degrees, rates in deg/s, speed in km/h, roll angle and roll rate positive to the
+    **left**; read back by ``bikeid measured fit FILE... `` with :func:`log_import_options`.
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        Hidden effect and nuisances.
+    folder : str or Path
+        Existing folder to write ``trial<index>_<speed>mps.csv`` into.
+    plant : str, optional
+        The truth's plant (:func:`log_signals`).
+    pushes : int, optional
+        Pushes per log.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    import csv
+    from pathlib import Path
+
+    out = []
+    for i, v in enumerate(trial.fit_speeds):
+        s = log_signals(trial, v, trial.seed + 10 * i, plant, pushes)
+        path = Path(folder) / f"trial{trial.index}_{v:.2f}mps.csv"
+        cols = [
+            1000.0 * s["t"], -np.degrees(s["phi"]), -np.degrees(s["phidot"]),
+            np.degrees(s["delta"]), np.degrees(s["deltadot"]), 3.6 * s["v"], s["T_delta"],
+        ]  # fmt: skip
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow([LOG_TIME, *LOG_COLUMNS.values()])
+            for row in zip(*cols, strict=True):
+                w.writerow([f"{row[0]:.1f}", *(repr(float(x)) for x in row[1:])])
+        out.append(path)
+    return out
+
+
 def _kind(effect: str) -> str:
     """The class of a hidden effect: "none", "library" or "outside"."""
     if effect == "none":
@@ -763,3 +1001,115 @@ def summarize_blind(rows: list[dict]) -> dict:
         }
     s["per_plant"] = per
     return s
+
+
+#: The hidden effects of the closure-rate trials (:func:`run_log_trial`): steer friction
+#: (viscous steer damping), an input delay, an actuator gain, an effect outside the library
+#: (roll damping) and none.
+CLOSURE_EFFECTS = ("steer_viscous_damping", "input_delay", "command_gain",
+                   "roll_viscous_damping", "none")  # fmt: skip
+#: The outcomes of :func:`score_log_fit`, one per trial.
+LOG_OUTCOMES = ("right", "right_with_extras", "wrong_first", "unexplained", "nothing",
+                "plant_uncertain", "refused")
+
+
+def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
+    """The outcome of ``bikeid measured fit`` on a trial's logs, as the closure asks.
+
+    Library effect: ``right`` when the accepted effects are the hidden one alone (first,
+    nothing extra, ``unexplained`` not said); outside-library effect: ``right`` when no
+    effect is accepted and the verdict is ``unexplained``; no effect: ``right`` when no effect
+    is accepted (``unexplained`` may be said: the stated bicycle's residual mismatch).
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        The truth.
+    model : dict or None
+        The model file ``measured fit`` wrote (``{"model": ..., "results": ...}``), None when
+        it refused the logs (too few usable decays).
+
+    Returns
+    -------
+    dict
+        ``kind``, ``outcome`` (one of :data:`LOG_OUTCOMES`), ``right`` (bool), ``verdict``,
+        ``effects`` (name -> value), ``value_ok`` (library: the hidden effect's value within
+        20 % of its deviation from absent, None otherwise), ``in_set`` (library: the hidden
+        effect in the ambiguity set of an accepted effect, as the fit reported it),
+        ``plant`` and ``plant_ratio`` (the nominal plant used, cost ratio nonlinear/linear).
+    """
+    kind = _kind(trial.effect)
+    out = {"kind": kind, "effect": trial.effect, "value": trial.value, "value_ok": None,
+           "in_set": None, "verdict": None, "effects": {}, "plant": None, "plant_ratio": None}
+    if model is None:
+        return {**out, "outcome": "refused", "right": False}
+    res = model["results"]
+    ident = res["identification"]
+    eff = dict(model["model"]["effects"])
+    verdict = list(ident["verdict"])
+    out.update(verdict=verdict, effects=eff, plant=res["plant_choice"]["plant"],
+               plant_ratio=res["plant_choice"]["ratio"])
+    if verdict == [PLANT_UNCERTAIN]:
+        return {**out, "outcome": "plant_uncertain", "right": False}
+    names = [n for n in verdict if n != "unexplained"]
+    if kind == "library":
+        es = EFFECTS[trial.effect]
+        x = eff.get(trial.effect)
+        out["value_ok"] = bool(x is not None and abs(x - trial.value)
+                               <= 0.2 * abs(trial.value - es.absent))  # fmt: skip
+        out["in_set"] = any(trial.effect in s for s in ident.get("ambiguity", {}).values())
+    if not names:
+        outcome = "unexplained" if "unexplained" in verdict else "nothing"
+    elif names[0] != trial.effect:
+        outcome = "wrong_first"
+    elif len(names) == 1 and "unexplained" not in verdict:
+        outcome = "right"
+    else:
+        outcome = "right_with_extras"
+    right = {"library": outcome == "right", "outside": outcome == "unexplained",
+             "none": not names}[kind]  # fmt: skip
+    return {**out, "outcome": outcome, "right": right}
+
+
+def run_log_trial(trial: BlindTrial, folder, plant: str | None = None,
+                  extra_args: tuple[str, ...] = ()) -> dict:  # fmt: skip
+    """Write a trial's logs as CSV (:func:`write_trial_logs`), fit them with ``bikeid
+    measured fit`` and its import options, and score the fit (:func:`score_log_fit`).
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        The truth.
+    folder : str or Path
+        An existing empty folder for the logs and the model file.
+    plant : str, optional
+        The truth's plant (:func:`log_signals`; default the trial's).
+    extra_args : tuple of str, optional
+        More ``measured fit`` options (e.g. ``("--plant", "linear")``).
+
+    Returns
+    -------
+    dict
+        The trial (index, seed, effect, value, fit speeds, truth plant), the command's exit
+        status ``rc`` and its one-line refusal ``error`` (None when it ran), and
+        :func:`score_log_fit`'s fields.
+    """
+    import contextlib
+    import io
+    import json
+    from pathlib import Path
+
+    from bikeid.experiments.cli import main
+
+    folder = Path(folder)
+    files = write_trial_logs(trial, folder, plant)
+    out = folder / "model.json"
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        rc = main(["measured", "fit", *map(str, files), *log_import_options(), "--out",
+                   str(out), "--quiet", *extra_args])  # fmt: skip
+    model = json.loads(out.read_text()) if rc == 0 else None
+    row = {"index": trial.index, "seed": trial.seed, "fit_speeds": list(trial.fit_speeds),
+           "truth_plant": plant or trial.nuisance.plant, "rc": rc,
+           "error": None if rc == 0 else err.getvalue().strip().splitlines()[-1:]}  # fmt: skip
+    return {**row, **score_log_fit(trial, model)}

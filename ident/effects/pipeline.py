@@ -25,8 +25,10 @@ from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.fit import FitResult, joint_fit
 from bikeid.ident.effects.library import LIBRARY
 from bikeid.ident.effects.selection import (
+    PLANT_UNCERTAIN,
     choose_nominal_plant,
     compare_nominal_plants,
+    compare_plant_selections,
     select_effects,
     selection_frequencies,
 )
@@ -403,7 +405,13 @@ def fit_model(
         ``auto`` takes, the cost ratio nonlinear / linear, the margin and a sentence) and both
         nominal fits
         (``nominal_fit``: summed squared NRMSE of roll rate and steer angle as linear and
-        as nonlinear plant); ``experiment`` (:func:`experiment_record`); ``dropped_windows``
+        as nonlinear plant); ``plant_check``: with ``plant="auto"`` and a nominal cost ratio
+        that does not pick a plant (``plant_choice["inconclusive"]``), the selection is run
+        with both plants and compared
+        (:func:`bikeid.ident.effects.selection.compare_plant_selections`; None otherwise);
+        when they disagree no effect is named (``effects`` empty, the identification's
+        verdict :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`, both selections in
+        ``plant_check``, a note); ``experiment`` (:func:`experiment_record`); ``dropped_windows``
         (file, start row, reason of each window no candidate could be scored on: the
         nominal nonlinear plant cannot simulate it, so it is dropped for all candidates
         alike, :func:`simulable_windows`; a window that fails at an accepted effect is
@@ -456,6 +464,21 @@ def fit_model(
                          f"{d['file']}@{d['start']}: {d['reason']}" for d in more) + ")")
         windows = [w for w in windows
                    if not any(d["file"] == w.file and d["start"] == w.start for d in more)]
+    check = None
+    if choice["asked"] == "auto" and choice["inconclusive"]:  # the plant before any effect
+        other, _ = _select_dropping(base, windows, max_effects, not nl, weave_weight, None,
+                                    select_kw)  # fmt: skip
+        check = compare_plant_selections(*((other, res) if nl else (res, other)))
+        if not check["agree"]:
+            notes.append(f"{PLANT_UNCERTAIN}: the nominal costs do not pick a plant (ratio "
+                         f"{choice['ratio']:.3g}, within 1/{choice['margin']:g}-"
+                         f"{choice['margin']:g}) and the selections with the two plants "
+                         "disagree (" + "; ".join(check["differences"]) + "), so no effect is "
+                         "named: the difference would be the plant mismatch")  # fmt: skip
+    uncertain = check is not None and not check["agree"]
+    ident = res.as_dict()
+    if uncertain:
+        ident.update(verdict=[PLANT_UNCERTAIN], effects=[])
     return {
         "bicycle": base.p.name,
         "experiment": experiment_record(base, law, base.p.name),
@@ -464,11 +487,12 @@ def fit_model(
         "parameters": res.model.p.as_dict(),
         "plant": plant,
         "plant_choice": choice,
-        "effects": {e.name: float(e.value) for e in res.effects},
+        "plant_check": check,
+        "effects": {} if uncertain else {e.name: float(e.value) for e in res.effects},
         "fit_speeds": sorted({round(w.speed, 2) for w in windows}),
         "fit_files": sorted({w.file for w in windows}),
         "fit_windows": [{"file": w.file, "start": w.start, "end": w.start + w.n} for w in windows],
-        "identification": res.as_dict(),
+        "identification": ident,
         "nominal_fit": nominal_fit,
         **extra,
     }

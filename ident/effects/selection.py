@@ -86,6 +86,8 @@ __all__ = [
     "RESIDUAL_MAX",
     "choose_nominal_plant",
     "compare_nominal_plants",
+    "compare_plant_selections",
+    "PLANT_UNCERTAIN",
     "evidence_lines",
     "WEAVE_EPS",
     "Identification",
@@ -105,6 +107,11 @@ WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter
 #: 1.2 is the round factor above all of these nonlinear cases (docs/measured.md,
 #: "Blind trials").
 LINEAR_PLANT_MARGIN = 1.2
+#: The verdict of a fit whose nominal plant is uncertain: the nominal costs do not pick a
+#: plant (their ratio within [1 / margin, margin]) and the selections with the two plants
+#: disagree beyond their ambiguity sets (:func:`compare_plant_selections`), so the named
+#: effects would be the plant mismatch, not effects of the bicycle.
+PLANT_UNCERTAIN = "nominal plant uncertain"
 
 
 def _t_value(name: str, value: float, sd: float, cal: Calibration | None) -> float:
@@ -755,7 +762,10 @@ def choose_nominal_plant(comparison: dict, margin: float = LINEAR_PLANT_MARGIN) 
     -------
     dict
         ``plant`` (``"linear"`` or ``"nonlinear"``), ``ratio`` (nonlinear / linear cost),
-        ``margin`` and ``reason`` (one sentence: the costs and the rule).
+        ``margin``, ``reason`` (one sentence: the costs and the rule) and ``inconclusive``
+        (True when the ratio lies within [1 / margin, margin]: neither plant fits better by
+        the margin, so the nominal costs alone do not settle the plant; the blind trials'
+        nonlinear truths reach 1.14 and linear truths lie within 5 % of 1, both inside).
 
     Raises
     ------
@@ -772,7 +782,47 @@ def choose_nominal_plant(comparison: dict, margin: float = LINEAR_PLANT_MARGIN) 
               f"linear plant fits {how} than {margin:g} times better, so the "
               f"{'linear' if linear else 'nonlinear'} plant")  # fmt: skip
     return {"plant": "linear" if linear else "nonlinear", "ratio": ratio, "margin": margin,
-            "reason": reason}  # fmt: skip
+            "reason": reason, "inconclusive": bool(1.0 / margin <= ratio <= margin)}  # fmt: skip
+
+
+def compare_plant_selections(linear: Identification, nonlinear: Identification) -> dict:
+    """Do the selections with the linear and the nonlinear nominal plant agree?
+
+    They agree when every effect one of them accepts is accepted by the other or is alike one
+    of the other's accepted effects (either effect in the other's ambiguity set,
+    :attr:`Identification.ambiguity`, the sets the pipeline reports: two alike effects are
+    the same answer), and both or neither say ``unexplained``.  Otherwise the effects named
+    depend on the nominal plant: a mismatch of the plant would be read as an effect.
+
+    Parameters
+    ----------
+    linear, nonlinear : Identification
+        :func:`select_effects` on the same windows with ``nonlinear=False`` and ``True``.
+
+    Returns
+    -------
+    dict
+        ``agree`` (bool); ``linear`` and ``nonlinear``: each plant's ``verdict``, ``effects``
+        (name -> value, registry units) and ``ambiguity``; ``differences``: sentences naming
+        each effect only one plant names (empty when they agree).
+    """
+    def side(r: Identification) -> dict:
+        return {"verdict": list(r.verdict), "effects": {e.name: float(e.value) for e in r.effects},
+                "ambiguity": r.ambiguity}  # fmt: skip
+
+    def alike(n: str, mine: dict, m: str, other: dict) -> bool:  # either set holds the other
+        return n == m or n in other["ambiguity"].get(m, []) or m in mine["ambiguity"].get(n, [])
+
+    a, b = side(linear), side(nonlinear)
+    diff = []
+    for mine, other, who, whom in ((a, b, "linear", "nonlinear"), (b, a, "nonlinear", "linear")):
+        diff += [f"{n} (named with the {who} plant; no effect of the {whom} plant's selection "
+                 "is it or alike it)" for n in mine["effects"]
+                 if not any(alike(n, mine, m, other) for m in other["effects"])]  # fmt: skip
+    if ("unexplained" in a["verdict"]) != ("unexplained" in b["verdict"]):
+        who = "linear" if "unexplained" in a["verdict"] else "nonlinear"
+        diff.append(f"unexplained (only with the {who} plant)")
+    return {"agree": not diff, "linear": a, "nonlinear": b, "differences": diff}
 
 
 def selection_frequencies(

@@ -1,0 +1,163 @@
+"""The closure on logs of another lab's format, from a generator that does not share the
+pipeline's nominal plant (``benchmarks/bench_closure_rates.py`` measures the rates; these
+tests check the mechanism both ways at CI size), and the nominal-plant check that runs before
+any effect is named.
+
+The logs are written at test time as CSV with other names and units (ms, degrees, deg/s,
+km/h, roll positive to the left) from the independent linear plant (Moore's canonical
+matrices from bicycleparameters, its own RK4 integration), and fitted by ``bikeid measured
+fit`` with identify's import options.  The independent source of each check: the injected
+effect and its value (known by construction), numpy's unit conversion for the log format,
+and hand-built selections for the plant comparison.
+"""
+
+import csv
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from bikeid.experiments.measured.blind_trials import (
+    CLOSURE_EFFECTS,
+    LOG_COLUMNS,
+    draw_blind_trials,
+    log_signals,
+    run_log_trial,
+    score_log_fit,
+    write_trial_logs,
+)
+from bikeid.ident.effects.selection import (
+    LINEAR_PLANT_MARGIN,
+    PLANT_UNCERTAIN,
+    choose_nominal_plant,
+    compare_plant_selections,
+)
+
+
+def _trial(effect: str):
+    """Seed 0's trial of ``effect`` (the grid of the benchmark's first seed)."""
+    return next(t for t in draw_blind_trials(len(CLOSURE_EFFECTS), 0, CLOSURE_EFFECTS)
+                if t.effect == effect)  # fmt: skip
+
+
+def test_logs_are_another_labs_format(tmp_path):
+    """The CSV holds the generator's signals in ms, degrees, deg/s and km/h with the roll
+    positive to the left: converted back by numpy (radians, /3.6, sign) they equal the
+    signals to the digits written (repr of a float: round-off only, 1e-12 relative)."""
+    tr = _trial("none")
+    files = write_trial_logs(tr, tmp_path)
+    assert len(files) == 2 and all(f.suffix == ".csv" for f in files)
+    s = log_signals(tr, tr.fit_speeds[0], tr.seed, None)
+    with open(files[0]) as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["time_ms", *LOG_COLUMNS.values()]
+    col = {k: np.array([float(r[c]) for r in rows]) for k, c in LOG_COLUMNS.items()}
+    t_ms = np.array([float(r["time_ms"]) for r in rows])
+    np.testing.assert_allclose(t_ms / 1000, s["t"], atol=1e-4)  # written to 0.1 ms
+    np.testing.assert_allclose(-np.radians(col["phi"]), s["phi"], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(-np.radians(col["phidot"]), s["phidot"], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(np.radians(col["delta"]), s["delta"], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(col["v"] / 3.6, s["v"], rtol=1e-12)
+    np.testing.assert_allclose(col["T_delta"], s["T_delta"], rtol=1e-12, atol=1e-15)
+    # pushes show in the log: peak roll rates like the steer-by-wire pushes (0.3-1.5 rad/s)
+    assert 0.3 < np.max(np.abs(s["phidot"])) < 1.5
+
+
+def test_plant_comparison_both_ways():
+    """Two selections agree when each named effect is named or in an ambiguity set of the
+    other (a delay named with one plant, an actuator lag whose set holds the delay with the
+    other); a different effect outside every set, or ``unexplained`` on one side only, is a
+    disagreement naming the effect."""
+    def sel(verdict, effects, alike=None):
+        ev = {"effects": {n: {"alike": [{"name": a, "heldout_cost_ratio": 0.5}
+                                         for a in (alike or {}).get(n, [])]} for n in effects}}
+        return SimpleNamespace(verdict=verdict, evidence=ev,
+                               effects=[SimpleNamespace(name=n, value=v)
+                                        for n, v in effects.items()],
+                               ambiguity=None)  # fmt: skip
+
+    def ident(verdict, effects, alike=None):
+        from bikeid.ident.effects.selection import Identification
+
+        s = sel(verdict, effects, alike)
+        return Identification(model=None, effects=s.effects, ranking=[], verdict=verdict,
+                              cost_nominal=1.0, cost_final=0.5, cost_floor=0.1, explained=0.9,
+                              evidence=s.evidence)  # fmt: skip
+
+    lin = ident(["input_delay"], {"input_delay": 0.03})
+    nl = ident(["actuator_lag"], {"actuator_lag": 0.02}, {"actuator_lag": ["input_delay"]})
+    same = compare_plant_selections(lin, nl)
+    assert same["agree"] and same["differences"] == []
+    assert same["linear"]["effects"] == {"input_delay": 0.03}
+    other = ident(["trail_correction"], {"trail_correction": 0.01})
+    diff = compare_plant_selections(lin, other)
+    assert not diff["agree"]
+    assert any(d.startswith("input_delay") for d in diff["differences"])
+    assert any(d.startswith("trail_correction") for d in diff["differences"])
+    unexpl = compare_plant_selections(lin, ident(["unexplained", "input_delay"],
+                                                 {"input_delay": 0.03}))  # fmt: skip
+    assert not unexpl["agree"] and unexpl["differences"] == ["unexplained (only with the "
+                                                             "nonlinear plant)"]  # fmt: skip
+
+
+@pytest.mark.parametrize("ratio, inconclusive", [(1.13, True), (1.0, True), (0.84, True),
+                                                 (1.21, False), (0.8, False), (1e3, False)])
+def test_inconclusive_band_is_the_margin_both_ways(ratio, inconclusive):
+    """The nominal costs settle the plant only outside [1 / margin, margin]: the issue's
+    1.13 (a linear truth the nonlinear plant was picked for) and the real decays' 1.01 are
+    inside; a ratio beyond the margin either way is outside."""
+    c = choose_nominal_plant({"linear": 1.0, "nonlinear": ratio})
+    assert c["inconclusive"] is inconclusive
+    assert (1 / LINEAR_PLANT_MARGIN <= ratio <= LINEAR_PLANT_MARGIN) is inconclusive
+
+
+def test_score_log_fit_both_ways():
+    """Scores of hand-made fit results: the hidden effect alone is right, with an extra it is
+    not; an outside effect is right only as ``unexplained`` with no effect; no effect is right
+    with nothing named; ``nominal plant uncertain`` and a refusal are never right."""
+    def fit(verdict, effects, ambiguity=None):
+        return {"model": {"effects": effects},
+                "results": {"identification": {"verdict": verdict,
+                                               "ambiguity": ambiguity or {}},
+                            "plant_choice": {"plant": "linear", "ratio": 2.0}}}  # fmt: skip
+
+    damp, outside, none = (_trial(e) for e in ("steer_viscous_damping",
+                                                "roll_viscous_damping", "none"))
+    v = damp.value
+    r = score_log_fit(damp, fit(["steer_viscous_damping"], {"steer_viscous_damping": v}))
+    assert r["right"] and r["outcome"] == "right" and r["value_ok"]
+    r = score_log_fit(damp, fit(["steer_viscous_damping", "speed_scale"],
+                                {"steer_viscous_damping": v, "speed_scale": 1.01}))
+    assert not r["right"] and r["outcome"] == "right_with_extras"
+    r = score_log_fit(damp, fit(["tire_scrub_torque"], {"tire_scrub_torque": 0.5},
+                                {"tire_scrub_torque": ["tire_scrub_torque",
+                                                       "steer_viscous_damping"]}))
+    assert not r["right"] and r["outcome"] == "wrong_first" and r["in_set"]
+    assert score_log_fit(outside, fit(["unexplained"], {}))["right"]
+    assert not score_log_fit(outside, fit(["unexplained", "steer_inertia"],
+                                          {"steer_inertia": 0.1}))["right"]
+    assert score_log_fit(none, fit([], {}))["right"]
+    assert not score_log_fit(none, fit(["speed_scale"], {"speed_scale": 1.02}))["right"]
+    u = score_log_fit(damp, fit([PLANT_UNCERTAIN], {}))
+    assert u["outcome"] == "plant_uncertain" and not u["right"]
+    assert score_log_fit(none, None)["outcome"] == "refused"
+
+
+@pytest.mark.parametrize("effect", ["steer_viscous_damping", "none"])
+def test_fit_on_csv_logs_both_ways(effect, tmp_path):
+    """End to end, ``bikeid measured fit`` on the CSV logs (seed 0's trials, linear truth):
+    an injected viscous steer damping is named alone, its value within 20 % of the truth's
+    (the blind trials' band: the nominal is calibrated within +-5 % inertias and +-2 mm
+    trail, which the damping partly absorbs); the no-effect logs get no effect.  Measured:
+    0.345 for a true 0.395; none: verdict ['unexplained'] (the stated bicycle's residual
+    mismatch, no effect named)."""
+    tr = _trial(effect)
+    r = run_log_trial(tr, tmp_path, "independent_linear")
+    assert r["rc"] == 0, r["error"]
+    assert r["plant"] == "linear" and r["plant_ratio"] > LINEAR_PLANT_MARGIN  # linear truth
+    if effect == "none":
+        assert r["right"] and r["effects"] == {}, r
+    else:
+        assert r["right"] and r["outcome"] == "right" and r["value_ok"], r
+        assert math.isclose(r["effects"][effect], tr.value, rel_tol=0.2)
