@@ -459,13 +459,17 @@ def predictor_radius(model) -> float | None:
     Returns
     -------
     float or None
-        max |eig(Ad - K C)| (dimensionless, per sample); None for a model without an
-        innovation gain (e.g. a speed-parameterized model).
+        max |eig(Ad - K C)| (dimensionless, per sample); None for a model whose theta and
+        K were not fitted together by a prediction-error fit (no innovation gain, or
+        ``nfev`` 0: a speed-parameterized model, or one taken from it at a speed by
+        ``SpeedCanonicalModel.at``, whose K belongs to another theta).
     """
     from bikeid.ident.predictor import discretize, output_matrix
 
     K, theta = getattr(model, "K", None), getattr(model, "theta", None)
     if K is None or theta is None or callable(theta) or not hasattr(model, "outputs"):
+        return None
+    if not getattr(model, "nfev", 0) > 0:  # theta and K not fitted together
         return None
     C, _ = output_matrix(model.outputs)
     Ad, _ = discretize(np.asarray(theta, float), float(model.dt))

@@ -131,3 +131,22 @@ def test_cli_default_path_runs_and_counts(capsys):
     assert rc == 0
     assert "default path: benchmark, linear plant" in out
     assert "predictor's stability boundary" in out
+
+
+def test_identify_withholds_intervals_of_a_boundary_fit(short_run, tmp_path, capsys):
+    """``bikeid identify`` on the 30 s default-path record: the estimate is printed, the
+    eigenvalue intervals are withheld with the reason; on the same record fitted inside the
+    boundary (``--method pem`` cannot select output error, so the interior case is the
+    library call of test_interior_fit_passes_and_covers) the JSON carries them."""
+    import json
+
+    from bikeid.dataset.store import write_runs
+
+    _, run = short_run
+    path = write_runs(tmp_path / "short.h5", [run])
+    rc = main(["identify", str(path), "--method", "pem", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert doc["per_speed"][0]["eigenvalues"]  # the estimate stands
+    assert doc["per_speed"][0].get("eigenvalue_intervals") is None
+    assert any("stability boundary" in n for n in doc["intervals"]["notes"])

@@ -983,9 +983,9 @@ def _intervals(models: dict, speed_model) -> dict:
 
     out: dict = {"level": 0.95, "calibration": INTERVAL_CALIBRATION, "eigenvalues": []}
     for v, m in models.items():
-        try:
-            out["eigenvalues"].append(eigenvalue_intervals(m).to_json())
-        except InputError as exc:  # no usable covariance: the estimate stands, no interval
+        try:  # a fit on its predictor's stability boundary has no trustworthy interval
+            out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
+        except (InputError, UntrustworthyResult) as exc:  # the estimate stands, no interval
             out["eigenvalues"].append(None)
             out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")
     if speed_model is not None:
