@@ -87,10 +87,10 @@ SPEED_STEP = 1e-4
 #: A fixed-speed PEM fit whose one-step predictor Ad - K C has spectral radius above
 #: 1 - PREDICTOR_BOUNDARY_TOL ended on the stability boundary the fit keeps its predictor
 #: inside (:func:`predictor_radius`).  Measured on the default path (benchmark, nonlinear
-#: plant, roll PID, 5 m/s, 1 N m dither, 20 seeds each of 30, 60, 90 and 120 s): the fits
-#: stopped there have 1 - radius of 1e-10 to 1e-8, the others 1.4e-3 and more (the slowest
-#: plant pole, exp(-0.32 dt) at K = 0, is 1 - 3.2e-3); 1e-4 lies between the two groups by
-#: more than an order of magnitude each side (docs/uncertainty.md).
+#: plant, roll PID, 5 m/s, 1 N m dither, 20 seeds each of 30, 60, 90, 120 and 300 s, and
+#: the output-error and 3 N m variants): the 73 fits stopped there have 1 - radius of at
+#: most 8.3e-7, the 107 others 6.6e-4 or more (the slowest plant pole, exp(-0.32 dt) at
+#: K = 0, is 1 - 3.2e-3); 1e-4 lies between the two groups (docs/uncertainty.md).
 PREDICTOR_BOUNDARY_TOL = 1e-4
 
 #: Interval methods: the quadratic-likelihood profile (default) and the first-order one

@@ -58,7 +58,8 @@ def test_boundary_fit_is_refused_and_would_have_missed(short_run):
     p, run = short_run
     model = pem.fit(run)
     # on the boundary: 1 - radius measured 4.6e-9, four orders of magnitude inside the
-    # tolerance (the interior fits of the study have 1 - radius >= 1.4e-3)
+    # tolerance (the study's boundary fits have 1 - radius <= 8.3e-7, its interior ones
+    # >= 6.6e-4)
     assert 1.0 - predictor_radius(model) < 1e-2 * PREDICTOR_BOUNDARY_TOL
     ei = eigenvalue_intervals(model)
     assert ei.at_predictor_boundary
