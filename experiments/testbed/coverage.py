@@ -29,6 +29,12 @@ the intervals are formed, to check that the verdict can fail (0.1 must give ``to
 
 This calibrates the intervals on the linear plant only; docs/uncertainty.md says what is
 measured on the nonlinear plant (a bias that grows with the excitation amplitude).
+
+:func:`run_default_path_coverage` (``bikeid coverage --plant nonlinear``) counts the same on
+the README's default path instead (``dataset.closed_loop.simulate_run`` of the nonlinear or
+linear plant under the roll PID with a 1 N m dither, ``pem.fit``, ``eigenvalue_intervals``),
+separately for the fits that end on their one-step predictor's stability boundary, which
+``ident.uncertainty.check_predictor_interior`` refuses.
 """
 
 from __future__ import annotations
