@@ -51,3 +51,22 @@ def test_readme_script_identifies_the_eigenvalues():
     tol = np.array([eigen_tolerance(z) for z in truth])
     assert np.all(err <= tol), (truth, found, err, tol)
     assert out.getvalue().count("\n") >= 4  # the table was printed
+
+
+def test_readme_is_a_newcomers_page():
+    """The README stays readable in one sitting: at most 200 lines, no table row over 300
+    characters (details go to docs/results.md), and every relative link and every
+    ``tests/...`` or ``docs/...`` path it names exists (so a moved file cannot leave it
+    pointing nowhere)."""
+    import re
+
+    text = README.read_text()
+    lines = text.splitlines()
+    assert len(lines) <= 200, len(lines)
+    long_rows = [i + 1 for i, line in enumerate(lines) if line.startswith("|") and len(line) > 300]
+    assert not long_rows, f"table rows over 300 characters at lines {long_rows}"
+    root = README.parent
+    named = set(re.findall(r"\]\(([^)#:]+)\)", text))
+    named |= set(re.findall(r"`((?:tests|docs|benchmarks)/[\w/.-]+\.(?:py|md))", text))
+    missing = sorted(n for n in named if not (root / n).exists())
+    assert not missing, f"README names files that do not exist: {missing}"
