@@ -161,3 +161,38 @@ def test_fit_on_csv_logs_both_ways(effect, tmp_path):
     else:
         assert r["right"] and r["outcome"] == "right" and r["value_ok"], r
         assert math.isclose(r["effects"][effect], tr.value, rel_tol=0.2)
+
+
+def test_pipeline_defaults_are_the_live_values():
+    """Every entry of PIPELINE_DEFAULTS equals what the pipeline runs: the AcceptanceRule
+    field, the module constant, or ``measured fit``'s option default (read from its parser),
+    and names the data it was chosen on; the plant margin and weave floor are one object
+    wherever they are imported."""
+    import argparse
+    import importlib
+
+    from bikeid.experiments.cli import measured
+    from bikeid.ident.effects import acceptance, selection
+    from bikeid.ident.effects.acceptance import PIPELINE_DEFAULTS, AcceptanceRule
+    from bikeid.ident.effects.nominal_uncertainty import NominalUncertainty
+
+    ap = argparse.ArgumentParser()
+    measured.register(ap.add_subparsers())
+    fit = ap.parse_args(["measured", "fit", "--out", "x.json"])
+    rule = AcceptanceRule()
+    for name, d in PIPELINE_DEFAULTS.items():
+        assert d["tuned_on"] and d["where"], name
+        where = d["where"].split(" ")[0]
+        if where.startswith("AcceptanceRule."):
+            assert getattr(rule, where.split(".")[1]) == d["value"], name
+        elif where.startswith("measured"):  # 'measured fit --opt'
+            opt = d["where"].split("--")[1].replace("-", "_")
+            assert str(getattr(fit, opt)) == str(d["value"]), name
+        elif "." in where and where.split(".")[-1].isupper():
+            mod, const = where.rsplit(".", 1)
+            m = importlib.import_module(f"bikeid.{'ident.effects.' if '.' not in mod else ''}{mod}")
+            assert getattr(m, const) == d["value"], name
+    assert rule.nominal_uncertainty == NominalUncertainty.parse(PIPELINE_DEFAULTS[
+        "nominal_uncertainty"]["value"]) == NominalUncertainty()  # fmt: skip
+    assert selection.LINEAR_PLANT_MARGIN is acceptance.LINEAR_PLANT_MARGIN
+    assert selection.WEAVE_EPS is acceptance.WEAVE_EPS

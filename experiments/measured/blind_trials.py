@@ -643,12 +643,9 @@ def _linear_log(plant: _LinearPlant, v0: float, nz: Nuisance, pushes: int, scale
 
 def _nonlinear_log(p, effects, v0: float, nz: Nuisance, pushes: int, scale: float,
                    rng) -> dict:  # fmt: skip
-    """A continuous log of pushes and free decays on bikeid's nonlinear plant (constant
-    speed; the pulses as a lateral force at the rear frame's mass centre, torque / its
-    height)."""
-    starts, peaks = _push_plan(nz, pushes, rng)
-    height = abs(float(p.zB))
-    peaks = [scale * a / height for a in peaks]
+    """A log of pushes and free decays on bikeid's nonlinear plant (constant speed): upright
+    running, then each push as an impulsive one, a start state like the steer-by-wire
+    windows' (as :func:`generate_windows`), followed by ``LOG_GAP`` s of the closed loop."""
     step = 2 * math.pi / nz.encoder_counts
     sensors = Sensors({
         "phi": Channel(std=nz.noise / 5),
@@ -656,17 +653,29 @@ def _nonlinear_log(p, effects, v0: float, nz: Nuisance, pushes: int, scale: floa
         "delta": Channel(std=nz.steer_noise, step=step),
         "deltadot": Channel(std=nz.noise, step=step / DT),
     })  # fmt: skip
-    dur = LOG_LEAD + pushes * LOG_GAP
-    run = simulate_run(p, SteerIntoLean(CONTROL_GAIN, CONTROL_SPEED), float(v0), duration=dur,
-                       substeps=4, sensors=sensors, effects=effects,
-                       seed=int(rng.integers(2**31)),
-                       lateral_force=lambda t: _pulse(t, starts, peaks, nz.pulse_duration),
-                       )  # fmt: skip
-    if run.meta["fell_at"] is not None or run.n < int(round(dur / DT)) - 1:
-        raise RuntimeError("blind-trial plant fell")
-    out = {k: np.asarray(run[k], float).copy()
-           for k in ("phi", "delta", "phidot", "deltadot", "v", "T_delta")}  # fmt: skip
-    out["t"] = np.arange(run.n) * DT
+    keys = ("phi", "delta", "phidot", "deltadot", "v", "T_delta")
+    parts: dict = {k: [] for k in keys}
+    sgn = float(rng.choice([-1.0, 1.0]))
+    for j in range(pushes + 1):
+        if j == 0:
+            init, dur = {"phi": 0.0, "delta": 0.0, "phidot": 0.0, "deltadot": 0.0}, LOG_LEAD
+        else:
+            sgn = -sgn
+            init = {"phi": float(rng.normal(0.0, 0.01)),
+                    "delta": float(-sgn * rng.uniform(0.0, DELTA0 / v0)),
+                    "phidot": float(scale * sgn * rng.uniform(0.35, 0.95)),
+                    "deltadot": float(scale * sgn * rng.uniform(0.4, 1.5))}  # fmt: skip
+            dur = LOG_GAP
+        n = int(round(dur / DT))
+        run = simulate_run(p, SteerIntoLean(CONTROL_GAIN, CONTROL_SPEED), float(v0),
+                           duration=n * DT, substeps=4, sensors=sensors, effects=effects,
+                           seed=int(rng.integers(2**31)), initial=init)  # fmt: skip
+        if run.meta["fell_at"] is not None or run.n < n:
+            raise RuntimeError("blind-trial plant fell")
+        for k in keys:
+            parts[k].append(np.asarray(run[k], float)[:n])
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    out["t"] = np.arange(out["phi"].size) * DT
     return out
 
 
@@ -674,9 +683,13 @@ def log_signals(trial: BlindTrial, speed: float, seed: int, plant: str | None = 
                 pushes: int = LOG_PUSHES) -> dict:  # fmt: skip
     """One continuous log of the blind generator: upright running, pushes, free decays.
 
-    ``pushes`` half-sine roll-torque pulses (the trial's duration, an impulse of 0.6-1 x
-    :data:`LOG_IMPULSE`, signs alternating) ``LOG_GAP`` s apart after ``LOG_LEAD`` s; the
-    loop is the steer-into-lean law on the logged speed; the trial's hidden effect and
+    ``pushes`` pushes ``LOG_GAP`` s apart after ``LOG_LEAD`` s of upright running, signs
+    alternating: on the independent linear plant half-sine roll-torque pulses (the trial's
+    duration, an impulse of 0.6-1 x :data:`LOG_IMPULSE`); on bikeid's nonlinear plant
+    impulsive pushes (a start state like the steer-by-wire windows'; a lateral-force pulse
+    at the rear frame, tried first, gave a roll lobe followed by a larger opposite one that
+    the decay detector rejects). The loop is the steer-into-lean law on
+    the logged speed; the trial's hidden effect and
     instrument nuisances (module docstring).  A log whose plant falls is redrawn with the
     pulses scaled by 0.7 (up to three times).
 

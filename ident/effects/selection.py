@@ -57,7 +57,9 @@ from bikeid.dataset.windows import Window
 from bikeid.ident.effects.acceptance import (
     EXPLAINED_MIN,
     EXPLAINED_MIN_CALIBRATED,
+    LINEAR_PLANT_MARGIN,
     RESIDUAL_MAX,
+    WEAVE_EPS,
     AcceptanceRule,
     paired_p_value,
     t_p_value,
@@ -95,18 +97,6 @@ __all__ = [
     "selection_frequencies",
 ]
 
-WEAVE_EPS = 0.02  # floor of the weave error in the selection score (fit scatter, ~2 %)
-#: Least factor by which the linear nominal plant's cost must undercut the nonlinear one's
-#: before ``plant="auto"`` (the default of ``bikeid measured fit``) fits from the linear
-#: plant (:func:`choose_nominal_plant`).  Calibrated on the blind trials' nominal costs
-#: (``benchmarks/bench_blind_trials.py --n 180 --seed 0|1 --nominal-only``, 360 trials):
-#: the ratio nonlinear / linear reached at most 1.14 on the 89 trials from bikeid's
-#: nonlinear plant, while 23 of the 31 no-effect trials from the independent linear plant
-#: exceed 1.2 (5 of them are within 5 % of 1: no margin separates those); the real
-#: steer-by-wire decays give 0.80-1.03 for every speed split (1.10 for 4.5 m/s alone).
-#: 1.2 is the round factor above all of these nonlinear cases (docs/measured.md,
-#: "Blind trials").
-LINEAR_PLANT_MARGIN = 1.2
 #: The verdict of a fit whose nominal plant is uncertain: the nominal costs do not pick a
 #: plant (their ratio within [1 / margin, margin]) and the selections with the two plants
 #: disagree beyond their ambiguity sets (:func:`compare_plant_selections`), so the named
