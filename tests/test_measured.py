@@ -216,22 +216,28 @@ def test_real_logs_sign_and_controller():
 
 @needs_data
 @pytest.mark.slow
-def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
-    """Goal of the brief on real data: fit 2.5 + 4.5 m/s (nonlinear nominal: the default
-    ``--plant auto`` keeps it, the linear plant fitting only 1.4 % better, below
-    LINEAR_PLANT_MARGIN; with the weave term), held-out 1.5 + 3.5 m/s decay error and weave error
-    both at least halve (measured 0.748 -> 0.322 and 0.141 -> 0.030 with the default nominal
-    uncertainty, docs/measured.md);
-    the JSON carries the documented schema.  (The reverse split, fit 1.5 + 3.5, does not
-    meet the goal: 0.58 / 0.28; docs/measured.md.)"""
+@pytest.mark.parametrize("fit, held, ratio, ci", [
+    ("2.5,4.5", {1.5, 3.5}, 0.43, (0.35, 0.58)),
+    ("1.5,3.5", {2.5, 4.5}, 0.61, (0.55, 0.67)),
+])  # fmt: skip
+def test_cli_fit_evaluate_states_the_goal_on_each_split(tmp_path, capsys, fit, held, ratio, ci):
+    """The goal (held-out decay error halved) on the two two-speed splits, by the default
+    path (``measured fit`` with ``--plant auto``, the default acceptance rule and nominal
+    uncertainty; ``measured evaluate --json``).  The verdict is computed here from the
+    interval (``halved`` only when its upper end is below 0.5, ``reduced`` when below 1), and
+    must be what evaluate prints; on both splits it is ``reduced``: the goal is **not shown**
+    (measured 0.43, 95 % interval 0.35-0.58, fitting 2.5 + 4.5; 0.61, 0.55-0.67, fitting
+    1.5 + 3.5; docs/measured.md).  The interval's ends are checked to 0.02, the bootstrap's
+    resampling scatter at 2000 resamples (fixed seed: the ends are reproduced exactly; the
+    band only allows the printed rounding).  The weave ratio has no interval (one median per
+    file), so only its direction is asserted.  The other four splits are in
+    ``benchmarks/measured_speed_splits.py`` (none halved by its interval)."""
     import json
 
     from bikeid.experiments.cli import main
 
     model = tmp_path / "m.json"
-    assert (
-        main(["measured", "fit", "--data", DATA, "--speeds", "2.5,4.5", "--out", str(model)]) == 0
-    )
+    assert main(["measured", "fit", "--data", DATA, "--speeds", fit, "--out", str(model)]) == 0
     capsys.readouterr()
     assert main(["measured", "evaluate", "--model", str(model), "--data", DATA, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -239,9 +245,15 @@ def test_cli_fit_evaluate_halves_held_out_error(tmp_path, capsys):
     assert all({"name", "value", "std", "unit"} <= set(e) for e in out["effects"])
     assert all({"file", "speed", "error_before", "error_after", "weave_error_before",
                 "weave_error_after"} <= set(f) for f in out["files"])  # fmt: skip
-    assert {round(f["speed"], 1) for f in out["files"]} == {1.5, 3.5}
-    assert out["summary"]["error_after"] <= 0.5 * out["summary"]["error_before"]
-    assert out["summary"]["weave_error_after"] <= 0.5 * out["summary"]["weave_error_before"]
+    assert {round(f["speed"], 1) for f in out["files"]} == held
+    s = out["summary"]
+    lo, hi = s["ratio_ci"]
+    assert lo <= s["ratio"] <= hi
+    expected = "halved" if hi < 0.5 else "reduced" if hi < 1 and s["p_value"] < 0.05 else None
+    assert s["verdict"] == expected == "reduced"
+    assert s["ratio"] == pytest.approx(ratio, abs=0.01)
+    assert lo == pytest.approx(ci[0], abs=0.02) and hi == pytest.approx(ci[1], abs=0.02)
+    assert s["weave_error_after"] < s["weave_error_before"]
 
 
 @needs_data
