@@ -1,6 +1,6 @@
 """Randomized undeclared-effect trials on the nonlinear plant (experiments.measured.effect_trials).
 
-Budget: the cheap tests take a few seconds; the rate test runs 24 trials on 2 processes
+Budget: the cheap tests take a few seconds; each rate test runs 24 trials on 2 processes
 (about 60 s on 2 cores: 24 trials, ~4 s of CPU each) and is marked slow.
 """
 
@@ -125,46 +125,83 @@ def test_defect_correction_makes_nominal_exact_on_noise_free_plant():
     assert lin.max() > 0.05 and nl.max() < 0.01
 
 
-FIRST_ORDER_EQUIVALENT = {"actuator_lag": "input_delay", "input_delay": "actuator_lag"}
+def _right_with_reported_set(r: dict) -> bool:
+    """The first named effect is the injected one, or the injected one is in the ambiguity set
+    the selection reported for it (a set counts only when the pipeline reported it)."""
+    named = [n for n in r["verdict"] if n != "unexplained"]
+    if not named:
+        return False
+    return named[0] == r["effect"] or r["effect"] in r["ambiguity"].get(named[0], [])
+
+
+def _scipy_clopper_pearson(k: int, n: int) -> tuple[float, float]:
+    """The exact interval from the beta quantiles (the independent form of binomial_ci)."""
+    from scipy import stats
+
+    lo = 0.0 if k == 0 else float(stats.beta.ppf(0.025, k, n - k + 1))
+    hi = 1.0 if k == n else float(stats.beta.ppf(0.975, k + 1, n - k))
+    return lo, hi
 
 
 @pytest.mark.slow
 def test_randomized_trials_name_library_effects_and_flag_outside_ones():
     """24 trials (3 per effect, seed 1, 2 processes) = the first 24 of the documented grid
-    (docs/measured.md).  Asserted against the brief's goals (90 %):
-    - held-out error halves in >= 90 % of library trials;
-    - when an effect is named first, it is the injected one or its first-order
-      equivalent (a lag 1/(1 + s tau) and a delay e^(-s tau) agree to O((s tau)^2); at the
-      weave, s tau <= 0.4) in >= 90 %, and its magnitude is within 20 % in >= 90 % of the
-      trials naming it right;
-    - the right-first rate's exact 95 % interval reaches the 90 % goal (the data do not
-      reject it; a rate of 9/15 would);
-    - outside-library effects: "unexplained" in >= 90 % of trials (5 of 6 is 83 %, so all 6).
+    (docs/measured.md), with the default nominal uncertainty (the stated bicycle calibrated
+    within inertias +-5 %, trail +-2 mm and the instrument offsets before any effect).  An
+    effect named in place of the injected one counts as right only when the selection
+    reported the injected one in its ambiguity set (no first-order equivalence assumed by
+    the test).  Asserted against the brief's goals (90 %):
+    - held-out error halves in >= 90 % of library trials (measured 18/18);
+    - the right-first rate, sets as reported: measured 15 of 18 (every damping, friction,
+      stiffness, gain and lag; of the three input delays, all named an actuator lag, only one
+      lag's set holds the delay); both ends of its exact 95 % interval (0.59-0.96, checked
+      against scipy's beta quantiles): the lower end above 0.5 (the data reject a rate of
+      one half), the upper end at or above 0.9 (the 90 % goal is not rejected, nor shown:
+      the point rate 0.83 is below it);
+    - magnitude within 20 % in >= 90 % of the trials naming the injected effect first;
+    - outside-library effects: "unexplained" first in >= 90 % of trials (measured 6/6).
 
     The goals were set for effects tested one at a time, so the trials run each effect's test
     at 5 % alone (``correction="none"``: Student t with the 3 degrees of freedom of the 4
-    fit-half windows, t > 3.18, the level nearest the former t > 3).  The default rule
-    (Bonferroni over the 37 tests of two rounds: t > 10.2 at 3 degrees of freedom) names 16
-    of these 18 library effects and misses two (a 0.24 N m friction, whose first-round
-    look-alikes reach t 3.7-5.4, and a 0.59 N m/rad steer spring, t 6.1: no effect named,
-    error not halved), which
-    :func:`test_default_rule_misses_are_unnamed_not_wrong` holds; docs/measured-log.md,
-    "Selection with stated error rates".
+    fit-half windows, t > 3.18).  The default rule (Bonferroni over the 37 tests of two
+    rounds) is :func:`test_default_rule_on_the_grid`.
     """
     out = run_trials(3 * len(EFFECTS), seed=1, processes=2,
-                     rule=AcceptanceRule.exact(correction="none"))  # fmt: skip
+                     rule=AcceptanceRule(correction="none"))  # fmt: skip
     lib = [r for r in out["trials"] if r["in_library"]]
     outside = [r for r in out["trials"] if not r["in_library"]]
     assert len(lib) == 3 * len(LIBRARY_EFFECTS) and len(outside) == 3 * len(OUTSIDE_EFFECTS)
     assert set(LIBRARY_EFFECTS).isdisjoint(OUTSIDE_EFFECTS)
     assert sum(r["error_halved"] for r in lib) >= 0.9 * len(lib)
-    named = [r for r in lib if r["verdict"][0] != "unexplained"]
-    ok = [r["verdict"][0] in (r["effect"], FIRST_ORDER_EQUIVALENT.get(r["effect"])) for r in named]
-    assert sum(ok) >= 0.9 * len(named)
+    k = sum(_right_with_reported_set(r) for r in lib)
+    lo, hi = binomial_ci(k, len(lib))
+    assert (lo, hi) == pytest.approx(_scipy_clopper_pearson(k, len(lib)), rel=1e-9)
+    assert lo > 0.5 and hi >= 0.9, (k, lo, hi)
     right = [r for r in lib if r["ranked_first"]]
     assert sum(r["magnitude_ok"] for r in right) >= 0.9 * len(right)
-    assert binomial_ci(len(right), len(lib))[1] >= 0.9
     assert sum(r["unexplained"] for r in outside) >= 0.9 * len(outside)
+
+
+@pytest.mark.slow
+def test_default_rule_on_the_grid():
+    """The same 24 trials by the default rule (family-wise 5 %, Bonferroni over 37 tests, the
+    default nominal uncertainty): right first with sets as reported in 13 of 18 library
+    trials (the three input delays are named actuator lags whose reported sets do not hold
+    the delay; a 0.24 N m friction and a 0.59 N m/rad spring are unnamed), so the exact 95 %
+    interval is 0.47-0.90: its upper end just reaches the 90 % goal (not rejected) and its
+    lower end stays below one half (a rate of one half is not rejected either); both ends
+    are checked against scipy's beta quantiles and the point rate against the goal.  Every
+    outside effect is answered ``unexplained`` first (6/6)."""
+    out = run_trials(3 * len(EFFECTS), seed=1, processes=2, rule=AcceptanceRule())
+    lib = [r for r in out["trials"] if r["in_library"]]
+    k = sum(_right_with_reported_set(r) for r in lib)
+    lo, hi = binomial_ci(k, len(lib))
+    assert (lo, hi) == pytest.approx(_scipy_clopper_pearson(k, len(lib)), rel=1e-9)
+    assert k / len(lib) < 0.9 <= hi and lo < 0.5, (k, lo, hi)
+    delays = [r for r in lib if r["effect"] == "input_delay"]
+    assert all(not _right_with_reported_set(r) for r in delays)  # a lag, no delay in its set
+    outside = [r for r in out["trials"] if not r["in_library"]]
+    assert all(r["unexplained"] for r in outside)
 
 
 def test_default_rule_misses_are_unnamed_not_wrong():

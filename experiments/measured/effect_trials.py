@@ -435,8 +435,9 @@ def run_trial(
     Returns
     -------
     dict
-        The spec, verdict, estimate [unit] and its std, errors before/after (NRMSE) and the
-        scores.
+        The spec, verdict, the ambiguity set of each accepted effect as the selection
+        reported it (``ambiguity``), estimate [unit] and its std, errors before/after (NRMSE)
+        and the scores.
     """
 
     t0 = time.perf_counter()
@@ -460,6 +461,7 @@ def run_trial(
         **asdict(spec),
         "in_library": es.in_library,
         "verdict": res.verdict,
+        "ambiguity": res.ambiguity,
         "estimate": value,
         "estimate_std": None if est is None else float(est.std),
         "explained_fraction": res.explained,
