@@ -800,6 +800,7 @@ def _sampled_loop(Ad, Bd, x, cmd, H, logged, tlog, text, tphi, Kc, s, brr, g, f,
 #: :meth:`bikeid.dataset.windows.Window.state0` as one dot product (the fit is linear in the
 #: samples and does not depend on the sample period).
 _STATE0_WEIGHTS = np.linalg.pinv(np.vander(np.arange(5.0), 3))[-1]
+_WINDOW_STATE0 = Window.state0  # the quadratic fit the weights reproduce
 
 
 def initial_states(windows: list[Window]) -> np.ndarray:
@@ -815,11 +816,14 @@ def initial_states(windows: list[Window]) -> np.ndarray:
     (len(windows), 4) ndarray
         phi [rad], delta [rad], phidot [rad/s], deltadot [rad/s] at each first sample: the
         quadratic least-squares fit over the first 5 samples, equal to ``state0`` to
-        round-off (windows shorter than 5 samples use ``state0`` itself).
+        round-off (windows shorter than 5 samples, or whose ``state0`` is not
+        :meth:`Window.state0`'s fit, e.g. a subclass giving the exact state, use ``state0``
+        itself).
     """
     if not windows:
         return np.zeros((0, 4))
-    if min(w.n for w in windows) < 5:
+    if min(w.n for w in windows) < 5 or any(type(w).state0 is not _WINDOW_STATE0
+                                            for w in windows):  # fmt: skip
         return np.stack([w.state0() for w in windows])
     first = np.array([[w.phi[:5], w.delta[:5], w.phidot[:5], w.deltadot[:5]] for w in windows])
     return first @ _STATE0_WEIGHTS
