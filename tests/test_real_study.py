@@ -121,7 +121,9 @@ def test_study_on_real_logs(tmp_path):
     deterministic numbers documented in docs/measured.md ("Moore & Hubbard on the real
     bicycle"): Whipple and effects decay errors on the held-out runs, to 1e-3 relative
     (no fit involved for these two: only the data and the documented effect set); (3) the
-    report and figures are written.
+    report and figures are written; (4) each split's before/after (Whipple -> Whipple +
+    effects) equals the per-file errors' mean, carries its interval and the verdict it
+    supports, and the report prints it.
     """
     from bikeid.dataset.sbw_logs import data_dir
     from bikeid.experiments.measured.study import _second_half_windows, decay_nrmse, run_study
@@ -164,6 +166,21 @@ def test_study_on_real_logs(tmp_path):
     h = headline(study)
     assert h["2.5+4.5"]["best"] == "effects"
     assert math.isfinite(h["1.5+3.5"]["ratio_to_whipple"])
+    # (4) the before/after (Whipple -> Whipple + effects) with its interval: the errors are
+    # the mean over held-out files of the per-file decay errors above (a second computation),
+    # the ratio lies in its interval and the verdict is the one the interval supports
+    for s in study["splits"]:
+        ba = s["before_after"]
+        runs = [r for r in s["runs"].values() if "decay_nrmse" in r["whipple"]]
+        for key, model in (("error_before", "whipple"), ("error_after", "effects")):
+            mean = sum(r[model]["decay_nrmse"] for r in runs) / len(runs)
+            assert ba[key] == pytest.approx(mean, rel=1e-9)
+        lo, hi = ba["ratio_ci"]
+        assert lo <= ba["ratio"] <= hi
+        expected = ("halved" if hi < 0.5 else "reduced" if hi < 1 and ba["p_value"] < 0.05
+                    else ba["verdict"])  # fmt: skip
+        assert ba["verdict"] == expected
+    assert "95 % interval" in path.read_text()
 
 
 def test_cli_refuses_bad_folders(tmp_path, capsys, monkeypatch):

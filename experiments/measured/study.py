@@ -63,6 +63,7 @@ from bikeid.dataset.run import Run
 from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log, settled
 from bikeid.ident import greybox
 from bikeid.ident.direct import ALL_ENTRIES, parse_entry
+from bikeid.ident.effects.before_after import before_after
 from bikeid.ident.effects.experiment_model import ExperimentModel, window_errors
 from bikeid.ident.effects.library import LIBRARY
 from bikeid.ident.effects.pipeline import fit_model
@@ -85,7 +86,9 @@ __all__ = [
     "StudyModel",
     "effect_footprints",
     "equation_vaf",
+    "decay_errors",
     "decay_runs",
+    "effects_before_after",
     "matrix_model",
     "run_study",
     "signal_consistency",
@@ -301,6 +304,34 @@ def simulation_vaf(model: StudyModel, run: Run, window: float = SIM_WINDOW) -> d
     return out
 
 
+def decay_errors(model: StudyModel, windows: list) -> np.ndarray:
+    """Each window's decay error of ``measured evaluate --input logged``.
+
+    Parameters
+    ----------
+    model : StudyModel
+        The model.
+    windows : list of Window
+        Free decays with their logged command (:func:`bikeid.dataset.decays.load_decays`).
+
+    Returns
+    -------
+    ndarray
+        Per window, the mean NRMSE of roll rate and steer angle
+        (:func:`bikeid.ident.effects.experiment_model.window_errors`; dimensionless; inf or
+        NaN where the replay diverged); empty without windows.
+    """
+    sims = []
+    for w in windows:
+        A, b = model.ab(w.speed)
+        Y = _replay(A, b, w.state0(), w.T_logged)
+        sims.append({o: Y[:, j] for j, o in enumerate(OUTPUTS)})
+    if not sims:
+        return np.zeros(0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return window_errors(windows, sims).mean(axis=1)
+
+
 def decay_nrmse(model: StudyModel, windows: list) -> float:
     """Mean decay error of ``measured evaluate --input logged`` over ``windows``.
 
@@ -314,20 +345,42 @@ def decay_nrmse(model: StudyModel, windows: list) -> float:
     Returns
     -------
     float
-        Mean over windows of the mean NRMSE of roll rate and steer angle
-        (:func:`bikeid.ident.effects.experiment_model.window_errors`); NaN without windows.
+        Mean over windows of :func:`decay_errors`; NaN without windows, inf when a replay
+        diverged.
     """
 
     if not windows:
         return math.nan
-    sims = []
-    for w in windows:
-        A, b = model.ab(w.speed)
-        Y = _replay(A, b, w.state0(), w.T_logged)
-        sims.append({o: Y[:, j] for j, o in enumerate(OUTPUTS)})
-    with np.errstate(over="ignore", invalid="ignore"):
-        e = window_errors(windows, sims).mean(axis=1)
+    e = decay_errors(model, windows)
     return float(np.mean(e)) if np.all(np.isfinite(e)) else math.inf
+
+
+def effects_before_after(whipple: StudyModel, effects: StudyModel, windows: list) -> dict:
+    """The held-out decay error before (Whipple) and after (Whipple + effects), with interval.
+
+    The same statistic, bootstrap and paired test as ``measured evaluate``'s summary
+    (:func:`bikeid.ident.effects.before_after.before_after`: per-decay errors resampled
+    within each log file, the models held fixed).
+
+    Parameters
+    ----------
+    whipple, effects : StudyModel
+        The models before and after.
+    windows : list of Window
+        The held-out decays (logged command replayed, :func:`decay_errors`).
+
+    Returns
+    -------
+    dict
+        :func:`bikeid.ident.effects.before_after.before_after`'s result, or
+        ``{"undefined": reason}`` without decays or when a replay diverged.
+    """
+    if not windows:
+        return {"undefined": "no held-out decays"}
+    e0, e1 = decay_errors(whipple, windows), decay_errors(effects, windows)
+    if not (np.all(np.isfinite(e0)) and np.all(np.isfinite(e1))):
+        return {"undefined": "a replay diverged: no finite per-decay errors"}
+    return before_after(e0, e1, [w.file for w in windows])
 
 
 # --------------------------------------------------------------------------- models
@@ -719,7 +772,9 @@ def run_study(
         (entries, stderr, conditioning) and ``runs`` (held-out run -> model -> measures);
         ``bode``: the 4 m/s table and FRF; ``translation`` per split and model;
         ``direct_decays`` per split (the direct method on the free-decay windows only, no
-        push inside); ``weave``: the measured weave per speed; ``signal_consistency`` per
+        push inside); ``before_after`` per split (the held-out decay error of the Whipple
+        model and of Whipple + effects with its 95 % interval, :func:`effects_before_after`);
+        ``weave``: the measured weave per speed; ``signal_consistency`` per
         eigen run (:func:`signal_consistency`); ``definitions``.
 
     Raises
@@ -761,9 +816,11 @@ def run_study(
         effm = _effects_model(eff, f"Whipple + effects ({source})")
         models = {"whipple": whipple, "effects": effm, "direct": direct, "greybox": grey}
         rows = {}
+        held_ws = []
         for r in held:
             _, second = _halves(r)
             ws = _second_half_windows(decays, r)
+            held_ws += ws
             ms = {**models, "pem": pem_models[r.speed]}
             rows[r.meta["file"]] = {"speed": r.speed, **_evaluate(ms, second, ws)}
         say(f"direct on the decay windows {tag}")
@@ -778,6 +835,7 @@ def run_study(
             "effects_source": source,
             "models": {k: _model_json(m) for k, m in models.items()},
             "runs": rows, "translation": trans, "direct_decays": _model_json(dd),
+            "before_after": effects_before_after(whipple, effm, held_ws),
         })  # fmt: skip
         split_models.append(models)
     out["pem"] = {f"{v:g}": _model_json(m) for v, m in pem_models.items()}

@@ -21,6 +21,7 @@ from bikeid.experiments.cli.args import atomic_write_text, dump_json
 from bikeid.experiments.measured.study import MODEL_ORDER, Z_SIGNIFICANT
 from bikeid.experiments.plots import display_scale, phases_on_one_branch, points_on_branch, save
 from bikeid.ident.direct import parse_entry
+from bikeid.ident.effects.before_after import verdict_text
 from bikeid.sim.linear import canonical_matrices
 from bikeid.sim.parameters import steer_by_wire
 
@@ -184,6 +185,16 @@ def _decay_direct_line(dd: dict) -> str:
     )
 
 
+def _before_after_line(ba: dict | None) -> str:
+    """The split's held-out decay error, Whipple -> Whipple + effects, with its interval."""
+    if not ba:
+        return ""
+    if "undefined" in ba:
+        return f"Held-out decay error before/after the effects: undefined ({ba['undefined']})."
+    return ("Held-out decay error, Whipple -> Whipple + effects (mean over files, "
+            f"{ba['decays']} decays): {verdict_text(ba)}; {ba['interval']}.")
+
+
 def write_study(study: dict, out: str | Path) -> Path:
     """Write ``report.md``, ``study.json`` and the figures of a study into ``out``.
 
@@ -226,6 +237,7 @@ def write_study(study: dict, out: str | Path) -> Path:
               f"Best on the held-out decays (median decay error): **{h['best']}**, "
               f"{h['ratio_to_whipple']:.2f} x the Whipple model's "
               f"({', '.join(f'{m} {v:.3g}' for m, v in h['median_decay_nrmse'].items())}).",
+              _before_after_line(s.get("before_after")),
               "", "Equation VAF, steer row (Tables 2-3 analogue):", ""]  # fmt: skip
         L += _runs_table(s["runs"], models, lambda r: r["equation_vaf"]["steer"])
         L += ["", "Equation VAF, roll row:", ""]
