@@ -12,6 +12,7 @@ and hand-built selections for the plant comparison.
 """
 
 import csv
+import json
 import math
 from types import SimpleNamespace
 
@@ -156,6 +157,8 @@ def test_fit_on_csv_logs_both_ways(effect, tmp_path):
     r = run_log_trial(tr, tmp_path, "independent_linear")
     assert r["rc"] == 0, r["error"]
     assert r["plant"] == "linear" and r["plant_ratio"] > LINEAR_PLANT_MARGIN  # linear truth
+    model = json.loads((tmp_path / "model.json").read_text())
+    assert model["results"]["plant_check"] is None  # the costs settle the plant
     if effect == "none":
         assert r["right"] and r["effects"] == {}, r
     else:
@@ -196,3 +199,24 @@ def test_pipeline_defaults_are_the_live_values():
         "nominal_uncertainty"]["value"]) == NominalUncertainty()  # fmt: skip
     assert selection.LINEAR_PLANT_MARGIN is acceptance.LINEAR_PLANT_MARGIN
     assert selection.WEAVE_EPS is acceptance.WEAVE_EPS
+
+
+def test_nominal_plant_uncertain_names_no_effect(tmp_path):
+    """Known both ways on two damping logs of the linear truth: seed 1's (nominal cost ratio
+    1.07, inside the band) has selections that disagree (linear plant: the damping alone;
+    nonlinear: a tyre scrub torque and a front mass shift, measured), so ``measured fit``
+    names no effect, says ``nominal plant uncertain`` and stores both selections; seed 0's
+    (ratio 1.21, outside the band) runs no plant check and names the damping
+    (:func:`test_fit_on_csv_logs_both_ways`)."""
+
+    tr = next(t for t in draw_blind_trials(len(CLOSURE_EFFECTS), 1, CLOSURE_EFFECTS)
+              if t.effect == "steer_viscous_damping")  # fmt: skip
+    r = run_log_trial(tr, tmp_path, "independent_linear")
+    assert r["outcome"] == "plant_uncertain" and r["effects"] == {}, r
+    assert 1 / LINEAR_PLANT_MARGIN <= r["plant_ratio"] <= LINEAR_PLANT_MARGIN
+    res = json.loads((tmp_path / "model.json").read_text())["results"]
+    pc = res["plant_check"]
+    assert not pc["agree"] and pc["differences"]
+    assert list(pc["linear"]["effects"]) == ["steer_viscous_damping"]
+    assert "steer_viscous_damping" not in pc["nonlinear"]["effects"]
+    assert any(PLANT_UNCERTAIN in n for n in res["notes"])
