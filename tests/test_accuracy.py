@@ -239,3 +239,11 @@ def test_direct_counts_over_five_seeds(tmp_path):
     for row in res["controllers"]["pid"]["methods"]["direct_ls"]["rows"]:
         assert not any(m["pass"] for m in row["modes"].values()), row["speed"]
     assert "over seeds 0, 1, 2, 3, 4" in acc.table_text(res)
+
+
+def test_cli_rows_are_the_study_rows():
+    """``bikeid accuracy --methods`` offers exactly the study's rows (the CLI spells them so
+    that --help does not import the study)."""
+    from bikeid.experiments.cli.identify import ACCURACY_METHODS
+
+    assert ACCURACY_METHODS == acc.METHODS

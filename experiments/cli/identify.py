@@ -153,9 +153,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     a.add_argument(
         "--methods",
-        type=_names_arg(("direct", "pem", "greybox"), "methods"),
-        default="direct,pem,greybox",
-        help="comma-separated subset of direct,pem,greybox (default all)",
+        type=_names_arg(ACCURACY_METHODS, "methods"),
+        default=",".join(ACCURACY_METHODS),
+        help=f"comma-separated subset of {','.join(ACCURACY_METHODS)} (default all; direct: "
+        "instrumental variables, direct_ls: Moore & Hubbard's least squares)",
+    )
+    a.add_argument(
+        "--seeds",
+        type=integer(1, 100),
+        default=1,
+        help="seeds 0..N-1 of the simulated data; with N > 1 the table gives each row's pass "
+        "count per seed with its mean and spread (default 1)",
     )
     a.add_argument(
         "--speeds",
@@ -188,6 +196,10 @@ class DefaultsFormatter(argparse.HelpFormatter):
 
 
 #: Data formats ``bikeid identify`` reads, and what each is.
+#: The rows of ``bikeid accuracy`` (``experiments.testbed.accuracy.METHODS``; spelled here
+#: so that ``--help`` does not import the study, a test keeps the two equal).
+ACCURACY_METHODS = ("direct", "direct_ls", "pem", "greybox")
+
 FORMATS = {
     "bikeid": "files written by bikeid (sweep, store)",
     "csv": "your own logs, read with --columns (dataset.importers)",
@@ -1063,7 +1075,7 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     bar = terminal_progress("accuracy", json_output=args.json, unit="stage")
     result = acc.run_accuracy(
         out, controllers, methods, speeds, workers=args.workers, dask=args.dask,
-        log=bar.write if bar else quiet, progress=bar,
+        log=bar.write if bar else quiet, progress=bar, seeds=tuple(range(args.seeds)),
     )  # fmt: skip
     atomic_write_text(out / "accuracy.json", dump_json(result))
     atomic_write_text(out / "accuracy.md", acc.markdown(result))
