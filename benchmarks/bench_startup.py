@@ -10,7 +10,8 @@ pass`` as the interpreter's own start-up in the same run for comparison, and the
 average before and after.  The goal is that ``--help``, ``linearize``, ``critical-speeds``
 and ``eig`` start and finish in under 0.5 s: a user calls them interactively and in shell
 loops.  Where the time goes: ``python -X importtime -m bikeid.experiments.cli
-critical-speeds``; tests/test_startup.py checks that these commands import none of the
+critical-speeds``; tests/experiments/cli/test_startup.py checks that these commands import none of
+the
 heavy modules.  Timings depend on the machine and its load; run it on an otherwise idle
 machine and quote the machine (docs/performance.md).
 """

@@ -2,7 +2,7 @@
 
 Linear closed loop of the benchmark bicycle (``dataset.linear_loop``: default PID, dither
 1 N m held 50 ms, unlogged steer disturbance 0.5 N m, sensor noise 1e-3 rad / 1e-2 rad/s),
-30 s at 2, 4, 6 and 8 m/s per replicate (the setting of ``tests/test_greybox.py``), Moore &
+30 s at 2, 4, 6 and 8 m/s per replicate (the setting of ``tests/ident/test_greybox.py``), Moore &
 Hubbard's free set fitted jointly.  Prints, per free entry, the spread of the estimates over
 the replicates divided by their mean standard error (1 if the standard errors are honest;
 the ratio itself is uncertain by about 1/sqrt(2 (n - 1))), the mean z-score (bias in

@@ -148,7 +148,8 @@ def detect_decays(
     exceeds 1.1 x the peak (no second push).  The next search starts after the window.  On the four
     ``eigen_normal`` logs this finds every window of the transcribed ``segments.csv``
     whose push clears the threshold, at the same start to a few samples, plus the
-    pushes the source's analysis did not use (tests/test_measured.py, docs/measured.md);
+    pushes the source's analysis did not use (tests/ident/effects/test_pipeline.py,
+    docs/measured.md);
     those fit the model worse, so the curated list is the default where it exists.
 
     Any log of :class:`~bikeid.dataset.run.Run` works (the steer-by-wire logs or a user's

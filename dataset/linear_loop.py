@@ -34,7 +34,7 @@ included), so noise circulates through the loop.  Two paths, same loop:
 - Python: any other controller (fuzzy, saturating laws) is called as
   ``controller(t_k, y_meas) + dither[k]`` once per sample.
 
-Both give the same run to round-off for a linear law (``tests/test_engine.py``).
+Both give the same run to round-off for a linear law (``tests/dataset/test_closed_loop.py``).
 
 Exact accelerations ``truth['phiddot'], truth['deltaddot']`` are
 q''(t_k+) = A[2:4] x[k] + B[2:4] u_applied[k], the right limit at the sample (the input

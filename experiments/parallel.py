@@ -14,7 +14,7 @@ the effect and blind trials, the reproductions) hands its jobs to :func:`imap` o
 
 **Same seeds, same numbers.**  A job carries all of its randomness (its seed is part of
 the job), and nothing is drawn from worker identity or completion order, so a study gives
-bit-identical results whichever way it runs (``tests/test_parallel.py`` runs one study
+bit-identical results whichever way it runs (``tests/experiments/test_parallel.py`` runs one study
 both ways).  Results come back to the calling process, which alone writes files, so Dask
 workers need no shared file system.  Resuming (skipping finished jobs) is the study's
 business: :mod:`bikeid.experiments.testbed.sweep` keeps one part file per finished run.

@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.experiments.cli.args import atomic_write_text, to_jsonable
+from bikeid.dataset.files import atomic_write_text
+from bikeid.sim.textformats import to_jsonable
 
 __all__ = ["Report", "fmt", "fmt_complex", "write"]
 

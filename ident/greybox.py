@@ -95,7 +95,7 @@ DEFAULT_FREE = MOORE_ROLL + tuple(n for n in MOORE_STEER if n != "HdF")
 #: A direction that badly determined has a standard error 1e4 times the best-determined
 #: one's (relative units): with the per-entry errors of ~0.1-1 % typical of the testbed's
 #: 50 s runs it is undetermined.  Measured: Moore & Hubbard's set over 2-8 m/s 10
-#: (tests/test_greybox.py), with K0pp over the 29 speeds of ``bikeid accuracy`` 475-518;
+#: (tests/ident/test_greybox.py), with K0pp over the 29 speeds of ``bikeid accuracy`` 475-518;
 #: K0dd and K2dd both free at one speed 7.7e7 (exactly collinear, the number is round-off).
 MAX_CONDITION = 1e4
 _MATS = ("M", "C1", "K0", "K2")

@@ -59,7 +59,7 @@ __all__ = [
 
 #: R^2 of the state law above which a run's steer torque counts as feedback only [-].  The
 #: steer-by-wire push logs reach 0.995-1.000 (their balance law reproduces the command to
-#: rounding); the testbed's dithered runs stay below 0.9 (tests/test_informativity.py).
+#: rounding); the testbed's dithered runs stay below 0.9 (tests/ident/test_informativity.py).
 FEEDBACK_R2 = 0.98
 #: Power of a periodogram bin relative to the strongest bin above which the bin counts as
 #: excited [-] (1e-3: 30 dB, an amplitude 3 % of the strongest component).

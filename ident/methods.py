@@ -23,7 +23,7 @@ the model loader read it, so a name means one estimator everywhere:
 A new method is one module (its estimator and model class, the model on the
 :class:`~bikeid.ident.linear_model.LinearModel` base), one entry here (a fit function of the
 signature of :func:`fit_direct`, a settings dataclass, its model classes and file kinds) and
-its tests (``tests/test_methods.py`` runs every entry on the same simulated runs).
+its tests (``tests/ident/test_methods.py`` runs every entry on the same simulated runs).
 
 Every :class:`Identified` carries the settings it ran (``settings.describe()``), which every
 command prints and saves with the model.

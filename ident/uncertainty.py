@@ -34,7 +34,7 @@ docs/uncertainty.md measures both against the truth.
 
 :func:`monte_carlo` draws p from N(p, P_p) and recomputes the same quantities (eigenvalues
 paired with the nominal ones by :func:`bikeid.sim.linear.match_eigenvalues`), the check of
-the first-order propagation (tests/test_uncertainty.py).  These intervals are only as good
+the first-order propagation (tests/ident/test_uncertainty.py).  These intervals are only as good
 as P_p: docs/uncertainty.md reports how often they contain the truth on the linear plant,
 where it is known exactly, and why that calibration does not carry over to the nonlinear
 plant or measured data.

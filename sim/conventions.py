@@ -51,7 +51,8 @@ PLAUSIBLE = {
     # |roll rate| < 20 rad/s: a rigid bicycle toppling from upright reaches at the ground
     # omega = sqrt(2 m g h / I_xx) <= sqrt(2 g / h) (energy; I_xx >= m h^2 about the contact
     # line): 4.8 rad/s for the benchmark (h = 0.86 m), 5.9 rad/s for the riderless
-    # steer-by-wire bicycle (h = 0.57 m); 20 rad/s is >= 3.4x both (tests/test_plausibility.py
+    # steer-by-wire bicycle (h = 0.57 m); 20 rad/s is >= 3.4x both
+    # (tests/dataset/test_plausibility.py
     # computes them).  The measured logs stay below 1.5 rad/s.
     "phidot": (-20.0, 20.0),
     # |steer rate| < 30 rad/s: fast human steering peaks near 10 rad/s; a free front

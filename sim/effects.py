@@ -30,7 +30,7 @@ identification library may select it) are declared once, as an entry of
    :func:`bikeid.sim.effect_registry.nonlinear_effects` builds it from a value;
 4. apply the entry in the linear experiment model (``bikeid.ident.effects.experiment_model``) and,
    if the identification may select it, give it fit settings in
-   ``bikeid.ident.effects.library.LIBRARY`` (tests/test_effect_registry_use.py checks both).
+   ``bikeid.ident.effects.library.LIBRARY`` (tests/sim/test_effect_registry.py checks both).
 
 An effect the plant cannot carry states why in the entry's ``no_plant`` instead (sensor
 effects are applied by :meth:`bikeid.dataset.sensors.Sensors.with_effects`).

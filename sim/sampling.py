@@ -30,7 +30,7 @@ def expm_small(M: np.ndarray) -> np.ndarray:
     (n, n) ndarray
         exp(M).  Order-16 Taylor series after scaling to infinity norm <= 0.5: truncation
         < 0.5^17 / 17! ~ 5e-20 relative, so the error is round-off (checked against
-        ``scipy.linalg.expm`` in tests/test_measured.py).
+        ``scipy.linalg.expm`` in tests/ident/effects/test_pipeline.py).
 
     Notes
     -----

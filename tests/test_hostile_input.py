@@ -569,7 +569,7 @@ def test_messages_name_fixes_this_cli_can_apply(library, cli):
 
 
 def test_decay_window_roll_rate_checked_against_this_bicycles_toppling_rate():
-    """The toppling rate is sqrt(2 m g h / I) (tests/test_plausibility.py's derivation):
+    """The toppling rate is sqrt(2 m g h / I) (tests/dataset/test_plausibility.py's derivation):
     below the point-mass bound sqrt(2 g / h) and far above a real decay's (< 1.5 rad/s).
     A 15 rad/s glitch (inside the generic 20 rad/s bound, 2.9 x the steer-by-wire
     bicycle's 5.24 rad/s) in one decay window is refused naming file and row; the same

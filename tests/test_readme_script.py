@@ -3,7 +3,7 @@
 The test takes the code block that follows the ``<!-- readme-script -->`` marker in
 README.md, runs it unchanged, and checks every identified eigenvalue of the closed-loop
 data against the true eigenvalue of the linearized benchmark bicycle (Meijaard et al.
-2007, the same computation ``tests/test_linear.py`` checks against their Table 2).
+2007, the same computation ``tests/sim/test_linear.py`` checks against their Table 2).
 
 Tolerance: the project's identification accuracy goal (``experiments.testbed.accuracy``:
 2 % of |lambda|, at least 0.05 1/s), the same goal ``bikeid accuracy`` reports against.

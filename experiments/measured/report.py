@@ -15,14 +15,15 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from bikeid.dataset.decays import load_decays
+from bikeid.dataset.files import atomic_write_text
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION, data_dir, find_logs, load_log
 from bikeid.dataset.windows import bode_window
-from bikeid.experiments.cli.args import atomic_write_text, dump_json
 from bikeid.experiments.plots import phases_on_one_branch, points_on_branch, save
 from bikeid.ident.effects.before_after import verdict_text
 from bikeid.ident.effects.experiment_model import ExperimentModel, with_nonlinear_correction
 from bikeid.ident.effects.pipeline import DEFAULT_PLANT, evaluate_json, fit_model, model_from_json
 from bikeid.ident.effects.weave import decay_eigenvalue
+from bikeid.sim.textformats import dump_json
 
 
 def sine_fit(y: np.ndarray, u: np.ndarray, freq: float, dt: float = 0.01) -> complex:

@@ -16,14 +16,15 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from bikeid.dataset.files import atomic_write_text
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
-from bikeid.experiments.cli.args import atomic_write_text, dump_json
 from bikeid.experiments.measured.study import MODEL_ORDER, Z_SIGNIFICANT
 from bikeid.experiments.plots import display_scale, phases_on_one_branch, points_on_branch, save
 from bikeid.ident.direct import parse_entry
 from bikeid.ident.effects.before_after import verdict_text
 from bikeid.sim.linear import canonical_matrices
 from bikeid.sim.parameters import steer_by_wire
+from bikeid.sim.textformats import dump_json
 
 __all__ = ["closed_loop_weave", "headline", "write_study"]
 

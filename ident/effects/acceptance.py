@@ -87,7 +87,8 @@ LINEAR_PLANT_MARGIN = 1.2
 #: The pipeline's defaults in one place (``bikeid measured fit`` without options), each with
 #: where it lives and the data it was chosen on.  "Development data" is every speed split of
 #: the four shared steer-by-wire speeds: none of them is out of sample for these defaults.
-#: tests/test_closure_rates.py checks each value against the live constant or option.
+#: tests/experiments/measured/test_closure_rates.py checks each value against the live
+#: constant or option.
 PIPELINE_DEFAULTS: dict[str, dict] = {
     "alpha": {"value": 0.05, "where": "AcceptanceRule.alpha (--alpha)",
               "tuned_on": "not tuned: the conventional family-wise level"},

@@ -62,7 +62,8 @@ Eliminating psi with the relaxed kinematics gives (e_d the steer column)
     nu = cos(lam) / w,   b nu = K2[:, d],
 
 one extra state delta_k; delta_k = delta recovers  M q'' + v C1 q' + (g K0 + v^2 K2) q = f
-exactly (tests/test_measured.py).  Linear model only: the nonlinear defect correction is taken
+exactly (tests/ident/effects/test_pipeline.py).  Linear model only: the nonlinear defect correction
+is taken
 without the relaxation (like steer_inertia), so the model is first order in sigma around it.
 """
 

@@ -4,7 +4,7 @@ Each effect's facts (name, unit, absent value, its one-line doc) are those of th
 (:mod:`bikeid.sim.effect_registry`); a :class:`Candidate` adds only how the ident layer fits
 it: additive or structural, the scale the optimizer works in, the fit bounds and, for a
 structural effect, the grid its start value is scanned on.  ``LIBRARY`` holds exactly the
-registry's entries with ``in_library`` (tests/test_discrepancy.py), in the order the
+registry's entries with ``in_library`` (tests/ident/effects/test_diagnostics.py), in the order the
 selection tries them.
 """
 

@@ -15,7 +15,7 @@ from bikeid.dataset.download import fetch
 from bikeid.dataset.sbw_logs import despike, load_log, treadmill_speed
 from bikeid.ident.effects.experiment_model import ExperimentModel
 
-DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[4] / "shared" / "data"))
 HAVE = (Path(DATA) / "tudelft-sbw" / "eigen").is_dir()
 needs_data = pytest.mark.skipif(not HAVE, reason=f"measured data not found at {DATA} (BIKEID_DATA)")
 HEADER = ("sil_command,speed,lean_angle,lean_rate,hand_angle,fork_angle,fork_rate,lean_torque,"

@@ -22,7 +22,7 @@ from bikeid.sim.parameters import benchmark, steer_by_wire
 
 pytestmark = pytest.mark.slow
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "derive_whipple.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "derive_whipple.py"
 
 
 @pytest.fixture(scope="module")

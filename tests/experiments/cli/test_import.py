@@ -4,7 +4,7 @@
 The same closed-loop data identified from bikeid's HDF5 file and from a "user's log" (the
 exported CSV rewritten in degrees, deg/s, km/h and milliseconds under other names) must give
 the same PEM eigenvalues: the unit conversions change each sample by at most 2 eps relative
-(tests/test_importers.py), far below what moves a prediction-error optimum, so the two
+(tests/dataset/test_importers.py), far below what moves a prediction-error optimum, so the two
 agree to 1e-6 1/s (observed: identical to the printed digits); both lie within the
 project's accuracy goal of the true eigenvalues (Meijaard 2007 linearization).
 """
@@ -177,7 +177,7 @@ def test_identify_refuses_impossible_choices(folder, extra, words):
 SBW = (
     Path(
         __import__("os").environ.get(
-            "BIKEID_DATA", Path(__file__).resolve().parents[2] / "shared/data"
+            "BIKEID_DATA", Path(__file__).resolve().parents[4] / "shared/data"
         )
     )
     / "tudelft-sbw"

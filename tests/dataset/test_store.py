@@ -104,7 +104,7 @@ def test_round_trip_bit_identical(tmp_path):
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 # inside every bound of sim.conventions.PLAUSIBLE (v >= -0.5 m/s, |angles| < pi/2 rad), with
-# subnormals and -0.0: the reader refuses values outside (tests/test_plausibility.py)
+# subnormals and -0.0: the reader refuses values outside (tests/dataset/test_plausibility.py)
 plausible = st.floats(min_value=-0.5, max_value=1.5, width=64)
 
 

@@ -679,7 +679,7 @@ def test_eigen_stderr_is_the_propagation_of_ident_uncertainty():
     """eigen_stderr calls ident.uncertainty: equal to eigenvalue_intervals' standard errors
     (same computation, 1e-12 relative) and to the central-difference propagation it used to
     do itself (perturbed eigenvalues paired by match_eigenvalues, relative step 1e-6:
-    truncation ~1e-12, round-off ~1e-10 relative, so rtol 1e-6 as tests/test_uncertainty.py).
+    truncation ~1e-12, round-off ~1e-10 relative, so rtol 1e-6 as tests/ident/test_uncertainty.py).
     Truth: the benchmark bicycle's canonical model at 5 m/s, a random SPD covariance."""
     from bikeid.ident.canonical import canonical_ab, theta_from_matrices
     from bikeid.ident.pem import CanonicalModel

@@ -1,6 +1,6 @@
 """Injected-effect checks with the *linear* experiment model as the simulator (10 substeps,
 noise + encoder quantization): the pipeline, not told, names the effect.  The randomized
-trials on the nonlinear plant are in tests/test_effect_trials.py."""
+trials on the nonlinear plant are in tests/experiments/measured/test_effect_trials.py."""
 
 from __future__ import annotations
 

@@ -38,7 +38,7 @@ from bikeid.experiments.testbed.sweep import (
 from bikeid.sim.conventions import MEASURED
 from bikeid.sim.parameters import benchmark
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def pid_run(**kw):

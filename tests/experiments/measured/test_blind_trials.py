@@ -234,7 +234,7 @@ def test_benchmark_at_ci_size_reports_what_its_log_recounts(tmp_path):
     import sys
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[3]
     log = tmp_path / "blind.jsonl"
     cmd = [sys.executable, str(root / "benchmarks" / "bench_blind_trials.py"), "--per-class",
            "steer_viscous_damping=1,none=1,roll_stiffness=1", "--seed", "0", "--processes", "1",

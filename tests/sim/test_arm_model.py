@@ -50,7 +50,7 @@ from bikeid.sim.parameters import benchmark, by_name
 
 ROUND_OFF = 1e-10
 NAMES = ("M", "C1", "K0", "K2")
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "derive_arms.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "derive_arms.py"
 
 
 def _assert_same(a: CanonicalMatrices, b: CanonicalMatrices, tol: float = ROUND_OFF) -> None:
@@ -276,7 +276,7 @@ def test_bad_arms_are_refused_in_one_line():
 @pytest.mark.slow
 def test_generated_code_matches_fresh_derivation():
     """Re-derive with sympy (about 3 min) and compare with the committed code (1e-9 as
-    tests/test_derivation.py: same expressions, different common-subexpression order)."""
+    tests/sim/test_derivation.py: same expressions, different common-subexpression order)."""
     spec = importlib.util.spec_from_file_location("derive_arms", SCRIPT)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -29,7 +29,7 @@ from bikeid.dataset.windows import bode_window, decay_windows
 from bikeid.sim.conventions import NOMINAL_SPEED, PLAUSIBLE, UNITS
 from bikeid.sim.parameters import benchmark, steer_by_wire
 
-DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[3] / "shared" / "data"))
 SBW = Path(DATA) / "tudelft-sbw"
 needs_data = pytest.mark.skipif(
     not (SBW / "eigen").is_dir(), reason=f"measured data not found at {DATA} (BIKEID_DATA)"

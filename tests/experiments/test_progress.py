@@ -139,7 +139,8 @@ def test_accuracy_reports_its_stages(tmp_path):
 def test_effect_selection_counts_its_candidate_fits():
     """``select_effects`` with 2 candidates and one round: 2 candidate fits, then the joint
     fit, so the callback sees 0/2, 1/2 (labelled by candidate) and 2/2; the verdict is that
-    of the injected effect (as in tests/test_discrepancy.py, here on 2 decays per speed)."""
+    of the injected effect (as in tests/ident/effects/test_diagnostics.py, here on 2 decays per
+    speed)."""
     from bikeid.ident.effects.experiment_model import ExperimentModel
     from bikeid.ident.effects.selection import select_effects
     from bikeid.ident.effects.synthetic_decays import synthetic_windows

@@ -177,7 +177,7 @@ def test_speed_model_needs_two_speeds(tmp_path, capsys):
 
 # -- a user's own logs: units, signs, excitation, pooling (ident.informativity, -----------
 # -- dataset.plausibility); files written at test time in two non-bikeid formats ---------
-DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[4] / "shared" / "data"))
 EIGEN = Path(DATA) / "tudelft-sbw" / "eigen" / "eigen_normal_sil6.5n2_5.4kph.log.gz"
 COLS = ("phi=Roll_deg,phidot=RollRate_dps,delta=Steer_deg,deltadot=SteerRate_dps,"
         "v=Speed_kmh,T_delta=SteerTorque_Nm")  # fmt: skip
