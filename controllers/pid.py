@@ -20,7 +20,7 @@ Integration is forward Euler over the actual time between calls.  Anti-windup:
 
 Default gains (Kp, Ki, Kd) = (-200, -500, -80) at every speed: in the linear
 benchmark model this one set stabilizes 1-15 m/s (reference controllers.md §4.3;
-``tests/test_controllers.py`` checks it on a speed grid).  Speed scheduling: pass a
+``tests/controllers/test_controllers.py`` checks it on a speed grid).  Speed scheduling: pass a
 :class:`~controllers.base.GainSchedule` of (Kp, Ki, Kd) rows; it is evaluated at the
 measured speed, or at ``design_speed`` if one is given.
 """
