@@ -131,8 +131,13 @@ def _check_refusal(argv: list[str], folder: Path, allowed=(2, 3, 4)) -> tuple[in
     assert rc in allowed, (argv, rc, err)
     assert "Traceback" not in err and "Traceback" not in out, (argv, err)
     if rc != 0:
+        # the refusal is one line, the last; lines before it may only be the progress lines a
+        # long command prints off a terminal ("identify: fitting ..."), never a second error
         lines = err.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("bikeid"), (argv, err)
+        assert lines and lines[-1].startswith("bikeid"), (argv, err)
+        progress = lines[:-1]
+        assert all(re.match(r"^[a-z][\w -]*: ", x) and not x.startswith("bikeid")
+                   and "error" not in x.lower() for x in progress), (argv, err)
     assert not re.search(r"\bnan\b", out, re.I), (argv, out)
     assert _files(folder) == before, argv
     return rc, err

@@ -746,7 +746,7 @@ def write_trial_logs(trial: BlindTrial, folder, plant: str | None = None,
 
     One log per fit speed, in the order of ``trial.fit_speeds``: time in ms, angles in
     degrees, rates in deg/s, speed in km/h, roll angle and roll rate positive to the
-    **left**; read back by ``bikeid measured fit FILE... `` with :func:`log_import_options`.
+    **left**; read back by ``bikeid measured fit FILE...`` with :func:`log_import_options`.
 
     Parameters
     ----------
