@@ -56,11 +56,13 @@ __all__ = [
     "GreyboxSettings",
     "Identified",
     "Method",
+    "ModelCodec",
     "PemSettings",
     "fit_direct",
     "fit_greybox",
     "fit_pem",
     "method",
+    "model_codecs",
     "model_kinds",
     "split_free",
 ]
@@ -695,6 +697,30 @@ def fit_greybox(
 
 
 @dataclass(frozen=True)
+class ModelCodec:
+    """How a method's own model class is written to and read from a model file, for a method
+    added after the built-in ones (the built-in kinds are written by
+    :mod:`bikeid.ident.model_file` itself), so that adding a method never edits that module.
+
+    Attributes
+    ----------
+    write : callable
+        ``write(model) -> dict``: the file's ``model`` section (plain JSON values).
+    read : callable
+        ``read(section) -> model``: the model back from that section; raises ``ValueError``,
+        ``TypeError`` or ``KeyError`` naming the bad field, which the loader reports as a
+        one-line refusal naming the file.
+    summary : callable
+        ``summary(model) -> dict`` with the file's top-level ``inputs``, ``outputs``,
+        ``sample_time`` [s] (or None) and ``speeds`` [m/s] (or None).
+    """
+
+    write: Callable[[Any], dict]
+    read: Callable[[Mapping[str, Any]], Any]
+    summary: Callable[[Any], dict]
+
+
+@dataclass(frozen=True)
 class Method:
     """One identification method of the table.
 
@@ -718,6 +744,9 @@ class Method:
         Whether it needs the values of fixed matrix entries (a reference bicycle).
     free_entries : bool
         Whether ``free`` (matrix entries to estimate) applies.
+    codecs : mapping of str to ModelCodec
+        Model-file codec per kind, for kinds the model file does not write itself (a new
+        method's); empty for the built-in methods.
     """
 
     name: str
@@ -728,6 +757,7 @@ class Method:
     kinds: tuple[str, ...]
     fixed_entries: bool
     free_entries: bool
+    codecs: Mapping[str, ModelCodec] = field(default_factory=dict)
 
     def settings(self, options: Mapping[str, Any] | None = None) -> Any:
         """The method's settings from options (missing ones at their defaults).
@@ -778,6 +808,17 @@ METHODS: dict[str, Method] = {
         free_entries=True,
     ),
 }  # fmt: skip
+
+
+def model_codecs() -> dict[str, ModelCodec]:
+    """Model-file codecs of the methods that bring their own (:attr:`Method.codecs`).
+
+    Returns
+    -------
+    dict of str to ModelCodec
+        Kind -> codec.
+    """
+    return {k: c for m in METHODS.values() for k, c in m.codecs.items()}
 
 
 def method(name: str) -> Method:

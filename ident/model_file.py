@@ -65,7 +65,7 @@ from bikeid.ident.direct import DirectResult
 from bikeid.ident.effects.experiment_model import DT as EXPERIMENT_DT
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.greybox import GreyboxModel
-from bikeid.ident.methods import model_kinds
+from bikeid.ident.methods import model_codecs, model_kinds
 from bikeid.ident.pem import INPUT, CanonicalModel, SpeedCanonicalModel
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import loads_json
@@ -313,17 +313,27 @@ def _greybox_section(m: GreyboxModel) -> dict:
     }
 
 
+def _kinds() -> dict[str, type]:
+    """:data:`KINDS` now, with any method added to the table since import."""
+    return {**model_kinds(), "experiment-model": ExperimentModel}
+
+
 def _kind_of(model: Any) -> str:
-    for kind, cls in KINDS.items():
+    kinds = _kinds()
+    # the most derived class first: a new method's model may subclass a built-in one
+    for kind, cls in sorted(kinds.items(), key=lambda kc: -len(kc[1].__mro__)):
         if isinstance(model, cls):
             return kind
     raise TypeError(
         f"cannot save a {type(model).__name__}: save_model takes "
-        + ", ".join(c.__name__ for c in KINDS.values())
+        + ", ".join(c.__name__ for c in kinds.values())
     )
 
 
 def _summary(kind: str, model: Any) -> dict:
+    codec = model_codecs().get(kind)
+    if codec is not None:
+        return dict(codec.summary(model))
     if kind == "canonical-pem":
         return {
             "inputs": [INPUT],
@@ -460,7 +470,7 @@ def model_json(
         "bikeid_version": __version__,
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         **summary,
-        "model": _SECTIONS[kind](model),
+        "model": _section(kind, model),
         "provenance": _provenance_entries(provenance),
         "settings": _plain(dict(settings or {}), "settings"),
         "results": _plain(dict(results or {}), "results"),
@@ -803,6 +813,23 @@ def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
     )
 
 
+def _section(kind: str, model: Any) -> dict:
+    if kind in _SECTIONS:
+        return _SECTIONS[kind](model)
+    return _plain(model_codecs()[kind].write(model), "model")
+
+
+def _read_section(r: _Reader, kind: str, sec: Any, prefix: str) -> Any:
+    if kind in _READERS:
+        return _READERS[kind](r, sec, prefix)
+    if not isinstance(sec, dict):
+        raise r.fail("model", "must be a JSON object")
+    try:
+        return model_codecs()[kind].read(sec)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise r.fail("model", f"cannot be read as a {kind!r} model ({exc})") from None
+
+
 _READERS = {
     "canonical-pem": _canonical_model,
     "speed-canonical-pem": _speed_model,
@@ -865,12 +892,13 @@ def model_from_text(text: str, where: str = "model file") -> ModelFile:
             f"{', '.join(map(str, READABLE_VERSIONS))}: upgrade bikeid, or {_FIX}"
         )
     kind = obj.get("kind")
-    if not isinstance(kind, str) or kind not in KINDS:
+    kinds = _kinds()
+    if not isinstance(kind, str) or kind not in kinds:
         raise InputError(
-            f"{where}: field 'kind' is {kind!r}; known kinds are {', '.join(KINDS)}: upgrade "
+            f"{where}: field 'kind' is {kind!r}; known kinds are {', '.join(kinds)}: upgrade "
             f"bikeid, or {_FIX}"
         )
-    model = _READERS[kind](r, r.get(obj, "model", ""), "model.")
+    model = _read_section(r, kind, r.get(obj, "model", ""), "model.")
     prov = r.get(obj, "provenance", "")
     if not isinstance(prov, list):
         raise r.fail("provenance", "must be a list of {path, size, sha256}")
