@@ -16,6 +16,9 @@ from pathlib import Path
 from typing import Any
 
 import matplotlib
+from matplotlib.text import Text
+
+from bikeid.sim.linear import eigenvalues, eigenvalues_vs_speed
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -278,7 +281,6 @@ def layout_problems(fig, tol: float = 1.0) -> list[str]:
     list of str
         One line per problem (empty when the figure fits).
     """
-    from matplotlib.text import Text
 
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
@@ -468,7 +470,6 @@ def plot_identified_eigenvalues(
     pathlib.Path
         ``path``.
     """
-    from bikeid.sim.linear import eigenvalues, eigenvalues_vs_speed
 
     rows = _interval_rows(identified)
     if not rows:

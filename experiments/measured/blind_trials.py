@@ -44,9 +44,14 @@ the four rates with exact (Clopper-Pearson) 95 % intervals.
 
 from __future__ import annotations
 
+import contextlib
+import csv
+import io
+import json
 import math
 import time
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from bicycleparameters.bicycle import benchmark_par_to_canonical
@@ -764,8 +769,6 @@ def write_trial_logs(trial: BlindTrial, folder, plant: str | None = None,
     list of Path
         The files written.
     """
-    import csv
-    from pathlib import Path
 
     out = []
     for i, v in enumerate(trial.fit_speeds):
@@ -1107,11 +1110,8 @@ def run_log_trial(trial: BlindTrial, folder, plant: str | None = None,
         status ``rc`` and its one-line refusal ``error`` (None when it ran), and
         :func:`score_log_fit`'s fields.
     """
-    import contextlib
-    import io
-    import json
-    from pathlib import Path
-
+    # the command line itself (not a library call), as a user runs it; imported here so
+    # that the trials' library stays importable without the CLI package
     from bikeid.experiments.cli import main
 
     folder = Path(folder)
