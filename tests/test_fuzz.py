@@ -4,7 +4,7 @@ Three generators (hypothesis, bounded, in CI):
 
 1. **Command lines** for every subcommand, discovered from the parser itself (a new command
    is covered the day it is registered; a mode that reads other inputs, ``measured evaluate
-   --input=logged``, is fuzzed as a command of its own): each case sets one typed option to
+   --drive=logged``, is fuzzed as a command of its own): each case sets one typed option to
    a value that option's own parser refuses, plus up to four more options with hostile
    values (empty, ``--``, NaN, infinities, 1e308, 99999999999999999999, 4096 characters,
    ranges of 1e308 points, paths that do not exist, ...).
@@ -76,8 +76,8 @@ def _commands() -> list[tuple[tuple[str, ...], list[argparse.Action]]]:
 
 COMMANDS = _commands()
 #: Fixed arguments of extra command-line variants fuzzed like a command of their own (a mode
-#: that reads other inputs): ``measured evaluate --input logged`` reads an identify model.
-VARIANTS = {("measured", "evaluate"): ("--input=logged",)}
+#: that reads other inputs): ``measured evaluate --drive logged`` reads an identify model.
+VARIANTS = {("measured", "evaluate"): ("--drive=logged",)}
 CASES = [(p, (), a) for p, a in COMMANDS] + [
     (p, VARIANTS[p], a) for p, a in COMMANDS if p in VARIANTS
 ]

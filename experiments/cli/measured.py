@@ -201,7 +201,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--model",
         required=True,
         help="MODEL.json from 'measured fit', or a model of 'bikeid identify --out' (with "
-        "--input logged)",
+        "--drive logged)",
     )
     e.add_argument("--data", help=DATA_HELP)
     add_log_options(e)
@@ -404,7 +404,7 @@ def cmd_evaluate(args) -> int:
         if args.input != "logged":
             raise InputError(
                 f"{args.model} holds an identified plant model, which knows no controller: "
-                "evaluate it with --input logged (the logged steer command replayed)"
+                "evaluate it with --drive logged (the logged steer command replayed)"
             )
         ws = load_decays(args.data, _speeds(args.speeds), source=args.decays)
         out = evaluate_plant_model(plant_model, ws)
@@ -597,7 +597,7 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
     and the time-window and speed-splitting options of
     :func:`bikeid.experiments.cli.identify.add_data_options` (the same reader), or the
     steer-by-wire folder (``--format sbw``, the default, ``--data``); plus ``--bicycle`` (the
-    nominal parameters), ``--controller``/``--gains`` (a known law) and ``--input``.
+    nominal parameters), ``--controller``/``--gains`` (a known law) and ``--drive``.
 
     Parameters
     ----------
@@ -626,7 +626,8 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
         "--gains", type=mapping_arg("--gains"), default=None, metavar="K=..,V=..",
         help="the law's parameters: K [N s^2/rad] and V [m/s] (default K=2,V=6.5)",
     )  # fmt: skip
-    p.add_argument("--input", choices=("loop", "logged"), default=None, help=INPUT_HELP)
+    p.add_argument("--drive", dest="input", choices=("loop", "logged"), default=None,
+                   help=INPUT_HELP)
 
 
 def _law(args: argparse.Namespace, sbw: bool) -> tuple[str | None, float, float]:
@@ -734,7 +735,7 @@ def load_log_decays(
     Returns
     -------
     windows : list of Window
-        The decays, each with its ``drive`` (``--input``).
+        The decays, each with its ``drive`` (``--drive``).
     model : ExperimentModel
         The nominal experiment: bicycle, sample period [s] and speed calibration of the logs,
         the law's gains.
@@ -808,8 +809,8 @@ def load_log_decays(
         law, k, v = experiment["law"], float(experiment["K"]), float(experiment["V"])
     drive = args.input or ("loop" if law else "logged")
     if drive == "loop" and law is None:
-        raise InputError("--input loop needs the controller law: give --controller "
-                         "steer-into-lean --gains K=..,V=.. or use --input logged")  # fmt: skip
+        raise InputError("--drive loop needs the controller law: give --controller "
+                         "steer-into-lean --gains K=..,V=.. or use --drive logged")  # fmt: skip
     model = ExperimentModel(p=p, K=k, V=v, dt=dt, speed_calibration=tuple(cal))
     windows, report = decays_from_runs(runs, "listed" if sbw else "detected", listed, speeds,
                                        exclude, min_decays, purpose)  # fmt: skip

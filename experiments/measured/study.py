@@ -36,7 +36,7 @@ Quality measures, per model and held-out run:
   loop by the logged total steer command in consecutive :data:`SIM_WINDOW` s windows from
   the measured state at each window start (the models are unstable), per output over the
   record; the table shows the mean over phi, delta, phidot, deltadot;
-- **decay NRMSE** (``measured evaluate --input logged``,
+- **decay NRMSE** (``measured evaluate --drive logged``,
   :func:`bikeid.ident.effects.experiment_model.window_errors`): the free-decay windows of the
   held-out record replayed with the logged command from their measured start state.
 
@@ -305,7 +305,7 @@ def simulation_vaf(model: StudyModel, run: Run, window: float = SIM_WINDOW) -> d
 
 
 def decay_errors(model: StudyModel, windows: list) -> np.ndarray:
-    """Each window's decay error of ``measured evaluate --input logged``.
+    """Each window's decay error of ``measured evaluate --drive logged``.
 
     Parameters
     ----------
@@ -333,7 +333,7 @@ def decay_errors(model: StudyModel, windows: list) -> np.ndarray:
 
 
 def decay_nrmse(model: StudyModel, windows: list) -> float:
-    """Mean decay error of ``measured evaluate --input logged`` over ``windows``.
+    """Mean decay error of ``measured evaluate --drive logged`` over ``windows``.
 
     Parameters
     ----------
@@ -957,7 +957,7 @@ DEFINITIONS = {
     "simulation_vaf": "eq. 6 on simulated outputs: the model driven open loop by the logged "
     "total steer command in consecutive 2 s windows, each from the measured state; per output "
     "over the record; 'mean' = mean over phi, delta, phidot, deltadot.",
-    "decay_nrmse": "measured evaluate --input logged: free-decay windows replayed with the "
+    "decay_nrmse": "measured evaluate --drive logged: free-decay windows replayed with the "
     "logged command from their measured start; mean over windows of the mean NRMSE of roll "
     "rate and steer angle (lower is better).",
     "hold_out": "speed models fitted on the split's fit speeds, evaluated on the second half "

@@ -571,7 +571,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
                                                for d in dropped) + ")")  # fmt: skip
         if not windows:
             raise InputError("no window left to evaluate: the nonlinear plant cannot simulate "
-                             "any of them (see the model's plant; try --input logged)")  # fmt: skip
+                             "any of them (see the model's plant; try --drive logged)")  # fmt: skip
     ev, at_aug = evaluate_windows(nominal, aug, windows,
                                   nonlinear=plant == "nonlinear")  # fmt: skip
     # the validation of `bikeid validate` on the decays (corrected at `aug`)

@@ -116,7 +116,7 @@ def test_study_on_real_logs(tmp_path):
     """The study's quick subset end to end on the real logs (about 40 s).
 
     Checks: (1) the Whipple and direct columns of the decay error equal those of
-    ``evaluate_plant_model`` (the ``measured evaluate --input logged`` code, a second
+    ``evaluate_plant_model`` (the ``measured evaluate --drive logged`` code, a second
     implementation through the DirectResult) on the same windows to 1e-9; (2) the
     deterministic numbers documented in docs/measured.md ("Moore & Hubbard on the real
     bicycle"): Whipple and effects decay errors on the held-out runs, to 1e-3 relative

@@ -92,7 +92,7 @@ def test_replay_needs_the_logged_command():
 
 @pytest.mark.skipif(not DATA, reason="needs the measured data ($BIKEID_DATA)")
 def test_cli_replay_on_the_measured_logs(tmp_path):
-    """`measured evaluate --input logged --json` gives the closed-loop mode's summary fields,
+    """`measured evaluate --drive logged --json` gives the closed-loop mode's summary fields,
     says what drove the model, and its nominal errors differ from the loop's (a different
     experiment: no feedback corrects the model's drift)."""
     model = tmp_path / "m.json"
@@ -103,7 +103,7 @@ def test_cli_replay_on_the_measured_logs(tmp_path):
     res = {}
     for mode in ("loop", "logged"):
         p = subprocess.run([str(exe), "measured", "evaluate", "--model", str(model), "--data",
-                            DATA, "--input", mode, "--json"], capture_output=True, text=True,
+                            DATA, "--drive", mode, "--json"], capture_output=True, text=True,
                            timeout=600)  # fmt: skip
         assert p.returncode == 0, p.stderr
         res[mode] = json.loads(p.stdout)
@@ -152,7 +152,7 @@ def test_identified_plant_model_replay_equals_the_nominal_when_it_is_the_nominal
 @pytest.mark.skipif(not DATA, reason="needs the measured data ($BIKEID_DATA)")
 def test_cli_identified_model_evaluates_by_replay_only(tmp_path):
     """A model of `bikeid identify --out` (direct, on the steer-by-wire eigen logs) evaluates
-    on the logs with --input logged (summary fields present, finite) and is refused without
+    on the logs with --drive logged (summary fields present, finite) and is refused without
     it (exit 3, naming the fix): a plant model knows no controller.  The push logs' torque is
     the balance law, so identify refuses them by default (exit 4, tested in
     tests/ident/test_informativity.py); this test is about the replay path and skips that
@@ -166,10 +166,10 @@ def test_cli_identified_model_evaluates_by_replay_only(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "informativity" in p.stderr  # the skipped check is named, never silent
     base = [str(exe), "measured", "evaluate", "--model", str(model), "--data", DATA]
-    p = subprocess.run(base + ["--input", "logged", "--json"], capture_output=True, text=True,
+    p = subprocess.run(base + ["--drive", "logged", "--json"], capture_output=True, text=True,
                        timeout=600)  # fmt: skip
     assert p.returncode == 0, p.stderr
     s = json.loads(p.stdout)["summary"]
     assert math.isfinite(s["error_before"]) and math.isfinite(s["error_after"])
     p = subprocess.run(base, capture_output=True, text=True, timeout=600)
-    assert p.returncode == 3 and "--input logged" in p.stderr
+    assert p.returncode == 3 and "--drive logged" in p.stderr
