@@ -1069,16 +1069,21 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     out = Path(args.out)
     import sys
 
+    from bikeid.dataset.files import check_owned_folder, owned_folder
+
+    # an owned folder: its accuracy.json/.md are never another's files, two runs cannot mix
+    owned = ("accuracy.json", "accuracy.md")
+    check_owned_folder(out, "bikeid accuracy", names=owned)
     print(f"bikeid accuracy: writing into {out}/ (data cache, accuracy.json, accuracy.md)",
           file=sys.stderr)  # a default location: say where  # fmt: skip
-    out.mkdir(parents=True, exist_ok=True)
     bar = terminal_progress("accuracy", json_output=args.json, unit="stage")
-    result = acc.run_accuracy(
-        out, controllers, methods, speeds, workers=args.workers, dask=args.dask,
-        log=bar.write if bar else quiet, progress=bar, seeds=tuple(range(args.seeds)),
-    )  # fmt: skip
-    atomic_write_text(out / "accuracy.json", dump_json(result))
-    atomic_write_text(out / "accuracy.md", acc.markdown(result))
+    with owned_folder(out, "bikeid accuracy", names=owned):
+        result = acc.run_accuracy(
+            out, controllers, methods, speeds, workers=args.workers, dask=args.dask,
+            log=bar.write if bar else quiet, progress=bar, seeds=tuple(range(args.seeds)),
+        )  # fmt: skip
+        atomic_write_text(out / "accuracy.json", dump_json(result))
+        atomic_write_text(out / "accuracy.md", acc.markdown(result))
     if args.json:
         print(dump_json(result))
     else:

@@ -247,3 +247,19 @@ def test_cli_rows_are_the_study_rows():
     from bikeid.experiments.cli.identify import ACCURACY_METHODS
 
     assert ACCURACY_METHODS == acc.METHODS
+
+
+def test_accuracy_folder_is_owned(tmp_path, capsys):
+    """``bikeid accuracy --out DIR`` never replaces a report it did not write: a foreign
+    accuracy.md is refused by name before any work (exit 3) and left as it was."""
+    from bikeid.experiments.cli import main
+
+    out = tmp_path / "acc"
+    out.mkdir()
+    (out / "accuracy.md").write_text("mine")
+    rc = main(["accuracy", "--quick", "--controllers", "pid", "--methods", "pem",
+               "--out", str(out)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 3 and "accuracy.md" in err.strip().splitlines()[-1]
+    assert (out / "accuracy.md").read_text() == "mine"
+    assert not (out / "data").exists()  # refused before any simulation
