@@ -60,10 +60,9 @@ Emitted functions (plain Python + math):
 
 from __future__ import annotations
 
-import argparse
+import functools
 import importlib.util
 import sys
-import time
 from pathlib import Path
 
 import sympy as sm
@@ -85,14 +84,15 @@ SEGMENT = (
 )  # fmt: skip
 
 
-def _whipple_printer():
-    """The code printer of ``derive_whipple.py`` (same formatting of powers)."""
+@functools.cache
+def _whipple():
+    """``derive_whipple.py`` as a module (its code printer and command line are reused)."""
     spec = importlib.util.spec_from_file_location(
         "derive_whipple", Path(__file__).with_name("derive_whipple.py")
     )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    return mod._code
+    return mod
 
 
 def _moore(G):
@@ -327,7 +327,7 @@ def _function(code, name, args, unpack, outputs, ret):
 
 def emit(sym: dict) -> str:
     """The text of ``sim/_arms_generated.py``."""
-    code = _whipple_printer()
+    code = _whipple()._code  # same formatting of powers
     b = sym["body"]
     outs = []
     for nm in ("M", "C1", "K0", "K2", "coupling"):
@@ -412,34 +412,11 @@ def check(sym: dict, n: int = 10, seed: int = 1) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(TARGET), help="file to write")
-    ap.add_argument(
-        "--check",
-        action="store_true",
-        help="compare the committed sim/_arms_generated.py with a fresh derivation "
-        "(numerically, 1e-9 relative) instead of writing; exit 1 on a mismatch",
-    )
-    args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    sym = derive()
-    t1 = time.perf_counter()
-    if args.check:
-        worst = check(sym)
-        ok = worst <= 1e-9
-        print(f"largest relative difference {worst:.2e}: {'ok' if ok else 'STALE'}")
-        return 0 if ok else 1
-    text = emit(sym)
-    t2 = time.perf_counter()
-    out = Path(args.out)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(text)
-    tmp.replace(out)
-    print(
-        f"derived in {t1 - t0:.1f} s, emitted in {t2 - t1:.1f} s: {out} ({len(text)} chars)",
-        file=sys.stderr,
-    )
-    return 0
+    """Write sim/_arms_generated.py, or ``--check`` it against a fresh derivation."""
+    return _whipple().run(
+        argv, description=__doc__.splitlines()[0], target=TARGET, derive=derive, emit=emit,
+        check=check,
+    )  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -517,14 +517,33 @@ def check(sym: dict, n: int = 20, seed: int = 1) -> float:
     return worst
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(TARGET), help="file to write")
+def run(argv, *, description: str, target: Path, derive, emit, check) -> int:
+    """Command line shared by the derivation scripts (this one and ``derive_arms.py``).
+
+    Parameters
+    ----------
+    argv : list of str or None
+        Arguments (None: ``sys.argv[1:]``).
+    description : str
+        The script's one-line description.
+    target : Path
+        Default output file (the committed generated module).
+    derive, emit, check : callable
+        ``derive() -> sym``, ``emit(sym) -> str`` (module text), ``check(sym) -> float``
+        (largest relative difference between the committed module and ``sym``).
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 1 when ``--check`` finds a difference above 1e-9.
+    """
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--out", default=str(target), help="file to write")
     ap.add_argument(
         "--check",
         action="store_true",
-        help="compare the committed sim/_whipple_generated.py with a fresh derivation "
-        "(numerically, 1e-9 relative) instead of writing; exit 1 on a mismatch",
+        help=f"compare the committed {target.parent.name}/{target.name} with a fresh "
+        "derivation (numerically, 1e-9 relative) instead of writing; exit 1 on a mismatch",
     )
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -546,6 +565,14 @@ def main(argv: list[str] | None = None) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write sim/_whipple_generated.py, or ``--check`` it against a fresh derivation."""
+    return run(
+        argv, description=__doc__.splitlines()[0], target=TARGET, derive=derive, emit=emit,
+        check=check,
+    )  # fmt: skip
 
 
 if __name__ == "__main__":
