@@ -78,8 +78,40 @@ def _choice(name: str, value: Any, allowed: Sequence[Any]) -> None:
         raise InputError(f"{name}={value!r}: choose one of {', '.join(map(str, allowed))}")
 
 
+class _Settings:
+    """What every method's settings dataclass shares: JSON out, command-line options in."""
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as plain JSON types.
+
+        Returns
+        -------
+        dict
+            Every field by name.
+        """
+        return asdict(self)  # type: ignore[call-overload]
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> Any:
+        """Settings from command-line style options (missing ones keep their defaults).
+
+        Parameters
+        ----------
+        options : mapping
+            May hold any field by name; a None value keeps the field's default.
+
+        Returns
+        -------
+        settings
+            An instance of the class.
+        """
+        names = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+        kw = {n: options[n] for n in names if options.get(n) is not None}
+        return cls(**kw)
+
+
 @dataclass(frozen=True)
-class DirectSettings:
+class DirectSettings(_Settings):
     """Settings of the direct method, each with its named default.
 
     Parameters
@@ -163,7 +195,7 @@ class DirectSettings:
             ``derivative``, ``cutoff`` [Hz] (resolved), ``iv``, ``lags``, ``covariance``,
             ``remove_means``.
         """
-        d = asdict(self)
+        d = super().to_json()
         d["cutoff"] = self.cutoff  # resolved: what ran
         del d["cutoff_hz"]
         return d
@@ -220,7 +252,7 @@ DIRECT_PRESETS: dict[str, DirectSettings] = {
 
 
 @dataclass(frozen=True)
-class PemSettings:
+class PemSettings(_Settings):
     """Settings of the canonical prediction-error method.
 
     Parameters
@@ -257,36 +289,9 @@ class PemSettings:
         k = "innovation gain estimated" if self.noise_model == "free" else "output error"
         return f"{what}, {k}"
 
-    def to_json(self) -> dict[str, Any]:
-        """The settings as plain JSON types.
-
-        Returns
-        -------
-        dict
-            ``speed_parameterized``, ``noise_model``.
-        """
-        return asdict(self)
-
-    @classmethod
-    def from_options(cls, options: Mapping[str, Any]) -> PemSettings:
-        """Settings from command-line style options (missing ones keep their defaults).
-
-        Parameters
-        ----------
-        options : mapping
-            May hold ``speed_parameterized`` and ``noise_model``.
-
-        Returns
-        -------
-        PemSettings
-            The settings.
-        """
-        kw = {f.name: options[f.name] for f in fields(cls) if options.get(f.name) is not None}
-        return cls(**kw)
-
 
 @dataclass(frozen=True)
-class GreyboxSettings:
+class GreyboxSettings(_Settings):
     """Settings of the grey-box prediction-error method.
 
     Parameters
@@ -332,24 +337,7 @@ class GreyboxSettings:
         dict
             ``drop_unidentifiable``, ``mode``, ``noise_model`` (always ``"free"``).
         """
-        return {**asdict(self), "noise_model": "free"}
-
-    @classmethod
-    def from_options(cls, options: Mapping[str, Any]) -> GreyboxSettings:
-        """Settings from command-line style options (missing ones keep their defaults).
-
-        Parameters
-        ----------
-        options : mapping
-            May hold ``drop_unidentifiable`` and ``mode``.
-
-        Returns
-        -------
-        GreyboxSettings
-            The settings.
-        """
-        kw = {f.name: options[f.name] for f in fields(cls) if options.get(f.name) is not None}
-        return cls(**kw)
+        return {**super().to_json(), "noise_model": "free"}
 
 
 @dataclass(frozen=True)
