@@ -374,7 +374,7 @@ def cmd_fit(args) -> int:
         held = [w for w in ws if (w.file, w.start) in kept][1::2]
         s = evaluate_json(out, held)["summary"]
         print(f"held-out half of the fit decays ({len(held)}; used by the selection, so not "
-              f"out of sample): {verdict_text({**s, 'level': 0.95})}")  # fmt: skip
+              f"out of sample): {verdict_text(s)}")  # fmt: skip
     return 0
 
 
@@ -442,7 +442,7 @@ def cmd_evaluate(args) -> int:
         print(f"summary: before {s['error_before']:.3f} after {s['error_after']:.3f} "
               f"(weave {s['weave_error_before']:.3f} -> {s['weave_error_after']:.3f}; the "
               f"measured weave is uncertain by {s['weave_data_rel_std']:.3f})")  # fmt: skip
-        print(f"before/after: {verdict_text({**s, 'level': 0.95})}")
+        print(f"before/after: {verdict_text(s)}")
         print(f"  ({s['interval']})")
         for when in ("before", "after"):
             a = s[f"push_asymmetry_{when}"]

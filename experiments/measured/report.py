@@ -231,7 +231,7 @@ def write_report(out: str | Path, data: str | None, model_path: str | None) -> P
         f"(ratio {s['ratio']:.2f}); weave {s['weave_error_before']:.3f} -> "
         f"{s['weave_error_after']:.3f} (the measured weave itself is uncertain by "
         f"{s['weave_data_rel_std']:.3f}, bootstrap over the decays).", "",
-        f"Before/after with its interval: {verdict_text({**s, 'level': 0.95})} "
+        f"Before/after with its interval: {verdict_text(s)} "
         f"({s['interval']}).", "",
         *_asymmetry_lines(s), "",
         "![free decays](decays.png)", "", "![weave eigenvalue](eigenvalues.png)", "",

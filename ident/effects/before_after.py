@@ -197,7 +197,8 @@ def verdict_text(s: dict) -> str:
     Parameters
     ----------
     s : dict
-        :func:`before_after`'s result (optionally with ``baseline_zero``).
+        :func:`before_after`'s result (optionally with ``baseline_zero``; without ``level``,
+        e.g. a summary saved before it was recorded, :data:`LEVEL`).
 
     Returns
     -------
@@ -207,7 +208,7 @@ def verdict_text(s: dict) -> str:
     """
     lo, hi = s["ratio_ci"]
     head = (f"error {s['error_before']:.3f} -> {s['error_after']:.3f} (ratio {s['ratio']:.2f}, "
-            f"{100 * s['level']:g} % interval {lo:.2f}-{hi:.2f}, paired p = "
+            f"{100 * s.get('level', LEVEL):g} % interval {lo:.2f}-{hi:.2f}, paired p = "
             f"{s['p_value']:.2g})")  # fmt: skip
     v = s["verdict"]
     if v == "halved":

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import signal
 
 from bikeid.dataset.windows import Window
+from bikeid.ident.effects.before_after import before_after, zero_motion_error
 from bikeid.ident.effects.experiment_model import COULOMB_EPS, ExperimentModel, window_errors
 from bikeid.ident.effects.fit import corrected
 from bikeid.ident.effects.weave import (
@@ -396,15 +397,15 @@ def before_after_summary(windows: list[Window], before: np.ndarray, after: np.nd
     -------
     dict
         ``ratio_ci`` [low, high], ``p_value``, ``verdict``, ``interval`` (what the interval
-        covers), ``goal`` (0.5), ``baseline_mean``, ``baseline_zero`` (dimensionless).
+        covers), ``goal`` (0.5), ``level`` (the interval's confidence level),
+        ``baseline_mean``, ``baseline_zero`` (dimensionless).
     """
-    from bikeid.ident.effects.before_after import before_after, zero_motion_error
-
     files = [w.file for w in windows]
     ba = before_after(before, after, files)
     zero = np.array([np.mean([zero_motion_error(getattr(w, c)) for c in ("phidot", "delta")])
                      for w in windows])  # fmt: skip
     per_file = [zero[[i for i, f in enumerate(files) if f == n]].mean() for n in set(files)]
     return {"ratio_ci": ba["ratio_ci"], "p_value": ba["p_value"], "verdict": ba["verdict"],
-            "interval": ba["interval"], "goal": ba["goal"], "baseline_mean": 1.0,
+            "interval": ba["interval"], "goal": ba["goal"], "level": ba["level"],
+            "baseline_mean": 1.0,
             "baseline_zero": float(np.mean(per_file))}  # fmt: skip

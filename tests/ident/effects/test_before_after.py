@@ -48,6 +48,14 @@ def test_ratio_near_the_goal_is_not_called_halved():
     assert "halving not shown" in verdict_text(s)
 
 
+def test_verdict_text_names_the_level_it_was_computed_at():
+    """The line states the interval's own level (90 % here, not a fixed 95 %), and a summary
+    without a recorded level reads as the default 95 %."""
+    s = before_after(*_errors(0.35, 0.2), FILES, level=0.9)
+    assert "90 % interval" in verdict_text(s)
+    assert "95 % interval" in verdict_text({k: v for k, v in s.items() if k != "level"})
+
+
 def test_no_change_and_worse():
     """after = before x noise (median ratio 1): no significant change; after = 1.5 x before:
     worse (the interval above 1)."""
