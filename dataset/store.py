@@ -30,8 +30,10 @@ the run, column and row named.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import uuid
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -40,14 +42,16 @@ from typing import Any
 import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED, UNITS
-from bikeid.sim.errors import InputError
+from bikeid.sim.errors import InputError, memory_limit
 
 from .files import (
     atomic_path,
     check_free_space,
     check_h5_dataset,
     check_input_file,
+    storage_error,
 )
+from .importers import JITTER
 from .run import REQUIRED, Run, check_plausible
 
 __all__ = [
@@ -66,9 +70,9 @@ __all__ = [
 
 FORMAT = "bikeid-runs"
 FORMAT_VERSION = 1
-#: Largest relative deviation of a time step from the run's median step (as the importers'
-#: ``dataset.importers.JITTER``): a larger one is a gap (or a jump) in the time base.
-TIME_JITTER = 0.01
+#: Largest relative deviation of a time step from the run's median step (the importers'
+#: :data:`~bikeid.dataset.importers.JITTER`): a larger one is a gap (or a jump) in the time base.
+TIME_JITTER = JITTER
 #: Bytes of HDF5 metadata per run on top of its data (groups, attributes, chunk indexes), for
 #: the free-space estimate of a write (a run with 27 datasets takes about 40 KiB).
 RUN_OVERHEAD = 64 * 1024
@@ -198,8 +202,11 @@ def write_runs(
     path = Path(path)
     need = sum(_run_bytes(r) for r in runs if isinstance(r, Run))
     check_free_space(path, need)  # HDF5 cannot always fail cleanly on a full disk: not there
-    with atomic_path(path) as tmp, _h5_write_errors(path, need), _h5_target(tmp, attrs,
-                                                                             need) as f:
+    with (
+        atomic_path(path) as tmp,
+        _h5_write_errors(path, need),
+        _h5_target(tmp, attrs, need) as f,
+    ):
         for name, run in zip(names, runs, strict=True):
             _write_run(f["runs"], name, run)
     return path
@@ -213,14 +220,10 @@ class _h5_target:
     directly, after the free-space check."""
 
     def __init__(self, tmp: Path, attrs: Mapping[str, Any] | None, need: float) -> None:
-        from bikeid.sim.errors import memory_limit
-
         self.tmp, self.attrs = tmp, attrs
         self.in_memory = need <= memory_limit() / 4
 
     def __enter__(self):
-        import uuid
-
         if self.in_memory:
             self.f = _new_file(f"bikeid-{uuid.uuid4().hex}.h5", self.attrs, driver="core",
                                backing_store=False)  # fmt: skip
@@ -267,10 +270,6 @@ class _h5_write_errors:
         if exc is None or isinstance(exc, (ValueError, KeyboardInterrupt, SystemExit)):
             return False
         if isinstance(exc, (OSError, RuntimeError)):
-            import errno
-
-            from .files import storage_error
-
             text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             code = getattr(exc, "errno", None)
             if code is None and ("errno = 28" in text or "No space left" in text):
@@ -327,8 +326,11 @@ def copy_runs(
     seen: set[str] = set()
     need = sum(Path(src).stat().st_size for src in dict.fromkeys(s for s, _ in sources))
     check_free_space(path, need)  # HDF5 cannot always fail cleanly on a full disk: not there
-    with atomic_path(path) as tmp, _h5_write_errors(path, need), _h5_target(tmp, attrs,
-                                                                             need) as f:
+    with (
+        atomic_path(path) as tmp,
+        _h5_write_errors(path, need),
+        _h5_target(tmp, attrs, need) as f,
+    ):
         for src, name in sources:
             if name in seen:
                 raise ValueError(f"duplicate run name {name!r} while copying")
