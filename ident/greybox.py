@@ -213,11 +213,11 @@ def _discretize_force(theta: np.ndarray, dt: float, derivatives: bool):
 class _GreyProblem(PredictionProblem):
     """Prediction errors of runs at several speeds, parameters [free entries, K per speed].
 
-    Reuses :class:`ident.predictor.PredictionProblem`'s residual (x0 projected out) when no run
-    has a lateral force; with ``forces`` (one F array per run) the error is the superposition of
-    the kernel's passes over (T_delta, y) and (F, 0).  The Jacobian is never stored whole:
-    per run its columns are accumulated into J'J and J'r (x0 eliminated), whose
-    innovation-gain blocks are per speed group.
+    Reuses :class:`ident.predictor.PredictionProblem`'s residual (x0 projected out); with
+    ``forces`` (one F array per run) the error is the superposition of the kernel's passes
+    over (T_delta, y) and (F, 0), the latter added by ``_extra_error``.  The Jacobian is
+    never stored whole: per run its columns are accumulated into J'J and J'r (x0
+    eliminated), whose innovation-gain blocks are per speed group.
     """
 
     def __init__(self, data, groups, Ks, vals, free, symmetric, g, free_k, weights, outputs,
@@ -285,28 +285,15 @@ class _GreyProblem(PredictionProblem):
             out.append((Ad, Bd, dAd, dBd, K, S, *force))
         return out
 
-    def residual(self, x):
-        """Weighted prediction errors (x0 projected out), or None (unstable predictor)."""
+    def _extra_error(self, i: int, model) -> np.ndarray | float:
+        """The lateral force's share of run ``i``'s errors: the kernel's pass over (F, 0)."""
         if self.forces is None:
-            return super().residual(x)
-        models = self._models(x, derivatives=False)
-        if models is None:
-            return None
-        res, x0s = [], []
-        empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
-        for d, F, (Ad, Bd, _, _, K, _, Bfd, _) in zip(self.data, self.forces, models,
-                                                       strict=True):  # fmt: skip
-            E0, Psi = prediction_kernel(Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx,
-                                        np.zeros(4), False)  # fmt: skip
-            Ef, _ = prediction_kernel(Ad, Bfd, K, empty_a, empty_b, F, np.zeros_like(d.y),
-                                      self.idx, np.zeros(4), False)  # fmt: skip
-            Psi = (Psi * self.w[None, :, None]).reshape(-1, 4)
-            e0 = ((E0 + Ef) * self.w).ravel()
-            x0, *_ = np.linalg.lstsq(Psi, -e0, rcond=None)
-            res.append(e0 + Psi @ x0)
-            x0s.append(x0)
-        self.x0s = x0s
-        return np.concatenate(res)
+            return 0.0
+        Ad, K, Bfd = model[0], model[4], model[6]
+        Ef, _ = prediction_kernel(Ad, Bfd, K, np.zeros((0, 4, 4)), np.zeros((0, 4)),
+                                  self.forces[i], np.zeros_like(self.data[i].y), self.idx,
+                                  np.zeros(4), False)  # fmt: skip
+        return Ef
 
     def normal_equations(self, x):
         """(residual, J'J, J'r) at x with the x0 columns projected out, or (None, None, None)."""

@@ -298,17 +298,22 @@ class PredictionProblem:
             return None
         res, x0s = [], []
         empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
-        for d, (Ad, Bd, _, _, K, _) in zip(self.data, models, strict=True):
+        for i, (d, model) in enumerate(zip(self.data, models, strict=True)):
+            Ad, Bd, _, _, K = model[:5]
             E0, Psi = prediction_kernel(
                 Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx, np.zeros(4), False
             )
             Psi = (Psi * self.w[None, :, None]).reshape(-1, 4)
-            e0 = (E0 * self.w).ravel()
+            e0 = ((E0 + self._extra_error(i, model)) * self.w).ravel()
             x0, *_ = np.linalg.lstsq(Psi, -e0, rcond=None)
             res.append(e0 + Psi @ x0)
             x0s.append(x0)
         self.x0s = x0s
         return np.concatenate(res)
+
+    def _extra_error(self, i: int, model) -> np.ndarray | float:
+        """Prediction errors of run ``i`` from inputs beyond u, added to the kernel's (none)."""
+        return 0.0
 
     def jacobian(self, x):
         """(residual, projected Jacobian) at x, or (None, None)."""
