@@ -154,9 +154,6 @@ def parse_entry(name: str) -> tuple[str, int, int | None]:
     raise ValueError(f"unknown matrix entry {name!r}; valid names are {list(ALL_ENTRIES)}")
 
 
-_parse = parse_entry  # the former private name, kept for scripts that import it
-
-
 def _data(run: Run, source: str, derivative: str) -> dict[str, np.ndarray]:
     sig = run.signals if source == "signals" else run.truth
     if sig is None:

@@ -24,7 +24,7 @@ x0 is solved by least squares at each evaluation and the Jacobian is projected
 Minimizer: ``scipy.optimize.least_squares(method="lm")`` (Levenberg-Marquardt,
 MINPACK).  A trial step whose predictor is unstable gets a large finite residual
 and is rejected.  Outputs are weighted by the inverse residual standard deviation
-(two passes); the covariance is the sandwich of ``_covariance``, which accounts for the
+(two passes); the covariance is the sandwich of ``sandwich_covariance``, which accounts for the
 correlation between the outputs' innovations that per-output weights leave.
 
 Start.  ``ident.subspace.pbsid`` on decimated data (closed-loop safe), converted to
@@ -67,15 +67,9 @@ from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
     INPUT,
     PredictionProblem,
-    RunData,
-    Solution,
     discretize,
-    discretize_with_derivatives,
     initial_gain,
-    kalman_gain,
-    levenberg_marquardt,
     output_matrix,
-    prediction_kernel,
     run_data,
     sandwich_covariance,
     single_threaded_blas,
@@ -94,21 +88,6 @@ __all__ = [
     "output_matrix",
     "subspace_start",
 ]
-
-# The shared predictor lives in ident.predictor; these former private names stay for scripts.
-_kernel = prediction_kernel
-_discretize_with_derivatives = discretize_with_derivatives
-_discretize = discretize
-_kalman_gain = kalman_gain
-_Data = RunData
-_run_data = run_data
-_Problem = PredictionProblem
-_Solution = Solution
-_lm = levenberg_marquardt
-_solve = solve
-_covariance = sandwich_covariance
-_initial_k = initial_gain
-_single_threaded_blas = single_threaded_blas
 
 
 class _ParamsDict(dict):
@@ -249,7 +228,7 @@ class CanonicalModel(LinearModel):
         K : (4, L) ndarray
             Innovation gain; xhat[k+1] = Ad xhat[k] + Bd u[k] + K (y[k] - C xhat[k]).
         """
-        Ad, Bd = _discretize(self.theta, self.dt)
+        Ad, Bd = discretize(self.theta, self.dt)
         return Ad, Bd[:, None], self.C_chen_dao, self.K
 
 
@@ -405,7 +384,7 @@ def subspace_start(
         without a real logarithm is not refused: the real part of the logarithm is used
         (``d2c(strict=False)``, good enough as a start).
     """
-    data = _run_data(runs, ("phi", "delta"))
+    data = run_data(runs, ("phi", "delta"))
     dt = data[0].dt
     factor = max(1, int(round(coarse_dt / dt)))
     us, ys = [], []
@@ -446,7 +425,7 @@ def _candidates(runs, theta0, starts, multistart) -> list[tuple[str, np.ndarray]
     return cands
 
 
-@_single_threaded_blas
+@single_threaded_blas
 def fit(
     runs: Run | Sequence[Run],
     *,
@@ -519,7 +498,7 @@ def fit(
         raise ValueError(f"noise_model {noise_model!r}: choose 'free' or 'none'")
     outputs = tuple(outputs)
     C, _ = output_matrix(outputs)
-    data = _run_data(runs, outputs)
+    data = run_data(runs, outputs)
     dts = {round(d.dt, 12) for d in data}
     if len(dts) > 1:
         raise ValueError(f"runs have different sample periods {sorted(dts)}; resample first")
@@ -535,11 +514,11 @@ def fit(
     mapping = [np.eye(10)] * len(data)
     best = None
     for name, theta in _candidates(runs, theta0, starts, multistart):
-        K = _initial_k(theta, dt, C, data, yvar, free_k)
+        K = initial_gain(theta, dt, C, data, yvar, free_k)
         if K is None:
             continue
         x = np.concatenate([theta, K.ravel()]) if free_k else theta
-        prob = _Problem(data, mapping, [K] * len(data), free_k, w, outputs)
+        prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
         r = prob.residual(x)
         if r is not None and (best is None or float(r @ r) < best[0]):
             best = (float(r @ r), name, x, K)
@@ -552,14 +531,14 @@ def fit(
     nfev = 0
     notes = [f"start: {start_name}"]
     for _ in range(max(1, passes)):
-        prob = _Problem(data, mapping, [K] * len(data), free_k, w, outputs)
-        sol = _solve(prob, x, max_nfev, method)
+        prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
+        sol = solve(prob, x, max_nfev, method)
         nfev += sol.nfev
         x = sol.x
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
     if not sol.success:
         notes.append(f"least_squares: {sol.message}")
-    cov = _covariance(prob, 4 * len(data))
+    cov = sandwich_covariance(prob, 4 * len(data))
     theta, Kf = prob.split(x)
     return CanonicalModel(
         theta=theta.copy(), covariance=cov[:10, :10], K=Kf.copy() if free_k else K, dt=dt,
@@ -569,7 +548,7 @@ def fit(
     )  # fmt: skip
 
 
-@_single_threaded_blas
+@single_threaded_blas
 def fit_speed_model(
     runs: Sequence[Run],
     *,
@@ -649,14 +628,14 @@ def fit_speed_model(
     Sstack = np.vstack([speed_map(v) for v in per])
     tstack = np.concatenate([m.theta for m in per.values()])
     params, *_ = np.linalg.lstsq(Sstack, tstack, rcond=None)
-    data = _run_data(runs, outputs)
+    data = run_data(runs, outputs)
     mapping = [speed_map(d.v) for d in data]
     Ks = [per[round(r.speed, 6)].K for r in runs]
     C = output_matrix(outputs)[0]
     for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
-        Ad, Bd = _discretize(mapping[i] @ params, d.dt)
+        Ad, Bd = discretize(mapping[i] @ params, d.dt)
         if not np.max(np.abs(np.linalg.eigvals(Ad - Ks[i] @ C))) < 1.0:
-            K = _initial_k(mapping[i] @ params, d.dt, C, [d], np.var(d.y, axis=0), True)
+            K = initial_gain(mapping[i] @ params, d.dt, C, [d], np.var(d.y, axis=0), True)
             if K is None:
                 raise ValueError(
                     f"no stable predictor for the run at {d.v} m/s from the joint start; "
@@ -666,12 +645,12 @@ def fit_speed_model(
     w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     nfev = 0
     for _ in range(max(1, passes)):
-        prob = _Problem(data, mapping, Ks, False, w, outputs)
-        sol = _solve(prob, params, max_nfev, method)
+        prob = PredictionProblem(data, mapping, Ks, False, w, outputs)
+        sol = solve(prob, params, max_nfev, method)
         nfev += sol.nfev
         params = sol.x
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
-    cov = _covariance(prob, 4 * len(data))
+    cov = sandwich_covariance(prob, 4 * len(data))
     return SpeedCanonicalModel(
         params=params.copy(), covariance=cov, per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev,

@@ -212,17 +212,17 @@ def test_lateral_force_gradient_matches_finite_differences():
     """Second method for the superposed (T_delta, F) predictor: J'r from the kernel's two
     passes equals the central-difference gradient of 0.5 |r(x)|^2 (x0 re-projected at each
     point, which variable projection makes exact) to 1e-4 relative (difference error ~h^2)."""
-    from bikeid.ident.pem import _initial_k, _run_data, output_matrix
+    from bikeid.ident.predictor import initial_gain, output_matrix, run_data
 
     rs = [simulate(P, v, duration=5, seed=3, dither=1.0, dither_hold=5, lateral_force=5.0,
                    angle_noise=1e-3, rate_noise=1e-2) for v in (3.0, 6.0)]  # fmt: skip
-    data = _run_data(rs, greybox.DEFAULT_OUTPUTS)
+    data = run_data(rs, greybox.DEFAULT_OUTPUTS)
     C = output_matrix(greybox.DEFAULT_OUTPUTS)[0]
     free = ("Mpd", "K0dd", "K2dd", "C1dd", "HpF", "HdF")
     vals = {n: true_entry(n) for n in greybox.ALL_ENTRIES if not n.startswith("H")}
     vals["HpF"], vals["HdF"] = lateral_force_vector(P, 0.5, -1.0)
     vals["Mdp"], vals["K0dp"] = vals["Mpd"], vals["K0pd"]
-    Ks = [_initial_k(theta_from_matrices(CM, d.v), d.dt, C, [d], np.var(d.y, axis=0), True)
+    Ks = [initial_gain(theta_from_matrices(CM, d.v), d.dt, C, [d], np.var(d.y, axis=0), True)
           for d in data]  # fmt: skip
     w = 1 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     forces = [np.asarray(r["F"], float) for r in rs]

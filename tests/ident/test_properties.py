@@ -201,15 +201,16 @@ def test_t10_residual_band(seed):
     """T10: with the true model and its Kalman gain, white innovations: about 1 % of the
     autocorrelations at lags 1..25 leave the 99 % band (allow <= 3 of 25 per output,
     binomial P ~ 0.002), and the residual-dither cross-correlation stays mostly inside."""
-    from bikeid.ident.pem import CanonicalModel, _discretize, _kalman_gain
+    from bikeid.ident.pem import CanonicalModel
+    from bikeid.ident.predictor import discretize, kalman_gain
 
     v = 5.0
     r = simulate(BASE, v, duration=100, seed=seed, dither=1.0, dither_hold=5, disturbance=0.5,
                  angle_noise=1e-3, rate_noise=1e-2)  # fmt: skip
     theta = theta_from_matrices(canonical_matrices(BASE), v)
-    Ad, Bd = _discretize(theta, r.dt)
+    Ad, Bd = discretize(theta, r.dt)
     C = np.eye(4)[[0, 2]]
-    K = _kalman_gain(Ad, Bd, C, 0.25, np.array([1e-6, 1e-6]))
+    K = kalman_gain(Ad, Bd, C, 0.25, np.array([1e-6, 1e-6]))
     m = CanonicalModel(theta=theta, covariance=np.zeros((10, 10)), K=K, dt=r.dt, speed=v,
                        noise_covariance=np.eye(2), outputs=("phi", "delta"))  # fmt: skip
     rr = resid(r, m, input="dither")
