@@ -50,11 +50,12 @@ def _loop(**kw):
 @pytest.mark.parametrize("hold", [1, 10])
 def test_dithered_loop_is_informative(hold):
     """The testbed's dither: the state law leaves most of the torque unexplained (observed
-    R^2 0.38 and 0.83, below the 0.98 threshold) and its residual excites hundreds of
-    frequencies, far above the 10 parameters of the canonical model."""
+    R^2 0.40 and 0.83, below the 0.9 that FEEDBACK_R2's comment states for dithered runs,
+    itself below the 0.98 threshold) and its residual excites hundreds of frequencies, far
+    above the 10 parameters of the canonical model."""
     run = _loop(dither=1.0, dither_hold=hold, rate_noise=1e-3, angle_noise=1e-4)
     info = check([run], 10, what="the canonical PEM model")
-    assert info.informative and info.r2[0] < FEEDBACK_R2
+    assert info.informative and info.r2[0] < 0.9 < FEEDBACK_R2
     assert info.order >= 10 and info.input_order >= 10
 
 
