@@ -31,6 +31,7 @@ import time
 from bikeid.dataset.decays import load_decays
 from bikeid.experiments.cli.measured import parse_weave_weight, uncertainty_arg
 from bikeid.ident.effects.acceptance import AcceptanceRule
+from bikeid.ident.effects.before_after import GOAL_RATIO
 from bikeid.ident.effects.nominal_uncertainty import NominalUncertainty
 from bikeid.ident.effects.pipeline import evaluate_json, fit_model
 
@@ -70,7 +71,7 @@ def run_split(
         "weave_error_before": s["weave_error_before"],
         "weave_error_after": s["weave_error_after"],
         "weave_ratio": s["weave_ratio"],
-        "both_halved": s["verdict"] == "halved" and s["weave_ratio"] <= 0.5,
+        "both_halved": s["verdict"] == "halved" and s["weave_ratio"] <= GOAL_RATIO,
         "seconds": time.perf_counter() - t0,
     }
 

@@ -52,6 +52,7 @@ from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.dataset.sensors import Channel, Sensors
 from bikeid.dataset.windows import Window
 from bikeid.experiments.parallel import imap
+from bikeid.ident.effects.before_after import GOAL_RATIO
 from bikeid.ident.effects.diagnostics import evaluate
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.selection import select_effects
@@ -473,8 +474,8 @@ def run_trial(
     if es.in_library:
         out["ranked_first"] = first == spec.effect
         out["magnitude_ok"] = bool(out["ranked_first"] and mag_ok)
-        out["error_halved"] = bool(ratio <= 0.5)
-        out["success"] = bool(out["ranked_first"] and mag_ok and ratio <= 0.5)
+        out["error_halved"] = bool(ratio <= GOAL_RATIO)  # point ratio: one synthetic trial
+        out["success"] = bool(out["magnitude_ok"] and out["error_halved"])
     else:
         out["unexplained"] = first == "unexplained"
         out["success"] = out["unexplained"]
