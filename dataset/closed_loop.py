@@ -53,6 +53,8 @@ import numpy as np
 
 from bikeid.sim.conventions import MEASURED
 from bikeid.sim.errors import UntrustworthyResult, check_memory
+from bikeid.sim.integrate import simulate
+from bikeid.sim.nonlinear import WhippleBicycle
 from bikeid.sim.parameters import BicycleParameters
 
 from .linear_loop import _describe, run_loop
@@ -311,9 +313,6 @@ def _integrate(
     p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options
 ):
     """Run ``sim.integrate.simulate`` with ``loop`` as the controller; returns its Trajectory."""
-    from bikeid.sim.integrate import simulate
-    from bikeid.sim.nonlinear import WhippleBicycle
-
     bike = WhippleBicycle(p)
     init = _initial_state(initial)
     x0 = bike.state(speed, **init)

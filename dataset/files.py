@@ -40,10 +40,11 @@ import os
 import stat
 import tempfile
 import threading
+import zlib
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
-from bikeid.sim.errors import InputError, memory_limit
+from bikeid.sim.errors import InputError, check_memory, memory_limit
 
 __all__ = [
     "MAX_EXPANSION",
@@ -335,10 +336,8 @@ def check_h5_dataset(ds, where: str, fix: str = "write it again with bikeid") ->
         :data:`~bikeid.dataset.files.MAX_EXPANSION` times, e.g. unwritten chunks);
         :class:`~bikeid.sim.errors.InputError` if it would not fit in memory.
     """
-    import h5py
+    import h5py  # optional format: loaded only when an HDF5 file is read
     import numpy as np
-
-    from bikeid.sim.errors import check_memory
 
     if not isinstance(ds, h5py.Dataset):
         raise ValueError(f"{where} is a {type(ds).__name__.lower()} where a dataset is expected; "
@@ -559,8 +558,6 @@ def read_bounded(path: str | os.PathLike, label: str, expansion: float = 1.0) ->
     OSError
         If the file cannot be read.
     """
-    import zlib
-
     path = Path(path)
     size = check_input_file(path, label)
     limit = memory_limit()
@@ -766,7 +763,7 @@ def owned_folder(
         If the path is a file or a link, another command owns the folder, it holds files
         the command did not write (named, up to five), or another run holds its lock.
     """
-    import fcntl
+    import fcntl  # POSIX only: loaded where a folder is locked
 
     folder = Path(path)
     if folder.is_symlink() or (folder.exists() and not folder.is_dir()):

@@ -61,7 +61,7 @@ import numpy as np
 
 from bikeid.sim.conventions import UNITS
 
-from .files import read_bounded
+from .files import check_h5_dataset, read_bounded
 from .run import CONSTANT_CHECKED, REQUIRED, Run, check_finite, check_plausible
 
 __all__ = [
@@ -861,8 +861,6 @@ _H5_DAMAGE = (OSError, RuntimeError, KeyError, TypeError, ValueError)
 
 
 def _h5_read(label: str, f, key: str) -> np.ndarray:
-    from .files import check_h5_dataset
-
     where = f"{label}: dataset {key!r}"
     try:
         ds = f[key]

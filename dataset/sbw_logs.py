@@ -70,6 +70,8 @@ import numpy as np
 
 from bikeid.dataset.run import Run, check_plausible
 
+from .importers import from_csv
+
 __all__ = [
     "COLUMNS",
     "DATASET",
@@ -250,8 +252,6 @@ def load_log(path: str | os.PathLike) -> Run:
         ``sim.conventions.PLAUSIBLE`` or a constant state or command column, named by
         file row and column).
     """
-    from .importers import from_csv
-
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"log file {path} does not exist")
