@@ -214,6 +214,20 @@ def test_identify_message_on_a_non_hdf5_file(capsys, tmp_path):
     assert "rebuilds" not in line and "delete or rename" in line
 
 
+@pytest.mark.parametrize(
+    ("argv", "phrase"),
+    [
+        (["--plant", "linear", "--critical"], "--plant and --critical are separate studies"),
+        (["--restart"], "--noise-model and --restart apply to --plant"),
+        (["--noise-model", "none"], "--noise-model and --restart apply to --plant"),
+    ],
+)  # fmt: skip
+def test_coverage_refuses_options_of_another_study(capsys, tmp_path, argv, phrase):
+    """An option of one coverage study given to another is refused, not silently ignored
+    (the default-path options were dropped by the linear study, --plant by --critical)."""
+    fails(capsys, tmp_path, ["coverage", "--seeds", "2", *argv], EXIT_INPUT, phrase)
+
+
 # -- parameter files (3) ----------------------------------------------------------------
 def _param_file(tmp_path: Path, text: str, name: str = "bike.json") -> Path:
     path = tmp_path / name
