@@ -405,6 +405,15 @@ class _LinearPlant:
         dTa = 0.0 if self.tau == 0.0 else (T_target - Ta) / self.tau
         return np.array([qd[0], qd[1], qdd[0], qdd[1], dTa])
 
+    def rk4(self, x: np.ndarray, h: float, v: float, T_cmd: float, T_phi) -> np.ndarray:
+        """One classical Runge-Kutta step of length ``h`` [s]; ``T_phi`` [N m] at the
+        step's start, middle and end (the command held)."""
+        k1 = self.rhs(x, v, T_cmd, T_phi[0])
+        k2 = self.rhs(x + h / 2 * k1, v, T_cmd, T_phi[1])
+        k3 = self.rhs(x + h / 2 * k2, v, T_cmd, T_phi[1])
+        k4 = self.rhs(x + h * k3, v, T_cmd, T_phi[2])
+        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
 
 def _linear_decay(plant: _LinearPlant, v0: float, nz: Nuisance, init: dict, rng) -> dict:
     """One push + 1 s window on the independent linear plant; measured signals."""
@@ -455,11 +464,7 @@ def _linear_decay(plant: _LinearPlant, v0: float, nz: Nuisance, init: dict, rng)
                          for a in (0.0, h / 2, h)]  # fmt: skip
             else:
                 T_phi = [0.0, 0.0, 0.0]
-            k1 = plant.rhs(x, v_true[k], T_cmd, T_phi[0])
-            k2 = plant.rhs(x + h / 2 * k1, v_true[k], T_cmd, T_phi[1])
-            k3 = plant.rhs(x + h / 2 * k2, v_true[k], T_cmd, T_phi[1])
-            k4 = plant.rhs(x + h * k3, v_true[k], T_cmd, T_phi[2])
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = plant.rk4(x, h, v_true[k], T_cmd, T_phi)
         if not np.all(np.isfinite(x)) or abs(x[0]) > 1.0:
             raise RuntimeError("blind-trial plant fell")
     s = HIST + n_pre
@@ -636,11 +641,7 @@ def _linear_log(plant: _LinearPlant, v0: float, nz: Nuisance, pushes: int, scale
         for j in range(SUBSTEPS):
             tt = k * DT + j * h
             f = [_pulse(tt + a, starts, peaks, nz.pulse_duration) for a in (0.0, h / 2, h)]
-            k1 = plant.rhs(x, v_true[k], T_cmd, f[0])
-            k2 = plant.rhs(x + h / 2 * k1, v_true[k], T_cmd, f[1])
-            k3 = plant.rhs(x + h / 2 * k2, v_true[k], T_cmd, f[1])
-            k4 = plant.rhs(x + h * k3, v_true[k], T_cmd, f[2])
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = plant.rk4(x, h, v_true[k], T_cmd, f)
         if not np.all(np.isfinite(x)) or abs(x[0]) > 1.0:
             raise RuntimeError("blind-trial plant fell")
     return out
