@@ -61,6 +61,7 @@ __all__ = [
     "check_owned_folder",
     "owned_folder",
     "read_bounded",
+    "sha256_file",
     "size_text",
     "storage_error",
 ]
@@ -473,7 +474,24 @@ def check_outputs(
                     )
 
 
-def _sha256_file(path: Path) -> str:
+def sha256_file(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's bytes, read in 1 MiB blocks.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+
+    Returns
+    -------
+    str
+        Hex digest (64 characters).
+
+    Raises
+    ------
+    OSError
+        If the file cannot be read.
+    """
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
@@ -516,7 +534,7 @@ def check_distinct_inputs(paths: Sequence[str | os.PathLike]) -> None:
             continue
         digests: dict[str, Path] = {}
         for p in group:
-            d = _sha256_file(p)
+            d = sha256_file(p)
             if d in digests:
                 raise InputError(
                     f"{p} and {digests[d]} hold the same data (equal SHA-256); give each data "

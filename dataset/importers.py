@@ -61,7 +61,7 @@ import numpy as np
 
 from bikeid.sim.conventions import UNITS
 
-from .files import check_h5_dataset, read_bounded
+from .files import check_h5_dataset, read_bounded, sha256_file
 from .run import CONSTANT_CHECKED, REQUIRED, Run, check_finite, check_plausible
 
 __all__ = [
@@ -131,14 +131,6 @@ def _relative(path: Path) -> str:
         return Path(os.path.relpath(path.resolve())).as_posix()
     except ValueError:  # another drive (Windows)
         return path.name
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 #: Signals a log may carry beyond :data:`~bikeid.sim.conventions.UNITS`, with their SI unit:
@@ -385,7 +377,7 @@ def _read_csv(
         raise ValueError(f"{label}: is a folder, not a CSV file")
     # memory estimated from the size before reading (a .gz streamed, its expansion capped)
     raw = read_bounded(path, label, CSV_MEMORY_FACTOR)
-    digest = _sha256(path)  # of the file's bytes, as saved in meta["import"]
+    digest = sha256_file(path)  # of the file's bytes, as saved in meta["import"]
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -968,7 +960,7 @@ def from_hdf5(
     sizes = {c: a.size for c, a in data.items()}
     if len(set(sizes.values())) > 1:
         raise ValueError(f"{label}: datasets have different lengths {sizes}")
-    table = _Table(label, data, lambda i: f"index {i}", "hdf5", path, _sha256(path))
+    table = _Table(label, data, lambda i: f"index {i}", "hdf5", path, sha256_file(path))
     return _build(
         table, columns, units, flipped, time=time, speed=speed, dt=dt, meta=meta,
         jitter=jitter, speed_range=speed_range,
