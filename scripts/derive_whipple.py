@@ -65,6 +65,8 @@ import sympy as sm
 import sympy.physics.mechanics as me
 from sympy.printing.pycode import PythonCodePrinter
 
+from bikeid.dataset.files import atomic_write_text, check_output_path
+
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = ROOT / "sim" / "_whipple_generated.py"
 
@@ -546,6 +548,10 @@ def run(argv, *, description: str, target: Path, derive, emit, check) -> int:
         "derivation (numerically, 1e-9 relative) instead of writing; exit 1 on a mismatch",
     )
     args = ap.parse_args(argv)
+    try:  # before the minutes of derivation, not after
+        out = check_output_path(args.out)
+    except ValueError as exc:
+        ap.error(str(exc))
     t0 = time.perf_counter()
     sym = derive()
     t1 = time.perf_counter()
@@ -556,10 +562,7 @@ def run(argv, *, description: str, target: Path, derive, emit, check) -> int:
         return 0 if ok else 1
     text = emit(sym)
     t2 = time.perf_counter()
-    out = Path(args.out)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(text)
-    tmp.replace(out)
+    atomic_write_text(out, text)
     print(
         f"derived in {t1 - t0:.1f} s, emitted in {t2 - t1:.1f} s: {out} ({len(text)} chars)",
         file=sys.stderr,
