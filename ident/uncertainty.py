@@ -52,7 +52,8 @@ import numpy as np
 
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, matrices_from_speed_params, speed_map
 from bikeid.ident.linear_model import mode_names
-from bikeid.sim.errors import InputError
+from bikeid.ident.predictor import discretize, output_matrix
+from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.linear import (
     CanonicalMatrices,
     constant_term,
@@ -464,8 +465,6 @@ def predictor_radius(model) -> float | None:
         ``nfev`` 0: a speed-parameterized model, or one taken from it at a speed by
         ``SpeedCanonicalModel.at``, whose K belongs to another theta).
     """
-    from bikeid.ident.predictor import discretize, output_matrix
-
     K, theta = getattr(model, "K", None), getattr(model, "theta", None)
     if K is None or theta is None or callable(theta) or not hasattr(model, "outputs"):
         return None
@@ -495,8 +494,6 @@ def check_predictor_interior(model) -> float | None:
         If the radius exceeds 1 - :data:`PREDICTOR_BOUNDARY_TOL`; the message names the
         fixes measured on the default path (output-error fit, a record about 4x longer).
     """
-    from bikeid.sim.errors import UntrustworthyResult
-
     rho = predictor_radius(model)
     if rho is not None and rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
         raise UntrustworthyResult(
@@ -701,8 +698,6 @@ def _h(params: np.ndarray, g: float, v: float, func) -> complex:
 
 def _critical_gradient(p: np.ndarray, g: float, v0: float, func, name: str) -> np.ndarray:
     """dv/dp at a critical speed v0 by the implicit function theorem (module docstring)."""
-    from bikeid.sim.errors import UntrustworthyResult
-
     eps = 1e-30 * max(1.0, float(np.max(np.abs(p))))
     dh_dp = np.empty(p.size)
     for j in range(p.size):
@@ -842,7 +837,6 @@ def _capsize_speed_set(
 
 def _critical_speed(g: float, vmax: float, name: str, func):
     """q(p) = v_w or v_c for :func:`profile_interval` (NaN where p has none below vmax)."""
-    from bikeid.sim.errors import UntrustworthyResult
 
     def q(pp: np.ndarray, state):
         v = critical_speeds(matrices_from_speed_params(pp, g), vmax)[name]
@@ -952,8 +946,6 @@ def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) 
     z = z_value(level)
     w = _check_frequencies(frequencies)
     p, cov, S, _ = _parameters(model, v)
-    from bikeid.ident.pem import output_matrix
-
     C = output_matrix(model.outputs)[0]
     G, dG = _frequency_response(S @ p, C, w)
     rel = (dG / G[:, :, None]) @ S  # d ln G / dp  (L, F, P)
@@ -1086,8 +1078,6 @@ def monte_carlo(
         ev[k] = match_eigenvalues(np.linalg.eigvals(canonical_ab(S @ pk)[0]), nominal)
     mag = phase = None
     if frequencies is not None:
-        from bikeid.ident.pem import output_matrix
-
         w = _check_frequencies(frequencies)
         C = output_matrix(model.outputs)[0]
         G0, _ = _frequency_response(S @ p, C, w)
