@@ -991,14 +991,12 @@ def summarize_blind(rows: list[dict]) -> dict:
     lib = [r for r in rows if r["kind"] == "library"]
     none = [r for r in rows if r["kind"] == "none"]
     outside = [r for r in rows if r["kind"] == "outside"]
-    for r in lib:
-        r["has_extra"] = r["extras"] > 0
     ex = np.array([r["extras"] for r in lib], dtype=float)
     half = 1.96 * ex.std(ddof=1) / math.sqrt(len(ex)) if len(ex) > 1 else float("nan")
     s = {
         "trials": len(rows),
         "right_first": rate(lib, "right_first"),
-        "with_extras": rate(lib, "has_extra"),
+        "with_extras": rate([{"has_extra": r["extras"] > 0} for r in lib], "has_extra"),
         "mean_extras": {
             "mean": float(ex.mean()) if len(ex) else float("nan"),
             "ci95": [float(ex.mean() - half), float(ex.mean() + half)] if len(ex) > 1 else None,

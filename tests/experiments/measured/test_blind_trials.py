@@ -118,6 +118,14 @@ def test_score_both_ways():
                  nuisance={"plant": "independent_linear"})] * 3  # fmt: skip
     s = summarize_blind(rows)
     assert s["right_first"]["k"] == 3 and s["mean_extras"]["mean"] == 0.0
+    extra = dict(score(tr, ["steer_viscous_damping", "steer_inertia"],
+                       {"steer_viscous_damping": 0.5, "steer_inertia": 0.01}),
+                 nuisance={"plant": "independent_linear"})  # fmt: skip
+    before = [dict(r) for r in rows + [extra]]
+    s = summarize_blind(rows + [extra])
+    assert (s["with_extras"]["k"], s["with_extras"]["n"]) == (1, 4)  # counted by hand
+    assert s["mean_extras"]["mean"] == 0.25
+    assert rows + [extra] == before  # the caller's rows are not written to
 
 
 def test_draw_is_reproducible_and_extends():
