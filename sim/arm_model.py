@@ -213,11 +213,6 @@ def geometry_vector(p: BicycleParameters) -> np.ndarray:
     return np.array([p.w, p.c, p.lam, p.rR, p.rF, p.g])
 
 
-def _rot(p: BicycleParameters) -> np.ndarray:
-    cl, sl = math.cos(p.lam), math.sin(p.lam)
-    return np.array([[cl, 0.0, -sl], [0.0, 1.0, 0.0], [sl, 0.0, cl]])  # benchmark -> C axes
-
-
 def segment_bodies(p: BicycleParameters, arms: ArmParameters) -> list[np.ndarray]:
     """The four segments as body vectors of ``body_matrices`` (right/left upper, lower).
 
@@ -289,7 +284,7 @@ def body_contribution(p: BicycleParameters, body: np.ndarray) -> CanonicalMatric
 
 def _arm_bodies_benchmark(p: BicycleParameters, arms: ArmParameters):
     """(mass, position, inertia) of each segment at the upright, benchmark axes."""
-    R = _rot(p)
+    R = p.moore_rotation()  # benchmark -> rear-frame (Moore C) axes
     out = []
     for b in segment_bodies(p, arms):
         ic = np.array([[b[1], b[4], b[6]], [b[4], b[2], b[5]], [b[6], b[5], b[3]]])

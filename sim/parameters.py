@@ -249,7 +249,7 @@ class BicycleParameters:
         l2 = self.xB * sl + self.zB * cl + self.rR * cl
         l4 = (self.zH + self.rF) * cl + (self.xH - self.w) * sl
         l3 = (self.xH - self.w - l4 * sl) / cl
-        rot = np.array([[cl, 0.0, -sl], [0.0, 1.0, 0.0], [sl, 0.0, cl]])
+        rot = self.moore_rotation()
         ic = rot @ self.inertia_B() @ rot.T
         ie = rot @ self.inertia_H() @ rot.T
         return {
@@ -263,6 +263,18 @@ class BicycleParameters:
             "ie11": ie[0, 0], "ie22": ie[1, 1], "ie33": ie[2, 2], "ie31": ie[2, 0],
             "g": self.g,
         }  # fmt: skip
+
+    def moore_rotation(self) -> np.ndarray:
+        """Rotation from the benchmark axes to Moore's frame-fixed axes (rotated by lam).
+
+        Returns
+        -------
+        (3, 3) ndarray
+            R with v_moore = R v_benchmark: ``[[cos lam, 0, -sin lam], [0, 1, 0],
+            [sin lam, 0, cos lam]]`` [-] (a frame inertia rotates as R I R^T).
+        """
+        cl, sl = math.cos(self.lam), math.sin(self.lam)
+        return np.array([[cl, 0.0, -sl], [0.0, 1.0, 0.0], [sl, 0.0, cl]])
 
     def inertia_B(self) -> np.ndarray:
         """Rear body inertia tensor about its mass centre, benchmark axes.
