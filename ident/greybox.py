@@ -55,9 +55,17 @@ import numpy as np
 from scipy.linalg import expm, expm_frechet
 
 from bikeid.dataset.run import Run
-from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
+from bikeid.ident.canonical import (
+    A_POS,
+    B_POS,
+    canonical_ab,
+    speed_map,
+    speed_params_from_matrices,
+    theta_from_matrices,
+)
 from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, parse_entry
 from bikeid.ident.linear_model import SpeedDependentModel
+from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
 from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
     PredictionProblem,
@@ -546,9 +554,6 @@ class GreyboxModel(SpeedDependentModel):
             ``params`` (14,), ``covariance`` (14, 14), ``per_speed`` = :meth:`at` of each
             fitted speed, ``dt``, ``g``, ``outputs``, ``cost``, ``nfev`` of this fit.
         """
-        from bikeid.ident.canonical import speed_map, speed_params_from_matrices
-        from bikeid.ident.pem import SpeedCanonicalModel
-
         grid = (0.0, 1.0, 2.0)
         S = np.vstack([speed_map(v) for v in grid])
         J = np.vstack([self._theta_jacobian(v) for v in grid])
@@ -575,8 +580,6 @@ class GreyboxModel(SpeedDependentModel):
             fitted speed nearest to ``v``, input T_delta only (a lateral-force column H is
             not part of it), as :meth:`ident.pem.SpeedCanonicalModel.at`.
         """
-        from bikeid.ident.pem import CanonicalModel
-
         near = min(self.K, key=lambda s: abs(s - v))
         return CanonicalModel(
             theta=self.theta(v), covariance=self.theta_covariance(v), K=self.K[near],

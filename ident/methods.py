@@ -48,6 +48,7 @@ from bikeid.ident.signals import prepare
 from bikeid.ident.tailored_iv import identify_tailored
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import canonical_matrices
+from bikeid.sim.parameters import BicycleParameters, from_mapping
 
 __all__ = [
     "DIRECT_PRESETS",
@@ -488,8 +489,6 @@ def fit_direct(
         return prepare(r, cutoff=cutoff, derivative=s.derivative, subtract_mean=s.remove_means)
 
     if s.iv == "tailored":
-        from bikeid.sim.parameters import BicycleParameters, from_mapping
-
         ref = reference if reference is not None else from_mapping(
             runs[0].meta["parameters"], name="run meta")  # fmt: skip
         start = canonical_matrices(ref) if isinstance(ref, BicycleParameters) else ref

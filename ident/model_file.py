@@ -61,13 +61,15 @@ import numpy as np
 
 from bikeid.dataset.files import atomic_write_text, check_output_path
 from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
-from bikeid.ident.direct import DirectResult
+from bikeid.ident.direct import ALL_ENTRIES, DirectResult
 from bikeid.ident.effects.experiment_model import DT as EXPERIMENT_DT
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.greybox import GreyboxModel
 from bikeid.ident.methods import model_codecs, model_kinds
-from bikeid.ident.pem import INPUT, CanonicalModel, SpeedCanonicalModel
+from bikeid.ident.pem import INPUT, CanonicalModel, SpeedCanonicalModel, output_matrix
+from bikeid.sim.effect_registry import check_values
 from bikeid.sim.errors import InputError
+from bikeid.sim.parameters import from_mapping
 from bikeid.sim.textformats import loads_json
 
 __all__ = [
@@ -640,8 +642,6 @@ class _Reader:
 
     def outputs(self, obj: dict, prefix: str) -> tuple[str, ...]:
         """The ``outputs`` field: measured states the canonical predictor accepts."""
-        from bikeid.ident.pem import output_matrix
-
         outputs = self.texts(obj, "outputs", prefix)
         try:
             output_matrix(outputs)
@@ -708,8 +708,6 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
 
 def _matrix_fields(r: _Reader, sec: Any, prefix: str) -> dict:
     """M, C1, K0, K2, H, g, free and stderr of :func:`_matrix_section`, checked."""
-    from bikeid.ident.direct import ALL_ENTRIES
-
     free = r.numbers(sec, "free", prefix)
     stderr = r.numbers(sec, "stderr", prefix)
     bad = [k for k in list(free) + list(stderr) if k not in ALL_ENTRIES]
@@ -747,9 +745,6 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
 
 
 def _experiment_model(r: _Reader, sec: Any, prefix: str) -> ExperimentModel:
-    from bikeid.sim.effect_registry import check_values
-    from bikeid.sim.parameters import from_mapping
-
     effects = r.numbers(sec, "effects", prefix)
     try:
         check_values(effects, f"{r.where}: field '{prefix}effects'")
@@ -764,8 +759,6 @@ def _experiment_model(r: _Reader, sec: Any, prefix: str) -> ExperimentModel:
 
 
 def _greybox_model(r: _Reader, sec: Any, prefix: str) -> GreyboxModel:
-    from bikeid.ident.direct import ALL_ENTRIES
-
     outputs = r.outputs(sec, prefix)
     n_out = len(outputs)
     fields = _matrix_fields(r, sec, prefix)

@@ -32,6 +32,7 @@ import numpy as np
 from scipy import signal
 
 from bikeid.dataset.run import SPEED_TOLERANCE, Run
+from bikeid.ident.uncertainty import bode_bands, z_value
 from bikeid.ident.validate import (
     CompareResult,
     ResidResult,
@@ -42,7 +43,7 @@ from bikeid.ident.validate import (
     sampled_model,
     whiteness,
 )
-from bikeid.sim.errors import UntrustworthyResult
+from bikeid.sim.errors import InputError, UntrustworthyResult
 
 __all__ = [
     "INTERVAL_CALIBRATION",
@@ -225,8 +226,6 @@ class FrequencyResponseEstimate:
         :attr:`in_band`, says whether model and data disagree."""
         if self.band_db.size == 0:
             return None
-        from bikeid.ident.uncertainty import z_value
-
         ze = z_value(BAND_LEVEL) * self.rel_error
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = self.H / self.model
@@ -291,9 +290,6 @@ def bode_band_halfwidths(model, f: np.ndarray, v: float) -> dict | None:
         (:func:`bikeid.ident.uncertainty.bode_bands` at ``BAND_LEVEL``); None for a model
         without covariance.
     """
-    from bikeid.ident.uncertainty import bode_bands, z_value
-    from bikeid.sim.errors import InputError
-
     m = model.at(v) if hasattr(model, "at") else model
     if not (hasattr(m, "predictor") and hasattr(m, "covariance")):
         return None
