@@ -722,12 +722,14 @@ def _settings(args: argparse.Namespace) -> dict:
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
+    import os
     import sys
 
     import numpy as np
 
     from bikeid.dataset.files import check_distinct_inputs, check_output_path, check_outputs
     from bikeid.ident.model_file import file_provenance, save_model
+    from bikeid.sim.errors import InputError
     from bikeid.sim.linear import eigenvalues
 
     outputs = _outputs(args.outputs, args.method)
@@ -761,6 +763,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.out:
         targets = _model_targets(args.out, speeds, method.one_file_per_speed(run_settings))
         check_outputs(targets, [*data_files, args.bicycle])
+        if args.plot is not None and os.path.realpath(args.plot) in map(os.path.realpath,
+                                                                         targets):
+            raise InputError(f"--plot {args.plot} is also the model file of --out; give the "
+                             "figure another name")  # fmt: skip
         provenance = file_provenance(_data_files(args))
         settings = _settings(args)
     out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,

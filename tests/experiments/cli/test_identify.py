@@ -175,6 +175,20 @@ def test_speed_model_needs_two_speeds(tmp_path, capsys):
     assert "two or more speeds" in capsys.readouterr().err
 
 
+def test_plot_and_out_must_be_different_files(tmp_path, capsys):
+    """--plot naming --out's model file is refused before the fit (the figure would have
+    replaced the model); different names write both."""
+    f = tmp_path / "one.h5"
+    run_sweep(SweepSpec("pid", (5.0,), (0,), 10.0), f, workers=1, progress=False)
+    same = tmp_path / "m.png"
+    assert main(["identify", str(f), "--out", str(same), "--plot", str(same), "--quiet"]) == 3
+    assert "also the model file of --out" in capsys.readouterr().err
+    assert not same.exists()
+    model, fig = tmp_path / "m.json", tmp_path / "e.png"
+    assert main(["identify", str(f), "--out", str(model), "--plot", str(fig), "--quiet"]) == 0
+    assert model.read_text().lstrip().startswith("{") and fig.read_bytes()[:4] == b"\x89PNG"
+
+
 # -- a user's own logs: units, signs, excitation, pooling (ident.informativity, -----------
 # -- dataset.plausibility); files written at test time in two non-bikeid formats ---------
 DATA = os.environ.get("BIKEID_DATA", str(Path(__file__).resolve().parents[4] / "shared" / "data"))
