@@ -371,15 +371,15 @@ class _LinearTrajectory:
 
 def _linear(p, loop, speed, duration, ctrl_dt, effects, mode, initial, lateral_force, options):
     """The exact ZOH linear plant (``linear_loop.run_loop``) under ``loop``."""
+    if mode not in ("held", "coast"):
+        raise ValueError(f"mode {mode!r} unknown; use 'coast' or 'held'")  # as the nonlinear
     for what, bad, fix in (
         ("effects", bool(list(effects)), "drop them"),
-        ("mode='coast'", mode != "held", "the linear plant holds the speed"),
+        ("mode='coast'", mode == "coast", "the linear plant holds the speed"),
         (f"integrator options {sorted(options)}", bool(options), "drop them"),
     ):
         if bad:
             raise ValueError(f"plant='linear' takes no {what}; {fix}, or use plant='nonlinear'")
-    if mode not in ("held", "coast"):
-        raise ValueError(f"mode={mode!r}: choose 'held' or 'coast'")
     init = _initial_state(initial)
     x0 = [float(init.get(k, 0.0)) for k in ("phi", "delta", "phidot", "deltadot")]
     n = int(round(duration / ctrl_dt)) + 1

@@ -308,6 +308,9 @@ def test_simulate_run_linear_refuses_what_it_cannot_do():
         simulate_run(P, c, 5.0, 1.0, plant="quadratic")
     with pytest.raises(ValueError, match="holds the speed"):
         simulate_run(P, c, 5.0, 1.0, mode="coast", plant="linear")
+    for plant in ("linear", "nonlinear"):  # an unknown mode is named, not called 'coast'
+        with pytest.raises(ValueError, match="mode 'drift' unknown; use 'coast' or 'held'"):
+            simulate_run(P, c, 5.0, 1.0, mode="drift", plant=plant)
     with pytest.raises(ValueError, match="integrator options"):
         simulate_run(P, c, 5.0, 1.0, substeps=4, plant="linear")
     with pytest.raises(ValueError, match="no effects"):
