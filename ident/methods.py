@@ -156,7 +156,10 @@ class DirectSettings(_Settings):
         _choice("covariance", self.covariance, ("white", "run"))
         if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz >= 0):
             raise InputError(f"cutoff_hz={self.cutoff_hz}: give a frequency >= 0 [Hz] (0: none)")
-        if int(self.lags) != self.lags or self.lags < 1:
+        whole = isinstance(self.lags, (int, np.integer)) or (
+            isinstance(self.lags, float) and self.lags.is_integer()
+        )
+        if not whole or self.lags < 1:
             raise InputError(f"lags={self.lags}: give a whole number of samples >= 1")
 
     @property
@@ -218,13 +221,18 @@ class DirectSettings(_Settings):
         DirectSettings
             The settings.
         """
-        base = DIRECT_PRESETS[options.get("preset") or "default"]
+        name = options.get("preset") or "default"
+        _choice("preset", name, tuple(DIRECT_PRESETS))
+        base = DIRECT_PRESETS[name]
         kw: dict[str, Any] = {}
         if options.get("derivative") is not None:
             kw["derivative"] = options["derivative"]
         cut = options.get("cutoff_hz", options.get("cutoff"))
         if cut is not None:
-            kw["cutoff_hz"] = float(cut)
+            try:
+                kw["cutoff_hz"] = float(cut)
+            except (TypeError, ValueError):
+                raise InputError(f"cutoff={cut!r}: give a frequency >= 0 [Hz] (0: none)") from None
         iv = options.get("iv")
         if iv is True:
             kw["iv"] = "lagged"

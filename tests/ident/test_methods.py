@@ -91,6 +91,14 @@ def test_direct_settings_resolve_describe_and_refuse():
     for bad in ({"derivative": "spline"}, {"cutoff_hz": -1.0}, {"iv": "magic"}, {"lags": 0}):
         with pytest.raises(InputError):
             DirectSettings(**bad)
+    for bad in ({"lags": float("inf")}, {"lags": "x"}):
+        with pytest.raises(InputError, match="lags=.*whole number"):
+            DirectSettings(**bad)
+    # options from a file or a caller: a misspelt preset or a non-number is one line
+    with pytest.raises(InputError, match="preset='nope': choose one of default, moore-hubbard"):
+        DirectSettings.from_options({"preset": "nope"})
+    with pytest.raises(InputError, match="cutoff='abc': give a frequency"):
+        DirectSettings.from_options({"cutoff": "abc"})
 
 
 @pytest.mark.parametrize("preset", sorted(DIRECT_PRESETS))
