@@ -377,7 +377,9 @@ def _read_csv(
         raise ValueError(f"{label}: is a folder, not a CSV file")
     # memory estimated from the size before reading (a .gz streamed, its expansion capped)
     raw = read_bounded(path, label, CSV_MEMORY_FACTOR)
-    digest = sha256_file(path)  # of the file's bytes, as saved in meta["import"]
+    # of the file's bytes, as saved in meta["import"] (read again only for a .gz)
+    gz = path.name.endswith(".gz")
+    digest = sha256_file(path) if gz else hashlib.sha256(raw).hexdigest()
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
