@@ -57,9 +57,11 @@ __all__ = [
     "tone_bins",
 ]
 
-#: R^2 of the state law above which a run's steer torque counts as feedback only [-].  The
-#: steer-by-wire push logs reach 0.995-1.000 (their balance law reproduces the command to
-#: rounding); the testbed's dithered runs stay below 0.9 (tests/ident/test_informativity.py).
+#: R^2 of the state law above which a run's steer torque counts as feedback only [-].  Three
+#: of the four steer-by-wire push logs (``eigen_*``) reach 0.995-1.000 (their balance law
+#: reproduces the command to rounding), the 9 km/h one 0.90, the bode-4mps logs 0.75-0.97
+#: (:func:`feedback_share` of each ``dataset.sbw_logs.settled`` log); the testbed's dithered
+#: runs stay below 0.9 (tests/ident/test_informativity.py).
 FEEDBACK_R2 = 0.98
 #: Power of a periodogram bin relative to the strongest bin above which the bin counts as
 #: excited [-] (1e-3: 30 dB, an amplitude 3 % of the strongest component).
