@@ -845,7 +845,12 @@ def _text_of(path: Path, where: str) -> str:
         raise InputError(f"{where} does not exist; {_FIX}") from None
     except IsADirectoryError:
         raise InputError(f"{where} is a folder; give the model's JSON file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError:
+        raise InputError(
+            f"{where} is not text (a run file or an image?); give the model's JSON file "
+            "(written by bikeid identify --out or bikeid measured fit --out)"
+        ) from None
+    except OSError as exc:
         raise InputError(f"cannot read {where}: {exc}") from None
 
 
