@@ -14,8 +14,9 @@ defined over speed from :class:`SpeedDependentModel`, so they share one API:
   zero-order hold (:func:`bikeid.sim.sampling.zoh`).
 - ``eigenvalues(speed=None)``: an :class:`Eigenvalues` array in the one order used
   everywhere in bikeid (:data:`EIGENVALUE_ORDER`: ascending real part, then imaginary part,
-  as ``numpy.sort_complex``), each with its mode name (``weave``, ``capsize``, ``caster``)
-  where it has one (:func:`mode_names`), in ``.modes``.
+  as ``numpy.sort_complex``), each with its mode name (``weave``, ``capsize``, ``caster``;
+  ``weave (real)`` for the two real roots that merge into the weave pair at v_d) where it
+  has one (:func:`mode_names`), in ``.modes``.
 - Speed-dependent models add ``eigenvalues_vs_speed(speeds)`` (tracked, labelled branches,
   :func:`bikeid.sim.linear.eigenvalues_vs_speed`) and ``critical_speeds(vmax=30.0)``
   (:func:`bikeid.sim.linear.critical_speeds`).
@@ -52,6 +53,7 @@ from bikeid.sim.sampling import zoh
 __all__ = [
     "EIGENVALUE_ORDER",
     "MODE_NAMES",
+    "WEAVE_REAL",
     "Eigenvalues",
     "LinearModel",
     "SpeedDependentModel",
@@ -64,6 +66,10 @@ __all__ = [
 EIGENVALUE_ORDER = "ascending real part, then ascending imaginary part (numpy.sort_complex)"
 #: Mode names of the Whipple bicycle's eigenvalues; "" where an eigenvalue has none.
 MODE_NAMES = ("weave", "capsize", "caster")
+#: Name of a real root on one of the weave's two branches: below v_d (0.684 m/s for the
+#: benchmark, Meijaard et al. 2007) the weave is two real roots that merge at v_d into the
+#: weave's complex pair (:func:`mode_names`).
+WEAVE_REAL = "weave (real)"
 #: |imaginary part| [1/s] above which an eigenvalue counts as complex.
 _COMPLEX = 1e-9
 #: Highest speed [m/s] of the branch tracking that names four real eigenvalues of a model
@@ -81,7 +87,8 @@ class Eigenvalues(np.ndarray):
     values : array_like of complex
         The eigenvalues [1/s], already in :data:`EIGENVALUE_ORDER`.
     modes : sequence of str
-        One name per eigenvalue: ``"weave"``, ``"capsize"``, ``"caster"`` or ``""``.
+        One name per eigenvalue: ``"weave"``, ``"weave (real)"``, ``"capsize"``,
+        ``"caster"`` or ``""`` (:func:`mode_names`).
 
     Attributes
     ----------
@@ -111,8 +118,9 @@ class Eigenvalues(np.ndarray):
         Returns
         -------
         dict of str to list of complex
-            ``{"weave": [...], "capsize": [...], "caster": [...]}`` for the modes present
-            [1/s], in :data:`EIGENVALUE_ORDER` within each mode.
+            ``{"weave": [...], "capsize": [...], "caster": [...]}`` for the names present
+            (``"weave (real)"`` below v_d instead of ``"weave"``) [1/s], in
+            :data:`EIGENVALUE_ORDER` within each.
         """
         out: dict[str, list[complex]] = {}
         for lam, mode in zip(np.asarray(self), self.modes, strict=True):
@@ -142,13 +150,29 @@ def mode_names(
 ) -> tuple[str, ...]:
     """The mode name of each eigenvalue of a bicycle model at one speed.
 
-    With one complex pair and two real roots (the Whipple bicycle above the speed where the
-    weave pair turns complex), the pair is the weave, the more negative real root the caster
-    and the other the capsize.  With four real roots the names need the branches over
-    speed: given the model's ``matrices``, its eigenvalues are tracked from ``speed`` up to
-    10 m/s and the labels of :func:`bikeid.sim.linear.eigenvalues_vs_speed` carried back;
-    without them (a fixed-speed model) four real roots stay unnamed.  Any other pattern
-    (two complex pairs, say) is unnamed.
+    The rule follows the Whipple bicycle's root loci (Meijaard et al. 2007, Table 2 and
+    Fig. 3: each column of Table 2 is one continuous branch; at zero speed the roots are
+    the pairs +-3.13 and +-5.53 1/s, the two positive roots merge at v_d = 0.684 m/s into
+    the weave pair, -3.13 continues as the capsize root and -5.53 as the caster root):
+
+    - One complex pair and two real roots, the pair right of the more negative real root
+      (the Whipple bicycle above v_d): the pair is the weave, the more negative real root
+      the caster and the other the capsize.
+    - Four real roots (below v_d): the two that merge into the weave pair are named
+      :data:`WEAVE_REAL` (``"weave (real)"``: the weave's branches before they turn
+      oscillatory), the others ``"caster"`` and ``"capsize"``.  A model over speed
+      (``matrices`` and ``speed`` given) names them by its own branches: tracked from
+      ``speed`` up to 10 m/s, the labels of :func:`bikeid.sim.linear.eigenvalues_vs_speed`
+      carried back.  A fixed-speed model (or a model over speed whose tracking finds no
+      weave pair) names them by their order along the real axis, as on the Whipple
+      bicycle below v_d: the most negative root the caster, the next the capsize, the two
+      largest the weave (real).  On the benchmark the two agree at every speed below v_d.
+    - A complex pair left of both real roots, or the left one of two complex pairs: the
+      caster and capsize roots merged into an oscillation (the Browser, Pista and Fisher
+      bicycles of ``bicycleparameters`` between about 0.3 and 2 m/s).  That pair is
+      neither mode alone and stays unnamed (``""``); the roots right of it are the weave
+      (its pair, or its two real roots).
+    - Anything else (not four finite eigenvalues) is unnamed.
 
     Parameters
     ----------
@@ -162,26 +186,50 @@ def mode_names(
     Returns
     -------
     tuple of str
-        One of ``"weave"``, ``"capsize"``, ``"caster"`` or ``""`` per eigenvalue.
+        One of ``"weave"``, ``"weave (real)"``, ``"capsize"``, ``"caster"`` or ``""`` per
+        eigenvalue.
     """
     lam = np.asarray(values, dtype=complex).ravel()
     names = [""] * lam.size
     if lam.size != 4 or not np.all(np.isfinite(lam)):
         return tuple(names)
-    cplx = [i for i in range(4) if abs(lam[i].imag) > _COMPLEX]
-    real = [i for i in range(4) if i not in cplx]
-    if len(cplx) == 2 and len(real) == 2:
+    cplx = sorted((i for i in range(4) if abs(lam[i].imag) > _COMPLEX),
+                  key=lambda i: lam[i].real)  # fmt: skip
+    real = sorted((i for i in range(4) if i not in cplx), key=lambda i: lam[i].real)
+    if len(cplx) == 4:  # two pairs: the left one is the caster and capsize merged
+        for i in cplx[2:]:
+            names[i] = "weave"
+    elif len(cplx) == 2 and lam[cplx[0]].real < lam[real[0]].real:  # caster-capsize pair
+        for i in real:
+            names[i] = WEAVE_REAL
+    elif len(cplx) == 2:
         for i in cplx:
             names[i] = "weave"
-        caster = min(real, key=lambda i: lam[i].real)
-        names[caster] = "caster"
-        names[next(i for i in real if i != caster)] = "capsize"
-    elif not cplx and matrices is not None and speed is not None and 0 < speed < 1000:
-        sweep = eigenvalues_vs_speed(matrices, [float(speed), max(float(speed), _TRACK_TO)])
-        _, col = match_eigenvalues(lam, sweep.values[0], return_index=True)
-        for j, i in enumerate(col):  # lam[col[j]] pairs with branch j
-            if sweep.labels[j] in MODE_NAMES:
-                names[i] = sweep.labels[j]
+        names[real[0]], names[real[1]] = "caster", "capsize"
+    elif not cplx:
+        tracked = _tracked_names(lam, matrices, speed)
+        if tracked is not None:
+            return tracked
+        for i, name in zip(real, ("caster", "capsize", WEAVE_REAL, WEAVE_REAL), strict=True):
+            names[i] = name
+    return tuple(names)
+
+
+def _tracked_names(
+    lam: np.ndarray, matrices: CanonicalMatrices | None, speed: float | None
+) -> tuple[str, ...] | None:
+    """Names of four real roots from the model's own branches over speed; None when the
+    model is not defined over speed or its tracking finds no weave pair."""
+    if matrices is None or speed is None or not 0 <= speed < 1000:
+        return None
+    sweep = eigenvalues_vs_speed(matrices, [float(speed), max(float(speed), _TRACK_TO)])
+    if "weave" not in sweep.labels:
+        return None
+    names = [""] * 4
+    _, col = match_eigenvalues(lam, sweep.values[0], return_index=True)
+    for j, i in enumerate(col):  # lam[col[j]] pairs with branch j
+        label = sweep.labels[j]
+        names[i] = WEAVE_REAL if label == "weave" else label
     return tuple(names)
 
 

@@ -329,8 +329,8 @@ class EigenIntervals:
     converged : (4, 2) bool ndarray or None
         Whether the profile ascents of the real and imaginary parts converged.
     modes : tuple of str
-        Mode name of each eigenvalue (``weave``, ``capsize``, ``caster``, or ``""``;
-        :func:`bikeid.ident.linear_model.mode_names`).
+        Mode name of each eigenvalue (``weave``, ``weave (real)``, ``capsize``, ``caster``
+        or ``""``; :func:`bikeid.ident.linear_model.mode_names`).
     predictor_radius : float or None
         Spectral radius of the fit's one-step predictor Ad - K C (:func:`predictor_radius`;
         None for a speed-parameterized model).  Above 1 - :data:`PREDICTOR_BOUNDARY_TOL`

@@ -10,8 +10,9 @@ Every model class of the method table (``ident.methods.METHODS``) is walked; eac
   outputs are in the same order (Chen & Dao's order only with ``order="chen_dao"``), equal
   to ``sim.linear.state_space`` of the same bicycle (an independent construction);
 - return eigenvalues sorted by real then imaginary part (numpy.sort_complex), each named
-  as ``sim.linear.eigenvalues_vs_speed``'s branch tracking names it, and
-  ``eigenvalue_intervals`` in the same order with the same names;
+  as ``sim.linear.eigenvalues_vs_speed``'s branch tracking names it (the weave branches'
+  real roots below v_d as ``weave (real)``), all four named at any speed of the benchmark,
+  and ``eigenvalue_intervals`` in the same order with the same names;
 - keep stored numbers as attributes (``params``, ``stderr`` are not callables).
 
 Every model here is built from the benchmark bicycle's exact matrices (Meijaard 2007), so
@@ -31,6 +32,7 @@ from bikeid.ident.canonical import speed_params_from_matrices, theta_from_matric
 from bikeid.ident.direct import DirectResult
 from bikeid.ident.greybox import GreyboxModel
 from bikeid.ident.linear_model import (
+    WEAVE_REAL,
     Eigenvalues,
     LinearModel,
     SpeedDependentModel,
@@ -186,17 +188,39 @@ def test_fixed_speed_model_refuses_other_speeds_and_speed_models_need_one():
             builder().state_space()
 
 
+def _branch(mode: str) -> str:
+    """The tracked branch a name lies on (the weave's real roots lie on the weave's)."""
+    return "weave" if mode == WEAVE_REAL else mode
+
+
 def test_four_real_roots_are_named_by_tracking_over_speed():
     """Below the speed where the weave pair turns complex (v_d = 0.68 m/s for the benchmark)
-    all four roots are real; a model over speed names them by tracking, and a fixed-speed
-    model, which cannot, leaves them unnamed rather than guess."""
+    all four roots are real; a model over speed names them by tracking its own branches, a
+    fixed-speed model by their order along the real axis (ident.linear_model.mode_names);
+    both give the tracked branches' names, the weave's two real roots as weave (real)."""
     v = 0.5
     ev = _direct().eigenvalues(v)
     assert np.all(np.abs(np.asarray(ev).imag) < 1e-9)
     sweep = eigenvalues_vs_speed(P, [v, 10.0])
     for lam, mode in zip(ev, ev.modes, strict=True):
-        assert mode == sweep.labels[int(np.argmin(np.abs(sweep.values[0] - lam)))]
-    assert _canonical(v).eigenvalues().modes == ("", "", "", "")
+        assert _branch(mode) == sweep.labels[int(np.argmin(np.abs(sweep.values[0] - lam)))]
+    assert ev.modes == ("caster", "capsize", WEAVE_REAL, WEAVE_REAL)
+    assert _canonical(v).eigenvalues().modes == ev.modes
+
+
+@pytest.mark.parametrize("cls", MODEL_CLASSES, ids=lambda c: c.__name__)
+def test_every_model_class_names_every_root_below_v_d(cls):
+    """At 0.5 m/s (below v_d = 0.684 m/s, Meijaard 2007 Table 2(a)) every class names all
+    four real roots, as the tracked branches of the benchmark (sim.linear) name them."""
+    v = 0.5
+    model = _canonical(v) if cls is CanonicalModel else BUILDERS[cls]()
+    ev = model.eigenvalues(v if isinstance(model, SpeedDependentModel) else None)
+    sweep = eigenvalues_vs_speed(P, [v, 10.0])
+    for lam, mode in zip(ev, ev.modes, strict=True):
+        j = int(np.argmin(np.abs(sweep.values[0] - lam)))
+        assert abs(sweep.values[0, j] - lam) < 1e-8 * abs(lam)
+        assert _branch(mode) == sweep.labels[j], (lam, mode, sweep.labels)
+    assert sorted(ev.modes) == ["capsize", "caster", WEAVE_REAL, WEAVE_REAL]
 
 
 def test_eigenvalue_intervals_share_the_order_and_names():
@@ -233,12 +257,14 @@ def test_canonical_model_matrices_in_bikeid_order_chen_dao_by_name():
 
 
 @settings(max_examples=25, deadline=None)
-@given(v=st.floats(0.8, 12.0))
+@given(v=st.floats(0.0, 12.0))
 def test_names_agree_with_the_tracked_branches_at_any_speed(v):
-    """Property: at any speed where the weave is a complex pair (above v_d), the single-speed
-    naming rule agrees with the branch tracking of sim.linear (independent)."""
+    """Property: at any speed, below v_d too, the single-speed naming rule (no matrices:
+    what a fixed-speed model uses) agrees with the branch tracking of sim.linear
+    (independent), every root named, weave (real) exactly where the root is real."""
     ev = _direct().eigenvalues(v)
     sweep = eigenvalues_vs_speed(P, [v, 12.0])
     for lam, mode in zip(ev, ev.modes, strict=True):
-        assert mode == sweep.labels[int(np.argmin(np.abs(sweep.values[0] - lam)))]
-    assert mode_names(np.asarray(ev)) == ev.modes or not np.any(np.asarray(ev).imag)
+        assert _branch(mode) == sweep.labels[int(np.argmin(np.abs(sweep.values[0] - lam)))]
+        assert (mode == WEAVE_REAL) == (_branch(mode) == "weave" and abs(lam.imag) <= 1e-9)
+    assert mode_names(np.asarray(ev)) == ev.modes
