@@ -1,4 +1,7 @@
-"""Matplotlib figures shared by commands and reports (PNG; radians inside, degrees in plots).
+"""Matplotlib figures shared by commands and reports (radians inside, degrees in plots).
+
+A figure file's suffix names its format (:data:`FIGURE_FORMATS`, :func:`figure_format`):
+PNG, PDF, SVG, EPS or PS; the reports' own figures are PNG.
 
 Angles are drawn in degrees (the design's convention: radians inside, degrees only in plots
 and reports) unless the user's own logs were in radians (:func:`angle_unit` reads the
@@ -25,30 +28,69 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bikeid.dataset.files import atomic_path  # noqa: E402
+from bikeid.sim.errors import InputError  # noqa: E402
 
 MODE_STYLE = {"weave": "tab:blue", "capsize": "tab:red", "caster": "tab:green"}
+#: Formats a figure file may have, named by its suffix (case ignored): matplotlib's own
+#: writers for raster PNG and vector PDF, SVG, EPS and PS.
+FIGURE_FORMATS = ("png", "pdf", "svg", "eps", "ps")
+
+
+def figure_format(path: str | Path, option: str = "figure file") -> str:
+    """The format of a figure file, named by its suffix.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The figure file.
+    option : str, optional
+        How the file was given (a command-line option such as ``--plot``), for the message.
+
+    Returns
+    -------
+    str
+        One of :data:`FIGURE_FORMATS` (lower case).
+
+    Raises
+    ------
+    InputError
+        If the suffix is none of :data:`FIGURE_FORMATS` (one line naming the supported ones).
+    """
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in FIGURE_FORMATS:
+        what = f"unsupported figure format '.{suffix}'" if suffix else "no suffix naming a format"
+        endings = ", ".join(f".{f}" for f in FIGURE_FORMATS[:-1]) + f" or .{FIGURE_FORMATS[-1]}"
+        raise InputError(f"{option} {path}: {what}; give a file name ending in {endings}")
+    return suffix
 
 
 def save(fig, path: str | Path) -> Path:
-    """Save a figure as PNG atomically (:func:`dataset.files.atomic_path`) and close it.
+    """Save a figure atomically (:func:`dataset.files.atomic_path`) and close it.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
         The figure (closed afterwards, also on error).
     path : str or path-like
-        The PNG file; its folder is created if missing.  A symlink or device there is
-        refused (ValueError).
+        The figure file, in the format its suffix names (:func:`figure_format`: .png,
+        .pdf, .svg, .eps, .ps; rasters at 130 dpi); its folder is created if missing.  A
+        symlink or device there is refused (ValueError).
 
     Returns
     -------
     pathlib.Path
         ``path``.
+
+    Raises
+    ------
+    InputError
+        If the suffix names no supported format (nothing is written).
     """
     path = Path(path)
     try:
+        fmt = figure_format(path)
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=130, bbox_inches="tight")
+            fig.savefig(tmp, format=fmt, dpi=130, bbox_inches="tight")
     finally:
         plt.close(fig)
     return path
@@ -349,7 +391,7 @@ def plot_eigenvalues(sweep, path: str | Path, title: str = "", critical: dict | 
         Eigenvalues [1/s] against speed [m/s] with mode labels
         (:func:`bikeid.sim.linear.eigenvalues_vs_speed`).
     path : str or Path
-        PNG file to write (atomically, :func:`save`).
+        Figure file to write (atomically, :func:`save`; format from its suffix).
     title : str, optional
         Figure title.
     critical : dict of str to float or None, optional
@@ -456,7 +498,7 @@ def plot_identified_eigenvalues(
     nominal : BicycleParameters or CanonicalMatrices
         The nominal bicycle (its linearized Whipple model).
     path : str or Path
-        PNG file to write (atomically, :func:`save`).
+        Figure file to write (atomically, :func:`save`; format from its suffix).
     nominal_label : str, optional
         Name of the nominal bicycle in the legend.
     speed_model : model with ``canonical_matrices()`` or None, optional

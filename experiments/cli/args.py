@@ -224,6 +224,32 @@ def range_text(
     return check
 
 
+def check_figure_path(path: str | None, option: str = "--plot") -> None:
+    """Refuse, before any work, a figure file whose suffix names no format bikeid writes.
+
+    Every command's figure option calls it first; the figure is then written in the format
+    its suffix names (:func:`bikeid.experiments.plots.figure_format`, the one rule).
+
+    Parameters
+    ----------
+    path : str or None
+        The figure file given, or None (no figure asked for: nothing checked).
+    option : str, optional
+        The option that named it, for the message.
+
+    Raises
+    ------
+    InputError
+        If the suffix is not one of :data:`bikeid.experiments.plots.FIGURE_FORMATS`
+        (exit status 3; the message lists the supported suffixes).
+    """
+    if path is None:
+        return
+    from bikeid.experiments.plots import figure_format  # matplotlib: only when plotting
+
+    figure_format(path, option)
+
+
 def mapping_arg(option: str) -> Callable[[str], dict[str, str]]:
     """argparse type for ``NAME=VALUE,NAME=VALUE`` (e.g. ``--columns phi=roll,v=speed``).
 

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.experiments.cli.args import (
     MAX_WORKERS,
+    check_figure_path,
     dump_json,
     integer,
     mapping_arg,
@@ -736,8 +737,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     data_files = _data_files(args)  # no output may be an input; no data file counted twice
     if args.out:
         check_output_path(args.out)  # a folder or link at --out: named as such first
-    if args.plot is not None and not str(args.plot).lower().endswith(".png"):
-        raise ValueError(f"--plot {args.plot}: give a file name ending in .png")
+    check_figure_path(args.plot, "--plot")  # the suffix names the figure's format
     check_outputs([args.out, args.plot], [*data_files, args.bicycle])
     check_distinct_inputs(data_files)
     method, run_settings = _method_settings(args)  # ident.methods.METHODS; options checked

@@ -6,6 +6,7 @@ import argparse
 
 from bikeid.experiments.cli.args import (
     atomic_write_text,
+    check_figure_path,
     dump_json,
     parse_range,
     range_text,
@@ -28,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="start:stop:step [m/s], stop included (at most 100 m/s)",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--plot", metavar="FILE", help="write a PNG of real/imaginary parts")
+    p.add_argument("--plot", metavar="FILE", help="write a figure of the real and imaginary "
+                   "parts, in the format its suffix names (.png, .pdf, .svg, .eps, .ps)")
     p.set_defaults(func=cmd_eig)
 
     p = sub.add_parser("linearize", help="M, C1, K0, K2, A, B and eigenvalues at one speed")
@@ -58,6 +60,7 @@ def cmd_eig(args: argparse.Namespace) -> int:
 
         check_output_path(args.plot)
         check_outputs([args.plot], [args.bicycle])
+        check_figure_path(args.plot, "--plot")
     p = _bicycle(args.bicycle)
     sweep = eigenvalues_vs_speed(p, speeds)
     if args.plot:

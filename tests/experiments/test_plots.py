@@ -251,6 +251,70 @@ def test_study_bode_figure_one_branch_and_degrees(captured, tmp_path):
     np.testing.assert_allclose(ph.lines[2].get_ydata(), pa[pick] - 10, atol=1e-9)
 
 
+# --- figure formats ----------------------------------------------------------------------------
+#: The supported suffixes as the refusal lists them.
+ENDINGS = ".png, .pdf, .svg, .eps or .ps"
+
+
+def _format_of(data: bytes) -> str:
+    """A file's format from its leading bytes, by each format's own specification: the PNG
+    signature (PNG spec 5.2), the PDF header "%PDF-" (ISO 32000 7.5.2), an XML document whose
+    root is <svg> (SVG 1.1), the DSC header "%!PS-Adobe-3.0", with " EPSF-3.0" on the first
+    line for EPS (Adobe DSC 3.0 / EPSF 3.0)."""
+    first = data.split(b"\n", 1)[0]
+    if data.startswith(b"\x89PNG\r\n\x1a\n"):
+        return "png"
+    if data.startswith(b"%PDF-"):
+        return "pdf"
+    if data.lstrip().startswith(b"<?xml") and b"<svg" in data[:2000]:
+        return "svg"
+    if first.startswith(b"%!PS-Adobe-3.0"):
+        return "eps" if b"EPSF-3.0" in first else "ps"
+    return "unknown"
+
+
+@pytest.mark.parametrize("fmt", plots.FIGURE_FORMATS)
+def test_save_writes_the_format_the_suffix_names(fmt, tmp_path):
+    """save() writes each supported format, upper-case suffixes too, as its leading bytes
+    show (an independent reading of the file: _format_of)."""
+    for name in (f"f.{fmt}", f"G.{fmt.upper()}"):
+        fig, ax = plt.subplots()
+        ax.plot([0, 1], [0, 1])
+        path = plots.save(fig, tmp_path / name)
+        assert _format_of(path.read_bytes()) == fmt, name
+
+
+def test_save_refuses_a_suffix_naming_no_format(tmp_path):
+    """An unknown suffix (and none at all) is refused in one line listing the supported
+    suffixes; nothing is written and the figure is closed."""
+    from bikeid.sim.errors import InputError
+
+    for name, what in (("f.txt", "unsupported figure format '.txt'"),
+                       ("f", "no suffix naming a format")):  # fmt: skip
+        fig, _ = plt.subplots()
+        with pytest.raises(InputError) as exc:
+            plots.save(fig, tmp_path / name)
+        assert str(exc.value).endswith(f"{what}; give a file name ending in {ENDINGS}")
+        assert "\n" not in str(exc.value) and not plt.fignum_exists(fig.number)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_eig_plot_format_follows_the_suffix(tmp_path):
+    """``bikeid eig --plot`` writes SVG, PDF, PNG (and EPS, PS) as the file name says (exit
+    0), the bytes read independently (_format_of); an unknown suffix is refused with exit 3
+    in one line listing the supported ones, before any work: the bicycle file named with it
+    does not exist, and a refusal after loading would name that file instead."""
+    for fmt in ("svg", "pdf", "png", "eps", "ps"):
+        rc, _, err = _cli(["eig", "--speeds", "0:2:0.5", "--plot", f"eig.{fmt}"], tmp_path)
+        assert rc == 0, err
+        assert _format_of((tmp_path / f"eig.{fmt}").read_bytes()) == fmt
+    rc, out, err = _cli(["eig", "--bicycle", "missing.yaml", "--plot", "eig.jpg"], tmp_path)
+    assert rc == 3 and out == "" and len(err.strip().splitlines()) == 1, err
+    assert f"--plot eig.jpg: unsupported figure format '.jpg'; give a file name ending in " \
+        f"{ENDINGS}" in err
+    assert not (tmp_path / "eig.jpg").exists()
+
+
 # --- identify --plot --------------------------------------------------------------------------
 
 
@@ -286,7 +350,8 @@ def test_identify_plot_draws_intervals_against_the_nominal(tmp_path, monkeypatch
     is written and fits (no layout problems); its complex-plane dots are the identified
     eigenvalues printed in --json, its open squares the benchmark's Whipple eigenvalues
     (sim.linear, to 1e-12), the error bars span the printed 95 % intervals; a --plot that is
-    not a .png is refused (exit 3) before any work."""
+    written as SVG because its name ends in .svg; a --plot whose suffix names no figure
+    format is refused (exit 3, one line listing the supported suffixes) before any work."""
     for v in (4.0, 6.0):
         _logger_csv(tmp_path / f"r{v:g}.csv",
                     simulate(P, v, duration=20, seed=1, rate_noise=1e-3, angle_noise=1e-4))
@@ -299,11 +364,12 @@ def test_identify_plot_draws_intervals_against_the_nominal(tmp_path, monkeypatch
 
     monkeypatch.setattr(plots, "save", keep)
     argv = ["identify", "r4.csv", "r6.csv", *LOGGER, "--method", "pem", "--speed-parameterized",
-            "--plot", "eig.png", "--json"]  # fmt: skip
+            "--plot", "eig.svg", "--json"]  # fmt: skip
     rc, out, err = _cli(argv, tmp_path)
     assert rc == 0, err
     doc = json.loads(out)
-    assert doc["plot"] == "eig.png" and (tmp_path / "eig.png").stat().st_size > 10000
+    assert doc["plot"] == "eig.svg" and (tmp_path / "eig.svg").stat().st_size > 10000
+    assert _format_of((tmp_path / "eig.svg").read_bytes()) == "svg"
     problems, lines, bars = figs["fig"]
     assert problems == []
     squares = [ln for ln in lines if ln.get_marker() == "s"]
@@ -320,8 +386,12 @@ def test_identify_plot_draws_intervals_against_the_nominal(tmp_path, monkeypatch
         ends = sorted((min(sg[:, 0]), max(sg[:, 0])) for sg in xbars)
         printed = sorted(tuple(r["real"]) for r in row["eigenvalue_intervals"]["eigenvalues"])
         np.testing.assert_allclose(ends, printed, atol=1e-9)
-    rc, _, err = _cli(["identify", "r4.csv", *LOGGER, "--plot", "eig.pdf"], tmp_path)
-    assert rc == 3 and "--plot eig.pdf: give a file name ending in .png" in err
+    for name, what in (("eig.txt", "unsupported figure format '.txt'"),
+                       ("eig", "no suffix naming a format")):  # fmt: skip
+        rc, _, err = _cli(["identify", "r4.csv", *LOGGER, "--plot", name], tmp_path)
+        assert rc == 3 and len(err.strip().splitlines()) == 1, err
+        assert f"--plot {name}: {what}; give a file name ending in {ENDINGS}" in err, err
+        assert not (tmp_path / name).exists()
 
 
 def test_validate_draws_in_the_users_unit(run, captured, tmp_path):
