@@ -42,11 +42,13 @@ import numpy as np
 from bikeid.sim.conventions import CANONICAL_STATE, LINEAR_STATE
 from bikeid.sim.errors import InputError
 from bikeid.sim.linear import (
+    WEAVE_REAL,
     CanonicalMatrices,
     EigenSweep,
     critical_speeds,
     eigenvalues_vs_speed,
     match_eigenvalues,
+    mode_names_at,
 )
 from bikeid.sim.sampling import zoh
 
@@ -66,12 +68,6 @@ __all__ = [
 EIGENVALUE_ORDER = "ascending real part, then ascending imaginary part (numpy.sort_complex)"
 #: Mode names of the Whipple bicycle's eigenvalues; "" where an eigenvalue has none.
 MODE_NAMES = ("weave", "capsize", "caster")
-#: Name of a real root on one of the weave's two branches: below v_d (0.684 m/s for the
-#: benchmark, Meijaard et al. 2007) the weave is two real roots that merge at v_d into the
-#: weave's complex pair (:func:`mode_names`).
-WEAVE_REAL = "weave (real)"
-#: |imaginary part| [1/s] above which an eigenvalue counts as complex.
-_COMPLEX = 1e-9
 #: Highest speed [m/s] of the branch tracking that names four real eigenvalues of a model
 #: defined over speed (the weave pair is complex well below it on every bicycle modelled).
 _TRACK_TO = 10.0
@@ -150,29 +146,18 @@ def mode_names(
 ) -> tuple[str, ...]:
     """The mode name of each eigenvalue of a bicycle model at one speed.
 
-    The rule follows the Whipple bicycle's root loci (Meijaard et al. 2007, Table 2 and
-    Fig. 3: each column of Table 2 is one continuous branch; at zero speed the roots are
-    the pairs +-3.13 and +-5.53 1/s, the two positive roots merge at v_d = 0.684 m/s into
-    the weave pair, -3.13 continues as the capsize root and -5.53 as the caster root):
-
-    - One complex pair and two real roots, the pair right of the more negative real root
-      (the Whipple bicycle above v_d): the pair is the weave, the more negative real root
-      the caster and the other the capsize.
-    - Four real roots (below v_d): the two that merge into the weave pair are named
-      :data:`WEAVE_REAL` (``"weave (real)"``: the weave's branches before they turn
-      oscillatory), the others ``"caster"`` and ``"capsize"``.  A model over speed
-      (``matrices`` and ``speed`` given) names them by its own branches: tracked from
-      ``speed`` up to 10 m/s, the labels of :func:`bikeid.sim.linear.eigenvalues_vs_speed`
-      carried back.  A fixed-speed model (or a model over speed whose tracking finds no
-      weave pair) names them by their order along the real axis, as on the Whipple
-      bicycle below v_d: the most negative root the caster, the next the capsize, the two
-      largest the weave (real).  On the benchmark the two agree at every speed below v_d.
-    - A complex pair left of both real roots, or the left one of two complex pairs: the
-      caster and capsize roots merged into an oscillation (the Browser, Pista and Fisher
-      bicycles of ``bicycleparameters`` between about 0.3 and 2 m/s).  That pair is
-      neither mode alone and stays unnamed (``""``); the roots right of it are the weave
-      (its pair, or its two real roots).
-    - Anything else (not four finite eigenvalues) is unnamed.
+    From the values alone by the rule of :func:`bikeid.sim.linear.mode_names_at`, which
+    follows the Whipple bicycle's root loci (Meijaard et al. 2007, Table 2 and Fig. 3): the
+    complex pair above v_d is the weave, the more negative real root the caster, the other
+    the capsize; below v_d the four real roots are, in ascending order, the caster, the
+    capsize and the weave's two real roots, ``"weave (real)"``
+    (:data:`bikeid.sim.linear.WEAVE_REAL`); a complex pair of the caster and capsize roots
+    merged (Browser, Pista, Fisher at low speed) stays unnamed.  A model over speed
+    (``matrices`` and ``speed`` given) names four real roots by its own branches instead:
+    tracked from ``speed`` up to 10 m/s, the labels of
+    :func:`bikeid.sim.linear.eigenvalues_vs_speed` carried back (the weave's as
+    ``"weave (real)"``), unless its tracking finds no weave pair.  On the benchmark the two
+    agree at every speed below v_d.
 
     Parameters
     ----------
@@ -190,29 +175,10 @@ def mode_names(
         eigenvalue.
     """
     lam = np.asarray(values, dtype=complex).ravel()
-    names = [""] * lam.size
-    if lam.size != 4 or not np.all(np.isfinite(lam)):
-        return tuple(names)
-    cplx = sorted((i for i in range(4) if abs(lam[i].imag) > _COMPLEX),
-                  key=lambda i: lam[i].real)  # fmt: skip
-    real = sorted((i for i in range(4) if i not in cplx), key=lambda i: lam[i].real)
-    if len(cplx) == 4:  # two pairs: the left one is the caster and capsize merged
-        for i in cplx[2:]:
-            names[i] = "weave"
-    elif len(cplx) == 2 and lam[cplx[0]].real < lam[real[0]].real:  # caster-capsize pair
-        for i in real:
-            names[i] = WEAVE_REAL
-    elif len(cplx) == 2:
-        for i in cplx:
-            names[i] = "weave"
-        names[real[0]], names[real[1]] = "caster", "capsize"
-    elif not cplx:
-        tracked = _tracked_names(lam, matrices, speed)
-        if tracked is not None:
-            return tracked
-        for i, name in zip(real, ("caster", "capsize", WEAVE_REAL, WEAVE_REAL), strict=True):
-            names[i] = name
-    return tuple(names)
+    names = mode_names_at(lam)
+    if names.count(WEAVE_REAL) == 2 and "" not in names:  # four real roots
+        return _tracked_names(lam, matrices, speed) or names
+    return names
 
 
 def _tracked_names(

@@ -32,6 +32,7 @@ if TYPE_CHECKING:  # python-control and scipy.optimize load on first use (start-
 __all__ = [
     "INPUT_NAMES",
     "STATE_NAMES",
+    "WEAVE_REAL",
     "CanonicalMatrices",
     "EigenSweep",
     "canonical_matrices",
@@ -42,6 +43,7 @@ __all__ = [
     "hurwitz3",
     "lateral_force_vector",
     "match_eigenvalues",
+    "mode_names_at",
     "quartic_coefficients",
     "state_matrices",
     "state_space",
@@ -528,6 +530,68 @@ def match_eigenvalues(found, truth, *, return_index: bool = False):
     return (found[col], col) if return_index else found[col]
 
 
+#: Name of a real root on one of the weave's two branches: below v_d the weave is two real
+#: roots that merge at v_d into the weave's complex pair (:func:`mode_names_at`).
+WEAVE_REAL = "weave (real)"
+#: |imaginary part| [1/s] above which an eigenvalue counts as complex in :func:`mode_names_at`.
+_COMPLEX = 1e-9
+
+
+def mode_names_at(values) -> tuple[str, ...]:
+    """Mode names of a bicycle's four eigenvalues at one speed, from the values alone.
+
+    The rule follows the Whipple bicycle's root loci (Meijaard et al. 2007, Table 2 and
+    Fig. 3: each column of Table 2 is one continuous branch; at zero speed the benchmark's
+    roots are +-3.13 and +-5.53 1/s, the two positive ones merge at v_d = 0.684 m/s into
+    the weave pair, -3.13 continues as the capsize root and -5.53 as the caster root):
+
+    - One complex pair and two real roots, the pair right of the more negative real root
+      (the Whipple bicycle above v_d): the pair is the weave, the more negative real root
+      the caster and the other the capsize.
+    - Four real roots (below v_d), by their order along the real axis as on the Whipple
+      bicycle below v_d: the most negative the caster, the next the capsize, the two
+      largest the weave's real roots, :data:`WEAVE_REAL` (``"weave (real)"``).
+    - A complex pair left of both real roots, or the left one of two complex pairs: the
+      caster and capsize roots merged into an oscillation (the Browser, Pista and Fisher
+      bicycles of ``bicycleparameters`` between about 0.2 and 2 m/s).  That pair is neither
+      mode alone and stays unnamed (``""``); the roots right of it are the weave (its
+      pair, or its two real roots).
+    - Anything else (not four finite eigenvalues) is unnamed.
+
+    Parameters
+    ----------
+    values : (4,) array_like of complex
+        Eigenvalues [1/s] at one speed, in the order the names are wanted.
+
+    Returns
+    -------
+    tuple of str
+        One of ``"weave"``, ``"weave (real)"``, ``"capsize"``, ``"caster"`` or ``""`` per
+        eigenvalue.
+    """
+    lam = np.asarray(values, dtype=complex).ravel()
+    names = [""] * lam.size
+    if lam.size != 4 or not np.all(np.isfinite(lam)):
+        return tuple(names)
+    cplx = sorted((i for i in range(4) if abs(lam[i].imag) > _COMPLEX),
+                  key=lambda i: lam[i].real)  # fmt: skip
+    real = sorted((i for i in range(4) if i not in cplx), key=lambda i: lam[i].real)
+    if len(cplx) == 4:  # two pairs: the left one is the caster and capsize merged
+        for i in cplx[2:]:
+            names[i] = "weave"
+    elif len(cplx) == 2 and lam[cplx[0]].real < lam[real[0]].real:  # caster-capsize pair
+        for i in real:
+            names[i] = WEAVE_REAL
+    elif len(cplx) == 2:
+        for i in cplx:
+            names[i] = "weave"
+        names[real[0]], names[real[1]] = "caster", "capsize"
+    elif not cplx:
+        for i, name in zip(real, ("caster", "capsize", WEAVE_REAL, WEAVE_REAL), strict=True):
+            names[i] = name
+    return tuple(names)
+
+
 def eigenvalues_vs_speed(p: BicycleParameters | CanonicalMatrices, speeds) -> EigenSweep:
     """Eigenvalues over a range of speeds, branches tracked and labelled.
 
@@ -713,7 +777,8 @@ def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0
     dict
         ``"v_d"`` : float or None
             Speed [m/s] at which the weave pair turns from two real roots into a
-            complex pair (a zero of the quartic's discriminant).
+            complex pair (a zero of the quartic's discriminant where the weave's roots
+            merge, :func:`mode_names_at`; not where the caster and capsize roots do).
         ``"v_w"`` : float or None
             Weave speed [m/s]: the weave pair crosses the imaginary axis (zero of the
             third Hurwitz determinant b c d - a d^2 - b^2 e).
@@ -729,10 +794,10 @@ def critical_speeds(p: BicycleParameters | CanonicalMatrices, vmax: float = 30.0
         exist, the lowest is reported and all are listed under ``all``.
     """
     cm = p if isinstance(p, CanonicalMatrices) else canonical_matrices(p)
-    d_roots = [
+    d_roots = [  # the weave's real roots merge (not the caster and capsize roots: Browser)
         v for v in _roots(_discriminant, cm, vmax)
-        if np.abs(eigenvalues(cm, v + 1e-4).imag).max() > 1e-9
-        and np.abs(eigenvalues(cm, max(v - 1e-4, 0.0)).imag).max() < 1e-6
+        if "weave" in mode_names_at(eigenvalues(cm, v + 1e-4))
+        and "weave" not in mode_names_at(eigenvalues(cm, max(v - 1e-4, 0.0)))
     ]  # fmt: skip
     w_roots = []
     for v in _roots(hurwitz3, cm, vmax):

@@ -134,6 +134,28 @@ def test_weave_pair_is_double_at_vd(bench):
     np.testing.assert_allclose(top, 3.78290405129320, atol=1e-6)
 
 
+@pytest.mark.parametrize("name", ["Browser", "Pista", "Fisher"])
+def test_v_d_is_where_the_weave_turns_complex_not_the_caster_capsize_pair(name):
+    """On these bicycleparameters bicycles the caster and capsize roots merge into a complex
+    pair at low speed, before the weave's two real roots do; v_d is the weave's merge.
+    Independent check: the branches tracked by eigenvalues_vs_speed (0.01 m/s grid, labelled
+    at the highest speed) show the weave-labelled roots real 0.01 m/s below v_d and a
+    complex pair 0.01 m/s above it, and the caster-capsize merge lies below v_d (it was
+    reported as v_d: 0.519 m/s for Browser)."""
+    import warnings
+
+    with warnings.catch_warnings():  # Browser's IByy is clipped to the triangle inequality
+        warnings.simplefilter("ignore", UserWarning)
+        p = parameters.by_name(name)
+    vd = linear.critical_speeds(p)["v_d"]
+    sweep = linear.eigenvalues_vs_speed(p, [vd - 0.01, vd + 0.01, 10.0])
+    weave = sweep.mode("weave")
+    assert np.all(np.abs(weave[0].imag) == 0) and np.all(np.abs(weave[1].imag) > 1e-3)
+    others = sweep.values[0, [j for j, lab in enumerate(sweep.labels) if lab != "weave"]]
+    assert np.all(np.abs(others.imag) > 1e-3)  # the caster-capsize pair: complex already
+    assert linear.mode_names_at(sweep.values[0]).count(linear.WEAVE_REAL) == 2
+
+
 def test_labels_follow_continuous_branches(bench):
     """Below v_d the weave branches are the two positive real roots (Meijaard Fig. 3):
     the labels must not jump when the pair becomes complex."""
