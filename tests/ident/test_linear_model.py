@@ -4,7 +4,7 @@ Published values: Meijaard, Papadopoulos, Ruina & Schwab (2007), "Linearized dyn
 equations for the balance and steer of a bicycle: a benchmark and review", Proc. R. Soc. A
 463:1955-1982, Table 2 (eigenvalues against speed; each column one continuous root locus)
 and Table 2(a) (v_d = 0.68428307889246 m/s, where the weave pair turns real, a double root
-at 3.78290405129320 1/s), as transcribed in /work/shared/reference/whipple-benchmarks.md
+at 3.78290405129320 1/s), as transcribed in whipple-benchmarks.md
 section 1.5.  The branch identities between the published rows come from an independent
 method: sim.linear's branch tracking on a 0.01 m/s grid (eigenvalues_vs_speed).
 """
