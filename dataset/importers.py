@@ -13,17 +13,18 @@ The readers share one validation step, :meth:`bikeid.dataset.run.Run.from_table`
   module names them :data:`from_dataframe`, :data:`from_arrays` and
   :data:`from_timeresponse` too (the same functions).
 
-``columns`` (``datasets`` for HDF5) maps bikeid signal names (:data:`~bikeid.sim.conventions.UNITS`:
-``phi``, ``delta``, ``phidot``, ``deltadot``, ``v``, ``T_delta``, ``psi``, ..., and
-``dither``, a measured external steer-torque excitation kept as ``Run.dither``) to the
-user's column names; the time column is ``time``.  ``units`` converts from the user's units
-to bikeid's SI units (:data:`CONVERSIONS`, the table of :mod:`bikeid.dataset.units`): angles
-``"deg"``/``"rad"``, rates ``"deg/s"``/``"rad/s"``, speed ``"m/s"``/``"km/h"``/``"kph"``/``"mph"``,
-torque ``"N m"``/``"N cm"``, time ``"s"``/``"ms"``; case-insensitive where that cannot change
-the meaning (``"KM/H"``; ``"Ms"``, a megasecond, is refused).  Signs: bikeid uses Meijaard et al. (2007) signs, roll, steer, yaw and steer
-torque positive to the right (x forward, y right, z down); list in ``flip`` the signals whose
-log uses the opposite sign.  Speed is a mapped column, or the constant nominal ``speed``
-[m/s] when the log has none.
+``columns`` (``datasets`` for HDF5) maps bikeid signal names
+(:data:`~bikeid.sim.conventions.UNITS`: ``phi``, ``delta``, ``phidot``, ``deltadot``, ``v``,
+``T_delta``, ``psi``, ..., and ``dither``, a measured external steer-torque excitation kept
+as ``Run.dither``) to the user's column names; the time column is ``time``.  ``units``
+converts from the user's units to bikeid's SI units (:data:`CONVERSIONS`, the table of
+:mod:`bikeid.dataset.units`): angles ``"deg"``/``"rad"``, rates ``"deg/s"``/``"rad/s"``,
+speed ``"m/s"``/``"km/h"``/``"kph"``/``"mph"``, torque ``"N m"``/``"N cm"``, time
+``"s"``/``"ms"``; case-insensitive where that cannot change the meaning (``"KM/H"``;
+``"Ms"``, a megasecond, is refused).  Signs: bikeid uses Meijaard et al. (2007) signs, roll,
+steer, yaw and steer torque positive to the right (x forward, y right, z down); list in
+``flip`` the signals whose log uses the opposite sign.  Speed is a mapped column, or the
+constant nominal ``speed`` [m/s] when the log has none.
 
 The data are refused with a one-line :class:`ValueError` naming the file, the column and
 the row (CSV: the 1-based line number, which is the row a spreadsheet shows, counting the

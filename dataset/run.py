@@ -487,6 +487,15 @@ class Run:
             nominal, speed_source = mean, "column"
         else:
             nominal, speed_source = float(speed), "nominal"
+            top = PLAUSIBLE["v"][1]
+            if nominal > top and "speed-bounds" not in skipped:
+                raise ValueError(
+                    f"{label}: the nominal speed {nominal:g} m/s given (speed=, --speed) is "
+                    f"outside the physical range 0..{top:g} m/s of v (sim.conventions."
+                    f"PLAUSIBLE); check its unit first (in km/h? give --speed {nominal:g}km/h, "
+                    f"speed={nominal:g} / 3.6); otherwise it is a typo (or, for a run you know "
+                    "is that fast, --skip-check speed-bounds, skip=['speed-bounds'])"
+                )
             signals["v"] = np.full(n, nominal)
         for name, col in extra.items():  # taken as logged: no unit conversion, no flip
             signals[name] = data[col]
