@@ -19,8 +19,7 @@ from hypothesis import strategies as st
 
 from bikeid.dataset import importers
 from bikeid.dataset.run import BOUND_CHECKS, Run, bound_check
-from bikeid.sim.conventions import PLAUSIBLE
-from bikeid.sim.conventions import UNITS
+from bikeid.sim.conventions import PLAUSIBLE, UNITS
 
 DT = 0.01
 N = 600
