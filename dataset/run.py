@@ -952,8 +952,8 @@ def check_plausible(
                     f"{source}: {_where(i, rows)}, column {label}: value {arr[i]:.6g} {unit}"
                     f"{_at(i, run.t)} is outside the physical range {lo:g}..{hi:g} {unit} of {key} "
                     f"(sim.conventions.PLAUSIBLE; {_count(bad)}); {hint}otherwise the data is "
-                    f"corrupt: fix or cut these rows (or, for data you know hold such values, "
-                    f"--skip-check {check}, skip=[{check!r}])"
+                    f"corrupt: fix or cut these rows (or, for a log of your own you know "
+                    f"holds such values, --skip-check {check}; skip=[{check!r}] in Python)"
                 )
     for name in () if failed else CONSTANT_CHECKED:
         if name in run.signals and np.ptp(run.signals[name]) == 0.0:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from bikeid.dataset.files import atomic_write_text
-from bikeid.dataset.plausibility import bounds_notes
+from bikeid.dataset.plausibility import CHECKS, bounds_notes
 from bikeid.dataset.run import BOUND_CHECKS
 from bikeid.dataset.units import parse_quantity
 from bikeid.sim.conventions import MAX_SPEED
@@ -39,6 +39,7 @@ __all__ = [
     "positive_speed",
     "quantity",
     "range_text",
+    "skipped_checks",
     "speed_value",
     "to_jsonable",
 ]
@@ -165,9 +166,15 @@ def quantity(
 
     def parse(text: str) -> float:
         try:
-            x = parse_quantity(text, si, "this option")
+            float(text)
+        except (TypeError, ValueError):
+            pass
+        else:  # a bare number (nan and inf included): the messages of number()
+            return check(text)
+        try:
+            x = parse_quantity(text, si, "the value")
         except ValueError as exc:
-            raise argparse.ArgumentTypeError(f"{text[:40]!r}: {exc}") from None
+            raise argparse.ArgumentTypeError(str(exc)) from None
         try:
             return check(repr(x))
         except argparse.ArgumentTypeError as exc:
@@ -356,3 +363,32 @@ def import_check_notes(skip: list[str], fmt: str, no_checks: bool = False) -> li
         )
     return [f"the range checks ({', '.join(bounds)}) still run on --format {fmt} files "
             "(written by bikeid or the steer-by-wire logger)"]
+
+
+def skipped_checks(args: argparse.Namespace) -> list[str]:
+    """The checks ``--skip-check NAME,...``/``--no-checks`` turn off.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options (``skip_check``, ``no_checks``; absent ones count as not given).
+
+    Returns
+    -------
+    list of str
+        Names of :data:`bikeid.dataset.plausibility.CHECKS`, each once (all of them with
+        ``--no-checks``).
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        On an unknown name, listing the known ones.
+    """
+    if getattr(args, "no_checks", False):
+        return list(CHECKS)
+    names = [n.strip() for n in (getattr(args, "skip_check", "") or "").split(",") if n.strip()]
+    bad = [n for n in names if n not in CHECKS]
+    if bad:
+        raise InputError(f"--skip-check {','.join(bad)}: unknown check; choose from "
+                         f"{', '.join(CHECKS)}")  # fmt: skip
+    return list(dict.fromkeys(names))

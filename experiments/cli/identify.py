@@ -19,6 +19,7 @@ from bikeid.experiments.cli.args import (
     number,
     positive_speed,
     range_text,
+    skipped_checks,
 )
 from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import quiet, stage_lines, terminal_progress
@@ -394,18 +395,8 @@ speed_arg = positive_speed
 
 
 def _skipped(args: argparse.Namespace) -> list[str]:
-    """The checks ``--skip-check``/``--no-checks`` turn off."""
-    from bikeid.dataset.plausibility import CHECKS
-    from bikeid.sim.errors import InputError
-
-    if getattr(args, "no_checks", False):
-        return list(CHECKS)
-    names = [n.strip() for n in (getattr(args, "skip_check", "") or "").split(",") if n.strip()]
-    bad = [n for n in names if n not in CHECKS]
-    if bad:
-        raise InputError(f"--skip-check {','.join(bad)}: unknown check; choose from "
-                         f"{', '.join(CHECKS)}")  # fmt: skip
-    return list(dict.fromkeys(names))
+    """The checks ``--skip-check``/``--no-checks`` turn off (``args.skipped_checks``)."""
+    return skipped_checks(args)
 
 
 def _read(args: argparse.Namespace) -> tuple[list, list[str]]:

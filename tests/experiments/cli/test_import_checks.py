@@ -124,3 +124,28 @@ def test_a_speed_in_any_unambiguous_case_gives_the_same_model(logs):
     assert all(g == got[0] for g in got[1:])
     rc, _, err = _cli(["identify", "ride_nospeed.csv", *read, "--speed", "5Ms"], logs)
     assert rc == 2 and "--speed" in err and "unit of a time" in err, err
+
+
+def test_the_toppling_rate_check_of_decays_refuses_then_skips_with_rate_bounds():
+    """measured fit's bicycle-specific roll-rate bound (the toppling rate, 5.24 rad/s for the
+    steer-by-wire bicycle) is a rate range check too: refused by default naming the unit
+    first and the skip, not run with rate-bounds skipped (the reader notes the skip)."""
+    import dataclasses
+
+    from bikeid.experiments.cli.measured import check_decay_rates
+    from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
+    from bikeid.sim.errors import InputError
+    from bikeid.sim.parameters import steer_by_wire
+
+    ws = synthetic_windows(ExperimentModel(), [2.5], per_speed=1, seed=1)
+    bad = ws[0].phidot.copy()
+    bad[40] = 15.0  # inside the generic 20 rad/s, 2.9 x the toppling rate
+    ws = [dataclasses.replace(ws[0], phidot=bad)]
+    with pytest.raises(InputError) as e:
+        check_decay_rates(ws, steer_by_wire())
+    msg = str(e.value)
+    assert msg.index("--units") < msg.index("glitch") < msg.index("--skip-check rate-bounds")
+    check_decay_rates(ws, steer_by_wire(), ["rate-bounds"])  # skipped: nothing raised
+    with pytest.raises(InputError):
+        check_decay_rates(ws, steer_by_wire(), ["angle-bounds"])  # another skip: still runs
