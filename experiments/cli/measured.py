@@ -11,6 +11,7 @@ from pathlib import Path
 from bikeid.experiments.cli.args import (
     MAX_WORKERS,
     dump_json,
+    import_check_notes,
     integer,
     mapping_arg,
     number,
@@ -762,7 +763,9 @@ def load_log_decays(
 
     sbw = args.format == "sbw"
     files = list(args.file or [])
-    if sbw:
+    if sbw:  # range checks of the logs cannot be skipped: refused by name, or noted
+        for msg in import_check_notes(skipped_checks(args), "sbw", args.no_checks):
+            print(f"note: {msg}", file=sys.stderr, flush=True)
         for opt in ("columns", "units", "speed"):
             if getattr(args, opt) is not None:
                 raise InputError(f"--{opt} applies to --format csv or hdf5 (your own logs)")

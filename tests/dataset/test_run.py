@@ -281,3 +281,18 @@ def test_arrays_and_the_same_csv_give_the_same_pem_model(tmp_path):
     ea = np.asarray(METHODS["pem"].fit(a).eigenvalues(a.speed))
     eb = np.asarray(METHODS["pem"].fit(b).eigenvalues(b.speed))
     np.testing.assert_allclose(eb, ea, rtol=1e-10)
+
+
+def test_units_of_a_mapping_are_read_case_insensitively_unless_ambiguous():
+    """'DEG', 'Deg/S', 'KM/H' and 'MS'... : the first three are the table's units (recorded
+    in their table spelling), a time in 'Ms' (megaseconds in SI) is refused naming 'ms'."""
+    units = {"t": "ms", "phi": "DEG", "delta": "Deg", "phidot": "Deg/S", "deltadot": "DEG/S",
+             "v": "KM/H"}  # fmt: skip
+    run = Run.from_arrays(T * 1000.0, _users_arrays(), MAPPING, units, flip=["phi", "phidot"])
+    _check_si(run)
+    assert {k: c["from"] for k, c in run.meta["import"]["units"].items()} == {
+        **UNITS_USER, "T_delta": "N m"}
+    with pytest.raises(ValueError, match=r"'Ms' for 't' is ambiguous.*megasecond.*write 'ms'"):
+        Run.from_arrays(T * 1000.0, _users_arrays(), MAPPING, {**units, "t": "Ms"})
+    mph = Run.from_arrays(T, {**SI, "v": SI["v"] / 0.44704}, units={"v": "mph"})
+    np.testing.assert_allclose(mph["v"], SI["v"], rtol=1e-15)  # 1 mph = 0.44704 m/s (NIST)

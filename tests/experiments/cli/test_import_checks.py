@@ -106,7 +106,15 @@ def test_measured_fit_shares_the_reader(logs):
 
 
 def test_range_checks_of_bikeid_files_cannot_be_skipped(logs):
+    """Run files written by bikeid and the steer-by-wire logs are always range-checked: a
+    skip by name is refused, --no-checks says so (never a skip that silently does nothing)."""
     rc, _, err = _cli(["identify", "runs.h5", "--skip-check", "angle-bounds"], logs)
+    assert rc == 3 and "applies to --format csv or hdf5" in err, err
+    rc, _, err = _cli(["identify", "runs.h5", "--no-checks", "--quiet"], logs)
+    assert rc == 0 and "range checks (angle-bounds, rate-bounds" in err, err
+    assert "still run on --format bikeid files" in err
+    rc, _, err = _cli(["measured", "fit", "--format", "sbw", "--data", "nowhere", "--out",
+                       "f.json", "--skip-check", "rate-bounds"], logs)  # fmt: skip
     assert rc == 3 and "applies to --format csv or hdf5" in err, err
 
 
