@@ -163,13 +163,13 @@ def resolve_unit(unit: str, si: str, what: str = "the value") -> str:
             f"{text!r} reads as {reading}, not {same[0]!r}; write {same[0]!r} (units of "
             f"{_describe(si)})"
         )
-    other = [s for s, units in CONVERSIONS.items() if s != si
-             and any(u.lower() == text.lower() for u in units)]  # fmt: skip
+    other = [(s, u) for s, units in CONVERSIONS.items() if s != si
+             for u in units if u.lower() == text.lower()]  # fmt: skip
     if other:
-        raise ValueError(
-            f"unit {unit!r} for {what} is a unit of {QUANTITIES[other[0]]}; {what} is "
-            f"{_describe(si)}"
-        )
+        s, u = other[0]
+        kind = (f"is a unit of {QUANTITIES[s]}" if u == text
+                else f"is not a unit of {QUANTITIES[si]} ({u!r} is a unit of {QUANTITIES[s]})")
+        raise ValueError(f"unit {unit!r} for {what} {kind}; {what} is {_describe(si)}")
     raise ValueError(f"unit {unit!r} for {what} is not supported; {what} is {_describe(si)}")
 
 
