@@ -6,7 +6,13 @@ never knows where the data came from.
 
 Modules:
 
-- :mod:`~bikeid.dataset.run`: :class:`Run`, one experiment's time series plus metadata.
+- :mod:`~bikeid.dataset.run`: :class:`Run`, one experiment's time series plus metadata, and
+  the data object a user builds (``Run.from_arrays``, ``Run.from_dataframe``,
+  ``Run.from_timeresponse``) with its units, sample time and physical ranges checked.
+- :mod:`~bikeid.dataset.tabular`: what every reader shares before a run is built (the table
+  of columns read, the mapping arguments' checks).
+- :mod:`~bikeid.dataset.units`: the one table of units and their factors to SI, and the
+  parser of a unit or a value with a unit (case-insensitive where unambiguous).
 - :mod:`~bikeid.dataset.closed_loop`: closed-loop runs on the nonlinear plant (controller,
   reference, dither, sensors, effects) -> :class:`Run`.
 - :mod:`~bikeid.dataset.linear_loop`: the exact (zero-order-hold) closed loop of the linear
@@ -23,8 +29,8 @@ Modules:
 - :mod:`~bikeid.dataset.download`: fetching the measured data from its upstream repository
   at a pinned commit, checksummed.
 - :mod:`~bikeid.dataset.store`: runs on disk (HDF5, one group per run) and CSV export.
-- :mod:`~bikeid.dataset.importers`: a user's own logs (CSV, any HDF5 file, a data frame)
-  -> :class:`Run`, with a column mapping, unit conversion, sign flips and checked data.
+- :mod:`~bikeid.dataset.importers`: a user's own logs (CSV, any HDF5 file) -> :class:`Run`,
+  with a column mapping, unit conversion, sign flips and checked data.
 - :mod:`~bikeid.dataset.files`: safe atomic file writing used by every output of bikeid.
 - :mod:`~bikeid.dataset.plausibility`: checks of a run's units and signs before any fit
   (sample period, each rate against its angle's derivative).

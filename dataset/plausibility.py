@@ -21,8 +21,14 @@ likely mistake and the option that fixes it:
     radians or the reverse) or -1 (one of the two signals flipped), the run is refused
     with the measured factor.  The steer-by-wire logs give slopes 1.00-1.09 at r >= 0.98.
 
-Either check is skipped by name (``skip``; ``bikeid identify --skip-check NAME`` or
-``--no-checks``), never silently: :func:`check_runs` returns a note for every skipped check.
+The range checks the readers run on import (:func:`bikeid.dataset.run.check_plausible`, one
+name per unit: ``angle-bounds``, ``rate-bounds``, ``speed-bounds``, ``torque-bounds``,
+``force-bounds``, :data:`bikeid.dataset.run.BOUND_CHECKS`) and the informativity check of the
+fit (:mod:`bikeid.ident.informativity`) share this vocabulary (:data:`CHECKS`).
+
+Every check is skipped by name (``skip``; ``bikeid identify --skip-check NAME`` or
+``--no-checks``), never silently: :func:`check_runs` returns a note for every skipped check
+of this module, :func:`bounds_notes` one for every skipped range check.
 """
 
 from __future__ import annotations
@@ -33,8 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.sim.conventions import SAMPLE_PERIOD
+from bikeid.sim.conventions import PLAUSIBLE, SAMPLE_PERIOD, UNITS
 from bikeid.sim.errors import InputError
+
+from .run import BOUND_CHECKS
 
 __all__ = [
     "CHECKS",
@@ -42,13 +50,15 @@ __all__ = [
     "MIN_CORRELATION",
     "RATE_PAIRS",
     "SMOOTHING",
+    "bounds_notes",
     "check_run",
     "check_runs",
     "rate_factor",
 ]
 
-#: Checks run before a fit, by the name ``--skip-check`` takes.
-CHECKS = ("sample-period", "rate-derivative", "informativity")
+#: Checks run before a fit, by the name ``--skip-check`` takes: the range checks of the
+#: import (:data:`bikeid.dataset.run.BOUND_CHECKS`), this module's two, informativity.
+CHECKS = (*BOUND_CHECKS, "sample-period", "rate-derivative", "informativity")
 #: Rate and the angle it is the derivative of.
 RATE_PAIRS = (("phidot", "phi"), ("deltadot", "delta"), ("psidot", "psi"))
 #: Width of the moving average applied to angle and rate before comparing them [s]
@@ -208,3 +218,29 @@ def check_runs(
         check_run(run, src, skip)
     return [f"check {s} skipped on request: its mistakes are not caught" for s in skip
             if s in ("sample-period", "rate-derivative")]  # fmt: skip
+
+
+def bounds_notes(skip: Iterable[str]) -> list[str]:
+    """The notes that say which range checks of the import were skipped.
+
+    Parameters
+    ----------
+    skip : iterable of str
+        Names of :data:`CHECKS` skipped (names that are not range checks are ignored).
+
+    Returns
+    -------
+    list of str
+        One note per skipped range check (:data:`bikeid.dataset.run.BOUND_CHECKS`), naming
+        the signals it bounds and their range, in the order of :data:`CHECKS`.
+    """
+    skip = set(skip)
+    out = []
+    for name, unit in BOUND_CHECKS.items():
+        if name not in skip:
+            continue
+        ranges = ", ".join(f"{k} {lo:g}..{hi:g}" for k, (lo, hi) in PLAUSIBLE.items()
+                           if UNITS.get(k) == unit)  # fmt: skip
+        out.append(f"check {name} skipped on request: values beyond the physical range "
+                   f"({ranges} {unit}) are kept")  # fmt: skip
+    return out

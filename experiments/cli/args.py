@@ -1,9 +1,11 @@
 """Small helpers shared by the command modules: ranges, JSON output, argument types.
 
 ``atomic_write_text`` is :func:`dataset.files.atomic_write_text` (re-exported for the
-command modules).  The argument types (:func:`number`, :func:`integer`, :func:`speed_value`,
-:func:`duration_value`) are argparse ``type=`` functions: a bad value is a usage error
-(exit status 2) naming the option, the value and the allowed range."""
+command modules).  The argument types (:func:`number`, :func:`integer`, :func:`quantity`,
+:func:`speed_value`, :func:`positive_speed`, :func:`duration_value`) are argparse ``type=``
+functions: a bad value is a usage error (exit status 2) naming the option, the value and the
+allowed range.  A speed takes a unit of the one unit table (``--speed 14.4km/h``, ``9mph``;
+:func:`bikeid.dataset.units.parse_quantity`)."""
 
 from __future__ import annotations
 
@@ -14,11 +16,16 @@ from collections.abc import Callable
 import numpy as np
 
 from bikeid.dataset.files import atomic_write_text
+from bikeid.dataset.plausibility import CHECKS, bounds_notes
+from bikeid.dataset.run import BOUND_CHECKS
+from bikeid.dataset.units import parse_quantity
 from bikeid.sim.conventions import MAX_SPEED
 from bikeid.sim.errors import InputError
 from bikeid.sim.textformats import dump_json, to_jsonable
 
 __all__ = [
+    "IMPORT_FORMATS",
+    "import_check_notes",
     "mapping_arg",
     "MAX_POINTS",
     "MAX_SPEED",
@@ -29,7 +36,10 @@ __all__ = [
     "integer",
     "number",
     "parse_range",
+    "positive_speed",
+    "quantity",
     "range_text",
+    "skipped_checks",
     "speed_value",
     "to_jsonable",
 ]
@@ -125,8 +135,59 @@ def integer(lo: int | None = None, hi: int | None = None) -> Callable[[str], int
     return parse
 
 
-#: ``--speed`` [m/s]: finite, 0 <= v <= MAX_SPEED.
-speed_value = number(0.0, MAX_SPEED, unit="m/s")
+def quantity(
+    si: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> Callable[[str], float]:
+    """An argparse ``type=``: a number with an optional unit, in SI, in ``[lo, hi]``.
+
+    Parameters
+    ----------
+    si : str
+        The SI unit of the quantity (a key of :data:`bikeid.dataset.units.CONVERSIONS`, e.g.
+        ``"m/s"``); a bare number is in it.
+    lo, hi : float, optional
+        Bounds in ``si`` (None: unbounded).
+    lo_open, hi_open : bool, optional
+        Exclude the bound itself.
+
+    Returns
+    -------
+    callable
+        ``parse(text) -> float`` [si] raising :class:`argparse.ArgumentTypeError` with the
+        value, the unit table's allowed units (case as in
+        :func:`bikeid.dataset.units.resolve_unit`) or the allowed range.
+    """
+    check = number(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=si)
+
+    def parse(text: str) -> float:
+        try:
+            float(text)
+        except (TypeError, ValueError):
+            pass
+        else:  # a bare number (nan and inf included): the messages of number()
+            return check(text)
+        try:
+            x = parse_quantity(text, si, "the value")
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        try:
+            return check(repr(x))
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"{text[:40]!r} = {exc}") from None
+
+    parse.__name__ = "quantity"
+    return parse
+
+
+#: ``--speed`` [m/s]: finite, 0 <= v <= MAX_SPEED, with an optional unit (14.4km/h).
+speed_value = quantity("m/s", 0.0, MAX_SPEED)
+#: ``--speed`` of a log [m/s]: finite, 0 < v <= MAX_SPEED, with an optional unit.
+positive_speed = quantity("m/s", 0.0, MAX_SPEED, lo_open=True)
 #: ``--duration`` [s]: finite, > 0 (a run too long for memory is refused by
 #: :func:`bikeid.sim.errors.check_memory` before anything is allocated or written).
 duration_value = number(0.0, lo_open=True, unit="s")
@@ -284,3 +345,76 @@ def mapping_arg(option: str) -> Callable[[str], dict[str, str]]:
     return parse
 
 
+
+
+#: Data formats read by the importers (a user's own logs), whose range checks
+#: (:data:`bikeid.dataset.run.BOUND_CHECKS`) ``--skip-check``/``--no-checks`` turn off; run
+#: files written by bikeid and the steer-by-wire logs are always checked.
+IMPORT_FORMATS = ("csv", "hdf5")
+
+
+def import_check_notes(skip: list[str], fmt: str, no_checks: bool = False) -> list[str]:
+    """The notes of the import's skipped range checks, or a refusal where they cannot be skipped.
+
+    Parameters
+    ----------
+    skip : list of str
+        The checks ``--skip-check``/``--no-checks`` turn off
+        (:data:`bikeid.dataset.plausibility.CHECKS` names).
+    fmt : str
+        The ``--format`` of the data.
+    no_checks : bool, optional
+        ``--no-checks`` was given (then a format without skippable range checks gets a note
+        saying so instead of a refusal).
+
+    Returns
+    -------
+    list of str
+        One note per skipped range check (:func:`bikeid.dataset.plausibility.bounds_notes`);
+        for bikeid or steer-by-wire files with ``--no-checks``, one note that their range
+        checks still run.
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        ``--skip-check NAME`` of a range check with a format whose files are always checked.
+    """
+    bounds = [s for s in skip if s in BOUND_CHECKS]
+    if fmt in IMPORT_FORMATS or not bounds:
+        return bounds_notes(bounds)
+    if not no_checks:
+        raise InputError(
+            f"--skip-check {','.join(bounds)} applies to --format csv or hdf5 (your own logs); "
+            f"--format {fmt} files are always range-checked: drop it"
+        )
+    return [f"the range checks ({', '.join(bounds)}) still run on --format {fmt} files "
+            "(written by bikeid or the steer-by-wire logger)"]
+
+
+def skipped_checks(args: argparse.Namespace) -> list[str]:
+    """The checks ``--skip-check NAME,...``/``--no-checks`` turn off.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options (``skip_check``, ``no_checks``; absent ones count as not given).
+
+    Returns
+    -------
+    list of str
+        Names of :data:`bikeid.dataset.plausibility.CHECKS`, each once (all of them with
+        ``--no-checks``).
+
+    Raises
+    ------
+    bikeid.sim.errors.InputError
+        On an unknown name, listing the known ones.
+    """
+    if getattr(args, "no_checks", False):
+        return list(CHECKS)
+    names = [n.strip() for n in (getattr(args, "skip_check", "") or "").split(",") if n.strip()]
+    bad = [n for n in names if n not in CHECKS]
+    if bad:
+        raise InputError(f"--skip-check {','.join(bad)}: unknown check; choose from "
+                         f"{', '.join(CHECKS)}")  # fmt: skip
+    return list(dict.fromkeys(names))

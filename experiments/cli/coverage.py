@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bikeid.experiments.cli.args import MAX_WORKERS, dump_json, integer, number
+from bikeid.experiments.cli.args import MAX_WORKERS, dump_json, integer, number, quantity
 from bikeid.experiments.parallel import DASK_HELP
 
 #: ``--level``: a nominal coverage strictly between 0 and 1.
@@ -33,8 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seeds", type=integer(2, 100000), default=200, help="runs N (default 200)")
     p.add_argument(
-        "--speed", type=number(1.0, 15.0, unit="m/s"), default=DEFAULTS["speed"],
-        help=f"forward speed [m/s], 1-15 (default {DEFAULTS['speed']:g})",
+        "--speed", type=quantity("m/s", 1.0, 15.0), default=DEFAULTS["speed"],
+        help=f"forward speed [m/s, or with a unit: 18km/h], 1-15 (default {DEFAULTS['speed']:g})",
     )  # fmt: skip
     p.add_argument(
         "--duration", type=number(1.0, 3600.0, unit="s"), default=DEFAULTS["duration"],

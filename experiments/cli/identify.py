@@ -14,10 +14,13 @@ from bikeid.experiments.cli.args import (
     MAX_WORKERS,
     check_figure_path,
     dump_json,
+    import_check_notes,
     integer,
     mapping_arg,
     number,
+    positive_speed,
     range_text,
+    skipped_checks,
 )
 from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import quiet, stage_lines, terminal_progress
@@ -282,8 +285,9 @@ def add_data_options(
     )  # fmt: skip
     p.add_argument(
         "--skip-check", default="", metavar="NAME,...",
-        help="checks not to run on a log you know is odd (a note says so): "
-        "sample-period, rate-derivative, informativity (default: none)",
+        help="checks not to run on a log you know is odd (a note says so): csv/hdf5: "
+        "angle-bounds, rate-bounds, speed-bounds, torque-bounds, force-bounds (physical "
+        "ranges); sample-period, rate-derivative, informativity (default: none)",
     )  # fmt: skip
     p.add_argument("--no-checks", action="store_true", help="skip every check of --skip-check")
     p.add_argument(
@@ -386,56 +390,14 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def speed_arg(text: str) -> float:
-    """``--speed``: a speed with an optional unit (``5``, ``5m/s``, ``14.4km/h``) in m/s.
-
-    Parameters
-    ----------
-    text : str
-        The option's value.
-
-    Returns
-    -------
-    float
-        The speed [m/s], in (0, MAX_SPEED].
-
-    Raises
-    ------
-    argparse.ArgumentTypeError
-        For a value that is not a positive speed with a known unit.
-    """
-    import math
-    import re
-
-    from bikeid.sim.conventions import MAX_SPEED
-
-    m = re.fullmatch(r"\s*([-+0-9.eE]+)\s*(m/s|km/h|kph|mph)?\s*", text)
-    factor = {None: 1.0, "m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704}
-    try:
-        value = float(m.group(1)) * factor[m.group(2)] if m else math.nan
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and 0 < value <= MAX_SPEED):
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: give a speed in (0, {MAX_SPEED:g}] m/s, optionally with a unit: 5, "
-            "5m/s, 14.4km/h"
-        )
-    return value
+#: ``--speed``: a speed with an optional unit of the one unit table (``5``, ``5m/s``,
+#: ``14.4km/h``, ``9mph``, ``KM/H``) in m/s, in (0, MAX_SPEED] (``args.positive_speed``).
+speed_arg = positive_speed
 
 
 def _skipped(args: argparse.Namespace) -> list[str]:
-    """The checks ``--skip-check``/``--no-checks`` turn off."""
-    from bikeid.dataset.plausibility import CHECKS
-    from bikeid.sim.errors import InputError
-
-    if getattr(args, "no_checks", False):
-        return list(CHECKS)
-    names = [n.strip() for n in (getattr(args, "skip_check", "") or "").split(",") if n.strip()]
-    bad = [n for n in names if n not in CHECKS]
-    if bad:
-        raise InputError(f"--skip-check {','.join(bad)}: unknown check; choose from "
-                         f"{', '.join(CHECKS)}")  # fmt: skip
-    return list(dict.fromkeys(names))
+    """The checks ``--skip-check``/``--no-checks`` turn off (``args.skipped_checks``)."""
+    return skipped_checks(args)
 
 
 def _read(args: argparse.Namespace) -> tuple[list, list[str]]:
@@ -473,7 +435,7 @@ def _read(args: argparse.Namespace) -> tuple[list, list[str]]:
     read = importers.from_csv if args.format == "csv" else importers.from_hdf5
     flip = [f.strip() for f in args.flip.split(",") if f.strip()]
     runs = [read(f, args.columns, args.units, time=args.time, speed=args.speed, flip=flip,
-                 speed_range=None) for f in args.file]  # fmt: skip
+                 speed_range=None, skip=_skipped(args)) for f in args.file]  # fmt: skip
     return runs, [str(f) for f in args.file]
 
 
@@ -554,6 +516,8 @@ def _load(args: argparse.Namespace, note=None) -> list:
             print(f"note: {msg}", file=sys.stderr, flush=True)
 
     skip = [s for s in _skipped(args) if s != "informativity"]
+    for msg in import_check_notes(skip, args.format, getattr(args, "no_checks", False)):
+        note(msg)  # the range checks of the import (csv/hdf5 logs)
     runs, sources = _read(args)
     runs = _window(runs, sources, args)
     # the sample period first: a time unit mistake would make nonsense of the speed split

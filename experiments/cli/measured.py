@@ -11,11 +11,13 @@ from pathlib import Path
 from bikeid.experiments.cli.args import (
     MAX_WORKERS,
     dump_json,
+    import_check_notes,
     integer,
     mapping_arg,
     number,
     parse_range,
     range_text,
+    skipped_checks,
     to_jsonable,
 )
 from bikeid.experiments.parallel import DASK_HELP
@@ -675,7 +677,7 @@ def toppling_rate(p) -> float:
     return math.sqrt(2 * m * d["g"] * h / inertia)
 
 
-def check_decay_rates(windows: list, p) -> None:
+def check_decay_rates(windows: list, p, skip: list[str] | tuple = ()) -> None:
     """Refuse a decay window whose roll rate exceeds bicycle ``p``'s toppling rate.
 
     A free decay after a push of a few degrees never approaches the rate of a fall from
@@ -688,6 +690,9 @@ def check_decay_rates(windows: list, p) -> None:
         The decays (``phidot`` [rad/s], ``start`` the first row in the log).
     p : bikeid.sim.parameters.BicycleParameters
         The bicycle the logs are of.
+    skip : list of str, optional
+        Checks skipped on request (``--skip-check``): with ``rate-bounds`` nothing is
+        checked (the reader prints the note).
 
     Raises
     ------
@@ -696,6 +701,8 @@ def check_decay_rates(windows: list, p) -> None:
     """
     import numpy as np
 
+    if "rate-bounds" in skip:
+        return
     bound = toppling_rate(p)
     for w in windows:
         x = np.abs(np.asarray(w.phidot, float))
@@ -704,8 +711,9 @@ def check_decay_rates(windows: list, p) -> None:
             raise InputError(
                 f"{w.file}: row {w.start + i} of a decay window: roll rate {float(x[i]):.3g} "
                 f"rad/s, beyond {bound:.3g} rad/s, the rate at which {p.name} hits the ground "
-                "falling from upright; a glitch in the log: cut it out (or give the right "
-                "--bicycle / --units)"
+                "falling from upright: check the right --bicycle / --units first, otherwise "
+                "a glitch in the log: cut it out (or --skip-check rate-bounds for a log you "
+                "know holds such rates)"
             )
 
 
@@ -755,7 +763,9 @@ def load_log_decays(
 
     sbw = args.format == "sbw"
     files = list(args.file or [])
-    if sbw:
+    if sbw:  # range checks of the logs cannot be skipped: refused by name, or noted
+        for msg in import_check_notes(skipped_checks(args), "sbw", args.no_checks):
+            print(f"note: {msg}", file=sys.stderr, flush=True)
         for opt in ("columns", "units", "speed"):
             if getattr(args, opt) is not None:
                 raise InputError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
@@ -814,7 +824,8 @@ def load_log_decays(
     model = ExperimentModel(p=p, K=k, V=v, dt=dt, speed_calibration=tuple(cal))
     windows, report = decays_from_runs(runs, "listed" if sbw else "detected", listed, speeds,
                                        exclude, min_decays, purpose)  # fmt: skip
-    check_decay_rates(windows, p)  # a glitch inside the generic bound, beyond this bicycle's
+    check_decay_rates(windows, p, () if sbw else skipped_checks(args))  # a glitch inside
+    # the generic bound, beyond this bicycle's
     if drive == "logged":
         windows = [replace(w, drive="logged") for w in windows]
     report["read"] = read

@@ -35,7 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("linearize", help="M, C1, K0, K2, A, B and eigenvalues at one speed")
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
-    p.add_argument("--speed", type=speed_value, required=True, help="forward speed [m/s], 0-100")
+    p.add_argument("--speed", type=speed_value, required=True,
+                   help="forward speed [m/s, or with a unit: 18km/h], 0-100")
     p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=cmd_linearize)
 

@@ -50,7 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--bicycle", default="benchmark", help=BICYCLE_HELP)
     p.add_argument(
-        "--speed", type=speed_value, required=True, help="initial forward speed [m/s], 0-100"
+        "--speed", type=speed_value, required=True,
+        help="initial forward speed [m/s, or with a unit: 18km/h], 0-100",
     )
     p.add_argument("--duration", type=duration_value, required=True, help="simulated time [s]")
     p.add_argument("--phi0", type=ANGLE, default=0.0, help="initial roll [deg]")
