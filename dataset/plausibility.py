@@ -42,7 +42,7 @@ import numpy as np
 from bikeid.sim.conventions import PLAUSIBLE, SAMPLE_PERIOD, UNITS
 from bikeid.sim.errors import InputError
 
-from .run import BOUND_CHECKS
+from .run import BOUND_CHECKS, SKIPPABLE_CHECKS
 
 __all__ = [
     "CHECKS",
@@ -58,7 +58,7 @@ __all__ = [
 
 #: Checks run before a fit, by the name ``--skip-check`` takes: the range checks of the
 #: import (:data:`bikeid.dataset.run.BOUND_CHECKS`), this module's two, informativity.
-CHECKS = (*BOUND_CHECKS, "sample-period", "rate-derivative", "informativity")
+CHECKS = SKIPPABLE_CHECKS
 #: Rate and the angle it is the derivative of.
 RATE_PAIRS = (("phidot", "phi"), ("deltadot", "delta"), ("psidot", "psi"))
 #: Width of the moving average applied to angle and rate before comparing them [s]

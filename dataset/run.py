@@ -48,6 +48,7 @@ __all__ = [
     "CONSTANT_CHECKED",
     "REQUIRED",
     "SPEED_TOLERANCE",
+    "SKIPPABLE_CHECKS",
     "Run",
     "bound_check",
     "check_finite",
@@ -101,9 +102,19 @@ def bound_check(signal: str) -> str | None:
     return next((name for name, u in BOUND_CHECKS.items() if u == unit), None)
 
 
+#: Every check a caller may skip by name: the range checks above, the import's plausibility
+#: checks (:mod:`bikeid.dataset.plausibility`) and the fit's informativity check
+#: (:mod:`bikeid.ident.informativity`).  ``skip`` and ``--skip-check`` take these names.
+SKIPPABLE_CHECKS = (*BOUND_CHECKS, "sample-period", "rate-derivative", "informativity")
+
+
 def _check_skip(skip: Iterable[str]) -> set[str]:
-    """The range checks named in ``skip`` (other checks' names pass through unused)."""
+    """The range checks named in ``skip``; a name no check has is refused (a misspelled skip
+    must not leave the user believing a check is off)."""
     skip = {skip} if isinstance(skip, str) else set(skip)
+    bad = sorted(s for s in skip if s not in SKIPPABLE_CHECKS)
+    if bad:
+        raise ValueError(f"skip={bad}: no such check; choose from {', '.join(SKIPPABLE_CHECKS)}")
     return {s for s in skip if s in BOUND_CHECKS}
 
 

@@ -222,6 +222,17 @@ def test_a_range_check_refuses_naming_the_unit_then_corruption_then_the_skip(
         Run.from_arrays(T, arrays, skip=others)
 
 
+def test_a_misspelled_skip_is_refused_not_ignored():
+    # 'angle-bound' (no s) names no check: ignoring it would leave the user believing the
+    # angle range is unchecked while the import still refuses for another reason
+    arrays = {**SI, "phi": np.degrees(SI["phi"]) + 30.0}
+    with pytest.raises(ValueError, match=r"skip=\['angle-bound'\]: no such check; choose from "
+                       r"angle-bounds, rate-bounds"):
+        Run.from_arrays(T, arrays, skip=["angle-bound"])
+    run = Run.from_arrays(T, SI, skip=["sample-period", "informativity"])  # known: accepted
+    assert "skipped_checks" not in run.meta["import"]  # neither is a range check
+
+
 def test_a_negative_speed_suggests_the_sign_and_a_declared_unit_is_not_suggested_again():
     from bikeid.dataset.run import check_plausible
 
