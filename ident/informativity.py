@@ -47,13 +47,16 @@ from bikeid.sim.errors import InputError, UntrustworthyResult
 
 __all__ = [
     "FEEDBACK_R2",
+    "INFORMATIVITY",
     "LINE_LEVEL",
     "ORDER_PER_PARAMETER",
+    "SKIPPED_NOTE",
     "Informativity",
     "assess",
     "check",
     "excited_frequencies",
     "feedback_share",
+    "guard",
     "tone_bins",
 ]
 
@@ -417,3 +420,66 @@ def check(
     if info.cause is not None:
         raise UntrustworthyResult(f"the logs cannot determine {what}: {info.cause}")
     return info
+
+
+#: What an estimator does about data that cannot determine its model (the ``informativity``
+#: keyword of every fit function): ``"refuse"`` (default) raises
+#: :class:`~bikeid.sim.errors.UntrustworthyResult` before fitting, ``"report"`` fits and
+#: records the cause, ``"skip"`` does not assess and records that it did not.
+INFORMATIVITY = ("refuse", "report", "skip")
+#: The record of a check skipped on request (never silent).
+SKIPPED_NOTE = ("check informativity skipped on request: the model may be determined by "
+                "feedback, not by the data")  # fmt: skip
+
+
+def guard(
+    runs: Sequence[Any],
+    n_params: int,
+    *,
+    what: str,
+    informativity: str = "refuse",
+    input_name: str = "T_delta",
+    min_speeds: int = 1,
+) -> tuple[dict, str | None]:
+    """What every estimator runs before it fits: :func:`check`, :func:`assess` or nothing.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        The runs a model is to be fitted to.
+    n_params : int
+        Free parameters of the model.
+    what : str
+        The model, for messages (e.g. ``"the canonical PEM model at 4.5 m/s"``).
+    informativity : {"refuse", "report", "skip"}, optional
+        :data:`INFORMATIVITY`.
+    input_name : str, optional
+        The input signal [N m].
+    min_speeds : int, optional
+        Distinct speeds the excited runs must cover (:func:`assess`).
+
+    Returns
+    -------
+    record : dict
+        :meth:`Informativity.to_json`, or ``{"skipped": True, "note": SKIPPED_NOTE}``.
+    note : str or None
+        A line for the model's notes: :data:`SKIPPED_NOTE`, or ``the logs cannot determine
+        <what>: <cause>`` for reported data that cannot; None when the data can.
+
+    Raises
+    ------
+    UntrustworthyResult
+        With ``"refuse"``, when the data cannot determine the model (:func:`check`).
+    InputError
+        If ``informativity`` is not one of :data:`INFORMATIVITY`.
+    """
+    if informativity not in INFORMATIVITY:
+        raise InputError(f"informativity={informativity!r}: choose one of "
+                         f"{', '.join(INFORMATIVITY)}")  # fmt: skip
+    if informativity == "skip":
+        return {"skipped": True, "note": SKIPPED_NOTE}, SKIPPED_NOTE
+    info = assess(runs, n_params, input_name=input_name, min_speeds=min_speeds)
+    note = None if info.cause is None else f"the logs cannot determine {what}: {info.cause}"
+    if note is not None and informativity == "refuse":
+        raise UntrustworthyResult(note)
+    return info.to_json(), note

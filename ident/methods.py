@@ -47,18 +47,17 @@ from bikeid.ident import greybox, pem
 from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
 from bikeid.ident.direct import MOORE_ROLL, MOORE_STEER, DirectResult, identify, parse_entry
 from bikeid.ident.greybox import GreyboxModel
-from bikeid.ident.informativity import assess
+from bikeid.ident.informativity import INFORMATIVITY, SKIPPED_NOTE, guard
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
 from bikeid.ident.signals import prepare
 from bikeid.ident.tailored_iv import identify_tailored
-from bikeid.sim.errors import InputError, UntrustworthyResult
+from bikeid.sim.errors import InputError
 from bikeid.sim.linear import canonical_matrices
 from bikeid.sim.parameters import BicycleParameters, from_mapping
 
 __all__ = [
     "DIRECT_PRESETS",
-    "INFORMATIVITY",
     "METHODS",
     "DirectSettings",
     "GreyboxSettings",
@@ -86,14 +85,6 @@ INSTRUMENTS = ("lagged", "dither", "external", "tailored")
 def _choice(name: str, value: Any, allowed: Sequence[Any]) -> None:
     if value not in allowed:
         raise InputError(f"{name}={value!r}: choose one of {', '.join(map(str, allowed))}")
-
-
-#: What the fit functions do about data that cannot determine the model (their
-#: ``informativity`` keyword): ``"refuse"`` (default) raises
-#: :class:`~bikeid.sim.errors.UntrustworthyResult` before the fit, ``"report"`` fits and
-#: records the cause in :attr:`Identified.informativity`, ``"skip"`` does not assess and
-#: records that the check was skipped.
-INFORMATIVITY = ("refuse", "report", "skip")
 
 
 @dataclass(frozen=True)
@@ -588,11 +579,6 @@ def split_free(free: Sequence[str] | None) -> tuple[list[str] | None, list[str] 
             [n for n, r in zip(free, rows, strict=True) if r == 1])  # fmt: skip
 
 
-#: The record and note of a fit whose informativity check was skipped on request.
-SKIPPED_NOTE = ("check informativity skipped on request: the model may be determined by "
-                "feedback, not by the data")  # fmt: skip
-
-
 def check_informativity(
     runs: Run | Sequence[Run],
     settings: Any,
@@ -620,7 +606,7 @@ def check_informativity(
         The input signal [N m] (default ``T_delta``).
     informativity : {"refuse", "report", "skip"}, optional
         Refuse data that cannot determine a model (default), only report it, or skip
-        the assessment (:data:`INFORMATIVITY`).
+        the assessment (:data:`~bikeid.ident.informativity.INFORMATIVITY`).
 
     Returns
     -------
@@ -628,7 +614,8 @@ def check_informativity(
         The record: one model's assessment
         (:meth:`~bikeid.ident.informativity.Informativity.to_json`), or ``{"per_speed":
         {speed: assessment}}`` for per-speed models and ``{"per_run": {index: assessment}}``
-        for per-run ones; with ``"skip"`` ``{"skipped": True, "note": SKIPPED_NOTE}``.
+        for per-run ones; with ``"skip"`` ``{"skipped": True, "note":``
+        :data:`~bikeid.ident.informativity.SKIPPED_NOTE` ``}``.
 
     Raises
     ------
@@ -636,7 +623,7 @@ def check_informativity(
         With ``"refuse"``: ``the logs cannot determine <model>: <cause and fix>`` for the
         first model the data cannot determine (its speed or run named).
     InputError
-        If ``informativity`` is not one of :data:`INFORMATIVITY`.
+        If ``informativity`` is not one of :data:`~bikeid.ident.informativity.INFORMATIVITY`.
     """
     _choice("informativity", informativity, INFORMATIVITY)
     if informativity == "skip":
@@ -644,14 +631,19 @@ def check_informativity(
     runs = [runs] if isinstance(runs, Run) else list(runs)
     records: dict[Any, dict[str, Any]] = {}
     for t in settings.targets(runs, free):
-        info = assess(t.runs, t.n_params, input_name=input_name, min_speeds=t.min_speeds)
-        if info.cause is not None and informativity == "refuse":
-            raise UntrustworthyResult(f"the logs cannot determine {t.what}: {info.cause}")
-        records[t.key] = info.to_json()
+        records[t.key], _ = guard(t.runs, t.n_params, what=t.what, informativity=informativity,
+                                  input_name=input_name, min_speeds=t.min_speeds)  # fmt: skip
     if list(records) == [None]:
         return records[None]
     first = next(iter(records))
     return {"per_speed" if isinstance(first, float) else "per_run": records}
+
+
+def _below(informativity: str) -> str:
+    """What a fit function asks of the estimator it calls after its own check: a skip is
+    passed on (the models' notes record it), otherwise the estimator only reports (its
+    notes name a cause it finds, e.g. in a per-speed start of a model over speed)."""
+    return "skip" if informativity == "skip" else "report"
 
 
 def _matrix_details(res: DirectResult | GreyboxModel) -> dict[str, Any]:
@@ -726,11 +718,13 @@ def fit_direct(
             runs[0].meta["parameters"], name="run meta")  # fmt: skip
         start = canonical_matrices(ref) if isinstance(ref, BicycleParameters) else ref
         res = identify_tailored(runs, ref, free_roll, free_steer, prepare=prep, start=start,
-                                iterations=3, covariance=s.covariance)  # fmt: skip
+                                iterations=3, covariance=s.covariance,
+                                informativity=_below(informativity))  # fmt: skip
     else:
         res = identify([prep(r) for r in runs], reference, free_roll, free_steer,
                        method="ls" if s.iv is None else "iv", instruments=s.iv or "lagged",
-                       lags=s.lags, covariance=s.covariance)  # fmt: skip
+                       lags=s.lags, covariance=s.covariance,
+                       informativity=_below(informativity))  # fmt: skip
     speeds = _speeds(runs)
     details = {
         **_matrix_details(res),
@@ -806,7 +800,7 @@ def fit_pem(
             f"from beta v^2; the data hold speed {speeds[0] if speeds else '-'} m/s only"
         )
     record = check_informativity(runs, s, informativity=informativity)
-    kw: dict[str, Any] = {"noise_model": s.noise_model}
+    kw: dict[str, Any] = {"noise_model": s.noise_model, "informativity": _below(informativity)}
     if outputs:
         kw["outputs"] = tuple(outputs)
     steps = len(speeds) + bool(s.speed_parameterized)
@@ -894,7 +888,8 @@ def fit_greybox(
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     s = settings or GreyboxSettings()
-    kw: dict[str, Any] = {"drop_unidentifiable": s.drop_unidentifiable}
+    kw: dict[str, Any] = {"drop_unidentifiable": s.drop_unidentifiable,
+                          "informativity": _below(informativity)}  # fmt: skip
     if outputs:
         kw["outputs"] = tuple(outputs)
     speeds = _speeds(runs)

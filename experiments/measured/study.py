@@ -441,7 +441,8 @@ def _informativity(fitted: Identified) -> dict:
 
 
 def _greybox_model(runs: list[Run], label: str, max_nfev: int = 100) -> StudyModel:
-    g = greybox.fit(runs, reference=steer_by_wire(), drop_unidentifiable=True, max_nfev=max_nfev)
+    g = greybox.fit(runs, reference=steer_by_wire(), drop_unidentifiable=True, max_nfev=max_nfev,
+                    informativity="report")  # what the logs cannot determine: in its notes
     info = {"condition": float(g.condition), "dropped": list(g.dropped),
             "inflation": dict(g.inflation), "notes": list(g.notes)}  # fmt: skip
     return matrix_model("greybox", label, g.canonical(), free=dict(g.free), stderr=dict(g.stderr),

@@ -126,3 +126,39 @@ def test_model_over_speed_needs_excited_runs_at_two_speeds(dithered, feedback):
     with pytest.raises(UntrustworthyResult, match="speed-parameterized PEM model: only the "
                        "runs at 3 m/s carry excitation"):  # fmt: skip
         fit_pem(runs, PemSettings(speed_parameterized=True))
+
+
+def _lower(name: str, runs, **kw):
+    """The estimators under the table, as the docs call them."""
+    from bikeid.ident import direct, greybox, pem
+
+    if name == "pem.fit":
+        return pem.fit(runs[:1], **kw)
+    if name == "pem.fit_speed_model":
+        return pem.fit_speed_model(runs, **kw)
+    if name == "greybox.fit":
+        return greybox.fit(runs, ("Mpd", "K0pd", "Mdd", "K0dd", "K2dd"), P, **kw)
+    return direct.identify(runs, reference=P, **kw)
+
+
+LOWER = ["pem.fit", "pem.fit_speed_model", "greybox.fit", "direct.identify"]
+
+
+@pytest.mark.parametrize("name", LOWER)
+def test_the_estimators_the_docs_call_refuse_too(name, feedback):
+    """``pem.fit`` (the README's example), ``pem.fit_speed_model``, ``greybox.fit`` and
+    ``direct.identify`` refuse feedback-only runs by themselves, before any fit."""
+    with pytest.raises(UntrustworthyResult, match="the logs cannot determine .*feedback only"):
+        _lower(name, feedback)
+
+
+@pytest.mark.parametrize("name", LOWER)
+def test_the_estimators_the_docs_call_record_report_and_skip(name, feedback, dithered):
+    """Asked to fit anyway, each says so in the model's notes: the cause, or that the
+    check was skipped; informative data add no note."""
+    rep = _lower(name, feedback, informativity="report")
+    assert any("the logs cannot determine" in n and "feedback only" in n for n in rep.notes)
+    skip = _lower(name, feedback, informativity="skip")
+    assert SKIPPED_NOTE in skip.notes
+    ok = _lower(name, dithered)
+    assert not any("informativity" in n or "cannot determine" in n for n in ok.notes)
