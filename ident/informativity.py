@@ -8,7 +8,11 @@ example: three unstable real poles from push logs under the steer-by-wire bicycl
 balance controller).  MATLAB's System Identification Toolbox has ``feedback`` and
 ``pexcit`` for this; :func:`assess` does both, and :func:`check` refuses
 (:class:`~bikeid.sim.errors.UntrustworthyResult`, exit 4) before any estimator returns a
-model from data that cannot determine it.
+model from data that cannot determine it: every estimator (``pem.fit``,
+``pem.fit_speed_model``, ``greybox.fit``, ``direct.identify`` and the fit functions of
+``ident.methods.METHODS``) runs :func:`guard` before it fits, whose ``informativity``
+keyword (:data:`INFORMATIVITY`) can instead report the cause or skip the check, both
+recorded with the model.
 
 1. **Feedback share.**  Per run, the steer torque T is regressed by least squares on a
    low-order linear law of the measured states: a constant, phi, delta, phidot,
@@ -63,7 +67,8 @@ __all__ = [
 #: R^2 of the state law above which a run's steer torque counts as feedback only [-].
 #: The rule: a run is feedback-only when the static law of point 1 (in-sample least squares)
 #: reproduces >= 98 % of its torque's variance.  Measured (:func:`feedback_share`; the
-#: steer-by-wire logs through ``dataset.sbw_logs.settled``, ``T_delta`` = ``command_fork``):
+#: steer-by-wire logs through ``dataset.sbw_logs.settled``, ``T_delta`` = ``command_fork``;
+#: ``benchmarks/feedback_share.py`` prints every number below):
 #:
 #: - refused, as they must be: the testbed's loops without dither or reference (PID, pole
 #:   placement at 2, 4, 6 m/s: 1.0000; fuzzy: 0.995, its nonlinear law) and the push logs
