@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bikeid.dataset.run import Run
+from bikeid.ident.informativity import guard
 from bikeid.ident.linear_model import SpeedDependentModel
 from bikeid.ident.signals import check_sampling, differentiate
 from bikeid.sim.errors import UntrustworthyResult
@@ -393,6 +394,7 @@ def identify(
     max_condition: float = 1e10,
     instrument_runs: Sequence[Run] | None = None,
     covariance: str = "white",
+    informativity: str = "refuse",
 ) -> DirectResult:
     """Direct least-squares (or IV) identification of M, C1, K0, K2, H from runs.
 
@@ -443,6 +445,11 @@ def identify(
     covariance : {"white", "run"}, optional
         "white" (the paper's sigma^2 (Gamma' Gamma)^-1) or "run" (cluster-robust over
         runs, for coloured equation errors; module docstring).
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the regression, whether the runs' steer torque can determine the free
+        entries, with excited runs at two or more speeds when they span two
+        (:func:`bikeid.ident.informativity.guard`): refuse when they cannot (default), or
+        estimate and say so in ``notes``, or skip the check (``notes`` says so).
 
     Returns
     -------
@@ -460,6 +467,9 @@ def identify(
         available; a row's right-hand side is zero; or a row is unidentifiable (K0 and
         K2 of the same entry free at one speed, or condition number above
         ``max_condition``), naming the collinear entries.
+    UntrustworthyResult
+        If the runs cannot determine the model and ``informativity`` is ``"refuse"``
+        (a subclass of ValueError).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -536,6 +546,11 @@ def identify(
     ):
         raise ValueError("instruments='external' needs runs with a logged dither and reference")
 
+    est = "least-squares" if method == "ls" else "instrumental-variables"
+    _, told = guard(runs, len(free_roll) + len(free_steer), what=f"the direct {est} model",
+                    informativity=informativity, min_speeds=2)  # fmt: skip
+    if told:
+        notes.append(told)
     cols = [regressors(d, g) for d in data]
     speeds = np.concatenate([d["v"] for d in data])
     one_speed = np.ptp(speeds) <= 1e-9 * max(1.0, float(np.abs(speeds).max()))

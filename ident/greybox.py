@@ -64,6 +64,7 @@ from bikeid.ident.canonical import (
     theta_from_matrices,
 )
 from bikeid.ident.direct import ALL_ENTRIES, MOORE_ROLL, MOORE_STEER, parse_entry
+from bikeid.ident.informativity import guard
 from bikeid.ident.linear_model import SpeedDependentModel
 from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
 from bikeid.ident.predictor import (
@@ -696,6 +697,7 @@ def fit(
     max_condition: float = MAX_CONDITION,
     drop_unidentifiable: bool = False,
     H: Sequence[float] | None = None,
+    informativity: str = "refuse",
 ) -> GreyboxModel:
     """Grey-box PEM of the free entries of M, C1, K0, K2 over runs at one or many speeds.
 
@@ -736,6 +738,11 @@ def fit(
         lateral force; default from the runs' ``meta['lateral_force_point']``
         (:func:`bikeid.sim.linear.lateral_force_vector`) with a ``BicycleParameters``
         reference.  Not used when F is zero in every run.
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the fit, whether the runs can determine the free entries, with excited runs
+        at two or more speeds when they span two (:func:`bikeid.ident.informativity.guard`):
+        refuse when they cannot (default), or fit and say so in ``notes``, or skip the
+        check (``notes`` says so).
 
     Returns
     -------
@@ -751,7 +758,8 @@ def fit(
         or H with a lateral force) are available.
     UntrustworthyResult
         If the free set's condition number exceeds ``max_condition`` (and
-        ``drop_unidentifiable`` is False), or no stable predictor exists at the start.
+        ``drop_unidentifiable`` is False), no stable predictor exists at the start, or the
+        runs cannot determine the model and ``informativity`` is ``"refuse"``.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -782,6 +790,8 @@ def fit(
         raise InputError(f"runs have different sample periods {sorted(dts)}; resample first")
     free = _free_set(free, symmetric, forced)
     cm = _reference(reference, runs)
+    _, told = guard(runs, len(free), what="the grey-box model", informativity=informativity,
+                    min_speeds=2)  # fmt: skip
     vals = {n: float(getattr(cm, parse_entry(n)[0])[parse_entry(n)[1], parse_entry(n)[2]])
             for n in ALL_ENTRIES if n not in _FORCE}  # fmt: skip
     if forced:
@@ -821,7 +831,7 @@ def fit(
     Ks = [Kg[k] for k in groups]
     names = list(free)
     dropped: list[str] = []
-    notes: list[str] = []
+    notes: list[str] = [told] if told else []
     # conditioning at the start: refuse (or drop) before spending a fit on garbage
     prob = problem(names, Ks)
     x = np.concatenate([p0] + ([K.ravel() for K in Kg] if free_k else []))

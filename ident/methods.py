@@ -26,7 +26,12 @@ signature of :func:`fit_direct`, a settings dataclass, its model classes and fil
 its tests (``tests/ident/test_methods.py`` runs every entry on the same simulated runs).
 
 Every :class:`Identified` carries the settings it ran (``settings.describe()``), which every
-command prints and saves with the model.
+command prints and saves with the model, and whether the data can determine its models:
+each fit function first calls :func:`check_informativity` (the settings' ``targets`` count
+each model's free parameters; :func:`bikeid.ident.informativity.assess` judges the input's
+feedback share and order of excitation) and refuses data that cannot
+(:class:`~bikeid.sim.errors.UntrustworthyResult`) unless told ``informativity="report"``
+or ``"skip"``, which the result records.
 """
 
 from __future__ import annotations
@@ -39,9 +44,10 @@ import numpy as np
 
 from bikeid.dataset.run import Run
 from bikeid.ident import greybox, pem
-from bikeid.ident.canonical import SPEED_NAMES
-from bikeid.ident.direct import DirectResult, identify, parse_entry
+from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
+from bikeid.ident.direct import MOORE_ROLL, MOORE_STEER, DirectResult, identify, parse_entry
 from bikeid.ident.greybox import GreyboxModel
+from bikeid.ident.informativity import INFORMATIVITY, SKIPPED_NOTE, guard
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
 from bikeid.ident.signals import prepare
@@ -59,6 +65,8 @@ __all__ = [
     "Method",
     "ModelCodec",
     "PemSettings",
+    "Target",
+    "check_informativity",
     "fit_direct",
     "fit_greybox",
     "fit_pem",
@@ -79,8 +87,66 @@ def _choice(name: str, value: Any, allowed: Sequence[Any]) -> None:
         raise InputError(f"{name}={value!r}: choose one of {', '.join(map(str, allowed))}")
 
 
+@dataclass(frozen=True)
+class Target:
+    """One model a fit estimates, as the informativity check sees it.
+
+    Attributes
+    ----------
+    what : str
+        The model, for messages (e.g. ``"the canonical PEM model at 4.5 m/s"``).
+    runs : tuple of Run
+        The runs that model is fitted to.
+    n_params : int
+        Its free parameters.
+    min_speeds : int
+        Distinct speeds its excited runs must cover (2 for a model over speed; capped at
+        the runs' own distinct speeds by :func:`bikeid.ident.informativity.assess`).
+    key : float or int or None
+        The speed [m/s] (per-speed models) or run index (per-run models) the record is
+        filed under; None for one model over all runs.
+    """
+
+    what: str
+    runs: tuple[Run, ...]
+    n_params: int
+    min_speeds: int = 1
+    key: float | int | None = None
+
+
+def _forced(runs: Sequence[Run]) -> bool:
+    """Whether some run logs a lateral force (then HdF is free by default)."""
+    return any(np.any(r["F"]) for r in runs if "F" in r.signals)
+
+
 class _Settings:
     """What every method's settings dataclass shares: JSON out, command-line options in."""
+
+    def targets(self, runs: Sequence[Run], free: Sequence[str] | None = None) -> list[Target]:
+        """The models a fit with these settings estimates and their free parameters.
+
+        Parameters
+        ----------
+        runs : sequence of Run
+            The runs to be fitted.
+        free : sequence of str, optional
+            Free matrix entries (methods that take them).
+
+        Returns
+        -------
+        list of Target
+            One per model; the default is one model over all runs with as many free
+            parameters as ``free`` names (a method without free entries overrides this).
+
+        Raises
+        ------
+        InputError
+            If the settings cannot count their parameters without ``free``.
+        """
+        if not free:
+            raise InputError(f"{type(self).__name__} does not count its free parameters: give "
+                             "free entries or define targets()")  # fmt: skip
+        return [Target("the model", tuple(runs), len(free), 2)]
 
     def to_json(self) -> dict[str, Any]:
         """The settings as plain JSON types.
@@ -190,6 +256,26 @@ class DirectSettings(_Settings):
         means = "" if self.remove_means else ", means kept"
         return f"{est}, {der}, {cut}{means}{se}"
 
+    def targets(self, runs: Sequence[Run], free: Sequence[str] | None = None) -> list[Target]:
+        """One model over all runs: the free entries of both rows.
+
+        Parameters
+        ----------
+        runs : sequence of Run
+            The runs to be fitted.
+        free : sequence of str, optional
+            Free entries (default Moore & Hubbard's sets, HdF only when a run logs a
+            lateral force, as :func:`bikeid.ident.direct.identify`).
+
+        Returns
+        -------
+        list of Target
+            The one model, needing excited runs at two speeds when the runs span two.
+        """
+        n = len(free) if free else len(MOORE_ROLL) + len(MOORE_STEER) - (not _forced(runs))
+        est = "least-squares" if self.iv is None else "instrumental-variables"
+        return [Target(f"the direct {est} model", tuple(runs), n, 2)]
+
     def to_json(self) -> dict[str, Any]:
         """The settings as plain JSON types, the resolved cut-off included.
 
@@ -284,6 +370,30 @@ class PemSettings(_Settings):
     def __post_init__(self) -> None:
         _choice("noise_model", self.noise_model, ("free", "none"))
 
+    def targets(self, runs: Sequence[Run], free: Sequence[str] | None = None) -> list[Target]:
+        """The canonical models: one per speed (10 parameters each), or one over speed.
+
+        Parameters
+        ----------
+        runs : sequence of Run
+            The runs to be fitted.
+        free : sequence of str, optional
+            Not used (every canonical parameter is free).
+
+        Returns
+        -------
+        list of Target
+            Per speed (``key`` the speed) :data:`~bikeid.ident.canonical.THETA_NAMES`, or
+            one model over speed with :data:`~bikeid.ident.canonical.SPEED_NAMES` needing
+            excited runs at two speeds.
+        """
+        if self.speed_parameterized:
+            return [Target("the speed-parameterized PEM model", tuple(runs), len(SPEED_NAMES),
+                           2)]  # fmt: skip
+        return [Target(f"the canonical PEM model at {v:g} m/s",
+                       tuple(r for r in runs if round(r.speed, 6) == v), len(THETA_NAMES), 1, v)
+                for v in _speeds(runs)]  # fmt: skip
+
     def describe(self) -> str:
         """One line naming every setting that ran.
 
@@ -323,6 +433,31 @@ class GreyboxSettings(_Settings):
 
     def __post_init__(self) -> None:
         _choice("mode", self.mode, ("joint", "per_speed"))
+
+    def targets(self, runs: Sequence[Run], free: Sequence[str] | None = None) -> list[Target]:
+        """The grey-box models: one over all runs, or one per run.
+
+        Parameters
+        ----------
+        runs : sequence of Run
+            The runs to be fitted.
+        free : sequence of str, optional
+            Free entries (default :data:`bikeid.ident.greybox.DEFAULT_FREE`, plus HdF when a
+            run logs a lateral force; per run without K2dd, as :func:`fit_greybox`).
+
+        Returns
+        -------
+        list of Target
+            One model needing excited runs at two speeds when the runs span two, or one per
+            run (``key`` its index).
+        """
+        forced = _forced(runs)
+        if self.mode == "joint":
+            n = len(free) if free else len(greybox.DEFAULT_FREE) + forced
+            return [Target("the grey-box model", tuple(runs), n, 2)]
+        n = len(free) if free else len(greybox.DEFAULT_FREE) - 1  # fit_greybox: no K2dd, HdF
+        return [Target(f"the grey-box model of run {k + 1} ({r.speed:g} m/s)", (r,), n, 1, k)
+                for k, r in enumerate(runs)]  # fmt: skip
 
     def describe(self) -> str:
         """One line naming every setting that ran.
@@ -375,6 +510,12 @@ class Identified:
     details : dict
         Method-specific numbers as JSON types (matrices and free entries with standard
         errors, canonical parameters, condition numbers, torque fits, notes).
+    informativity : dict or None
+        Whether the data can determine the models (:func:`check_informativity`'s record):
+        one model's :meth:`~bikeid.ident.informativity.Informativity.to_json`, or
+        ``{"per_speed": {speed: ...}}`` / ``{"per_run": {index: ...}}``; with
+        ``informativity="skip"`` ``{"skipped": True, "note": ...}``.  None only for an
+        :class:`Identified` built by hand.
     """
 
     method: str
@@ -386,6 +527,7 @@ class Identified:
     interval_models: dict[float, CanonicalModel] | None = None
     speed_model: SpeedCanonicalModel | None = None
     details: dict[str, Any] = field(default_factory=dict)
+    informativity: dict[str, Any] | None = None
 
     def eigenvalues(self, speed: float) -> np.ndarray:
         """Eigenvalues at one of the fitted speeds, ordered and named.
@@ -437,6 +579,73 @@ def split_free(free: Sequence[str] | None) -> tuple[list[str] | None, list[str] 
             [n for n, r in zip(free, rows, strict=True) if r == 1])  # fmt: skip
 
 
+def check_informativity(
+    runs: Run | Sequence[Run],
+    settings: Any,
+    *,
+    free: Sequence[str] | None = None,
+    input_name: str = "T_delta",
+    informativity: str = "refuse",
+) -> dict[str, Any]:
+    """Whether ``runs`` can determine the models a fit with ``settings`` estimates.
+
+    Every fit function of :data:`METHODS` calls this before it fits: the models and their
+    free parameters come from ``settings.targets(runs, free)``, each is assessed by
+    :func:`bikeid.ident.informativity.assess` (the input's feedback share and order of
+    excitation).
+
+    Parameters
+    ----------
+    runs : Run or sequence of Run
+        The runs to be fitted.
+    settings : DirectSettings, PemSettings or GreyboxSettings
+        The method's settings (their ``targets`` method counts the free parameters).
+    free : sequence of str, optional
+        Free matrix entries (direct, greybox).
+    input_name : str, optional
+        The input signal [N m] (default ``T_delta``).
+    informativity : {"refuse", "report", "skip"}, optional
+        Refuse data that cannot determine a model (default), only report it, or skip
+        the assessment (:data:`~bikeid.ident.informativity.INFORMATIVITY`).
+
+    Returns
+    -------
+    dict
+        The record: one model's assessment
+        (:meth:`~bikeid.ident.informativity.Informativity.to_json`), or ``{"per_speed":
+        {speed: assessment}}`` for per-speed models and ``{"per_run": {index: assessment}}``
+        for per-run ones; with ``"skip"`` ``{"skipped": True, "note":``
+        :data:`~bikeid.ident.informativity.SKIPPED_NOTE` ``}``.
+
+    Raises
+    ------
+    UntrustworthyResult
+        With ``"refuse"``: ``the logs cannot determine <model>: <cause and fix>`` for the
+        first model the data cannot determine (its speed or run named).
+    InputError
+        If ``informativity`` is not one of :data:`~bikeid.ident.informativity.INFORMATIVITY`.
+    """
+    _choice("informativity", informativity, INFORMATIVITY)
+    if informativity == "skip":
+        return {"skipped": True, "note": SKIPPED_NOTE}
+    runs = [runs] if isinstance(runs, Run) else list(runs)
+    records: dict[Any, dict[str, Any]] = {}
+    for t in settings.targets(runs, free):
+        records[t.key], _ = guard(t.runs, t.n_params, what=t.what, informativity=informativity,
+                                  input_name=input_name, min_speeds=t.min_speeds)  # fmt: skip
+    if list(records) == [None]:
+        return records[None]
+    first = next(iter(records))
+    return {"per_speed" if isinstance(first, float) else "per_run": records}
+
+
+def _below(informativity: str) -> str:
+    """What a fit function asks of the estimator it calls after its own check: a skip is
+    passed on (the models' notes record it), otherwise the estimator only reports (its
+    notes name a cause it finds, e.g. in a per-speed start of a model over speed)."""
+    return "skip" if informativity == "skip" else "report"
+
+
 def _matrix_details(res: DirectResult | GreyboxModel) -> dict[str, Any]:
     return {"M": res.M, "C1": res.C1, "K0": res.K0, "K2": res.K2, "H": res.H}
 
@@ -449,6 +658,7 @@ def fit_direct(
     free: Sequence[str] | None = None,
     outputs: Sequence[str] | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    informativity: str = "refuse",
 ) -> Identified:
     """The direct method: prepare the signals, then least squares or IV of both rows.
 
@@ -467,6 +677,10 @@ def fit_direct(
     progress : callable, optional
         Not used (one step).
 
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the fit, whether the data can determine the model
+        (:func:`check_informativity`): refuse when they cannot (default), report it in
+        :attr:`Identified.informativity`, or skip the check (recorded there as skipped).
     Returns
     -------
     Identified
@@ -479,6 +693,8 @@ def fit_direct(
     InputError
         If ``outputs`` is not all four states or a free name is unknown;
         ValueError / UntrustworthyResult as :func:`bikeid.ident.direct.identify`.
+    UntrustworthyResult
+        If the data cannot determine the model (:func:`check_informativity`).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     s = settings or DirectSettings()
@@ -491,6 +707,7 @@ def fit_direct(
     if reference is None and runs and "parameters" not in runs[0].meta:
         raise InputError("runs carry no parameters: give the reference bicycle for the fixed "
                          "entries")  # fmt: skip
+    record = check_informativity(runs, s, free=free, informativity=informativity)
     cutoff = s.cutoff or None
 
     def prep(r: Run) -> Run:
@@ -501,11 +718,13 @@ def fit_direct(
             runs[0].meta["parameters"], name="run meta")  # fmt: skip
         start = canonical_matrices(ref) if isinstance(ref, BicycleParameters) else ref
         res = identify_tailored(runs, ref, free_roll, free_steer, prepare=prep, start=start,
-                                iterations=3, covariance=s.covariance)  # fmt: skip
+                                iterations=3, covariance=s.covariance,
+                                informativity=_below(informativity))  # fmt: skip
     else:
         res = identify([prep(r) for r in runs], reference, free_roll, free_steer,
                        method="ls" if s.iv is None else "iv", instruments=s.iv or "lagged",
-                       lags=s.lags, covariance=s.covariance)  # fmt: skip
+                       lags=s.lags, covariance=s.covariance,
+                       informativity=_below(informativity))  # fmt: skip
     speeds = _speeds(runs)
     details = {
         **_matrix_details(res),
@@ -518,7 +737,7 @@ def fit_direct(
     return Identified(
         method="direct", settings=s, models=(res,), speeds=tuple(speeds),
         outputs=("phi", "delta", "phidot", "deltadot"), at_speed=dict.fromkeys(speeds, res),
-        details=details,
+        details=details, informativity=record,
     )  # fmt: skip
 
 
@@ -530,6 +749,7 @@ def fit_pem(
     free: Sequence[str] | None = None,
     outputs: Sequence[str] | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    informativity: str = "refuse",
 ) -> Identified:
     """Canonical PEM per speed (each started from the next lower speed's model), and with
     ``speed_parameterized`` one model over all speeds started from them.
@@ -549,6 +769,10 @@ def fit_pem(
     progress : callable, optional
         ``progress(done, total, label)`` before each fit.
 
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the fit, whether the data can determine the model
+        (:func:`check_informativity`): refuse when they cannot (default), report it in
+        :attr:`Identified.informativity`, or skip the check (recorded there as skipped).
     Returns
     -------
     Identified
@@ -560,6 +784,9 @@ def fit_pem(
     ------
     InputError
         If ``free`` is given, or ``speed_parameterized`` with runs at one speed only.
+    UntrustworthyResult
+        If the data cannot determine a model (:func:`check_informativity`), naming its
+        speed.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     s = settings or PemSettings()
@@ -572,7 +799,8 @@ def fit_pem(
             "a speed-parameterized model needs runs at two or more speeds to separate alpha "
             f"from beta v^2; the data hold speed {speeds[0] if speeds else '-'} m/s only"
         )
-    kw: dict[str, Any] = {"noise_model": s.noise_model}
+    record = check_informativity(runs, s, informativity=informativity)
+    kw: dict[str, Any] = {"noise_model": s.noise_model, "informativity": _below(informativity)}
     if outputs:
         kw["outputs"] = tuple(outputs)
     steps = len(speeds) + bool(s.speed_parameterized)
@@ -597,7 +825,7 @@ def fit_pem(
             method="pem", settings=s, models=(model,), speeds=tuple(speeds),
             outputs=out_names, at_speed=dict.fromkeys(speeds, model),
             interval_models={v: model.at(v) for v in speeds}, speed_model=model,
-            details=details,
+            details=details, informativity=record,
         )  # fmt: skip
     else:
         details = {"models": {v: {"theta": m.params, "stderr": m.stderr, "A": m.A, "B": m.B}
@@ -605,6 +833,7 @@ def fit_pem(
         result = Identified(
             method="pem", settings=s, models=tuple(per.values()), speeds=tuple(speeds),
             outputs=out_names, at_speed=dict(per), interval_models=dict(per), details=details,
+            informativity=record,
         )  # fmt: skip
     if progress:
         progress(steps, steps, "done")
@@ -619,6 +848,7 @@ def fit_greybox(
     free: Sequence[str] | None = None,
     outputs: Sequence[str] | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    informativity: str = "refuse",
 ) -> Identified:
     """Grey-box PEM of the free matrix entries, one fit over all speeds (or one per run).
 
@@ -638,6 +868,10 @@ def fit_greybox(
     progress : callable, optional
         ``progress(done, total, label)`` before each fit.
 
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the fit, whether the data can determine the model
+        (:func:`check_informativity`): refuse when they cannot (default), report it in
+        :attr:`Identified.informativity`, or skip the check (recorded there as skipped).
     Returns
     -------
     Identified
@@ -649,11 +883,13 @@ def fit_greybox(
     Raises
     ------
     ValueError, UntrustworthyResult
-        As :func:`bikeid.ident.greybox.fit`.
+        As :func:`bikeid.ident.greybox.fit`; UntrustworthyResult also if the data cannot
+        determine the model (:func:`check_informativity`).
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     s = settings or GreyboxSettings()
-    kw: dict[str, Any] = {"drop_unidentifiable": s.drop_unidentifiable}
+    kw: dict[str, Any] = {"drop_unidentifiable": s.drop_unidentifiable,
+                          "informativity": _below(informativity)}  # fmt: skip
     if outputs:
         kw["outputs"] = tuple(outputs)
     speeds = _speeds(runs)
@@ -663,6 +899,7 @@ def fit_greybox(
         groups = [[r] for r in runs]
         if free is None:
             free = tuple(n for n in greybox.DEFAULT_FREE if n != "K2dd")
+    record = check_informativity(runs, s, free=free, informativity=informativity)
     fits = []
     for k, group in enumerate(groups):
         if progress:
@@ -687,7 +924,7 @@ def fit_greybox(
         method="greybox", settings=s, models=tuple(fits), speeds=tuple(speeds),
         outputs=tuple(res.outputs), at_speed=at,
         interval_models={v: at[v].at(v) for v in speeds}, speed_model=speed_model,
-        details=details,
+        details=details, informativity=record,
     )  # fmt: skip
 
 
@@ -727,7 +964,9 @@ class Method:
         One line: what the method estimates.
     fit : callable
         ``fit(runs, settings=None, *, reference=None, free=None, outputs=None,
-        progress=None) -> Identified``.
+        progress=None, informativity="refuse") -> Identified``; it checks that the data can
+        determine the model before fitting (:func:`check_informativity`, the free
+        parameters counted by ``settings.targets``).
     settings_type : type
         The frozen settings dataclass (``describe()``, ``to_json()``,
         ``from_options(mapping)``).

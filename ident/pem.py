@@ -62,6 +62,7 @@ from bikeid.ident.canonical import (
     speed_map,
     to_canonical_form,
 )
+from bikeid.ident.informativity import guard
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
@@ -260,6 +261,9 @@ class SpeedCanonicalModel(SpeedDependentModel):
         Sum of squared weighted prediction errors of the joint fit (dimensionless).
     nfev : int
         Number of residual evaluations of the joint fit.
+    notes : tuple of str
+        What the fit recorded (an informativity check skipped or failed, when asked to fit
+        anyway).
     """
 
     params: np.ndarray
@@ -270,6 +274,7 @@ class SpeedCanonicalModel(SpeedDependentModel):
     outputs: tuple[str, ...] = DEFAULT_OUTPUTS
     cost: float = float("nan")
     nfev: int = 0
+    notes: tuple[str, ...] = ()
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -437,6 +442,7 @@ def fit(
     passes: int = 2,
     starts: Sequence[np.ndarray] = (),
     multistart: bool = True,
+    informativity: str = "refuse",
 ) -> CanonicalModel:
     """Fixed-speed canonical PEM from one or more runs at the same speed and dt.
 
@@ -476,6 +482,10 @@ def fit(
         Further candidate starts.
     multistart : bool, optional
         Try all :data:`SUBSPACE_STARTS` (else only the first) when ``theta0`` is None.
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the fit, whether the runs can determine the 10 parameters
+        (:func:`bikeid.ident.informativity.guard`): refuse when they cannot (default), or
+        fit and say so in ``notes``, or skip the check (``notes`` says so).
 
     Returns
     -------
@@ -489,6 +499,9 @@ def fit(
         ``method`` or ``outputs`` is invalid, runs differ in sample period or speed,
         ``T_delta`` is zero in a run, a start does not hold 10 values, or no start gives
         a stable one-step predictor.
+    UntrustworthyResult
+        If the runs cannot determine the model (feedback-only input, too few excited
+        frequencies) and ``informativity`` is ``"refuse"``.
     """
     runs = [runs] if isinstance(runs, Run) else list(runs)
     if not runs:
@@ -507,6 +520,8 @@ def fit(
         raise ValueError(
             f"runs at different speeds {sorted(speeds)}: use fit_speed_model for several speeds"
         )
+    _, told = guard(runs, len(THETA_NAMES), what=f"the canonical PEM model at {data[0].v:g} m/s",
+                    informativity=informativity)  # fmt: skip
     dt = data[0].dt
     free_k = noise_model == "free"
     yvar = np.mean([np.var(d.y, axis=0) for d in data], axis=0)
@@ -538,6 +553,8 @@ def fit(
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
     if not sol.success:
         notes.append(f"least_squares: {sol.message}")
+    if told:
+        notes.append(told)
     cov = sandwich_covariance(prob, 4 * len(data))
     theta, Kf = prob.split(x)
     return CanonicalModel(
@@ -559,6 +576,7 @@ def fit_speed_model(
     method: str = "lm",
     per_speed: dict[float, CanonicalModel] | None = None,
     passes: int = 2,
+    informativity: str = "refuse",
 ) -> SpeedCanonicalModel:
     """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
 
@@ -589,6 +607,10 @@ def fit_speed_model(
         Fixed-speed fits to reuse, keyed by speed [m/s].
     passes : int, optional
         Weighting passes of the joint fit (at least 1).
+    informativity : {"refuse", "report", "skip"}, optional
+        Before the fit, whether the runs can determine the 14 parameters, with excited
+        runs at two or more speeds (:func:`bikeid.ident.informativity.guard`; the
+        per-speed fits, only starts here, report rather than refuse).
 
     Returns
     -------
@@ -601,6 +623,8 @@ def fit_speed_model(
         If a run breaks the sampling contract, the runs cover fewer than 2 distinct
         speeds, ``per_speed`` models used other outputs, no stable predictor exists for
         a run at the joint start, or a per-speed :func:`fit` raises.
+    UntrustworthyResult
+        If the runs cannot determine the model and ``informativity`` is ``"refuse"``.
     """
     runs = list(runs)
     check_sampling(runs, "pem.fit_speed_model")
@@ -613,6 +637,9 @@ def fit_speed_model(
             "the speed-parameterized model needs runs at >= 2 distinct speeds (alpha and beta "
             "are not separable at one speed, reference T3)"
         )
+    _, told = guard(runs, len(SPEED_NAMES), what="the speed-parameterized PEM model",
+                    informativity=informativity, min_speeds=2)  # fmt: skip
+    starts_check = "skip" if informativity == "skip" else "report"
     per: dict[float, CanonicalModel] = {}
     given = {round(float(v), 6): m for v, m in (per_speed or {}).items()}
     prev = None
@@ -621,7 +648,8 @@ def fit_speed_model(
             per[v] = given[v]
         else:
             per[v] = fit(groups[v], outputs=outputs, noise_model=noise_model, method=method,
-                         passes=1, starts=() if prev is None else (prev.theta,))  # fmt: skip
+                         passes=1, starts=() if prev is None else (prev.theta,),
+                         informativity=starts_check)  # fmt: skip
         prev = per[v]
     if any(tuple(m.outputs) != outputs for m in per.values()):
         raise ValueError("per_speed models were fitted with other outputs than outputs=")
@@ -654,4 +682,5 @@ def fit_speed_model(
     return SpeedCanonicalModel(
         params=params.copy(), covariance=cov, per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev,
+        notes=(told,) if told else (),
     )  # fmt: skip

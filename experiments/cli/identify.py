@@ -693,6 +693,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     import numpy as np
 
     from bikeid.dataset.files import check_distinct_inputs, check_output_path, check_outputs
+    from bikeid.ident.methods import SKIPPED_NOTE, check_informativity
     from bikeid.ident.model_file import file_provenance, save_model
     from bikeid.sim.errors import InputError
     from bikeid.sim.linear import eigenvalues
@@ -719,7 +720,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
     runs = _pool(runs, args.speed_tolerance)
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
-    informativity = _check_informative(args, runs, speeds, note)
+    free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
+    # the library's informativity check, run here before any stage line (a refusal stays
+    # one line) and again, cheaply, inside the fit; skipped on request with a note
+    skip_informativity = "informativity" in _skipped(args)
+    informativity = None if skip_informativity else check_informativity(runs, run_settings,
+                                                                        free=free)
+    if skip_informativity:
+        note(SKIPPED_NOTE)
     # stage lines start once the data passed every check: a refusal stays one line
     say(f"{len(runs)} run(s) from {len(data_files)} file(s) at "
         f"{', '.join(f'{v:g}' for v in speeds)} m/s passed the checks")
@@ -737,11 +745,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
                  "input": args.input, "informativity": informativity}  # fmt: skip
     say(f"fitting ({args.method}: {run_settings.describe()})")
     reference = _reference(args, runs, truth) if method.fixed_entries else None
-    free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
     bar = terminal_progress("identify", json_output=args.json, unit="fit",
                             quiet=args.quiet)  # fmt: skip
     fitted = method.fit(runs, run_settings, reference=reference, free=free, outputs=outputs,
-                        progress=bar)  # fmt: skip
+                        progress=bar, informativity="skip" if skip_informativity
+                        else "refuse")  # fmt: skip
     out["settings"] = {"method": args.method, **run_settings.to_json(),
                        "description": run_settings.describe()}  # fmt: skip
     out["outputs"] = list(fitted.outputs)
@@ -911,45 +919,6 @@ def _detail_lines(out: dict) -> list[str]:
         )
         lines.append(f"VAF (Moore eq. 6): {vaf}; condition: {out['condition']}")
     return lines
-
-
-def _n_params(args: argparse.Namespace, runs: list) -> int:
-    """Free parameters of the model ``args`` asks for (the informativity check's count)."""
-    from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
-
-    force = any(r["F"].any() for r in runs)
-    if args.method == "pem":
-        return len(SPEED_NAMES if args.speed_parameterized else THETA_NAMES)
-    if args.free:
-        return len([n for n in args.free.split(",") if n.strip()])
-    if args.method == "greybox":
-        from bikeid.ident.greybox import DEFAULT_FREE
-
-        return len(DEFAULT_FREE) + force
-    from bikeid.ident.direct import MOORE_ROLL, MOORE_STEER
-
-    return len(MOORE_ROLL) + len(MOORE_STEER) - (not force)
-
-
-def _check_informative(args: argparse.Namespace, runs: list, speeds: list, note) -> dict | None:
-    """Refuse data that cannot determine the model (ident.informativity), before the fit."""
-    from bikeid.ident.informativity import check
-
-    if "informativity" in _skipped(args):
-        note("check informativity skipped on request: the model may be determined by "
-             "feedback, not by the data")  # fmt: skip
-        return None
-    n = _n_params(args, runs)
-    if args.method == "pem" and not args.speed_parameterized:
-        per = {}
-        for v in speeds:
-            at_v = [r for r in runs if round(r.speed, 6) == v]
-            per[v] = check(at_v, n, what=f"the canonical PEM model at {v:g} m/s",
-                           min_speeds=1).to_json()  # fmt: skip
-        return {"per_speed": per}
-    what = {"pem": "the speed-parameterized PEM model", "greybox": "the grey-box model",
-            "direct": "the direct least-squares model"}[args.method]  # fmt: skip
-    return check(runs, n, what=what, min_speeds=2 if len(speeds) >= 2 else 1).to_json()
 
 
 def _intervals(models: dict, speed_model) -> dict:

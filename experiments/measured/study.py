@@ -68,8 +68,7 @@ from bikeid.ident.effects.experiment_model import ExperimentModel, window_errors
 from bikeid.ident.effects.library import LIBRARY
 from bikeid.ident.effects.pipeline import fit_model
 from bikeid.ident.effects.weave import decay_eigenvalue, median_complex, weave_uncertainty
-from bikeid.ident.informativity import assess
-from bikeid.ident.methods import DIRECT_PRESETS, METHODS
+from bikeid.ident.methods import DIRECT_PRESETS, METHODS, Identified
 from bikeid.ident.signals import prepare
 from bikeid.ident.validate import windowed_simulation_vaf
 from bikeid.ident.validation_report import frequency_response_estimate, model_frequency_response
@@ -394,7 +393,8 @@ def _halves(run: Run) -> tuple[Run, Run]:
 
 def _pem_model(runs: list[Run], label: str) -> StudyModel:
     """Canonical PEM at the runs' (single) speed as a StudyModel (the method table's pem)."""
-    (m,) = METHODS["pem"].fit(runs).models
+    fitted = METHODS["pem"].fit(runs, informativity="report")
+    (m,) = fitted.models
 
     def ab(v: float):
         ss = m.state_space()
@@ -404,12 +404,14 @@ def _pem_model(runs: list[Run], label: str) -> StudyModel:
     return StudyModel("pem", label, ab, None, speeds=(float(m.speed),),
                       info={"speed": float(m.speed), "eigenvalues": [complex(x) for x in eig],
                             "notes": list(m.notes),
-                            **_informativity(runs, 10, 1)})  # fmt: skip
+                            **_informativity(fitted)})  # fmt: skip
 
 
 def _direct_model(runs: list[Run], label: str) -> StudyModel:
     """The method table's direct with the settings :data:`DIRECT_SETTINGS` names."""
-    (d,) = METHODS["direct"].fit(runs, DIRECT_SETTINGS, reference=steer_by_wire()).models
+    fitted = METHODS["direct"].fit(runs, DIRECT_SETTINGS, reference=steer_by_wire(),
+                                   informativity="report")  # fmt: skip
+    (d,) = fitted.models
     names = list(d.free)
     cov = np.zeros((len(names), len(names)))
     for nm, C in d.covariance.values():
@@ -420,24 +422,27 @@ def _direct_model(runs: list[Run], label: str) -> StudyModel:
                                               "condition": dict(d.condition),
                                               "vaf_in_sample": dict(d.vaf_moore),
                                               "notes": list(d.notes),
-                                              **_informativity(runs, len(names), 2)})  # fmt: skip
+                                              **_informativity(fitted)})  # fmt: skip
 
 
-def _informativity(runs: list[Run], n_params: int, min_speeds: int) -> dict:
-    """Whether the logs can determine a model of ``n_params`` parameters
-    (:func:`bikeid.ident.informativity.assess`): ``informativity`` always, ``undetermined``
-    (the cause) when they cannot, so the rows say so instead of reporting numbers."""
-
-    speeds = {round(r.speed, 1) for r in runs}
-    info = assess(runs, n_params, min_speeds=min(min_speeds, len(speeds)))
-    out: dict = {"informativity": info.to_json()}
-    if info.cause is not None:
-        out["undetermined"] = f"the logs cannot determine this model: {info.cause}"
+def _informativity(fitted: Identified) -> dict:
+    """Whether the logs can determine the fitted model, as the fit assessed it
+    (``informativity="report"``, :func:`bikeid.ident.methods.check_informativity`):
+    ``informativity`` always, ``undetermined`` (the cause) when they cannot, so the rows
+    say so instead of reporting numbers."""
+    record = fitted.informativity or {}
+    per = record.get("per_speed") or record.get("per_run")
+    infos = list(per.values()) if per else [record]
+    out: dict = {"informativity": infos[0] if len(infos) == 1 else record}
+    causes = [i["cause"] for i in infos if i.get("cause")]
+    if causes:
+        out["undetermined"] = f"the logs cannot determine this model: {causes[0]}"
     return out
 
 
 def _greybox_model(runs: list[Run], label: str, max_nfev: int = 100) -> StudyModel:
-    g = greybox.fit(runs, reference=steer_by_wire(), drop_unidentifiable=True, max_nfev=max_nfev)
+    g = greybox.fit(runs, reference=steer_by_wire(), drop_unidentifiable=True, max_nfev=max_nfev,
+                    informativity="report")  # what the logs cannot determine: in its notes
     info = {"condition": float(g.condition), "dropped": list(g.dropped),
             "inflation": dict(g.inflation), "notes": list(g.notes)}  # fmt: skip
     return matrix_model("greybox", label, g.canonical(), free=dict(g.free), stderr=dict(g.stderr),

@@ -15,6 +15,9 @@ controller (``dataset.linear_loop.simulate``), 30 s at 100 Hz:
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -121,3 +124,82 @@ def test_bad_arguments():
         assess([run], 0)
     with pytest.raises(InputError):
         assess([run], 10, threshold=1.5)
+
+
+# -- the threshold on the steer-by-wire push logs (FEEDBACK_R2's comment) ----------------
+DATA = os.environ.get("BIKEID_DATA")
+needs_data = pytest.mark.skipif(
+    not DATA or not Path(DATA, "tudelft-sbw", "eigen").is_dir(),
+    reason="set BIKEID_DATA to the folder holding tudelft-sbw/ (the measured logs)",
+)
+
+
+def _push_log(kph: str):
+    from bikeid.dataset.sbw_logs import data_dir, load_log, settled
+
+    return settled(load_log(data_dir(DATA) / "eigen" / f"eigen_normal_sil6.5n2_{kph}kph.log.gz"))
+
+
+@needs_data
+@pytest.mark.parametrize("kph", ["5.4", "12.6", "16.2"])
+def test_push_logs_are_refused_as_feedback(kph):
+    """The push logs at 1.5, 3.5, 4.5 m/s: the logged command is the balance law
+    K (V - v) phidot (the data README), which the state law reproduces to >= 0.995 (measured
+    1.0000, 0.9987, 0.9951; the remainder is a few relayed handlebar bursts), so no model."""
+    run = _push_log(kph)
+    with pytest.raises(UntrustworthyResult, match="the input T_delta is feedback only"):
+        check([run], 10, what="the canonical PEM model")
+    assert assess([run], 10).r2[0] >= 0.995
+
+
+@needs_data
+def test_push_log_at_9_kmh_is_a_known_limit():
+    """The 9 km/h push log passes the feedback share (0.8994), and that is what the data
+    give, not a defect of the law: its balance-law part (``sil_command``) is reproduced to
+    rounding (R^2 > 0.9999, the README's law K (V - v) phidot), while its plant input
+    ``command_fork`` also holds the relayed handlebar torque (``command_fork - sil_command``
+    correlates > 0.9 with ``hand_torque``: measured 0.91), which no state law reproduces.
+    Its R^2 lies between the testbed's dithered runs (<= 0.83) and a small-dither run
+    that determines the model (0.968), so no threshold separates it (FEEDBACK_R2's comment).
+    """
+    run = _push_log("9")
+    assert feedback_share(run, "sil_command")[0] > 0.9999
+    assert np.corrcoef(run["T_ext"], run["hand_torque"])[0, 1] > 0.9
+    r2 = feedback_share(run)[0]
+    assert 0.85 < r2 < FEEDBACK_R2  # measured 0.8994
+    assert assess([run], 10).informative
+    assert _lagged_law_r2(run) < 0.85  # a low-order dynamic law does not reproduce it: 0.680
+
+
+def _lagged_law_r2(run, lags: int = 3) -> float:
+    """Held-out R^2 of the static law plus the four states lagged 1..``lags`` samples:
+    least squares on the first half, judged on the second (a second construction of a
+    low-order dynamic law, independent of ``feedback_share``)."""
+    from bikeid.ident.informativity import _law
+
+    cols = [_law(run, "T_delta")]
+    for s in ("phi", "delta", "phidot", "deltadot"):
+        x = np.asarray(run[s], float)
+        cols += [np.concatenate([np.full(k, x[0]), x[:-k]])[:, None] for k in range(1, lags + 1)]
+    X, u = np.hstack(cols), np.asarray(run["T_delta"], float)
+    h = run.n // 2
+    coef, *_ = np.linalg.lstsq(X[:h], u[:h], rcond=None)
+    res = u[h:] - X[h:] @ coef
+    return float(1.0 - np.sum(res**2) / np.sum((u[h:] - u[h:].mean()) ** 2))
+
+
+def test_a_lagged_law_would_refuse_the_testbeds_own_dithered_run():
+    """Why the law has no lagged states: on the testbed's dithered sweep run (pole placement
+    at 2 m/s, the sweep's defaults: roll chirp and a dither held 0.05 s) the static law
+    leaves a third of the torque unexplained (R^2 0.633), but with the states lagged 1-3
+    samples a law reproduces 0.974 of it on the held-out second half (the lags give back
+    the held input through the plant's equation), far above what the 9 km/h push log
+    reaches with the same law (0.680): a lagged law would refuse this run first.  The
+    bounds 0.8 and 0.95 sit between the two measured values and the threshold's other
+    cases (FEEDBACK_R2's comment)."""
+    from bikeid.experiments.testbed.sweep import SweepSpec, Task, simulate_task
+
+    run = simulate_task(SweepSpec(controller="pole", speeds=(2.0,)), Task("pole", 2.0, 0))
+    assert feedback_share(run)[0] < 0.8
+    assert _lagged_law_r2(run) > 0.95
+    assert check([run], 10).informative

@@ -143,7 +143,9 @@ def test_study_on_real_logs(tmp_path):
     root = data_dir(DATA)
     eig = {r.meta["file"]: r for r in (settled(load_log(p)) for p in find_logs(root, "eigen"))}
     fit = [r for r in eig.values() if r.speed in (2.5, 4.5)]
-    d = direct.identify(fit, reference=steer_by_wire())
+    # the push logs cannot determine this model (ident.informativity): fitted anyway, as
+    # the study does, to check its decay error against a second implementation
+    d = direct.identify(fit, reference=steer_by_wire(), informativity="report")
     decays = load_decays(root)
     for f, row in s0["runs"].items():
         ws = _second_half_windows(decays, eig[f])
