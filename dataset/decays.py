@@ -3,7 +3,8 @@
 - **Listed**: the rows of ``eigen/segments.csv`` (transcribed from the source's analysis)
   where it lists the log (:func:`read_segments`).
 - **Detected**: for any other eigen log (a new run, a fetched folder without the segments
-  file) :func:`detect_decays` finds them from the roll rate.
+  file) :func:`detect_decays` finds them from the roll rate; a window lasts 1 s, or up to
+  3 s for a decay that needs longer to halve (:data:`DECAY_MAX_LENGTH`).
 
 :func:`iter_decays` gives each eigen log with its windows; :func:`load_decays` turns them
 into :class:`bikeid.dataset.windows.Window` objects, optionally only near some speeds.
