@@ -331,7 +331,8 @@ def _second_push(x: np.ndarray, thr: float, lull: int) -> int:
     second push (at the lobe's start, or where it rose again) when: the lobe starts after
     ``lull`` samples within thr / 2 (the decay's own oscillation crosses that band in at
     most 1.05 / omega s); it rises again within the lobe, above :data:`DECAY_REGROW` x the
-    lobe's extreme so far after falling below half of it; or, after the push's own lobe
+    lobe's extreme so far after falling below half of it (a lobe that had risen above
+    ``thr``: noise at the band's edge makes no dip); or, after the push's own lobe
     and the next (its response, which may be the larger), it rises above DECAY_REGROW x
     every lobe since the push's own."""
     h = 0.5 * thr
@@ -347,7 +348,7 @@ def _second_push(x: np.ndarray, thr: float, lull: int) -> int:
                     before = max(before, ext)
                 sgn, k, ext, start, fresh, dip = np.sign(v), k + 1, 0.0, t, calm >= lull, -1
             calm = 0
-        if dip < 0 and u < 0.5 * ext:
+        if dip < 0 and ext > thr and u < 0.5 * ext:
             dip = t  # the lobe has fallen: a rise above its extreme is another push
         if u > thr and u > DECAY_REGROW * ext and dip >= 0:
             return dip
