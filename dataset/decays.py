@@ -3,7 +3,8 @@
 - **Listed**: the rows of ``eigen/segments.csv`` (transcribed from the source's analysis)
   where it lists the log (:func:`read_segments`).
 - **Detected**: for any other eigen log (a new run, a fetched folder without the segments
-  file) :func:`detect_decays` finds them from the roll rate.
+  file) :func:`detect_decays` finds them from the roll rate; a window lasts 1 s, or up to
+  3 s for a decay that needs longer to halve (:data:`DECAY_MAX_LENGTH`).
 
 :func:`iter_decays` gives each eigen log with its windows; :func:`load_decays` turns them
 into :class:`bikeid.dataset.windows.Window` objects, optionally only near some speeds.
@@ -29,9 +30,12 @@ from bikeid.sim.errors import InputError
 __all__ = [
     "DECAY_K",
     "DECAY_LENGTH",
+    "DECAY_LULL",
+    "DECAY_MAX_LENGTH",
     "DECAY_MIN_PEAK",
     "DECAY_QUIET",
     "DECAY_RATIO",
+    "DECAY_REGROW",
     "MIN_FIT_DECAYS",
     "Segment",
     "decays_from_runs",
@@ -39,6 +43,7 @@ __all__ = [
     "iter_decays",
     "load_decays",
     "read_segments",
+    "slowest_decay_rate",
     "steer_by_wire_logs",
 ]
 
@@ -124,15 +129,48 @@ def _segments(path: Path, reader: csv.DictReader, available: set[str] | None) ->
 
 
 #: free-decay detector settings (:func:`detect_decays`)
-DECAY_LENGTH = 1.0  # s, window length (the transcribed windows are 1 s)
+DECAY_LENGTH = 1.0  # s, shortest window (the transcribed windows are 1 s)
+DECAY_MAX_LENGTH = 3.0  # s, longest window: a slow decay may take this long to halve
 DECAY_K = 6.0  # onset threshold in robust standard deviations of the roll rate
 DECAY_MIN_PEAK = 0.2  # rad/s, lower bound of the onset threshold
 DECAY_QUIET = 0.35  # max |roll rate| in the second before the push, relative to the peak
 DECAY_RATIO = 0.5  # max |roll rate| over the window's second half, relative to the peak
+DECAY_REGROW = 1.1  # a lobe above this x the lobes before it is a push (not the same motion)
+DECAY_LULL = 0.4  # s, a lobe above the onset threshold after this long calm is a second push
+
+
+def slowest_decay_rate(max_length: float = DECAY_MAX_LENGTH) -> float:
+    """The slowest exponential envelope :func:`detect_decays` keeps, -2 ln(1/ratio) / max_length.
+
+    A window of length L is kept when the second half stays below :data:`DECAY_RATIO` x the
+    peak; for an envelope e^{sigma t} whose lobes fall at L/2 that is e^{sigma L / 2} <
+    ratio, so with L at most ``max_length`` the envelope must decay faster than this rate.
+
+    Parameters
+    ----------
+    max_length : float, optional
+        Longest window [s] (default :data:`DECAY_MAX_LENGTH`, 3 s).
+
+    Returns
+    -------
+    float
+        The rate sigma [1/s] (negative): -0.462 1/s for 3 s and the ratio 0.5.
+
+    Raises
+    ------
+    ValueError
+        If ``max_length`` is not a positive number.
+    """
+    if not (isinstance(max_length, (int, float)) and max_length > 0):
+        raise ValueError(f"max_length must be a positive number of seconds, got {max_length!r}")
+    return 2.0 * math.log(DECAY_RATIO) / float(max_length)
 
 
 def detect_decays(
-    run: Run, length: float = DECAY_LENGTH, rejected: list | None = None
+    run: Run,
+    length: float = DECAY_LENGTH,
+    rejected: list | None = None,
+    max_length: float | None = DECAY_MAX_LENGTH,
 ) -> list[Segment]:
     """Free decays in an eigen log found from the roll rate alone (no segments file).
 
@@ -140,17 +178,38 @@ def detect_decays(
     (1.4826 MAD) scale of the roll rate over the settled-speed part of the log (the rows
     the windows may come from; the whole log when it has no start-up ramp).  The window
     starts at the extreme of that first lobe (|roll rate| > half the threshold with the
-    same sign; the hand has left: from there on the motion is the loop's own) and lasts
-    ``length`` s.  It is kept
-    only if it is a clean decay from rest: within the settled-speed part of the log; in
-    the second before the push (less its last 0.15 s) |roll rate| stayed below 0.35 x the
-    peak; over the window's second half it stays below 0.5 x the peak; and it never
-    exceeds 1.1 x the peak (no second push).  The next search starts after the window.  On the four
-    ``eigen_normal`` logs this finds every window of the transcribed ``segments.csv``
-    whose push clears the threshold, at the same start to a few samples, plus the
-    pushes the source's analysis did not use (tests/ident/effects/test_pipeline.py,
-    docs/measured.md);
-    those fit the model worse, so the curated list is the default where it exists.
+    same sign; the hand has left: from there on the motion is the loop's own).  A lobe
+    no larger than 1.1 x the largest |roll rate| of the second before it (less its last
+    0.15 s) is the motion before going on, not a push: it is skipped, neither kept nor
+    counted.  A push is kept only if it is a clean decay from rest: within the
+    settled-speed part of the log; in the second before the push (less its last 0.15 s)
+    |roll rate| stayed below 0.35 x the peak; it decays: over the window's second half
+    |roll rate| stays below 0.5 x the peak; and it never exceeds 1.1 x the peak.
+
+    **The window follows the decay.**  Its length L is the shortest from ``length`` (1 s)
+    up to ``max_length`` (3 s) whose second half stays below 0.5 x the peak: a decay that
+    has halved within 0.5 s keeps a 1 s window, a slower one a window about twice its
+    halving time, so at least half of every window shows the decayed motion.  The slowest
+    envelope e^{sigma t} kept has sigma = 2 ln 0.5 / max_length (-0.46 1/s for 3 s,
+    :func:`slowest_decay_rate`; a fixed 1 s window needs sigma < -1.39 1/s, which refused
+    the weave of a loop with a 10-30 ms input delay, -0.5 to -1.6 1/s).  A window longer
+    than ``length`` never runs past the settled speed and ends before the next push.  Lobes
+    are the excursions of the roll rate beyond -+ half the onset threshold; a free decay's
+    lobes each rise and fall once and shrink.  A second push is a lobe rising above the
+    onset threshold after more than 0.4 s within that band (the decay's oscillation crosses
+    it in at most 1.05 / omega s, 0.35 s at 3 rad/s), a lobe rising again above 1.1 x its
+    extreme after falling below half of it, or, after the push's own lobe and the next
+    (its response, which may be the larger), a lobe above 1.1 x every lobe since the push's
+    own.  A window that has not halved before a second push is rejected.  The search for
+    the next push starts after the window; after a rejected one, after ``max_length`` or at
+    that second push.
+    With ``max_length`` None (or equal to ``length``) every window is ``length`` long.
+
+    On the four ``eigen_normal`` logs this finds every window of the transcribed
+    ``segments.csv`` whose push clears the threshold, at the same start to a few samples
+    and with the same 1 s length, plus the pushes the source's analysis did not use
+    (tests/ident/effects/test_pipeline.py, docs/measured.md); those fit the model worse,
+    so the curated list is the default where it exists.
 
     Any log of :class:`~bikeid.dataset.run.Run` works (the steer-by-wire logs or a user's
     CSV/HDF5 log): the sample period is the run's own (:attr:`Run.dt`).
@@ -160,22 +219,27 @@ def detect_decays(
     run : Run
         A log with pushes and free decays (roll rate ``phidot`` [rad/s]).
     length : float, optional
-        Window length [s] (default :data:`DECAY_LENGTH` = 1 s).
+        Shortest window length [s] (default :data:`DECAY_LENGTH` = 1 s).
     rejected : list, optional
         When given, each push that cleared the threshold but was not kept is appended as
-        ``(row, reason)`` (file row index of its peak, a short reason: no quiet second
-        before it, does not decay, a second push, or past the end of the settled speed).
+        ``(row, reason)`` (file row index of its peak, a short reason: not at rest in the
+        second before it; does not decay within the longest window; rises above 1.1 x its
+        peak; a second push before it decayed; past the end of the settled speed).
+    max_length : float or None, optional
+        Longest window length [s] (default :data:`DECAY_MAX_LENGTH` = 3 s; None:
+        ``length``).
 
     Returns
     -------
     list of Segment
         The clean decays in time order, rows in file row indices, ``speed`` the run's
-        treadmill speed [m/s] (NaN if the run has none).
+        treadmill speed [m/s] (NaN if the run has none); ``length`` to ``max_length`` long.
 
     Raises
     ------
     ValueError
-        If ``length`` is shorter than 20 samples.
+        If ``length`` is shorter than 20 samples, or ``max_length`` shorter than
+        ``length``.
     """
     pr = np.asarray(run.signals["phidot"], dtype=float)
     dt = float(run.meta.get("dt") or run.dt)
@@ -186,13 +250,17 @@ def detect_decays(
     if m < 20:
         raise ValueError(f"decay window length {length} s is too short (need >= 20 samples "
                          f"= {20 * dt:g} s)")  # fmt: skip
+    mx = m if max_length is None else int(round(max_length / dt))
+    if mx < m:
+        raise ValueError(f"longest decay window {max_length} s is shorter than the shortest "
+                         f"({length} s); give max_length >= length")  # fmt: skip
     part = pr[lo:hi] if hi - lo >= 20 else pr
     sigma = 1.4826 * float(np.median(np.abs(part - np.median(part))))
     thr = max(DECAY_K * sigma, DECAY_MIN_PEAK)
     pre, gap = int(round(1.0 / dt)), int(round(0.15 / dt))
     speed = float(run.meta.get("speed", np.nan))
     out: list[Segment] = []
-    i = max(lo, pre)
+    i, pushed = max(lo, pre), False
     while i < hi - m:
         if abs(pr[i]) <= thr:
             i += 1
@@ -202,23 +270,95 @@ def detect_decays(
             k += 1
         j = i + int(np.argmax(sgn * pr[i : k + 1]))
         peak = abs(pr[j])
-        win = np.abs(pr[j : j + m])
+        before = float(np.max(np.abs(pr[i - pre : i - gap])))
+        if peak <= DECAY_REGROW * before and not pushed:  # a lobe of the motion before
+            i = k + 1
+            continue
+        n, nxt = 0, j + m
         if j + m > hi:
             why = "runs past the end of the settled speed"
-        elif np.max(np.abs(pr[i - pre : i - gap])) >= DECAY_QUIET * peak:
+        elif before >= DECAY_QUIET * peak:
             why = f"not at rest in the second before the push (>= {DECAY_QUIET} x peak)"
-        elif np.max(win[m // 2 :]) >= DECAY_RATIO * peak:
-            why = f"does not decay (second half >= {DECAY_RATIO} x peak)"
-        elif np.max(win) > 1.1 * peak:
-            why = "a second push inside the window (> 1.1 x peak)"
         else:
-            why = ""
-        if not why:
-            out.append(Segment(run.meta.get("file", "?"), speed, first + j, first + j + m))
+            n, why, nxt = _decay_length(pr[j : min(j + mx, hi)], m, peak, thr, dt)
+            if why.startswith("does not decay") and hi - j < mx:
+                why = (f"runs past the end of the settled speed before it decays (second half "
+                       f">= {DECAY_RATIO} x peak)")  # fmt: skip
+            nxt += j
+        if n:
+            out.append(Segment(run.meta.get("file", "?"), speed, first + j, first + j + n))
         elif rejected is not None:
             rejected.append((first + j, why))
-        i = j + m
+        i, pushed = nxt, why.startswith("a second push")  # the next lobe is that push
     return out
+
+
+def _decay_length(
+    x: np.ndarray, m: int, peak: float, thr: float, dt: float
+) -> tuple[int, str, int]:
+    """One push's window: ``x`` is the roll rate from its peak on [rad/s], at most the longest
+    window long (or to the end of the settled speed); ``m`` the shortest window [samples];
+    ``thr`` the onset threshold [rad/s].
+
+    Returns (the kept length [samples], 0 when rejected; the reason, "" when kept; the
+    sample, counted from the peak, where the search for the next push goes on).
+    """
+    a = np.abs(x)
+    top = np.maximum.accumulate(a)
+    if top[m - 1] > 1.1 * peak:
+        return 0, _RISES, m
+    if np.max(a[m // 2 : m]) < DECAY_RATIO * peak:
+        return m, "", m  # the fixed window: no further test
+    if a.size == m:
+        return 0, f"does not decay (second half >= {DECAY_RATIO} x peak)", m
+    q = _second_push(x, thr, int(round(DECAY_LULL / dt)))  # a longer window ends before it
+    for n in range(m + 1, min(q, a.size) + 1):
+        if top[n - 1] > 1.1 * peak:
+            return 0, _RISES, n
+        if np.max(a[n // 2 : n]) < DECAY_RATIO * peak:
+            return n, "", n
+    if q < a.size:
+        return 0, f"a second push {q * dt:.2f} s after the peak, before it decayed", q
+    return 0, (f"does not decay within {a.size * dt:.3g} s (second half >= {DECAY_RATIO} x "
+               "peak)"), a.size  # fmt: skip
+
+
+def _second_push(x: np.ndarray, thr: float, lull: int) -> int:
+    """The first sample of a second push in ``x`` (roll rate from a push's peak on), or
+    ``x.size``.  Lobes are the excursions beyond -+ ``thr`` / 2 (a sign change there starts
+    the next; noise near zero starts none); a free decay's lobes each rise and fall once
+    and shrink.  A lobe's |roll rate| rising above the onset threshold ``thr`` marks a
+    second push (at the lobe's start, or where it rose again) when: the lobe starts after
+    ``lull`` samples within thr / 2 (the decay's own oscillation crosses that band in at
+    most 1.05 / omega s); it rises again within the lobe, above :data:`DECAY_REGROW` x the
+    lobe's extreme so far after falling below half of it (a lobe that had risen above
+    ``thr``: noise at the band's edge makes no dip); or, after the push's own lobe
+    and the next (its response, which may be the larger), it rises above DECAY_REGROW x
+    every lobe since the push's own."""
+    h = 0.5 * thr
+    sgn = 1.0 if x[0] >= 0 else -1.0
+    k, ext, before, start, calm, fresh, dip = 0, 0.0, 0.0, 0, 0, False, -1
+    for t, v in enumerate(x):
+        u = abs(v)
+        if u < h:
+            calm += 1
+        else:
+            if sgn * v < 0 or calm >= lull:  # the next lobe
+                if k >= 1:
+                    before = max(before, ext)
+                sgn, k, ext, start, fresh, dip = np.sign(v), k + 1, 0.0, t, calm >= lull, -1
+            calm = 0
+        if dip < 0 and ext > thr and u < 0.5 * ext:
+            dip = t  # the lobe has fallen: a rise above its extreme is another push
+        if u > thr and u > DECAY_REGROW * ext and dip >= 0:
+            return dip
+        ext = max(ext, u)
+        if ext > thr and k >= 1 and (fresh or (k >= 2 and ext > DECAY_REGROW * before)):
+            return start
+    return x.size
+
+
+_RISES = "rises above 1.1 x its peak inside the window (a second push, or the push still acting)"
 
 
 def iter_decays(
@@ -371,8 +511,9 @@ def _too_few(files: list[dict], n: int, need: int, purpose: str) -> str:
         parts.append(f"{f['file']}: {pushes} pushes, {f['kept']} kept"
                      + (f", rejected: {rej}" if rej else ""))  # fmt: skip
     return (f"{n} usable free decay(s) in {len(files)} log(s); {purpose} needs at least "
-            f"{need}. " + " | ".join(parts) + ". Log more pushes, each followed by at least "
-            f"{DECAY_LENGTH:g} s of free motion from rest")  # fmt: skip
+            f"{need}. " + " | ".join(parts) + ". Log more pushes, each from rest and followed "
+            f"by free motion that halves within {DECAY_MAX_LENGTH:g} s (at least "
+            f"{DECAY_LENGTH:g} s of it)")  # fmt: skip
 
 
 def steer_by_wire_logs(

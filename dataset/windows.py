@@ -36,6 +36,13 @@ class Window:
     simulation only).  ``hist`` holds the logged steer commands before the window
     start (oldest first) for the delay buffer.  ``speed`` is the treadmill speed [m/s].
 
+    Windows of one fit may differ in length (detected decays last 1 to 3 s,
+    :func:`bikeid.dataset.decays.detect_decays`).  Each counts as one decay: the fit divides
+    a window's residual by that window's own ||y - mean y|| (its cost term is its NRMSE^2,
+    :func:`bikeid.ident.effects.fit.output_residuals`, not a sum that grows with n), the
+    standard errors take each window as one cluster of its own size, and the weave term
+    takes one eigenvalue fit per window (the median per speed).
+
     Attributes
     ----------
     file : str
