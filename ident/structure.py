@@ -24,6 +24,14 @@ whether the data reject the structure the intervals assume, with the residual te
   by construction, so its whiteness says nothing about the fit; its independence test still
   applies (in closed loop a coloured disturbance that the fit ignores correlates with past
   inputs and biases the plant estimate: Forssell & Ljung 1999, the direct approach).
+  Whiteness is *advisory*: it is reported, and named in the note, but does not withhold
+  intervals.  It tests the noise model, whose error biases the plant estimate in closed loop
+  only in proportion to the disturbance's share of the input (Forssell & Ljung 1999), and it
+  rejects fits whose intervals are right: on the linear plant of the coverage study
+  (``bikeid coverage`` settings: 5 m/s, 3 N m dither, 0.5 N m unlogged torque held like the
+  dither, 50 s), seeds 0-59, whiteness of phi or delta rejects 5 fits at the per-test level
+  and all 20 of their eigenvalue real-part intervals contain the truth; independence rejects
+  none of the 60.
 - **Speed-parameterized model against its per-speed fits** (with ``speed_model``): the model
   over speed is the per-speed canonical model restricted to theta(v) = S(v) p, so at each
   fitted speed the difference d = theta_v - S(v) p between the free fit and the restricted
@@ -32,9 +40,11 @@ whether the data reject the structure the intervals assume, with the residual te
   conservative).  It catches a model over speed whose restriction the data reject even where
   its residuals look clean.
 
-All tests at all speeds form one family: each is run at ``level / (number of tests)``
-(Bonferroni), so on data the structure fits the chance of any rejection is at most
-``level`` (default :data:`STRUCTURE_LEVEL`, 1 %).
+The withholding tests (independence, and the comparison over speed) at all speeds form one
+family: each is run at ``level / (number of them)`` (Bonferroni), so on data the structure
+fits the chance that any withholds intervals is at most ``level`` (default
+:data:`STRUCTURE_LEVEL`, 1 %); the advisory whiteness tests are judged at the same per-test
+level.
 
 What the check does not catch (measured on the README tour's sweep, 29 speeds x 5 runs of
 50 s, and the same sweep on the exact linear plant): the bias of a *fixed-speed* fit to the
@@ -95,13 +105,14 @@ class StructureCheck:
     per_test_level : float
         Level of each test, ``level / n_tests`` (Bonferroni).
     n_tests : int
-        Number of tests in the family.
+        Number of withholding tests (independence, speed model) in the family.
     tests : dict of float to list of dict
         Per speed [m/s] every test: ``kind`` (``"independence"``, ``"whiteness"`` or
         ``"speed_model"``), ``output`` (or None), ``statistic``, ``dof``, ``p_value``,
-        ``rejected``.
+        ``rejected`` (p below the per-test level) and ``advisory`` (True for whiteness:
+        reported, never withholding).
     rejected_speeds : tuple of float
-        Speeds [m/s] at which some test rejects.
+        Speeds [m/s] at which some withholding test rejects.
     speed_model_rejected : bool
         Whether a model over speed is rejected at any speed: one parameter vector describes
         every speed, so a rejection anywhere rejects it, with its v_w, v_c and its
@@ -142,7 +153,7 @@ class StructureCheck:
             "whiteness": "residuals are not white",
             "speed_model": "the model over speed differs from the per-speed fits",
         }
-        speeds = self.rejected_speeds if speed is None else (round(float(speed), 6),)
+        speeds = tuple(self.tests) if speed is None else (round(float(speed), 6),)
         rows = [t for v in speeds for t in self.tests.get(v, []) if t["rejected"]]
         parts = []
         for kind, text in words.items():
@@ -163,11 +174,19 @@ class StructureCheck:
             :data:`REJECTED_NOTE` filled in, or :data:`PASSED_NOTE`.
         """
         if self.passed:
-            return PASSED_NOTE.format(level=self.level)
-        where = ", ".join(f"{v:g}" for v in self.withheld_speeds) + " m/s"
+            advisory = self.causes()
+            if not advisory:
+                return PASSED_NOTE.format(level=self.level)
+            at = [v for v, r in self.tests.items() if any(t["rejected"] for t in r)]
+            return PASSED_NOTE.format(level=self.level) + (
+                f" (advisory: {advisory} at {_speeds_text(at)}: the noise "
+                "model misses something; in closed loop that biases the estimates in "
+                "proportion to the disturbance's share of the input)"
+            )
+        where = _speeds_text(self.withheld_speeds)
         if self.speed_model_rejected:
-            at = ", ".join(f"{v:g}" for v in self.rejected_speeds)
-            where = f"the model over speed (rejected at {at} m/s): v_w, v_c and {where}"
+            where = (f"the model over speed (rejected at {_speeds_text(self.rejected_speeds)}): "
+                     "v_w, v_c and its eigenvalues at every speed")  # fmt: skip
         return REJECTED_NOTE.format(level=self.level, causes=self.causes(), where=where)
 
     def to_json(self) -> dict[str, Any]:
@@ -186,6 +205,13 @@ class StructureCheck:
             "withheld_speeds": list(self.withheld_speeds), "note": self.note(),
             "tests": {f"{v:g}": rows for v, rows in self.tests.items()},
         })  # fmt: skip
+
+
+def _speeds_text(speeds: Sequence[float]) -> str:
+    """``5, 6 m/s``, or for more than four ``29 speeds in 1-15 m/s``."""
+    if len(speeds) <= 4:
+        return ", ".join(f"{v:g}" for v in speeds) + " m/s"
+    return f"{len(speeds)} speeds in {min(speeds):g}-{max(speeds):g} m/s"
 
 
 def _speed_model_test(speed_model, v: float) -> dict[str, Any] | None:
@@ -263,13 +289,15 @@ def check_structure(
             row = _speed_model_test(speed_model, v)
             rows += [row] if row is not None else []
         tests[v] = [{k: x for k, x in r.items() if k != "passed"} for r in rows]
-    n = sum(len(rows) for rows in tests.values())
+        for r in tests[v]:
+            r["advisory"] = r["kind"] == "whiteness"
+    n = sum(not r["advisory"] for rows in tests.values() for r in rows)
     each = level / max(n, 1)
     rejected = []
     for v, rows in tests.items():
         for r in rows:
             r["rejected"] = bool(r["p_value"] < each)
-        if any(r["rejected"] for r in rows):
+        if any(r["rejected"] and not r["advisory"] for r in rows):
             rejected.append(v)
     one_model = bool(speed_model is not None and rejected)
     return StructureCheck(

@@ -1010,7 +1010,11 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
     speeds where the data reject the structure, none of v_w, v_c when the model over speed
     is rejected (the estimates stand), the verdict under ``"structure"``.
     """
-    from bikeid.ident.uncertainty import critical_speed_intervals, eigenvalue_intervals
+    from bikeid.ident.uncertainty import (
+        check_predictor_interior,
+        critical_speed_intervals,
+        eigenvalue_intervals,
+    )
     from bikeid.ident.validation_report import INTERVAL_CALIBRATION
     from bikeid.sim.errors import InputError, UntrustworthyResult
 
@@ -1020,11 +1024,12 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
         out["structure"] = structure.to_json()
         out.setdefault("notes", []).append(structure.note())
     for v, m in models.items():
-        if round(v, 6) in rejected:  # a bias the interval does not carry
-            out["eigenvalues"].append(None)
-            continue
         try:  # a fit on its predictor's stability boundary has no trustworthy interval
-            out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
+            if round(v, 6) in rejected:  # nor has a structure the data reject: bias
+                check_predictor_interior(m)  # (named too when it applies)
+                out["eigenvalues"].append(None)
+            else:
+                out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
         except (InputError, UntrustworthyResult) as exc:  # the estimate stands, no interval
             out["eigenvalues"].append(None)
             out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")

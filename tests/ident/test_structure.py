@@ -61,11 +61,13 @@ def linear_fit(linear_run):
 
 def test_linear_plant_passes_and_its_intervals_cover(linear_run, linear_fit):
     check = check_structure([linear_run], {5.0: linear_fit})
-    # 4 independence + 4 whiteness tests (free noise model), Bonferroni at 1 %
-    assert check.n_tests == 8
-    assert check.per_test_level == pytest.approx(STRUCTURE_LEVEL / 8, rel=1e-12)
+    # 4 independence tests withhold (Bonferroni at 1 %); 4 whiteness tests (free noise
+    # model) are advisory, judged at the same per-test level
+    assert check.n_tests == 4 and len(check.tests[5.0]) == 8
+    assert sum(t["advisory"] for t in check.tests[5.0]) == 4
+    assert check.per_test_level == pytest.approx(STRUCTURE_LEVEL / 4, rel=1e-12)
     assert check.passed and not check.rejected_speeds
-    # the per-test level is 1.25e-3; measured p-values 0.19-0.86 (smallest: delta)
+    # the per-test level is 2.5e-3; measured p-values 0.19-0.86 (smallest: delta)
     assert min(t["p_value"] for t in check.tests[5.0]) > 0.01
     # the structure is right, so the intervals stand and contain the truth
     ei = eigenvalue_intervals(linear_fit)
@@ -95,6 +97,25 @@ def test_output_error_fit_is_not_judged_by_whiteness(linear_run):
     check = check_structure([linear_run], {5.0: model})
     assert {t["kind"] for t in check.tests[5.0]} == {"independence"}
     assert check.n_tests == 4
+
+
+def test_whiteness_alone_is_advisory():
+    """Seed 41 of the coverage study's linear plant (``bikeid coverage`` settings, a held
+    unlogged steer torque the 4-state noise model cannot whiten exactly): its residual in
+    delta is not white (measured p = 8e-15) while independence passes, and its intervals
+    contain the truth, so they are kept and the note names the noise model."""
+    from bikeid.experiments.testbed.coverage import DEFAULTS, _closed_loop_run
+
+    run = _closed_loop_run(benchmark(), {**DEFAULTS, "controller": "pid"}, 5.0, 41)
+    model = pem.fit(run)
+    check = check_structure([run], {5.0: model})
+    white = [t for t in check.tests[5.0] if t["kind"] == "whiteness"]
+    assert any(t["rejected"] and t["p_value"] < 1e-9 for t in white)
+    assert check.passed and check.withheld_speeds == ()
+    assert "advisory: residuals are not white (delta)" in check.note()
+    ei = eigenvalue_intervals(model)
+    truth = linear.match_eigenvalues(linear.eigenvalues(benchmark(), 5.0), ei.values)
+    assert all(lo <= t <= hi for (lo, hi), t in zip(ei.real_bounds, truth.real, strict=True))
 
 
 def test_speed_model_against_its_per_speed_fits():
