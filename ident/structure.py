@@ -95,9 +95,15 @@ MAX_LAG = 25
 REJECTED_NOTE = (
     "the data reject the model structure (residual tests at family level {level:g}, "
     "ident.structure): {causes}; the estimates' bias can exceed their standard errors, so no "
-    "95 % intervals are given for {where} (the estimates stand). Fix: shorter or less "
-    "aggressive records (smaller roll amplitude), or a model with the missing effect"
+    "95 % intervals are given for {where} (the estimates stand). Fix: {fix}"
 )
+#: The fix of a rejected fixed-speed model, and of a rejected model over speed.
+FIX_FIXED = ("shorter or less aggressive records (smaller roll amplitude), or a model with "
+             "the missing effect")  # fmt: skip
+FIX_OVER_SPEED = ("fit each speed alone (per-speed PEM: bikeid identify without "
+                  "--speed-parameterized) and compare, record longer so that no per-speed fit "
+                  "ends on its predictor's stability boundary, or use smaller roll "
+                  "amplitudes")  # fmt: skip
 #: What a passed check does not show, printed beside the intervals.
 PASSED_NOTE = (
     "the residual tests do not reject the model structure (family level {level:g}); they "
@@ -199,7 +205,8 @@ class StructureCheck:
         if self.speed_model_rejected:
             where = (f"the model over speed (rejected at {_speeds_text(self.rejected_speeds)}): "
                      "v_w, v_c and its eigenvalues at every speed")  # fmt: skip
-        return REJECTED_NOTE.format(level=self.level, causes=self.causes(), where=where)
+        fix = FIX_OVER_SPEED if self.speed_model_rejected else FIX_FIXED
+        return REJECTED_NOTE.format(level=self.level, causes=self.causes(), where=where, fix=fix)
 
     def to_json(self) -> dict[str, Any]:
         """The verdict as plain JSON types.

@@ -139,6 +139,7 @@ def test_speed_model_against_its_per_speed_fits():
     bad = check_structure(runs, {v: moved.at(v) for v in (3.0, 7.0)}, speed_model=moved)
     assert bad.speed_model_rejected and not bad.passed
     assert "v_w, v_c" in bad.note() and bad.withheld_speeds == (3.0, 7.0)
+    assert "without --speed-parameterized" in bad.note()
 
 
 def test_bad_arguments_are_one_line_errors(linear_run, linear_fit):
