@@ -125,8 +125,10 @@ class StructureCheck:
     n_tests : int
         Number of withholding tests (independence, speed model) in the family.
     tests : dict of float to list of dict
-        Per speed [m/s] every test: ``kind`` (``"independence"``, ``"whiteness"`` or
-        ``"speed_model"``), ``output`` (or None), ``statistic``, ``dof``, ``p_value``,
+        Per speed [m/s] every test: ``kind`` (``"independence"``, ``"whiteness"``,
+        ``"speed_model"``, or ``"predictor"``: the residuals could not be formed, e.g. an
+        unstable one-step predictor, p = 0), ``output`` (or None), ``statistic``, ``dof``,
+        ``p_value``,
         ``rejected`` (p below the per-test level) and ``advisory`` (True for whiteness:
         reported, never withholding).
     rejected_speeds : tuple of float
@@ -170,6 +172,7 @@ class StructureCheck:
             "independence": "residuals correlate with the past input",
             "whiteness": "residuals are not white",
             "speed_model": "the model over speed differs from the per-speed fits",
+            "predictor": "its one-step predictor is unstable on the runs",
         }
         speeds = tuple(self.tests) if speed is None else (round(float(speed), 6),)
         rows = [t for v in speeds for t in self.tests.get(v, []) if t["rejected"]]
@@ -298,12 +301,18 @@ def check_structure(
         at_v = [r for r in runs if round(r.speed, 6) == v]
         if not at_v:
             raise InputError(f"no runs at {v:g} m/s for its model; pass the fitted runs")
-        rr = resid(at_v, model, max_lag=int(max_lag))
-        rows = [{"kind": "independence", "output": o, **rr.independence_test[o]}
-                for o in rr.independence_test]  # fmt: skip
-        if np.any(np.asarray(getattr(model, "K", 0.0), float)):  # a noise model is fitted
-            rows += [{"kind": "whiteness", "output": o, **rr.whiteness_test[o]}
-                     for o in rr.whiteness_test]  # fmt: skip
+        try:
+            with np.errstate(over="ignore"):  # a diverging predictor is reported, not warned
+                rr = resid(at_v, model, max_lag=int(max_lag))
+        except ValueError as exc:  # e.g. an unstable one-step predictor: nothing to test
+            rows = [{"kind": "predictor", "output": None, "statistic": float("inf"),
+                     "dof": 0, "p_value": 0.0, "message": str(exc).splitlines()[0]}]  # fmt: skip
+        else:
+            rows = [{"kind": "independence", "output": o, **rr.independence_test[o]}
+                    for o in rr.independence_test]  # fmt: skip
+            if np.any(np.asarray(getattr(model, "K", 0.0), float)):  # a noise model is fitted
+                rows += [{"kind": "whiteness", "output": o, **rr.whiteness_test[o]}
+                         for o in rr.whiteness_test]  # fmt: skip
         if speed_model is not None:
             row = _speed_model_test(speed_model, v)
             rows += [row] if row is not None else []

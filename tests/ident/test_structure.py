@@ -142,6 +142,21 @@ def test_speed_model_against_its_per_speed_fits():
     assert "without --speed-parameterized" in bad.note()
 
 
+def test_unstable_predictor_is_a_rejection(linear_run, linear_fit):
+    """A model whose one-step predictor diverges on the runs has no residuals to test: its
+    intervals are withheld, not the command aborted (here K = -3 C': Ad - K C then has an
+    eigenvalue outside the unit circle, checked below)."""
+    from bikeid.ident.predictor import output_matrix
+
+    C = output_matrix(linear_fit.outputs)[0]
+    bad = dataclasses.replace(linear_fit, K=-3.0 * C.T)
+    Ad, _, _, _ = bad.predictor()
+    assert np.max(np.abs(np.linalg.eigvals(Ad - bad.K @ C))) > 1.0
+    check = check_structure([linear_run], {5.0: bad})
+    assert check.rejected_speeds == (5.0,)
+    assert "predictor is unstable" in check.note()
+
+
 def test_bad_arguments_are_one_line_errors(linear_run, linear_fit):
     with pytest.raises(InputError, match="level"):
         check_structure([linear_run], {5.0: linear_fit}, level=1.5)
