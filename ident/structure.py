@@ -61,10 +61,11 @@ second amplitude reveal it (docs/uncertainty.md, "Bias against excitation amplit
 printed note says so.
 
 What it catches there: the speed-parameterized model of that sweep (v_c = 6.170 m/s, its
-interval [6.169, 6.171] against the linearized 6.024) is rejected at all 29 speeds (the
-per-speed comparison everywhere, independence at 28).  Its main cause is not the
-nonlinearity: the same sweep on the exact linear plant gives v_c = 6.063 m/s with eigenvalue
-errors up to 94 standard errors, while the 15 per-speed fits of those runs that end inside
+interval [6.169, 6.171] against the linearized 6.024) is rejected: independence alone at 28
+of its 29 speeds (p below 6.9e-5), so v_w, v_c and every eigenvalue interval are withheld.
+Its main cause is not the nonlinearity: the same sweep on the exact linear plant gives
+v_c = 6.063 m/s with eigenvalue errors up to 94 standard errors (rejected there too,
+independence at 22 speeds), while the 15 per-speed fits of those runs that end inside
 their predictor's stability region are within 2.24.  The model over speed holds each
 speed's innovation gain K at its per-speed fit's value; 14 of those fits (5.5-9.5 and
 12-15 m/s) end on that boundary (:func:`~bikeid.ident.uncertainty.predictor_radius` within
@@ -92,7 +93,7 @@ from bikeid.sim.textformats import to_jsonable
 __all__ = ["MAX_LAG", "STRUCTURE_LEVEL", "StructureCheck", "check_structure"]
 
 #: Family-wise level of the structure check: on data the model structure fits, the chance
-#: that any of its tests (all speeds, outputs and kinds) rejects is at most this.
+#: that any of its withholding tests (all speeds, outputs and kinds) rejects is at most this.
 STRUCTURE_LEVEL = 0.01
 #: Largest lag [samples] of the residual tests (MATLAB ``resid``'s default, 25).
 MAX_LAG = 25
