@@ -34,6 +34,9 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   format of every identified model (parameters bit for bit, covariance, provenance).
 - :mod:`~bikeid.ident.uncertainty`: profile and delta-method intervals on eigenvalues, v_w,
   v_c, Bode.
+- :mod:`~bikeid.ident.structure`: ``check_structure``, whether the data reject the model
+  structure the intervals assume (residual tests valid in closed loop), run before
+  ``bikeid identify`` prints intervals.
 - :mod:`~bikeid.ident.informativity`: whether data can determine a model (the steer
   torque's feedback share and the order of excitation of the rest); ``check`` refuses.
 

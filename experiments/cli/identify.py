@@ -757,11 +757,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
     saved = list(zip(fitted.models, targets, strict=True)) if targets else []
     eig = {v: fitted.eigenvalues(v) for v in speeds}
     interval_models, speed_model = fitted.interval_models, fitted.speed_model
+    structure = None
     if interval_models is not None:  # a fit-quality figure, and data it cannot explain refused
         out["fit_percent"] = _fit_quality(runs, interval_models)
+        structure = _structure(runs, interval_models, speed_model, say)
     settings["outputs"] = out["outputs"]  # as fitted (the method's default when not given)
+    results = {"structure_check": structure.to_json()} if structure is not None else None
     for model, target in saved:
-        save_model(model, target, provenance=provenance, settings=settings, speeds=speeds)
+        save_model(model, target, provenance=provenance, settings=settings, speeds=speeds,
+                   results=results)  # fmt: skip
     out["model_files"] = [str(t) for _, t in saved]
     for f in out["model_files"]:
         say(f"wrote {f}")
@@ -774,7 +778,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             row["true_eigenvalues"] = _sorted(eigenvalues(truth, v))
         per_speed.append(row)
     if interval_models is not None:
-        out["intervals"] = _intervals(interval_models, speed_model)
+        out["intervals"] = _intervals(interval_models, speed_model, structure)
         for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
             row["eigenvalue_intervals"] = ei
     out["per_speed"] = per_speed
@@ -921,25 +925,51 @@ def _detail_lines(out: dict) -> list[str]:
     return lines
 
 
-def _intervals(models: dict, speed_model) -> dict:
+def _structure(runs: list, models: dict, speed_model, say):
+    """Whether the data reject the structure the intervals assume (ident.structure)."""
+    from bikeid.ident.structure import check_structure
+
+    say("testing the model structure (residual tests)")
+    return check_structure(runs, models, speed_model=speed_model)
+
+
+def _intervals(models: dict, speed_model, structure=None) -> dict:
     """95 % eigenvalue intervals per speed and, for a model over speed, of v_w and v_c.
 
     ``models`` maps each speed to a model with a theta covariance (a CanonicalModel, or a
     model over speed taken there); ``speed_model`` is a SpeedCanonicalModel (the
-    speed-parameterized fit, or a grey-box model's :meth:`speed_model`) or None.
+    speed-parameterized fit, or a grey-box model's :meth:`speed_model`) or None;
+    ``structure`` an :class:`~bikeid.ident.structure.StructureCheck`: no intervals at the
+    speeds where the data reject the structure, none of v_w, v_c when the model over speed
+    is rejected (the estimates stand), the verdict under ``"structure"``.
     """
-    from bikeid.ident.uncertainty import critical_speed_intervals, eigenvalue_intervals
+    from bikeid.ident.uncertainty import (
+        check_predictor_interior,
+        critical_speed_intervals,
+        eigenvalue_intervals,
+    )
     from bikeid.ident.validation_report import INTERVAL_CALIBRATION
     from bikeid.sim.errors import InputError, UntrustworthyResult
 
     out: dict = {"level": 0.95, "calibration": INTERVAL_CALIBRATION, "eigenvalues": []}
+    rejected = set(structure.withheld_speeds) if structure is not None else set()
+    if structure is not None:
+        out["structure"] = structure.to_json()
+        out.setdefault("notes", []).append(structure.note())
     for v, m in models.items():
         try:  # a fit on its predictor's stability boundary has no trustworthy interval
-            out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
+            if round(v, 6) in rejected:  # nor has a structure the data reject: bias
+                check_predictor_interior(m)  # (named too when it applies)
+                out["eigenvalues"].append(None)
+            else:
+                out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
         except (InputError, UntrustworthyResult) as exc:  # the estimate stands, no interval
             out["eigenvalues"].append(None)
             out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")
-    if speed_model is not None:
+    if speed_model is not None and structure is not None and structure.speed_model_rejected:
+        out["critical_speeds"] = None
+        out["critical_speeds_note"] = "withheld: the model over speed is rejected (note below)"
+    elif speed_model is not None:
         try:
             out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
         except (InputError, UntrustworthyResult) as exc:  # e.g. a tangential crossing

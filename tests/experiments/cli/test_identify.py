@@ -42,14 +42,18 @@ def _complex(rows):
     return np.array([complex(e["re"], e["im"]) for e in rows])
 
 
-def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
+def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys, tmp_path):
     """PEM on 30 s of noisy closed-loop data per speed. Tolerances: the issue's accuracy goal
     (2 %, or 0.05 1/s where |lambda| < 2.5) met by ``bikeid accuracy`` from 50 s runs; here
     runs are 30 s (standard errors ~sqrt(50/30) = 1.3x larger), so 1.5x that goal. Critical
     speeds: the goal is 0.05 m/s from 29 speeds; from 4 speeds we allow 0.15 m/s."""
+    from bikeid.ident.model_file import load_model
+    from bikeid.ident.uncertainty import critical_speed_intervals
+
     noisy, _ = sweeps
     p = benchmark()
-    out = _identify(capsys, "--method", "pem", noisy, "--speed-parameterized")
+    target = tmp_path / "speed.json"
+    out = _identify(capsys, "--method", "pem", noisy, "--speed-parameterized", "--out", target)
     assert out["speeds"] == list(SPEEDS)
     for row in out["per_speed"]:
         truth = np.sort_complex(eigenvalues(p, row["speed"]))
@@ -60,26 +64,32 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys):
     cs, true_cs = out["critical_speeds"], critical_speeds(p)
     assert abs(cs["v_w"] - true_cs["v_w"]) < 0.15
     assert abs(cs["v_c"] - true_cs["v_c"]) < 0.15
-    # the 95 % intervals are profile intervals around the printed values; where the
-    # standard error is a small fraction of the value (under 1 % here) the speed is nearly
-    # linear in the parameters over the interval, so each end is within 5 % of the
-    # first-order half-width 1.96 SE (ident.uncertainty.z_value(0.95) = 1.959964); they say
-    # what they are calibrated on
-    iv = out["intervals"]
-    assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
-    assert iv["critical_speeds"]["method"] == "profile"
+    # the 95 % intervals (of the saved model, ident.uncertainty) are profile intervals
+    # around the printed values; where the standard error is a small fraction of the value
+    # (under 1 % here) the speed is nearly linear in the parameters over the interval, so
+    # each end is within 5 % of the first-order half-width 1.96 SE
+    # (ident.uncertainty.z_value(0.95) = 1.959964)
+    crit = critical_speed_intervals(load_model(target)).to_json()
+    assert crit["method"] == "profile"
     for name in ("v_w", "v_c"):
-        c = iv["critical_speeds"][name]
+        c = crit[name]
         assert c["value"] == pytest.approx(cs[name], rel=1e-12)
         assert c["std"] < 0.01 * c["value"]
         lo, hi = c["interval"]
         assert hi - c["value"] == pytest.approx(1.959964 * c["std"], rel=0.05)
         assert c["value"] - lo == pytest.approx(1.959964 * c["std"], rel=0.05)
-    for row in out["per_speed"]:
-        ei = row["eigenvalue_intervals"]
-        centres = [complex(e["value"]["re"], e["value"]["im"]) for e in ei["eigenvalues"]]
-        np.testing.assert_allclose(np.sort_complex(centres), _complex(row["eigenvalues"]),
-                                   rtol=1e-10)  # fmt: skip
+        # but on these 30 s runs of the nonlinear plant they exclude the linearized truth
+        # (measured v_w [4.276, 4.282], v_c [6.008, 6.019] for 4.292, 6.024): the data reject
+        # the model over speed (ident.structure), so identify withholds them and says why
+        assert not lo <= true_cs[name] <= hi
+    iv = out["intervals"]
+    assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
+    assert iv["critical_speeds"] is None and iv["structure"]["speed_model_rejected"]
+    assert any("reject the model structure" in n and "Fix:" in n for n in iv["notes"])
+    assert all(row["eigenvalue_intervals"] is None for row in out["per_speed"])
+    # the verdict is recorded in the model file beside the covariance it judges
+    doc = json.loads(target.read_text())
+    assert doc["results"]["structure_check"]["passed"] is False
 
 
 def test_greybox_intervals_match_monte_carlo(sweeps, capsys, tmp_path):
@@ -104,6 +114,10 @@ def test_greybox_intervals_match_monte_carlo(sweeps, capsys, tmp_path):
     assert out["intervals"]["critical_speeds"] == cv
     row = out["per_speed"][1]
     assert row["eigenvalue_intervals"] == uncertainty.eigenvalue_intervals(g.at(4.5)).to_json()
+    # the structure check keeps them: only the advisory whiteness test rejects (phi at
+    # 4.5 m/s, measured p = 1.2e-19), and the note says so
+    st = out["intervals"]["structure"]
+    assert st["passed"] and "advisory: residuals are not white (phi)" in st["note"]
     small = dataclasses.replace(g, covariance=g.covariance * 1e-4)
     ei = uncertainty.eigenvalue_intervals(small.at(5.0))
     v_w = uncertainty.critical_speed_intervals(small.speed_model())
