@@ -101,10 +101,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "MODEL-v<speed>.json",
     )  # fmt: skip
     p.add_argument(
-        "--plot", default=None, metavar="FILE.png",
+        "--plot", default=None, metavar="FILE",
         help="draw the identified eigenvalues with their 95 %% intervals against the nominal "
         "bicycle's (--bicycle, else the runs' bicycle, else benchmark) in the complex plane "
-        "and, for several speeds or a model over speed, against speed",
+        "and, for several speeds or a model over speed, against speed; the format follows "
+        "the suffix (.png, .pdf, .svg, .eps, .ps)",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print JSON (no progress lines)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
