@@ -11,6 +11,7 @@ from collections.abc import Mapping
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.experiments.cli.args import (
+    IMPORT_FORMATS,
     MAX_WORKERS,
     check_figure_path,
     dump_json,
@@ -401,6 +402,14 @@ def _skipped(args: argparse.Namespace) -> list[str]:
     return skipped_checks(args)
 
 
+def _applied_skips(args: argparse.Namespace) -> list[str]:
+    """The skipped checks that were in fact skipped: range checks still run on bikeid and
+    steer-by-wire files, so ``--no-checks`` does not list them there (the model file's record)."""
+    from bikeid.dataset.run import BOUND_CHECKS
+
+    return [c for c in _skipped(args) if args.format in IMPORT_FORMATS or c not in BOUND_CHECKS]
+
+
 def _read(args: argparse.Namespace) -> tuple[list, list[str]]:
     """The runs of every file and what each came from: run files or logs."""
     if args.format == "bikeid":
@@ -677,7 +686,7 @@ def _settings(args: argparse.Namespace) -> dict:
                  flip=[f.strip() for f in args.flip.split(",") if f.strip()])  # fmt: skip
     s.update(start=args.start, stop=args.stop, speed_tolerance=args.speed_tolerance,
              min_stretch=args.min_stretch, min_speed=args.min_speed,
-             skipped_checks=_skipped(args))  # fmt: skip
+             skipped_checks=_applied_skips(args))  # fmt: skip
     method, run_settings = _method_settings(args)
     s.update(run_settings.to_json())
     if method.fixed_entries:

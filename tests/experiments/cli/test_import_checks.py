@@ -110,9 +110,13 @@ def test_range_checks_of_bikeid_files_cannot_be_skipped(logs):
     skip by name is refused, --no-checks says so (never a skip that silently does nothing)."""
     rc, _, err = _cli(["identify", "runs.h5", "--skip-check", "angle-bounds"], logs)
     assert rc == 3 and "applies to --format csv or hdf5" in err, err
-    rc, _, err = _cli(["identify", "runs.h5", "--no-checks", "--quiet"], logs)
+    rc, _, err = _cli(["identify", "runs.h5", "--no-checks", "--quiet", "--out", "m.json"],
+                      logs)  # fmt: skip
     assert rc == 0 and "range checks (angle-bounds, rate-bounds" in err, err
     assert "still run on --format bikeid files" in err
+    # the model file records the checks that were skipped, not the range checks that ran
+    settings = json.loads((logs / "m.json").read_text())["settings"]
+    assert settings["skipped_checks"] == ["sample-period", "rate-derivative", "informativity"]
     rc, _, err = _cli(["measured", "fit", "--format", "sbw", "--data", "nowhere", "--out",
                        "f.json", "--skip-check", "rate-bounds"], logs)  # fmt: skip
     assert rc == 3 and "applies to --format csv or hdf5" in err, err
