@@ -89,6 +89,8 @@ __all__ = [
     "choose_nominal_plant",
     "compare_nominal_plants",
     "compare_plant_selections",
+    "choose_plant",
+    "out_of_fold_costs",
     "PLANT_UNCERTAIN",
     "evidence_lines",
     "WEAVE_EPS",
@@ -97,10 +99,11 @@ __all__ = [
     "selection_frequencies",
 ]
 
-#: The verdict of a fit whose nominal plant is uncertain: the nominal costs do not pick a
-#: plant (their ratio within [1 / margin, margin]) and the selections with the two plants
-#: disagree beyond their ambiguity sets (:func:`compare_plant_selections`), so the named
-#: effects would be the plant mismatch, not effects of the bicycle.
+#: The verdict of a fit whose nominal plant is uncertain: the final models of the selections
+#: with the two plants fit the decays alike (:func:`choose_plant`'s paired test of their
+#: out-of-fold costs does not separate them) and the selections disagree beyond their
+#: ambiguity sets (:func:`compare_plant_selections`), so the named effects would depend on a
+#: plant the data cannot choose: the plant mismatch, not effects of the bicycle.
 PLANT_UNCERTAIN = "nominal plant uncertain"
 
 
@@ -170,6 +173,11 @@ class Identification:
         the calibrated nominal; ``unexplained`` holds the final cost, the noise
         floors (second differences, coloured, from the final residual), the explained
         fractions, the rule and its threshold, and the verdict it gave.
+    windows : list of Window
+        The decays with the final fit's defect correction (nonlinear plant).
+    calibration : Calibration or None
+        The nominal's offsets within its uncertainty at the final fit (None when the stated
+        bicycle was taken as exact).
     """
 
     model: ExperimentModel
@@ -185,6 +193,7 @@ class Identification:
     weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
     evidence: dict = field(default_factory=dict)  # why each name is in the verdict
     windows: list[Window] = field(default_factory=list)  # with the final defect correction
+    calibration: Calibration | None = None  # the nominal's offsets of the final fit
 
     @property
     def ambiguity(self) -> dict[str, list[str]]:
@@ -620,6 +629,7 @@ def select_effects(
         cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor,
         explained=unexpl["explained"], eq_ranking=err_ranking(model, windows), rounds=st.rounds,
         weave_weight=weave_weight, evidence=evidence, windows=windows,
+        calibration=final.calibration,
     )  # fmt: skip
 
 
@@ -813,6 +823,143 @@ def compare_plant_selections(linear: Identification, nonlinear: Identification) 
         who = "linear" if "unexplained" in a["verdict"] else "nonlinear"
         diff.append(f"unexplained (only with the {who} plant)")
     return {"agree": not diff, "linear": a, "nonlinear": b, "differences": diff}
+
+
+def out_of_fold_costs(
+    model: ExperimentModel, selection: Identification, nonlinear: bool
+) -> np.ndarray:
+    """Each decay's cost under a selection's final effect set refitted without that decay.
+
+    Two-fold cross-fitting on the selection's own halves (even and odd windows): the final
+    model's effects (and, with a nominal calibration, its offsets within the box) are
+    refitted on one half (:func:`bikeid.ident.effects.fit.joint_fit`, decay signals only,
+    from the final values) and every decay of the other half is scored by that fit, then the
+    halves swap.  A parameter that only fits the noise of one half raises the other half's
+    cost, so the number of effects is paid for in the cost itself (cross-validation; Stone
+    1977 shows leave-one-out cross-validation asymptotically equivalent to AIC, two folds
+    penalize more).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model the selection started from (stated bicycle, no effects).
+    selection : Identification
+        :func:`select_effects`'s result (its ``windows``, ``effects``, ``model`` and
+        ``calibration``).
+    nonlinear : bool
+        The plant the selection ran with (True: the nonlinear plant by defect correction).
+
+    Returns
+    -------
+    (n,) ndarray
+        Per window of ``selection.windows``, in order: the summed squared NRMSE of roll rate
+        and steer angle (dimensionless) of the fit on the other half; nan where the
+        nonlinear plant could not simulate the window (or the half it was fitted on) at
+        that fit.
+    """
+    from bikeid.ident.effects.experiment_model import SimulationFailed
+
+    ws = [replace(w, correction=None) for w in selection.windows]
+    names = [e.name for e in selection.effects]
+    start = {n: selection.model.e(n) for n in names}
+    out = np.full(len(ws), np.nan)
+    idx = np.arange(len(ws))
+    for fit_i, held_i in ((idx[0::2], idx[1::2]), (idx[1::2], idx[0::2])):
+        if fit_i.size == 0:
+            continue
+        try:
+            f = joint_fit(model, [ws[i] for i in fit_i], names, start, nonlinear, None,
+                          selection.calibration)  # fmt: skip
+        except SimulationFailed:  # the half cannot be fitted: its held-out decays unscored
+            continue
+        for i in held_i:
+            try:
+                w = corrected([ws[i]], f.model, nonlinear)
+            except SimulationFailed:
+                continue
+            out[i] = float(np.sum(window_errors(w, f.model.simulate(w)) ** 2))
+    return out
+
+
+def choose_plant(
+    model: ExperimentModel,
+    linear: Identification,
+    nonlinear: Identification,
+    alpha: float = 0.05,
+) -> dict:
+    """The nominal plant chosen after selection, by the two final models' fits to the decays.
+
+    Each plant's selection (:func:`select_effects` on the same windows) ends in a final model;
+    both are scored on every decay by :func:`out_of_fold_costs` (refitted on the other half:
+    the penalty for the number of effects), and the per-decay differences nonlinear - linear
+    are tested by a paired t test (:func:`bikeid.ident.effects.acceptance.paired_p_value`:
+    Student t, n - 1 degrees of freedom over the n decays both plants could score; the
+    decays are independent pushes, the clusters of the selection's own tests), two-sided at
+    ``alpha``.  The rule:
+
+    - p <= ``alpha``: the plant with the lower out-of-fold cost, and its selection;
+    - otherwise the final models fit alike; if the selections agree
+      (:func:`compare_plant_selections`: every effect named by one is named by the other or
+      in an ambiguity set with one of its effects, ``unexplained`` on both or neither), the
+      plant with the lower out-of-fold cost (the nonlinear on a tie) and its effects, which
+      are the agreed ones up to those sets;
+    - otherwise :data:`PLANT_UNCERTAIN`: which effects are named depends on a plant the data
+      cannot choose, so none is.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model both selections started from.
+    linear, nonlinear : Identification
+        :func:`select_effects` on the same windows with ``nonlinear=False`` and ``True``.
+    alpha : float, optional
+        Level of the paired test (two-sided; default 0.05, the acceptance rule's).
+
+    Returns
+    -------
+    dict
+        ``plant`` (``"linear"`` or ``"nonlinear"``: the selection to report; with
+        ``uncertain``, the plant of lower out-of-fold cost, whose effects are not named),
+        ``uncertain`` (bool), ``reason`` (one sentence: the costs, the test and the rule's
+        branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: summed out-of-fold costs
+        over the decays both scored; ``mean_difference`` nonlinear - linear per decay;
+        ``p_value``; ``alpha``; ``decays``; ``unscored``: decays left out for both because
+        one plant could not simulate them; ``separated``: p <= alpha; ``effects``: the
+        number of effects of each final model) and ``check``
+        (:func:`compare_plant_selections`).
+    """
+    lin = out_of_fold_costs(model, linear, False)
+    nl = out_of_fold_costs(model, nonlinear, True)
+    if lin.size != nl.size:
+        raise ValueError(f"the selections ran on different windows ({lin.size} linear, "
+                         f"{nl.size} nonlinear); run both on the same decays")  # fmt: skip
+    ok = np.isfinite(lin) & np.isfinite(nl)
+    d = nl[ok] - lin[ok]
+    p = paired_p_value(d)
+    better = "linear" if float(np.sum(d)) > 0 else "nonlinear"
+    separated = bool(d.size >= 2 and p <= alpha)
+    check = compare_plant_selections(linear, nonlinear)
+    uncertain = not separated and not check["agree"]
+    test = {"linear_cost": float(np.sum(lin[ok])), "nonlinear_cost": float(np.sum(nl[ok])),
+            "mean_difference": float(np.mean(d)) if d.size else float("nan"),
+            "p_value": p, "alpha": alpha, "decays": int(ok.sum()),
+            "unscored": int((~ok).sum()), "separated": separated,
+            "effects": {"linear": len(linear.effects), "nonlinear": len(nonlinear.effects)},
+            "statistic": "paired t (n - 1 degrees of freedom) of the per-decay out-of-fold "
+            "cost, nonlinear - linear"}  # fmt: skip
+    head = (f"chosen after selection: the final models' out-of-fold decay cost linear "
+            f"{test['linear_cost']:.4g} ({len(linear.effects)} effects), nonlinear "
+            f"{test['nonlinear_cost']:.4g} ({len(nonlinear.effects)} effects) over "
+            f"{test['decays']} decays, paired p = {p:.2g} (level {alpha:g}): ")  # fmt: skip
+    if separated:
+        tail = f"the {better} plant fits better, so the {better} plant and its effects"
+    elif check["agree"]:
+        tail = (f"they fit alike and their selections agree, so the {better} plant (the lower "
+                "cost) and the agreed effects")  # fmt: skip
+    else:
+        tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
+    return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test,
+            "check": check}  # fmt: skip
 
 
 def selection_frequencies(
