@@ -182,9 +182,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="auto",
         help="nominal plant: auto (default): select effects with both the linear and the "
         "nonlinear (defect-corrected) Whipple plant and keep the plant whose final model "
-        "predicts the decays better (out-of-fold costs, paired test at --alpha); alike fits "
-        "with disagreeing selections give 'nominal plant uncertain' (about twice the CPU); "
-        "nonlinear or linear force one",
+        "predicts the decays better (out-of-fold costs, sign-flip paired test at --alpha); "
+        "alike fits with disagreeing selections give 'nominal plant uncertain' (about twice "
+        "the CPU); nonlinear or linear force one",
     )
     f.add_argument(
         "--weave-weight",

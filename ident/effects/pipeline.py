@@ -371,8 +371,8 @@ def fit_model(
         Whipple model and the nonlinear one by defect correction) on the same decays, and the
         plant is chosen after it by the two final models' fits
         (:func:`bikeid.ident.effects.selection.choose_plant`: per-decay out-of-fold costs, a
-        paired t test at the rule's ``alpha``; alike fits with disagreeing selections give
-        :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`); ``"nonlinear"`` or
+        sign-flip paired test at the rule's ``alpha``; alike fits with disagreeing
+        selections give :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`); ``"nonlinear"`` or
         ``"linear"`` force one (one selection, no comparison).  The nominal fits before any
         effect are reported in every case (``nominal_fit``), the plant used as ``plant``
         and why as ``plant_choice``.

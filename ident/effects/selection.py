@@ -36,6 +36,18 @@ Workflow (identification.md section 5, approaches A/B/E):
    residual's own noise floor.  :attr:`Identification.evidence` records, per accepted effect
    and for ``unexplained``, the numbers behind the verdict (:func:`evidence_lines` prints
    them); their rates on the blind trials are in docs/measured.md "Blind trials".
+6. **The nominal plant, chosen after selection** (:func:`choose_plant`).  ``measured fit
+   --plant auto`` runs the selection with the linear and with the nonlinear plant on the same
+   decays and compares the two final models by their per-decay out-of-fold costs (each
+   effect set refitted on the other half of the decays: the penalty for the number of
+   effects), a sign-flip paired test (stratified by file) at the rule's ``alpha``.  A
+   separated pair gives the better plant; alike fits give the better plant when the two
+   selections agree up to their ambiguity sets (:func:`compare_plant_selections`) and
+   :data:`PLANT_UNCERTAIN` when they do not.  The nominal costs before any effect
+   (:func:`compare_nominal_plants`) are reported but no longer choose: an effect in the
+   data shifts them (linear truths with a command gain gave nominal cost ratios nonlinear /
+   linear of 0.49-1.03 on the closure benchmark: the wrong plant looked as good or better
+   before any effect).
 
 The pieces live in their own modules: the library and its fit settings in
 :mod:`bikeid.ident.effects.library` (effect facts: :mod:`bikeid.sim.effect_registry`), the
@@ -91,6 +103,7 @@ __all__ = [
     "compare_plant_selections",
     "choose_plant",
     "out_of_fold_costs",
+    "plant_verdict",
     "PLANT_UNCERTAIN",
     "evidence_lines",
     "WEAVE_EPS",
@@ -742,8 +755,12 @@ def compare_nominal_plants(model: ExperimentModel, windows: list[Window]) -> dic
 
 
 def choose_nominal_plant(comparison: dict, margin: float = LINEAR_PLANT_MARGIN) -> dict:
-    """The nominal plant a fit starts from, given :func:`compare_nominal_plants`.
+    """The nominal plant chosen before any effect, given :func:`compare_nominal_plants`.
 
+    Used by the blind trials' ``nonlinear="auto"``
+    (:func:`bikeid.experiments.measured.blind_trials.run_blind_trial`, the calibration of
+    :data:`LINEAR_PLANT_MARGIN`); ``bikeid measured fit`` chooses after selection instead
+    (:func:`choose_plant`), because an effect in the data shifts these costs.
     The nonlinear plant is the default (the real bicycle is nonlinear); the linear plant is
     taken only when its nominal cost is lower by more than the factor ``margin``, so that a
     plant mismatch larger than the fit scatter is not read as an effect, while decays that
@@ -881,6 +898,98 @@ def out_of_fold_costs(
     return out
 
 
+def plant_verdict(
+    costs_linear: np.ndarray,
+    costs_nonlinear: np.ndarray,
+    check: dict,
+    alpha: float = 0.05,
+    effects: tuple[int, int] | None = None,
+    groups: list[str] | None = None,
+) -> dict:
+    """The rule of :func:`choose_plant`, from the per-decay costs and the selections' comparison.
+
+    Over the decays scored by both plants (finite in both arrays), the out-of-fold cost
+    ratio nonlinear / linear and its paired test are those of every before/after figure of
+    the pipeline (:func:`bikeid.ident.effects.before_after.before_after`, "before" the
+    linear, "after" the nonlinear: the statistic is the mean over log files of each file's
+    mean decay cost; the test a two-sided sign-flip randomization test of the per-decay
+    differences, stratified by file, 4000 flips, seed 0; the interval a bootstrap over decays
+    within files).  The rule:
+
+    - p <= ``alpha`` (separated): the plant of the lower cost;
+    - otherwise (the final models fit alike) and the selections agree (``check["agree"]``):
+      the plant of the lower cost (the nonlinear on a tie), whose effects are the agreed
+      ones up to the ambiguity sets;
+    - otherwise :data:`PLANT_UNCERTAIN`.
+
+    Parameters
+    ----------
+    costs_linear, costs_nonlinear : (n,) ndarray
+        Per-decay out-of-fold costs (:func:`out_of_fold_costs`, dimensionless; nan: not
+        scored), the same decays in the same order.
+    check : dict
+        :func:`compare_plant_selections` of the two selections (``agree``).
+    alpha : float, optional
+        Level of the paired test (default 0.05).
+    effects : tuple of int, optional
+        Number of effects of the linear and the nonlinear final model (for the sentence).
+    groups : list of str, optional
+        Each decay's log file (the strata; default: one stratum).
+
+    Returns
+    -------
+    dict
+        ``plant``, ``uncertain``, ``reason`` and ``test`` as :func:`choose_plant` describes.
+
+    Raises
+    ------
+    ValueError
+        If the cost arrays (or ``groups``) differ in length.
+    """
+    from bikeid.ident.effects.before_after import before_after
+
+    lin, nl = np.asarray(costs_linear, float), np.asarray(costs_nonlinear, float)
+    g = ["decays"] * lin.size if groups is None else list(groups)
+    if not lin.shape == nl.shape == (len(g),):
+        raise ValueError(f"the selections ran on different windows ({lin.size} linear, "
+                         f"{nl.size} nonlinear, {len(g)} files); run both on the same "
+                         "decays")  # fmt: skip
+    ok = np.isfinite(lin) & np.isfinite(nl)
+    test = {"decays": int(ok.sum()), "unscored": int((~ok).sum()), "alpha": alpha,
+            "statistic": "out-of-fold cost ratio nonlinear / linear (mean over files of the "
+            "file means); sign-flip paired test, stratified by file"}  # fmt: skip
+    if ok.sum() >= 2 and np.sum(lin[ok]) > 0:
+        ba = before_after(lin[ok], nl[ok], [x for x, k in zip(g, ok, strict=True) if k])
+        test.update(linear_cost=ba["error_before"], nonlinear_cost=ba["error_after"],
+                    ratio=ba["ratio"], ratio_ci=ba["ratio_ci"], p_value=ba["p_value"])
+    else:  # nothing to compare: the costs cannot separate the plants
+        test.update(linear_cost=float(np.mean(lin[ok])) if ok.any() else float("nan"),
+                    nonlinear_cost=float(np.mean(nl[ok])) if ok.any() else float("nan"),
+                    ratio=float("nan"), ratio_ci=[float("nan")] * 2, p_value=1.0)
+    p = test["p_value"]
+    better = "linear" if test["ratio"] > 1 else "nonlinear"
+    separated = bool(p <= alpha)
+    test["separated"] = separated
+    uncertain = not separated and not check["agree"]
+    n_eff = ("", "") if effects is None else (f" ({effects[0]} effects)", f" ({effects[1]} "
+                                               "effects)")  # fmt: skip
+    if effects is not None:
+        test["effects"] = {"linear": int(effects[0]), "nonlinear": int(effects[1])}
+    lo, hi = test["ratio_ci"]
+    head = (f"chosen after selection: the final models' out-of-fold decay cost linear "
+            f"{test['linear_cost']:.4g}{n_eff[0]}, nonlinear {test['nonlinear_cost']:.4g}"
+            f"{n_eff[1]} (ratio {test['ratio']:.3g}, 95 % interval {lo:.3g}-{hi:.3g}) over "
+            f"{test['decays']} decays, paired p = {p:.2g} (level {alpha:g}): ")  # fmt: skip
+    if separated:
+        tail = f"the {better} plant fits better, so the {better} plant and its effects"
+    elif check["agree"]:
+        tail = (f"they fit alike and their selections agree, so the {better} plant (the lower "
+                "cost) and the agreed effects")  # fmt: skip
+    else:
+        tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
+    return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test}
+
+
 def choose_plant(
     model: ExperimentModel,
     linear: Identification,
@@ -891,11 +1000,12 @@ def choose_plant(
 
     Each plant's selection (:func:`select_effects` on the same windows) ends in a final model;
     both are scored on every decay by :func:`out_of_fold_costs` (refitted on the other half:
-    the penalty for the number of effects), and the per-decay differences nonlinear - linear
-    are tested by a paired t test (:func:`bikeid.ident.effects.acceptance.paired_p_value`:
-    Student t, n - 1 degrees of freedom over the n decays both plants could score; the
-    decays are independent pushes, the clusters of the selection's own tests), two-sided at
-    ``alpha``.  The rule:
+    the penalty for the number of effects), and the per-decay costs are compared by the
+    pipeline's paired before/after machinery
+    (:func:`bikeid.ident.effects.before_after.before_after`: the ratio nonlinear / linear of
+    the mean over files of the file-mean costs, a sign-flip paired test stratified by file,
+    two-sided at ``alpha``; the decays are independent pushes, the clusters of the
+    selection's own tests); :func:`plant_verdict` applies the rule:
 
     - p <= ``alpha``: the plant with the lower out-of-fold cost, and its selection;
     - otherwise the final models fit alike; if the selections agree
@@ -921,45 +1031,23 @@ def choose_plant(
         ``plant`` (``"linear"`` or ``"nonlinear"``: the selection to report; with
         ``uncertain``, the plant of lower out-of-fold cost, whose effects are not named),
         ``uncertain`` (bool), ``reason`` (one sentence: the costs, the test and the rule's
-        branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: summed out-of-fold costs
-        over the decays both scored; ``mean_difference`` nonlinear - linear per decay;
-        ``p_value``; ``alpha``; ``decays``; ``unscored``: decays left out for both because
-        one plant could not simulate them; ``separated``: p <= alpha; ``effects``: the
-        number of effects of each final model) and ``check``
+        branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: out-of-fold costs, mean
+        over files of the file means, over the decays both scored; ``ratio`` nonlinear /
+        linear and ``ratio_ci`` its 95 % bootstrap interval; ``p_value``; ``alpha``;
+        ``decays``; ``unscored``: decays left out for both because one plant could not
+        simulate them; ``separated``: p <= alpha; ``effects``: the
+        number of effects of each final model; ``costs``: the per-decay costs of each plant,
+        in the windows' order, nan where not scored) and ``check``
         (:func:`compare_plant_selections`).
     """
     lin = out_of_fold_costs(model, linear, False)
     nl = out_of_fold_costs(model, nonlinear, True)
-    if lin.size != nl.size:
-        raise ValueError(f"the selections ran on different windows ({lin.size} linear, "
-                         f"{nl.size} nonlinear); run both on the same decays")  # fmt: skip
-    ok = np.isfinite(lin) & np.isfinite(nl)
-    d = nl[ok] - lin[ok]
-    p = paired_p_value(d)
-    better = "linear" if float(np.sum(d)) > 0 else "nonlinear"
-    separated = bool(d.size >= 2 and p <= alpha)
     check = compare_plant_selections(linear, nonlinear)
-    uncertain = not separated and not check["agree"]
-    test = {"linear_cost": float(np.sum(lin[ok])), "nonlinear_cost": float(np.sum(nl[ok])),
-            "mean_difference": float(np.mean(d)) if d.size else float("nan"),
-            "p_value": p, "alpha": alpha, "decays": int(ok.sum()),
-            "unscored": int((~ok).sum()), "separated": separated,
-            "effects": {"linear": len(linear.effects), "nonlinear": len(nonlinear.effects)},
-            "statistic": "paired t (n - 1 degrees of freedom) of the per-decay out-of-fold "
-            "cost, nonlinear - linear"}  # fmt: skip
-    head = (f"chosen after selection: the final models' out-of-fold decay cost linear "
-            f"{test['linear_cost']:.4g} ({len(linear.effects)} effects), nonlinear "
-            f"{test['nonlinear_cost']:.4g} ({len(nonlinear.effects)} effects) over "
-            f"{test['decays']} decays, paired p = {p:.2g} (level {alpha:g}): ")  # fmt: skip
-    if separated:
-        tail = f"the {better} plant fits better, so the {better} plant and its effects"
-    elif check["agree"]:
-        tail = (f"they fit alike and their selections agree, so the {better} plant (the lower "
-                "cost) and the agreed effects")  # fmt: skip
-    else:
-        tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
-    return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test,
-            "check": check}  # fmt: skip
+    out = plant_verdict(lin, nl, check, alpha, (len(linear.effects), len(nonlinear.effects)),
+                        [w.file for w in linear.windows])  # fmt: skip
+    out["test"]["costs"] = {"linear": [float(x) for x in lin],
+                            "nonlinear": [float(x) for x in nl]}  # fmt: skip
+    return {**out, "check": check}
 
 
 def selection_frequencies(

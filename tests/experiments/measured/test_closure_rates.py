@@ -102,6 +102,71 @@ def test_plant_comparison_both_ways():
                                                              "nonlinear plant)"]  # fmt: skip
 
 
+def _hand_ident(verdict, effects, alike=None):
+    """An Identification with only what the plant comparison reads: verdict, effects and
+    each effect's ambiguity set (``alike``)."""
+    from bikeid.ident.effects.selection import Identification
+
+    ev = {"effects": {n: {"alike": [{"name": a, "heldout_cost_ratio": 0.5}
+                                     for a in (alike or {}).get(n, [])]} for n in effects}}
+    return Identification(model=None, effects=[SimpleNamespace(name=n, value=v)
+                                               for n, v in effects.items()],
+                          ranking=[], verdict=verdict, cost_nominal=1.0, cost_final=0.5,
+                          cost_floor=0.1, explained=0.9, evidence=ev)  # fmt: skip
+
+
+def _exact_sign_flip_p(d: np.ndarray) -> float:
+    """The two-sided sign-flip p-value of mean(d) by enumerating all 2^n flips (n <= 14)."""
+    signs = np.array(np.meshgrid(*[[-1.0, 1.0]] * d.size)).reshape(d.size, -1).T
+    return float(np.mean(np.abs(signs @ d) >= abs(d.sum()) - 1e-12))
+
+
+def test_plant_verdict_three_ways():
+    """The plant rule on hand-built per-decay out-of-fold costs and selections, each branch
+    known by construction; the ratio is checked against numpy's means and the p-value against
+    the exact sign-flip distribution enumerated here (all 4096 flips of 12 decays; the rule's
+    4000 random flips put p within 0.025 of it: 3 binomial standard errors at p = 0.5):
+    (1) the linear model better on every decay (d = 0.2 +- 0.05): separated (exact p = 2/4096),
+    the linear plant with its effects even though the selections disagree; (2) differences
+    that straddle 0 with selections that disagree: ``nominal plant uncertain``; (3) the same
+    costs with agreeing selections (an actuator lag whose set holds the delay): the plant of
+    the lower cost, not uncertain.  A decay one plant could not score (nan) is left out for
+    both."""
+    from bikeid.ident.effects.selection import plant_verdict
+
+    rng = np.random.default_rng(3)
+    lin = rng.uniform(0.1, 0.3, 12)
+    damp = _hand_ident(["steer_viscous_damping"], {"steer_viscous_damping": 0.4})
+    scrub = _hand_ident(["tire_scrub_torque", "front_mass_shift"],
+                        {"tire_scrub_torque": 0.3, "front_mass_shift": 0.01})  # fmt: skip
+    disagree = compare_plant_selections(damp, scrub)
+    assert not disagree["agree"]
+    nl = lin + 0.2 + rng.normal(0, 0.05, 12)
+    assert np.all(nl > lin)
+    v = plant_verdict(lin, nl, disagree, 0.05, (1, 2))
+    assert v["test"]["ratio"] == pytest.approx(nl.mean() / lin.mean(), rel=1e-12)
+    assert _exact_sign_flip_p(nl - lin) == 2 / 4096 and v["test"]["p_value"] < 0.01
+    assert v["test"]["separated"] and v["plant"] == "linear" and not v["uncertain"]
+    assert "linear plant fits better" in v["reason"] and "(2 effects)" in v["reason"]
+    d = np.array([0.25, -0.2, 0.1, -0.15, 0.2, -0.1, 0.05, -0.05, 0.3, -0.3, 0.0, 0.02])
+    alike = plant_verdict(lin, lin + d, disagree)
+    assert alike["test"]["p_value"] == pytest.approx(_exact_sign_flip_p(d), abs=0.025)
+    assert alike["test"]["p_value"] > 0.5 and alike["uncertain"]
+    assert alike["reason"].endswith(PLANT_UNCERTAIN)
+    delay = _hand_ident(["input_delay"], {"input_delay": 0.03})
+    lag = _hand_ident(["actuator_lag"], {"actuator_lag": 0.02}, {"actuator_lag": ["input_delay"]})
+    agree = plant_verdict(lin, lin + d, compare_plant_selections(delay, lag))
+    assert not agree["uncertain"] and agree["plant"] == "linear"  # sum(d) = 0.12 > 0
+    assert "selections agree" in agree["reason"]
+    gap = nl.copy()
+    gap[0] = np.nan
+    g = plant_verdict(lin, gap, disagree)
+    assert g["test"]["decays"] == 11 and g["test"]["unscored"] == 1
+    assert g["test"]["ratio"] == pytest.approx(nl[1:].mean() / lin[1:].mean(), rel=1e-12)
+    with pytest.raises(ValueError, match="different windows"):
+        plant_verdict(lin, nl[:-1], disagree)
+
+
 @pytest.mark.parametrize("ratio, inconclusive", [(1.13, True), (1.0, True), (0.84, True),
                                                  (1.21, False), (0.8, False), (1e3, False)])
 def test_inconclusive_band_is_the_margin_both_ways(ratio, inconclusive):
