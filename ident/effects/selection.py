@@ -1016,6 +1016,10 @@ def choose_plant(
     - otherwise :data:`PLANT_UNCERTAIN`: which effects are named depends on a plant the data
       cannot choose, so none is.
 
+    The sign-flip test's smallest p-value with n decays is 2 / 2^n, so with 5 decays or fewer
+    it never separates the plants at 0.05: such fits name effects only where the two
+    selections agree.
+
     Parameters
     ----------
     model : ExperimentModel
