@@ -418,7 +418,8 @@ def test_fit_model_plant_uncertain_names_no_effect(monkeypatch):
     selections and the test are in ``plant_check`` and a note names the difference; with the
     real rule the two nominals are compared and the linear plant, the data's, is chosen
     after selection (separated: at 1.5 m/s the decays reach steer angles where the
-    nonlinear plant departs from the linear truth), with a sentence saying so."""
+    nonlinear plant departs from the linear truth), with a sentence saying so; the stability
+    subsamples run with the chosen plant."""
     from bikeid.ident.effects import pipeline
     from bikeid.ident.effects.acceptance import AcceptanceRule
     from bikeid.ident.effects.selection import PLANT_UNCERTAIN
@@ -426,8 +427,10 @@ def test_fit_model_plant_uncertain_names_no_effect(monkeypatch):
 
     ws = synthetic_windows(ExperimentModel(), (1.5, 2.5), per_speed=4, noise=0.01, seed=4)
     rule = AcceptanceRule.exact()
-    real = pipeline.fit_model(ws, max_effects=0, rule=rule)
+    real = pipeline.fit_model(ws, max_effects=0, rule=rule, stability=2)
     assert real["plant"] == "linear" and not real["plant_choice"]["uncertain"]
+    assert real["stability"]["plant"] == "linear"  # the subsamples run the chosen plant
+    assert real["selection_frequency"] == {"unexplained": 1.0}  # nothing else to select
     assert real["plant_check"]["test"]["separated"] and "linear plant fits better" in \
         real["plant_choice"]["reason"]  # fmt: skip
     side = {"verdict": ["steer_viscous_damping"], "effects": {"steer_viscous_damping": 0.5},
