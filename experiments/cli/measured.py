@@ -183,8 +183,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="nominal plant: auto (default): select effects with both the linear and the "
         "nonlinear (defect-corrected) Whipple plant and keep the plant whose final model "
         "predicts the decays better (out-of-fold costs, sign-flip paired test at --alpha); "
-        "alike fits with disagreeing selections give 'nominal plant uncertain' (about twice "
-        "the CPU); nonlinear or linear force one",
+        "alike fits keep the nonlinear plant when the two selections agree and give "
+        "'nominal plant uncertain' when they disagree (about twice the CPU); nonlinear or "
+        "linear force one",
     )
     f.add_argument(
         "--weave-weight",

@@ -371,11 +371,12 @@ def fit_model(
         Whipple model and the nonlinear one by defect correction) on the same decays, and the
         plant is chosen after it by the two final models' fits
         (:func:`bikeid.ident.effects.selection.choose_plant`: per-decay out-of-fold costs, a
-        sign-flip paired test at the rule's ``alpha``; alike fits with disagreeing
-        selections give :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`); ``"nonlinear"`` or
-        ``"linear"`` force one (one selection, no comparison).  The nominal fits before any
-        effect are reported in every case (``nominal_fit``), the plant used as ``plant``
-        and why as ``plant_choice``.
+        sign-flip paired test at the rule's ``alpha``; alike fits keep the nonlinear plant
+        when the selections agree and give
+        :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN` when they disagree);
+        ``"nonlinear"`` or ``"linear"`` force one (one selection, no comparison).  The
+        nominal fits before any effect are reported in every case (``nominal_fit``), the
+        plant used as ``plant`` and why as ``plant_choice``.
     stability : int, optional
         With N > 0, also the selection frequency of each name over N random 75 % subsamples
         (:func:`bikeid.ident.effects.selection.selection_frequencies`).

@@ -41,13 +41,13 @@ Workflow (identification.md section 5, approaches A/B/E):
    decays and compares the two final models by their per-decay out-of-fold costs (each
    effect set refitted on the other half of the decays: the penalty for the number of
    effects), a sign-flip paired test (stratified by file) at the rule's ``alpha``.  A
-   separated pair gives the better plant; alike fits give the better plant when the two
-   selections agree up to their ambiguity sets (:func:`compare_plant_selections`) and
-   :data:`PLANT_UNCERTAIN` when they do not.  The nominal costs before any effect
-   (:func:`compare_nominal_plants`) are reported but no longer choose: an effect in the
-   data shifts them (linear truths with a command gain gave nominal cost ratios nonlinear /
-   linear of 0.49-1.03 on the closure benchmark: the wrong plant looked as good or better
-   before any effect).
+   separated pair gives the better plant; alike fits give the nonlinear plant (the default)
+   when the two selections agree up to their ambiguity sets
+   (:func:`compare_plant_selections`) and :data:`PLANT_UNCERTAIN` when they do not.  The
+   nominal costs before any effect (:func:`compare_nominal_plants`) are reported but no
+   longer choose: an effect in the data shifts them (linear truths with a command gain gave
+   nominal cost ratios nonlinear / linear of 0.49-1.03 on the closure benchmark: the wrong
+   plant looked as good or better before any effect).
 
 The pieces live in their own modules: the library and its fit settings in
 :mod:`bikeid.ident.effects.library` (effect facts: :mod:`bikeid.sim.effect_registry`), the
@@ -918,9 +918,11 @@ def plant_verdict(
 
     - p <= ``alpha`` (separated): the plant of the lower cost;
     - otherwise (the final models fit alike) and the selections agree (``check["agree"]``):
-      the plant of the lower cost (the nonlinear on a tie), whose effects are the agreed
-      ones up to the ambiguity sets;
-    - otherwise :data:`PLANT_UNCERTAIN`.
+      the nonlinear plant, the default (the real bicycle is nonlinear; the linear plant is
+      taken only when the data show it fits better), whose effects are the agreed ones up
+      to the ambiguity sets;
+    - otherwise :data:`PLANT_UNCERTAIN` (the nonlinear plant's selection is kept, its effects
+      not named).
 
     Parameters
     ----------
@@ -967,8 +969,8 @@ def plant_verdict(
                     nonlinear_cost=float(np.mean(nl[ok])) if ok.any() else float("nan"),
                     ratio=float("nan"), ratio_ci=[float("nan")] * 2, p_value=1.0)
     p = test["p_value"]
-    better = "linear" if test["ratio"] > 1 else "nonlinear"
     separated = bool(p <= alpha)
+    better = "linear" if separated and test["ratio"] > 1 else "nonlinear"
     test["separated"] = separated
     uncertain = not separated and not check["agree"]
     n_eff = ("", "") if effects is None else (f" ({effects[0]} effects)", f" ({effects[1]} "
@@ -983,8 +985,8 @@ def plant_verdict(
     if separated:
         tail = f"the {better} plant fits better, so the {better} plant and its effects"
     elif check["agree"]:
-        tail = (f"they fit alike and their selections agree, so the {better} plant (the lower "
-                "cost) and the agreed effects")  # fmt: skip
+        tail = ("they fit alike and their selections agree, so the nonlinear plant (the "
+                "default unless the linear fits better) and the agreed effects")  # fmt: skip
     else:
         tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
     return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test}
@@ -1011,8 +1013,8 @@ def choose_plant(
     - otherwise the final models fit alike; if the selections agree
       (:func:`compare_plant_selections`: every effect named by one is named by the other or
       in an ambiguity set with one of its effects, ``unexplained`` on both or neither), the
-      plant with the lower out-of-fold cost (the nonlinear on a tie) and its effects, which
-      are the agreed ones up to those sets;
+      nonlinear plant (the default: the linear is taken only when the data show it fits
+      better) and its effects, which are the agreed ones up to those sets;
     - otherwise :data:`PLANT_UNCERTAIN`: which effects are named depends on a plant the data
       cannot choose, so none is.
 
@@ -1033,7 +1035,7 @@ def choose_plant(
     -------
     dict
         ``plant`` (``"linear"`` or ``"nonlinear"``: the selection to report; with
-        ``uncertain``, the plant of lower out-of-fold cost, whose effects are not named),
+        ``uncertain``, the nonlinear, whose effects are not named),
         ``uncertain`` (bool), ``reason`` (one sentence: the costs, the test and the rule's
         branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: out-of-fold costs, mean
         over files of the file means, over the decays both scored; ``ratio`` nonlinear /
