@@ -850,11 +850,13 @@ def out_of_fold_costs(
     Two-fold cross-fitting on the selection's own halves (even and odd windows): the final
     model's effects (and, with a nominal calibration, its offsets within the box) are
     refitted on one half (:func:`bikeid.ident.effects.fit.joint_fit`, decay signals only,
-    from the final values) and every decay of the other half is scored by that fit, then the
-    halves swap.  A parameter that only fits the noise of one half raises the other half's
-    cost, so the number of effects is paid for in the cost itself (cross-validation; Stone
-    1977 shows leave-one-out cross-validation asymptotically equivalent to AIC, two folds
-    penalize more).
+    from the final values; with the nonlinear plant from the final fit's defect correction,
+    taken again twice at the half's own fit) and every decay of the other half is scored by
+    that fit (the nonlinear plant's correction taken at it), then the halves swap.  A
+    parameter that only fits the noise of one half raises the other half's cost, so the
+    number of effects is paid for in the cost itself (cross-validation; Stone 1977 shows
+    leave-one-out cross-validation asymptotically equivalent to AIC, two folds penalize
+    more).
 
     Parameters
     ----------
@@ -876,7 +878,11 @@ def out_of_fold_costs(
     """
     from bikeid.ident.effects.experiment_model import SimulationFailed
 
-    ws = [replace(w, correction=None) for w in selection.windows]
+    # the fit half starts from the final fit's defect correction (a nearer linearization
+    # point than the nominal's: half the CPU; joint_fit then takes it twice at the half's own
+    # fit); each held-out decay is corrected afresh at the half's fit
+    ws = list(selection.windows) if nonlinear else [replace(w, correction=None)
+                                                    for w in selection.windows]  # fmt: skip
     names = [e.name for e in selection.effects]
     start = {n: selection.model.e(n) for n in names}
     out = np.full(len(ws), np.nan)
@@ -891,7 +897,7 @@ def out_of_fold_costs(
             continue
         for i in held_i:
             try:
-                w = corrected([ws[i]], f.model, nonlinear)
+                w = corrected([replace(ws[i], correction=None)], f.model, nonlinear)
             except SimulationFailed:
                 continue
             out[i] = float(np.sum(window_errors(w, f.model.simulate(w)) ** 2))
