@@ -5,10 +5,13 @@ Each seed draws one blind trial (experiments.measured.blind_trials) per hidden e
 CLOSURE_EFFECTS: viscous steer damping, an input delay, an actuator gain, roll damping
 (outside the library) and none.  Its two fit speeds are written as CSV logs (time in ms,
 degrees, deg/s, km/h, roll positive to the left) and fitted by ``bikeid measured fit`` with
-identify's import options and the default pipeline (``--plant auto``, the default acceptance
-rule).  The truth's plant is the independent linear one (Moore's canonical matrices from
+identify's import options and the default pipeline (``--plant auto``: the selection with both
+nominal plants, the plant chosen after it by the final models' out-of-fold costs; the default
+acceptance rule).  The truth's plant is the independent linear one (Moore's canonical matrices from
 bicycleparameters, perturbed within the stated uncertainty) unless ``--truth`` says
-otherwise.  Prints each trial's outcome and, per effect, the rate of right answers with its
+otherwise.  Prints each trial's outcome (with the plant test's out-of-fold cost ratio
+nonlinear / linear, its p-value and whether the two selections agree, and the nominal cost
+ratio before any effect) and, per effect, the rate of right answers with its
 exact (Clopper-Pearson) 95 % interval; ``--json`` writes all rows and the summary.
 
 Usage::
@@ -25,6 +28,7 @@ import json
 import tempfile
 import time
 from collections import Counter
+from pathlib import Path
 
 from bikeid.experiments.measured.blind_trials import (
     CLOSURE_EFFECTS,
@@ -43,6 +47,13 @@ def _job(args: tuple) -> dict:
     extra = () if fit_plant == "auto" else ("--plant", fit_plant)
     with tempfile.TemporaryDirectory() as d:
         row = run_log_trial(trial, d, None if truth == "trial" else truth, extra)
+        model = Path(d) / "model.json"
+        check = json.loads(model.read_text())["results"].get("plant_check") if row["rc"] == 0 \
+            else None  # fmt: skip
+    test = (check or {}).get("test") or {}
+    row["plant_test"] = {k: test.get(k) for k in ("ratio", "p_value", "separated")} if test \
+        else None  # fmt: skip
+    row["plant_agree"] = None if check is None else check["agree"]
     row["cpu_s"] = time.process_time() - t0
     return row
 
@@ -81,8 +92,13 @@ def main() -> None:
     for _, r in imap(_job, [(t, args.truth, args.fit_plant) for t in trials], args.processes, None,
                      ordered=True):  # fmt: skip
         rows.append(r)
+        t = r["plant_test"]
+        after = "" if not t else (f" (after selection: out-of-fold ratio {t['ratio']:.3g}, p "
+                                  f"{t['p_value']:.2g}, selections "
+                                  f"{'agree' if r['plant_agree'] else 'disagree'})")
+        ratio = "-" if r["plant_ratio"] is None else f"{r['plant_ratio']:.3g}"
         print(f"seed-trial {r['seed']} {r['effect']:22s} {r['outcome']:18s} verdict "
-              f"{r['verdict']} plant {r['plant']} ratio {r['plant_ratio']} cpu "
+              f"{r['verdict']} plant {r['plant']}{after} nominal ratio {ratio} cpu "
               f"{r['cpu_s']:.1f} s", flush=True)  # fmt: skip
     s = summarize(rows)
     for eff, v in s.items():

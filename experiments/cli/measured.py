@@ -182,9 +182,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--plant",
         choices=("auto", "nonlinear", "linear"),
         default="auto",
-        help="nominal plant: auto (default): the nonlinear Whipple plant (defect-corrected) "
-        "unless the linear one fits the decays more than 1.2 times better before selection "
-        "(both fits and the choice are printed); nonlinear or linear force one",
+        help="nominal plant: auto (default): select effects with both the linear and the "
+        "nonlinear (defect-corrected) Whipple plant and keep the plant whose final model "
+        "predicts the decays better (out-of-fold costs, sign-flip paired test at --alpha); "
+        "alike fits keep the nonlinear plant when the two selections agree and give "
+        "'nominal plant uncertain' when they disagree (about twice the CPU); nonlinear or "
+        "linear force one",
     )
     f.add_argument(
         "--weave-weight",
@@ -349,18 +352,19 @@ def cmd_fit(args) -> int:
           f"{ws[0].drive}")  # fmt: skip
     ch = out["plant_choice"]
     print(f"nominal plant: {out['plant']} ({ch['reason']})")
-    if ch["auto"] != out["plant"]:
-        print(f"note: --plant auto would fit with the {ch['auto']} plant; a mismatch of the "
-              "nominal plant can be read as an effect")  # fmt: skip
+    if ch["asked"] != "auto":
+        print(f"note: the {out['plant']} plant was forced and not compared with the other; a "
+              "mismatch of the nominal plant can be read as an effect (--plant auto compares "
+              "both plants' final models)")  # fmt: skip
     pc = out.get("plant_check")
-    if pc:  # the costs did not pick a plant: both selections, compared
+    if pc:  # --plant auto: both selections, compared
         print(f"plant check: the selections with the two plants "
               f"{'agree' if pc['agree'] else 'disagree'} (up to their ambiguity sets): linear "
               f"{pc['linear']['verdict']}, nonlinear {pc['nonlinear']['verdict']}")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
     from bikeid.ident.effects.selection import evidence_lines
 
-    uncertain = bool(pc and not pc["agree"])  # the chosen plant's evidence names no effect
+    uncertain = bool(ch.get("uncertain"))  # the chosen plant's evidence names no effect
     for line in [] if uncertain else evidence_lines(out["identification"]["evidence"]):
         print(f"  {line}")
     w = out["identification"]["weave_weight"]

@@ -26,9 +26,8 @@ from bikeid.ident.effects.fit import FitResult, joint_fit
 from bikeid.ident.effects.library import LIBRARY
 from bikeid.ident.effects.selection import (
     PLANT_UNCERTAIN,
-    choose_nominal_plant,
+    choose_plant,
     compare_nominal_plants,
-    compare_plant_selections,
     select_effects,
     selection_frequencies,
 )
@@ -51,11 +50,11 @@ __all__ = [
 
 #: Plants a model file may name (``measured fit`` records the one it fitted with); a file
 #: without ``plant`` gets :data:`DEFAULT_PLANT`, the plant ``measured fit`` used before it
-#: recorded one (and the one ``--plant auto``, its default, keeps on the real decays).
+#: recorded one).
 PLANTS = ("nonlinear", "linear")
 DEFAULT_PLANT = "nonlinear"
-#: ``measured fit --plant`` choices; ``auto`` (default) applies
-#: :func:`bikeid.ident.effects.selection.choose_nominal_plant`.
+#: ``measured fit --plant`` choices; ``auto`` (default) selects with both plants and applies
+#: :func:`bikeid.ident.effects.selection.choose_plant` to the two final models.
 PLANT_CHOICES = ("auto", *PLANTS)
 #: Largest model file read [bytes] (a fitted model is a few kB; a stability run ~100 kB).
 MAX_MODEL_BYTES = 20_000_000
@@ -368,12 +367,16 @@ def fit_model(
     max_effects : int, optional
         At most this many effects (:func:`bikeid.ident.effects.selection.select_effects`).
     plant : str, optional
-        ``"auto"`` (default): the nonlinear Whipple plant (defect-corrected) unless the
-        linear plant's nominal cost on the decays is lower by more than
-        :data:`bikeid.ident.effects.selection.LINEAR_PLANT_MARGIN`
-        (:func:`bikeid.ident.effects.selection.choose_nominal_plant`); ``"nonlinear"`` or
-        ``"linear"`` force one.  Both nominal fits are reported in every case
-        (``nominal_fit``), the plant used as ``plant`` and why as ``plant_choice``.
+        ``"auto"`` (default): the selection is run with both nominal plants (the linear
+        Whipple model and the nonlinear one by defect correction) on the same decays, and the
+        plant is chosen after it by the two final models' fits
+        (:func:`bikeid.ident.effects.selection.choose_plant`: per-decay out-of-fold costs, a
+        sign-flip paired test at the rule's ``alpha``; alike fits keep the nonlinear plant
+        when the selections agree and give
+        :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN` when they disagree);
+        ``"nonlinear"`` or ``"linear"`` force one (one selection, no comparison).  The
+        nominal fits before any effect are reported in every case (``nominal_fit``), the
+        plant used as ``plant`` and why as ``plant_choice``.
     stability : int, optional
         With N > 0, also the selection frequency of each name over N random 75 % subsamples
         (:func:`bikeid.ident.effects.selection.selection_frequencies`).
@@ -400,18 +403,24 @@ def fit_model(
     dict
         Effects (registry units), the bicycle parameters of the fitted model
         (``parameters``, SI: the stated ones moved within ``nominal_uncertainty``), fit
-        speeds [m/s], files, windows, the identification, the
-        nominal plant used (``plant``), why (``plant_choice``: the plant asked for, the one
-        ``auto`` takes, the cost ratio nonlinear / linear, the margin and a sentence) and both
-        nominal fits
-        (``nominal_fit``: summed squared NRMSE of roll rate and steer angle as linear and
-        as nonlinear plant); ``plant_check``: with ``plant="auto"`` and a nominal cost ratio
-        that does not pick a plant (``plant_choice["inconclusive"]``), the selection is run
-        with both plants and compared
-        (:func:`bikeid.ident.effects.selection.compare_plant_selections`; None otherwise);
-        when they disagree no effect is named (``effects`` empty, the identification's
-        verdict :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`, both selections in
-        ``plant_check``, a note); ``experiment`` (:func:`experiment_record`); ``dropped_windows``
+        speeds [m/s], files, windows, the identification (of the plant used), ``plant``:
+        the nominal plant of the reported model (its effects, parameters and
+        identification); ``plant_choice``: ``asked`` (auto, linear or nonlinear), ``plant``,
+        ``auto`` (the plant auto chose; None when the plant was forced: auto was not run),
+        ``uncertain`` (the verdict is :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`),
+        ``ratio`` (nominal cost nonlinear / linear before any effect, for reference: it no
+        longer chooses) and ``reason`` (a sentence: the final models' out-of-fold costs, the
+        paired test and the rule's branch, or "as asked"); ``plant_check`` (auto only, None
+        when forced): :func:`bikeid.ident.effects.selection.compare_plant_selections` of the
+        two selections (``agree``, each plant's verdict, effects and ambiguity sets,
+        ``differences``) with the plant test's numbers under ``test``
+        (:func:`bikeid.ident.effects.selection.choose_plant`); when the plant is uncertain no
+        effect is named (``effects`` empty, the identification's verdict
+        :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN`, both selections in
+        ``plant_check``, a note); ``nominal_fit``: the nominal model's summed squared NRMSE
+        of roll rate and steer angle as linear and as nonlinear plant before any effect
+        (:func:`bikeid.ident.effects.selection.compare_nominal_plants`), reported, not used
+        to choose; ``experiment`` (:func:`experiment_record`); ``dropped_windows``
         (file, start row, reason of each window no candidate could be scored on: the
         nominal nonlinear plant cannot simulate it, so it is dropped for all candidates
         alike, :func:`simulable_windows`; a window that fails at an accepted effect is
@@ -438,13 +447,47 @@ def fit_model(
                      "nonlinear plant cannot simulate them (" + "; ".join(
                          f"{d['file']}@{d['start']}: {d['reason']}" for d in dropped) + ")")
     nominal_fit = compare_nominal_plants(base, windows)
-    auto = choose_nominal_plant(nominal_fit)
-    choice = {"asked": plant, **auto, "auto": auto["plant"]}
-    if plant == "auto":
-        plant = auto["plant"]
+    asked = plant
+    ratio = nominal_fit["ratio"]
+    sel: dict[str, object] = {}
+    # the nonlinear plant first: a window it cannot simulate at an accepted effect is dropped
+    # for both plants, so the two selections run on the same decays
+    for name in [p for p in ("nonlinear", "linear") if asked in ("auto", p)]:
+        prog = progress
+        if progress and asked == "auto":
+            prog = (lambda lab: lambda d, t, label: progress(d, t, f"{lab} plant, {label}"))(name)
+        res, more = _select_dropping(base, windows, max_effects, name == "nonlinear",
+                                     weave_weight, prog, select_kw)  # fmt: skip
+        sel[name] = res
+        if more:
+            dropped += more
+            notes.append(f"{len(more)} more window(s) dropped for all candidates alike and the "
+                         "selection rerun: the nonlinear plant could not simulate them at an "
+                         "accepted effect (" + "; ".join(
+                             f"{d['file']}@{d['start']}: {d['reason']}" for d in more) + ")")
+            windows = [w for w in windows
+                       if not any(d["file"] == w.file and d["start"] == w.start for d in more)]
+    check = None
+    if asked == "auto":
+        pick = choose_plant(base, sel["linear"], sel["nonlinear"], select_kw["rule"].alpha)
+        plant = pick["plant"]
+        check = {**pick["check"], "test": pick["test"]}
+        choice = {"asked": asked, "plant": plant, "auto": plant, "uncertain": pick["uncertain"],
+                  "ratio": ratio, "reason": pick["reason"]}  # fmt: skip
+        if pick["uncertain"]:
+            t = pick["test"]
+            notes.append(f"{PLANT_UNCERTAIN}: the final models of the two plants fit the decays "
+                         f"alike (out-of-fold cost linear {t['linear_cost']:.4g}, nonlinear "
+                         f"{t['nonlinear_cost']:.4g}, paired p = {t['p_value']:.2g} > "
+                         f"{t['alpha']:g}) and their selections disagree ("
+                         + "; ".join(check["differences"]) + "), so no effect is named: the "
+                         "difference would be the plant mismatch")  # fmt: skip
     else:
-        choice["reason"] = f"{plant} plant as asked (auto would take the {auto['plant']})"
-        choice["plant"] = plant
+        choice = {"asked": asked, "plant": plant, "auto": None, "uncertain": False,
+                  "ratio": ratio,
+                  "reason": f"{plant} plant as asked (not compared with the other plant; before "
+                  f"any effect the nominal cost ratio nonlinear / linear is {ratio:.3g})"}
+    res = sel[plant]
     nl = plant == "nonlinear"
     extra = {}
     if stability:
@@ -453,29 +496,9 @@ def fit_model(
             progress=progress, **select_kw,
         )  # fmt: skip
         extra = {"selection_frequency": freq,
-                 "stability": {"resamples": stability, "fraction": 0.75, "seed": 0}}  # fmt: skip
-    res, more = _select_dropping(base, windows, max_effects, nl, weave_weight, progress,
-                                 select_kw)  # fmt: skip
-    if more:
-        dropped += more
-        notes.append(f"{len(more)} more window(s) dropped for all candidates alike and the "
-                     "selection rerun: the nonlinear plant could not simulate them at an "
-                     "accepted effect (" + "; ".join(
-                         f"{d['file']}@{d['start']}: {d['reason']}" for d in more) + ")")
-        windows = [w for w in windows
-                   if not any(d["file"] == w.file and d["start"] == w.start for d in more)]
-    check = None
-    if choice["asked"] == "auto" and choice["inconclusive"]:  # the plant before any effect
-        other, _ = _select_dropping(base, windows, max_effects, not nl, weave_weight, None,
-                                    select_kw)  # fmt: skip
-        check = compare_plant_selections(*((other, res) if nl else (res, other)))
-        if not check["agree"]:
-            notes.append(f"{PLANT_UNCERTAIN}: the nominal costs do not pick a plant (ratio "
-                         f"{choice['ratio']:.3g}, within 1/{choice['margin']:g}-"
-                         f"{choice['margin']:g}) and the selections with the two plants "
-                         "disagree (" + "; ".join(check["differences"]) + "), so no effect is "
-                         "named: the difference would be the plant mismatch")  # fmt: skip
-    uncertain = check is not None and not check["agree"]
+                 "stability": {"resamples": stability, "fraction": 0.75, "seed": 0,
+                               "plant": plant}}  # fmt: skip
+    uncertain = choice["uncertain"]
     ident = res.as_dict()
     if uncertain:
         ident.update(verdict=[PLANT_UNCERTAIN], effects=[])

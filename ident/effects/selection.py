@@ -36,6 +36,18 @@ Workflow (identification.md section 5, approaches A/B/E):
    residual's own noise floor.  :attr:`Identification.evidence` records, per accepted effect
    and for ``unexplained``, the numbers behind the verdict (:func:`evidence_lines` prints
    them); their rates on the blind trials are in docs/measured.md "Blind trials".
+6. **The nominal plant, chosen after selection** (:func:`choose_plant`).  ``measured fit
+   --plant auto`` runs the selection with the linear and with the nonlinear plant on the same
+   decays and compares the two final models by their per-decay out-of-fold costs (each
+   effect set refitted on the other half of the decays: the penalty for the number of
+   effects), a sign-flip paired test (stratified by file) at the rule's ``alpha``.  A
+   separated pair gives the better plant; alike fits give the nonlinear plant (the default)
+   when the two selections agree up to their ambiguity sets
+   (:func:`compare_plant_selections`) and :data:`PLANT_UNCERTAIN` when they do not.  The
+   nominal costs before any effect (:func:`compare_nominal_plants`) are reported but no
+   longer choose: an effect in the data shifts them (linear truths with a command gain gave
+   nominal cost ratios nonlinear / linear of 0.49-1.03 on the closure benchmark: the wrong
+   plant looked as good or better before any effect).
 
 The pieces live in their own modules: the library and its fit settings in
 :mod:`bikeid.ident.effects.library` (effect facts: :mod:`bikeid.sim.effect_registry`), the
@@ -89,6 +101,9 @@ __all__ = [
     "choose_nominal_plant",
     "compare_nominal_plants",
     "compare_plant_selections",
+    "choose_plant",
+    "out_of_fold_costs",
+    "plant_verdict",
     "PLANT_UNCERTAIN",
     "evidence_lines",
     "WEAVE_EPS",
@@ -97,10 +112,11 @@ __all__ = [
     "selection_frequencies",
 ]
 
-#: The verdict of a fit whose nominal plant is uncertain: the nominal costs do not pick a
-#: plant (their ratio within [1 / margin, margin]) and the selections with the two plants
-#: disagree beyond their ambiguity sets (:func:`compare_plant_selections`), so the named
-#: effects would be the plant mismatch, not effects of the bicycle.
+#: The verdict of a fit whose nominal plant is uncertain: the final models of the selections
+#: with the two plants fit the decays alike (:func:`choose_plant`'s paired test of their
+#: out-of-fold costs does not separate them) and the selections disagree beyond their
+#: ambiguity sets (:func:`compare_plant_selections`), so the named effects would depend on a
+#: plant the data cannot choose: the plant mismatch, not effects of the bicycle.
 PLANT_UNCERTAIN = "nominal plant uncertain"
 
 
@@ -170,6 +186,11 @@ class Identification:
         the calibrated nominal; ``unexplained`` holds the final cost, the noise
         floors (second differences, coloured, from the final residual), the explained
         fractions, the rule and its threshold, and the verdict it gave.
+    windows : list of Window
+        The decays with the final fit's defect correction (nonlinear plant).
+    calibration : Calibration or None
+        The nominal's offsets within its uncertainty at the final fit (None when the stated
+        bicycle was taken as exact).
     """
 
     model: ExperimentModel
@@ -185,6 +206,7 @@ class Identification:
     weave_weight: float = 0.0  # weight of the weave-eigenvalue term in the fits
     evidence: dict = field(default_factory=dict)  # why each name is in the verdict
     windows: list[Window] = field(default_factory=list)  # with the final defect correction
+    calibration: Calibration | None = None  # the nominal's offsets of the final fit
 
     @property
     def ambiguity(self) -> dict[str, list[str]]:
@@ -620,6 +642,7 @@ def select_effects(
         cost_nominal=cost0, cost_final=cost_sig, cost_floor=floor,
         explained=unexpl["explained"], eq_ranking=err_ranking(model, windows), rounds=st.rounds,
         weave_weight=weave_weight, evidence=evidence, windows=windows,
+        calibration=final.calibration,
     )  # fmt: skip
 
 
@@ -732,8 +755,12 @@ def compare_nominal_plants(model: ExperimentModel, windows: list[Window]) -> dic
 
 
 def choose_nominal_plant(comparison: dict, margin: float = LINEAR_PLANT_MARGIN) -> dict:
-    """The nominal plant a fit starts from, given :func:`compare_nominal_plants`.
+    """The nominal plant chosen before any effect, given :func:`compare_nominal_plants`.
 
+    Used by the blind trials' ``nonlinear="auto"``
+    (:func:`bikeid.experiments.measured.blind_trials.run_blind_trial`, the calibration of
+    :data:`LINEAR_PLANT_MARGIN`); ``bikeid measured fit`` chooses after selection instead
+    (:func:`choose_plant`), because an effect in the data shifts these costs.
     The nonlinear plant is the default (the real bicycle is nonlinear); the linear plant is
     taken only when its nominal cost is lower by more than the factor ``margin``, so that a
     plant mismatch larger than the fit scatter is not read as an effect, while decays that
@@ -813,6 +840,226 @@ def compare_plant_selections(linear: Identification, nonlinear: Identification) 
         who = "linear" if "unexplained" in a["verdict"] else "nonlinear"
         diff.append(f"unexplained (only with the {who} plant)")
     return {"agree": not diff, "linear": a, "nonlinear": b, "differences": diff}
+
+
+def out_of_fold_costs(
+    model: ExperimentModel, selection: Identification, nonlinear: bool
+) -> np.ndarray:
+    """Each decay's cost under a selection's final effect set refitted without that decay.
+
+    Two-fold cross-fitting on the selection's own halves (even and odd windows): the final
+    model's effects (and, with a nominal calibration, its offsets within the box) are
+    refitted on one half (:func:`bikeid.ident.effects.fit.joint_fit`, decay signals only,
+    from the final values; with the nonlinear plant from the final fit's defect correction,
+    taken again twice at the half's own fit) and every decay of the other half is scored by
+    that fit (the nonlinear plant's correction taken at it), then the halves swap.  A
+    parameter that only fits the noise of one half raises the other half's cost, so the
+    number of effects is paid for in the cost itself (cross-validation; Stone 1977 shows
+    leave-one-out cross-validation asymptotically equivalent to AIC, two folds penalize
+    more).
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model the selection started from (stated bicycle, no effects).
+    selection : Identification
+        :func:`select_effects`'s result (its ``windows``, ``effects``, ``model`` and
+        ``calibration``).
+    nonlinear : bool
+        The plant the selection ran with (True: the nonlinear plant by defect correction).
+
+    Returns
+    -------
+    (n,) ndarray
+        Per window of ``selection.windows``, in order: the summed squared NRMSE of roll rate
+        and steer angle (dimensionless) of the fit on the other half; nan where the
+        nonlinear plant could not simulate the window (or the half it was fitted on) at
+        that fit.
+    """
+    from bikeid.ident.effects.experiment_model import SimulationFailed
+
+    # the fit half starts from the final fit's defect correction (a nearer linearization
+    # point than the nominal's: half the CPU; joint_fit then takes it twice at the half's own
+    # fit); each held-out decay is corrected afresh at the half's fit
+    ws = list(selection.windows) if nonlinear else [replace(w, correction=None)
+                                                    for w in selection.windows]  # fmt: skip
+    names = [e.name for e in selection.effects]
+    start = {n: selection.model.e(n) for n in names}
+    out = np.full(len(ws), np.nan)
+    idx = np.arange(len(ws))
+    for fit_i, held_i in ((idx[0::2], idx[1::2]), (idx[1::2], idx[0::2])):
+        if fit_i.size == 0:
+            continue
+        try:
+            f = joint_fit(model, [ws[i] for i in fit_i], names, start, nonlinear, None,
+                          selection.calibration)  # fmt: skip
+        except SimulationFailed:  # the half cannot be fitted: its held-out decays unscored
+            continue
+        for i in held_i:
+            try:
+                w = corrected([replace(ws[i], correction=None)], f.model, nonlinear)
+            except SimulationFailed:
+                continue
+            out[i] = float(np.sum(window_errors(w, f.model.simulate(w)) ** 2))
+    return out
+
+
+def plant_verdict(
+    costs_linear: np.ndarray,
+    costs_nonlinear: np.ndarray,
+    check: dict,
+    alpha: float = 0.05,
+    effects: tuple[int, int] | None = None,
+    groups: list[str] | None = None,
+) -> dict:
+    """The rule of :func:`choose_plant`, from the per-decay costs and the selections' comparison.
+
+    Over the decays scored by both plants (finite in both arrays), the out-of-fold cost
+    ratio nonlinear / linear and its paired test are those of every before/after figure of
+    the pipeline (:func:`bikeid.ident.effects.before_after.before_after`, "before" the
+    linear, "after" the nonlinear: the statistic is the mean over log files of each file's
+    mean decay cost; the test a two-sided sign-flip randomization test of the per-decay
+    differences, stratified by file, 4000 flips, seed 0; the interval a bootstrap over decays
+    within files).  The rule:
+
+    - p <= ``alpha`` (separated): the plant of the lower cost;
+    - otherwise (the final models fit alike) and the selections agree (``check["agree"]``):
+      the nonlinear plant, the default (the real bicycle is nonlinear; the linear plant is
+      taken only when the data show it fits better), whose effects are the agreed ones up
+      to the ambiguity sets;
+    - otherwise :data:`PLANT_UNCERTAIN` (the nonlinear plant's selection is kept, its effects
+      not named).
+
+    Parameters
+    ----------
+    costs_linear, costs_nonlinear : (n,) ndarray
+        Per-decay out-of-fold costs (:func:`out_of_fold_costs`, dimensionless; nan: not
+        scored), the same decays in the same order.
+    check : dict
+        :func:`compare_plant_selections` of the two selections (``agree``).
+    alpha : float, optional
+        Level of the paired test (default 0.05).
+    effects : tuple of int, optional
+        Number of effects of the linear and the nonlinear final model (for the sentence).
+    groups : list of str, optional
+        Each decay's log file (the strata; default: one stratum).
+
+    Returns
+    -------
+    dict
+        ``plant``, ``uncertain``, ``reason`` and ``test`` as :func:`choose_plant` describes.
+
+    Raises
+    ------
+    ValueError
+        If the cost arrays (or ``groups``) differ in length.
+    """
+    from bikeid.ident.effects.before_after import before_after
+
+    lin, nl = np.asarray(costs_linear, float), np.asarray(costs_nonlinear, float)
+    g = ["decays"] * lin.size if groups is None else list(groups)
+    if not lin.shape == nl.shape == (len(g),):
+        raise ValueError(f"the selections ran on different windows ({lin.size} linear, "
+                         f"{nl.size} nonlinear, {len(g)} files); run both on the same "
+                         "decays")  # fmt: skip
+    ok = np.isfinite(lin) & np.isfinite(nl)
+    test = {"decays": int(ok.sum()), "unscored": int((~ok).sum()), "alpha": alpha,
+            "statistic": "out-of-fold cost ratio nonlinear / linear (mean over files of the "
+            "file means); sign-flip paired test, stratified by file"}  # fmt: skip
+    if ok.sum() >= 2 and np.sum(lin[ok]) > 0:
+        ba = before_after(lin[ok], nl[ok], [x for x, k in zip(g, ok, strict=True) if k])
+        test.update(linear_cost=ba["error_before"], nonlinear_cost=ba["error_after"],
+                    ratio=ba["ratio"], ratio_ci=ba["ratio_ci"], p_value=ba["p_value"])
+    else:  # nothing to compare: the costs cannot separate the plants
+        test.update(linear_cost=float(np.mean(lin[ok])) if ok.any() else float("nan"),
+                    nonlinear_cost=float(np.mean(nl[ok])) if ok.any() else float("nan"),
+                    ratio=float("nan"), ratio_ci=[float("nan")] * 2, p_value=1.0)
+    p = test["p_value"]
+    separated = bool(p <= alpha)
+    better = "linear" if separated and test["ratio"] > 1 else "nonlinear"
+    test["separated"] = separated
+    uncertain = not separated and not check["agree"]
+    n_eff = ("", "") if effects is None else (f" ({effects[0]} effects)", f" ({effects[1]} "
+                                               "effects)")  # fmt: skip
+    if effects is not None:
+        test["effects"] = {"linear": int(effects[0]), "nonlinear": int(effects[1])}
+    lo, hi = test["ratio_ci"]
+    head = (f"chosen after selection: the final models' out-of-fold decay cost linear "
+            f"{test['linear_cost']:.4g}{n_eff[0]}, nonlinear {test['nonlinear_cost']:.4g}"
+            f"{n_eff[1]} (ratio {test['ratio']:.3g}, 95 % interval {lo:.3g}-{hi:.3g}) over "
+            f"{test['decays']} decays, paired p = {p:.2g} (level {alpha:g}): ")  # fmt: skip
+    if separated:
+        tail = f"the {better} plant fits better, so the {better} plant and its effects"
+    elif check["agree"]:
+        tail = ("they fit alike and their selections agree, so the nonlinear plant (the "
+                "default unless the linear fits better) and the agreed effects")  # fmt: skip
+    else:
+        tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
+    return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test}
+
+
+def choose_plant(
+    model: ExperimentModel,
+    linear: Identification,
+    nonlinear: Identification,
+    alpha: float = 0.05,
+) -> dict:
+    """The nominal plant chosen after selection, by the two final models' fits to the decays.
+
+    Each plant's selection (:func:`select_effects` on the same windows) ends in a final model;
+    both are scored on every decay by :func:`out_of_fold_costs` (refitted on the other half:
+    the penalty for the number of effects), and the per-decay costs are compared by the
+    pipeline's paired before/after machinery
+    (:func:`bikeid.ident.effects.before_after.before_after`: the ratio nonlinear / linear of
+    the mean over files of the file-mean costs, a sign-flip paired test stratified by file,
+    two-sided at ``alpha``; the decays are independent pushes, the clusters of the
+    selection's own tests); :func:`plant_verdict` applies the rule:
+
+    - p <= ``alpha``: the plant with the lower out-of-fold cost, and its selection;
+    - otherwise the final models fit alike; if the selections agree
+      (:func:`compare_plant_selections`: every effect named by one is named by the other or
+      in an ambiguity set with one of its effects, ``unexplained`` on both or neither), the
+      nonlinear plant (the default: the linear is taken only when the data show it fits
+      better) and its effects, which are the agreed ones up to those sets;
+    - otherwise :data:`PLANT_UNCERTAIN`: which effects are named depends on a plant the data
+      cannot choose, so none is.
+
+    The sign-flip test's smallest p-value with n decays is 2 / 2^n, so with 5 decays or fewer
+    it never separates the plants at 0.05: such fits name effects only where the two
+    selections agree.
+
+    Parameters
+    ----------
+    model : ExperimentModel
+        The nominal model both selections started from.
+    linear, nonlinear : Identification
+        :func:`select_effects` on the same windows with ``nonlinear=False`` and ``True``.
+    alpha : float, optional
+        Level of the paired test (two-sided; default 0.05, the acceptance rule's).
+
+    Returns
+    -------
+    dict
+        ``plant`` (``"linear"`` or ``"nonlinear"``: the selection to report; with
+        ``uncertain``, the nonlinear, whose effects are not named),
+        ``uncertain`` (bool), ``reason`` (one sentence: the costs, the test and the rule's
+        branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: out-of-fold costs, mean
+        over files of the file means, over the decays both scored; ``ratio`` nonlinear /
+        linear and ``ratio_ci`` its 95 % bootstrap interval; ``p_value``; ``alpha``;
+        ``decays``; ``unscored``: decays left out for both because one plant could not
+        simulate them; ``separated``: p <= alpha; ``effects``: the
+        number of effects of each final model; ``costs``: the per-decay costs of each plant,
+        in the windows' order, nan where not scored) and ``check``
+        (:func:`compare_plant_selections`).
+    """
+    lin = out_of_fold_costs(model, linear, False)
+    nl = out_of_fold_costs(model, nonlinear, True)
+    check = compare_plant_selections(linear, nonlinear)
+    out = plant_verdict(lin, nl, check, alpha, (len(linear.effects), len(nonlinear.effects)),
+                        [w.file for w in linear.windows])  # fmt: skip
+    out["test"]["costs"] = {"linear": [float(x) for x in lin],
+                            "nonlinear": [float(x) for x in nl]}  # fmt: skip
+    return {**out, "check": check}
 
 
 def selection_frequencies(

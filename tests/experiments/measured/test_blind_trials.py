@@ -195,7 +195,9 @@ def test_auto_plant_choice_both_ways(plant):
     margin), the nonlinear for the nonlinear truth's (ratio ~1e-3); and the margin decides:
     the same linear-truth costs keep the nonlinear plant under a margin 1 % above their own
     ratio, as the real decays (ratio 1.014 < 1.2) keep it.  ``fit_model`` (what ``measured
-    fit`` runs, no selection round here) records the same choice and its reason."""
+    fit`` runs; no selection round here, so each plant's final model is its calibrated
+    nominal) chooses after selection by the final models' out-of-fold costs and reaches the
+    same plant, separated by its paired test; forced, it runs no comparison."""
     from bikeid.ident.effects.pipeline import fit_model
     from bikeid.ident.effects.selection import (
         LINEAR_PLANT_MARGIN,
@@ -219,10 +221,13 @@ def test_auto_plant_choice_both_ways(plant):
     out = fit_model(ws, max_effects=0)
     assert out["plant"] == expected and out["plant_choice"]["asked"] == "auto"
     assert f"so the {expected} plant" in out["plant_choice"]["reason"]
+    test = out["plant_check"]["test"]
+    assert test["separated"] and test["p_value"] <= test["alpha"] == 0.05
+    assert (test["linear_cost"] < test["nonlinear_cost"]) is (expected == "linear")
     forced = fit_model(ws, max_effects=0, plant="nonlinear",
                        rule=AcceptanceRule(min_heldout_gain=0.25))  # fmt: skip
     assert forced["plant"] == "nonlinear" and "as asked" in forced["plant_choice"]["reason"]
-    assert forced["plant_choice"]["auto"] == expected
+    assert forced["plant_choice"]["auto"] is None and forced["plant_check"] is None
     assert forced["identification"]["evidence"]["min_heldout_gain"] == 0.25
     with pytest.raises(ValueError, match="margin"):
         choose_nominal_plant(costs, margin=0.5)

@@ -407,3 +407,51 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert [f["file"] for f in out["files"]] == ["eigen_new_run_3.5mps.log.gz"]
     assert out["files"][0]["windows"] == len(new)
+
+
+def test_fit_model_plant_uncertain_names_no_effect(monkeypatch):
+    """The pipeline's wiring of the plant rule, both ways on the same decays (synthetic, from
+    the linear nominal model itself; no selection round, so each plant's final model is its
+    nominal): with the plant test's answer replaced by a hand-built disagreeing one
+    (alike fits, the linear selection naming a steer damping, the nonlinear a tyre scrub
+    torque), ``fit_model`` names no effect, its verdict is ``nominal plant uncertain``, both
+    selections and the test are in ``plant_check`` and a note names the difference; with the
+    real rule the two nominals are compared and the linear plant, the data's, is chosen
+    after selection (separated: at 1.5 m/s the decays reach steer angles where the
+    nonlinear plant departs from the linear truth), with a sentence saying so; the stability
+    subsamples run with the chosen plant."""
+    from bikeid.ident.effects import pipeline
+    from bikeid.ident.effects.acceptance import AcceptanceRule
+    from bikeid.ident.effects.selection import PLANT_UNCERTAIN
+    from bikeid.ident.effects.synthetic_decays import synthetic_windows
+
+    ws = synthetic_windows(ExperimentModel(), (1.5, 2.5), per_speed=4, noise=0.01, seed=4)
+    rule = AcceptanceRule.exact()
+    real = pipeline.fit_model(ws, max_effects=0, rule=rule, stability=2)
+    assert real["plant"] == "linear" and not real["plant_choice"]["uncertain"]
+    assert real["stability"]["plant"] == "linear"  # the subsamples run the chosen plant
+    assert real["selection_frequency"] == {"unexplained": 1.0}  # nothing else to select
+    assert real["plant_check"]["test"]["separated"] and "linear plant fits better" in \
+        real["plant_choice"]["reason"]  # fmt: skip
+    side = {"verdict": ["steer_viscous_damping"], "effects": {"steer_viscous_damping": 0.5},
+            "ambiguity": {"steer_viscous_damping": ["steer_viscous_damping"]}}
+    other = {"verdict": ["tire_scrub_torque"], "effects": {"tire_scrub_torque": 0.4},
+             "ambiguity": {"tire_scrub_torque": ["tire_scrub_torque"]}}
+    diff = ["steer_viscous_damping (named with the linear plant; ...)",
+            "tire_scrub_torque (named with the nonlinear plant; ...)"]
+
+    def hand_built(model, linear, nonlinear, alpha=0.05):
+        return {"plant": "linear", "uncertain": True, "reason": "hand-built: alike, disagree",
+                "test": {"linear_cost": 1.0, "nonlinear_cost": 1.01, "p_value": 0.6,
+                         "alpha": alpha, "separated": False},
+                "check": {"agree": False, "linear": side, "nonlinear": other,
+                          "differences": diff}}  # fmt: skip
+
+    monkeypatch.setattr(pipeline, "choose_plant", hand_built)
+    out = pipeline.fit_model(ws, max_effects=0, rule=rule)
+    assert out["effects"] == {} and out["identification"]["verdict"] == [PLANT_UNCERTAIN]
+    assert out["identification"]["effects"] == [] and out["plant_choice"]["uncertain"]
+    assert out["plant_check"]["linear"] == side and out["plant_check"]["nonlinear"] == other
+    assert out["plant_check"]["test"]["p_value"] == 0.6
+    note = next(n for n in out["notes"] if n.startswith(PLANT_UNCERTAIN))
+    assert all(d in note for d in diff) and "p = 0.6 > 0.05" in note
