@@ -152,12 +152,13 @@ def test_randomized_trials_name_library_effects_and_flag_outside_ones():
     reported the injected one in its ambiguity set (no first-order equivalence assumed by
     the test).  Asserted against the brief's goals (90 %):
     - held-out error halves in >= 90 % of library trials (measured 18/18);
-    - the right-first rate, sets as reported: measured 15 of 18 (every damping, friction,
-      stiffness, gain and lag; of the three input delays, all named an actuator lag, only one
-      lag's set holds the delay); both ends of its exact 95 % interval (0.59-0.96, checked
-      against scipy's beta quantiles): the lower end above 0.5 (the data reject a rate of
-      one half), the upper end at or above 0.9 (the 90 % goal is not rejected, nor shown:
-      the point rate 0.83 is below it);
+    - the right-first rate, sets as reported: measured 16 of 18 (every damping, friction,
+      stiffness, gain and lag; the three input delays are all named an actuator lag, and one
+      lag's set holds the delay; since the sets count every candidate significant at 5 %
+      alone, not only those passing the round, was 15); both ends of its exact 95 %
+      interval (0.65-0.99, checked against scipy's beta quantiles): the lower end above 0.5
+      (the data reject a rate of one half), the upper end at or above 0.9 (the 90 % goal is
+      not rejected, nor shown: the point rate 0.89 is below it);
     - magnitude within 20 % in >= 90 % of the trials naming the injected effect first;
     - outside-library effects: "unexplained" first in >= 90 % of trials (measured 6/6).
 
@@ -185,21 +186,23 @@ def test_randomized_trials_name_library_effects_and_flag_outside_ones():
 @pytest.mark.slow
 def test_default_rule_on_the_grid():
     """The same 24 trials by the default rule (family-wise 5 %, Bonferroni over 37 tests, the
-    default nominal uncertainty): right first with sets as reported in 13 of 18 library
-    trials (the three input delays are named actuator lags whose reported sets do not hold
-    the delay; a 0.24 N m friction and a 0.59 N m/rad spring are unnamed), so the exact 95 %
-    interval is 0.47-0.90: its upper end just reaches the 90 % goal (not rejected) and its
-    lower end stays below one half (a rate of one half is not rejected either); both ends
-    are checked against scipy's beta quantiles and the point rate against the goal.  Every
-    outside effect is answered ``unexplained`` first (6/6)."""
+    default nominal uncertainty): right first with sets as reported in 14 of 18 library
+    trials (the three input delays are named actuator lags; one lag's reported set holds the
+    delay, the other two do not; a 0.24 N m friction and a 0.59 N m/rad spring are
+    unnamed), so the exact 95 % interval is 0.52-0.94: its upper end reaches the 90 % goal
+    (not rejected) and its lower end is above one half (13 of 18, 0.47-0.90, before the
+    sets counted every candidate significant at 5 % alone); both ends are checked against
+    scipy's beta quantiles and the point rate against the goal.  Every outside effect is
+    answered ``unexplained`` first (6/6)."""
     out = run_trials(3 * len(EFFECTS), seed=1, processes=2, rule=AcceptanceRule())
     lib = [r for r in out["trials"] if r["in_library"]]
     k = sum(_right_with_reported_set(r) for r in lib)
     lo, hi = binomial_ci(k, len(lib))
     assert (lo, hi) == pytest.approx(_scipy_clopper_pearson(k, len(lib)), rel=1e-9)
-    assert k / len(lib) < 0.9 <= hi and lo < 0.5, (k, lo, hi)
+    assert k / len(lib) < 0.9 <= hi and lo > 0.5, (k, lo, hi)
     delays = [r for r in lib if r["effect"] == "input_delay"]
-    assert all(not _right_with_reported_set(r) for r in delays)  # a lag, no delay in its set
+    assert all(r["verdict"][-1] == "actuator_lag" for r in delays)  # each named a lag ...
+    assert sum(_right_with_reported_set(r) for r in delays) == 1  # ... one set holds the delay
     outside = [r for r in out["trials"] if not r["in_library"]]
     assert all(r["unexplained"] for r in outside)
 
