@@ -51,6 +51,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import solve_discrete_are
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import (
@@ -69,8 +70,10 @@ from bikeid.ident.predictor import (
     INPUT,
     PredictionProblem,
     discretize,
+    discretize_with_derivatives,
     initial_gain,
     output_matrix,
+    prediction_kernel,
     run_data,
     sandwich_covariance,
     single_threaded_blas,
@@ -79,6 +82,7 @@ from bikeid.ident.predictor import (
 from bikeid.ident.signals import check_sampling
 from bikeid.ident.subspace import d2c, decimate, pbsid
 from bikeid.sim.linear import CanonicalMatrices
+from bikeid.sim.sampling import zoh
 
 __all__ = [
     "CanonicalModel",
@@ -565,6 +569,137 @@ def fit(
     )  # fmt: skip
 
 
+#: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
+#: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
+NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
+#: Range of the log standard deviations of that noise relative to its reference
+#: (the input's std times |b1|, |b2|); beyond it the gain no longer changes.
+NOISE_LOG_RANGE = (-40.0, 5.0)
+#: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
+NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
+
+
+def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
+    """Steady-state Kalman gain of the canonical model ``theta`` for acceleration noise.
+
+    Process noise: white noise in the roll and steer accelerations, held over each sample
+    (``Q = G L L' G'``, G the zero-order-hold sampling of :data:`NOISE_INPUT`, L =
+    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]); sensor noise diag(``rdiag``).  The
+    predictor Ad - K C is stable for every ``eta`` (the stabilizing Riccati solution).
+
+    Parameters
+    ----------
+    theta : (10,) ndarray
+        Canonical parameters [a1, ..., a8, b1, b2].
+    dt : float
+        Sample period [s].
+    C : (L, 4) ndarray
+        Output matrix.
+    rdiag : (L,) ndarray
+        Sensor-noise variances (squared output units).
+    eta : (3,) ndarray
+        [log s1, s21, log s2] of the noise's Cholesky factor, relative to ``ref``
+        (logs clipped to :data:`NOISE_LOG_RANGE`).
+    ref : (2,) ndarray
+        Reference standard deviations of the roll and steer acceleration noise [rad/s^2].
+
+    Returns
+    -------
+    (4, L) ndarray
+        K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k] (Chen & Dao's state order).
+    """
+    A, _ = canonical_ab(theta)
+    Ad, G = zoh(A, NOISE_INPUT, dt)
+    lo, hi = NOISE_LOG_RANGE
+    s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
+    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * np.asarray(ref)[:, None]
+    GL = G @ Lf
+    Q = GL @ GL.T + 1e-12 * np.eye(4)
+    R = np.diag(rdiag)
+    P = solve_discrete_are(Ad.T, C.T, Q, R)
+    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+
+
+class _KalmanGainProblem(PredictionProblem):
+    """The joint problem with each run's K the Kalman gain of the joint model at its speed.
+
+    x = [speed parameters (14), eta (3)]: the innovation gains follow the model (and a
+    shared acceleration-noise covariance), so the predictor is stable at every point and
+    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dx to the
+    kernel's dE/dtheta (dK by central differences of the Riccati solution).
+    """
+
+    def __init__(self, data, mapping, rdiag, weights, outputs, ref):
+        super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
+        self.rdiag, self.ref = rdiag, np.asarray(ref, float)
+
+    def split(self, x):
+        return x[: self.mapping[0].shape[1]], None
+
+    def gain(self, theta, dt, rdiag, eta):
+        return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
+
+    def _models(self, x, derivatives: bool):
+        P = self.mapping[0].shape[1]
+        p, eta = x[:P], x[P:]
+        out, cache = [], {}
+        for i, d in enumerate(self.data):
+            S = self.mapping[i]
+            theta = S @ p
+            key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
+            if key not in cache:
+                if derivatives:
+                    Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
+                else:
+                    (Ad, Bd), dAd, dBd = discretize(theta, d.dt), None, None
+                try:
+                    K = self.gain(theta, d.dt, self.rdiag[i], eta)
+                except (ValueError, np.linalg.LinAlgError):
+                    return None
+                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
+                    return None
+                dK = self._gain_derivative(theta, d.dt, self.rdiag[i], eta) if derivatives else None
+                cache[key] = (Ad, Bd, dAd, dBd, K, dK)
+            Ad, Bd, dAd, dBd, K, dK = cache[key]
+            out.append((Ad, Bd, dAd, dBd, K, S, dK))
+        return out
+
+    def _gain_derivative(self, theta, dt, rdiag, eta):
+        """(13, 4 L): dK/d[theta, eta] by central differences."""
+        z = np.concatenate([theta, eta])
+        rows = []
+        for j in range(z.size):
+            h = 1e-6 * max(abs(z[j]), 1.0)
+            zp, zm = z.copy(), z.copy()
+            zp[j] += h
+            zm[j] -= h
+            Kp = self.gain(zp[:10], dt, rdiag, zp[10:])
+            Km = self.gain(zm[:10], dt, rdiag, zm[10:])
+            rows.append(((Kp - Km) / (2 * h)).ravel())
+        return np.array(rows)
+
+    def jacobian(self, x):
+        r = self.residual(x)
+        if r is None:
+            return None, None
+        models = self._models(x, derivatives=True)
+        if models is None:
+            return None, None
+        nk = 4 * self.L
+        jac = []
+        for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
+            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
+            JK = J[:, 10 : 10 + nk]
+            Jz = np.hstack([J[:, :10], np.zeros((J.shape[0], dK.shape[0] - 10))]) + JK @ dK.T
+            Jm = np.hstack([Jz[:, :10] @ S, Jz[:, 10:]])
+            Q, _ = np.linalg.qr(J[:, 10 + nk :])
+            Jm -= Q @ (Q.T @ Jm)
+            jac.append(Jm)
+        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
+        return r, self._J
+
+
 @single_threaded_blas
 def fit_speed_model(
     runs: Sequence[Run],
@@ -577,6 +712,7 @@ def fit_speed_model(
     per_speed: dict[float, CanonicalModel] | None = None,
     passes: int = 2,
     informativity: str = "refuse",
+    joint_gain: str = "kalman",
 ) -> SpeedCanonicalModel:
     """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
 
@@ -628,6 +764,8 @@ def fit_speed_model(
     """
     runs = list(runs)
     check_sampling(runs, "pem.fit_speed_model")
+    if joint_gain not in ("kalman", "per_speed"):
+        raise ValueError(f"joint_gain {joint_gain!r}: choose 'kalman' or 'per_speed'")
     outputs = tuple(outputs)
     groups: dict[float, list[Run]] = {}
     for r in runs:
@@ -658,6 +796,10 @@ def fit_speed_model(
     params, *_ = np.linalg.lstsq(Sstack, tstack, rcond=None)
     data = run_data(runs, outputs)
     mapping = [speed_map(d.v) for d in data]
+    w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
+    if noise_model == "free" and joint_gain == "kalman":
+        return _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev,
+                             method, passes, told)  # fmt: skip
     Ks = [per[round(r.speed, 6)].K for r in runs]
     C = output_matrix(outputs)[0]
     for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
@@ -670,7 +812,6 @@ def fit_speed_model(
                     "fit that speed separately and check its data"
                 )
             Ks[i] = K
-    w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     nfev = 0
     for _ in range(max(1, passes)):
         prob = PredictionProblem(data, mapping, Ks, False, w, outputs)
@@ -683,4 +824,43 @@ def fit_speed_model(
         params=params.copy(), covariance=cov, per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev,
         notes=(told,) if told else (),
+    )  # fmt: skip
+
+
+def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, method, passes,
+                  told) -> SpeedCanonicalModel:  # fmt: skip
+    """The joint fit with the innovation gains from the joint model's Kalman filter."""
+    rdiag = [np.diag(per[round(r.speed, 6)].noise_covariance).copy() for r in runs]
+    uvar = float(np.mean([np.var(d.u) for d in data]))
+    ref = np.abs(params[12:14]) * math.sqrt(uvar)
+    best = None
+    for eta in NOISE_STARTS:
+        x = np.concatenate([params, eta])
+        prob = _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref)
+        r = prob.residual(x)
+        if r is not None and (best is None or float(r @ r) < best[0]):
+            best = (float(r @ r), x)
+    if best is None:
+        raise ValueError(
+            "no stable predictor from the joint start: fit each speed separately and check "
+            "its data"
+        )
+    x = best[1]
+    nfev = 0
+    for _ in range(max(1, passes)):
+        prob = _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref)
+        sol = solve(prob, x, max_nfev, method)
+        nfev += sol.nfev
+        x = sol.x
+        w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
+    cov = sandwich_covariance(prob, 4 * len(data))
+    n = len(SPEED_NAMES)
+    notes = [f"innovation gains: Kalman gains of the joint model (acceleration noise "
+             f"[log s1, s21, log s2] = {np.round(x[n:], 3).tolist()} relative to "
+             f"{np.round(ref, 6).tolist()} rad/s^2)"]  # fmt: skip
+    if told:
+        notes.append(told)
+    return SpeedCanonicalModel(
+        params=x[:n].copy(), covariance=cov[:n, :n], per_speed=per, dt=data[0].dt, g=g,
+        outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev, notes=tuple(notes),
     )  # fmt: skip
