@@ -268,6 +268,12 @@ class SpeedCanonicalModel(SpeedDependentModel):
     notes : tuple of str
         What the fit recorded (an informativity check skipped or failed, when asked to fit
         anyway).
+    gain_noise : (5,) ndarray or None
+        The joint fit's innovation-gain model: [log s1, s21, log s2] of the acceleration
+        noise's Cholesky factor relative to [ref1, ref2] [rad/s^2], then ref1, ref2
+        (:func:`kalman_gain_of`; the sensor-noise variances are the diagonal of each
+        per-speed fit's ``noise_covariance``).  None when each speed's K was the per-speed
+        fit's (``joint_gain="per_speed"`` or ``noise_model="none"``).
     """
 
     params: np.ndarray
@@ -279,6 +285,7 @@ class SpeedCanonicalModel(SpeedDependentModel):
     cost: float = float("nan")
     nfev: int = 0
     notes: tuple[str, ...] = ()
+    gain_noise: np.ndarray | None = None
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -301,7 +308,7 @@ class SpeedCanonicalModel(SpeedDependentModel):
         return speed_map(v) @ self.params
 
     def at(self, v: float) -> CanonicalModel:
-        """The fixed-speed model at v (covariance propagated; K of the nearest fitted speed).
+        """The fixed-speed model at v (covariance propagated, K of the joint model).
 
         Parameters
         ----------
@@ -311,15 +318,22 @@ class SpeedCanonicalModel(SpeedDependentModel):
         Returns
         -------
         CanonicalModel
-            theta = S(v) params, covariance S(v) cov S(v)', K and ``noise_covariance``
-            of the fitted speed nearest to ``v``; ``x0``, ``cost`` and ``nfev`` are left
-            at their defaults.
+            theta = S(v) params, covariance S(v) cov S(v)', ``noise_covariance`` of the
+            fitted speed nearest to ``v`` and K the Kalman gain of theta with the joint
+            fit's noise model (:attr:`gain_noise`), or, without one, the K of that nearest
+            fitted speed; ``x0``, ``cost`` and ``nfev`` are left at their defaults.
         """
         S = speed_map(v)
         near = min(self.per_speed, key=lambda s: abs(s - v))
+        K = self.per_speed[near].K
+        if self.gain_noise is not None:
+            C = output_matrix(self.outputs)[0]
+            rdiag = sensor_variances(self.per_speed[near])
+            K = kalman_gain_of(S @ self.params, self.dt, C, rdiag, self.gain_noise[:3],
+                               self.gain_noise[3:])  # fmt: skip
         return CanonicalModel(
             theta=S @ self.params, covariance=S @ self.covariance @ S.T,
-            K=self.per_speed[near].K, dt=self.dt, speed=v,
+            K=K, dt=self.dt, speed=v,
             noise_covariance=self.per_speed[near].noise_covariance, outputs=self.outputs,
         )  # fmt: skip
 
@@ -577,6 +591,11 @@ NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
 NOISE_LOG_RANGE = (-40.0, 5.0)
 #: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
 NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
+#: Rounds of the joint fit's alternation (speed parameters, then the noise's eta) per
+#: weighting pass; a round whose eta step lowers the cost by less than :data:`JOINT_TOL`
+#: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
+JOINT_ROUNDS = 6
+JOINT_TOL = 1e-2
 
 
 def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
@@ -620,21 +639,54 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
     return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
 
 
+def sensor_variances(model: CanonicalModel) -> np.ndarray:
+    """The sensor-noise variances a joint fit's Kalman gains use at a fitted speed.
+
+    Parameters
+    ----------
+    model : CanonicalModel
+        The per-speed fit.
+
+    Returns
+    -------
+    (L,) ndarray
+        The diagonal of its ``noise_covariance`` (squared output units), raised to at
+        least 1e-12 of its largest entry and to 1e-30 (noise-free data: a solvable
+        Riccati equation).
+    """
+    r = np.diag(np.atleast_2d(model.noise_covariance)).astype(float)
+    return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
+
+
 class _KalmanGainProblem(PredictionProblem):
     """The joint problem with each run's K the Kalman gain of the joint model at its speed.
 
-    x = [speed parameters (14), eta (3)]: the innovation gains follow the model (and a
+    z = [speed parameters (14), eta (3)]: the innovation gains follow the model (and a
     shared acceleration-noise covariance), so the predictor is stable at every point and
-    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dx to the
-    kernel's dE/dtheta (dK by central differences of the Riccati solution).
+    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dz to the
+    kernel's dE/dtheta (dK by central differences of the Riccati solution).  Only the
+    entries ``free`` of z are the minimizer's x (the others held at ``z``): the fit
+    alternates between the speed parameters and eta, because where the noise is
+    negligible K hardly depends on eta, and those near-zero Jacobian columns made the
+    joint Levenberg-Marquardt steps so damped that it stopped short of the optimum.
     """
 
-    def __init__(self, data, mapping, rdiag, weights, outputs, ref):
+    def __init__(self, data, mapping, rdiag, weights, outputs, ref, z, free):
         super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
         self.rdiag, self.ref = rdiag, np.asarray(ref, float)
+        self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
 
-    def split(self, x):
-        return x[: self.mapping[0].shape[1]], None
+    def full(self, x) -> np.ndarray:
+        """z with the free entries set to x."""
+        z = self.z.copy()
+        z[self.free] = x
+        return z
+
+    def split(self, z):
+        return z[: self.mapping[0].shape[1]], None
+
+    def residual(self, x):
+        return super().residual(self.full(x))
 
     def gain(self, theta, dt, rdiag, eta):
         return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
@@ -682,7 +734,7 @@ class _KalmanGainProblem(PredictionProblem):
         r = self.residual(x)
         if r is None:
             return None, None
-        models = self._models(x, derivatives=True)
+        models = self._models(self.full(x), derivatives=True)
         if models is None:
             return None, None
         nk = 4 * self.L
@@ -695,7 +747,7 @@ class _KalmanGainProblem(PredictionProblem):
             Jm = np.hstack([Jz[:, :10] @ S, Jz[:, 10:]])
             Q, _ = np.linalg.qr(J[:, 10 + nk :])
             Jm -= Q @ (Q.T @ Jm)
-            jac.append(Jm)
+            jac.append(Jm[:, self.free])
         self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
         return r, self._J
 
@@ -830,37 +882,56 @@ def fit_speed_model(
 def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, method, passes,
                   told) -> SpeedCanonicalModel:  # fmt: skip
     """The joint fit with the innovation gains from the joint model's Kalman filter."""
-    rdiag = [np.diag(per[round(r.speed, 6)].noise_covariance).copy() for r in runs]
+    rdiag = [sensor_variances(per[round(r.speed, 6)]) for r in runs]
     uvar = float(np.mean([np.var(d.u) for d in data]))
     ref = np.abs(params[12:14]) * math.sqrt(uvar)
+    n = len(SPEED_NAMES)
+    every, par, noise = np.arange(n + 3), np.arange(n), np.arange(n, n + 3)
+
+    def problem(z, free):
+        return _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref, z, free)
+
     best = None
     for eta in NOISE_STARTS:
-        x = np.concatenate([params, eta])
-        prob = _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref)
-        r = prob.residual(x)
+        z = np.concatenate([params, eta])
+        r = problem(z, every).residual(z)
         if r is not None and (best is None or float(r @ r) < best[0]):
-            best = (float(r @ r), x)
+            best = (float(r @ r), z)
     if best is None:
         raise ValueError(
             "no stable predictor from the joint start: fit each speed separately and check "
             "its data"
         )
-    x = best[1]
-    nfev = 0
+    z = best[1]
+    nfev, stopped = 0, None
     for _ in range(max(1, passes)):
-        prob = _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref)
-        sol = solve(prob, x, max_nfev, method)
-        nfev += sol.nfev
-        x = sol.x
+        for _ in range(JOINT_ROUNDS):
+            prob = problem(z, par)
+            sol = solve(prob, z[par], max_nfev, method)
+            z[par], nfev = sol.x, nfev + sol.nfev
+            before = float(prob._r @ prob._r)
+            prob = problem(z, noise)
+            sol_n = solve(prob, z[noise], max_nfev, method)
+            z[noise], nfev = sol_n.x, nfev + sol_n.nfev
+            stopped = None if sol.success else str(sol.message)
+            if before - float(prob._r @ prob._r) < JOINT_TOL:
+                break
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
+    prob = problem(z, every)
+    prob.jacobian(z)
+    x = z
     cov = sandwich_covariance(prob, 4 * len(data))
-    n = len(SPEED_NAMES)
+    lo, hi = NOISE_LOG_RANGE
+    x[n], x[n + 2] = (min(max(x[i], lo), hi) for i in (n, n + 2))  # same gain, finite
     notes = [f"innovation gains: Kalman gains of the joint model (acceleration noise "
              f"[log s1, s21, log s2] = {np.round(x[n:], 3).tolist()} relative to "
              f"{np.round(ref, 6).tolist()} rad/s^2)"]  # fmt: skip
+    if stopped:
+        notes.append(f"least_squares: {stopped}")
     if told:
         notes.append(told)
     return SpeedCanonicalModel(
         params=x[:n].copy(), covariance=cov[:n, :n], per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev, notes=tuple(notes),
+        gain_noise=np.concatenate([x[n:], ref]),
     )  # fmt: skip
