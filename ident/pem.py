@@ -899,8 +899,7 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
             best = (float(r @ r), z)
     if best is None:
         raise ValueError(
-            "no stable predictor from the joint start: fit each speed separately and check "
-            "its data"
+            "no stable predictor from the joint start: fit each speed separately and check its data"
         )
     z = best[1]
     nfev, stopped = 0, None
