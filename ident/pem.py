@@ -320,8 +320,9 @@ class SpeedCanonicalModel(SpeedDependentModel):
         CanonicalModel
             theta = S(v) params, covariance S(v) cov S(v)', ``noise_covariance`` of the
             fitted speed nearest to ``v`` and K the Kalman gain of theta with the joint
-            fit's noise model (:attr:`gain_noise`), or, without one, the K of that nearest
-            fitted speed; ``x0``, ``cost`` and ``nfev`` are left at their defaults.
+            fit's noise model (:attr:`gain_noise`), or, without one (or without a
+            stabilizing Riccati solution at ``v``), the K of that nearest fitted speed;
+            ``x0``, ``cost`` and ``nfev`` are left at their defaults.
         """
         S = speed_map(v)
         near = min(self.per_speed, key=lambda s: abs(s - v))
@@ -329,8 +330,11 @@ class SpeedCanonicalModel(SpeedDependentModel):
         if self.gain_noise is not None:
             C = output_matrix(self.outputs)[0]
             rdiag = sensor_variances(self.per_speed[near])
-            K = kalman_gain_of(S @ self.params, self.dt, C, rdiag, self.gain_noise[:3],
-                               self.gain_noise[3:])  # fmt: skip
+            try:
+                K = kalman_gain_of(S @ self.params, self.dt, C, rdiag, self.gain_noise[:3],
+                                   self.gain_noise[3:])  # fmt: skip
+            except (ValueError, np.linalg.LinAlgError):  # no stabilizing Riccati solution
+                K = self.per_speed[near].K
         return CanonicalModel(
             theta=S @ self.params, covariance=S @ self.covariance @ S.T,
             K=K, dt=self.dt, speed=v,
@@ -717,17 +721,29 @@ class _KalmanGainProblem(PredictionProblem):
         return out
 
     def _gain_derivative(self, theta, dt, rdiag, eta):
-        """(13, 4 L): dK/d[theta, eta] by central differences."""
+        """(13, 4 L): dK/d[theta, eta] by central differences (one-sided where the Riccati
+        equation has no stabilizing solution on one side; zero where on neither: the
+        derivative only steers the search, the cost is exact)."""
         z = np.concatenate([theta, eta])
+        K0 = self.gain(theta, dt, rdiag, eta)
         rows = []
         for j in range(z.size):
             h = 1e-6 * max(abs(z[j]), 1.0)
-            zp, zm = z.copy(), z.copy()
-            zp[j] += h
-            zm[j] -= h
-            Kp = self.gain(zp[:10], dt, rdiag, zp[10:])
-            Km = self.gain(zm[:10], dt, rdiag, zm[10:])
-            rows.append(((Kp - Km) / (2 * h)).ravel())
+            side = {}
+            for s in (1.0, -1.0):
+                zs = z.copy()
+                zs[j] += s * h
+                try:
+                    side[s] = self.gain(zs[:10], dt, rdiag, zs[10:])
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+            if len(side) == 2:
+                rows.append(((side[1.0] - side[-1.0]) / (2 * h)).ravel())
+            elif side:
+                s, Ks = next(iter(side.items()))
+                rows.append((s * (Ks - K0) / h).ravel())
+            else:
+                rows.append(np.zeros(K0.size))
         return np.array(rows)
 
     def jacobian(self, x):
