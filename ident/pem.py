@@ -38,9 +38,19 @@ with a statistical stopping rule (see ``_lm``); ``method="scipy"``: MINPACK thro
 (N l) x P Jacobian at every iteration, and a Jacobian at every trial point, dominating.
 
 Speed-parameterized model (``fit_speed_model``): per-speed fits (warm-started from
-the next lower speed, or reused via ``per_speed=``) give the start and each speed's K;
-then alpha, beta, gamma, b are refined jointly over all runs with each speed's K held
-fixed (shared structural parameters, speed-specific noise model).  The runs' nominal
+the next lower speed, or reused via ``per_speed=``) give the start; then alpha, beta,
+gamma, b are refined jointly over all runs.  Each run's innovation gain is the steady-state
+Kalman gain of the joint model at its speed (:func:`kalman_gain_of`: white noise in the roll
+and steer accelerations, one 2x2 covariance shared by all speeds and estimated with the
+model, sensor noise the per-speed fit's innovation variances), so K follows the model and
+the predictor is stable at every point.  Holding each speed's K at its per-speed fit's value
+(``joint_gain="per_speed"``, the former fit) biased the model: on a loop without process
+noise the optimal predictor's poles are the plant's slow poles, near the unit circle, and
+short per-speed fits with a free K end on the predictor's stability boundary; with their K
+the true parameters give an unstable predictor for some runs, so the joint fit could not
+reach them (the README tour's sweep on the exact linear plant: v_c 6.0627 m/s, 85 standard
+errors from Meijaard's 6.0243, eigenvalue real parts up to 95 standard errors off; with the
+Kalman gains v_c 6.0240, 0.4 standard errors, eigenvalues within 1.7).  The runs' nominal
 speed ``run.speed`` is used (per-sample speed variation is ignored here).
 """
 
@@ -242,8 +252,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
     """Speed-parameterized canonical model: a_odd = alpha + beta v^2, a_even = gamma v.
 
     ``params`` in :data:`ident.canonical.SPEED_NAMES` order with ``covariance``
-    (14x14); ``per_speed`` holds the fixed-speed fits (start values and each speed's
-    innovation gain K).
+    (14x14); ``per_speed`` holds the fixed-speed fits (start values and sensor-noise
+    variances; each speed's innovation gain K with ``gain_noise`` None).
 
     Attributes
     ----------
@@ -785,10 +795,12 @@ def fit_speed_model(
     """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
 
     Per-speed fits (one weighting pass each; speeds in increasing order, each also
-    started from its lower neighbour's model) give the start and each speed's K; pass
-    ``per_speed`` (speed rounded to 1e-6 m/s -> :class:`CanonicalModel`, e.g. from
-    :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are refined
-    jointly over all runs with each speed's K held fixed (``passes`` weighting passes).
+    started from its lower neighbour's model) give the start and the sensor-noise
+    variances; pass ``per_speed`` (speed rounded to 1e-6 m/s -> :class:`CanonicalModel`,
+    e.g. from :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are
+    refined jointly over all runs (``passes`` weighting passes), each run's K the Kalman
+    gain of the joint model at its speed, alternating with the acceleration-noise
+    covariance that gain assumes (module docstring).
     Runs that break the sampling contract (``ident.signals.check_sampling``) raise ValueError.
 
     Parameters
@@ -815,6 +827,11 @@ def fit_speed_model(
         Before the fit, whether the runs can determine the 14 parameters, with excited
         runs at two or more speeds (:func:`bikeid.ident.informativity.guard`; the
         per-speed fits, only starts here, report rather than refuse).
+    joint_gain : {"kalman", "per_speed"}, optional
+        Innovation gains of the joint fit (with ``noise_model="free"``): the joint model's
+        Kalman gains (default), or each speed's K held at its per-speed fit's (the former
+        fit, biased where those fits end on their predictor's stability boundary; kept for
+        comparison).  With ``noise_model="none"`` K = 0 either way.
 
     Returns
     -------
@@ -826,7 +843,8 @@ def fit_speed_model(
     ValueError
         If a run breaks the sampling contract, the runs cover fewer than 2 distinct
         speeds, ``per_speed`` models used other outputs, no stable predictor exists for
-        a run at the joint start, or a per-speed :func:`fit` raises.
+        a run at the joint start, ``joint_gain`` is unknown, or a per-speed :func:`fit`
+        raises.
     UntrustworthyResult
         If the runs cannot determine the model and ``informativity`` is ``"refuse"``.
     """
