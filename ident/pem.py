@@ -705,39 +705,51 @@ class _KalmanGainProblem(PredictionProblem):
     def gain(self, theta, dt, rdiag, eta):
         return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
 
+    def _needs(self) -> tuple[bool, bool]:
+        """Whether speed parameters, and whether noise parameters, are free."""
+        P = self.mapping[0].shape[1]
+        return bool(np.any(self.free < P)), bool(np.any(self.free >= P))
+
     def _models(self, x, derivatives: bool):
         P = self.mapping[0].shape[1]
         p, eta = x[:P], x[P:]
+        need_theta, need_eta = self._needs()
+        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
         out, cache = [], {}
         for i, d in enumerate(self.data):
             S = self.mapping[i]
             theta = S @ p
             key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
             if key not in cache:
-                if derivatives:
+                if derivatives and need_theta:
                     Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
                 else:
-                    (Ad, Bd), dAd, dBd = discretize(theta, d.dt), None, None
+                    (Ad, Bd), dAd, dBd = (
+                        discretize(theta, d.dt),
+                        np.zeros((0, 4, 4)),
+                        np.zeros((0, 4)),
+                    )
                 try:
                     K = self.gain(theta, d.dt, self.rdiag[i], eta)
                 except (ValueError, np.linalg.LinAlgError):
                     return None
                 if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
                     return None
-                dK = self._gain_derivative(theta, d.dt, self.rdiag[i], eta) if derivatives else None
+                dK = (self._gain_derivative(theta, d.dt, self.rdiag[i], eta, K, rows)
+                      if derivatives else None)  # fmt: skip
                 cache[key] = (Ad, Bd, dAd, dBd, K, dK)
             Ad, Bd, dAd, dBd, K, dK = cache[key]
             out.append((Ad, Bd, dAd, dBd, K, S, dK))
         return out
 
-    def _gain_derivative(self, theta, dt, rdiag, eta):
-        """(13, 4 L): dK/d[theta, eta] by central differences (one-sided where the Riccati
-        equation has no stabilizing solution on one side; zero where on neither: the
-        derivative only steers the search, the cost is exact)."""
+    def _gain_derivative(self, theta, dt, rdiag, eta, K0, rows):
+        """(13, 4 L): dK/d[theta, eta] by central differences in ``rows`` (zero in the
+        others; one-sided where the Riccati equation has no stabilizing solution on one
+        side, zero where on neither: the derivative only steers the search, the cost is
+        exact)."""
         z = np.concatenate([theta, eta])
-        K0 = self.gain(theta, dt, rdiag, eta)
-        rows = []
-        for j in range(z.size):
+        out = np.zeros((z.size, K0.size))
+        for j in rows:
             h = 1e-6 * max(abs(z[j]), 1.0)
             side = {}
             for s in (1.0, -1.0):
@@ -748,13 +760,11 @@ class _KalmanGainProblem(PredictionProblem):
                 except (ValueError, np.linalg.LinAlgError):
                     continue
             if len(side) == 2:
-                rows.append(((side[1.0] - side[-1.0]) / (2 * h)).ravel())
+                out[j] = ((side[1.0] - side[-1.0]) / (2 * h)).ravel()
             elif side:
                 s, Ks = next(iter(side.items()))
-                rows.append((s * (Ks - K0) / h).ravel())
-            else:
-                rows.append(np.zeros(K0.size))
-        return np.array(rows)
+                out[j] = (s * (Ks - K0) / h).ravel()
+        return out
 
     def jacobian(self, x):
         r = self.residual(x)
@@ -764,16 +774,24 @@ class _KalmanGainProblem(PredictionProblem):
         if models is None:
             return None, None
         nk = 4 * self.L
+        need_theta, need_eta = self._needs()
+        P = self.mapping[0].shape[1]
+        cols = self.free - (0 if need_theta else P)  # columns of the blocks computed
         jac = []
         for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
             _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
             J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
-            JK = J[:, 10 : 10 + nk]
-            Jz = np.hstack([J[:, :10], np.zeros((J.shape[0], dK.shape[0] - 10))]) + JK @ dK.T
-            Jm = np.hstack([Jz[:, :10] @ S, Jz[:, 10:]])
-            Q, _ = np.linalg.qr(J[:, 10 + nk :])
+            nt = dAd.shape[0]  # 10 or 0
+            JK = J[:, nt : nt + nk]
+            blocks = []
+            if need_theta:
+                blocks.append((J[:, :10] + JK @ dK[:10].T) @ S)
+            if need_eta:
+                blocks.append(JK @ dK[10:].T)
+            Jm = np.hstack(blocks)[:, cols]
+            Q, _ = np.linalg.qr(J[:, nt + nk :])
             Jm -= Q @ (Q.T @ Jm)
-            jac.append(Jm[:, self.free])
+            jac.append(Jm)
         self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
         return r, self._J
 
