@@ -249,6 +249,8 @@ def _speed_section(m: SpeedCanonicalModel) -> dict:
         "cost": _num(m.cost, "cost", nullable=True),
         "nfev": int(m.nfev),
         "per_speed": [_canonical_section(pm) for _, pm in sorted(m.per_speed.items())],
+        "gain_noise": None if m.gain_noise is None else _arr(m.gain_noise, "gain_noise"),
+        "notes": [str(n) for n in m.notes],
     }
 
 
@@ -703,6 +705,9 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
         outputs=outputs,
         cost=r.number(sec, "cost", prefix, nullable=True),
         nfev=r.integer(sec, "nfev", prefix),
+        gain_noise=(None if sec.get("gain_noise") is None  # absent in older files
+                    else r.array(sec, "gain_noise", prefix, (5,))),
+        notes=r.texts(sec, "notes", prefix) if "notes" in sec else (),
     )
 
 

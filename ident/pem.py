@@ -38,9 +38,19 @@ with a statistical stopping rule (see ``_lm``); ``method="scipy"``: MINPACK thro
 (N l) x P Jacobian at every iteration, and a Jacobian at every trial point, dominating.
 
 Speed-parameterized model (``fit_speed_model``): per-speed fits (warm-started from
-the next lower speed, or reused via ``per_speed=``) give the start and each speed's K;
-then alpha, beta, gamma, b are refined jointly over all runs with each speed's K held
-fixed (shared structural parameters, speed-specific noise model).  The runs' nominal
+the next lower speed, or reused via ``per_speed=``) give the start; then alpha, beta,
+gamma, b are refined jointly over all runs.  Each run's innovation gain is the steady-state
+Kalman gain of the joint model at its speed (:func:`kalman_gain_of`: white noise in the roll
+and steer accelerations, one 2x2 covariance shared by all speeds and estimated with the
+model, sensor noise the per-speed fit's innovation variances), so K follows the model and
+the predictor is stable at every point.  Holding each speed's K at its per-speed fit's value
+(``joint_gain="per_speed"``, the former fit) biased the model: on a loop without process
+noise the optimal predictor's poles are the plant's slow poles, near the unit circle, and
+short per-speed fits with a free K end on the predictor's stability boundary; with their K
+the true parameters give an unstable predictor for some runs, so the joint fit could not
+reach them (the README tour's sweep on the exact linear plant: v_c 6.0627 m/s, 85 standard
+errors from Meijaard's 6.0243, eigenvalue real parts up to 95 standard errors off; with the
+Kalman gains v_c 6.0240, 0.4 standard errors, eigenvalues within 1.7).  The runs' nominal
 speed ``run.speed`` is used (per-sample speed variation is ignored here).
 """
 
@@ -51,6 +61,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import solve_discrete_are
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import (
@@ -69,8 +80,10 @@ from bikeid.ident.predictor import (
     INPUT,
     PredictionProblem,
     discretize,
+    discretize_with_derivatives,
     initial_gain,
     output_matrix,
+    prediction_kernel,
     run_data,
     sandwich_covariance,
     single_threaded_blas,
@@ -79,6 +92,7 @@ from bikeid.ident.predictor import (
 from bikeid.ident.signals import check_sampling
 from bikeid.ident.subspace import d2c, decimate, pbsid
 from bikeid.sim.linear import CanonicalMatrices
+from bikeid.sim.sampling import zoh
 
 __all__ = [
     "CanonicalModel",
@@ -238,8 +252,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
     """Speed-parameterized canonical model: a_odd = alpha + beta v^2, a_even = gamma v.
 
     ``params`` in :data:`ident.canonical.SPEED_NAMES` order with ``covariance``
-    (14x14); ``per_speed`` holds the fixed-speed fits (start values and each speed's
-    innovation gain K).
+    (14x14); ``per_speed`` holds the fixed-speed fits (start values and sensor-noise
+    variances; each speed's innovation gain K with ``gain_noise`` None).
 
     Attributes
     ----------
@@ -264,6 +278,12 @@ class SpeedCanonicalModel(SpeedDependentModel):
     notes : tuple of str
         What the fit recorded (an informativity check skipped or failed, when asked to fit
         anyway).
+    gain_noise : (5,) ndarray or None
+        The joint fit's innovation-gain model: [log s1, s21, log s2] of the acceleration
+        noise's Cholesky factor relative to [ref1, ref2] [rad/s^2], then ref1, ref2
+        (:func:`kalman_gain_of`; the sensor-noise variances are the diagonal of each
+        per-speed fit's ``noise_covariance``).  None when each speed's K was the per-speed
+        fit's (``joint_gain="per_speed"`` or ``noise_model="none"``).
     """
 
     params: np.ndarray
@@ -275,6 +295,7 @@ class SpeedCanonicalModel(SpeedDependentModel):
     cost: float = float("nan")
     nfev: int = 0
     notes: tuple[str, ...] = ()
+    gain_noise: np.ndarray | None = None
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -297,7 +318,7 @@ class SpeedCanonicalModel(SpeedDependentModel):
         return speed_map(v) @ self.params
 
     def at(self, v: float) -> CanonicalModel:
-        """The fixed-speed model at v (covariance propagated; K of the nearest fitted speed).
+        """The fixed-speed model at v (covariance propagated, K of the joint model).
 
         Parameters
         ----------
@@ -307,15 +328,26 @@ class SpeedCanonicalModel(SpeedDependentModel):
         Returns
         -------
         CanonicalModel
-            theta = S(v) params, covariance S(v) cov S(v)', K and ``noise_covariance``
-            of the fitted speed nearest to ``v``; ``x0``, ``cost`` and ``nfev`` are left
-            at their defaults.
+            theta = S(v) params, covariance S(v) cov S(v)', ``noise_covariance`` of the
+            fitted speed nearest to ``v`` and K the Kalman gain of theta with the joint
+            fit's noise model (:attr:`gain_noise`), or, without one (or without a
+            stabilizing Riccati solution at ``v``), the K of that nearest fitted speed;
+            ``x0``, ``cost`` and ``nfev`` are left at their defaults.
         """
         S = speed_map(v)
         near = min(self.per_speed, key=lambda s: abs(s - v))
+        K = self.per_speed[near].K
+        if self.gain_noise is not None:
+            C = output_matrix(self.outputs)[0]
+            rdiag = sensor_variances(self.per_speed[near])
+            try:
+                K = kalman_gain_of(S @ self.params, self.dt, C, rdiag, self.gain_noise[:3],
+                                   self.gain_noise[3:])  # fmt: skip
+            except (ValueError, np.linalg.LinAlgError):  # no stabilizing Riccati solution
+                K = self.per_speed[near].K
         return CanonicalModel(
             theta=S @ self.params, covariance=S @ self.covariance @ S.T,
-            K=self.per_speed[near].K, dt=self.dt, speed=v,
+            K=K, dt=self.dt, speed=v,
             noise_covariance=self.per_speed[near].noise_covariance, outputs=self.outputs,
         )  # fmt: skip
 
@@ -565,6 +597,205 @@ def fit(
     )  # fmt: skip
 
 
+#: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
+#: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
+NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
+#: Range of the log standard deviations of that noise relative to its reference
+#: (the input's std times |b1|, |b2|); beyond it the gain no longer changes.
+NOISE_LOG_RANGE = (-40.0, 5.0)
+#: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
+NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
+#: Rounds of the joint fit's alternation (speed parameters, then the noise's eta) per
+#: weighting pass; a round whose eta step lowers the cost by less than :data:`JOINT_TOL`
+#: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
+JOINT_ROUNDS = 6
+JOINT_TOL = 1e-2
+
+
+def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
+    """Steady-state Kalman gain of the canonical model ``theta`` for acceleration noise.
+
+    Process noise: white noise in the roll and steer accelerations, held over each sample
+    (``Q = G L L' G'``, G the zero-order-hold sampling of :data:`NOISE_INPUT`, L =
+    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]); sensor noise diag(``rdiag``).  The
+    predictor Ad - K C is stable for every ``eta`` (the stabilizing Riccati solution).
+
+    Parameters
+    ----------
+    theta : (10,) ndarray
+        Canonical parameters [a1, ..., a8, b1, b2].
+    dt : float
+        Sample period [s].
+    C : (L, 4) ndarray
+        Output matrix.
+    rdiag : (L,) ndarray
+        Sensor-noise variances (squared output units).
+    eta : (3,) ndarray
+        [log s1, s21, log s2] of the noise's Cholesky factor, relative to ``ref``
+        (logs clipped to :data:`NOISE_LOG_RANGE`).
+    ref : (2,) ndarray
+        Reference standard deviations of the roll and steer acceleration noise [rad/s^2].
+
+    Returns
+    -------
+    (4, L) ndarray
+        K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k] (Chen & Dao's state order).
+    """
+    A, _ = canonical_ab(theta)
+    Ad, G = zoh(A, NOISE_INPUT, dt)
+    lo, hi = NOISE_LOG_RANGE
+    s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
+    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * np.asarray(ref)[:, None]
+    GL = G @ Lf
+    Q = GL @ GL.T + 1e-12 * np.eye(4)
+    R = np.diag(rdiag)
+    P = solve_discrete_are(Ad.T, C.T, Q, R)
+    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+
+
+def sensor_variances(model: CanonicalModel) -> np.ndarray:
+    """The sensor-noise variances a joint fit's Kalman gains use at a fitted speed.
+
+    Parameters
+    ----------
+    model : CanonicalModel
+        The per-speed fit.
+
+    Returns
+    -------
+    (L,) ndarray
+        The diagonal of its ``noise_covariance`` (squared output units), raised to at
+        least 1e-12 of its largest entry and to 1e-30 (noise-free data: a solvable
+        Riccati equation).
+    """
+    r = np.diag(np.atleast_2d(model.noise_covariance)).astype(float)
+    return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
+
+
+class _KalmanGainProblem(PredictionProblem):
+    """The joint problem with each run's K the Kalman gain of the joint model at its speed.
+
+    z = [speed parameters (14), eta (3)]: the innovation gains follow the model (and a
+    shared acceleration-noise covariance), so the predictor is stable at every point and
+    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dz to the
+    kernel's dE/dtheta (dK by central differences of the Riccati solution).  Only the
+    entries ``free`` of z are the minimizer's x (the others held at ``z``): the fit
+    alternates between the speed parameters and eta, because where the noise is
+    negligible K hardly depends on eta, and those near-zero Jacobian columns made the
+    joint Levenberg-Marquardt steps so damped that it stopped short of the optimum.
+    """
+
+    def __init__(self, data, mapping, rdiag, weights, outputs, ref, z, free):
+        super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
+        self.rdiag, self.ref = rdiag, np.asarray(ref, float)
+        self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
+
+    def full(self, x) -> np.ndarray:
+        """z with the free entries set to x."""
+        z = self.z.copy()
+        z[self.free] = x
+        return z
+
+    def split(self, z):
+        return z[: self.mapping[0].shape[1]], None
+
+    def residual(self, x):
+        return super().residual(self.full(x))
+
+    def gain(self, theta, dt, rdiag, eta):
+        return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
+
+    def _needs(self) -> tuple[bool, bool]:
+        """Whether speed parameters, and whether noise parameters, are free."""
+        P = self.mapping[0].shape[1]
+        return bool(np.any(self.free < P)), bool(np.any(self.free >= P))
+
+    def _models(self, x, derivatives: bool):
+        P = self.mapping[0].shape[1]
+        p, eta = x[:P], x[P:]
+        need_theta, need_eta = self._needs()
+        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
+        out, cache = [], {}
+        for i, d in enumerate(self.data):
+            S = self.mapping[i]
+            theta = S @ p
+            key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
+            if key not in cache:
+                if derivatives and need_theta:
+                    Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
+                else:
+                    (Ad, Bd), dAd, dBd = (
+                        discretize(theta, d.dt),
+                        np.zeros((0, 4, 4)),
+                        np.zeros((0, 4)),
+                    )
+                try:
+                    K = self.gain(theta, d.dt, self.rdiag[i], eta)
+                except (ValueError, np.linalg.LinAlgError):
+                    return None
+                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
+                    return None
+                dK = (self._gain_derivative(theta, d.dt, self.rdiag[i], eta, K, rows)
+                      if derivatives else None)  # fmt: skip
+                cache[key] = (Ad, Bd, dAd, dBd, K, dK)
+            Ad, Bd, dAd, dBd, K, dK = cache[key]
+            out.append((Ad, Bd, dAd, dBd, K, S, dK))
+        return out
+
+    def _gain_derivative(self, theta, dt, rdiag, eta, K0, rows):
+        """(13, 4 L): dK/d[theta, eta] by central differences in ``rows`` (zero in the
+        others; one-sided where the Riccati equation has no stabilizing solution on one
+        side, zero where on neither: the derivative only steers the search, the cost is
+        exact)."""
+        z = np.concatenate([theta, eta])
+        out = np.zeros((z.size, K0.size))
+        for j in rows:
+            h = 1e-6 * max(abs(z[j]), 1.0)
+            side = {}
+            for s in (1.0, -1.0):
+                zs = z.copy()
+                zs[j] += s * h
+                try:
+                    side[s] = self.gain(zs[:10], dt, rdiag, zs[10:])
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+            if len(side) == 2:
+                out[j] = ((side[1.0] - side[-1.0]) / (2 * h)).ravel()
+            elif side:
+                s, Ks = next(iter(side.items()))
+                out[j] = (s * (Ks - K0) / h).ravel()
+        return out
+
+    def jacobian(self, x):
+        r = self.residual(x)
+        if r is None:
+            return None, None
+        models = self._models(self.full(x), derivatives=True)
+        if models is None:
+            return None, None
+        nk = 4 * self.L
+        need_theta, need_eta = self._needs()
+        P = self.mapping[0].shape[1]
+        cols = self.free - (0 if need_theta else P)  # columns of the blocks computed
+        jac = []
+        for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
+            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
+            nt = dAd.shape[0]  # 10 or 0
+            JK = J[:, nt : nt + nk]
+            blocks = []
+            if need_theta:
+                blocks.append((J[:, :10] + JK @ dK[:10].T) @ S)
+            if need_eta:
+                blocks.append(JK @ dK[10:].T)
+            Jm = np.hstack(blocks)[:, cols]
+            Q, _ = np.linalg.qr(J[:, nt + nk :])
+            Jm -= Q @ (Q.T @ Jm)
+            jac.append(Jm)
+        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
+        return r, self._J
+
+
 @single_threaded_blas
 def fit_speed_model(
     runs: Sequence[Run],
@@ -577,14 +808,17 @@ def fit_speed_model(
     per_speed: dict[float, CanonicalModel] | None = None,
     passes: int = 2,
     informativity: str = "refuse",
+    joint_gain: str = "kalman",
 ) -> SpeedCanonicalModel:
     """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
 
     Per-speed fits (one weighting pass each; speeds in increasing order, each also
-    started from its lower neighbour's model) give the start and each speed's K; pass
-    ``per_speed`` (speed rounded to 1e-6 m/s -> :class:`CanonicalModel`, e.g. from
-    :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are refined
-    jointly over all runs with each speed's K held fixed (``passes`` weighting passes).
+    started from its lower neighbour's model) give the start and the sensor-noise
+    variances; pass ``per_speed`` (speed rounded to 1e-6 m/s -> :class:`CanonicalModel`,
+    e.g. from :func:`fit`) to reuse fits already made.  Then alpha, beta, gamma, b are
+    refined jointly over all runs (``passes`` weighting passes), each run's K the Kalman
+    gain of the joint model at its speed, alternating with the acceleration-noise
+    covariance that gain assumes (module docstring).
     Runs that break the sampling contract (``ident.signals.check_sampling``) raise ValueError.
 
     Parameters
@@ -611,6 +845,11 @@ def fit_speed_model(
         Before the fit, whether the runs can determine the 14 parameters, with excited
         runs at two or more speeds (:func:`bikeid.ident.informativity.guard`; the
         per-speed fits, only starts here, report rather than refuse).
+    joint_gain : {"kalman", "per_speed"}, optional
+        Innovation gains of the joint fit (with ``noise_model="free"``): the joint model's
+        Kalman gains (default), or each speed's K held at its per-speed fit's (the former
+        fit, biased where those fits end on their predictor's stability boundary; kept for
+        comparison).  With ``noise_model="none"`` K = 0 either way.
 
     Returns
     -------
@@ -622,12 +861,15 @@ def fit_speed_model(
     ValueError
         If a run breaks the sampling contract, the runs cover fewer than 2 distinct
         speeds, ``per_speed`` models used other outputs, no stable predictor exists for
-        a run at the joint start, or a per-speed :func:`fit` raises.
+        a run at the joint start, ``joint_gain`` is unknown, or a per-speed :func:`fit`
+        raises.
     UntrustworthyResult
         If the runs cannot determine the model and ``informativity`` is ``"refuse"``.
     """
     runs = list(runs)
     check_sampling(runs, "pem.fit_speed_model")
+    if joint_gain not in ("kalman", "per_speed"):
+        raise ValueError(f"joint_gain {joint_gain!r}: choose 'kalman' or 'per_speed'")
     outputs = tuple(outputs)
     groups: dict[float, list[Run]] = {}
     for r in runs:
@@ -658,6 +900,10 @@ def fit_speed_model(
     params, *_ = np.linalg.lstsq(Sstack, tstack, rcond=None)
     data = run_data(runs, outputs)
     mapping = [speed_map(d.v) for d in data]
+    w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
+    if noise_model == "free" and joint_gain == "kalman":
+        return _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev,
+                             method, passes, told)  # fmt: skip
     Ks = [per[round(r.speed, 6)].K for r in runs]
     C = output_matrix(outputs)[0]
     for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
@@ -670,7 +916,6 @@ def fit_speed_model(
                     "fit that speed separately and check its data"
                 )
             Ks[i] = K
-    w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     nfev = 0
     for _ in range(max(1, passes)):
         prob = PredictionProblem(data, mapping, Ks, False, w, outputs)
@@ -683,4 +928,61 @@ def fit_speed_model(
         params=params.copy(), covariance=cov, per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev,
         notes=(told,) if told else (),
+    )  # fmt: skip
+
+
+def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, method, passes,
+                  told) -> SpeedCanonicalModel:  # fmt: skip
+    """The joint fit with the innovation gains from the joint model's Kalman filter."""
+    rdiag = [sensor_variances(per[round(r.speed, 6)]) for r in runs]
+    uvar = float(np.mean([np.var(d.u) for d in data]))
+    ref = np.abs(params[12:14]) * math.sqrt(uvar)
+    n = len(SPEED_NAMES)
+    every, par, noise = np.arange(n + 3), np.arange(n), np.arange(n, n + 3)
+
+    def problem(z, free):
+        return _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref, z, free)
+
+    best = None
+    for eta in NOISE_STARTS:
+        z = np.concatenate([params, eta])
+        r = problem(z, every).residual(z)
+        if r is not None and (best is None or float(r @ r) < best[0]):
+            best = (float(r @ r), z)
+    if best is None:
+        raise ValueError(
+            "no stable predictor from the joint start: fit each speed separately and check its data"
+        )
+    z = best[1]
+    nfev, stopped = 0, None
+    for _ in range(max(1, passes)):
+        for _ in range(JOINT_ROUNDS):
+            prob = problem(z, par)
+            sol = solve(prob, z[par], max_nfev, method)
+            z[par], nfev = sol.x, nfev + sol.nfev
+            before = float(prob._r @ prob._r)
+            prob = problem(z, noise)
+            sol_n = solve(prob, z[noise], max_nfev, method)
+            z[noise], nfev = sol_n.x, nfev + sol_n.nfev
+            stopped = None if sol.success else str(sol.message)
+            if before - float(prob._r @ prob._r) < JOINT_TOL:
+                break
+        w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
+    prob = problem(z, every)
+    prob.jacobian(z)
+    x = z
+    cov = sandwich_covariance(prob, 4 * len(data))
+    lo, hi = NOISE_LOG_RANGE
+    x[n], x[n + 2] = (min(max(x[i], lo), hi) for i in (n, n + 2))  # same gain, finite
+    notes = [f"innovation gains: Kalman gains of the joint model (acceleration noise "
+             f"[log s1, s21, log s2] = {np.round(x[n:], 3).tolist()} relative to "
+             f"{np.round(ref, 6).tolist()} rad/s^2)"]  # fmt: skip
+    if stopped:
+        notes.append(f"least_squares: {stopped}")
+    if told:
+        notes.append(told)
+    return SpeedCanonicalModel(
+        params=x[:n].copy(), covariance=cov[:n, :n], per_speed=per, dt=data[0].dt, g=g,
+        outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev, notes=tuple(notes),
+        gain_noise=np.concatenate([x[n:], ref]),
     )  # fmt: skip

@@ -78,18 +78,22 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys, tmp_path):
         lo, hi = c["interval"]
         assert hi - c["value"] == pytest.approx(1.959964 * c["std"], rel=0.05)
         assert c["value"] - lo == pytest.approx(1.959964 * c["std"], rel=0.05)
-        # but on these 30 s runs of the nonlinear plant they exclude the linearized truth
-        # (measured v_w [4.276, 4.282], v_c [6.008, 6.019] for 4.292, 6.024): the data reject
-        # the model over speed (ident.structure), so identify withholds them and says why
-        assert not lo <= true_cs[name] <= hi
+    # on these 30 s runs of the nonlinear plant the weave speed's interval excludes the
+    # linearized truth (measured v_w 4.2809 +- 0.0009 [4.279, 4.283] for 4.2924, 12 SE;
+    # v_c 6.0188 +- 0.0026 [6.014, 6.024] for 6.0243, 2 SE): the bias of a linear fit at the
+    # excitation amplitude, which the residual tests cannot see (ident.structure), so they
+    # pass and the note says how to check it.  (With each speed's K held at its per-speed
+    # fit's, the model over speed was biased on the linear plant too and rejected here.)
+    lo, hi = crit["v_w"]["interval"]
+    assert not lo <= true_cs["v_w"] <= hi
     iv = out["intervals"]
     assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
-    assert iv["critical_speeds"] is None and iv["structure"]["speed_model_rejected"]
-    assert any("reject the model structure" in n and "Fix:" in n for n in iv["notes"])
-    assert all(row["eigenvalue_intervals"] is None for row in out["per_speed"])
+    assert iv["critical_speeds"] is not None and not iv["structure"]["speed_model_rejected"]
+    assert any("cannot see the bias of a linear fit to a nonlinear plant" in n
+               and "half the amplitude" in n for n in iv["notes"])  # fmt: skip
     # the verdict is recorded in the model file beside the covariance it judges
     doc = json.loads(target.read_text())
-    assert doc["results"]["structure_check"]["passed"] is False
+    assert doc["results"]["structure_check"]["passed"] is True
 
 
 def test_greybox_intervals_match_monte_carlo(sweeps, capsys, tmp_path):
