@@ -63,15 +63,15 @@ printed note says so.
 What it catches there: the speed-parameterized model of that sweep (v_c = 6.170 m/s, its
 interval [6.169, 6.171] against the linearized 6.024) is rejected: independence alone at 28
 of its 29 speeds (p below 6.9e-5), so v_w, v_c and every eigenvalue interval are withheld.
-Its main cause is not the nonlinearity: the same sweep on the exact linear plant gives
+Its main cause then was not the nonlinearity: the same sweep on the exact linear plant gave
 v_c = 6.063 m/s with eigenvalue errors up to 94 standard errors (rejected there too,
-independence at 22 speeds), while the 15 per-speed fits of those runs that end inside
-their predictor's stability region are within 2.24.  The model over speed holds each
-speed's innovation gain K at its per-speed fit's value; 14 of those fits (5.5-9.5 and
-12-15 m/s) end on that boundary (:func:`~bikeid.ident.uncertainty.predictor_radius` within
-3.2e-7 of 1), with those K the linearized truth itself gives an unstable predictor for 15
-runs, so the joint fit cannot reach it and stops on the boundary too (40 runs within 1e-4
-of 1).
+independence at 22 speeds), because the model over speed held each speed's innovation
+gain K at its per-speed fit's value, 14 of which ended on the predictor's stability
+boundary.  Since the joint fit takes each speed's K as the Kalman gain of the joint model
+(:func:`bikeid.ident.pem.fit_speed_model`), the linear-plant sweep gives v_w 4.29262
+(+1.4 SE), v_c 6.02405 (-0.4 SE) and passes this check with intervals that contain the
+truth; the nonlinear sweep gives v_w 4.2832, v_c 6.0196 and is still rejected (at 12
+speeds in 1-7 m/s), its intervals withheld.
 """
 
 from __future__ import annotations
