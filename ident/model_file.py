@@ -49,7 +49,6 @@ untouched.
 from __future__ import annotations
 
 import datetime
-import hashlib
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -59,7 +58,8 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.dataset.files import atomic_write_text, check_output_path
+from bikeid.dataset.files import atomic_write_text, check_output_path, sha256_file
+from bikeid.dataset.tabular import relative_path
 from bikeid.ident.canonical import SPEED_NAMES, THETA_NAMES
 from bikeid.ident.direct import ALL_ENTRIES, DirectResult
 from bikeid.ident.effects.experiment_model import DT as EXPERIMENT_DT
@@ -146,27 +146,6 @@ class ModelFile:
 
 
 # -- provenance --------------------------------------------------------------------------
-def relative_path(path: str | os.PathLike) -> str:
-    """A file's path relative to the working directory, as stored in provenance.
-
-    Parameters
-    ----------
-    path : str or path-like
-        The file.
-
-    Returns
-    -------
-    str
-        ``os.path.relpath`` of the resolved path (POSIX separators); the file name alone
-        when there is none (another drive).
-    """
-    resolved = Path(path).resolve()
-    try:
-        return Path(os.path.relpath(resolved)).as_posix()
-    except ValueError:  # another drive (Windows)
-        return resolved.name
-
-
 def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
     """Path, size and SHA-256 of each data file, as saved in ``provenance``.
 
@@ -190,15 +169,11 @@ def file_provenance(paths: Iterable[str | os.PathLike]) -> list[dict]:
     out = []
     for p in paths:
         path = Path(p).resolve()
-        h = hashlib.sha256()
         try:
-            with open(path, "rb") as fh:
-                for chunk in iter(lambda fh=fh: fh.read(1 << 20), b""):
-                    h.update(chunk)
-            size = path.stat().st_size
+            digest, size = sha256_file(path), path.stat().st_size
         except OSError as exc:
             raise InputError(f"cannot hash data file {str(path)!r}: {exc.strerror}") from None
-        out.append({"path": relative_path(path), "size": int(size), "sha256": h.hexdigest()})
+        out.append({"path": relative_path(path), "size": int(size), "sha256": digest})
     return out
 
 
