@@ -37,8 +37,8 @@ from bikeid.experiments.measured.blind_trials import (
     draw_blind_trials,
     run_log_trial,
 )
+from bikeid.experiments.measured.effect_trials import rate
 from bikeid.experiments.parallel import imap
-from bikeid.ident.validate import binomial_interval
 
 
 def _job(args: tuple) -> dict:
@@ -58,19 +58,22 @@ def _job(args: tuple) -> dict:
     return row
 
 
+def _counts(rows: list[dict]) -> dict:
+    """Right answers with their exact 95 % interval (:func:`effect_trials.rate`), outcomes."""
+    r = rate(rows, "right")
+    return {"right": r["k"], "n": r["n"], "ci95": r["ci95"],
+            "outcomes": dict(Counter(row["outcome"] for row in rows))}  # fmt: skip
+
+
 def summarize(rows: list[dict]) -> dict:
     """Per hidden effect: outcomes, right answers with 95 % intervals; and over all."""
     out = {}
     for eff in CLOSURE_EFFECTS:
         rs = [r for r in rows if r["effect"] == eff]
-        k = sum(r["right"] for r in rs)
-        out[eff] = {"right": k, "n": len(rs), "ci95": list(binomial_interval(k, len(rs))),
-                    "outcomes": dict(Counter(r["outcome"] for r in rs))}  # fmt: skip
+        out[eff] = _counts(rs)
         if rs and rs[0]["kind"] == "library":
             out[eff]["value_ok"] = sum(bool(r["value_ok"]) for r in rs)
-    k = sum(r["right"] for r in rows)
-    out["all"] = {"right": k, "n": len(rows), "ci95": list(binomial_interval(k, len(rows))),
-                  "outcomes": dict(Counter(r["outcome"] for r in rows))}  # fmt: skip
+    out["all"] = _counts(rows)
     return out
 
 
