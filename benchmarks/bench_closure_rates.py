@@ -48,8 +48,14 @@ def _job(args: tuple) -> dict:
     with tempfile.TemporaryDirectory() as d:
         row = run_log_trial(trial, d, None if truth == "trial" else truth, extra)
         model = Path(d) / "model.json"
-        check = json.loads(model.read_text())["results"].get("plant_check") if row["rc"] == 0 \
-            else None  # fmt: skip
+        res = json.loads(model.read_text())["results"] if row["rc"] == 0 else {}
+    check = res.get("plant_check")
+    ident = res.get("identification") or {}
+    ev = ident.get("evidence") or {}
+    keep = ("fit_gain", "heldout_gain", "heldout_windows_improved", "heldout_windows", "p_adjusted")
+    row["evidence"] = {"explained": (ev.get("unexplained") or {}).get("explained"),
+                       "effects": {n: {k: e.get(k) for k in keep}
+                                   for n, e in (ev.get("effects") or {}).items()}}  # fmt: skip
     test = (check or {}).get("test") or {}
     row["plant_test"] = {k: test.get(k) for k in ("ratio", "p_value", "separated")} if test \
         else None  # fmt: skip
@@ -73,6 +79,7 @@ def summarize(rows: list[dict]) -> dict:
         out[eff] = _counts(rs)
         if rs and rs[0]["kind"] == "library":
             out[eff]["value_ok"] = sum(bool(r["value_ok"]) for r in rs)
+            out[eff]["named_first"] = rate(rs, "named_first")
     out["all"] = _counts(rows)
     return out
 
@@ -106,7 +113,10 @@ def main() -> None:
     s = summarize(rows)
     for eff, v in s.items():
         lo, hi = v["ci95"]
-        extra = f", value within 20 %: {v['value_ok']}" if "value_ok" in v else ""
+        extra = "" if "value_ok" not in v else (
+            f", named first alone {v['named_first']['k']}/{v['named_first']['n']} (95 % CI "
+            f"{v['named_first']['ci95'][0]:.2f}-{v['named_first']['ci95'][1]:.2f}), value "
+            f"within 20 %: {v['value_ok']}")
         print(f"{eff:22s} right {v['right']}/{v['n']} (95 % CI {lo:.2f}-{hi:.2f}); "
               f"outcomes {v['outcomes']}{extra}")
     print(f"outcomes: {', '.join(LOG_OUTCOMES)}; CPU {sum(r['cpu_s'] for r in rows):.0f} s")

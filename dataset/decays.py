@@ -137,6 +137,15 @@ DECAY_QUIET = 0.35  # max |roll rate| in the second before the push, relative to
 DECAY_RATIO = 0.5  # max |roll rate| over the window's second half, relative to the peak
 DECAY_REGROW = 1.1  # a lobe above this x the lobes before it is a push (not the same motion)
 DECAY_LULL = 0.4  # s, a lobe above the onset threshold after this long calm is a second push
+#: The window starts this fraction of the push's rise time after the roll-rate extreme: a push
+#: that lasts D s (a half-sine) still acts for about 0.25 D after the extreme, a third of its
+#: rise (independent linear generator, pulses of 0.1-0.4 s: the extreme 0-0.07 s before the
+#: pulse's end); 0.5 leaves a margin.
+DECAY_SETTLE = 0.5
+#: The push's onset: the last sample before the extreme with |roll rate| below this x peak.
+DECAY_ONSET = 0.1
+#: Longest settling delay [s] (a push rising for longer is a lean, not a hand's push).
+DECAY_MAX_SETTLE = 0.2
 
 
 def slowest_decay_rate(max_length: float = DECAY_MAX_LENGTH) -> float:
@@ -177,8 +186,14 @@ def detect_decays(
     A push shows as |roll rate| rising above max(6 sigma, 0.2 rad/s), sigma the robust
     (1.4826 MAD) scale of the roll rate over the settled-speed part of the log (the rows
     the windows may come from; the whole log when it has no start-up ramp).  The window
-    starts at the extreme of that first lobe (|roll rate| > half the threshold with the
-    same sign; the hand has left: from there on the motion is the loop's own).  A lobe
+    starts after the extreme of that first lobe (|roll rate| > half the threshold with the
+    same sign) by :data:`DECAY_SETTLE` (0.5) x the push's rise time, from its onset (the last
+    sample with |roll rate| below :data:`DECAY_ONSET` x peak) to the extreme, at most
+    :data:`DECAY_MAX_SETTLE` (0.2 s): the extreme is where the push's roll moment has fallen
+    to the loop's, not where the hand has left (a half-sine push of D s still acts for about
+    0.25 D after it), and a window that starts while the push still acts gives the push's
+    tail to the effects (on the closure generator, an input delay fitted as an actuator lag).
+    From the window's start on the motion is the loop's own.  A lobe
     no larger than 1.1 x the largest |roll rate| of the second before it (less its last
     0.15 s) is the motion before going on, not a push: it is skipped, neither kept nor
     counted.  A push is kept only if it is a clean decay from rest: within the
@@ -206,8 +221,9 @@ def detect_decays(
     With ``max_length`` None (or equal to ``length``) every window is ``length`` long.
 
     On the four ``eigen_normal`` logs this finds every window of the transcribed
-    ``segments.csv`` whose push clears the threshold, at the same start to a few samples
-    and with the same 1 s length, plus the pushes the source's analysis did not use
+    ``segments.csv`` whose push clears the threshold, starting its settling delay after
+    the transcribed start (which is at the extreme; 6-20 samples, the hand pushes rising for
+    0.12-0.4 s) and with the same 1 s length, plus the pushes the source's analysis did not use
     (tests/ident/effects/test_pipeline.py, docs/measured.md); those fit the model worse,
     so the curated list is the default where it exists.
 
@@ -274,6 +290,7 @@ def detect_decays(
         if peak <= DECAY_REGROW * before and not pushed:  # a lobe of the motion before
             i = k + 1
             continue
+        j = j + _settle(pr, j, max(i - pre, 0), peak, dt)  # the window starts here
         n, nxt = 0, j + m
         if j + m > hi:
             why = "runs past the end of the settled speed"
@@ -291,6 +308,15 @@ def detect_decays(
             rejected.append((first + j, why))
         i, pushed = nxt, why.startswith("a second push")  # the next lobe is that push
     return out
+
+
+def _settle(pr: np.ndarray, j: int, lo: int, peak: float, dt: float) -> int:
+    """Samples from the roll-rate extreme ``j`` to the window's start: :data:`DECAY_SETTLE`
+    x the push's rise (from its onset, the last sample after ``lo`` with |roll rate| below
+    :data:`DECAY_ONSET` x ``peak``, to the extreme), at most :data:`DECAY_MAX_SETTLE`."""
+    quiet = np.flatnonzero(np.abs(pr[lo:j]) < DECAY_ONSET * peak)
+    rise = j - (lo + int(quiet[-1]) if quiet.size else lo)
+    return min(int(round(DECAY_SETTLE * rise)), int(round(DECAY_MAX_SETTLE / dt)))
 
 
 def _decay_length(
@@ -318,7 +344,7 @@ def _decay_length(
         if np.max(a[n // 2 : n]) < DECAY_RATIO * peak:
             return n, "", n
     if q < a.size:
-        return 0, f"a second push {q * dt:.2f} s after the peak, before it decayed", q
+        return 0, f"a second push {q * dt:.2f} s into the window, before it decayed", q
     return 0, (f"does not decay within {a.size * dt:.3g} s (second half >= {DECAY_RATIO} x "
                "peak)"), a.size  # fmt: skip
 

@@ -1024,15 +1024,18 @@ def summarize_blind(rows: list[dict]) -> dict:
 CLOSURE_EFFECTS = ("steer_viscous_damping", "input_delay", "command_gain",
                    "roll_viscous_damping", "none")  # fmt: skip
 #: The outcomes of :func:`score_log_fit`, one per trial.
-LOG_OUTCOMES = ("right", "right_with_extras", "wrong_first", "unexplained", "nothing",
-                "plant_uncertain", "refused")
+LOG_OUTCOMES = ("right", "right_in_set", "right_with_extras", "wrong_first", "unexplained",
+                "nothing", "plant_uncertain", "refused")
 
 
 def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
     """The outcome of ``bikeid measured fit`` on a trial's logs, as the closure asks.
 
     Library effect: ``right`` when the accepted effects are the hidden one alone (first,
-    nothing extra, ``unexplained`` not said); outside-library effect: ``right`` when no
+    nothing extra, ``unexplained`` not said); ``right_in_set`` when one effect alone is
+    accepted and the fit reported the hidden one in its ambiguity set (the data cannot tell
+    them apart, and the fit said so: counted right, as the closure asks; ``named_first``
+    keeps the strict count); outside-library effect: ``right`` when no
     effect is accepted and the verdict is ``unexplained``; no effect: ``right`` when no effect
     is accepted (``unexplained`` may be said: the stated bicycle's residual mismatch).
 
@@ -1051,11 +1054,14 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
         ``effects`` (name -> value), ``value_ok`` (library: the hidden effect's value within
         20 % of its deviation from absent, None otherwise), ``in_set`` (library: the hidden
         effect in the ambiguity set of an accepted effect, as the fit reported it),
+        ``set_size`` (library: the size of that set, None when not in one), ``named_first``
+        (library: the hidden effect named first and alone, the strict count),
         ``plant`` and ``plant_ratio`` (the nominal plant used, cost ratio nonlinear/linear).
     """
     kind = _kind(trial.effect)
     out = {"kind": kind, "effect": trial.effect, "value": trial.value, "value_ok": None,
-           "in_set": None, "verdict": None, "effects": {}, "plant": None, "plant_ratio": None}
+           "in_set": None, "set_size": None, "named_first": None, "verdict": None,
+           "effects": {}, "plant": None, "plant_ratio": None}  # fmt: skip
     if model is None:
         return {**out, "outcome": "refused", "right": False}
     res = model["results"]
@@ -1072,16 +1078,22 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
         x = eff.get(trial.effect)
         out["value_ok"] = bool(x is not None and abs(x - trial.value)
                                <= 0.2 * abs(trial.value - es.absent))  # fmt: skip
-        out["in_set"] = any(trial.effect in s for s in ident.get("ambiguity", {}).values())
+        sets = [s for s in ident.get("ambiguity", {}).values() if trial.effect in s]
+        out["in_set"] = bool(sets)
+        out["set_size"] = min(map(len, sets)) if sets else None
+    alone = len(names) == 1 and "unexplained" not in verdict
     if not names:
         outcome = "unexplained" if "unexplained" in verdict else "nothing"
     elif names[0] != trial.effect:
-        outcome = "wrong_first"
-    elif len(names) == 1 and "unexplained" not in verdict:
+        own = ident.get("ambiguity", {}).get(names[0], [])
+        outcome = "right_in_set" if alone and trial.effect in own else "wrong_first"
+    elif alone:
         outcome = "right"
     else:
         outcome = "right_with_extras"
-    right = {"library": outcome == "right", "outside": outcome == "unexplained",
+    if kind == "library":
+        out["named_first"] = outcome == "right"
+    right = {"library": outcome in ("right", "right_in_set"), "outside": outcome == "unexplained",
              "none": not names}[kind]  # fmt: skip
     return {**out, "outcome": outcome, "right": right}
 

@@ -143,6 +143,13 @@ PIPELINE_DEFAULTS: dict[str, dict] = {
     "DECAY_MAX_LENGTH": {"value": 3.0, "where": "dataset.decays.DECAY_MAX_LENGTH",
                          "tuned_on": "closure delay logs, linear truth, seeds 0-7 (3 and 4 s "
                          "keep the same decays; development data)"},
+    "DECAY_SETTLE": {"value": 0.5, "where": "dataset.decays.DECAY_SETTLE",
+                     "tuned_on": "closure logs, linear truth, seeds 1-3 (half-sine pushes of "
+                     "0.12-0.29 s: the roll-rate extreme 0-0.07 s before the push ends; "
+                     "development data)"},
+    "DECAY_MAX_SETTLE": {"value": 0.2, "where": "dataset.decays.DECAY_MAX_SETTLE",
+                         "tuned_on": "not tuned: the longest half-sine push of the generator "
+                         "(0.4 s) rises for about 0.3 s"},
 }
 
 

@@ -26,6 +26,8 @@ from hypothesis import strategies as st
 
 from bikeid.dataset.decays import (
     DECAY_MAX_LENGTH,
+    DECAY_ONSET,
+    DECAY_SETTLE,
     decays_from_runs,
     detect_decays,
     slowest_decay_rate,
@@ -69,11 +71,23 @@ def _log(sigma: float, omega: float, dt: float = 0.01, noise: float = 0.005, gap
     return run, peaks[:pushes]
 
 
-def _expected_length(sigma: float, omega: float) -> float:
-    """2 t_c (at least 1 s), t_c the last time the noise-free decay is at half its peak."""
+#: The window's start after the peak [s] for this construction's push (a quarter sine rising
+#: over 0.1 s): DECAY_SETTLE x its rise from the onset (where the lobe passes DECAY_ONSET x
+#: the peak, at 0.2 / pi asin(DECAY_ONSET) s) to the peak; 0.047 s.
+SETTLE = DECAY_SETTLE * (0.1 - 0.2 / math.pi * math.asin(DECAY_ONSET))
+
+
+def _expected_length(sigma: float, omega: float, settle: float = SETTLE) -> float:
+    """2 (t_c - settle) (at least 1 s), t_c the last time the noise-free decay is at half its
+    peak: the window starts ``settle`` s after the peak and its second half is below half."""
     tau = np.arange(0.0, 10.0, 1e-4)
     above = np.flatnonzero(np.abs(_decay(tau, sigma, omega)) >= 0.5)
-    return max(1.0, 2.0 * tau[above[-1]])
+    return max(1.0, 2.0 * (tau[above[-1]] - settle))
+
+
+def _start(peak: float, dt: float) -> float:
+    """The expected first row of a push's window: SETTLE after its peak [s]."""
+    return (peak + SETTLE) / dt
 
 
 def _lobes_clear_of_half(sigma: float, omega: float, margin: float = 0.05) -> bool:
@@ -83,38 +97,45 @@ def _lobes_clear_of_half(sigma: float, omega: float, margin: float = 0.05) -> bo
     return bool(np.all(np.abs(lobes - 0.5) > margin))
 
 
-def test_fast_decays_keep_one_second_windows():
+def test_fast_decays_keep_one_second_windows(monkeypatch):
     """sigma = -3 1/s (the steer-by-wire bicycle's weave, docs/measured.md) halves in
     0.23 s: every push is kept with the 1 s window (100 samples, as the transcribed
-    segments), starting at its peak to 2 samples (the noise can move the sampled extreme of
-    a lobe flat at its top), none rejected."""
+    segments), starting SETTLE (0.047 s) after its peak to 2 samples (the noise can move the
+    sampled extreme of a lobe flat at its top, and the onset by a sample), none rejected.
+    With the settling delay off (DECAY_SETTLE 0) the window starts at the peak itself."""
     run, peaks = _log(-3.0, 8.0, gap=GAP)
     rejected: list = []
     segs = detect_decays(run, rejected=rejected)
     assert rejected == []
     assert [s.end - s.start for s in segs] == [100] * PUSHES
-    assert all(abs(s.start - round(p / 0.01)) <= 2 for s, p in zip(segs, peaks, strict=True))
+    assert all(abs(s.start - _start(p, 0.01)) <= 2 for s, p in zip(segs, peaks, strict=True))
+    monkeypatch.setattr("bikeid.dataset.decays.DECAY_SETTLE", 0.0)
+    at_peak = detect_decays(run)
+    assert all(abs(s.start - p / 0.01) <= 2 for s, p in zip(at_peak, peaks, strict=True))
 
 
 @pytest.mark.parametrize("sigma, omega, dt", [(-0.65, 5.0, 0.01), (-1.0, 6.0, 0.01),
                                               (-0.8, 4.5, 0.005)])  # fmt: skip
 def test_slow_decays_are_kept_with_the_window_of_their_rate(sigma, omega, dt):
-    """Decays of -0.65 to -1.0 1/s (the delayed loop's weave: -0.5 to -1.6 1/s) are kept, each
-    window 2 t_c long (1.2-1.6 s here) to 0.06 s: 2 samples of the sampled second half, 2 of
-    the start (the noise moves the sampled extreme of the lobe) and the noise's shift of the
-    half-peak crossing (3 x 0.005 rad/s on a slope of about omega a / 2, doubled, about
-    0.02 s); at 5 ms as at 10 ms (the run's own sample period).  The fixed 1 s
-    window (max_length None) refuses every one of them as not decaying."""
+    """Decays of -0.65 to -1.0 1/s (the delayed loop's weave: -0.5 to -1.6 1/s) are kept,
+    each starting SETTLE after its peak to 4 samples (the noise moves the sampled extreme
+    of the lobe by 2, the settling delay by half of that, the onset by 1) and each window
+    2 (t_c - its own settling delay) long (1.1-1.5 s here) to 0.06 s: 2 samples of the
+    sampled second half and the noise's shift of the half-peak crossing (3 x 0.005 rad/s on
+    a slope of about omega a / 2, doubled, about 0.02 s); at 5 ms as at 10 ms (the run's
+    own sample period).  The fixed 1 s window (max_length None) refuses every one of them
+    as not decaying."""
     assert _lobes_clear_of_half(sigma, omega)
     run, peaks = _log(sigma, omega, dt=dt)
     want = _expected_length(sigma, omega)
-    assert want > 1.1  # the window must grow for this test to mean anything
+    assert want > 1.05  # the window must grow for this test to mean anything
     rejected: list = []
     segs = detect_decays(run, rejected=rejected)
     assert rejected == [] and len(segs) == PUSHES
     for s, p in zip(segs, peaks, strict=True):
-        assert abs(s.start - round(p / dt)) <= 2
-        assert abs((s.end - s.start) * dt - want) <= 0.06, ((s.end - s.start) * dt, want)
+        assert abs(s.start - _start(p, dt)) <= 4  # the extreme's 2, half of it again, onset 1
+        got = _expected_length(sigma, omega, s.start * dt - p)  # from the window's own start
+        assert abs((s.end - s.start) * dt - got) <= 0.06, ((s.end - s.start) * dt, got)
     fixed: list = []
     assert detect_decays(run, rejected=fixed, max_length=None) == []
     assert len(fixed) == PUSHES and all(w.startswith("does not decay") for _, w in fixed)
@@ -158,16 +179,16 @@ def test_a_second_push_before_the_decay_halved_is_rejected():
     """A slow decay (-0.7 1/s, 5 rad/s) with a second push (+0.6 x the amplitude, 1.3 s after
     the third push's peak, on the decay's own third lobe, which it lifts to about the peak):
     that push is rejected as a second push found before it decayed (at the start of the
-    lobe it lifts, 1.0-1.3 s after the peak), the second push itself is counted and
+    lobe it lifts, 0.95-1.3 s into the window), the second push itself is counted and
     rejected as not at rest, the other 7 are kept: 9 pushes, 9 counted."""
     run, peaks = _log(-0.7, 5.0, extra={2: (1.3, AMP * 0.6)})
     rejected: list = []
     segs = detect_decays(run, rejected=rejected)
     assert len(segs) == 7 and len(rejected) == 2
     (row, why), (row2, why2) = rejected
-    assert abs(row - round(peaks[2] / 0.01)) <= 2
+    assert abs(row - _start(peaks[2], 0.01)) <= 4  # as in the slow-decay test
     assert why.startswith("a second push")
-    assert 1.0 <= float(why.split()[3]) <= 1.3, why
+    assert 0.95 <= float(why.split()[3]) <= 1.3, why
     assert why2.startswith("not at rest") and row2 > row
 
 
@@ -175,7 +196,7 @@ def test_a_second_push_before_the_decay_halved_is_rejected():
 @given(sigma=st.floats(-3.0, -0.6), omega=st.floats(4.0, 9.0), seed=st.integers(0, 2**16))
 def test_every_clean_decay_is_kept_with_its_window(sigma, omega, seed):
     """Property over the decays the detector is for (-3 to -0.6 1/s, 4-9 rad/s): all 8 pushes
-    kept, each window 2 t_c (at least 1 s) to 0.06 s (as above)."""
+    kept, each window 2 (t_c - SETTLE) (at least 1 s) to 0.06 s (as above)."""
     assume(_lobes_clear_of_half(sigma, omega))
     run, _ = _log(sigma, omega, seed=seed)
     want = _expected_length(sigma, omega)
@@ -191,23 +212,31 @@ DATA = Path(os.environ.get("BIKEID_DATA", "")) / "tudelft-sbw"
                     reason="needs the measured data ($BIKEID_DATA)")  # fmt: skip
 def test_transcribed_windows_are_found_with_their_start_and_length():
     """Against the windows the source's analysis picked by hand (eigen/segments.csv, all
-    1 s): on the four eigen_normal logs the detector finds 27 of the 28 (the 28th push,
-    1.5 m/s row 10603, peaks below the onset threshold), each at the same start to 3
-    samples (30 ms; measured: to 2) and 1 s long, as the fixed window gave (the listed
-    windows are 1 s but one of 0.92 s), so the longer windows of slow decays change
-    nothing there; the detector keeps 2 more pushes than the fixed
-    1 s window did (one at 1.5 m/s of 1.96 s, one at 2.5 m/s of 1.14 s; measured)."""
-    from bikeid.dataset.decays import iter_decays, read_segments
+    1 s but one of 0.92 s, each starting at the push's roll-rate extreme): on the four
+    eigen_normal logs the detector finds 26 of the 28, each starting its settling delay
+    after the listed start (the hand pushes rise for 0.12-0.2 s: 6-10 samples measured;
+    accepted 0 to DECAY_MAX_SETTLE + 3 samples) and 1 s long.  The two not found: the 1.5 m/s
+    push at row 10603 peaks below the onset threshold; the 2.5 m/s push at row 8673 (the
+    listed 0.92 s window, which the source ended at the next push) is rejected as a second
+    push before it decayed, since its 1 s window now starts 8 samples later and reaches that
+    push.  The detector keeps 1 more push than the fixed 1 s window (measured: a 1.74 s
+    window), 56 in all (58 with the windows starting at the extreme, 2 of them longer)."""
+    from bikeid.dataset.decays import DECAY_MAX_SETTLE, iter_decays, read_segments
 
     listed = read_segments(DATA / "eigen" / "segments.csv", {p.name for p in DATA.rglob("*.gz")})
     found, fixed = {}, {}
     for run, segs in iter_decays(DATA, "detected"):
         found[run.meta["file"]] = segs
         fixed[run.meta["file"]] = detect_decays(run, max_length=None)
-    hits = [next((s for s in found.get(sg.file, []) if abs(s.start - sg.start) <= 3), None)
+    late = round(DECAY_MAX_SETTLE / 0.01) + 3
+    hits = [next((s for s in found.get(sg.file, []) if 0 <= s.start - sg.start <= late), None)
             for sg in listed]  # fmt: skip
-    assert len(listed) == 28 and sum(h is not None for h in hits) == 27
+    missed = [(sg.file.split("_")[-1], sg.start) for sg, h in zip(listed, hits, strict=True) if h is None]
+    assert len(listed) == 28 and sum(h is not None for h in hits) == 26
+    assert missed == [("5.4kph.log.gz", 10603), ("9kph.log.gz", 8673)], missed
+    delays = [h.start - sg.start for sg, h in zip(listed, hits, strict=True) if h is not None]
+    assert 6 <= min(delays) and max(delays) <= 10, delays
     assert all(h.end - h.start == 100 for h in hits if h is not None)
     longer = [s for segs in found.values() for s in segs if s.end - s.start > 100]
-    assert sum(map(len, found.values())) == sum(map(len, fixed.values())) + 2 == 56 + 2
-    assert sorted(s.end - s.start for s in longer) == [114, 196]
+    assert sum(map(len, found.values())) == sum(map(len, fixed.values())) + 1 == 56
+    assert sorted(s.end - s.start for s in longer) == [174]

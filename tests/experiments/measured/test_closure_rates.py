@@ -183,7 +183,8 @@ def test_inconclusive_band_is_the_margin_both_ways(ratio, inconclusive):
 
 def test_score_log_fit_both_ways():
     """Scores of hand-made fit results: the hidden effect alone is right, with an extra it is
-    not; an outside effect is right only as ``unexplained`` with no effect; no effect is right
+    not; another effect alone whose reported ambiguity set holds the hidden one is right as a
+    set (not named first), with an extra or without that set it is wrong; an outside effect is right only as ``unexplained`` with no effect; no effect is right
     with nothing named; ``nominal plant uncertain`` and a refusal are never right."""
     def fit(verdict, effects, ambiguity=None):
         return {"model": {"effects": effects},
@@ -195,14 +196,19 @@ def test_score_log_fit_both_ways():
                                                 "roll_viscous_damping", "none"))
     v = damp.value
     r = score_log_fit(damp, fit(["steer_viscous_damping"], {"steer_viscous_damping": v}))
-    assert r["right"] and r["outcome"] == "right" and r["value_ok"]
+    assert r["right"] and r["outcome"] == "right" and r["value_ok"] and r["named_first"]
     r = score_log_fit(damp, fit(["steer_viscous_damping", "speed_scale"],
                                 {"steer_viscous_damping": v, "speed_scale": 1.01}))
     assert not r["right"] and r["outcome"] == "right_with_extras"
-    r = score_log_fit(damp, fit(["tire_scrub_torque"], {"tire_scrub_torque": 0.5},
-                                {"tire_scrub_torque": ["tire_scrub_torque",
-                                                       "steer_viscous_damping"]}))
-    assert not r["right"] and r["outcome"] == "wrong_first" and r["in_set"]
+    scrub_set = {"tire_scrub_torque": ["tire_scrub_torque", "steer_viscous_damping"]}
+    r = score_log_fit(damp, fit(["tire_scrub_torque"], {"tire_scrub_torque": 0.5}, scrub_set))
+    assert r["right"] and r["outcome"] == "right_in_set" and r["in_set"] and r["set_size"] == 2
+    assert r["named_first"] is False  # the strict count does not take it
+    r = score_log_fit(damp, fit(["tire_scrub_torque", "speed_scale"],
+                                {"tire_scrub_torque": 0.5, "speed_scale": 1.01}, scrub_set))
+    assert not r["right"] and r["outcome"] == "wrong_first" and r["in_set"]  # not alone
+    r = score_log_fit(damp, fit(["tire_scrub_torque"], {"tire_scrub_torque": 0.5}))
+    assert not r["right"] and r["outcome"] == "wrong_first" and not r["in_set"]  # not said
     assert score_log_fit(outside, fit(["unexplained"], {}))["right"]
     assert not score_log_fit(outside, fit(["unexplained", "steer_inertia"],
                                           {"steer_inertia": 0.1}))["right"]

@@ -327,8 +327,10 @@ def _push_log(tmp_path: Path, name: str, pushes: dict[int, float], n: int = 3000
 
 
 def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
-    """Pushes at known rows: the windows start at each push's roll-rate extreme (to 1
-    sample: the lobe's maximum is at k by construction) and last 1 s.  Rejected by the
+    """Pushes at known rows: the windows start at each push's roll-rate extreme (the lobe's
+    maximum is at k by construction) plus the settling delay, DECAY_SETTLE x the lobe's
+    10-sample rise (its onset is the lobe's first sample, the only one below DECAY_ONSET x
+    the peak: sin(pi / 20) = 0.156), to 1 sample, and last 1 s.  Rejected by the
     rules of ``detect_decays``: a decay spoilt by a second push 0.5 s in (its peak is
     exceeded within the window; 1000 by 1050, 2000 by 2060; the search resumes after
     the spoilt window).  The quiet-before rule matters: switched off, a third window
@@ -341,7 +343,8 @@ def test_detect_decays_finds_clean_pushes_only(tmp_path, monkeypatch):
     run = load_log(_push_log(tmp_path, "eigen_x.log.gz", pushes))
     starts = [s.start for s in detect_decays(run)]
     assert len(starts) == 2
-    assert abs(starts[0] - 500) <= 1 and abs(starts[1] - 2600) <= 1
+    late = dm.DECAY_SETTLE * 10
+    assert abs(starts[0] - 500 - late) <= 1 and abs(starts[1] - 2600 - late) <= 1
     assert all(s.end - s.start == 100 for s in detect_decays(run))
     monkeypatch.setattr(dm, "DECAY_QUIET", 10.0)
     assert len(detect_decays(run)) == 3
@@ -357,16 +360,17 @@ def test_iter_decays_rejects_unknown_source(tmp_path):
 @needs_data
 def test_detected_decays_match_transcribed_segments():
     """The detector against an independent source, the windows the source's analysis
-    script picked by hand (eigen/segments.csv): on the four logs 27 of the 28 listed
-    windows are found, each start within 2 samples (the 28th push, 1.5 m/s row 10603,
-    peaks below the detection threshold).  Asserted: >= 90 % found within 3 samples
-    (30 ms, under 1/20 of a weave period)."""
-    from bikeid.dataset.decays import iter_decays
+    script picked by hand (eigen/segments.csv, starting at the roll-rate extreme): on the
+    four logs 26 of the 28 listed windows are found, each starting its settling delay after
+    the listed start (6-10 samples measured; tests/dataset/test_decays.py names the two
+    missed).  Asserted: >= 90 % found within 0 to DECAY_MAX_SETTLE + 3 samples."""
+    from bikeid.dataset.decays import DECAY_MAX_SETTLE, iter_decays
 
     root = Path(DATA) / "tudelft-sbw"
     listed = read_segments(root / "eigen" / "segments.csv", {p.name for p in root.rglob("*.gz")})
     found = {r.meta["file"]: [s.start for s in sg] for r, sg in iter_decays(root, "detected")}
-    hits = [any(abs(s.start - d) <= 3 for d in found.get(s.file, [])) for s in listed]
+    late = round(DECAY_MAX_SETTLE / 0.01) + 3
+    hits = [any(0 <= d - s.start <= late for d in found.get(s.file, [])) for s in listed]
     assert len(listed) >= 20 and np.mean(hits) >= 0.9, (sum(hits), len(listed))
 
 
@@ -375,9 +379,10 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     """A log the segments file does not list (here a copy of the 3.5 m/s log under a new
     name, in a folder without segments.csv) is evaluated from detected windows.  Check
     against the listed windows of the original: on the detected windows that coincide
-    with listed ones (9 of 9), the nominal error is the same to 5 % (measured 0.419 vs
-    0.424, 1.3 %: the starts differ by <= 2 samples, and a later start drops part of the
-    first swing; 5 % leaves room for a 3-sample shift), and `measured evaluate` runs on
+    with listed ones (9 of 9, each starting its settling delay, 6-10 samples, after the
+    listed start at the extreme), the nominal error is the same to 10 % (measured 0.419
+    listed vs 0.398 detected, 5 %: the later start drops the largest part of the first
+    swing; 10 % leaves room for the 0.2 s longest delay), and `measured evaluate` runs on
     the folder."""
     import json
     import shutil
@@ -391,7 +396,7 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     new = load_decays(str(tmp_path))
     old = [w for w in load_decays(DATA) if w.file == src.name]
     assert len(new) >= len(old) - 1
-    pairs = [(o, n) for o in old for n in new if abs(o.start - n.start) <= 3]
+    pairs = [(o, n) for o in old for n in new if 0 <= n.start - o.start <= 23]
     assert len(pairs) == len(old)
     from bikeid.ident.effects.experiment_model import window_errors, with_nonlinear_correction
 
@@ -399,7 +404,7 @@ def test_unlisted_log_is_evaluated_from_detected_decays(tmp_path, capsys):
     eo, en = (with_nonlinear_correction([p[i] for p in pairs], m) for i in (0, 1))
     e_old = window_errors(eo, m.simulate(eo)).mean()
     e_new = window_errors(en, m.simulate(en)).mean()
-    assert e_new == pytest.approx(e_old, rel=0.05)
+    assert e_new == pytest.approx(e_old, rel=0.1)
     model = tmp_path / "m.json"
     model.write_text(json.dumps({"effects": {"steer_viscous_damping": 0.44}, "plant": "nonlinear"}))
     assert main(["measured", "evaluate", "--model", str(model), "--data", str(tmp_path),
