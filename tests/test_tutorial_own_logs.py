@@ -108,7 +108,8 @@ def test_csv_evaluation_is_the_steer_by_wire_one_and_the_quoted_one(ran):
     assert a["verdict"] == b["verdict"] == "halved"
     assert a["baseline_zero"] == pytest.approx(1.30, abs=5e-3)
     files = {f["speed"]: f for f in json.loads((ran / "evaluate_csv.json").read_text())["files"]}
-    got = [(round(f["error_before"], 2), round(f["error_after"], 2)) for _, f in sorted(files.items())]
+    got = [(round(f["error_before"], 2), round(f["error_after"], 2))
+           for _, f in sorted(files.items())]  # fmt: skip
     assert got == [(38.60, 5.83), (2.38, 0.92)], got
     assert a["error_after"] > a["baseline_mean"] == 1.0  # the tutorial's warning holds
 

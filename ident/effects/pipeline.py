@@ -372,8 +372,9 @@ def fit_model(
         plant is chosen after it by the two final models' fits
         (:func:`bikeid.ident.effects.selection.choose_plant`: per-decay out-of-fold costs, a
         sign-flip paired test at the rule's ``alpha``; alike fits keep the nonlinear plant
-        when the selections agree and give
-        :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN` when they disagree);
+        when the selections agree, take the smaller selection's plant when one only adds
+        effects to the other's, and give
+        :data:`bikeid.ident.effects.selection.PLANT_UNCERTAIN` when they disagree otherwise);
         ``"nonlinear"`` or ``"linear"`` force one (one selection, no comparison).  The
         nominal fits before any effect are reported in every case (``nominal_fit``), the
         plant used as ``plant`` and why as ``plant_choice``.
@@ -482,6 +483,10 @@ def fit_model(
                          f"{t['alpha']:g}) and their selections disagree ("
                          + "; ".join(check["differences"]) + "), so no effect is named: the "
                          "difference would be the plant mismatch")  # fmt: skip
+        elif check.get("nested") and not check["agree"] and not pick["test"]["separated"]:
+            notes.append("plant-dependent effects not named: " + "; ".join(check["differences"])
+                         + f"; the {plant} plant's selection, which both plants support, is "
+                         "the answer")  # fmt: skip
     else:
         choice = {"asked": asked, "plant": plant, "auto": None, "uncertain": False,
                   "ratio": ratio,

@@ -29,7 +29,10 @@ Workflow (identification.md section 5, approaches A/B/E):
    accepted effects remove less than the rule's threshold (``EXPLAINED_MIN`` = 90 %; 85 %
    with the nominal calibrated) of the nominal cost
    above that floor, the verdict is ``unexplained`` (listed first), with the
-   accepted effects reported as partial.
+   accepted effects reported as partial; if they remove less than ``EXPLAINED_TO_NAME``
+   (50 %), no library member explains the residual well: they are its nearest members,
+   reported in the evidence (``nearest``) and not named, and the verdict is
+   ``unexplained`` alone.
 5. **Options and evidence.**  The rule's ``min_heldout_gain`` and ``min_improved`` (share of
    held-out decays improved) make acceptance stricter; ``unexplained_rule`` decides ``unexplained``
    from the second-difference floor (default), a coloured-noise floor, or the final
@@ -69,6 +72,7 @@ from bikeid.dataset.windows import Window
 from bikeid.ident.effects.acceptance import (
     EXPLAINED_MIN,
     EXPLAINED_MIN_CALIBRATED,
+    EXPLAINED_TO_NAME,
     LINEAR_PLANT_MARGIN,
     RESIDUAL_MAX,
     WEAVE_EPS,
@@ -635,17 +639,27 @@ def select_effects(
         effects.append(EffectEstimate(n, v, sd, LIBRARY[n].unit, t, unexpl["explained"],
                                       accepted=True, p_value=t_p_value(t, final.dof),
                                       dof=final.dof))  # fmt: skip
-    verdict = [e.name for e in effects]
-    if unexpl.pop("structured") or not effects:
-        verdict = ["unexplained"] + verdict
-    unexpl["unexplained"] = verdict[0] == "unexplained"
     for e in effects:
         st.ev_effects[e.name].update(
             t_joint=e.t, dof_joint=e.dof, p_value=e.p_value,
             p_adjusted=rule.adjusted(e.p_value, tests), conditional_on=edge,
+            value=float(e.value),
         )  # fmt: skip
+    structured = unexpl.pop("structured")
+    nearest = {}
+    if structured and effects and unexpl["explained"] < EXPLAINED_TO_NAME:
+        nearest = {e.name: st.ev_effects[e.name] for e in effects}  # not named
+        final = replace(final, model=final.model.with_effects(
+            **{e.name: LIBRARY[e.name].absent for e in effects}))  # fmt: skip
+        effects = []
+    verdict = [e.name for e in effects]
+    if structured or not effects:
+        verdict = ["unexplained"] + verdict
+    unexpl["unexplained"] = verdict[0] == "unexplained"
+    unexpl["explained_to_name"] = EXPLAINED_TO_NAME
     evidence = {
         "effects": {e.name: st.ev_effects[e.name] for e in effects},
+        "nearest": nearest,
         "unexplained": unexpl,
         "min_heldout_gain": rule.heldout_gain,
         "min_improved": rule.min_improved,
@@ -698,7 +712,8 @@ def evidence_lines(evidence: dict) -> list[str]:
         degrees of freedom, p-value, adjusted p-value and any edge offsets it is conditional
         on), then
         one for ``unexplained`` (the final
-        cost against the noise floors, the rule, its threshold and its answer).
+        cost against the noise floors, the rule, its threshold and its answer), and one for
+        the nearest members not named, if any.
     """
     out = []
     cal = evidence.get("nominal_calibration")
@@ -746,6 +761,16 @@ def evidence_lines(evidence: dict) -> list[str]:
             f"residual {u['floor_residual']:.4g}; {test} -> "
             + ("unexplained" if u["unexplained"] else "explained")
         )
+    near = evidence.get("nearest") or {}
+    if near:
+        out.append(
+            "nearest library members, not named (accepted by the tests, yet with them "
+            f"{u['explained']:.2f} of the nominal's excess over the floor is explained, below "
+            f"{u.get('explained_to_name', EXPLAINED_TO_NAME):.2f}: no member explains the "
+            "residual well): " + "; ".join(
+                f"{n} {e['value']:.4g} (held-out gain {100 * e['heldout_gain']:.1f} %, "
+                f"{e['heldout_windows_improved']}/{e['heldout_windows']} held-out decays "
+                "improved)" for n, e in near.items()))  # fmt: skip
     return out
 
 
@@ -846,7 +871,10 @@ def compare_plant_selections(linear: Identification, nonlinear: Identification) 
     dict
         ``agree`` (bool); ``linear`` and ``nonlinear``: each plant's ``verdict``, ``effects``
         (name -> value, registry units) and ``ambiguity``; ``differences``: sentences naming
-        each effect only one plant names (empty when they agree).
+        each effect only one plant names (empty when they agree); ``nested``: when they
+        disagree only because one selection names effects beyond the other's (every effect
+        of the other is it or alike it, ``unexplained`` said by both or neither), the plant
+        of the smaller selection, else None.
     """
     def side(r: Identification) -> dict:
         return {"verdict": list(r.verdict), "effects": {e.name: float(e.value) for e in r.effects},
@@ -856,15 +884,21 @@ def compare_plant_selections(linear: Identification, nonlinear: Identification) 
         return n == m or n in other["ambiguity"].get(m, []) or m in mine["ambiguity"].get(n, [])
 
     a, b = side(linear), side(nonlinear)
-    diff = []
+    diff, only = [], {}
     for mine, other, who, whom in ((a, b, "linear", "nonlinear"), (b, a, "nonlinear", "linear")):
+        only[who] = [n for n in mine["effects"]
+                     if not any(alike(n, mine, m, other) for m in other["effects"])]  # fmt: skip
         diff += [f"{n} (named with the {who} plant; no effect of the {whom} plant's selection "
-                 "is it or alike it)" for n in mine["effects"]
-                 if not any(alike(n, mine, m, other) for m in other["effects"])]  # fmt: skip
-    if ("unexplained" in a["verdict"]) != ("unexplained" in b["verdict"]):
+                 "is it or alike it)" for n in only[who]]  # fmt: skip
+    same_flag = ("unexplained" in a["verdict"]) == ("unexplained" in b["verdict"])
+    if not same_flag:
         who = "linear" if "unexplained" in a["verdict"] else "nonlinear"
         diff.append(f"unexplained (only with the {who} plant)")
-    return {"agree": not diff, "linear": a, "nonlinear": b, "differences": diff}
+    nested = None
+    if diff and same_flag and not (only["linear"] and only["nonlinear"]):
+        nested = "nonlinear" if only["linear"] else "linear"
+    return {"agree": not diff, "linear": a, "nonlinear": b, "differences": diff,
+            "nested": nested}  # fmt: skip
 
 
 def out_of_fold_costs(
@@ -952,6 +986,10 @@ def plant_verdict(
       the nonlinear plant, the default (the real bicycle is nonlinear; the linear plant is
       taken only when the data show it fits better), whose effects are the agreed ones up
       to the ambiguity sets;
+    - otherwise, when one selection only adds effects to the other's (``check["nested"]``):
+      the plant of the smaller selection, whose effects both plants support (an effect
+      named with one nominal plant only could be that plant's mismatch read as an effect;
+      it is reported in ``plant_check`` as plant-dependent, not named);
     - otherwise :data:`PLANT_UNCERTAIN` (the nonlinear plant's selection is kept, its effects
       not named).
 
@@ -1002,8 +1040,11 @@ def plant_verdict(
     p = test["p_value"]
     separated = bool(p <= alpha)
     better = "linear" if separated and test["ratio"] > 1 else "nonlinear"
+    nested = None if separated or check["agree"] else check.get("nested")
+    if nested:
+        better = nested
     test["separated"] = separated
-    uncertain = not separated and not check["agree"]
+    uncertain = not separated and not check["agree"] and not nested
     n_eff = ("", "") if effects is None else (f" ({effects[0]} effects)", f" ({effects[1]} "
                                                "effects)")  # fmt: skip
     if effects is not None:
@@ -1018,6 +1059,11 @@ def plant_verdict(
     elif check["agree"]:
         tail = ("they fit alike and their selections agree, so the nonlinear plant (the "
                 "default unless the linear fits better) and the agreed effects")  # fmt: skip
+    elif nested:
+        extra = [d.split(" (")[0] for d in check["differences"]]
+        tail = (f"they fit alike and the other plant's selection only adds {', '.join(extra)} "
+                f"(named with one nominal plant only: plant-dependent, not named), so the "
+                f"{nested} plant and the effects both plants support")  # fmt: skip
     else:
         tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
     return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test}
@@ -1046,6 +1092,9 @@ def choose_plant(
       in an ambiguity set with one of its effects, ``unexplained`` on both or neither), the
       nonlinear plant (the default: the linear is taken only when the data show it fits
       better) and its effects, which are the agreed ones up to those sets;
+    - otherwise, if one selection only adds effects to the other's (``nested``), the plant of
+      the smaller one: the effects both plants support are named, the additions (named with
+      one nominal plant only) are reported as plant-dependent;
     - otherwise :data:`PLANT_UNCERTAIN`: which effects are named depends on a plant the data
       cannot choose, so none is.
 

@@ -231,7 +231,8 @@ def test_transcribed_windows_are_found_with_their_start_and_length():
     late = round(DECAY_MAX_SETTLE / 0.01) + 3
     hits = [next((s for s in found.get(sg.file, []) if 0 <= s.start - sg.start <= late), None)
             for sg in listed]  # fmt: skip
-    missed = [(sg.file.split("_")[-1], sg.start) for sg, h in zip(listed, hits, strict=True) if h is None]
+    missed = [(sg.file.split("_")[-1], sg.start)
+              for sg, h in zip(listed, hits, strict=True) if h is None]  # fmt: skip
     assert len(listed) == 28 and sum(h is not None for h in hits) == 26
     assert missed == [("5.4kph.log.gz", 10603), ("9kph.log.gz", 8673)], missed
     delays = [h.start - sg.start for sg, h in zip(listed, hits, strict=True) if h is not None]

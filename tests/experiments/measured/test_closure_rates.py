@@ -69,7 +69,8 @@ def test_plant_comparison_both_ways():
     """Two selections agree when each named effect is named or in an ambiguity set of the
     other (a delay named with one plant, an actuator lag whose set holds the delay with the
     other); a different effect outside every set, or ``unexplained`` on one side only, is a
-    disagreement naming the effect."""
+    disagreement naming the effect.  It is ``nested`` (naming the smaller selection's plant)
+    only when one side adds effects and the other adds none, ``unexplained`` alike."""
     def sel(verdict, effects, alike=None):
         ev = {"effects": {n: {"alike": [{"name": a, "heldout_cost_ratio": 0.5}
                                          for a in (alike or {}).get(n, [])]} for n in effects}}
@@ -96,10 +97,21 @@ def test_plant_comparison_both_ways():
     assert not diff["agree"]
     assert any(d.startswith("input_delay") for d in diff["differences"])
     assert any(d.startswith("trail_correction") for d in diff["differences"])
+    assert same["nested"] is None and diff["nested"] is None  # agree; both add their own
     unexpl = compare_plant_selections(lin, ident(["unexplained", "input_delay"],
                                                  {"input_delay": 0.03}))  # fmt: skip
     assert not unexpl["agree"] and unexpl["differences"] == ["unexplained (only with the "
                                                              "nonlinear plant)"]  # fmt: skip
+    assert unexpl["nested"] is None
+    more = compare_plant_selections(lin, ident(["actuator_lag", "front_mass_shift"],
+                                               {"actuator_lag": 0.02, "front_mass_shift": 0.01},
+                                               {"actuator_lag": ["input_delay"]}))  # fmt: skip
+    assert not more["agree"] and more["nested"] == "linear"  # the nonlinear only adds one
+    assert more["differences"][0].startswith("front_mass_shift")
+    fewer = compare_plant_selections(ident(["input_delay", "speed_scale"],
+                                           {"input_delay": 0.03, "speed_scale": 1.02}),
+                                     ident([], {}))  # fmt: skip
+    assert not fewer["agree"] and fewer["nested"] == "nonlinear"  # nothing is the smaller
 
 
 def _hand_ident(verdict, effects, alike=None):
@@ -121,7 +133,7 @@ def _exact_sign_flip_p(d: np.ndarray) -> float:
     return float(np.mean(np.abs(signs @ d) >= abs(d.sum()) - 1e-12))
 
 
-def test_plant_verdict_three_ways():
+def test_plant_verdict_four_ways():
     """The plant rule on hand-built per-decay out-of-fold costs and selections, each branch
     known by construction; the ratio is checked against numpy's means and the p-value against
     the exact sign-flip distribution enumerated here (all 4096 flips of 12 decays; the rule's
@@ -131,7 +143,9 @@ def test_plant_verdict_three_ways():
     that straddle 0 with selections that disagree: ``nominal plant uncertain``; (3) the same
     costs with agreeing selections (an actuator lag whose set holds the delay): the nonlinear
     plant, the default, although the linear's cost is lower (not significantly), not
-    uncertain.  A decay one plant could not score (nan) is left out for
+    uncertain; (4) the same costs with one selection adding a front mass shift to the other's
+    damping: the smaller selection's plant (linear here), not uncertain; separated costs
+    still decide first.  A decay one plant could not score (nan) is left out for
     both."""
     from bikeid.ident.effects.selection import plant_verdict
 
@@ -160,6 +174,13 @@ def test_plant_verdict_three_ways():
     assert agree["test"]["ratio"] > 1 and not agree["test"]["separated"]  # sum(d) = 0.12 > 0
     assert not agree["uncertain"] and agree["plant"] == "nonlinear"
     assert "selections agree" in agree["reason"]
+    more = _hand_ident(["steer_viscous_damping", "front_mass_shift"],
+                       {"steer_viscous_damping": 0.4, "front_mass_shift": 0.01})  # fmt: skip
+    nested = plant_verdict(lin, lin + d, compare_plant_selections(damp, more))
+    assert not nested["test"]["separated"] and not nested["uncertain"]
+    assert nested["plant"] == "linear" and "only adds front_mass_shift" in nested["reason"]
+    sep = plant_verdict(lin, nl, compare_plant_selections(more, damp))  # separated: the rule
+    assert sep["plant"] == "linear" and "fits better" in sep["reason"]  # of the costs first
     gap = nl.copy()
     gap[0] = np.nan
     g = plant_verdict(lin, gap, disagree)
@@ -184,8 +205,9 @@ def test_inconclusive_band_is_the_margin_both_ways(ratio, inconclusive):
 def test_score_log_fit_both_ways():
     """Scores of hand-made fit results: the hidden effect alone is right, with an extra it is
     not; another effect alone whose reported ambiguity set holds the hidden one is right as a
-    set (not named first), with an extra or without that set it is wrong; an outside effect is right only as ``unexplained`` with no effect; no effect is right
-    with nothing named; ``nominal plant uncertain`` and a refusal are never right."""
+    set (not named first), with an extra or without that set it is wrong; an outside effect
+    is right only as ``unexplained`` with no effect; no effect is right with nothing named;
+    ``nominal plant uncertain`` and a refusal are never right."""
     def fit(verdict, effects, ambiguity=None):
         return {"model": {"effects": effects},
                 "results": {"identification": {"verdict": verdict,
@@ -222,29 +244,31 @@ def test_score_log_fit_both_ways():
 @pytest.mark.parametrize("seed, effect", [(0, "none"), (1, "steer_viscous_damping")])
 def test_fit_on_csv_logs_linear_truth(seed, effect, tmp_path):
     """End to end, ``bikeid measured fit`` on the CSV logs of the independent linear truth:
-    both nominal plants' selections run and the plant test picks the linear one after
-    selection (its final model's out-of-fold cost lower, the sign-flip test separating them
-    at 0.05).  Seed 1's damping log is the case a choice before any effect got wrong: its
-    nominal cost ratio nonlinear / linear is 1.07 (inside the old 1.2 margin), and the
-    nonlinear plant's selection names other effects (a tyre scrub torque and a front mass
-    shift, measured), so the old rule said ``nominal plant uncertain``; now the damping is
-    named alone (measured 0.744 for a true 0.699), its value within 20 % of the truth (the
-    blind trials' band: the nominal is calibrated within +-5 % inertias and +-2 mm trail,
-    which the damping partly absorbs).  Seed 0's no-effect logs get no effect."""
+    both nominal plants' selections run and the linear plant is taken after selection.
+    Seed 0's no-effect logs: the plant test separates the plants (the linear final model's
+    out-of-fold cost lower, sign-flip p <= 0.05) and no effect is named.  Seed 1's damping
+    log is the case a choice before any effect got wrong (nominal cost ratio nonlinear /
+    linear inside the old 1.2 margin): both plants name a tyre scrub torque whose reported
+    ambiguity set holds the steer damping (the two are alike on these decays), and the
+    nonlinear plant adds a front mass shift; the final models fit alike (p > 0.05), so the
+    smaller selection's plant, the linear, is taken and the front mass shift is reported as
+    plant-dependent, not named (measured, this session).  Scored as the closure scores it:
+    right as a reported ambiguity set, not named first."""
     tr = _trial(effect, seed)
     r = run_log_trial(tr, tmp_path, "independent_linear")
     assert r["rc"] == 0, r["error"]
     res = json.loads((tmp_path / "model.json").read_text())["results"]
     test = res["plant_check"]["test"]
     assert r["plant"] == "linear" and res["plant_choice"]["asked"] == "auto", r
-    assert test["separated"] and test["ratio"] > 1 and test["p_value"] <= 0.05, test
     if effect == "none":
+        assert test["separated"] and test["ratio"] > 1 and test["p_value"] <= 0.05, test
         assert r["right"] and r["effects"] == {}, r
     else:
-        assert r["right"] and r["outcome"] == "right" and r["value_ok"], r
-        assert math.isclose(r["effects"][effect], tr.value, rel_tol=0.2)
-        assert 1 / LINEAR_PLANT_MARGIN <= r["plant_ratio"] <= LINEAR_PLANT_MARGIN
-        assert "steer_viscous_damping" not in res["plant_check"]["nonlinear"]["effects"]
+        assert not test["separated"] and res["plant_check"]["nested"] == "linear", test
+        assert "only adds front_mass_shift" in res["plant_choice"]["reason"]
+        assert r["right"] and r["outcome"] == "right_in_set" and not r["named_first"], r
+        assert "front_mass_shift" not in r["effects"]
+        assert any("plant-dependent" in n for n in res["notes"])
 
 
 def test_pipeline_defaults_are_the_live_values():
@@ -299,3 +323,27 @@ def test_fit_on_csv_logs_nonlinear_truth(tmp_path):
     assert r["plant"] == "nonlinear" and test["separated"] and test["ratio"] < 1, test
     assert r["right"] and r["outcome"] == "right" and r["value_ok"], r
     assert math.isclose(r["effects"]["command_gain"], tr.value, rel_tol=0.2)
+
+
+def test_nearest_member_of_an_outside_effect_is_not_named(tmp_path, monkeypatch):
+    """Roll damping (outside the library) on the independent linear truth, seed 18's trial:
+    the tests accept a steer inertia, yet with it only 0.18 of the nominal's excess over the
+    noise floor is explained (measured), below ``EXPLAINED_TO_NAME`` (0.5): the verdict is
+    ``unexplained`` alone and the steer inertia is reported as the nearest member, not named.
+    Both ways on the same logs: with the threshold lowered to 0.1 the same member is named
+    (after ``unexplained``), so the rule, not the search, makes the difference."""
+    from bikeid.ident.effects import selection
+
+    tr = _trial("roll_viscous_damping", 18)
+    (tmp_path / "a").mkdir()
+    r = run_log_trial(tr, tmp_path / "a", "independent_linear")
+    assert r["rc"] == 0 and r["verdict"] == ["unexplained"] and r["effects"] == {}, r
+    ev = json.loads((tmp_path / "a" / "model.json").read_text())["results"]["identification"][
+        "evidence"]  # fmt: skip
+    assert list(ev["nearest"]) == ["steer_inertia"]
+    assert ev["unexplained"]["explained"] < selection.EXPLAINED_TO_NAME == 0.5
+    assert r["right"] and r["outcome"] == "unexplained"
+    monkeypatch.setattr(selection, "EXPLAINED_TO_NAME", 0.1)
+    (tmp_path / "b").mkdir()
+    r = run_log_trial(tr, tmp_path / "b", "independent_linear")
+    assert r["verdict"] == ["unexplained", "steer_inertia"] and not r["right"], r
