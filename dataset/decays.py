@@ -146,6 +146,11 @@ DECAY_SETTLE = 0.5
 DECAY_ONSET = 0.1
 #: Longest settling delay [s] (a push rising for longer is a lean, not a hand's push).
 DECAY_MAX_SETTLE = 0.2
+#: The push's response (the next lobe, of the other sign) may exceed the push's own lobe by
+#: this factor and still be the loop's free motion (a lightly damped loop swings back past
+#: the forced lobe: 1.1-1.36 x on the closure generator's 20-30 ms input-delay logs, seeds
+#: 32 and 38); a larger one is a second push.
+DECAY_RESPONSE_MAX = 1.5
 
 
 def slowest_decay_rate(max_length: float = DECAY_MAX_LENGTH) -> float:
@@ -199,7 +204,10 @@ def detect_decays(
     counted.  A push is kept only if it is a clean decay from rest: within the
     settled-speed part of the log; in the second before the push (less its last 0.15 s)
     |roll rate| stayed below 0.35 x the peak; it decays: over the window's second half
-    |roll rate| stays below 0.5 x the peak; and it never exceeds 1.1 x the peak.
+    |roll rate| stays below 0.5 x the peak; and it never exceeds 1.1 x the peak.  The peak
+    is the push's own, or its response's (the next lobe, of the other sign) when that is
+    larger but at most :data:`DECAY_RESPONSE_MAX` (1.5) x the push's: a lightly damped loop
+    swings back past the forced lobe.
 
     **The window follows the decay.**  Its length L is the shortest from ``length`` (1 s)
     up to ``max_length`` (3 s) whose second half stays below 0.5 x the peak: a decay that
@@ -297,7 +305,8 @@ def detect_decays(
         elif before >= DECAY_QUIET * peak:
             why = f"not at rest in the second before the push (>= {DECAY_QUIET} x peak)"
         else:
-            n, why, nxt = _decay_length(pr[j : min(j + mx, hi)], m, peak, thr, dt)
+            ref = _response_peak(pr[j : min(j + m, hi)], peak, thr)
+            n, why, nxt = _decay_length(pr[j : min(j + mx, hi)], m, ref, thr, dt)
             if why.startswith("does not decay") and hi - j < mx:
                 why = (f"runs past the end of the settled speed before it decays (second half "
                        f">= {DECAY_RATIO} x peak)")  # fmt: skip
@@ -317,6 +326,21 @@ def _settle(pr: np.ndarray, j: int, lo: int, peak: float, dt: float) -> int:
     quiet = np.flatnonzero(np.abs(pr[lo:j]) < DECAY_ONSET * peak)
     rise = j - (lo + int(quiet[-1]) if quiet.size else lo)
     return min(int(round(DECAY_SETTLE * rise)), int(round(DECAY_MAX_SETTLE / dt)))
+
+
+def _response_peak(x: np.ndarray, peak: float, thr: float) -> float:
+    """The peak a window's decay is measured against: the larger of the push's ``peak`` and
+    its response (the first lobe of the other sign in ``x``, the roll rate from the window's
+    start [rad/s], beyond ``thr`` / 2), when that lobe is at most :data:`DECAY_RESPONSE_MAX`
+    x ``peak``; else ``peak`` (a larger lobe is a second push, rejected as rising)."""
+    sgn = 1.0 if x[0] >= 0 else -1.0
+    back = np.flatnonzero(-sgn * x > 0.5 * thr)
+    if not back.size:
+        return peak
+    end = np.flatnonzero(-sgn * x[back[0] :] <= 0)
+    lobe = -sgn * x[back[0] : back[0] + (end[0] if end.size else x.size)]
+    r = float(np.max(lobe))
+    return r if peak < r <= DECAY_RESPONSE_MAX * peak else peak
 
 
 def _decay_length(

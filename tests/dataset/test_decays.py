@@ -241,3 +241,48 @@ def test_transcribed_windows_are_found_with_their_start_and_length():
     longer = [s for segs in found.values() for s in segs if s.end - s.start > 100]
     assert sum(map(len, found.values())) == sum(map(len, fixed.values())) + 1 == 56
     assert sorted(s.end - s.start for s in longer) == [174]
+
+
+def _response_log(ratio: float, sigma: float = -3.0, omega: float = 8.0) -> Run:
+    """A log of PUSHES pushes GAP s apart whose response lobe is ``ratio`` x the push's: the
+    push lobe rises over 0.1 s to a, falls as a cos(omega tau) to its zero at pi / (2 omega),
+    from where the free motion is a R e^{sigma (tau - pi / (2 omega))} cos(omega tau), R set
+    so that the next lobe's extreme (tau = pi / omega) is ``ratio`` x a (a lightly damped loop
+    swinging back past the forced lobe); y is continuous (zero where R starts)."""
+    dt, n = 0.01, int(round((LEAD + PUSHES * GAP + 1.0) / 0.01))
+    t = np.arange(n) * dt
+    pr = 0.005 * np.random.default_rng(0).standard_normal(n)
+    q = math.pi / (2 * omega)
+    big = ratio * math.exp(-sigma * q)
+    for k in range(PUSHES):
+        tk, a = LEAD + 0.1 + k * GAP, AMP * (-1) ** k
+        rise = (t >= tk - 0.1) & (t < tk)
+        pr[rise] += a * np.sin(0.5 * np.pi * (t[rise] - tk + 0.1) / 0.1)
+        tau = t - tk
+        env = np.where(tau < q, 1.0, big * np.exp(sigma * (tau - q)))
+        pr += np.where(tau >= 0, a * env * np.cos(omega * tau), 0.0)
+    z = np.zeros(n)
+    phi = np.cumsum(pr) * dt
+    return Run(t=t, signals={"phi": phi, "delta": 0.5 * phi, "phidot": pr, "deltadot": 0.5 * pr,
+                             "v": z + 3.0, "T_delta": z},
+               meta={"file": "synthetic.csv", "speed": 3.0, "dt": dt})  # fmt: skip
+
+
+def test_a_response_larger_than_the_push_is_the_loops_own_both_ways(monkeypatch):
+    """The push's response (the next lobe) may exceed the push's lobe by DECAY_RESPONSE_MAX
+    (1.5): at 1.3 x every push is kept (the decay measured against the response's peak:
+    sigma = -3 1/s halves well within the 1 s window); at 1.7 x every one is rejected as
+    rising above its peak (a second push against the first); and with the allowance off
+    (DECAY_RESPONSE_MAX 1, the detector before it) the 1.3 x responses are rejected the same
+    way, so the allowance is what keeps them."""
+    from bikeid.dataset.decays import DECAY_RESPONSE_MAX
+
+    assert DECAY_RESPONSE_MAX == 1.5
+    assert len(detect_decays(_response_log(1.3))) == PUSHES
+    rejected: list = []
+    assert detect_decays(_response_log(1.7), rejected=rejected) == []
+    assert len(rejected) == PUSHES and all(w.startswith("rises above") for _, w in rejected)
+    monkeypatch.setattr("bikeid.dataset.decays.DECAY_RESPONSE_MAX", 1.0)
+    rejected = []
+    assert detect_decays(_response_log(1.3), rejected=rejected) == []
+    assert all(w.startswith("rises above") for _, w in rejected)
