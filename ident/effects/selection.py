@@ -344,7 +344,12 @@ class _Search:
             start = {}
             if cand.kind == "structural":
                 start[n] = _scan_start(self.cur, self.fit_w, cand, self.accepted, {})
-            res = fit_effects(self.cur, self.fit_w, self.accepted + [n], start, self.wv_fit)
+            # with a calibration, its offsets are refitted with every candidate: calibrated
+            # before any effect, they absorb what they can of a missing effect (an input
+            # delay pushed the inertias to the box's edges), and a candidate fitted at those
+            # frozen offsets competes against that bent nominal (a lag then beat the delay)
+            res = fit_effects(self.cur, self.fit_w, self.accepted + [n], start, self.wv_fit,
+                              self.cal)  # fmt: skip
             gain = (base_cost - res.cost) / max(base_cost, 1e-300)
             trials.append((gain, n, res, self.estimate(n, res, gain)))
         trials.sort(key=lambda z: -z[0])
@@ -356,7 +361,8 @@ class _Search:
         for _gain, n, res, _est in trials[:3]:
             self.correct_all(res.model)
             wv_n = self.wv_fit.at(res.model, self.fit_w) if self.wv_fit else None
-            res = fit_effects(self.cur, self.fit_w, self.accepted + [n], res.values, wv_n)
+            res = fit_effects(self.cur, self.fit_w, self.accepted + [n], res.values, wv_n,
+                              res.calibration)  # fmt: skip
             gain = (base_cost - res.cost) / max(base_cost, 1e-300)
             top.append((gain, n, res, self.estimate(n, res, gain)))
         return sorted(top, key=lambda z: -z[0]) + trials[3:]

@@ -186,23 +186,23 @@ def test_randomized_trials_name_library_effects_and_flag_outside_ones():
 @pytest.mark.slow
 def test_default_rule_on_the_grid():
     """The same 24 trials by the default rule (family-wise 5 %, Bonferroni over 37 tests, the
-    default nominal uncertainty): right first with sets as reported in 14 of 18 library
-    trials (the three input delays are named actuator lags; one lag's reported set holds the
-    delay, the other two do not; a 0.24 N m friction and a 0.59 N m/rad spring are
-    unnamed), so the exact 95 % interval is 0.52-0.94: its upper end reaches the 90 % goal
-    (not rejected) and its lower end is above one half (13 of 18, 0.47-0.90, before the
-    sets counted every candidate significant at 5 % alone); both ends are checked against
-    scipy's beta quantiles and the point rate against the goal.  Every outside effect is
-    answered ``unexplained`` first (6/6)."""
+    default nominal uncertainty, its offsets refitted with every candidate): right first
+    with sets as reported in 17 of 18 library trials (one 0.62 N m s/rad steer damping is
+    unnamed, ``unexplained``), so the exact 95 % interval is 0.73-1.00: the point rate meets
+    the 90 % goal and the lower end is above one half.  Before the offsets were refitted
+    with each candidate (calibrated once, before any effect) it was 14 of 18 (0.52-0.94):
+    the three input delays were named actuator lags, the calibration having bent the
+    nominal towards the missing delay; now each is named ``input_delay`` first.  Both ends
+    are checked against scipy's beta quantiles.  Every outside effect is answered
+    ``unexplained`` first (6/6)."""
     out = run_trials(3 * len(EFFECTS), seed=1, processes=2, rule=AcceptanceRule())
     lib = [r for r in out["trials"] if r["in_library"]]
     k = sum(_right_with_reported_set(r) for r in lib)
     lo, hi = binomial_ci(k, len(lib))
     assert (lo, hi) == pytest.approx(_scipy_clopper_pearson(k, len(lib)), rel=1e-9)
-    assert k / len(lib) < 0.9 <= hi and lo > 0.5, (k, lo, hi)
+    assert k == 17 and k / len(lib) >= 0.9 and lo > 0.5, (k, lo, hi)
     delays = [r for r in lib if r["effect"] == "input_delay"]
-    assert all(r["verdict"][-1] == "actuator_lag" for r in delays)  # each named a lag ...
-    assert sum(_right_with_reported_set(r) for r in delays) == 1  # ... one set holds the delay
+    assert all(r["verdict"][0] == "input_delay" for r in delays)  # each named a delay first
     outside = [r for r in out["trials"] if not r["in_library"]]
     assert all(r["unexplained"] for r in outside)
 
