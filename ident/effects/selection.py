@@ -13,7 +13,9 @@ Workflow (identification.md section 5, approaches A/B/E):
    Every candidate (additive or structural: delay, lag, ...) is then fitted by
    output error on the decays; the structural ones by a scan of their parameter
    followed by a local refinement.  Candidates are ordered by the fraction of the
-   output-error cost they remove.
+   output-error cost they remove.  With a nominal uncertainty the nominal's offsets are
+   calibrated within their box before any effect and refitted with every candidate (held
+   at the pre-effect calibration they would already carry part of the missing effect).
 3. **Acceptance** (:class:`bikeid.ident.effects.acceptance.AcceptanceRule`).  An effect is
    accepted only if its t = |value - absent| / std (standard errors clustered by window,
    :func:`bikeid.ident.effects.fit.effect_std`) is significant against Student's t with
