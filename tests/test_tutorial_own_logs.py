@@ -69,13 +69,15 @@ def _model(path: Path) -> tuple[dict, dict]:
 def test_csv_logs_fit_as_the_steer_by_wire_format(ran):
     """Same effects (1e-6 relative), same decays kept and dropped; the quoted counts: 26
     decays (9 pushes rejected), 5 dropped (the nonlinear replay falls: a rear wheel lifts or
-    the steer folds), 21 fitted; the quoted values 1.66 and 0.26 to their printed digits."""
+    the steer folds), 21 fitted; the quoted values 1.80, 0.27 and 0.53 to their printed
+    digits."""
     eff_csv, res_csv = _model(ran / "model.json")
     eff_sbw, res_sbw = _model(ran / "sbw_model.json")
     assert sorted(eff_csv) == sorted(eff_sbw) == sorted(
-        ["speed_scale", "roll_rate_scale"])
-    assert eff_csv["speed_scale"] == pytest.approx(1.66, abs=5e-3)
-    assert eff_csv["roll_rate_scale"] == pytest.approx(0.26, abs=5e-3)
+        ["speed_scale", "roll_rate_scale", "steer_coulomb_friction"])
+    assert eff_csv["speed_scale"] == pytest.approx(1.80, abs=5e-3)
+    assert eff_csv["roll_rate_scale"] == pytest.approx(0.27, abs=5e-3)
+    assert eff_csv["steer_coulomb_friction"] == pytest.approx(0.53, abs=5e-3)
     for k in eff_csv:
         assert eff_csv[k] == pytest.approx(eff_sbw[k], rel=1e-6)
     assert len(res_csv["fit_windows"]) == len(res_sbw["fit_windows"]) == 21
@@ -93,8 +95,8 @@ def test_csv_logs_fit_as_the_steer_by_wire_format(ran):
 @pytest.mark.slow
 def test_csv_evaluation_is_the_steer_by_wire_one_and_the_quoted_one(ran):
     """Before/after equal to 1e-6 relative (the bootstrap's draws do not depend on the order
-    of the logs); the quoted 20.486 -> 3.372, ratio 0.16 [0.14, 0.22], verdict halved, zero
-    motion baseline 1.30, and the per-log 38.60 -> 5.83 (1.5 m/s) and 2.38 -> 0.92
+    of the logs); the quoted 20.486 -> 2.159, ratio 0.11 [0.08, 0.16], verdict halved, zero
+    motion baseline 1.30, and the per-log 38.60 -> 3.55 (1.5 m/s) and 2.38 -> 0.77
     (3.5 m/s), to the printed digits."""
     a = json.loads((ran / "evaluate_csv.json").read_text())["summary"]
     b = json.loads((ran / "evaluate_sbw.json").read_text())["summary"]
@@ -102,15 +104,15 @@ def test_csv_evaluation_is_the_steer_by_wire_one_and_the_quoted_one(ran):
         assert a[k] == pytest.approx(b[k], rel=1e-6), k
     np.testing.assert_allclose(a["ratio_ci"], b["ratio_ci"], rtol=1e-6)
     assert a["error_before"] == pytest.approx(20.486, abs=5e-4)
-    assert a["error_after"] == pytest.approx(3.372, abs=5e-4)
-    assert a["ratio"] == pytest.approx(0.16, abs=5e-3)
-    np.testing.assert_allclose(a["ratio_ci"], [0.14, 0.22], atol=5e-3)
+    assert a["error_after"] == pytest.approx(2.159, abs=5e-4)
+    assert a["ratio"] == pytest.approx(0.11, abs=5e-3)
+    np.testing.assert_allclose(a["ratio_ci"], [0.08, 0.16], atol=5e-3)
     assert a["verdict"] == b["verdict"] == "halved"
     assert a["baseline_zero"] == pytest.approx(1.30, abs=5e-3)
     files = {f["speed"]: f for f in json.loads((ran / "evaluate_csv.json").read_text())["files"]}
     got = [(round(f["error_before"], 2), round(f["error_after"], 2))
            for _, f in sorted(files.items())]  # fmt: skip
-    assert got == [(38.60, 5.83), (2.38, 0.92)], got
+    assert got == [(38.60, 3.55), (2.38, 0.77)], got
     assert a["error_after"] > a["baseline_mean"] == 1.0  # the tutorial's warning holds
 
 

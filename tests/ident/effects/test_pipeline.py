@@ -228,7 +228,8 @@ def test_cli_fit_evaluate_states_the_goal_on_each_split(tmp_path, capsys, fit, h
     must be what evaluate prints; on both splits it is ``reduced``: the goal is **not shown**
     (measured 0.43, 95 % interval 0.35-0.58, fitting 2.5 + 4.5; 0.58, 0.52-0.65, fitting
     1.5 + 3.5, a steer damping and spring since the nominal's offsets are refitted with each
-    candidate (a tyre scrub torque and a spring before, 0.61, 0.55-0.67); docs/measured.md).  The interval's ends are checked to 0.02, the bootstrap's
+    candidate (a tyre scrub torque and a spring before, 0.61, 0.55-0.67); docs/measured.md).
+    The interval's ends are checked to 0.02, the bootstrap's
     resampling scatter at 2000 resamples (fixed seed: the ends are reproduced exactly; the
     band only allows the printed rounding).  The weave ratio has no interval (one median per
     file), so only its direction is asserted.  The other four splits are in
