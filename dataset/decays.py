@@ -246,7 +246,8 @@ def detect_decays(
         Shortest window length [s] (default :data:`DECAY_LENGTH` = 1 s).
     rejected : list, optional
         When given, each push that cleared the threshold but was not kept is appended as
-        ``(row, reason)`` (file row index of its peak, a short reason: not at rest in the
+        ``(row, reason)`` (file row index of its peak, not of the window's start, which is
+        the settling delay later; a short reason: not at rest in the
         second before it; does not decay within the longest window; rises above 1.1 x its
         peak; a second push before it decayed; past the end of the settled speed).
     max_length : float or None, optional
@@ -298,23 +299,23 @@ def detect_decays(
         if peak <= DECAY_REGROW * before and not pushed:  # a lobe of the motion before
             i = k + 1
             continue
-        j = j + _settle(pr, j, max(i - pre, 0), peak, dt)  # the window starts here
-        n, nxt = 0, j + m
-        if j + m > hi:
+        s = j + _settle(pr, j, max(i - pre, 0), peak, dt)  # the window starts here
+        n, nxt = 0, s + m
+        if s + m > hi:
             why = "runs past the end of the settled speed"
         elif before >= DECAY_QUIET * peak:
             why = f"not at rest in the second before the push (>= {DECAY_QUIET} x peak)"
         else:
-            ref = _response_peak(pr[j : min(j + m, hi)], peak, thr)
-            n, why, nxt = _decay_length(pr[j : min(j + mx, hi)], m, ref, thr, dt)
-            if why.startswith("does not decay") and hi - j < mx:
+            ref = _response_peak(sgn * pr[s : s + m], peak, thr)
+            n, why, nxt = _decay_length(pr[s : min(s + mx, hi)], m, ref, thr, dt)
+            if why.startswith("does not decay") and hi - s < mx:
                 why = (f"runs past the end of the settled speed before it decays (second half "
                        f">= {DECAY_RATIO} x peak)")  # fmt: skip
-            nxt += j
+            nxt += s
         if n:
-            out.append(Segment(run.meta.get("file", "?"), speed, first + j, first + j + n))
+            out.append(Segment(run.meta.get("file", "?"), speed, first + s, first + s + n))
         elif rejected is not None:
-            rejected.append((first + j, why))
+            rejected.append((first + j, why))  # the push's peak: where a user finds it
         i, pushed = nxt, why.startswith("a second push")  # the next lobe is that push
     return out
 
@@ -331,15 +332,14 @@ def _settle(pr: np.ndarray, j: int, lo: int, peak: float, dt: float) -> int:
 def _response_peak(x: np.ndarray, peak: float, thr: float) -> float:
     """The peak a window's decay is measured against: the larger of the push's ``peak`` and
     its response (the first lobe of the other sign in ``x``, the roll rate from the window's
-    start [rad/s], beyond ``thr`` / 2), when that lobe is at most :data:`DECAY_RESPONSE_MAX`
-    x ``peak``; else ``peak`` (a larger lobe is a second push, rejected as rising)."""
-    sgn = 1.0 if x[0] >= 0 else -1.0
-    back = np.flatnonzero(-sgn * x > 0.5 * thr)
+    start times the push's sign [rad/s], beyond ``thr`` / 2), when that lobe is at most
+    :data:`DECAY_RESPONSE_MAX` x ``peak``; else ``peak`` (a larger lobe is a second push,
+    rejected as rising)."""
+    back = np.flatnonzero(x < -0.5 * thr)
     if not back.size:
         return peak
-    end = np.flatnonzero(-sgn * x[back[0] :] <= 0)
-    lobe = -sgn * x[back[0] : back[0] + (end[0] if end.size else x.size)]
-    r = float(np.max(lobe))
+    end = np.flatnonzero(x[back[0] :] >= 0)
+    r = float(-np.min(x[back[0] : back[0] + (end[0] if end.size else x.size)]))
     return r if peak < r <= DECAY_RESPONSE_MAX * peak else peak
 
 

@@ -483,7 +483,7 @@ def fit_model(
                          f"{t['alpha']:g}) and their selections disagree ("
                          + "; ".join(check["differences"]) + "), so no effect is named: the "
                          "difference would be the plant mismatch")  # fmt: skip
-        elif check.get("nested") and not check["agree"] and not pick["test"]["separated"]:
+        elif pick["plant_dependent"]:
             notes.append("plant-dependent effects not named: " + "; ".join(check["differences"])
                          + f"; the {plant} plant's selection, which both plants support, is "
                          "the answer")  # fmt: skip

@@ -305,7 +305,7 @@ class _Search:
     def estimate(self, n: str, res: FitResult, gain: float) -> EffectEstimate:
         """Candidate ``n``'s estimate in ``res``: t, its p-value on ``res.dof``."""
         v, sd = res.values[n], res.std[n]
-        t = _t_value(n, v, sd, self.cal)
+        t = _t_value(n, v, sd, res.calibration or self.cal)  # the offsets fitted with it
         return EffectEstimate(n, v, sd, LIBRARY[n].unit, t, gain, p_value=t_p_value(t, res.dof),
                               dof=res.dof)  # fmt: skip
 
@@ -657,9 +657,8 @@ def select_effects(
     nearest = {}
     if structured and effects and unexpl["explained"] < EXPLAINED_TO_NAME:
         nearest = {e.name: st.ev_effects[e.name] for e in effects}  # not named
-        final = replace(final, model=final.model.with_effects(
-            **{e.name: LIBRARY[e.name].absent for e in effects}))  # fmt: skip
-        effects = []
+        st.accepted, effects = [], []
+        final, windows = st.joint_fit_and_prune()  # the model without them
     verdict = [e.name for e in effects]
     if structured or not effects:
         verdict = ["unexplained"] + verdict
@@ -879,9 +878,10 @@ def compare_plant_selections(linear: Identification, nonlinear: Identification) 
     dict
         ``agree`` (bool); ``linear`` and ``nonlinear``: each plant's ``verdict``, ``effects``
         (name -> value, registry units) and ``ambiguity``; ``differences``: sentences naming
-        each effect only one plant names (empty when they agree); ``nested``: when they
-        disagree only because one selection names effects beyond the other's (every effect
-        of the other is it or alike it, ``unexplained`` said by both or neither), the plant
+        each effect only one plant names (empty when they agree); ``only``: the names of
+        those effects by plant; ``nested``: when they disagree only because one selection
+        names effects beyond the other's (every effect of the other is it or alike it,
+        ``unexplained`` said by both or neither), the plant
         of the smaller selection, else None.
     """
     def side(r: Identification) -> dict:
@@ -906,7 +906,7 @@ def compare_plant_selections(linear: Identification, nonlinear: Identification) 
     if diff and same_flag and not (only["linear"] and only["nonlinear"]):
         nested = "nonlinear" if only["linear"] else "linear"
     return {"agree": not diff, "linear": a, "nonlinear": b, "differences": diff,
-            "nested": nested}  # fmt: skip
+            "only": only, "nested": nested}  # fmt: skip
 
 
 def out_of_fold_costs(
@@ -1018,7 +1018,9 @@ def plant_verdict(
     Returns
     -------
     dict
-        ``plant``, ``uncertain``, ``reason`` and ``test`` as :func:`choose_plant` describes.
+        ``plant``, ``uncertain``, ``plant_dependent`` (the effects named with the other
+        plant only when the nested branch chose, else empty), ``reason`` and ``test`` as
+        :func:`choose_plant` describes.
 
     Raises
     ------
@@ -1049,8 +1051,10 @@ def plant_verdict(
     separated = bool(p <= alpha)
     better = "linear" if separated and test["ratio"] > 1 else "nonlinear"
     nested = None if separated or check["agree"] else check.get("nested")
+    dependent = []
     if nested:
         better = nested
+        dependent = check["only"]["linear" if nested == "nonlinear" else "nonlinear"]
     test["separated"] = separated
     uncertain = not separated and not check["agree"] and not nested
     n_eff = ("", "") if effects is None else (f" ({effects[0]} effects)", f" ({effects[1]} "
@@ -1068,13 +1072,13 @@ def plant_verdict(
         tail = ("they fit alike and their selections agree, so the nonlinear plant (the "
                 "default unless the linear fits better) and the agreed effects")  # fmt: skip
     elif nested:
-        extra = [d.split(" (")[0] for d in check["differences"]]
-        tail = (f"they fit alike and the other plant's selection only adds {', '.join(extra)} "
-                f"(named with one nominal plant only: plant-dependent, not named), so the "
-                f"{nested} plant and the effects both plants support")  # fmt: skip
+        tail = (f"they fit alike and the other plant's selection only adds "
+                f"{', '.join(dependent)} (named with one nominal plant only: plant-dependent, "
+                f"not named), so the {nested} plant and the effects both plants support")
     else:
         tail = f"they fit alike and their selections disagree: {PLANT_UNCERTAIN}"
-    return {"plant": better, "uncertain": uncertain, "reason": head + tail, "test": test}
+    return {"plant": better, "uncertain": uncertain, "plant_dependent": dependent,
+            "reason": head + tail, "test": test}  # fmt: skip
 
 
 def choose_plant(
@@ -1124,9 +1128,10 @@ def choose_plant(
     dict
         ``plant`` (``"linear"`` or ``"nonlinear"``: the selection to report; with
         ``uncertain``, the nonlinear, whose effects are not named),
-        ``uncertain`` (bool), ``reason`` (one sentence: the costs, the test and the rule's
-        branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: out-of-fold costs, mean
-        over files of the file means, over the decays both scored; ``ratio`` nonlinear /
+        ``uncertain`` (bool), ``plant_dependent`` (effects the other plant's selection adds,
+        not named; nested branch only), ``reason`` (one sentence: the costs, the test and
+        the rule's branch), ``test`` (``linear_cost`` and ``nonlinear_cost``: out-of-fold
+        costs, mean over files of the file means, over the decays both scored; ``ratio`` nonlinear /
         linear and ``ratio_ci`` its 95 % bootstrap interval; ``p_value``; ``alpha``;
         ``decays``; ``unscored``: decays left out for both because one plant could not
         simulate them; ``separated``: p <= alpha; ``effects``: the

@@ -186,7 +186,7 @@ def test_a_second_push_before_the_decay_halved_is_rejected():
     segs = detect_decays(run, rejected=rejected)
     assert len(segs) == 7 and len(rejected) == 2
     (row, why), (row2, why2) = rejected
-    assert abs(row - _start(peaks[2], 0.01)) <= 4  # as in the slow-decay test
+    assert abs(row - round(peaks[2] / 0.01)) <= 2  # reported at the push's peak
     assert why.startswith("a second push")
     assert 0.95 <= float(why.split()[3]) <= 1.3, why
     assert why2.startswith("not at rest") and row2 > row

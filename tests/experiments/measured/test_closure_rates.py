@@ -179,6 +179,7 @@ def test_plant_verdict_four_ways():
     nested = plant_verdict(lin, lin + d, compare_plant_selections(damp, more))
     assert not nested["test"]["separated"] and not nested["uncertain"]
     assert nested["plant"] == "linear" and "only adds front_mass_shift" in nested["reason"]
+    assert nested["plant_dependent"] == ["front_mass_shift"]
     sep = plant_verdict(lin, nl, compare_plant_selections(more, damp))  # separated: the rule
     assert sep["plant"] == "linear" and "fits better" in sep["reason"]  # of the costs first
     gap = nl.copy()
@@ -346,3 +347,31 @@ def test_nearest_member_of_an_outside_effect_is_not_named(tmp_path, monkeypatch)
     (tmp_path / "b").mkdir()
     r = run_log_trial(tr, tmp_path / "b", "independent_linear")
     assert r["verdict"] == ["unexplained", "steer_inertia"] and not r["right"], r
+
+
+def test_detected_windows_start_after_the_push_ends_both_ways(monkeypatch):
+    """On the generator's logs the push is a half-sine of known length (the independent
+    source: its end, LOG_LEAD + k LOG_GAP + duration): every window ``detect_decays`` keeps
+    starts at or after the end of its push (seed 1's delay log, 0.25 s pushes: measured
+    0.02-0.07 s after), and with the settling delay off (DECAY_SETTLE 0, a window at the
+    roll-rate extreme) every one starts before it (measured 0.02-0.06 s), the push's tail
+    inside the window: the case that named an input delay an actuator lag."""
+    from bikeid.dataset.decays import detect_decays
+    from bikeid.dataset.run import Run
+    from bikeid.experiments.measured.blind_trials import LOG_GAP, LOG_LEAD, LOG_PUSHES
+
+    tr = _trial("input_delay", 1)
+    s = log_signals(tr, tr.fit_speeds[0], tr.seed, "independent_linear")
+    run = Run.from_arrays(s["t"], {k: s[k] for k in ("phi", "phidot", "delta", "deltadot",
+                                                     "v", "T_delta")})  # fmt: skip
+    ends = np.array([LOG_LEAD + k * LOG_GAP + tr.nuisance.pulse_duration
+                     for k in range(LOG_PUSHES)])  # fmt: skip
+
+    def lags(segs):  # window start - its push's end [s]
+        return np.array([min(sg.start * 0.01 - ends, key=abs) for sg in segs])
+
+    after = lags(detect_decays(run))
+    assert after.size == LOG_PUSHES and np.all(after >= 0), after
+    monkeypatch.setattr("bikeid.dataset.decays.DECAY_SETTLE", 0.0)
+    before = lags(detect_decays(run))
+    assert before.size >= 4 and np.all(before < 0), before
