@@ -1054,13 +1054,13 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
         ``effects`` (name -> value), ``value_ok`` (library: the hidden effect's value within
         20 % of its deviation from absent, None otherwise), ``in_set`` (library: the hidden
         effect in the ambiguity set of an accepted effect, as the fit reported it),
-        ``set_size`` (library: the size of that set, None when not in one), ``named_first``
-        (library: the hidden effect named first and alone, the strict count),
+        ``named_first`` (library: the hidden effect named first and alone, the strict
+        count),
         ``plant`` and ``plant_ratio`` (the nominal plant used, cost ratio nonlinear/linear).
     """
     kind = _kind(trial.effect)
     out = {"kind": kind, "effect": trial.effect, "value": trial.value, "value_ok": None,
-           "in_set": None, "set_size": None, "named_first": None, "verdict": None,
+           "in_set": None, "named_first": None, "verdict": None,
            "effects": {}, "plant": None, "plant_ratio": None}  # fmt: skip
     if model is None:
         return {**out, "outcome": "refused", "right": False}
@@ -1078,9 +1078,7 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
         x = eff.get(trial.effect)
         out["value_ok"] = bool(x is not None and abs(x - trial.value)
                                <= 0.2 * abs(trial.value - es.absent))  # fmt: skip
-        sets = [s for s in ident.get("ambiguity", {}).values() if trial.effect in s]
-        out["in_set"] = bool(sets)
-        out["set_size"] = min(map(len, sets)) if sets else None
+        out["in_set"] = any(trial.effect in s for s in ident.get("ambiguity", {}).values())
     alone = len(names) == 1 and "unexplained" not in verdict
     if not names:
         outcome = "unexplained" if "unexplained" in verdict else "nothing"
