@@ -3,11 +3,11 @@ window that follows the decay (dataset.decays.detect_decays).
 
 Each seed draws the closure's trials (experiments.measured.blind_trials.draw_blind_trials over
 CLOSURE_EFFECTS), writes the chosen effect's two fit-speed logs as CSV
-(``write_trial_logs``), reads them as ``bikeid measured fit`` does (its import options,
-``log_import_options``) and counts the decays each detector keeps, the pushes it counts
-(kept + rejected; the generator makes 8 per log) and the window lengths.  A trial whose two
-logs hold fewer than MIN_FIT_DECAYS decays is one ``measured fit`` refuses.  No fits: a
-few seconds per trial.
+(``write_trial_logs``), reads them as ``bikeid measured fit`` does (the one loader,
+``dataset.logs.load_runs``, with the trials' ``log_options``) and counts the decays each
+detector keeps, the pushes it counts (kept + rejected; the generator makes 8 per log) and
+the window lengths.  A trial whose two logs hold fewer than MIN_FIT_DECAYS decays is one
+``measured fit`` refuses.  No fits: a few seconds per trial.
 
 Usage::
 
@@ -19,16 +19,14 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-from pathlib import Path
 
 from bikeid.dataset.decays import MIN_FIT_DECAYS, detect_decays
-from bikeid.experiments.cli import build_parser
-from bikeid.experiments.cli.identify import load_runs
+from bikeid.dataset.logs import load_runs
 from bikeid.experiments.measured.blind_trials import (
     CLOSURE_EFFECTS,
     PLANTS,
     draw_blind_trials,
-    log_import_options,
+    log_options,
     write_trial_logs,
 )
 
@@ -37,12 +35,9 @@ DETECTORS = {"fixed 1 s": {"max_length": None}, "follows the decay": {}}
 
 def count(trial, truth: str) -> dict:
     """Per detector: decays kept, pushes counted and window lengths [s] over a trial's logs."""
-    parser = build_parser()
     with tempfile.TemporaryDirectory() as d:
         files = write_trial_logs(trial, d, truth)
-        args = parser.parse_args(["measured", "fit", *map(str, files), *log_import_options(),
-                                  "--out", str(Path(d) / "m.json")])  # fmt: skip
-        runs = load_runs(args, note=lambda _msg: None)
+        runs = load_runs(files, log_options(), note=lambda _msg: None)
     out = {}
     for name, kw in DETECTORS.items():
         kept, pushes, lengths = 0, 0, []

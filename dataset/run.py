@@ -103,9 +103,10 @@ def bound_check(signal: str) -> str | None:
 
 
 #: Every check a caller may skip by name: the range checks above, the import's plausibility
-#: checks (:mod:`bikeid.dataset.plausibility`) and the fit's informativity check
+#: checks (:mod:`bikeid.dataset.plausibility`), the sign check against a nominal bicycle
+#: (:mod:`bikeid.dataset.signs`) and the fit's informativity check
 #: (:mod:`bikeid.ident.informativity`).  ``skip`` and ``--skip-check`` take these names.
-SKIPPABLE_CHECKS = (*BOUND_CHECKS, "sample-period", "rate-derivative", "informativity")
+SKIPPABLE_CHECKS = (*BOUND_CHECKS, "sample-period", "rate-derivative", "signs", "informativity")
 
 
 def _check_skip(skip: Iterable[str]) -> set[str]:

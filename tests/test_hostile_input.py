@@ -589,8 +589,8 @@ def test_decay_window_roll_rate_checked_against_this_bicycles_toppling_rate():
     import dataclasses
     import math
 
-    from bikeid.experiments.cli.measured import check_decay_rates, toppling_rate
     from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.log_decays import check_decay_rates, toppling_rate
     from bikeid.ident.effects.synthetic_decays import synthetic_windows
     from bikeid.sim.parameters import steer_by_wire
 

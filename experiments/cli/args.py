@@ -16,8 +16,8 @@ from collections.abc import Callable
 import numpy as np
 
 from bikeid.dataset.files import atomic_write_text
-from bikeid.dataset.plausibility import CHECKS, bounds_notes
-from bikeid.dataset.run import BOUND_CHECKS
+from bikeid.dataset.logs import IMPORT_FORMATS, import_check_notes
+from bikeid.dataset.plausibility import CHECKS
 from bikeid.dataset.units import parse_quantity
 from bikeid.sim.conventions import MAX_SPEED
 from bikeid.sim.errors import InputError
@@ -345,50 +345,6 @@ def mapping_arg(option: str) -> Callable[[str], dict[str, str]]:
     return parse
 
 
-
-
-#: Data formats read by the importers (a user's own logs), whose range checks
-#: (:data:`bikeid.dataset.run.BOUND_CHECKS`) ``--skip-check``/``--no-checks`` turn off; run
-#: files written by bikeid and the steer-by-wire logs are always checked.
-IMPORT_FORMATS = ("csv", "hdf5")
-
-
-def import_check_notes(skip: list[str], fmt: str, no_checks: bool = False) -> list[str]:
-    """The notes of the import's skipped range checks, or a refusal where they cannot be skipped.
-
-    Parameters
-    ----------
-    skip : list of str
-        The checks ``--skip-check``/``--no-checks`` turn off
-        (:data:`bikeid.dataset.plausibility.CHECKS` names).
-    fmt : str
-        The ``--format`` of the data.
-    no_checks : bool, optional
-        ``--no-checks`` was given (then a format without skippable range checks gets a note
-        saying so instead of a refusal).
-
-    Returns
-    -------
-    list of str
-        One note per skipped range check (:func:`bikeid.dataset.plausibility.bounds_notes`);
-        for bikeid or steer-by-wire files with ``--no-checks``, one note that their range
-        checks still run.
-
-    Raises
-    ------
-    bikeid.sim.errors.InputError
-        ``--skip-check NAME`` of a range check with a format whose files are always checked.
-    """
-    bounds = [s for s in skip if s in BOUND_CHECKS]
-    if fmt in IMPORT_FORMATS or not bounds:
-        return bounds_notes(bounds)
-    if not no_checks:
-        raise InputError(
-            f"--skip-check {','.join(bounds)} applies to --format csv or hdf5 (your own logs); "
-            f"--format {fmt} files are always range-checked: drop it"
-        )
-    return [f"the range checks ({', '.join(bounds)}) still run on --format {fmt} files "
-            "(written by bikeid or the steer-by-wire logger)"]
 
 
 def skipped_checks(args: argparse.Namespace) -> list[str]:

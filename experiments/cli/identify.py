@@ -7,22 +7,17 @@ printed beside the estimate (``true_eigenvalues``).
 from __future__ import annotations
 
 import argparse
-from collections.abc import Mapping
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.experiments.cli.args import (
-    IMPORT_FORMATS,
     MAX_WORKERS,
     check_figure_path,
     dump_json,
-    import_check_notes,
     integer,
-    mapping_arg,
     number,
-    positive_speed,
     range_text,
-    skipped_checks,
 )
+from bikeid.experiments.cli.log_options import FORMATS, add_data_options, log_options
 from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import quiet, stage_lines, terminal_progress
 
@@ -201,123 +196,9 @@ class DefaultsFormatter(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
-#: Data formats ``bikeid identify`` reads, and what each is.
 #: The rows of ``bikeid accuracy`` (``experiments.testbed.accuracy.METHODS``; spelled here
 #: so that ``--help`` does not import the study, a test keeps the two equal).
 ACCURACY_METHODS = ("direct", "direct_ls", "pem", "greybox")
-
-FORMATS = {
-    "bikeid": "files written by bikeid (sweep, store)",
-    "csv": "your own logs, read with --columns (dataset.importers)",
-    "hdf5": "your own logs, read with --columns (dataset.importers)",
-    "sbw": "TU Delft steer-by-wire logs (files or folders; the settled part of each, v = "
-    "treadmill speed, dataset.sbw_logs)",
-}
-
-
-def add_data_options(
-    p: argparse.ArgumentParser, formats: Mapping[str, str], input_help: str | None,
-    files: str = "+",
-) -> None:  # fmt: skip
-    """The data arguments of ``identify`` and ``validate``, read by :func:`_load`.
-
-    Adds FILE..., ``--format``, the importer options ``--columns``, ``--units``, ``--time``,
-    ``--speed``, ``--flip`` (csv/hdf5 logs) and ``--input`` (the torque signal used as
-    T_delta, :func:`_with_input`).
-
-    Parameters
-    ----------
-    p : argparse.ArgumentParser
-        The command's parser.
-    formats : mapping of str to str
-        The ``--format`` choices (a subset of :data:`FORMATS`) and their help; the first is
-        the default.
-    input_help : str or None
-        Help text of ``--input``; None: no ``--input`` (a command with its own, e.g.
-        ``measured evaluate``).
-    files : str, optional
-        ``nargs`` of FILE (default ``"+"``; ``"*"`` where the files may come from elsewhere,
-        e.g. ``measured fit --data``).
-
-    Returns
-    -------
-    None
-    """
-    p.add_argument("file", nargs=files, help="run files (bikeid HDF5) or logs (--format)")
-    p.add_argument(
-        "--format", choices=tuple(formats), default=next(iter(formats)),
-        help="; ".join(f"{k}: {v}" for k, v in formats.items()),
-    )  # fmt: skip
-    p.add_argument(
-        "--columns", type=mapping_arg("--columns"), default=None, metavar="NAME=COL,...",
-        help="csv/hdf5: bikeid signal -> your column (CSV header) or dataset path (HDF5)",
-    )  # fmt: skip
-    p.add_argument(
-        "--units", type=mapping_arg("--units"), default=None, metavar="NAME=UNIT,...",
-        help="csv/hdf5: units of non-SI columns, e.g. phi=deg,v=km/h,t=ms",
-    )  # fmt: skip
-    p.add_argument("--time", default="t", help="csv/hdf5: the time column / dataset (default t)")
-    p.add_argument(
-        "--speed", type=speed_arg, default=None, metavar="SPEED",
-        help="csv/hdf5: constant speed when the log has no speed column, with a unit: 5m/s, "
-        "14.4km/h (a bare number is m/s)",
-    )  # fmt: skip
-    p.add_argument(
-        "--start", type=number(-1e9, 1e9, unit="s"), default=None,
-        help="keep the samples at t >= START [s, the run's own time base] (default: all)",
-    )  # fmt: skip
-    p.add_argument(
-        "--stop", type=number(-1e9, 1e9, unit="s"), default=None,
-        help="keep the samples at t < STOP [s] (default: all)",
-    )  # fmt: skip
-    p.add_argument(
-        "--speed-tolerance", type=number(0.0, 10.0, unit="m/s"), default=0.25,
-        help="runs whose mean speeds lie within this of each other pool into one model at "
-        "their weighted mean speed; also the speed range of a constant-speed stretch when a "
-        "log's speed varies [m/s] (default 0.25; 0 pools equal speeds only)",
-    )  # fmt: skip
-    p.add_argument(
-        "--min-stretch", type=number(0.0, 1e6, unit="s"), default=10.0,
-        help="shortest constant-speed stretch kept when a log's speed varies [s] (default 10)",
-    )  # fmt: skip
-    p.add_argument(
-        "--min-speed", type=number(0.0, 100.0, unit="m/s"), default=0.5,
-        help="stretches slower than this are dropped when a log's speed varies [m/s] "
-        "(default 0.5)",
-    )  # fmt: skip
-    p.add_argument(
-        "--skip-check", default="", metavar="NAME,...",
-        help="checks not to run on a log you know is odd (a note says so): csv/hdf5: "
-        "angle-bounds, rate-bounds, speed-bounds, torque-bounds, force-bounds (physical "
-        "ranges); sample-period, rate-derivative, informativity (default: none)",
-    )  # fmt: skip
-    p.add_argument("--no-checks", action="store_true", help="skip every check of --skip-check")
-    p.add_argument(
-        "--flip", default="", metavar="NAME,...",
-        help="csv/hdf5: signals logged with the opposite sign (Meijaard: positive right)",
-    )  # fmt: skip
-    if input_help is not None:
-        p.add_argument("--input", default="T_delta", metavar="SIGNAL", help=input_help)
-
-
-def load_runs(args: argparse.Namespace, note=None) -> list:
-    """The runs of :func:`add_data_options`' files, read as ``bikeid identify`` reads them.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        Parsed options of :func:`add_data_options`.
-    note : callable, optional
-        ``note(msg)`` receives what was done beyond reading (windowing, speed splits,
-        skipped checks); default: printed on stderr.
-
-    Returns
-    -------
-    list of Run
-        One per log (or constant-speed stretch), checked for plausibility.
-    """
-    return _load(args, note)
-
 
 def _truth(runs):
     """The simulated bicycle: ``meta['parameters']`` or ``meta['bicycle']['parameters']``
@@ -355,8 +236,10 @@ def cmd_export(args: argparse.Namespace) -> int:
 
         if args.run is not None:
             raise ValueError("--run applies to bikeid run files; give the log file itself")
-        ns = argparse.Namespace(file=[args.file], format="sbw")
-        logs = {Path(f).name.removesuffix(".gz").removesuffix(".log"): f for f in _data_files(ns)}
+        from bikeid.dataset.logs import LogOptions, data_files
+
+        found = data_files([args.file], LogOptions(format="sbw"))
+        logs = {Path(f).name.removesuffix(".gz").removesuffix(".log"): f for f in found}
         names = list(logs)
     else:
         names = [args.run] if args.run else list_runs(args.file)
@@ -392,201 +275,6 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-#: ``--speed``: a speed with an optional unit of the one unit table (``5``, ``5m/s``,
-#: ``14.4km/h``, ``9mph``, ``KM/H``) in m/s, in (0, MAX_SPEED] (``args.positive_speed``).
-speed_arg = positive_speed
-
-
-def _skipped(args: argparse.Namespace) -> list[str]:
-    """The checks ``--skip-check``/``--no-checks`` turn off (``args.skipped_checks``)."""
-    return skipped_checks(args)
-
-
-def _applied_skips(args: argparse.Namespace) -> list[str]:
-    """The skipped checks that were in fact skipped: range checks still run on bikeid and
-    steer-by-wire files, so ``--no-checks`` does not list them there (the model file's record)."""
-    from bikeid.dataset.run import BOUND_CHECKS
-
-    return [c for c in _skipped(args) if args.format in IMPORT_FORMATS or c not in BOUND_CHECKS]
-
-
-def _read(args: argparse.Namespace) -> tuple[list, list[str]]:
-    """The runs of every file and what each came from: run files or logs."""
-    if args.format == "bikeid":
-        from bikeid.dataset.store import list_runs, read_runs
-
-        for opt in ("columns", "units", "speed"):
-            if getattr(args, opt) is not None:
-                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
-        runs, sources = [], []
-        for f in args.file:
-            got = read_runs(f)
-            runs += got
-            names = list_runs(f) if len(got) > 1 else [None]
-            sources += [f"{f}: run {n!r}" if n else str(f) for n in names]
-        return runs, sources
-    if args.format == "sbw":
-        from bikeid.dataset.sbw_logs import load_log, settled
-
-        for opt in ("columns", "units", "speed"):
-            if getattr(args, opt) is not None:
-                raise ValueError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
-        if args.flip:
-            raise ValueError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
-        files = _data_files(args)
-        return [settled(load_log(p)) for p in files], [str(p) for p in files]
-    from bikeid.dataset import importers
-
-    if not args.columns:
-        raise ValueError(
-            f"--format {args.format} needs --columns NAME=COL,... mapping phi, delta, phidot, "
-            "deltadot, T_delta (and v, or give --speed) to your columns"
-        )
-    read = importers.from_csv if args.format == "csv" else importers.from_hdf5
-    flip = [f.strip() for f in args.flip.split(",") if f.strip()]
-    runs = [read(f, args.columns, args.units, time=args.time, speed=args.speed, flip=flip,
-                 speed_range=None, skip=_skipped(args)) for f in args.file]  # fmt: skip
-    return runs, [str(f) for f in args.file]
-
-
-def _window(runs: list, sources: list[str], args: argparse.Namespace) -> list:
-    """``--start``/``--stop``: each run cut to the time window."""
-    from bikeid.sim.errors import InputError
-
-    start, stop = getattr(args, "start", None), getattr(args, "stop", None)
-    if start is None and stop is None:
-        return runs
-    if start is not None and stop is not None and not start < stop:
-        raise InputError(f"--start {start:g} s is not before --stop {stop:g} s; swap them")
-    out = []
-    for r, src in zip(runs, sources, strict=True):
-        t0 = r.t[0] if start is None else start
-        t1 = r.t[-1] + r.dt if stop is None else stop
-        if ((r.t >= t0) & (r.t < t1)).sum() < 3:
-            raise InputError(
-                f"{src}: --start/--stop keep fewer than 3 samples of its {r.t[0]:.6g}.."
-                f"{r.t[-1]:.6g} s; give a window inside the run"
-            )
-        w = r.window(t0, t1)
-        w.meta["window"] = [float(t0), float(t1)]
-        if w.meta.get("source") == "imported" and w.meta.get("import", {}).get(
-            "speed_source"
-        ) == "column":
-            w.meta["speed"] = float(w.signals["v"].mean())
-        out.append(w)
-    return out
-
-
-def _split(runs: list, sources: list[str], args: argparse.Namespace, note) -> tuple[list, list]:
-    """Logs whose speed varies beyond the importer's limit, split into constant-speed stretches."""
-    import numpy as np
-
-    from bikeid.dataset.importers import SPEED_RANGE
-    from bikeid.dataset.run import split_by_speed
-    from bikeid.sim.errors import InputError
-
-    tol = getattr(args, "speed_tolerance", 0.25)
-    out, out_src = [], []
-    for r, src in zip(runs, sources, strict=True):
-        v = r.signals["v"]
-        mean = float(np.mean(v))
-        if r.meta.get("source") != "imported" or np.ptp(v) <= SPEED_RANGE * mean:
-            out.append(r)
-            out_src.append(src)
-            continue
-        parts = split_by_speed(r, tolerance=max(tol, 1e-9), min_duration=args.min_stretch,
-                               min_speed=args.min_speed)  # fmt: skip
-        if not parts:
-            raise InputError(
-                f"{src}: speed varies {v.min():.3g}..{v.max():.3g} m/s and no stretch of "
-                f"{args.min_stretch:g} s stays within --speed-tolerance {tol:g} m/s above "
-                f"--min-speed {args.min_speed:g} m/s; raise --speed-tolerance, lower "
-                "--min-stretch, or cut the log with --start/--stop"
-            )
-        spans = ", ".join(f"{p.t[0]:.1f}..{p.t[-1]:.1f} s at {p.speed:.3g} m/s" for p in parts)
-        note(f"{src}: speed varies {v.min():.3g}..{v.max():.3g} m/s: split into "
-             f"{len(parts)} constant-speed stretch{'es' if len(parts) > 1 else ''} ({spans})")
-        out += parts
-        out_src += [f"{src} [{p.t[0]:.1f}..{p.t[-1]:.1f} s]" for p in parts]
-    return out, out_src
-
-
-def _load(args: argparse.Namespace, note=None) -> list:
-    """The runs of every file, windowed, split into constant-speed stretches and checked.
-
-    ``note(msg)`` receives what was done beyond reading (splits, skipped checks); default:
-    printed on stderr.
-    """
-    import sys
-
-    from bikeid.dataset.plausibility import check_runs
-
-    if note is None:
-        def note(msg: str) -> None:
-            print(f"note: {msg}", file=sys.stderr, flush=True)
-
-    skip = [s for s in _skipped(args) if s != "informativity"]
-    for msg in import_check_notes(skip, args.format, getattr(args, "no_checks", False)):
-        note(msg)  # the range checks of the import (csv/hdf5 logs)
-    runs, sources = _read(args)
-    runs = _window(runs, sources, args)
-    # the sample period first: a time unit mistake would make nonsense of the speed split
-    for msg in check_runs(runs, sources, sorted({*skip, "rate-derivative"})):
-        if "sample-period" in msg:
-            note(msg)
-    if getattr(args, "min_stretch", None) is not None:
-        runs, sources = _split(runs, sources, args, note)
-    for msg in check_runs(runs, sources, sorted({*skip, "sample-period"})):
-        if "rate-derivative" in msg:
-            note(msg)
-    return runs
-
-
-def pool_speeds(speeds: list[float], weights: list[float], tolerance: float) -> list[int]:
-    """Group index of each speed: sorted speeds within ``tolerance`` of a group's lowest pool.
-
-    Parameters
-    ----------
-    speeds : list of float
-        Mean speed of each run [m/s].
-    weights : list of float
-        Weight of each run (its number of samples).
-    tolerance : float
-        Largest speed difference within a group [m/s]; 0 pools equal speeds (to 1e-6 m/s).
-
-    Returns
-    -------
-    list of int
-        For each run, the index of its group (groups numbered by increasing speed).
-    """
-    order = sorted(range(len(speeds)), key=lambda i: speeds[i])
-    group, lowest, k = [0] * len(speeds), None, -1
-    for i in order:
-        if lowest is None or speeds[i] - lowest > max(tolerance, 1e-6):
-            k, lowest = k + 1, speeds[i]
-        group[i] = k
-    return group
-
-
-def _pool(runs: list, tolerance: float) -> list:
-    """The runs with each pooled group's weighted mean speed as their nominal speed."""
-    import dataclasses
-
-    speeds = [r.speed for r in runs]
-    group = pool_speeds(speeds, [r.n for r in runs], tolerance)
-    out = []
-    for g in sorted(set(group)):
-        idx = [i for i in range(len(runs)) if group[i] == g]
-        n = sum(runs[i].n for i in idx)
-        mean = round(sum(speeds[i] * runs[i].n for i in idx) / n, 6)
-        for i in idx:
-            meta = {**runs[i].meta, "speed": mean}
-            if len(idx) > 1 or abs(speeds[i] - mean) > 1e-9:
-                meta["measured_speed"] = speeds[i]
-            out.append((i, dataclasses.replace(runs[i], meta=meta)))
-    return [r for _, r in sorted(out, key=lambda x: x[0])]
-
-
 def _outputs(text: str | None, method: str) -> tuple[str, ...] | None:
     """``--outputs``: the measured states fitted (None: the method's default)."""
     from bikeid.sim.conventions import CANONICAL_STATE
@@ -614,53 +302,6 @@ def _outputs(text: str | None, method: str) -> tuple[str, ...] | None:
     return names
 
 
-def _with_input(runs: list, name: str) -> list:
-    """The runs with ``name`` as the steer-torque input T_delta (``--input``)."""
-    import dataclasses
-
-    from bikeid.sim.conventions import UNITS
-    from bikeid.sim.errors import InputError
-
-    if name == "T_delta":
-        return runs
-    if UNITS.get(name, "N m") != "N m":
-        raise InputError(
-            f"--input {name}: that signal is in {UNITS[name]}, not a torque; give a steer "
-            "torque [N m] such as T_delta"
-        )
-    for i, r in enumerate(runs):
-        if name not in r.signals:
-            raise InputError(
-                f"--input {name}: run {i + 1} has no signal {name!r}; its signals are "
-                f"{', '.join(sorted(r.signals))}"
-            )
-        if not r.signals[name].any():
-            raise InputError(f"--input {name}: the signal is zero in run {i + 1}; nothing to fit")
-    return [
-        dataclasses.replace(r, signals={**r.signals, "T_delta": r.signals[name]},
-                            meta={**r.meta, "input": name})
-        for r in runs
-    ]  # fmt: skip
-
-
-def _data_files(args: argparse.Namespace) -> list:
-    """The files the runs were read from (hashed into the model file's provenance)."""
-    from pathlib import Path
-
-    files = []
-    for f in map(Path, args.file):
-        if f.is_dir() and args.format == "sbw":
-            from bikeid.dataset.sbw_logs import find_logs
-
-            logs = find_logs(f)
-            if not logs:
-                raise ValueError(f"{f} holds no steer-by-wire logs (*.log, *.log.gz)")
-            files += logs
-        else:
-            files.append(f)
-    return files
-
-
 def _model_targets(out: str, speeds: list[float], per_speed: bool) -> list:
     """``--out`` file(s): one, or one per speed for per-speed pem over several speeds."""
     from pathlib import Path
@@ -679,14 +320,8 @@ def _model_targets(out: str, speeds: list[float], per_speed: bool) -> list:
 
 def _settings(args: argparse.Namespace) -> dict:
     """The method, its settings (ident.methods) and the data options saved with the model."""
-    s: dict = {"command": "bikeid identify", "method": args.method, "format": args.format,
-               "input": args.input}  # fmt: skip
-    if args.format != "bikeid":
-        s.update(columns=args.columns, units=args.units, time=args.time, speed=args.speed,
-                 flip=[f.strip() for f in args.flip.split(",") if f.strip()])  # fmt: skip
-    s.update(start=args.start, stop=args.stop, speed_tolerance=args.speed_tolerance,
-             min_stretch=args.min_stretch, min_speed=args.min_speed,
-             skipped_checks=_applied_skips(args))  # fmt: skip
+    s: dict = {"command": "bikeid identify", "method": args.method,
+               **log_options(args).settings()}  # fmt: skip
     method, run_settings = _method_settings(args)
     s.update(run_settings.to_json())
     if method.fixed_entries:
@@ -703,13 +338,16 @@ def cmd_identify(args: argparse.Namespace) -> int:
     import numpy as np
 
     from bikeid.dataset.files import check_distinct_inputs, check_output_path, check_outputs
+    from bikeid.dataset.logs import IMPORT_FORMATS, load_runs, pool_runs
+    from bikeid.dataset.logs import data_files as files_of
     from bikeid.ident.methods import SKIPPED_NOTE, check_informativity
     from bikeid.ident.model_file import file_provenance, save_model
     from bikeid.sim.errors import InputError
     from bikeid.sim.linear import eigenvalues
 
     outputs = _outputs(args.outputs, args.method)
-    data_files = _data_files(args)  # no output may be an input; no data file counted twice
+    options = log_options(args, bicycle=args.bicycle)
+    data_files = files_of(args.file, options)  # no output may be an input; none counted twice
     if args.out:
         check_output_path(args.out)  # a folder or link at --out: named as such first
     check_figure_path(args.plot, "--plot")  # the suffix names the figure's format
@@ -723,17 +361,20 @@ def cmd_identify(args: argparse.Namespace) -> int:
         notes.append(msg)
         print(f"note: {msg}", file=sys.stderr, flush=True)
 
-    runs = _load(args, note)
+    runs = load_runs(args.file, options, note)
     if not runs:
         raise ValueError(f"{', '.join(args.file)} hold no runs")
-    runs = _with_input(runs, args.input)
-    runs = _pool(runs, args.speed_tolerance)
+    if options.bicycle is None and options.format in IMPORT_FORMATS:
+        note("the relative signs of roll, steer and torque are unchecked (no --bicycle): a "
+             "mirrored axis leaves the eigenvalues unchanged but flips the coupling signs "
+             "(e.g. torque to roll); give --bicycle NAME to check them")  # fmt: skip
+    runs = pool_runs(runs, args.speed_tolerance)
     truth = _truth(runs)
     speeds = sorted({round(r.speed, 6) for r in runs})
     free = [n.strip() for n in args.free.split(",") if n.strip()] if args.free else None
     # the library's informativity check, run here before any stage line (a refusal stays
     # one line) and again, cheaply, inside the fit; skipped on request with a note
-    skip_informativity = "informativity" in _skipped(args)
+    skip_informativity = "informativity" in options.skip
     informativity = None if skip_informativity else check_informativity(runs, run_settings,
                                                                         free=free)
     if skip_informativity:
@@ -749,7 +390,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                                                                          targets):
             raise InputError(f"--plot {args.plot} is also the model file of --out; give the "
                              "figure another name")  # fmt: skip
-        provenance = file_provenance(_data_files(args))
+        provenance = file_provenance(data_files)
         settings = _settings(args)
     out: dict = {"file": list(map(str, args.file)), "method": args.method, "speeds": speeds,
                  "input": args.input, "informativity": informativity}  # fmt: skip

@@ -11,13 +11,11 @@ from pathlib import Path
 from bikeid.experiments.cli.args import (
     MAX_WORKERS,
     dump_json,
-    import_check_notes,
     integer,
     mapping_arg,
     number,
     parse_range,
     range_text,
-    skipped_checks,
     to_jsonable,
 )
 from bikeid.experiments.parallel import DASK_HELP
@@ -601,7 +599,7 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
 
     FILE... with ``--format csv|hdf5`` and ``--columns``, ``--units``, ``--time``, ``--flip``
     and the time-window and speed-splitting options of
-    :func:`bikeid.experiments.cli.identify.add_data_options` (the same reader), or the
+    :func:`bikeid.experiments.cli.log_options.add_data_options` (the same reader), or the
     steer-by-wire folder (``--format sbw``, the default, ``--data``); plus ``--bicycle`` (the
     nominal parameters), ``--controller``/``--gains`` (a known law) and ``--drive``.
 
@@ -614,7 +612,7 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
     -------
     None
     """
-    from bikeid.experiments.cli.identify import add_data_options
+    from bikeid.experiments.cli.log_options import add_data_options
 
     add_data_options(p, LOG_FORMATS, None, files="*")
     p.add_argument(
@@ -636,89 +634,25 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
                    help=INPUT_HELP)
 
 
-def _law(args: argparse.Namespace, sbw: bool) -> tuple[str | None, float, float]:
-    """(law name or None, K, V) of ``--controller``/``--gains``."""
-    law = args.controller or ("steer-into-lean" if sbw else None)
+def _law(args: argparse.Namespace):
+    """The :class:`~bikeid.ident.effects.log_decays.ControlLaw` of ``--controller``/``--gains``
+    (None: not given)."""
+    from bikeid.ident.effects.log_decays import ControlLaw
+
     gains = dict(args.gains or {})
-    if gains and law is None:
+    if gains and args.controller is None and args.format != "sbw":
         raise InputError("--gains needs --controller steer-into-lean (the law they belong to)")
     bad = sorted(set(gains) - {"K", "V"})
     if bad:
         raise InputError(f"--gains {','.join(bad)}: the steer-into-lean law has K [N s^2/rad] "
                          "and V [m/s]; give --gains K=2,V=6.5")  # fmt: skip
+    if args.controller is None and not gains:
+        return None  # the steer-by-wire logs' own law, or the model file's
     try:
         k, v = float(gains.get("K", 2.0)), float(gains.get("V", 6.5))
     except ValueError:
         raise InputError(f"--gains {gains}: K and V must be numbers") from None
-    if not (math.isfinite(k) and math.isfinite(v)):
-        raise InputError(f"--gains {gains}: K and V must be finite numbers")
-    return law, k, v
-
-
-def toppling_rate(p) -> float:
-    """The roll rate [rad/s] at which bicycle ``p``, rigid with the steer locked, reaches the
-    ground falling from upright: m g h = I w^2 / 2, I = sum(I_xx + m z^2) about the contact
-    line (the derivation of ``sim.conventions.PLAUSIBLE["phidot"]``): 4.43 rad/s for the
-    benchmark, 5.24 rad/s for the steer-by-wire bicycle (below the point-mass bound
-    sqrt(2 g / h) the conventions quote, 4.8 and 5.9 rad/s).
-
-    Parameters
-    ----------
-    p : bikeid.sim.parameters.BicycleParameters
-        The bicycle (benchmark axes, z down; SI units).
-
-    Returns
-    -------
-    float
-        The toppling rate [rad/s], > 0.
-    """
-    d = p.as_dict()
-    parts = [(d["mR"], -d["rR"], d["IRxx"]), (d["mF"], -d["rF"], d["IFxx"]),
-             (d["mB"], d["zB"], d["IBxx"]), (d["mH"], d["zH"], d["IHxx"])]  # fmt: skip
-    m = sum(q[0] for q in parts)
-    h = -sum(q[0] * q[1] for q in parts) / m
-    inertia = sum(q[2] + q[0] * q[1] ** 2 for q in parts)
-    return math.sqrt(2 * m * d["g"] * h / inertia)
-
-
-def check_decay_rates(windows: list, p, skip: list[str] | tuple = ()) -> None:
-    """Refuse a decay window whose roll rate exceeds bicycle ``p``'s toppling rate.
-
-    A free decay after a push of a few degrees never approaches the rate of a fall from
-    upright to the ground (the steer-by-wire logs stay below 1.5 rad/s, under a third of its
-    5.24 rad/s), so a larger value is a glitch even inside the generic 20 rad/s bound.
-
-    Parameters
-    ----------
-    windows : list of bikeid.dataset.windows.Window
-        The decays (``phidot`` [rad/s], ``start`` the first row in the log).
-    p : bikeid.sim.parameters.BicycleParameters
-        The bicycle the logs are of.
-    skip : list of str, optional
-        Checks skipped on request (``--skip-check``): with ``rate-bounds`` nothing is
-        checked (the reader prints the note).
-
-    Raises
-    ------
-    bikeid.sim.errors.InputError
-        Naming the log, the row, the value and the bound, and the fix.
-    """
-    import numpy as np
-
-    if "rate-bounds" in skip:
-        return
-    bound = toppling_rate(p)
-    for w in windows:
-        x = np.abs(np.asarray(w.phidot, float))
-        i = int(np.argmax(x)) if x.size else 0
-        if x.size and x[i] > bound:
-            raise InputError(
-                f"{w.file}: row {w.start + i} of a decay window: roll rate {float(x[i]):.3g} "
-                f"rad/s, beyond {bound:.3g} rad/s, the rate at which {p.name} hits the ground "
-                "falling from upright: check the right --bicycle / --units first, otherwise "
-                "a glitch in the log: cut it out (or --skip-check rate-bounds for a log you "
-                "know holds such rates)"
-            )
+    return ControlLaw(args.controller or "steer-into-lean", k, v)
 
 
 def load_log_decays(
@@ -729,108 +663,18 @@ def load_log_decays(
     purpose: str = "the fit",
     experiment: dict | None = None,
 ) -> tuple[list, object, str | None, dict]:  # fmt: skip
-    """The decay windows of the logs of :func:`add_log_options` and their experiment.
+    """:func:`bikeid.ident.effects.log_decays.decays_from_logs` of the parsed options.
 
-    Parameters
-    ----------
-    args : argparse.Namespace
-        Parsed options.
-    speeds, exclude : list of float, optional
-        Keep only / drop windows near these speeds [m/s].
-    min_decays : int, optional
-        Fewest usable decays (fewer: a refusal counting them and the rejections).
-    purpose : str, optional
-        What the decays are for (in the refusal).
-    experiment : dict, optional
-        A model file's ``experiment`` (evaluate): its sample period must match the logs'.
-
-    Returns
-    -------
-    windows : list of Window
-        The decays, each with its ``drive`` (``--drive``).
-    model : ExperimentModel
-        The nominal experiment: bicycle, sample period [s] and speed calibration of the logs,
-        the law's gains.
-    law : str or None
-        The controller law, None when the logged torque is replayed.
-    report : dict
-        :func:`bikeid.dataset.decays.decays_from_runs`'s report, plus ``files`` read.
+    Returns the windows, the nominal experiment, the law's name (None: none known) and the
+    decay report.
     """
-    from dataclasses import replace
-    from pathlib import Path
+    from bikeid.experiments.cli.log_options import log_options
+    from bikeid.ident.effects.log_decays import decays_from_logs
 
-    from bikeid.dataset.decays import decays_from_runs, steer_by_wire_logs
-    from bikeid.dataset.files import check_distinct_inputs
-    from bikeid.dataset.sbw_logs import DT, SPEED_CALIBRATION, data_dir, find_logs
-    from bikeid.ident.effects.experiment_model import ExperimentModel
-    from bikeid.sim.parameters import by_name, steer_by_wire
-
-    sbw = args.format == "sbw"
-    files = list(args.file or [])
-    if sbw:  # range checks of the logs cannot be skipped: refused by name, or noted
-        for msg in import_check_notes(skipped_checks(args), "sbw", args.no_checks):
-            print(f"note: {msg}", file=sys.stderr, flush=True)
-        for opt in ("columns", "units", "speed"):
-            if getattr(args, opt) is not None:
-                raise InputError(f"--{opt} applies to --format csv or hdf5 (your own logs)")
-        if args.flip:
-            raise InputError("--flip applies to --format csv or hdf5 (sbw logs: bikeid signs)")
-        if files and args.data:
-            raise InputError("give either --data FOLDER or log files, not both")
-        paths = []
-        for f in map(Path, files) if files else [data_dir(args.data)]:
-            found = find_logs(f, "eigen") if f.is_dir() else [f]
-            if f.is_dir() and not found:
-                raise InputError(f"{f} holds no steer-by-wire eigen logs (eigen*.log[.gz])")
-            paths += found
-        check_distinct_inputs(paths)  # a log given twice would count its decays twice
-        runs, listed = steer_by_wire_logs(paths, args.decays)
-        read = [str(p) for p in paths] + sorted(
-            {str(p.parent / "segments.csv") for p in paths
-             if args.decays == "listed" and (p.parent / "segments.csv").is_file()})  # fmt: skip
-        dt, cal = DT, SPEED_CALIBRATION
-    else:
-        if args.data:
-            raise InputError(f"--data is the steer-by-wire folder; with --format {args.format} "
-                             "give your log files as FILE...")  # fmt: skip
-        if not files:
-            raise InputError(f"--format {args.format} needs log files: FILE... with --columns")
-        if not args.columns:
-            raise InputError(f"--format {args.format} needs --columns NAME=COL,... mapping phi, "
-                             "delta, phidot, deltadot, T_delta (and v, or --speed)")  # fmt: skip
-        from bikeid.experiments.cli.identify import load_runs
-
-        check_distinct_inputs(files)  # a log given twice would count its decays twice
-        runs, listed, read = load_runs(args), {}, files
-        dts = [r.dt for r in runs]
-        dt = sorted(dts)[len(dts) // 2]
-        if max(abs(d / dt - 1) for d in dts) > 0.01:
-            raise InputError(f"the logs' sample periods differ ({min(dts):g}-{max(dts):g} s); "
-                             "fit logs of one sample period together")  # fmt: skip
-        cal = (1.0, 0.0)  # the logged speed is the bicycle's speed
-    if experiment and experiment.get("dt") and abs(experiment["dt"] / dt - 1) > 0.01:
-        raise InputError(f"the model was fitted at a sample period of {experiment['dt']:g} s, "
-                         f"the logs have {dt:g} s; evaluate on logs like the fit's")  # fmt: skip
-    if args.bicycle:
-        p = by_name(args.bicycle)
-    elif sbw or experiment is not None:  # evaluate: the model file holds the bicycle
-        p = steer_by_wire()
-    else:
-        raise InputError("your own logs need --bicycle NAME|FILE: the nominal parameters of "
-                         "the bicycle (a name of bikeid eig -h, or a .yaml/.json)")  # fmt: skip
-    law, k, v = _law(args, sbw)
-    if experiment and not args.controller and experiment.get("law"):  # the model's own law
-        law, k, v = experiment["law"], float(experiment["K"]), float(experiment["V"])
-    drive = args.input or ("loop" if law else "logged")
-    if drive == "loop" and law is None:
-        raise InputError("--drive loop needs the controller law: give --controller "
-                         "steer-into-lean --gains K=..,V=.. or use --drive logged")  # fmt: skip
-    model = ExperimentModel(p=p, K=k, V=v, dt=dt, speed_calibration=tuple(cal))
-    windows, report = decays_from_runs(runs, "listed" if sbw else "detected", listed, speeds,
-                                       exclude, min_decays, purpose)  # fmt: skip
-    check_decay_rates(windows, p, () if sbw else skipped_checks(args))  # a glitch inside
-    # the generic bound, beyond this bicycle's
-    if drive == "logged":
-        windows = [replace(w, drive="logged") for w in windows]
-    report["read"] = read
-    return windows, model, law, report
+    options = log_options(args, bicycle=args.bicycle, input="T_delta")
+    windows, model, law, report = decays_from_logs(
+        list(args.file or []), options, _law(args), decays=args.decays, data=args.data,
+        drive=args.input, speeds=speeds, exclude=exclude, min_decays=min_decays,
+        purpose=purpose, experiment=experiment,
+    )  # fmt: skip
+    return windows, model, (law.name if law else None), report

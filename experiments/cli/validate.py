@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 
 from bikeid.experiments.cli.args import dump_json, integer, number
-from bikeid.experiments.cli.identify import FORMATS, add_data_options
+from bikeid.experiments.cli.log_options import FORMATS, add_data_options, log_options
 
 #: Marker of the folders ``bikeid validate --out`` writes (in validation.json).
 MARKER = "bikeid validate"
@@ -249,20 +249,22 @@ def table(report, model_path: str) -> str:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     from bikeid.dataset.files import check_distinct_inputs, check_input_file, check_outputs
+    from bikeid.dataset.logs import data_files as files_of
+    from bikeid.dataset.logs import load_runs
     from bikeid.experiments.cli.args import atomic_write_text
-    from bikeid.experiments.cli.identify import _data_files, _load, _with_input
     from bikeid.ident.model_file import read_model_file
     from bikeid.ident.validation_report import validate_model
 
     out = check_out_dir(args.out) if args.out else None
     check_input_file(args.model, "--model")
     taken = reuse_settings(args, dict(read_model_file(args.model).settings or {}))
-    data_files = _data_files(args)
+    options = log_options(args, bicycle=getattr(args, "bicycle", None))
+    data_files = files_of(args.file, options)
     check_outputs([out], [args.model, *data_files])
     check_distinct_inputs(data_files)
     with _owned(out):
         model = _model(args.model)
-        runs = _with_input(_load(args), args.input)
+        runs = load_runs(args.file, options)
         if not runs:
             raise ValueError(f"{', '.join(args.file)} hold no runs")
         report = validate_model(model, runs, k_step=args.k_step, coherence_min=args.coherence)

@@ -59,6 +59,7 @@ from scipy.signal import lfilter
 
 from bikeid.controllers.steer_into_lean import SteerIntoLean
 from bikeid.dataset.closed_loop import simulate_run
+from bikeid.dataset.logs import LogOptions
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.dataset.sensors import Channel, Sensors
 from bikeid.dataset.windows import Window
@@ -566,6 +567,20 @@ LOG_LEAD, LOG_GAP = 1.5, 4.5  # s of upright running before the first push; s be
 #: 0.4-0.9 rad/s, like the steer-by-wire pushes (window starts 0.35-0.95 rad/s).
 LOG_IMPULSE = 10.0
 PLANTS = ("independent_linear", "bikeid_nonlinear")
+
+
+def log_options() -> LogOptions:
+    """The :class:`~bikeid.dataset.logs.LogOptions` that read :func:`write_trial_logs`'s CSV
+    logs (the Python form of :func:`log_import_options`; the steer-by-wire bicycle checks
+    their signs).
+
+    Returns
+    -------
+    bikeid.dataset.logs.LogOptions
+    """
+    units = dict(pair.split("=", 1) for pair in LOG_UNITS.split(","))
+    return LogOptions(format="csv", time=LOG_TIME, columns=dict(LOG_COLUMNS), units=units,
+                      flip=LOG_FLIP, bicycle="steer-by-wire")  # fmt: skip
 
 
 def log_import_options() -> list[str]:

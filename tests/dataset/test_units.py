@@ -100,10 +100,10 @@ def test_a_unit_of_another_quantity_is_named_as_such():
 def test_one_table_and_one_parser_behind_every_speed_option():
     """The importers' table is the units table, and identify's --speed is the args type."""
     from bikeid.dataset import importers
-    from bikeid.experiments.cli import args, identify
+    from bikeid.experiments.cli import args, log_options
 
     assert importers.CONVERSIONS is CONVERSIONS
-    assert identify.speed_arg is args.positive_speed
+    assert log_options.speed_arg is args.positive_speed
     for parse in (args.speed_value, args.positive_speed):
         assert parse("14.4KM/H") == pytest.approx(4.0, rel=1e-15)
         assert parse("9 mph") == pytest.approx(9 * 0.44704, rel=1e-15)

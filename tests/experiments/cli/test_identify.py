@@ -427,7 +427,7 @@ def test_pooled_runs_give_one_model(tmp_path):
     1 cm/s sensor noise, km/h): one model at their sample-weighted mean speed (computed here
     from the written files), its eigenvalues within the accuracy goal of the Whipple model
     there; with --speed-tolerance 0 they stay three speeds."""
-    from bikeid.experiments.cli.identify import pool_speeds
+    from bikeid.dataset.logs import pool_speeds
     from bikeid.experiments.testbed.accuracy import eigen_tolerance
 
     speeds = (4.146, 4.153, 4.157)
@@ -459,7 +459,7 @@ def test_pooled_runs_give_one_model(tmp_path):
 @pytest.mark.parametrize("text, value", [("14.4km/h", 4.0), ("5m/s", 5.0), ("5", 5.0),
                                          (" 9 km/h ", 2.5)])
 def test_speed_takes_a_unit(text, value):
-    from bikeid.experiments.cli.identify import speed_arg
+    from bikeid.experiments.cli.log_options import speed_arg
 
     assert speed_arg(text) == pytest.approx(value, rel=1e-15)
 

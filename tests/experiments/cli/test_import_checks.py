@@ -116,7 +116,8 @@ def test_range_checks_of_bikeid_files_cannot_be_skipped(logs):
     assert "still run on --format bikeid files" in err
     # the model file records the checks that were skipped, not the range checks that ran
     settings = json.loads((logs / "m.json").read_text())["settings"]
-    assert settings["skipped_checks"] == ["sample-period", "rate-derivative", "informativity"]
+    assert settings["skipped_checks"] == ["sample-period", "rate-derivative", "signs",
+                                          "informativity"]
     rc, _, err = _cli(["measured", "fit", "--format", "sbw", "--data", "nowhere", "--out",
                        "f.json", "--skip-check", "rate-bounds"], logs)  # fmt: skip
     assert rc == 3 and "applies to --format csv or hdf5" in err, err
@@ -144,8 +145,8 @@ def test_the_toppling_rate_check_of_decays_refuses_then_skips_with_rate_bounds()
     first and the skip, not run with rate-bounds skipped (the reader notes the skip)."""
     import dataclasses
 
-    from bikeid.experiments.cli.measured import check_decay_rates
     from bikeid.ident.effects.experiment_model import ExperimentModel
+    from bikeid.ident.effects.log_decays import check_decay_rates
     from bikeid.ident.effects.synthetic_decays import synthetic_windows
     from bikeid.sim.errors import InputError
     from bikeid.sim.parameters import steer_by_wire
