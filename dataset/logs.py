@@ -67,8 +67,6 @@ FORMATS = {
 IMPORT_FORMATS = ("csv", "hdf5")
 #: File name endings read as CSV text when columns are given (a ``.csv`` is never HDF5).
 TABLE_SUFFIXES = (".csv", ".txt", ".csv.gz", ".txt.gz")
-#: A stretch is dropped when its speed changes by more than the tolerance along it [-]
-#: (a linear trend fitted to v; the model's speed would not describe it).
 Note = Callable[[str], None]
 
 
@@ -378,18 +376,20 @@ def _split(runs: list[Run], sources: list[str], o: LogOptions, note: Note
                 )
         kept = []
         for p in parts:
-            change = _trend(p)
-            if tol > 0 and change > tol:
+            change, limit = _trend(p), min(tol, SPEED_RANGE * p.speed)
+            if tol > 0 and change > limit:
                 note(f"{src} [{p.t[0]:.1f}..{p.t[-1]:.1f} s]: dropped: its speed changes "
-                     f"{change:.3g} m/s along it (a linear trend), more than --speed-tolerance "
-                     f"{tol:g} m/s; a model at one speed would not describe it")  # fmt: skip
+                     f"{change:.3g} m/s along it (a linear trend), more than {limit:.3g} m/s "
+                     f"(--speed-tolerance {tol:g} m/s or {100 * SPEED_RANGE:g} % of its "
+                     f"{p.speed:.3g} m/s): the bicycle was changing speed, and a model at one "
+                     "speed would not describe it")  # fmt: skip
                 continue
             kept.append(p)
         if not kept:
             raise InputError(
-                f"{src}: every constant-speed stretch changes speed by more than "
-                f"--speed-tolerance {tol:g} m/s along it (the treadmill or rider was changing "
-                "speed); cut a steady part with --start/--stop or raise --speed-tolerance"
+                f"{src}: every stretch changes speed along it by more than --speed-tolerance "
+                f"{tol:g} m/s or {100 * SPEED_RANGE:g} % of its speed (the treadmill or rider "
+                "was changing speed); cut a part at steady speed with --start/--stop"
             )
         if split:
             spans = ", ".join(f"{p.t[0]:.1f}..{p.t[-1]:.1f} s at {p.speed:.3g} m/s"

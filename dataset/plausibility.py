@@ -73,15 +73,18 @@ _DEG = 180.0 / math.pi
 #: (factor of rate over derivative, the likely mistake, the fix).
 _MISTAKES = (
     (1000.0, "the time column is in milliseconds but read as seconds",
-     "give its unit: --units t=ms (or, if the time is right, check both signals' units)"),
+     "give its unit: --units t=ms, units={{'t': 'ms'}} in Python (or, if the time is right, "
+     "check both signals' units)"),
     (1e-3, "the time column is in seconds but declared as milliseconds",
-     "drop t=ms from --units"),
+     "drop t=ms from --units (units= in Python)"),
     (_DEG, "{rate} is in deg/s declared as rad/s, or {angle} in rad declared as deg",
-     "--units {rate}=deg/s (or remove {angle}=deg)"),
+     "give --units {rate}=deg/s, units={{'{rate}': 'deg/s'}} in Python (or remove {angle}=deg)"),
     (1.0 / _DEG, "{angle} is in degrees declared as radians, or {rate} in rad/s declared as "
-     "deg/s", "--units {angle}=deg (or remove {rate}=deg/s)"),
+     "deg/s", "give --units {angle}=deg, units={{'{angle}': 'deg'}} in Python (or remove "
+     "{rate}=deg/s)"),
     (-1.0, "one of {rate} and {angle} has the opposite sign",
-     "--flip the one logged positive to the left (bikeid: positive to the right)"),
+     "--flip the one logged positive to the left, flip=[...] in Python (bikeid: positive to "
+     "the right)"),
 )  # fmt: skip
 
 
@@ -158,13 +161,14 @@ def check_run(run: Any, source: str, skip: Iterable[str] = ()) -> None:
     if "sample-period" not in skip and not (lo * (1 - 1e-9) <= dt <= hi * (1 + 1e-9)):
         duration = dt * (run.n - 1)
         hint = ("the time column is probably in milliseconds read as seconds: give --units "
-                "t=ms" if dt > hi else "the time column is probably in seconds declared as "
-                "milliseconds (drop t=ms), or in microseconds: resample or rescale it")
+                "t=ms, units={'t': 'ms'} in Python" if dt > hi else "the time column is "
+                "probably in seconds declared as milliseconds (drop t=ms), or in microseconds: "
+                "resample or rescale it")  # fmt: skip
         raise InputError(
             f"{source}: sample period {dt:.6g} s ({duration:.6g} s for {run.n} samples) is "
             f"outside the {lo:g}..{hi:g} s a bicycle logger produces "
-            f"(sim.conventions.SAMPLE_PERIOD); {hint} (or --skip-check sample-period for a "
-            "log you know is sampled so)"
+            f"(sim.conventions.SAMPLE_PERIOD); {hint} (or --skip-check sample-period, "
+            "skip=['sample-period'], for a log you know is sampled so)"
         )  # fmt: skip
     if "rate-derivative" in skip:
         return
@@ -180,8 +184,9 @@ def check_run(run: Any, source: str, skip: Iterable[str] = ()) -> None:
         _, what, fix = found
         raise InputError(
             f"{source}: {rate} is {factor:.4g} x d({angle})/dt (correlation {corr:.3f}; 1 "
-            f"expected): {what.format(rate=rate, angle=angle)}; fix with "
-            f"{fix.format(rate=rate, angle=angle)} (or --skip-check rate-derivative)"
+            f"expected): {what.format(rate=rate, angle=angle)}; "
+            f"{fix.format(rate=rate, angle=angle)} (or --skip-check rate-derivative, "
+            "skip=['rate-derivative'])"
         )
 
 

@@ -21,7 +21,7 @@ import hashlib
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -562,6 +562,7 @@ class Run:
         jitter: float = JITTER,
         speed_range: float = SPEED_RANGE,
         skip: Iterable[str] = (),
+        bicycle: Any = None,
     ) -> Run:
         """A run from a table in memory (a pandas DataFrame or any look-alike).
 
@@ -595,8 +596,12 @@ class Run:
         speed_range : float, default 0.10
             Largest allowed speed range relative to the mean speed [-].
         skip : iterable of str, optional
-            Range checks not to run (:data:`BOUND_CHECKS`), for data you know are odd;
-            recorded in ``meta["import"]["skipped_checks"]``.
+            Checks not to run (:data:`SKIPPABLE_CHECKS`: the range checks, ``sample-period``,
+            ``rate-derivative``, ``signs``), for data you know are odd; recorded in
+            ``meta["import"]["skipped_checks"]``.
+        bicycle : str or BicycleParameters, optional
+            The nominal bicycle: the relative signs of roll, steer and torque are checked
+            against its equations of motion (:mod:`bikeid.dataset.signs`).
 
         Returns
         -------
@@ -642,10 +647,11 @@ class Run:
         for c in wanted:
             h.update(np.ascontiguousarray(data[c], dtype="<f8").tobytes())
         table = Table(label, data, lambda i: f"row {i + 2}", "dataframe", None, h.hexdigest())
-        return cls.from_table(
+        run = cls.from_table(
             table, columns, units, flipped, time=time, speed=speed, dt=dt, meta=meta,
             jitter=jitter, speed_range=speed_range, skip=skip,
         )  # fmt: skip
+        return _checked(run, label, skip, bicycle)
 
     @classmethod
     def from_arrays(
@@ -661,13 +667,17 @@ class Run:
         meta: Mapping[str, Any] | None = None,
         name: str = "arrays",
         skip: Iterable[str] = (),
+        bicycle: Any = None,
     ) -> Run:
         """A run from numpy arrays with your own signal names, units and signs.
 
         The arrays go through the checks of every import (:meth:`from_table`): uniform
         sampling (each step within 1 % of the median), ``dt`` if given, finite values, units
         converted to SI, ``flip`` signals negated, the physical ranges of
-        :data:`bikeid.sim.conventions.PLAUSIBLE`.
+        :data:`bikeid.sim.conventions.PLAUSIBLE`; then the checks of the loader
+        (:mod:`bikeid.dataset.plausibility`): the sample period (a time in ms given as s is
+        refused) and each rate against the derivative of its angle (units, single flips);
+        with ``bicycle``, the relative signs against its equations (a mirrored axis).
 
         Parameters
         ----------
@@ -694,8 +704,10 @@ class Run:
         name : str, optional
             What messages call the data.
         skip : iterable of str, optional
-            Range checks not to run (:data:`BOUND_CHECKS`), recorded in
+            Checks not to run (:data:`SKIPPABLE_CHECKS`), recorded in
             ``meta["import"]["skipped_checks"]``.
+        bicycle : str or BicycleParameters, optional
+            The nominal bicycle whose equations check the signs (default: not checked).
 
         Returns
         -------
@@ -715,7 +727,7 @@ class Run:
         columns = dict(mapping) if mapping is not None else {k: k for k in names}
         return cls.from_dataframe(ArrayTable({time: t, **names}), columns, units, time=time,
                                   speed=speed, dt=dt, meta=meta, flip=flip, name=name,
-                                  skip=skip)  # fmt: skip
+                                  skip=skip, bicycle=bicycle)  # fmt: skip
 
     @classmethod
     def from_timeresponse(
@@ -728,6 +740,7 @@ class Run:
         flip: Iterable[str] = (),
         meta: Mapping[str, Any] | None = None,
         skip: Iterable[str] = (),
+        bicycle: Any = None,
     ) -> Run:
         """A run from python-control's ``TimeResponseData`` (one trace).
 
@@ -753,7 +766,9 @@ class Run:
         meta : mapping, optional
             Extra JSON-serializable metadata.
         skip : iterable of str, optional
-            Range checks not to run (:data:`BOUND_CHECKS`).
+            Checks not to run (:data:`SKIPPABLE_CHECKS`).
+        bicycle : str or BicycleParameters, optional
+            The nominal bicycle whose equations check the signs (default: not checked).
 
         Returns
         -------
@@ -790,7 +805,36 @@ class Run:
                      if k in (mapping or signals)}  # fmt: skip
         return cls.from_arrays(t, signals, mapping, units, speed=speed, dt=params.get("dt"),
                                flip=flip, meta=meta, name="time response",
-                               skip=skip)  # fmt: skip
+                               skip=skip, bicycle=bicycle)  # fmt: skip
+
+
+def _checked(run: Run, source: str, skip: Iterable[str], bicycle: Any) -> Run:
+    """The loader's data checks on a run built in Python (:meth:`Run.from_dataframe` and the
+    constructors on it), as ``bikeid identify`` runs them on files: sample period, rates vs
+    angles, and with ``bicycle`` the relative signs; skipped ones recorded in the meta."""
+    import warnings
+
+    from .plausibility import check_run
+
+    skip = {skip} if isinstance(skip, str) else set(skip)
+    check_run(run, source, skip)
+    notes = []
+    if bicycle is not None and "signs" not in skip:
+        from .logs import nominal_bicycle
+        from .signs import check_signs
+
+        notes = check_signs([run], nominal_bicycle(bicycle), source)
+        for msg in notes:
+            warnings.warn(msg, UserWarning, stacklevel=4)
+    data_skips = sorted(skip & {"sample-period", "rate-derivative", "signs"})
+    if not (data_skips or notes):
+        return run
+    imp = dict(run.meta.get("import", {}))
+    if data_skips:
+        imp["skipped_checks"] = sorted({*imp.get("skipped_checks", []), *data_skips})
+    if notes:
+        imp["notes"] = notes
+    return replace(run, meta={**run.meta, "import": imp})
 
 
 def _where(i: int, rows) -> str:

@@ -61,7 +61,8 @@ SMOOTHING = 0.25
 #: weave (~0.3-0.5 s) and the smoothing window.
 HAC_BANDWIDTH = 2.0
 #: The two equivalent fixes of a mirrored roll axis.
-FIXES = "--flip phi,phidot, or equivalently --flip delta,deltadot,T_delta"
+FIXES = ("--flip phi,phidot (flip=['phi', 'phidot'] in Python), or equivalently --flip "
+         "delta,deltadot,T_delta")
 
 
 @dataclass(frozen=True)
@@ -222,13 +223,14 @@ def check_signs(
                 f"{source}: roll and steer have opposite signs to {p.name}'s roll equation "
                 f"(sign coefficient {c.coefficient:.3g} +- {c.std_error:.2g}, +1 expected): "
                 f"the roll axis is probably logged positive to the left; fix with {FIXES} "
-                "(or --skip-check signs)"
+                "(or --skip-check signs, skip=['signs'])"
             )
         if c.verdict == "mirrored":
             raise InputError(
                 f"{source}: the steer torque has the opposite sign to {p.name}'s steer "
                 f"equation (sign coefficient {c.coefficient:.3g} +- {c.std_error:.2g}, +1 "
-                "expected): fix with --flip T_delta (or --skip-check signs)"
+                "expected): fix with --flip T_delta, flip=['T_delta'] in Python (or --skip-check "
+                "signs, skip=['signs'])"
             )
         if c.verdict == "undecided":
             what = ("roll vs steer" if c.equation == "roll" else "steer torque vs angles")

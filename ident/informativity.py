@@ -284,9 +284,23 @@ class Informativity:
                 "informative": self.informative, "cause": self.cause}  # fmt: skip
 
 
-_FIX = ("add an external steer-torque dither or reference (broadband, independent of the "
-        "states) to the experiment, pool more runs, or fit a grey-box model with fewer free "
-        "entries (--method greybox --free ...)")  # fmt: skip
+#: What to do with feedback-only data: no choice of free parameters helps (the data show the
+#: loop, not the plant); free decays after pushes are what ``bikeid measured fit`` fits.
+_FEEDBACK_FIX = ("if the logs hold free decays after pushes, fit them with bikeid measured fit "
+                 "(free decays under the known controller law); otherwise record with an "
+                 "external steer-torque dither or reference (broadband, independent of the "
+                 "states)")  # fmt: skip
+
+
+def _fewer_fix(order: int, n_params: int) -> str:
+    """The fix of too few excited frequencies: the parameters these data can carry, if any."""
+    most = order // ORDER_PER_PARAMETER
+    excite = "excite more frequencies (a broadband dither or a multisine)"
+    if 0 < most < n_params:
+        return (f"fit at most {most} free parameter{'s' if most > 1 else ''} (a grey-box model, "
+                f"--method greybox --free with {most} entr{'ies' if most > 1 else 'y'}), or "
+                f"{excite}")  # fmt: skip
+    return excite
 
 
 def assess(
@@ -360,15 +374,14 @@ def assess(
         cause = (f"the input {input_name} excites {input_order // 2} distinct frequenc"
                  f"{'y' if input_order // 2 == 1 else 'ies'} (order of excitation "
                  f"{input_order}; a single sinusoid has 2), fewer than the model's {n_params} "
-                 f"free parameters need; excite more frequencies (a broadband dither or a "
-                 f"multisine), pool runs at other frequencies, or fit a grey-box model with "
-                 f"fixed entries")  # fmt: skip
+                 f"free parameters need; {_fewer_fix(input_order, n_params)}, or pool runs "
+                 "at other frequencies")  # fmt: skip
     elif len(feedback) == n:
         worst = min(r2s)
         cause = (f"the input {input_name} is feedback only: a linear law of the measured "
                  f"states reproduces {100 * worst:.4g} % or more of its variance in "
                  f"{'the run' if n == 1 else f'all {n} runs'} (threshold {100 * threshold:g} "
-                 f"%), so the data show the closed loop, not the plant; {_FIX}")  # fmt: skip
+                 f"%), so the data show the closed loop, not the plant; {_FEEDBACK_FIX}")
     elif len(_distinct([runs[i].speed for i in range(n) if i not in feedback],
                        speed_tolerance)) < min(min_speeds, len(_distinct([r.speed for r in runs],
                                                                           speed_tolerance))):
@@ -377,12 +390,13 @@ def assess(
         cause = (f"only the runs at {', '.join(f'{v:g}' for v in excited)} m/s carry "
                  f"excitation (the input of the others is feedback only: R^2 >= "
                  f"{100 * threshold:g} %), and a model over speed needs excited runs at "
-                 f"{min_speeds} or more speeds; {_FIX}")  # fmt: skip
+                 f"{min_speeds} or more speeds; fit the excited speeds on their own (one "
+                 "model per speed), or record dithered runs at more speeds")  # fmt: skip
     elif order < need:
         cause = (f"the part of the input {input_name} that no state law reproduces excites "
                  f"{order // 2} distinct frequenc{'y' if order // 2 == 1 else 'ies'} (order "
                  f"of excitation {order}), fewer than the model's {n_params} free parameters "
-                 f"need; {_FIX}")  # fmt: skip
+                 f"need; {_fewer_fix(order, n_params)}")  # fmt: skip
     return Informativity(int(n_params), tuple(r2s), feedback, input_order, order, threshold,
                          cause)  # fmt: skip
 

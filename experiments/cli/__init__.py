@@ -20,6 +20,7 @@ import re
 import signal
 import sys
 import traceback
+import warnings
 
 from bikeid.sim.errors import (
     EXIT_INPUT,
@@ -217,7 +218,12 @@ def _main(argv: list[str] | None) -> int:
         return EXIT_USAGE
     try:
         try:
-            return int(args.func(args) or 0)
+            with warnings.catch_warnings():
+                if not debug:  # no raw warning reaches a user: each becomes one note
+                    warnings.showwarning = _warning_note
+                    warnings.simplefilter("default")
+                    _seen_warnings.clear()
+                return int(args.func(args) or 0)
         finally:  # progress bars end before any error line (experiments.progress)
             if "bikeid.experiments.progress" in sys.modules:
                 sys.modules["bikeid.experiments.progress"].close_all()
@@ -242,6 +248,40 @@ def _main(argv: list[str] | None) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERNAL
+
+
+#: What a warning of each category means for the result (the note printed with it).
+WARNING_CONSEQUENCES = (
+    (RuntimeWarning, "a numerical step met an overflow, a division by zero or an invalid "
+     "value; the checks after it decide whether the result stands (a failed check refuses "
+     "it); --debug shows where"),
+    (DeprecationWarning, "a library bikeid uses will change; this result is not affected"),
+    (FutureWarning, "a library bikeid uses will change; this result is not affected"),
+    (Warning, "a library's caution about its own input; check the result that depends on "
+     "it, or rerun with --debug to see where"),
+)  # fmt: skip
+_seen_warnings: set[tuple[type, str]] = set()
+
+
+def _short_path(filename: str) -> str:
+    """A warning's source file without the installation's folders (``numpy/linalg/...``)."""
+    for marker in ("site-packages/", "dist-packages/"):
+        if marker in filename:
+            return filename.split(marker, 1)[1]
+    parts = filename.replace("\\", "/").split("/")
+    return "/".join(parts[-2:])
+
+
+def _warning_note(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` of the command line: one ``note:`` line per distinct warning,
+    saying what it means for the result (:data:`WARNING_CONSEQUENCES`), no source line."""
+    text = str(message).strip().splitlines()[0] if str(message).strip() else category.__name__
+    if (category, text) in _seen_warnings:
+        return
+    _seen_warnings.add((category, text))
+    consequence = next(c for k, c in WARNING_CONSEQUENCES if issubclass(category, k))
+    print(f"note: {text} ({_short_path(str(filename))}): {consequence}", file=sys.stderr,
+          flush=True)  # fmt: skip
 
 
 def _report(prog: str, exc: BaseException, code: int, debug: bool, text: str = "") -> int:

@@ -11,11 +11,14 @@ Front door:
 - :func:`fit_model`: the whole pipeline on decay windows (nominal calibration, selection,
   joint fit), returning a :class:`FittedModel`-like record that saves to JSON.
 - :func:`evaluate`: before/after errors of a model on held-out decays.
+- :func:`decays_from_logs`: the free-decay windows of anyone's logs (the one loader,
+  :func:`bikeid.dataset.logs.load_runs`, with every check) and their nominal experiment.
 - :class:`ExperimentModel`: the plant of the experiment (linear or nonlinear Whipple
   bicycle, its controller or the replayed torque, effects of
   :mod:`bikeid.sim.effect_registry`).
 
-Modules: :mod:`.experiment_model`, :mod:`.library` (the candidate effects and their fit
+Modules: :mod:`.log_decays`, :mod:`.experiment_model`, :mod:`.library` (the candidate
+effects and their fit
 settings), :mod:`.acceptance` (the acceptance rule and its test), :mod:`.fit` (fitting
 effect values, standard errors), :mod:`.nominal_uncertainty`
 (the stated bicycle's uncertainty and its calibration), :mod:`.selection`,
@@ -28,7 +31,16 @@ paired test and verdict) and :mod:`.pipeline` (fit, save, load, evaluate).
 from bikeid.ident.effects.acceptance import AcceptanceRule
 from bikeid.ident.effects.diagnostics import evaluate
 from bikeid.ident.effects.experiment_model import ExperimentModel
+from bikeid.ident.effects.log_decays import ControlLaw, decays_from_logs
 from bikeid.ident.effects.pipeline import fit_model
 from bikeid.ident.effects.selection import select_effects
 
-__all__ = ["AcceptanceRule", "ExperimentModel", "evaluate", "fit_model", "select_effects"]
+__all__ = [
+    "AcceptanceRule",
+    "ControlLaw",
+    "ExperimentModel",
+    "decays_from_logs",
+    "evaluate",
+    "fit_model",
+    "select_effects",
+]
