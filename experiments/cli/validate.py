@@ -257,8 +257,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
     out = check_out_dir(args.out) if args.out else None
     check_input_file(args.model, "--model")
-    taken = reuse_settings(args, dict(read_model_file(args.model).settings or {}))
-    options = log_options(args, bicycle=getattr(args, "bicycle", None))
+    saved = dict(read_model_file(args.model).settings or {})
+    taken = reuse_settings(args, saved)
+    options = log_options(args, bicycle=saved.get("bicycle"))  # a grey-box/direct model's
     data_files = files_of(args.file, options)
     check_outputs([out], [args.model, *data_files])
     check_distinct_inputs(data_files)

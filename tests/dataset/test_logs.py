@@ -108,6 +108,15 @@ def test_the_command_line_refuses_a_mirrored_roll_axis_with_exit_3(real_logs, ca
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "roll axis is probably logged positive to the left" in err
     assert "--flip phi,phidot" in err and "--flip delta,deltadot,T_delta" in err
+    # measured fit reads the same way: refused before any decay is fitted
+    out = Path(left).with_name("fit.json")
+    assert main(["measured", "fit", str(left), *ARGS, "--bicycle", "steer-by-wire", "--out",
+                 str(out), "--quiet"]) == 3  # fmt: skip
+    err = capsys.readouterr().err
+    assert "--flip phi,phidot" in err and not out.exists(), err
+    # without a bicycle, identify says that the signs are unchecked (and fits)
+    assert main(["identify", str(right), *ARGS, "--quiet", "--method", "pem"]) == 0
+    assert "signs of roll, steer and torque are unchecked" in capsys.readouterr().err
 
 
 def test_a_flipped_torque_is_refused_through_the_steer_equation():
