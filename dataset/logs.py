@@ -49,6 +49,8 @@ __all__ = [
     "data_files",
     "import_check_notes",
     "load_runs",
+    "nominal_bicycle",
+    "print_note",
     "pool_runs",
     "pool_speeds",
     "with_input",
@@ -70,7 +72,8 @@ TABLE_SUFFIXES = (".csv", ".txt", ".csv.gz", ".txt.gz")
 Note = Callable[[str], None]
 
 
-def _stderr_note(msg: str) -> None:
+def print_note(msg: str) -> None:
+    """The default ``note``: ``note: MSG`` on stderr."""
     print(f"note: {msg}", file=sys.stderr, flush=True)
 
 
@@ -489,7 +492,7 @@ def load_runs(
     if not files:
         raise InputError("no files given: give run files or logs")
     o = resolve_format(files, options or LogOptions())
-    note = note or _stderr_note
+    note = note or print_note
     if o.format != (options or LogOptions()).format:
         note(f"{Path(files[0]).name}: read as CSV (--columns given; --format csv says so)")
     for msg in import_check_notes(o.skip, o.format, o.no_checks):

@@ -60,7 +60,7 @@ import numpy as np
 
 from bikeid.dataset.decays import load_decays
 from bikeid.dataset.run import Run
-from bikeid.dataset.sbw_logs import DT, data_dir, find_logs, load_log, settled
+from bikeid.dataset.sbw_logs import DT, data_dir, find_logs
 from bikeid.ident import greybox
 from bikeid.ident.direct import ALL_ENTRIES, parse_entry
 from bikeid.ident.effects.before_after import before_after
@@ -707,10 +707,10 @@ def signal_consistency(run: Run, max_lag: int = 30) -> dict[str, dict[str, float
 
 
 def _load(root: Path, kind: str) -> list[Run]:
-    runs = []
-    for p in find_logs(root, kind):
-        runs.append(settled(load_log(p)))
-    return runs
+    """The settled part of each ``kind`` log, through the one loader (every check)."""
+    from bikeid.dataset.logs import LogOptions, load_runs
+
+    return load_runs(find_logs(root, kind), LogOptions(format="sbw", bicycle="steer-by-wire"))
 
 
 def _near(v: float, speeds) -> bool:

@@ -205,12 +205,12 @@ def decays_from_logs(
     """
     from bikeid.dataset.decays import decays_from_runs
     from bikeid.dataset.files import check_distinct_inputs
-    from bikeid.dataset.logs import _stderr_note
+    from bikeid.dataset.logs import print_note
     from bikeid.dataset.sbw_logs import DT, SPEED_CALIBRATION
     from bikeid.ident.effects.experiment_model import ExperimentModel
     from bikeid.sim.parameters import steer_by_wire
 
-    note = note or _stderr_note
+    note = note or print_note
     files = list(files or [])
     sbw = options.format == "sbw"
     if sbw:
