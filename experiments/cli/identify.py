@@ -1047,6 +1047,12 @@ def _withheld(structure, speed_model) -> dict:
             "rejected_speeds": rej, "withheld_speeds": held}  # fmt: skip
 
 
+#: Why a model over speed from a method without intervals (direct) has no critical-speed
+#: intervals: they come from a speed-parameterized canonical model (PEM, grey-box).
+NO_CRITICAL_INTERVALS = ("this method gives none (critical-speed intervals come from "
+                         "--method pem --speed-parameterized or --method greybox)")  # fmt: skip
+
+
 def _critical_to_save(model, iv: dict | None) -> dict:
     """The critical-speed intervals, or why none, saved with a model over speed."""
     from bikeid.ident.linear_model import SpeedDependentModel
@@ -1054,7 +1060,7 @@ def _critical_to_save(model, iv: dict | None) -> dict:
     if not isinstance(model, SpeedDependentModel):
         return {}  # a fixed-speed model has no critical speeds
     if iv is None:
-        return {"critical_speeds_note": "no intervals: the fit has no parameter covariance"}
+        return {"critical_speeds_note": f"no intervals: {NO_CRITICAL_INTERVALS}"}
     if iv.get("withheld"):
         w = iv["withheld"]
         return {"critical_speeds_note": f"{w['what']}\nfix: {w['fix']}"}
@@ -1078,7 +1084,7 @@ def _critical_lines(crit: dict, iv: dict | None, speeds: list[float]) -> list[st
     lo_v, hi_v = min(speeds), max(speeds)
     cells = (iv or {}).get("critical_speeds") or {}
     if iv is None:
-        reason = "the fit has no parameter covariance"
+        reason = NO_CRITICAL_INTERVALS
     elif iv.get("withheld"):
         reason = "withheld, the data reject the model over speed (note below)"
     else:

@@ -621,3 +621,26 @@ def test_withheld_counts_rejecting_speeds_against_all():
     assert "(phi), p = 1e-09" in w["what"]
     assert w["fix"] == FIX_PER_SPEED
     assert (w["rejected_speeds"], w["withheld_speeds"]) == ([3.0], [3.0, 4.0, 5.0])
+
+
+def test_direct_model_over_speed_prints_its_critical_speeds_and_why_no_interval(
+    sweeps, capsys, tmp_path
+):
+    """Least squares gives one model over all speeds, so it has critical speeds: printed
+    (each equal to the saved model's own, recomputed after loading), saved, and said to have
+    no interval (the method gives none).  On noise-free data the weave speed is within
+    0.15 m/s of the benchmark's 4.2924 (the tolerance of the PEM test above)."""
+    from bikeid.ident.model_file import read_model_file
+
+    _, ideal = sweeps
+    target = tmp_path / "direct.json"
+    assert main(["identify", "--method", "direct", str(ideal), "--out", str(target)]) == 0
+    rows = _critical_rows(capsys.readouterr().out)
+    saved = read_model_file(target)
+    again = saved.model.critical_speeds()
+    for name in ("v_d", "v_w", "v_c"):
+        assert saved.critical_speeds[name] == again[name]
+        assert _value_text(again[name]) in rows[name]
+    assert "no interval: this method gives none" in rows["v_w"]
+    assert saved.critical_speeds["note"].startswith("no intervals: this method gives none")
+    assert abs(again["v_w"] - critical_speeds(benchmark())["v_w"]) < 0.15
