@@ -644,3 +644,24 @@ def test_direct_model_over_speed_prints_its_critical_speeds_and_why_no_interval(
     assert "no interval: this method gives none" in rows["v_w"]
     assert saved.critical_speeds["note"].startswith("no intervals: this method gives none")
     assert abs(again["v_w"] - critical_speeds(benchmark())["v_w"]) < 0.15
+
+
+def test_the_same_refusal_at_several_speeds_is_one_note(monkeypatch):
+    """Per-speed fits refused alike (e.g. each on its predictor's stability boundary): one
+    note naming how many speeds, not one line per speed; every speed without interval."""
+    from bikeid.experiments.cli.identify import _intervals
+    from bikeid.ident import uncertainty
+    from bikeid.sim.errors import UntrustworthyResult
+
+    def refuse(model, *args, **kwargs):
+        raise UntrustworthyResult(f"the fit ended on the boundary ({model})")
+
+    monkeypatch.setattr(uncertainty, "eigenvalue_intervals", refuse)
+    speeds = [3.0, 4.0, 5.0, 6.0, 7.0]
+    iv = _intervals(dict.fromkeys(speeds, "m"), None, None)
+    assert iv["eigenvalues"] == [None] * 5
+    assert iv["notes"] == ["no eigenvalue intervals at 5 speeds (3-7 m/s): the fit ended on "
+                           "the boundary (m)"]  # fmt: skip
+    iv = _intervals({3.0: "a", 4.0: "b"}, None, None)  # different reasons: one note each
+    assert iv["notes"] == ["no eigenvalue intervals at 3 m/s: the fit ended on the boundary (a)",
+                           "no eigenvalue intervals at 4 m/s: the fit ended on the boundary (b)"]
