@@ -663,5 +663,7 @@ def test_the_same_refusal_at_several_speeds_is_one_note(monkeypatch):
     assert iv["notes"] == ["no eigenvalue intervals at 5 speeds (3-7 m/s): the fit ended on "
                            "the boundary (m)"]  # fmt: skip
     iv = _intervals({3.0: "a", 4.0: "b"}, None, None)  # different reasons: one note each
-    assert iv["notes"] == ["no eigenvalue intervals at 3 m/s: the fit ended on the boundary (a)",
-                           "no eigenvalue intervals at 4 m/s: the fit ended on the boundary (b)"]
+    assert iv["notes"] == [
+        "no eigenvalue intervals at 3 m/s: the fit ended on the boundary (a)",
+        "no eigenvalue intervals at 4 m/s: the fit ended on the boundary (b)",
+    ]
