@@ -6,7 +6,10 @@ recursively from ``api.rst``, so no module is listed here: a module added, moved
 is documented on the next build. ``tests/test_docs_build.py`` builds a copy of this folder
 with ``-W`` (every warning is an error), so a docstring that does not render fails the tests.
 
-The Markdown guides next to this file (``docs/*.md``) are read on GitHub, not by Sphinx.
+The site's front page (``index.rst``) leads to the README's tour (``tour.md`` includes
+``../README.md``), the Markdown guides (read by ``myst-parser`` as they are written for
+GitHub: the tutorials, identification, uncertainty and measured data first, the others
+under "More guides") and the API reference, with one search over all of them.
 """
 
 from __future__ import annotations
@@ -30,13 +33,16 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.mathjax",
     "numpydoc",
+    "myst_parser",  # the Markdown guides and the README's tour
 ]
 root_doc = "index"
 templates_path = ["_templates"]  # autosummary: a page per function and class
-source_suffix = {".rst": "restructuredtext"}
-# The guides are Markdown for GitHub (no MyST dependency); generated pages and builds are
-# outputs, not sources.
-exclude_patterns = ["_build", "**.md"]
+source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+# Builds are outputs, not sources; every Markdown guide is a page (index.rst lists them).
+exclude_patterns = ["_build"]
+# The README (the tour page) links CHANGELOG.md, a repository file that is no page here;
+# every other link between the README and the guides must resolve (-W).
+nitpick_ignore = [("myst", "CHANGELOG.md")]
 default_role = "code"  # `x` in a docstring renders as code, as numpydoc writers intend
 
 # -- autosummary / autodoc -----------------------------------------------------------------
@@ -66,7 +72,7 @@ numpydoc_validation_checks: set[str] = set()  # tests/test_docstrings.py is the 
 
 # -- HTML ----------------------------------------------------------------------------------
 html_theme = "alabaster"
-html_title = f"bikeid {release} API reference"
+html_title = f"bikeid {release}: tour, guides and API reference"
 html_static_path: list[str] = []
 # No global navigation tree in the sidebar: with one page per function and class it lists
 # ~700 entries on every page (a fifth of the write time, and unreadable); pages link up via

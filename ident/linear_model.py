@@ -19,7 +19,9 @@ defined over speed from :class:`SpeedDependentModel`, so they share one API:
   has one (:func:`mode_names`), in ``.modes``.
 - Speed-dependent models add ``eigenvalues_vs_speed(speeds)`` (tracked, labelled branches,
   :func:`bikeid.sim.linear.eigenvalues_vs_speed`) and ``critical_speeds(vmax=30.0)``
-  (:func:`bikeid.sim.linear.critical_speeds`).
+  (:func:`bikeid.sim.linear.critical_speeds`).  Critical speeds belong to models over speed:
+  a fixed-speed model (one speed's fit) refuses both with an
+  :class:`~bikeid.sim.errors.InputError` that names the models which have them.
 
 ``speed`` is in m/s.  A model defined over speed needs it; a fixed-speed model takes
 ``None`` or its own speed (anything else is refused: it says nothing about other speeds).
@@ -328,6 +330,36 @@ class LinearModel:
         v = _resolve_speed(self, speed)
         lam = sort_eigenvalues(np.linalg.eigvals(self._matrices_at(v)[0]))
         return Eigenvalues(lam, mode_names(lam, self._speed_matrices(), v))
+
+    def eigenvalues_vs_speed(self, speeds: Any) -> EigenSweep:
+        """Refused: a fixed-speed model says nothing about other speeds.
+
+        Raises
+        ------
+        InputError
+            Always, naming the models defined over speed.
+        """
+        raise InputError(_fixed_speed_refusal(self, "eigenvalues_vs_speed"))
+
+    def critical_speeds(self, vmax: float = 30.0) -> dict:
+        """Refused: weave and capsize speeds belong to a model over speed.
+
+        Raises
+        ------
+        InputError
+            Always, naming the models defined over speed.
+        """
+        raise InputError(_fixed_speed_refusal(self, "critical_speeds"))
+
+
+def _fixed_speed_refusal(model: Any, what: str) -> str:
+    """Why a fixed-speed model has no ``what`` and which models do."""
+    return (
+        f"{what}: this {type(model).__name__} was fitted at one speed "
+        f"({float(model.speed):g} m/s) and says nothing about other speeds; {what} belongs "
+        "to a model over speed (pem.fit_speed_model, greybox, direct; bikeid identify "
+        "--speed-parameterized)"
+    )
 
 
 class SpeedDependentModel(LinearModel):

@@ -8,7 +8,7 @@ A saved model is a strict JSON object (no pickle; read back with
      "inputs": ["T_delta"], "outputs": ["phi", "phidot", "delta", "deltadot"],
      "sample_time": 0.005, "speeds": [5.0],
      "model": {...}, "provenance": [{"path": ..., "size": ..., "sha256": ...}],
-     "settings": {...}, "results": {...}}
+     "settings": {...}, "results": {...}, "critical_speeds": {...}}
 
 ``kind`` (:data:`KINDS`) names the model class and the layout of ``model``:
 
@@ -37,6 +37,16 @@ speeds the data covered (null when unknown).
 ``size`` [bytes] and ``sha256`` of its bytes (:func:`file_provenance`).  ``settings`` holds
 the method and its options as given by the caller; ``results`` any further fit results
 (e.g. the effect selection log of ``measured fit``); both are stored verbatim.
+
+``critical_speeds`` (models defined over speed only: speed-parameterized PEM, grey-box,
+direct) holds the model's own answers, so a reader need not refit or recompute them:
+``vmax`` [m/s] (the upper end of the search), ``v_d``, ``v_w``, ``v_c`` [m/s] (null where the
+model has none in (0, vmax]; :func:`bikeid.sim.linear.critical_speeds`),
+``weave_frequency`` [rad/s] at v_w (or null), ``intervals`` (the caller's
+:meth:`bikeid.ident.uncertainty.CriticalSpeedIntervals.to_json`, or null) and ``note`` (why
+there are no intervals, or null).  A fixed-speed model has none (the field is absent), and
+files written before the field existed read back with :attr:`ModelFile.critical_speeds`
+None (``model.critical_speeds()`` recomputes the values).
 
 Version policy: ``version`` is incremented whenever a field changes meaning, unit or
 layout, so that a reader never misreads a file; readers refuse a version they do not know
@@ -129,6 +139,10 @@ class ModelFile:
         Version of bikeid that wrote the file.
     created : str
         Creation time, ISO 8601 with UTC offset.
+    critical_speeds : dict or None
+        For a model over speed: ``vmax``, ``v_d``, ``v_w``, ``v_c`` [m/s] (None where the
+        model has none), ``weave_frequency`` [rad/s], ``intervals`` and ``note`` as saved
+        (module docstring); None for a fixed-speed model or a file written without them.
     """
 
     model: Any
@@ -143,6 +157,7 @@ class ModelFile:
     results: dict = field(default_factory=dict)
     bikeid_version: str = ""
     created: str = ""
+    critical_speeds: dict | None = None
 
 
 # -- provenance --------------------------------------------------------------------------
@@ -399,6 +414,41 @@ def _plain(obj: Any, where: str) -> Any:
     raise TypeError(f"cannot save {where}: {type(obj).__name__} is not a JSON value")
 
 
+#: Upper end [m/s] of the critical-speed search saved with a model over speed (the default
+#: of :meth:`bikeid.ident.linear_model.SpeedDependentModel.critical_speeds`).
+CRITICAL_VMAX = 30.0
+_CRITICAL_NAMES = ("v_d", "v_w", "v_c", "weave_frequency")
+
+
+def _critical_section(
+    model: Any, intervals: Mapping[str, Any] | None, note: str | None
+) -> dict | None:
+    """The ``critical_speeds`` field of a model over speed (None for a fixed-speed model)."""
+    from bikeid.ident.linear_model import SpeedDependentModel
+
+    if not isinstance(model, SpeedDependentModel):
+        if intervals is not None or note is not None:
+            raise ValueError(
+                f"a fixed-speed {type(model).__name__} has no critical speeds: save "
+                "critical_speed_intervals/critical_speeds_note with a model over speed only"
+            )
+        return None
+    try:
+        with np.errstate(all="ignore"):  # a degenerate model: no critical speeds, said so
+            crit = model.critical_speeds(CRITICAL_VMAX)
+    except (np.linalg.LinAlgError, ValueError, ArithmeticError) as exc:
+        crit = {}
+        note = f"{note}; " if note else ""
+        note += f"no critical speeds: the model's matrices give none ({exc})"
+    out: dict = {"vmax": CRITICAL_VMAX}
+    for name in _CRITICAL_NAMES:
+        v = crit.get(name)
+        out[name] = None if v is None or not math.isfinite(v) else float(v)
+    out["intervals"] = None if intervals is None else _plain(dict(intervals), "intervals")
+    out["note"] = None if note is None else str(note)
+    return out
+
+
 def model_json(
     model: Any,
     *,
@@ -406,6 +456,8 @@ def model_json(
     settings: Mapping[str, Any] | None = None,
     results: Mapping[str, Any] | None = None,
     speeds: Sequence[float] | None = None,
+    critical_speed_intervals: Mapping[str, Any] | None = None,
+    critical_speeds_note: str | None = None,
 ) -> str:
     """The text :func:`save_model` writes (same parameters, no file).
 
@@ -421,6 +473,12 @@ def model_json(
         Further fit results (JSON values).
     speeds : sequence of float, optional
         Speeds [m/s] of the data, for kinds that do not record them (direct, experiment).
+    critical_speed_intervals : mapping, optional
+        For a model over speed: its v_w, v_c intervals
+        (:meth:`bikeid.ident.uncertainty.CriticalSpeedIntervals.to_json`), saved beside the
+        critical speeds the model file computes and records itself.
+    critical_speeds_note : str, optional
+        For a model over speed: why there are no intervals (e.g. the data reject it).
 
     Returns
     -------
@@ -432,7 +490,8 @@ def model_json(
     TypeError
         If ``model`` is not one of the saved classes or a setting is not a JSON value.
     ValueError
-        If a model number is NaN or infinite where a finite value is required.
+        If a model number is NaN or infinite where a finite value is required, or critical
+        speed intervals or a note are given with a fixed-speed model.
     """
     import json
 
@@ -454,6 +513,9 @@ def model_json(
         "settings": _plain(dict(settings or {}), "settings"),
         "results": _plain(dict(results or {}), "results"),
     }
+    crit = _critical_section(model, critical_speed_intervals, critical_speeds_note)
+    if crit is not None:
+        obj["critical_speeds"] = crit
     return json.dumps(obj, indent=1, allow_nan=False) + "\n"
 
 
@@ -465,6 +527,8 @@ def save_model(
     settings: Mapping[str, Any] | None = None,
     results: Mapping[str, Any] | None = None,
     speeds: Sequence[float] | None = None,
+    critical_speed_intervals: Mapping[str, Any] | None = None,
+    critical_speeds_note: str | None = None,
 ) -> Path:
     """Write a model file (module docstring), atomically.
 
@@ -483,6 +547,12 @@ def save_model(
         Further fit results stored verbatim (JSON values).
     speeds : sequence of float, optional
         Speeds [m/s] of the data, for kinds that do not record them (direct, experiment).
+    critical_speed_intervals : mapping, optional
+        For a model over speed: its v_w, v_c intervals
+        (:meth:`bikeid.ident.uncertainty.CriticalSpeedIntervals.to_json`), saved beside the
+        critical speeds the model file computes and records itself.
+    critical_speeds_note : str, optional
+        For a model over speed: why there are no intervals (e.g. the data reject it).
 
     Returns
     -------
@@ -494,13 +564,16 @@ def save_model(
     TypeError
         If ``model`` is not one of the saved classes.
     ValueError
-        If ``path`` is not a regular file (a link, folder or device), or a model number is
-        NaN or infinite where a finite value is required.  Nothing is written then.
+        If ``path`` is not a regular file (a link, folder or device), a model number is
+        NaN or infinite where a finite value is required, or critical-speed intervals or a
+        note are given with a fixed-speed model.  Nothing is written then.
     """
     path = check_output_path(path)
     text = model_json(
-        model, provenance=provenance, settings=settings, results=results, speeds=speeds
-    )
+        model, provenance=provenance, settings=settings, results=results, speeds=speeds,
+        critical_speed_intervals=critical_speed_intervals,
+        critical_speeds_note=critical_speeds_note,
+    )  # fmt: skip
     atomic_write_text(path, text)
     return path
 
@@ -920,7 +993,31 @@ def model_from_text(text: str, where: str = "model file") -> ModelFile:
         results=results,
         bikeid_version=r.text(obj, "bikeid_version", ""),
         created=r.text(obj, "created", ""),
+        critical_speeds=_read_critical(r, obj, model),
     )
+
+
+def _read_critical(r: _Reader, obj: dict, model: Any) -> dict | None:
+    """The saved ``critical_speeds`` (None when absent: a fixed-speed model, an older file)."""
+    from bikeid.ident.linear_model import SpeedDependentModel
+
+    sec = obj.get("critical_speeds")
+    if sec is None:
+        return None
+    if not isinstance(model, SpeedDependentModel):
+        raise r.fail("critical_speeds", f"is given for a fixed-speed {type(model).__name__}, "
+                     "which has none (edited by hand?)")  # fmt: skip
+    out: dict = {"vmax": r.number(sec, "vmax", "critical_speeds.")}
+    for name in _CRITICAL_NAMES:
+        v = r.number(sec, name, "critical_speeds.", nullable=True)
+        out[name] = None if math.isnan(v) else v
+    intervals, note = sec.get("intervals"), sec.get("note")
+    if intervals is not None and not isinstance(intervals, dict):
+        raise r.fail("critical_speeds.intervals", "must be an object or null")
+    if note is not None and not isinstance(note, str):
+        raise r.fail("critical_speeds.note", "must be a string or null")
+    out["intervals"], out["note"] = intervals, note
+    return out
 
 
 def read_model_file(path: str | os.PathLike) -> ModelFile:

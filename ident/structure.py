@@ -107,10 +107,14 @@ REJECTED_NOTE = (
 #: The fix of a rejected fixed-speed model, and of a rejected model over speed.
 FIX_FIXED = ("shorter or less aggressive records (smaller roll amplitude), or a model with "
              "the missing effect")  # fmt: skip
-FIX_OVER_SPEED = ("fit each speed alone (per-speed PEM: bikeid identify without "
-                  "--speed-parameterized) and compare, record longer so that no per-speed fit "
-                  "ends on its predictor's stability boundary, or use smaller roll "
-                  "amplitudes")  # fmt: skip
+#: The fixes of a rejected model over speed one at a time, for a caller that names the one
+#: that applies (``bikeid identify``: a longer record where a per-speed fit ended on its
+#: predictor's stability boundary, else the per-speed fit, which these data allow).
+FIX_PER_SPEED = ("fit each speed alone (per-speed PEM: bikeid identify without "
+                 "--speed-parameterized) and compare")  # fmt: skip
+FIX_LONGER = "record longer so that no per-speed fit ends on its predictor's stability boundary"
+FIX_AMPLITUDE = "use smaller roll amplitudes"
+FIX_OVER_SPEED = f"{FIX_PER_SPEED}, {FIX_LONGER}, or {FIX_AMPLITUDE}"
 #: What a passed check does not show, printed beside the intervals.
 PASSED_NOTE = (
     "the residual tests do not reject the model structure (family level {level:g}); they "

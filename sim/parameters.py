@@ -571,12 +571,23 @@ def _clip_iyy(values: dict[str, float], body: str, bicycle: str) -> None:
     lo, hi = p2 - p1, p1 + p2
     if not lo <= yy <= hi:
         new = min(max(yy, lo), hi)
+        part = {"B": "rear body", "H": "front frame"}.get(body, body)
         warnings.warn(
-            f"bicycleparameters bicycle {bicycle!r}: I{body}yy={yy} breaks the triangle "
-            f"inequality (allowed [{lo:.6g}, {hi:.6g}]); using I{body}yy={new:.6g}",
+            ParameterAdjusted(
+                f"bicycle {bicycle!r}: its measured {part} I{body}yy = {yy:.5g} kg m^2 lies "
+                f"outside the physically possible [{lo:.5g}, {hi:.5g}] (triangle inequality), "
+                f"so bikeid uses I{body}yy = {new:.5g} ({100 * (new - yy) / yy:+.1f} %); "
+                f"I{body}yy is not in the linear model (eigenvalues and critical speeds "
+                "unchanged), only in the nonlinear model's pitch-rate terms"
+            ),
             stacklevel=3,
         )
         values[f"I{body}yy"] = float(new)
+
+
+class ParameterAdjusted(UserWarning):
+    """A shipped bicycle's value was moved to make it physical; the message says which, by
+    how much, and what it changes (commands print it as a note)."""
 
 
 def from_file(path: str | Path) -> BicycleParameters:

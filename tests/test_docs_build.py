@@ -1,7 +1,9 @@
-"""The API reference builds from the docstrings without a single warning.
+"""The site builds without a single warning: front page, the README's tour, the Markdown
+guides (myst-parser) and the API reference from the docstrings, with a working search.
 
 ``docs/api.rst`` points autosummary at ``bikeid`` recursively, so every public module is
-documented without a list to keep up to date. The build runs on a copy of ``docs/`` in a
+documented without a list to keep up to date. The build runs on a copy of ``docs/`` (and of
+the README it includes) in a
 temporary folder (autosummary writes its pages next to the sources, and parallel test
 workers must not share or leave output in the checkout), with ``-W --keep-going``: every
 docutils/numpydoc warning is reported, and any one fails the test.
@@ -34,20 +36,27 @@ def _public_modules() -> set[str]:
     } | {"bikeid"}
 
 
-def _copy_sources(dest: Path) -> Path:
-    """The Sphinx sources (conf.py, reST, templates) without any earlier build output."""
+def _copy_sources(root: Path) -> Path:
+    """The Sphinx sources (conf.py, reST, Markdown guides, templates) without any earlier
+    build output, in ``root/docs``, beside a copy of the README (``docs/tour.md`` includes
+    ``../README.md``)."""
+    dest = root / "docs"
     shutil.copytree(
         DOCS,
         dest,
-        ignore=shutil.ignore_patterns("_build", "generated", "*.md", "__pycache__"),
+        ignore=shutil.ignore_patterns("_build", "generated", "__pycache__"),
     )
+    shutil.copy2(ROOT / "README.md", root / "README.md")
     return dest
 
 
 @pytest.mark.slow  # ~30 s: imports every module and writes ~600 pages
-def test_api_reference_builds_without_warnings(tmp_path):
+def test_site_builds_without_warnings(tmp_path):
+    """The site: front page, the README's tour, the Markdown guides and the API reference,
+    built with ``-W`` (any warning fails), with a search index covering the guides."""
     pytest.importorskip("sphinx")
     pytest.importorskip("numpydoc")
+    pytest.importorskip("myst_parser")
     before = _snapshot(DOCS)
     src = _copy_sources(tmp_path / "src")
     out = tmp_path / "html"
@@ -57,7 +66,8 @@ def test_api_reference_builds_without_warnings(tmp_path):
         + ["-d", str(tmp_path / "doctrees"), str(src), str(out)],
         capture_output=True,
         text=True,
-        timeout=300,  # a hang guard; the build takes ~30 s on the 2-core CI machine
+        timeout=900,  # a hang guard; ~30 s on the idle 2-core CI machine, 10 min measured
+        # on it while six other jobs ran (89 s of CPU): the guard must not fire under load
         cwd=tmp_path,
     )
     elapsed = time.perf_counter() - t0
@@ -68,6 +78,45 @@ def test_api_reference_builds_without_warnings(tmp_path):
     assert not missing, f"modules without an API page: {sorted(missing)}"
     assert "bikeid.sim._whipple_generated" not in pages
     assert _snapshot(DOCS) == before, "the build wrote into the checkout's docs/"
+    _check_front_page_guides_and_search(out)
+
+
+#: The pages the front page leads to first: the README's tour, the guides, the API.
+FRONT = ("tour", "tutorial", "tutorial_own_logs", "identification", "uncertainty", "measured",
+         "api")  # fmt: skip
+
+
+def _check_front_page_guides_and_search(out: Path) -> None:
+    """The front page links the tour, the guides and the API; each guide's page shows its
+    own first heading (read here from the Markdown source); the tour page holds the
+    README's tour; every guide is in the search index (a word of the tutorial found there,
+    stemmed by Sphinx's own English stemmer)."""
+    import json
+    import re
+
+    index = (out / "index.html").read_text(encoding="utf-8")
+    for page in FRONT:
+        assert f'href="{page}.html"' in index, page
+    for md in sorted(DOCS.glob("*.md")):
+        if md.stem == "tour":
+            continue
+        html = (out / f"{md.stem}.html").read_text(encoding="utf-8")
+        title = md.read_text(encoding="utf-8").splitlines()[0].removeprefix("# ")
+        words = re.sub(r"[`*]", "", title).split()[:3]  # the title as text, before markup
+        assert all(w.replace("&", "&amp;") in html for w in words), (md.name, words)
+    tour = re.sub(r"<[^>]+>", "", (out / "tour.html").read_text(encoding="utf-8"))
+    assert "A tour" in tour and "bikeid critical-speeds --bicycle benchmark" in tour
+    text = (out / "searchindex.js").read_text(encoding="utf-8")
+    index_js = json.loads(text[text.index("(") + 1 : text.rindex(")")])
+    docs = index_js["docnames"]
+    assert set(FRONT) <= set(docs) and {p.stem for p in DOCS.glob("*.md")} <= set(docs)
+    from sphinx.search.en import SearchEnglish
+
+    term = SearchEnglish(options={}).stem("treadmill")  # in docs/tutorial.md, line 4
+    assert "treadmill" in (DOCS / "tutorial.md").read_text(encoding="utf-8")
+    hits = index_js["terms"][term]
+    hits = hits if isinstance(hits, list) else [hits]
+    assert docs.index("tutorial") in hits, (term, [docs[i] for i in hits])
 
 
 def _snapshot(folder: Path) -> list[tuple[str, int]]:

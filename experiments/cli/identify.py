@@ -413,15 +413,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
         out["fit_percent"] = _fit_quality(runs, interval_models)
         structure = _structure(runs, interval_models, speed_model, say)
     settings["outputs"] = out["outputs"]  # as fitted (the method's default when not given)
-    results = {"structure_check": structure.to_json()} if structure is not None else None
-    for model, target in saved:
-        save_model(model, target, provenance=provenance, settings=settings, speeds=speeds,
-                   results=results)  # fmt: skip
-    out["model_files"] = [str(t) for _, t in saved]
-    for f in out["model_files"]:
-        say(f"wrote {f}")
-    if notes:
-        out["notes"] = notes
     per_speed = []
     for v in speeds:
         row = {"speed": v, "eigenvalues": eig[v], "modes": list(eig[v].modes)}
@@ -433,6 +424,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
         for row, ei in zip(per_speed, out["intervals"].pop("eigenvalues"), strict=True):
             row["eigenvalue_intervals"] = ei
     out["per_speed"] = per_speed
+    results = {"structure_check": structure.to_json()} if structure is not None else None
+    for model, target in saved:  # a model over speed with its critical speeds' intervals
+        save_model(model, target, provenance=provenance, settings=settings, speeds=speeds,
+                   results=results, **_critical_to_save(model, out.get("intervals")))  # fmt: skip
+    out["model_files"] = [str(t) for _, t in saved]
+    for f in out["model_files"]:
+        say(f"wrote {f}")
+    if notes:
+        out["notes"] = notes
     if args.plot is not None:
         from bikeid.experiments.plots import plot_identified_eigenvalues
 
@@ -470,6 +470,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if "true_eigenvalues" in row:
             fmt = "  ".join(f"{z.real:+.3f}{z.imag:+.3f}j" for z in row["true_eigenvalues"])
             print(f"{'':8s}  true       {fmt}")
+    if out.get("critical_speeds"):  # a model over speed: its answers, intervals or why not
+        for line in _critical_lines(out["critical_speeds"], out.get("intervals"), speeds):
+            print(line)
     if "intervals" in out:
         for line in _interval_lines(out["intervals"]):
             print(line)
@@ -592,7 +595,9 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
     speed-parameterized fit, or a grey-box model's :meth:`speed_model`) or None;
     ``structure`` an :class:`~bikeid.ident.structure.StructureCheck`: no intervals at the
     speeds where the data reject the structure, none of v_w, v_c when the model over speed
-    is rejected (the estimates stand), the verdict under ``"structure"``.
+    is rejected (the estimates stand), the verdict under ``"structure"``.  The reasons go
+    to ``"notes"``: a rejected model over speed as two lines (:func:`_withheld_lines`: what
+    was rejected, the one fix), the same refusal at several speeds as one line.
     """
     from bikeid.ident.uncertainty import (
         check_predictor_interior,
@@ -603,10 +608,18 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
     from bikeid.sim.errors import InputError, UntrustworthyResult
 
     out: dict = {"level": 0.95, "calibration": INTERVAL_CALIBRATION, "eigenvalues": []}
+    notes: list[str] = []
     rejected = set(structure.withheld_speeds) if structure is not None else set()
+    over_speed_rejected = bool(speed_model is not None and structure is not None
+                               and structure.speed_model_rejected)  # fmt: skip
     if structure is not None:
         out["structure"] = structure.to_json()
-        out.setdefault("notes", []).append(structure.note())
+        if over_speed_rejected:
+            out["withheld"] = _withheld(structure, speed_model)
+            notes += [out["withheld"]["what"], f"fix: {out['withheld']['fix']}"]
+        else:
+            notes.append(structure.note())
+    refused: dict[str, list[float]] = {}  # the same refusal at several speeds: one note
     for v, m in models.items():
         try:  # a fit on its predictor's stability boundary has no trustworthy interval
             if round(v, 6) in rejected:  # nor has a structure the data reject: bias
@@ -616,17 +629,128 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
                 out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
         except (InputError, UntrustworthyResult) as exc:  # the estimate stands, no interval
             out["eigenvalues"].append(None)
-            out.setdefault("notes", []).append(f"no eigenvalue intervals at {v:g} m/s: {exc}")
-    if speed_model is not None and structure is not None and structure.speed_model_rejected:
+            refused.setdefault(str(exc), []).append(v)
+    notes += [f"no eigenvalue intervals at {_speed_list(at)}: {why}"
+              for why, at in refused.items()]  # fmt: skip
+    if over_speed_rejected:
         out["critical_speeds"] = None
-        out["critical_speeds_note"] = "withheld: the model over speed is rejected (note below)"
+        out["critical_speeds_note"] = "withheld: the data reject the model over speed (note)"
     elif speed_model is not None:
         try:
             out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
         except (InputError, UntrustworthyResult) as exc:  # e.g. a tangential crossing
             out["critical_speeds"] = None
             out["critical_speeds_note"] = str(exc)
+    if notes:
+        out["notes"] = notes
     return out
+
+
+def _speed_list(speeds: list[float]) -> str:
+    """``5 m/s``, ``3, 4 m/s`` or, beyond four, ``29 speeds (1-15 m/s)``."""
+    if len(speeds) <= 4:
+        return ", ".join(f"{v:g}" for v in speeds) + " m/s"
+    return f"{len(speeds)} speeds ({min(speeds):g}-{max(speeds):g} m/s)"
+
+
+def _withheld(structure, speed_model) -> dict:
+    """Why a model over speed has no intervals: what was rejected, and the one fix.
+
+    Parameters
+    ----------
+    structure : ident.structure.StructureCheck
+        The verdict, with ``speed_model_rejected`` True.
+    speed_model : SpeedCanonicalModel
+        The model over speed (its ``per_speed`` fits, if any, decide the fix).
+
+    Returns
+    -------
+    dict
+        ``what`` (one line: the speeds whose tests reject counted against all tested
+        speeds, the causes of :meth:`~bikeid.ident.structure.StructureCheck.causes`, what
+        is withheld), ``fix`` (the one remedy of :mod:`bikeid.ident.structure` that
+        applies: a longer record where a per-speed fit ended on its predictor's stability
+        boundary, where neither it nor its intervals can be trusted; else the per-speed
+        fit, which these data allow), ``rejected_speeds`` and ``withheld_speeds`` [m/s].
+    """
+    from bikeid.ident.structure import FIX_LONGER, FIX_PER_SPEED
+    from bikeid.ident.uncertainty import PREDICTOR_BOUNDARY_TOL, predictor_radius
+
+    rej, held = list(structure.rejected_speeds), list(structure.withheld_speeds)
+    span = ", ".join(f"{v:g}" for v in rej) if len(rej) <= 4 else f"{min(rej):g}-{max(rej):g}"
+    what = (f"no 95 % intervals for v_w, v_c or the eigenvalues at any of the {len(held)} "
+            f"speeds (the estimates stand): the data reject the model over speed at "
+            f"{len(rej)} of {len(held)} speeds ({span} m/s; residual tests, family level "
+            f"{structure.level:g}): {structure.causes()}")  # fmt: skip
+    radii = [predictor_radius(m) for m in getattr(speed_model, "per_speed", {}).values()]
+    boundary = any(r is not None and r > 1.0 - PREDICTOR_BOUNDARY_TOL for r in radii)
+    return {"what": what, "fix": FIX_LONGER if boundary else FIX_PER_SPEED,
+            "rejected_speeds": rej, "withheld_speeds": held}  # fmt: skip
+
+
+#: Why a model over speed from a method without intervals (direct) has no critical-speed
+#: intervals: they come from a speed-parameterized canonical model (PEM, grey-box).
+NO_CRITICAL_INTERVALS = ("this method gives none (critical-speed intervals come from "
+                         "--method pem --speed-parameterized or --method greybox)")  # fmt: skip
+
+
+def _critical_to_save(model, iv: dict | None) -> dict:
+    """The critical-speed intervals, or why none, saved with a model over speed."""
+    from bikeid.ident.linear_model import SpeedDependentModel
+
+    if not isinstance(model, SpeedDependentModel):
+        return {}  # a fixed-speed model has no critical speeds
+    if iv is None:
+        return {"critical_speeds_note": f"no intervals: {NO_CRITICAL_INTERVALS}"}
+    if iv.get("withheld"):
+        w = iv["withheld"]
+        return {"critical_speeds_note": f"{w['what']}\nfix: {w['fix']}"}
+    if iv.get("critical_speeds") is not None:
+        return {"critical_speed_intervals": iv["critical_speeds"]}
+    return {"critical_speeds_note": iv.get("critical_speeds_note")}
+
+
+#: What a critical speed is, printed beside it (sim.linear.critical_speeds).
+CRITICAL_MEANING = {"v_d": "weave becomes oscillatory", "v_w": "weave speed",
+                    "v_c": "capsize speed"}  # fmt: skip
+
+
+def _critical_lines(crit: dict, iv: dict | None, speeds: list[float]) -> list[str]:
+    """v_d, v_w, v_c of a model over speed, each with its 95 % interval or why none.
+
+    ``crit`` is the model's :func:`bikeid.sim.linear.critical_speeds` (searched up to
+    30 m/s), ``iv`` the ``intervals`` of :func:`_intervals` (None without a covariance),
+    ``speeds`` the fitted speeds [m/s] (a critical speed outside them is extrapolated).
+    """
+    lo_v, hi_v = min(speeds), max(speeds)
+    cells = (iv or {}).get("critical_speeds") or {}
+    if iv is None:
+        reason = NO_CRITICAL_INTERVALS
+    elif iv.get("withheld"):
+        reason = "withheld, the data reject the model over speed (note below)"
+    else:
+        reason = iv.get("critical_speeds_note") or "none computed"
+    lines = [f"critical speeds of the model over speed (fitted at {lo_v:g}-{hi_v:g} m/s):"]
+    for name, meaning in CRITICAL_MEANING.items():
+        v = crit.get(name)
+        value = f"{v:.3f} m/s" if v is not None else "none below 30 m/s"
+        where = ("" if v is None or lo_v <= v <= hi_v else
+                 f"; {'below' if v < lo_v else 'above'} the fitted speeds: "
+                 "extrapolated")  # fmt: skip
+        c = cells.get(name)
+        if name == "v_d":
+            why = "no interval (bikeid's intervals cover v_w and v_c)"
+        elif c and c.get("interval") is not None:
+            lo, hi = c["interval"]
+            why = f"95 % interval [{lo:.3f}, {hi:.3f}] m/s" + (
+                f" (open: the confidence region holds parameters without {name} in the "
+                "searched range)" if c.get("open") else "")  # fmt: skip
+        elif c:
+            why = "no interval: no parameters in the confidence region have one"
+        else:
+            why = f"no interval: {reason}"
+        lines.append(f"  {name} = {value:>17s}  {meaning}; {why}{where}")
+    return lines
 
 
 def _interval_cells(ei: dict, part: str) -> str:
@@ -635,21 +759,8 @@ def _interval_cells(ei: dict, part: str) -> str:
 
 
 def _interval_lines(iv: dict) -> list[str]:
-    lines = []
-    crit = iv.get("critical_speeds")
-    for name in ("v_w", "v_c") if crit else ():
-        c = crit[name]
-        if c["interval"] is not None:
-            lo, hi = c["interval"]
-            val = f"{c['value']:.3f} m/s" if c["value"] is not None else "none found"
-            lines.append(f"{name} = {val}, 95 % interval [{lo:.3f}, {hi:.3f}] m/s"
-                         + (f" (open: the confidence region holds parameters without {name} "
-                            "in the searched range)" if c.get("open") else ""))  # fmt: skip
-    if iv.get("critical_speeds_note"):
-        lines.append(f"critical-speed intervals: {iv['critical_speeds_note']}")
-    lines += [f"note: {n}" for n in iv.get("notes", [])]
-    lines.append(f"note: {iv['calibration']}")
-    return lines
+    """The notes of :func:`_intervals` and what the intervals are calibrated on."""
+    return [f"note: {n}" for n in iv.get("notes", [])] + [f"note: {iv['calibration']}"]
 
 
 def _names(text: str, allowed: tuple[str, ...], what: str) -> list[str]:

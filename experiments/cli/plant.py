@@ -47,9 +47,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _bicycle(name: str):
-    from bikeid.sim.parameters import by_name
+    """The bicycle of ``--bicycle``; a value bikeid adjusted is said as a note on stderr."""
+    import sys
+    import warnings
 
-    return by_name(name)
+    from bikeid.sim.parameters import ParameterAdjusted, by_name
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ParameterAdjusted)
+        p = by_name(name)
+    for w in caught:
+        if issubclass(w.category, ParameterAdjusted):
+            print(f"note: {w.message}", file=sys.stderr)
+        else:  # not ours to turn into a note: pass it on unchanged
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return p
 
 
 def cmd_eig(args: argparse.Namespace) -> int:

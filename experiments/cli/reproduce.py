@@ -58,15 +58,61 @@ def _run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"bikeid reproduce: writing into {args.out}/", file=sys.stderr)
     bar = terminal_progress("reproduce", unit="stage", quiet=args.quiet)
+    before = user_files(args.out)  # files of an earlier run left unchanged are not counted
     with owned_folder(args.out, "bikeid reproduce"):
         reproduce(
             args.out, quick=args.quick, workers=args.workers, bicycle=args.bicycle,
             log=bar.write if bar else quiet, progress=bar, dask=args.dask,
         )  # fmt: skip
     if not args.quiet:  # the files written, also when stderr is not a terminal
-        from pathlib import Path
-
-        files = sorted(str(p) for p in Path(args.out).rglob("*") if p.is_file())
-        print(f"bikeid reproduce: wrote {len(files)} files: {', '.join(files)}",
+        files = written_files(args.out, before)
+        print(f"bikeid reproduce: wrote {len(files)} file{'s' if len(files) != 1 else ''}: "
+              f"{', '.join(map(str, files))}",
               file=sys.stderr)  # fmt: skip
     return 0
+
+
+def user_files(folder) -> dict:
+    """The files of ``folder`` meant for the user, each with its identity (inode, mtime).
+
+    Parameters
+    ----------
+    folder : str or path-like
+        The output folder (missing: no files).
+
+    Returns
+    -------
+    dict of pathlib.Path to tuple
+        Path -> ``(st_ino, st_mtime_ns, st_size)``; hidden files (the folder's marker and
+        lock, any name starting with ``.``) left out.
+    """
+    from pathlib import Path
+
+    root = Path(folder)
+    if not root.is_dir():
+        return {}
+    out = {}
+    for p in root.rglob("*"):
+        if p.is_file() and not any(part.startswith(".") for part in p.relative_to(root).parts):
+            st = p.stat()
+            out[p] = (st.st_ino, st.st_mtime_ns, st.st_size)
+    return out
+
+
+def written_files(folder, before: dict) -> list:
+    """The files written for the user since ``before`` (:func:`user_files` then).
+
+    Parameters
+    ----------
+    folder : str or path-like
+        The output folder.
+    before : dict
+        :func:`user_files` of the folder before the run: a file left unchanged by this
+        run (same inode, time and size) is not counted.
+
+    Returns
+    -------
+    list of pathlib.Path
+        Sorted.
+    """
+    return sorted(p for p, key in user_files(folder).items() if before.get(p) != key)

@@ -144,6 +144,42 @@ def default_workers() -> int:
     return max(1, min(2, os.cpu_count() or 1))
 
 
+def stage_announcer(
+    log: Callable[[str], None],
+    progress: Callable[[int, int, str], None] | None,
+    total: int,
+) -> Callable[[str], float]:
+    """The function that announces each stage once and returns its start time.
+
+    Parameters
+    ----------
+    log : callable
+        Log lines; a stage goes here (``[reproduce] name ...``) only without ``progress``.
+    progress : callable or None
+        ``progress(done, total, name)``: the bar or stage lines of the command, which
+        announce the stage themselves (so it is said once, not by both).
+    total : int
+        Number of stages.
+
+    Returns
+    -------
+    callable
+        ``stage(name) -> time.perf_counter()`` at the stage's start.
+    """
+    done = 0
+
+    def stage(name: str) -> float:
+        nonlocal done
+        if progress:
+            progress(done, total, name)
+        else:
+            log(f"[reproduce] {name} ...")
+        done += 1
+        return time.perf_counter()
+
+    return stage
+
+
 def reproduce(
     out: str | Path,
     quick: bool = False,
@@ -191,16 +227,7 @@ def reproduce(
     times: dict[str, float] = {}
     t_all = time.perf_counter()
 
-    stages_done = 0
-
-    def stage(name: str):
-        nonlocal stages_done
-        log(f"[reproduce] {name} ...")
-        if progress:
-            progress(stages_done, 7, name.split(":")[0].split(" (")[0])
-        stages_done += 1
-        return time.perf_counter()
-
+    stage = stage_announcer(log, progress, 7)
     t0 = stage("Chen & Dao Fig. 2 / eqs. 5-6 (identification at 4.2 m/s)")
     f2 = cdf.fig2(p, out, st.fig2_duration)
     times["fig2"] = time.perf_counter() - t0

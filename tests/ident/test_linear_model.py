@@ -179,3 +179,14 @@ def test_identified_model_with_four_real_eigenvalues_is_named():
         assert _branch(name) == sweep.labels[j] and name != "weave", (lam, name)
     assert ev.modes == ("caster", "capsize", WEAVE_REAL, WEAVE_REAL)
     assert eigenvalue_intervals(model, method="delta").modes == ev.modes
+
+
+def test_fixed_speed_model_refuses_critical_speeds_and_names_the_models_that_have_them():
+    """Critical speeds belong to a model over speed: one speed's fit refuses them (and the
+    sweep over speed) with a message, never a meaningless number or an AttributeError."""
+    from bikeid.sim.errors import InputError
+
+    m = _fixed_speed_model(5.0)
+    for call in (m.critical_speeds, lambda: m.eigenvalues_vs_speed([4.0, 5.0])):
+        with pytest.raises(InputError, match=r"fitted at one speed \(5 m/s\).*model over speed"):
+            call()

@@ -431,3 +431,46 @@ def test_a_new_method_saves_and_loads_through_its_table_entry(tmp_path, monkeypa
     path.write_text(json.dumps(text))
     with pytest.raises(InputError, match=r"toy\.json.*'model'.*toy-model"):
         read_model_file(path)
+
+
+@pytest.mark.parametrize("kind", ["speed-canonical-pem", "direct", "greybox", "canonical-pem",
+                                  "experiment-model"])  # fmt: skip
+def test_model_over_speed_saves_its_critical_speeds(kind, models, tmp_path):
+    """A model over speed saves v_d, v_w, v_c: equal, bit for bit, to the model's own
+    ``critical_speeds()`` (sim.linear) recomputed after loading; a fixed-speed model and the
+    experiment model save none.  A file without the field (written before it existed) reads
+    back with ``critical_speeds`` None and the same model."""
+    model = models[kind]
+    path = save_model(model, tmp_path / "m.json")
+    saved = read_model_file(path)
+    if kind in ("canonical-pem", "experiment-model"):
+        assert saved.critical_speeds is None
+        assert "critical_speeds" not in json.loads(path.read_text())
+        return
+    again = saved.model.critical_speeds()
+    for name in ("v_d", "v_w", "v_c", "weave_frequency"):
+        assert saved.critical_speeds[name] == again[name], name
+    assert saved.critical_speeds["vmax"] == 30.0
+    assert saved.critical_speeds["intervals"] is None and saved.critical_speeds["note"] is None
+    old = json.loads(path.read_text())
+    del old["critical_speeds"]
+    older = model_from_text(json.dumps(old))
+    assert older.critical_speeds is None
+    _same(older.model, saved.model)
+
+
+def test_critical_speed_intervals_and_note_saved_verbatim(models, tmp_path):
+    """The caller's intervals and note come back as given; a fixed-speed model refuses them
+    (it has no critical speeds), and a hand-edited fixed-speed file carrying them is refused."""
+    iv = {"level": 0.95, "method": "profile",
+          "v_w": {"value": 4.29, "std": 0.01, "interval": [4.27, 4.31], "open": False}}  # fmt: skip
+    path = save_model(models["speed-canonical-pem"], tmp_path / "s.json",
+                      critical_speed_intervals=iv, critical_speeds_note="why not")  # fmt: skip
+    crit = read_model_file(path).critical_speeds
+    assert crit["intervals"] == iv and crit["note"] == "why not"
+    with pytest.raises(ValueError, match="fixed-speed CanonicalModel has no critical speeds"):
+        save_model(models["canonical-pem"], tmp_path / "c.json", critical_speeds_note="x")
+    doc = json.loads(model_json(models["canonical-pem"]))
+    doc["critical_speeds"] = json.loads(path.read_text())["critical_speeds"]
+    with pytest.raises(InputError, match="'critical_speeds' is given for a fixed-speed"):
+        model_from_text(json.dumps(doc))

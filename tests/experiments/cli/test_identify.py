@@ -482,3 +482,188 @@ def test_help_states_the_defaults(capsys):
                 "--format", "--input"):  # fmt: skip
         part = text.rsplit(f"{opt} ", 1)[-1][:400]  # its own entry comes last
         assert "default" in part, opt
+
+
+# -- a model over speed says its answers: v_d, v_w, v_c printed and saved -----------------
+@pytest.fixture(scope="module")
+def two_speed_files(tmp_path_factory):
+    """15 s of the exact linear plant under the roll PID at 4 and 6 m/s (the canonical model
+    over speed contains it), and the same at 4 m/s beside the steer-by-wire bicycle at 6 m/s
+    (no one model over speed holds both bicycles: the data reject it)."""
+    from bikeid.controllers import UniformDither, make
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.store import write_runs
+    from bikeid.sim.parameters import by_name
+
+    def run(p, v):
+        return simulate_run(p, make("pid", p), speed=v, duration=15.0, plant="linear",
+                            dither=UniformDither(1.0, seed=3), seed=3)  # fmt: skip
+
+    root = tmp_path_factory.mktemp("over_speed")
+    p = benchmark()
+    one = write_runs(root / "one.h5", [run(p, 4.0), run(p, 6.0)])
+    mixed = write_runs(root / "mixed.h5", [run(p, 4.0), run(by_name("steer-by-wire"), 6.0)])
+    return one, mixed
+
+
+def _critical_rows(text: str) -> dict:
+    """The printed lines of v_d, v_w and v_c by name."""
+    rows = {}
+    for line in text.splitlines():
+        name = line.strip().split(" ", 1)[0]
+        if name in ("v_d", "v_w", "v_c") and " = " in line:
+            rows[name] = line
+    return rows
+
+
+def _value_text(v) -> str:
+    return "none below 30 m/s" if v is None else f"{v:.3f} m/s"
+
+
+def test_model_over_speed_prints_and_saves_its_critical_speeds(two_speed_files, capsys,
+                                                               tmp_path):  # fmt: skip
+    """Text output and model file carry v_d, v_w, v_c.  Values: recomputed from the model read
+    back (sim.linear.critical_speeds, a second path).  Intervals: on the linear plant the
+    model set holds the truth, so the printed 95 % intervals must contain the benchmark's
+    v_w 4.2924 and v_c 6.0243 m/s (Meijaard 2007; sim.linear), and equal the saved ones."""
+    from bikeid.ident.model_file import read_model_file
+
+    target = tmp_path / "model.json"
+    assert main(["identify", str(two_speed_files[0]), "--speed-parameterized",
+                 "--out", str(target)]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    saved = read_model_file(target)
+    crit = saved.critical_speeds
+    again = saved.model.critical_speeds()
+    rows = _critical_rows(text)
+    assert set(rows) == {"v_d", "v_w", "v_c"}
+    truth = critical_speeds(benchmark())
+    for name in ("v_d", "v_w", "v_c"):
+        assert crit[name] == again[name]  # saved = the model's own, bit for bit
+        assert _value_text(again[name]) in rows[name]
+    assert "no interval" in rows["v_d"]  # intervals cover v_w and v_c only: said so
+    for name in ("v_w", "v_c"):
+        lo, hi = crit["intervals"][name]["interval"]
+        assert f"95 % interval [{lo:.3f}, {hi:.3f}] m/s" in rows[name]
+        assert lo <= truth[name] <= hi, (name, lo, hi, truth[name])
+    assert crit["note"] is None and crit["vmax"] == 30.0
+    # a critical speed outside the fitted 4-6 m/s is labelled extrapolated, one inside not
+    for name, line in rows.items():
+        v = crit[name]
+        assert ("extrapolated" in line) == (v is not None and not 4.0 <= v <= 6.0), line
+
+
+def test_rejected_model_over_speed_says_why_in_two_lines_and_counts_right(
+    two_speed_files, capsys, tmp_path
+):
+    """Two bicycles in one file: the model over speed is rejected.  v_d, v_w, v_c are still
+    printed (the estimates stand) and saved; the reason is two lines (what, one fix); the
+    count of withheld speeds is the structure check's, saved beside it, and equals the
+    number of speeds printed without interval rows."""
+    from bikeid.ident.model_file import read_model_file
+    from bikeid.ident.structure import FIX_LONGER, FIX_PER_SPEED
+    from bikeid.ident.uncertainty import PREDICTOR_BOUNDARY_TOL, predictor_radius
+
+    target = tmp_path / "model.json"
+    assert main(["identify", str(two_speed_files[1]), "--speed-parameterized",
+                 "--out", str(target)]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    saved = read_model_file(target)
+    check = saved.results["structure_check"]
+    assert check["speed_model_rejected"] is True
+    rows = _critical_rows(text)
+    again = saved.model.critical_speeds()
+    for name in ("v_d", "v_w", "v_c"):
+        assert saved.critical_speeds[name] == again[name]
+        assert _value_text(again[name]) in rows[name]
+    for name in ("v_w", "v_c"):
+        assert "no interval: withheld, the data reject the model over speed" in rows[name]
+    notes = [n for n in text.splitlines() if n.startswith("note: ")]
+    i = next(k for k, n in enumerate(notes) if "the data reject the model over speed" in n)
+    what, fix = notes[i], notes[i + 1]
+    n_rej, n_held = len(check["rejected_speeds"]), len(check["withheld_speeds"])
+    assert n_held == 2 and text.count("95 % Re") == 0  # every speed withheld, none printed
+    assert f"at any of the {n_held} speeds" in what
+    assert f"reject the model over speed at {n_rej} of {n_held} speeds" in what
+    # the one fix that applies: a longer record where a per-speed fit ended on its
+    # predictor's stability boundary (recomputed from the saved per-speed fits), else
+    # the per-speed fit
+    boundary = any(
+        r is not None and r > 1.0 - PREDICTOR_BOUNDARY_TOL
+        for r in map(predictor_radius, saved.model.per_speed.values())
+    )
+    assert fix == f"note: fix: {FIX_LONGER if boundary else FIX_PER_SPEED}"
+    assert not any("Fix:" in n for n in notes)  # no second, long copy of the reason
+    assert saved.critical_speeds["intervals"] is None
+    assert saved.critical_speeds["note"] == f"{what[6:]}\n{fix[6:]}"
+
+
+def test_withheld_counts_rejecting_speeds_against_all():
+    """One speed of three rejects a model over speed: all three lose their intervals, and
+    the note counts 1 of 3 (not "rejected at 3", not "withheld at 1"); no per-speed fit
+    ended on its boundary, so the fix is the per-speed fit."""
+    from bikeid.experiments.cli.identify import _withheld
+    from bikeid.ident.structure import FIX_PER_SPEED, StructureCheck
+
+    row = {"kind": "independence", "output": "phi", "statistic": 90.0, "dof": 25,
+           "p_value": 1e-9, "rejected": True, "advisory": False}  # fmt: skip
+    check = StructureCheck(level=0.01, per_test_level=0.01 / 12, n_tests=12,
+                           tests={3.0: [row], 4.0: [], 5.0: []}, rejected_speeds=(3.0,),
+                           speed_model_rejected=True,
+                           withheld_speeds=(3.0, 4.0, 5.0))  # fmt: skip
+
+    class Over:  # a model over speed whose per-speed fits are not on their boundary
+        per_speed: dict = {}
+
+    w = _withheld(check, Over())
+    assert "at any of the 3 speeds" in w["what"]
+    assert "at 1 of 3 speeds (3 m/s;" in w["what"]
+    assert "(phi), p = 1e-09" in w["what"]
+    assert w["fix"] == FIX_PER_SPEED
+    assert (w["rejected_speeds"], w["withheld_speeds"]) == ([3.0], [3.0, 4.0, 5.0])
+
+
+def test_direct_model_over_speed_prints_its_critical_speeds_and_why_no_interval(
+    sweeps, capsys, tmp_path
+):
+    """Least squares gives one model over all speeds, so it has critical speeds: printed
+    (each equal to the saved model's own, recomputed after loading), saved, and said to have
+    no interval (the method gives none).  On noise-free data the weave speed is within
+    0.15 m/s of the benchmark's 4.2924 (the tolerance of the PEM test above)."""
+    from bikeid.ident.model_file import read_model_file
+
+    _, ideal = sweeps
+    target = tmp_path / "direct.json"
+    assert main(["identify", "--method", "direct", str(ideal), "--out", str(target)]) == 0
+    rows = _critical_rows(capsys.readouterr().out)
+    saved = read_model_file(target)
+    again = saved.model.critical_speeds()
+    for name in ("v_d", "v_w", "v_c"):
+        assert saved.critical_speeds[name] == again[name]
+        assert _value_text(again[name]) in rows[name]
+    assert "no interval: this method gives none" in rows["v_w"]
+    assert saved.critical_speeds["note"].startswith("no intervals: this method gives none")
+    assert abs(again["v_w"] - critical_speeds(benchmark())["v_w"]) < 0.15
+
+
+def test_the_same_refusal_at_several_speeds_is_one_note(monkeypatch):
+    """Per-speed fits refused alike (e.g. each on its predictor's stability boundary): one
+    note naming how many speeds, not one line per speed; every speed without interval."""
+    from bikeid.experiments.cli.identify import _intervals
+    from bikeid.ident import uncertainty
+    from bikeid.sim.errors import UntrustworthyResult
+
+    def refuse(model, *args, **kwargs):
+        raise UntrustworthyResult(f"the fit ended on the boundary ({model})")
+
+    monkeypatch.setattr(uncertainty, "eigenvalue_intervals", refuse)
+    speeds = [3.0, 4.0, 5.0, 6.0, 7.0]
+    iv = _intervals(dict.fromkeys(speeds, "m"), None, None)
+    assert iv["eigenvalues"] == [None] * 5
+    assert iv["notes"] == ["no eigenvalue intervals at 5 speeds (3-7 m/s): the fit ended on "
+                           "the boundary (m)"]  # fmt: skip
+    iv = _intervals({3.0: "a", 4.0: "b"}, None, None)  # different reasons: one note each
+    assert iv["notes"] == [
+        "no eigenvalue intervals at 3 m/s: the fit ended on the boundary (a)",
+        "no eigenvalue intervals at 4 m/s: the fit ended on the boundary (b)",
+    ]

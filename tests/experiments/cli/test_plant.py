@@ -77,3 +77,35 @@ def test_bad_input_is_one_line_error(args, code, message):
     assert res.returncode == code
     assert message in res.stderr
     assert "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_adjusted_bicycle_value_is_a_note_with_its_consequence():
+    """Browser's pendulum-measured IByy = 1.3164 kg m^2 breaks the triangle inequality; the
+    bound is the sum of its x-z principal moments (0.4806 + 0.8058 = 1.2864, from the
+    shipped IBxx 0.5296, IBzz 0.7568, IBxz -0.1163), a change of -2.3 %.  ``eig`` says so in
+    one note line on stderr, no Python warning; and the note's claim that the linear model
+    does not depend on IByy holds: the eigenvalues with IByy at the other end of its range
+    are the same."""
+    import numpy as np
+
+    from bikeid.sim.linear import eigenvalues
+    from bikeid.sim.parameters import ParameterAdjusted, by_name
+
+    res = run("eig", "--bicycle", "Browser", "--speeds", "5:5:1", "--json")
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("note: bicycle 'Browser'"), res.stderr
+    principal = np.linalg.eigvalsh(np.array([[0.5296, -0.1163], [-0.1163, 0.7568]]))
+    for text in ("IByy = 1.3164 kg m^2", f"uses IByy = {principal.sum():.5g}",
+                 f"({100 * (principal.sum() - 1.3164) / 1.3164:+.1f} %)",
+                 "eigenvalues and critical speeds unchanged"):  # fmt: skip
+        assert text in lines[0], text
+    assert "Warning" not in res.stderr
+    with pytest.warns(ParameterAdjusted, match=r"uses IByy = 1\.2864 \(-2\.3 %\)"):
+        p = by_name("Browser")
+    other = p.replace(IByy=float(principal[1] - principal[0]))  # the range's lower end
+    np.testing.assert_array_equal(np.sort_complex(eigenvalues(p, 5.0)),
+                                  np.sort_complex(eigenvalues(other, 5.0)))  # fmt: skip
+    printed = json.loads(res.stdout)["eigenvalues"][0]
+    got = np.sort_complex([complex(z["re"], z["im"]) if isinstance(z, dict) else complex(z)
+                           for z in printed])  # fmt: skip
+    np.testing.assert_allclose(got, np.sort_complex(eigenvalues(p, 5.0)), rtol=1e-12)
