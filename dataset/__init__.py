@@ -34,6 +34,12 @@ Modules:
 - :mod:`~bikeid.dataset.files`: safe atomic file writing used by every output of bikeid.
 - :mod:`~bikeid.dataset.plausibility`: checks of a run's units and signs before any fit
   (sample period, each rate against its angle's derivative).
+- :mod:`~bikeid.dataset.signs`: the relative signs of roll, steer and torque checked against
+  a nominal bicycle's equations of motion (a mirrored axis).
+- :mod:`~bikeid.dataset.check_names`: the names of the checks a caller may skip.
+- :mod:`~bikeid.dataset.logs`: the one loader: :class:`LogOptions` (format, columns, units,
+  signs, window, speed split, checks, bicycle) and ``load_runs``, every check applied, for
+  the command line and the Python API alike.
 
 Nothing is imported here; import the modules.
 """

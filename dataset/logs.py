@@ -39,6 +39,7 @@ from bikeid.sim.errors import InputError
 
 from .plausibility import CHECKS, bounds_notes, check_runs
 from .run import BOUND_CHECKS, SPEED_RANGE, Run, split_by_speed
+from .signs import nominal_bicycle
 
 __all__ = [
     "FORMATS",
@@ -73,7 +74,17 @@ Note = Callable[[str], None]
 
 
 def print_note(msg: str) -> None:
-    """The default ``note``: ``note: MSG`` on stderr."""
+    """The default ``note``: ``note: MSG`` on stderr.
+
+    Parameters
+    ----------
+    msg : str
+        The note.
+
+    Returns
+    -------
+    None
+    """
     print(f"note: {msg}", file=sys.stderr, flush=True)
 
 
@@ -169,11 +180,30 @@ class LogOptions:
             raise InputError("speed_tolerance, min_stretch and min_speed must be >= 0")
 
     def replace(self, **changes: Any) -> LogOptions:
-        """A copy with ``changes`` (the options are a value; nothing is changed in place)."""
+        """A copy with ``changes`` (the options are a value; nothing is changed in place).
+
+        Parameters
+        ----------
+        **changes
+            Attributes and their new values (checked as at construction).
+
+        Returns
+        -------
+        LogOptions
+        """
         return dataclasses.replace(self, **changes)
 
     def settings(self) -> dict[str, Any]:
-        """The options as saved with a model (JSON-serializable; the bicycle by name)."""
+        """The options as saved with a model (JSON-serializable; the bicycle is saved by the
+        model's own record, not here).
+
+        Returns
+        -------
+        dict
+            ``format``, ``input``; for csv/hdf5 ``columns``, ``units``, ``time``, ``speed``,
+            ``flip``; ``start``, ``stop``, ``speed_tolerance``, ``min_stretch``,
+            ``min_speed`` and ``skipped_checks`` (:func:`applied_skips`).
+        """
         s: dict[str, Any] = {"format": self.format, "input": self.input}
         if self.format in IMPORT_FORMATS:
             s.update(columns=self.columns, units=self.units, time=self.time, speed=self.speed,
@@ -221,8 +251,19 @@ def import_check_notes(skip: Iterable[str], fmt: str, no_checks: bool = False) -
 
 
 def applied_skips(options: LogOptions) -> list[str]:
-    """The skipped checks that were in fact skipped (the model file's record): range checks
-    still run on bikeid and steer-by-wire files, so they are not listed there."""
+    """The skipped checks that were in fact skipped (the model file's record).
+
+    Parameters
+    ----------
+    options : LogOptions
+        The options.
+
+    Returns
+    -------
+    list of str
+        ``options.skip`` without the range checks where they still run (bikeid and
+        steer-by-wire files).
+    """
     return [c for c in options.skip
             if options.format in IMPORT_FORMATS or c not in BOUND_CHECKS]  # fmt: skip
 
@@ -441,15 +482,6 @@ def with_input(runs: Sequence[Run], name: str) -> list[Run]:
                             meta={**r.meta, "input": name})
         for r in runs
     ]  # fmt: skip
-
-
-def nominal_bicycle(bicycle: Any) -> Any:
-    """The parameters of a bicycle given by name, file or parameter set (None stays None)."""
-    if bicycle is None:
-        return None
-    from bikeid.sim.parameters import BicycleParameters, by_name
-
-    return bicycle if isinstance(bicycle, BicycleParameters) else by_name(str(bicycle))
 
 
 def load_runs(

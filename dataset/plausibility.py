@@ -42,7 +42,7 @@ import numpy as np
 from bikeid.sim.conventions import PLAUSIBLE, SAMPLE_PERIOD, UNITS
 from bikeid.sim.errors import InputError
 
-from .run import BOUND_CHECKS, SKIPPABLE_CHECKS
+from .check_names import BOUND_CHECKS, SKIPPABLE_CHECKS
 
 __all__ = [
     "CHECKS",

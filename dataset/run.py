@@ -28,6 +28,7 @@ import numpy as np
 
 from bikeid.sim.conventions import INPUTS, MEASURED, NOMINAL_SPEED, PLAUSIBLE, UNITS
 
+from .check_names import BOUND_CHECKS, SKIPPABLE_CHECKS
 from .tabular import (
     JITTER,
     REQUIRED,
@@ -70,19 +71,6 @@ CONSTANT_CHECKED = ("phi", "delta", "phidot", "deltadot", "T_delta")
 #: those and catches metadata of another run or a mistyped speed (e.g. 4.5 for 2.5 m/s).
 SPEED_TOLERANCE = (0.5, 0.15)
 
-#: The range checks of :func:`check_plausible` by name (the vocabulary of ``skip`` and of
-#: ``bikeid identify --skip-check``), each with the SI unit of the signals it bounds: every
-#: name of :data:`~bikeid.sim.conventions.PLAUSIBLE` falls under the check of its unit
-#: (``speed-bounds`` also bounds the nominal speed from above, NOMINAL_SPEED).
-BOUND_CHECKS = {
-    "angle-bounds": "rad",
-    "rate-bounds": "rad/s",
-    "speed-bounds": "m/s",
-    "torque-bounds": "N m",
-    "force-bounds": "N",
-}
-
-
 def bound_check(signal: str) -> str | None:
     """The name of the range check that bounds a signal (:data:`BOUND_CHECKS`).
 
@@ -100,13 +88,6 @@ def bound_check(signal: str) -> str | None:
         return None
     unit = UNITS[signal]
     return next((name for name, u in BOUND_CHECKS.items() if u == unit), None)
-
-
-#: Every check a caller may skip by name: the range checks above, the import's plausibility
-#: checks (:mod:`bikeid.dataset.plausibility`), the sign check against a nominal bicycle
-#: (:mod:`bikeid.dataset.signs`) and the fit's informativity check
-#: (:mod:`bikeid.ident.informativity`).  ``skip`` and ``--skip-check`` take these names.
-SKIPPABLE_CHECKS = (*BOUND_CHECKS, "sample-period", "rate-derivative", "signs", "informativity")
 
 
 def _check_skip(skip: Iterable[str]) -> set[str]:
@@ -820,8 +801,7 @@ def _checked(run: Run, source: str, skip: Iterable[str], bicycle: Any) -> Run:
     check_run(run, source, skip)
     notes = []
     if bicycle is not None and "signs" not in skip:
-        from .logs import nominal_bicycle
-        from .signs import check_signs
+        from .signs import check_signs, nominal_bicycle
 
         notes = check_signs([run], nominal_bicycle(bicycle), source)
         for msg in notes:

@@ -48,6 +48,7 @@ __all__ = [
     "SMOOTHING",
     "SignCheck",
     "check_signs",
+    "nominal_bicycle",
     "sign_evidence",
 ]
 
@@ -90,6 +91,26 @@ class SignCheck:
     def t(self) -> float:
         """The coefficient over its standard error [-]."""
         return self.coefficient / self.std_error if self.std_error > 0 else math.nan
+
+
+def nominal_bicycle(bicycle: Any) -> Any:
+    """The parameters of a bicycle given by name, file or parameter set.
+
+    Parameters
+    ----------
+    bicycle : str, path, BicycleParameters or None
+        A name of :func:`bikeid.sim.parameters.by_name`, a parameter file, or the set.
+
+    Returns
+    -------
+    BicycleParameters or None
+        None when ``bicycle`` is None.
+    """
+    if bicycle is None:
+        return None
+    from bikeid.sim.parameters import BicycleParameters, by_name
+
+    return bicycle if isinstance(bicycle, BicycleParameters) else by_name(str(bicycle))
 
 
 def _smoothed(x: np.ndarray, dt: float, deriv: int = 0) -> np.ndarray:

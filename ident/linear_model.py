@@ -334,6 +334,16 @@ class LinearModel:
     def eigenvalues_vs_speed(self, speeds: Any) -> EigenSweep:
         """Refused: a fixed-speed model says nothing about other speeds.
 
+        Parameters
+        ----------
+        speeds : (K,) array_like
+            Forward speeds [m/s] (not used).
+
+        Returns
+        -------
+        EigenSweep
+            Never: the call raises.
+
         Raises
         ------
         InputError
@@ -343,6 +353,16 @@ class LinearModel:
 
     def critical_speeds(self, vmax: float = 30.0) -> dict:
         """Refused: weave and capsize speeds belong to a model over speed.
+
+        Parameters
+        ----------
+        vmax : float, optional
+            Upper end of the speed range [m/s] (not used).
+
+        Returns
+        -------
+        dict
+            Never: the call raises.
 
         Raises
         ------

@@ -5,7 +5,8 @@ Each group of subcommands lives in a module of this package with a
 ``critical-speeds``), :mod:`.simulate`, :mod:`.data` (``sweep``, ``stabilization``),
 :mod:`.identify` (``identify``, ``export``, ``accuracy``), :mod:`.validate`,
 :mod:`.reproduce`, :mod:`.measured` (``measured ...``, ``data fetch``), :mod:`.coverage`;
-:mod:`.args` holds the argument types and helpers they share.  Handlers import the study
+:mod:`.args` holds the argument types and helpers they share, :mod:`.log_options` the
+data options that parse into the one loader's :class:`~bikeid.dataset.logs.LogOptions`.  Handlers import the study
 modules lazily so that ``bikeid --help`` stays fast (start-up time).  Any failure ends in one line
 on stderr, never a
 traceback (unless ``--debug``), and a documented exit status (:data:`EXIT_CODES`,
