@@ -6,11 +6,11 @@ Each group of subcommands lives in a module of this package with a
 :mod:`.identify` (``identify``, ``export``, ``accuracy``), :mod:`.validate`,
 :mod:`.reproduce`, :mod:`.measured` (``measured ...``, ``data fetch``), :mod:`.coverage`;
 :mod:`.args` holds the argument types and helpers they share, :mod:`.log_options` the
-data options that parse into the one loader's :class:`~bikeid.dataset.logs.LogOptions`.  Handlers import the study
-modules lazily so that ``bikeid --help`` stays fast (start-up time).  Any failure ends in one line
-on stderr, never a
-traceback (unless ``--debug``), and a documented exit status (:data:`EXIT_CODES`,
-:mod:`bikeid.sim.errors`).
+data options that parse into the one loader's :class:`~bikeid.dataset.logs.LogOptions`.
+Handlers import the study modules lazily so that ``bikeid --help`` stays fast (start-up
+time).  Any failure ends in one line on stderr, never a traceback (unless ``--debug``),
+and a documented exit status (:data:`EXIT_CODES`, :mod:`bikeid.sim.errors`); a Python
+warning becomes one ``note:`` line saying its consequence.
 """
 
 from __future__ import annotations
