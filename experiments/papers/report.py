@@ -29,6 +29,7 @@ __all__ = [
     "arm_model_verdict",
     "paper_difference",
     "real_part_verdict",
+    "window_label",
 ]
 
 
@@ -70,7 +71,9 @@ def build_report(s: dict[str, Any]) -> Report:
         _report_free_speed(rep, cd["free_speed"])
     _report_limit_cycles(rep, cd["figs4_5"])
     if cd.get("speed_scan") is not None:
-        _report_speed_scan(rep, cd["speed_scan"], s["speed_scan"])
+        _report_speed_scan(
+            rep, cd["speed_scan"], s["speed_scan"], s["truth"]["critical_speeds"]["v_w"]
+        )
     _report_fig7(rep, cd["fig7"])
     _report_mh(rep, s["moore_hubbard"])
     _report_sweep(rep, s["sweep"])
@@ -96,56 +99,143 @@ def _fmt_windows(windows) -> str:
     return "; ".join(f"{a:.2f}-{b:.2f} m/s ({f})" for a, b, f in windows) or "none"
 
 
-def _report_speed_scan(rep: Report, info: dict, points: list[dict]) -> None:
+def window_label(w: dict, v_w: float, step: float | None) -> str:
+    """What a periodic window of the speed scan is, from its data.
+
+    Parameters
+    ----------
+    w : dict
+        A window of :func:`limit_cycles.scan_windows` (``outcome``, ``family``,
+        ``period_n``, ``high`` [m/s]).
+    v_w : float
+        The linearization's weave speed [m/s].
+    step : float or None
+        The scan's grid step [m/s].
+
+    Returns
+    -------
+    str
+        ``"weave cycles (born at v_w)"`` for a symmetric period-1 window that reaches the
+        last grid speed below v_w (the Hopf family: its amplitude goes to zero at v_w);
+        otherwise the family and the returns per period, e.g. ``"symmetric, period 3"``;
+        ``"-"`` for a window that is not periodic.
+    """
+    if w["outcome"] != "periodic":
+        return "-"
+    n = ", ".join(str(k) for k in w["period_n"]) or "?"
+    reach = step is not None and v_w - w["high"] <= step * (1 + 1e-9)
+    if w["family"] == "symmetric" and w["period_n"] == [1] and reach and w["high"] < v_w:
+        return "weave cycles (born at v_w)"
+    return f"{w['family']}, period {n}"
+
+
+def _rng(x, digits: int = 2) -> str:
+    if not x:
+        return "-"
+    a, b = x
+    return f"{a:.{digits}f}" if abs(a - b) < 0.5 * 10**-digits else f"{a:.{digits}f}-{b:.{digits}f}"
+
+
+def _report_speed_scan(rep: Report, info: dict, points: list[dict], v_w: float) -> None:
     rep.heading("Chen & Dao v_l .. v_w: speed scan of coasting, classified per initial speed")
     lo, hi = info["paper"]
+    step = info.get("step")
+    labels = [
+        f"{w['low']:.2f}-{w['high']:.2f} m/s ({window_label(w, v_w, step)})"
+        for w in info["windows"]
+        if w["outcome"] == "periodic"
+    ]
+    gains = [w["speed_gain"] for w in info["windows"] if w.get("speed_gain")]
+    gain = (
+        f"{min(g[0] for g in gains):+.3f} to {max(g[1] for g in gains):+.3f} m/s" if gains else "-"
+    )
     rep.para(
-        f"Paper (p. 4, conclusions): periodic orbits ('limit cycles') within {lo}-{hi} m/s, "
-        f"one interval. Here: coasting runs from {info['condition']} deg "
-        f"({info['duration']:g} s each, classified as in Figs. 4-5) at every initial speed "
-        f"of a grid ({info['grid_note']}; `limit_cycles.speed_scan`), no bisection (a class "
-        "can change more than once between grid speeds), and each periodic orbit assigned "
-        "to a family (`limit_cycles.orbit_family`): symmetric (about upright: mean roll and "
-        "roll max + min within 3 % of the amplitude; the weave cycles born at v_w) or turning "
-        "(lopsided: a mean lean into a turn, as Chen & Dao's Figs. 4-5). "
-        "**Periodic windows: " + _fmt_windows(info["periodic_windows"]) + ".** "
-        "A window's ends are grid speeds: the true edge lies within one grid step outside."
+        f"Paper (p. 3-4): Chen & Dao did not scan speeds. Their 'limit cycles within {lo}-{hi} "
+        "m/s' (conclusions) is the band B2 = v_l .. v_w of their identified linear models, "
+        "where they simulated one speed (3.5 m/s, Figs. 4-5); its top is their v_w, "
+        f"{hi - v_w:+.3f} m/s from the benchmark's linear v_w {v_w:.3f} m/s (their bias). "
+        f"Here: coasting runs from {info['condition']} deg at every initial speed of a grid "
+        f"({info['grid_note']}; `limit_cycles.speed_scan`), each run capped at T_max = "
+        f"{info['duration']:g} s and classified from its Poincare section as in Figs. 4-5 "
+        "(decays / growing / periodic / irregular / falls). A run still periodic or growing "
+        "at T_max is not the verdict: Newton on the Poincare map from the run's end "
+        "(`orbit_convergence.converge_from_run_end`) decides whether an attracting orbit "
+        "exists there (periodic, with its amplitude, period and mean speed) or not (not "
+        "converged). No bisection (a class can change more than once between grid speeds). "
+        "Families (`limit_cycles.orbit_family`, on the converged orbit): symmetric (about "
+        "upright: mean roll and roll max + min within 3 % of the amplitude) or turning "
+        "(lopsided: a mean lean into a turn, as Chen & Dao's Figs. 4-5). A window is "
+        "labelled weave cycles (born at v_w) only if it is symmetric, period 1, and reaches "
+        "the grid speed below v_w. **Periodic windows: "
+        + ("; ".join(labels) or "none")
+        + ".** A window's ends are grid speeds: the true edge lies within one grid step "
+        "outside. **Speed column: the initial speed**, an energy label (coasting conserves "
+        "energy); on an orbit the speed oscillates, and its mean over the orbit differs from "
+        f"the initial speed by {gain} (turning orbits: potential energy released into speed)."
+    )
+    rep.para(
+        "Machine-readable: `summary.json` `chen_dao.periodic_windows` lists the same windows "
+        "as [low, high, family]: " + _fmt_windows(info["periodic_windows"]) + "."
     )
     rep.table(
-        ["window [m/s]", "class", "family", "returns/period", "grid speeds"],
+        [
+            "window [m/s]",
+            "class",
+            "label",
+            "returns/period",
+            "grid speeds",
+            "roll amplitude [deg]",
+            "period [s]",
+            "mean orbit speed [m/s]",
+        ],  # fmt: skip
         [
             [
                 f"{w['low']:.2f}-{w['high']:.2f}",
                 w["outcome"],
-                w["family"] or "-",
+                window_label(w, v_w, step),
                 ", ".join(str(n) for n in w["period_n"]) or "-",
                 str(w["n"]),
+                _rng(w.get("roll_amplitude_deg")),
+                _rng(w.get("orbit_period_s")),
+                _rng(w.get("orbit_speed_mean"), 3),
             ]
             for w in info["windows"]
         ],
     )
+
+    def orbit_cell(q: dict, key: str, digits: int = 3) -> str:
+        o = q.get("orbit") or {}
+        return fmt(o.get(key), digits) if o.get("outcome") == "periodic" else "-"
+
     rep.table(
         [
             "initial speed [m/s]",
-            "class",
+            f"run class at T_max = {info['duration']:g} s",
+            "growth per return",
+            "class (Newton)",
             "returns/period",
             "family",
             "period [s]",
-            "roll min .. max, mean (last half) [deg]",
+            "orbit roll min .. max [deg]",
+            "mean orbit speed [m/s]",
+            "largest \\|mu\\|",
             "fall time [s] (cause)",
-            "speed range [m/s]",
+            "run speed range [m/s]",
         ],
         [
             [
                 f"{q['v0']:.2f}",
+                q.get("run_outcome", q["outcome"]),
+                fmt(q.get("growth_per_return"), 2),
                 q["outcome"],
                 str(q.get("period_n") or "-"),
                 q.get("family") or "-",
                 fmt(q.get("period_s"), 4),
                 "-"
-                if q.get("roll_range_last_half_deg") is None
-                else f"{q['roll_range_last_half_deg'][0]:.2f} .. "
-                f"{q['roll_range_last_half_deg'][1]:.2f}, {q['roll_mean_last_half_deg']:.2f}",
+                if (q.get("orbit") or {}).get("outcome") != "periodic"
+                else f"{q['orbit']['roll_min']:.2f} .. {q['orbit']['roll_max']:.2f}",
+                orbit_cell(q, "speed_mean", 4),
+                orbit_cell(q, "largest_multiplier", 3),
                 "-"
                 if q.get("fall_time_s") is None
                 else f"{q['fall_time_s']:.2f} ({q['fall_cause']})",
@@ -156,6 +246,13 @@ def _report_speed_scan(rep: Report, info: dict, points: list[dict]) -> None:
             for q in points
         ],
     )
+    nc = [q for q in points if q["outcome"] == "not converged"]
+    if nc:
+        rep.para(
+            "Not converged (no attracting orbit from the run's end): "
+            + "; ".join(f"{q['v0']:.2f} m/s: {q['orbit']['reason']}" for q in nc)
+            + "."
+        )
 
 
 def _b_ratio(f2: dict, i: int) -> str:
@@ -536,7 +633,7 @@ def family_sentence(periodic: list[dict]) -> str:
     if sym:
         parts.append(
             f"{len(sym)} of the {len(periodic)} are symmetric about upright (mean roll "
-            f"{means(sym)} deg: weave cycles)"
+            f"{means(sym)} deg)"
         )
     return "; ".join(parts) + "."
 
