@@ -242,6 +242,27 @@ def test_family_sentence_and_lowest_periodic_follow_the_data():
     assert lowest_periodic([{"v0": 3.3, "outcome": "falls"}]) == (None, None)
 
 
+def test_window_label_names_weave_cycles_only_where_the_data_say_so():
+    """The referee's case: the 3.35-3.36 m/s orbits (symmetric, period 3, +-25 deg, T ~ 11 s)
+    are not the weave cycles born at v_w.  Both ways: a symmetric period-1 window reaching
+    the grid speed below v_w = 4.2924 (4.28 at a 0.02 grid) is the weave family; the same
+    window ending two steps lower, a period-3 symmetric window, and a turning window are
+    not; a non-periodic window has no label."""
+    from bikeid.experiments.papers.report import window_label
+
+    vw = 4.2924
+    weave = {"outcome": "periodic", "family": "symmetric", "period_n": [1], "high": 4.28}
+    assert window_label(weave, vw, 0.02) == "weave cycles (born at v_w)"
+    assert window_label({**weave, "high": 4.24}, vw, 0.02) == "symmetric, period 1"
+    p3 = {"outcome": "periodic", "family": "symmetric", "period_n": [3], "high": 3.36}
+    assert window_label(p3, vw, 0.02) == "symmetric, period 3"
+    assert window_label({**p3, "high": 4.28}, vw, 0.02) == "symmetric, period 3"
+    turn = {"outcome": "periodic", "family": "turning", "period_n": [1, 2], "high": 3.9}
+    assert window_label(turn, vw, 0.02) == "turning, period 1, 2"
+    assert window_label({"outcome": "falls", "family": None, "period_n": [], "high": 3.3},
+                        vw, 0.02) == "-"  # fmt: skip
+
+
 def _eq5_polys(th):
     """Characteristic polynomial and the two numerators of eq. (3)'s A, B, C by hand.
 
