@@ -875,14 +875,15 @@ def _report_fig7(rep: Report, f7: dict) -> None:
 
 
 def arm_model_verdict(a: dict) -> str:
-    """Whether the arm model reproduces Moore's dissertation, from its computed stability.
+    """Whether the arm model reproduces Moore & Hubbard's finding (section 6.2), from its
+    computed stability.
 
     Parameters
     ----------
     a : dict
         ``moore_hubbard.arm_model`` of summary.json (``stable_ranges``,
         ``whipple_stable_ranges`` as lists of [low, high] [m/s], ``real_unstable_everywhere``,
-        ``oscillatory_stable_everywhere``, ``vmax`` [m/s]).
+        ``oscillatory_stable_everywhere``, ``vmax`` [m/s], ``arms_mass`` [kg]).
 
     Returns
     -------
@@ -907,17 +908,23 @@ def arm_model_verdict(a: dict) -> str:
         missing.append("no real mode is unstable at every speed")
     if not a["oscillatory_stable_everywhere"]:
         missing.append("its oscillatory mode is unstable at some speed")
+    where = (
+        f" This is for the assumed posture and {a['arms_mass']:.2f} kg of arms; where it holds "
+        "over posture (+-0.1 m) and arm mass: `benchmarks/arm_model_map.py`, quoted in "
+        "docs/results.md."
+    )
     if not missing:
-        return head + (
-            "The arm model reproduces the dissertation's finding: one real mode is unstable at "
-            "every speed, the oscillatory (weave) mode is stable at every speed, and there is "
-            "no stable speed range."
+        return (
+            head + "The arm model reproduces Moore & Hubbard's finding (section 6.2, also Moore's "
+            "dissertation): one real mode is unstable at every speed, the oscillatory (weave) "
+            "mode is stable at every speed, and there is no stable speed range." + where
         )
     return (
         head
-        + "The arm model does not reproduce the dissertation's finding: "
+        + "The arm model does not reproduce Moore & Hubbard's finding (section 6.2): "
         + "; ".join(missing)
         + "."
+        + where
     )
 
 
@@ -1001,8 +1008,8 @@ def _report_mh(rep: Report, m: dict) -> None:
     rep.table(["model", "M", "C1", "K0", "K2", "H [m]"], rows)
     if "arm_model" in m:
         rep.para(
-            "Arm model (Moore's dissertation, 'Rider Arms'; Moore & Hubbard's third model): "
-            + arm_model_verdict(m["arm_model"])
+            "Arm model (Moore & Hubbard's third model, section 6.2; Moore's dissertation, "
+            "'Rider Arms'): " + arm_model_verdict(m["arm_model"])
         )
     for f, cap in zip(
         m["figures"],
