@@ -23,6 +23,7 @@ PAPER_ANOMALY = PAPER["anomaly"]
 
 __all__ = [
     "build_report",
+    "drift_sentence",
     "family_sentence",
     "lowest_periodic",
     "multiplier_sentence",
@@ -638,16 +639,48 @@ def family_sentence(periodic: list[dict]) -> str:
     return "; ".join(parts) + "."
 
 
+def drift_sentence(speed_ranges: list[dict]) -> str:
+    """The speed drift of free-speed runs with its range over speeds, as report text.
+
+    Parameters
+    ----------
+    speed_ranges : list of dict
+        ``speed`` (initial speed [m/s]) and ``speed_range`` ([min, max] over the run [m/s]).
+
+    Returns
+    -------
+    str
+        ``"a-b m/s over v1-v2 m/s (largest d at v m/s; c-e m/s from v' m/s up)"``, the
+        bracket leaving out the lowest speed where the drift is largest there; ``"-"``
+        without runs.
+    """
+    rows = sorted((q["speed"], q["speed_range"][1] - q["speed_range"][0]) for q in speed_ranges)
+    if not rows:
+        return "-"
+    d = [x for _, x in rows]
+    text = f"{min(d):.3f}-{max(d):.3f} m/s over {rows[0][0]:g}-{rows[-1][0]:g} m/s"
+    v_max, d_max = max(rows, key=lambda r: r[1])
+    if len(rows) > 2 and v_max == rows[0][0]:
+        rest = d[1:]
+        text += (
+            f" (largest {d_max:.3f} m/s at {v_max:g} m/s; {min(rest):.3f}-{max(rest):.3f} m/s "
+            f"from {rows[1][0]:g} m/s up)"
+        )
+    else:
+        text += f" (largest {d_max:.3f} m/s at {v_max:g} m/s)"
+    return text
+
+
 def _report_free_speed(rep: Report, fs: dict) -> None:
     c = fs["comparison"]
     rep.heading("Chen & Dao with the speed free: does speed drift explain the paper's shifts?")
-    drift = [q["speed_range"][1] - q["speed_range"][0] for q in fs["speed_ranges"]]
     rep.para(
         "Chen & Dao's runs have an 'initial forward speed' (p. 2), so their speed was probably "
         "free; ours above are held. The same fuzzy runs (same chirp, dither, noise, seeds) "
         "with the rear wheel coasting from the initial speed, identified by the same PEM and "
-        "labelled by the initial speed as the paper does: speed drift within a run "
-        + (f"{min(drift):.3f}-{max(drift):.3f} m/s" if drift else "-")
+        "labelled by the initial speed as the paper does: speed drift within a run (max - "
+        "min of the speed) "
+        + drift_sentence(fs["speed_ranges"])
         + f". **Verdict: speed drift {c['verdict']} the paper's shifts** ({c['reason']}; rule: "
         "explains if the free-speed estimates close at least half of the gap to the paper "
         "for both v_w and v_c, or the capsize dip appears)."

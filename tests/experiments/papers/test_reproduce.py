@@ -242,6 +242,22 @@ def test_family_sentence_and_lowest_periodic_follow_the_data():
     assert lowest_periodic([{"v0": 3.3, "outcome": "falls"}]) == (None, None)
 
 
+def test_drift_sentence_gives_the_range_over_speeds():
+    """The referee's case: the quick run drifts 0.43 m/s at 1 m/s and 0.012-0.085 m/s from
+    2 m/s up; the sentence must give both, from the numbers (max - min of each run)."""
+    from bikeid.experiments.papers.report import drift_sentence
+
+    rows = [{"speed": 2.0, "speed_range": [1.95, 2.035]},
+            {"speed": 1.0, "speed_range": [0.6, 1.03]},
+            {"speed": 10.0, "speed_range": [9.994, 10.006]}]  # fmt: skip
+    assert drift_sentence(rows) == (
+        "0.012-0.430 m/s over 1-10 m/s (largest 0.430 m/s at 1 m/s; 0.012-0.085 m/s from 2 m/s up)"
+    )
+    rows[1]["speed_range"] = [0.99, 1.0]  # the largest drift now at 2 m/s
+    assert drift_sentence(rows) == "0.010-0.085 m/s over 1-10 m/s (largest 0.085 m/s at 2 m/s)"
+    assert drift_sentence([]) == "-"
+
+
 def test_window_label_names_weave_cycles_only_where_the_data_say_so():
     """The referee's case: the 3.35-3.36 m/s orbits (symmetric, period 3, +-25 deg, T ~ 11 s)
     are not the weave cycles born at v_w.  Both ways: a symmetric period-1 window reaching
