@@ -14,6 +14,7 @@ import numpy as np
 
 from bikeid.experiments.papers.chen_dao import PAPER
 from bikeid.experiments.papers.moore_hubbard import ENVIRONMENTS, RIDERS, SIM_WINDOW
+from bikeid.experiments.papers.verdicts import verdict_rows
 from bikeid.experiments.report import Report, fmt, fmt_complex
 from bikeid.experiments.testbed.accuracy import real_tolerance
 from bikeid.ident.canonical import THETA_NAMES
@@ -65,6 +66,12 @@ def build_report(s: dict[str, Any]) -> Report:
         f"{s['seconds']['total']:.1f} s with {s['workers']} worker process(es). "
         "Numbers are also in `summary.json`."
     )
+    rep.heading("Verdicts: one line per claim")
+    rep.para(
+        "Every cell is read from `summary.json` and every verdict computed with the tolerance "
+        "it states (`experiments.papers.verdicts`); the sections below give the details."
+    )
+    rep.table(["claim", "paper", "bikeid", "truth", "verdict"], verdict_rows(s))
     rep.table(["setting", "value"], [[k, str(v)] for k, v in st.items()])
     _report_fig2(rep, cd["fig2"])
     _report_fig3(rep, cd["fig3"], s["truth"], cd.get("speed_scan"), s.get("speed_scan"))

@@ -760,3 +760,52 @@ def test_eigen_stderr_is_the_propagation_of_ident_uncertainty():
         J[:, j] = np.concatenate([d.real, d.imag])
     fd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, cov, J), 0)).reshape(2, 4).T
     np.testing.assert_allclose(se, fd, rtol=1e-6, atol=1e-12)
+
+
+def _verdict_summary(v_w_id=4.287, wins=((3.46, 3.6, "turning"), (3.92, 4.28, "symmetric"))):
+    """The parts of a reproduction summary the verdict table reads (numbers of the quick
+    run: truth v_d 0.684, v_w 4.292, v_c 6.024; paper 1.465, 3.994, 10.525)."""
+    crit_true = {"v_d": 0.6843, "v_w": 4.2924, "v_c": 6.0243}
+    return {
+        "truth": {"critical_speeds": crit_true},
+        "chen_dao": {
+            "fig2": {"rhp_zero": {"paper": 3.311, "identified": 3.14, "true": 3.1347}},
+            "fig3": {
+                "critical_paper": {"v_d": 1.465, "v_w": 3.994, "v_c": 10.525},
+                "critical_identified": {"v_d": None, "v_w": v_w_id, "v_c": 6.02},
+                "critical_true": crit_true,
+                "anomaly": {"verdict": "absent", "truth": "absent"},
+            },
+            "figs4_5": {"limit_cycles": [{"outcome": "periodic"}] * 4 + [{"outcome": "falls"}] * 4},
+            "speed_scan": {"paper": (3.152, 3.994)},
+            "periodic_windows": [list(w) for w in wins],
+        },
+        "moore_hubbard": {},
+    }
+
+
+def test_verdict_table_is_computed_both_ways():
+    """Each verdict follows its row's numbers and stated tolerance: the paper's v_w 3.994 is
+    0.298 m/s off the linearization (tolerance 0.15), bikeid's 4.287 agrees; an identified
+    4.0 is off.  The paper's RHP zero 3.311 is 0.176 rad/s off (tolerance 0.05).  Two
+    periodic windows are not one band; one window over 3.15-3.99 is.  4 of 8 coasting
+    starts periodic holds for 4 of 8, not every start."""
+    from bikeid.experiments.papers.verdicts import verdict_rows
+
+    rows = {r[0]: r for r in verdict_rows(_verdict_summary())}
+    vw = rows["Chen & Dao: v_w (weave stable above)"]
+    assert vw[4] == "paper off (-0.298, tolerance 0.15); bikeid agrees (-0.005, tolerance 0.15)"
+    assert "bikeid not found" in rows["Chen & Dao: v_d (weave pair turns complex)"][4]
+    assert rows["Chen & Dao eq. 6: right-half-plane zero of delta/T_delta at 4.2 m/s"][4] == (
+        "paper off (+0.176, tolerance 0.05); bikeid agrees (+0.005, tolerance 0.05)"
+    )
+    assert rows["Chen & Dao: capsize anomaly in v_l .. v_w"][4] == "not reproduced (absent)"
+    band = rows["Chen & Dao: limit cycles within 3.152-3.994 m/s"]
+    assert band[4] == "not one band: 2 windows" and "-0.298 m/s" in band[1]
+    assert rows["Chen & Dao Figs. 4-5: coasting at 3.5 m/s reaches limit cycles"][4] == (
+        "holds for 4 of 8"
+    )
+    rows = {r[0]: r for r in verdict_rows(_verdict_summary(4.0, ((3.15, 3.99, "turning"),)))}
+    assert rows["Chen & Dao: v_w (weave stable above)"][4].endswith("bikeid off (-0.292, "
+                                                                    "tolerance 0.15)")  # fmt: skip
+    assert rows["Chen & Dao: limit cycles within 3.152-3.994 m/s"][4] == "one band"
