@@ -781,6 +781,18 @@ def _verdict_summary(v_w_id=4.287, wins=((3.46, 3.6, "turning"), (3.92, 4.28, "s
             "periodic_windows": [list(w) for w in wins],
         },
         "moore_hubbard": {},
+        "sweep": {
+            "pid/direct": {
+                "stacked": {
+                    "speeds": [2.0, 5.0, 10.0],
+                    "entries": {
+                        "Mpd": {"noise_free": 0.6749, "true": 0.6650},  # +1.5 %
+                        "K0pd": {"noise_free": -0.1262, "true": -0.0950},  # -32.8 %
+                        "C1dd": {"noise_free": 0.0, "true": None},
+                    },
+                }
+            }
+        },  # no truth: left out
     }
 
 
@@ -805,6 +817,9 @@ def test_verdict_table_is_computed_both_ways():
     assert rows["Chen & Dao Figs. 4-5: coasting at 3.5 m/s reaches limit cycles"][4] == (
         "holds for 4 of 8"
     )
+    ls = rows["Moore & Hubbard: least squares on differentiated rates identifies the entries"]
+    assert ls[2].endswith("2, 5, 10 m/s: K0pd -32.8 %, Mpd +1.5 %")
+    assert ls[4] == "biased beyond 10 %: K0pd"
     rows = {r[0]: r for r in verdict_rows(_verdict_summary(4.0, ((3.15, 3.99, "turning"),)))}
     assert rows["Chen & Dao: v_w (weave stable above)"][4].endswith("bikeid off (-0.292, "
                                                                     "tolerance 0.15)")  # fmt: skip
