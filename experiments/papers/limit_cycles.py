@@ -599,10 +599,12 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
 SCAN_CONDITION = InitialCondition("delta0=0.1, phidot0=0", delta=0.1)
 
 
-#: Orbit families (Chen & Dao's turning orbits of Figs. 4-5 and the weave cycles about
-#: upright born at v_w).  A periodic run is ``symmetric`` when over its last half the
-#: mean roll and the sum of the roll extrema are both within :data:`FAMILY_REL` of the roll
-#: amplitude (max - min) / 2, else ``turning`` (lopsided: a mean lean, a mean turn).
+#: Orbit families (Chen & Dao's turning orbits of Figs. 4-5; orbits symmetric about upright,
+#: the weave cycles born at v_w among them, but not only: the period-3 orbit at 3.36 m/s is
+#: symmetric too, see ``report.window_label``).  A periodic run is ``symmetric`` when over
+#: its last half the mean roll and the sum of the roll extrema are both within
+#: :data:`FAMILY_REL` of the roll amplitude (max - min) / 2, else ``turning`` (lopsided: a
+#: mean lean, a mean turn).
 FAMILIES = ("symmetric", "turning")
 #: Benchmark bicycle, 0.1 deg steer start, 300 s runs on a 0.02 m/s grid over 3.2-4.3 m/s:
 #: the symmetric cycles have |mean roll| / amplitude <= 0.006 (the half-run mean over a
