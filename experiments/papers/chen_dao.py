@@ -106,7 +106,9 @@ PAPER = {
         "unstable_from": 3.568,
     },
     # p. 4, Sec. V: "limit-cycle phase portraits [...] within the speed range from 3.152 to
-    # 3.994 m/s"
+    # 3.994 m/s".  Not a scan: the band B2 = v_l .. v_w of their identified linear models
+    # (p. 3), in which they simulated one speed, 3.5 m/s (Figs. 4-5); its top is their v_w,
+    # 0.298 m/s below the benchmark's linear v_w (4.292 m/s)
     "periodic_range": (3.152, 3.994),
 }
 #: The paper's anomaly speeds [m/s] (:data:`PAPER` ``anomaly``), identified in every run.

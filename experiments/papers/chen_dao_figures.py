@@ -134,14 +134,18 @@ def fig3(
             a2.plot(sw.speeds, np.abs(sw.values[:, j].imag), color=c, lw=1.0, label=nm)
         sp = np.array([g["speed"] for g in runs_sel])
         ev = np.array([g["methods"]["pem"]["eig"] for g in runs_sel])
-        a1.plot(np.repeat(sp, 4), ev.real.ravel(), "kx", ms=4, label="identified (PEM), real part")
-        a2.plot(
-            np.repeat(sp, 4),
-            np.abs(ev.imag).ravel(),
-            "k*",
-            ms=4,
-            label="identified (PEM), |imag part|",
-        )
+        # 95 % intervals: 1.96 standard errors of the real and imaginary parts (first-order
+        # propagation of the PEM covariance, chen_dao.eigen_stderr); NaN: no bar
+        se = np.full((len(runs_sel), 4, 2), np.nan)
+        for i, g in enumerate(runs_sel):
+            if g["methods"]["pem"].get("stderr") is not None:
+                se[i] = np.asarray(g["methods"]["pem"]["stderr"], float).reshape(4, 2)
+        a1.errorbar(np.repeat(sp, 4), ev.real.ravel(), yerr=1.96 * se[:, :, 0].ravel(),
+                    fmt="kx", ms=4, elinewidth=0.8, capsize=2,
+                    label="identified (PEM), real part, 95 % interval")  # fmt: skip
+        a2.errorbar(np.repeat(sp, 4), np.abs(ev.imag).ravel(), yerr=1.96 * se[:, :, 1].ravel(),
+                    fmt="k*", ms=4, elinewidth=0.8, capsize=2,
+                    label="identified (PEM), |imag part|, 95 % interval")  # fmt: skip
         for a in (a1, a2):
             a.axhline(0, color="k", lw=0.5)
             a.set_xlim(lo - 0.02 * (hi - lo), hi + 0.02 * (hi - lo))

@@ -13,10 +13,18 @@ Classification (a Poincare section).  The section is phidot = 0 with phidot decr
 samples and gives the section point x_n = (phi, delta, deltadot, v).  :func:`classify`
 calls a run ``falls`` (the integrator stopped it: |roll| > 60 deg), ``decays`` (the
 amplitude |(phi, delta, deltadot)| of the section points shrinks geometrically towards
-zero, at a rate distinguishable from zero), ``periodic`` with period n (the smallest p in
-1..4 with max |x_{n+p} - x_n| below :data:`CLOSURE_REL` of the points' amplitude, per
-component, on the last half of the returns) or ``irregular`` (none of these).  Tolerances
-are relative to the motion's amplitude, so a motion dying out is not called periodic.
+zero, at a rate distinguishable from zero), ``growing`` (the amplitude grows at a rate
+distinguishable from zero, by more than :data:`CLOSURE_REL` over the last half: a motion
+still growing 0.5 % per return closes to 0.5 % and is not periodic), ``periodic`` with
+period n (the smallest p in 1..4 with max |x_{n+p} - x_n| below :data:`CLOSURE_REL` of the
+points' amplitude, per component, on the last half of the returns) or ``irregular`` (none
+of these).  Tolerances are relative to the motion's amplitude, so a motion dying out or
+still growing is not called periodic.
+
+That is the class of a run capped at T_max.  The speed scan then lets Newton on the
+Poincare map decide from the run's end whether a periodic orbit exists
+(:mod:`experiments.papers.orbit_convergence`): a growing or periodic run is ``periodic``
+only if Newton finds an attracting orbit there, else ``not converged``.
 
 Stability of a periodic orbit: :mod:`sim.periodic_orbits` converges the orbit by Newton
 on the Poincare map's fixed point (DOP853 at rtol = atol = 1e-12) and takes the
@@ -40,6 +48,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from bikeid.experiments.papers.orbit_convergence import converge_from_run_end
 from bikeid.experiments.parallel import map_jobs
 from bikeid.experiments.plots import plt, save
 from bikeid.sim.integrate import DEFAULT_SUBSTEPS, simulate
@@ -200,7 +209,7 @@ def section_points(t, phi, phidot, delta, deltadot, v) -> tuple[np.ndarray, np.n
 #: of a 10 ms run are linearly interpolated; on the converged 3.5 m/s orbits (Newton residual
 #: 1e-10, multipliers |mu| < 0.2) that leaves closures of 5e-5 .. 1.4e-3, hence 1e-2.
 CLOSURE_REL = 1e-2
-OUTCOMES = ("decays", "periodic", "irregular", "falls")
+OUTCOMES = ("decays", "growing", "periodic", "irregular", "falls")
 
 
 @dataclass(frozen=True)
@@ -217,7 +226,7 @@ class Classification:
     Attributes
     ----------
     outcome : str
-        ``decays``, ``periodic``, ``irregular`` or ``falls``.
+        ``decays``, ``growing``, ``periodic``, ``irregular`` or ``falls``.
     period_n : int or None
         Returns per period (periodic only).
     closure_rel : float or None
@@ -249,15 +258,18 @@ def classify(
     closure_rel: float = CLOSURE_REL,
     final_rel: float | None = None,
 ) -> Classification:
-    """Classify a coasting run as ``decays``, ``periodic``, ``irregular`` or ``falls``.
+    """Classify a coasting run as ``decays``, ``growing``, ``periodic``, ``irregular``, ``falls``.
 
     Rules (on the last half of the section points, at least 8 returns there):
     ``falls`` if the run fell; ``decays`` if the log amplitude shrinks at a rate
     distinguishable from zero (slope + 3 standard errors < 0), by more than ``closure_rel``
     over the tail, and geometrically (the slope over the second half of the tail is at
     least half the slope over the first half: the amplitude heads to zero, not to a
-    nonzero orbit); ``periodic`` (period n = smallest p in 1..4) if the relative closure
-    is below ``closure_rel``; otherwise ``irregular``.
+    nonzero orbit); ``growing`` if the log amplitude grows at a rate distinguishable from
+    zero (slope - 3 standard errors > 0) by more than ``closure_rel`` over the tail (so a
+    growth below ``closure_rel`` per return is not taken for closure); ``periodic`` (period
+    n = smallest p in 1..4) if the relative closure is below ``closure_rel``; otherwise
+    ``irregular``.
 
     Parameters
     ----------
@@ -305,6 +317,8 @@ def classify(
         b2, _ = _slope(la[h:])
         if b + 3 * se < 0 and -b * la.size > closure_rel and b2 < 0.5 * b1 < 0:
             return Classification("decays", None, None, b, se)
+        if b - 3 * se > 0 and b * la.size > closure_rel:
+            return Classification("growing", None, None, b, se)
     s = np.max(np.abs(tail), axis=0)
     s[s == 0] = 1.0
     best = None
@@ -321,17 +335,18 @@ def classify(
 class Periodicity:
     """Outcome of one coasting run (angles deg, rates deg/s, speed m/s, energy J).
 
-    ``verdict`` is the :func:`classify` outcome (``decays``, ``periodic``, ``irregular``,
-    ``falls``); ``returns_per_period`` its period n; ``period`` the mean time of n returns
-    over the last half [s]; ``closure`` the relative closure of :class:`Classification`;
-    ``decay_rate`` the log-amplitude slope per return; ``fall_cause`` the integrator's
-    stop reason; ``energy_drift`` = (max - min) / |mean| of the total energy.
+    ``verdict`` is the :func:`classify` outcome (``decays``, ``growing``, ``periodic``,
+    ``irregular``, ``falls``); ``returns_per_period`` its period n; ``period`` the mean
+    time of n returns over the last half [s]; ``closure`` the relative closure of
+    :class:`Classification`; ``decay_rate`` the log-amplitude slope per return;
+    ``fall_cause`` the integrator's stop reason; ``energy_drift`` = (max - min) / |mean|
+    of the total energy.
 
     Attributes
     ----------
     label : str
         The initial condition's label.
-    verdict : {"decays", "periodic", "irregular", "falls"}
+    verdict : {"decays", "growing", "periodic", "irregular", "falls"}
         Outcome of :func:`classify`.
     fell_at : float or None
         Time the run ended early [s] (None if it ran to the end).
@@ -584,10 +599,12 @@ def summary_entry(p: BicycleParameters, ic: InitialCondition, res: Periodicity) 
 SCAN_CONDITION = InitialCondition("delta0=0.1, phidot0=0", delta=0.1)
 
 
-#: Orbit families (Chen & Dao's turning orbits of Figs. 4-5 and the weave cycles about
-#: upright born at v_w).  A periodic run is ``symmetric`` when over its last half the
-#: mean roll and the sum of the roll extrema are both within :data:`FAMILY_REL` of the roll
-#: amplitude (max - min) / 2, else ``turning`` (lopsided: a mean lean, a mean turn).
+#: Orbit families (Chen & Dao's turning orbits of Figs. 4-5; orbits symmetric about upright,
+#: the weave cycles born at v_w among them, but not only: the period-3 orbit at 3.36 m/s is
+#: symmetric too, see ``report.window_label``).  A periodic run is ``symmetric`` when over
+#: its last half the mean roll and the sum of the roll extrema are both within
+#: :data:`FAMILY_REL` of the roll amplitude (max - min) / 2, else ``turning`` (lopsided: a
+#: mean lean, a mean turn).
 FAMILIES = ("symmetric", "turning")
 #: Benchmark bicycle, 0.1 deg steer start, 300 s runs on a 0.02 m/s grid over 3.2-4.3 m/s:
 #: the symmetric cycles have |mean roll| / amplitude <= 0.006 (the half-run mean over a
@@ -647,9 +664,10 @@ def _scan_point(args: tuple) -> dict:
         except ValueError as exc:  # numerical stop (stop_info refuses it)
             msg = str(exc)
             continue
-        return {
+        e = {
             "v0": float(v),
             "outcome": r.verdict,
+            "run_outcome": r.verdict,
             "period_n": r.returns_per_period,
             "family": r.family,
             "period_s": r.period,
@@ -658,8 +676,23 @@ def _scan_point(args: tuple) -> dict:
             "roll_range_last_half_deg": r.roll_range_last_half,
             "roll_mean_last_half_deg": r.roll_mean,
             "speed_range": r.speed_range,
+            "speed_mean_last_half": r.speed_mean,
+            "growth_per_return": r.decay_rate,
             "rk4_substeps": substeps,
+            "orbit": None,
         }
+        if r.verdict in ("periodic", "growing"):
+            o = converge_from_run_end(
+                p, r.last_section_point, r.verdict, r.returns_per_period, r.energy
+            )
+            e.update(
+                outcome=o.outcome,
+                period_n=o.returns_per_period,
+                family=o.family,
+                period_s=o.period,
+                orbit=o.as_dict(),
+            )
+        return e
     return {"v0": float(v), "outcome": "numerical", "period_n": None, "family": None,
             "message": msg}  # fmt: skip
 
@@ -684,7 +717,11 @@ def scan_windows(points) -> dict[str, list]:
         ``periodic``: list of [low, high, family] [m/s] for the periodic windows (the
         ``chen_dao.periodic_windows`` of summary.json); ``all``: every window as a dict
         (``low``, ``high`` [m/s], ``outcome``, ``family``, ``period_n``: sorted distinct
-        period numbers in it, ``n``: number of grid speeds).
+        period numbers in it, ``n``: number of grid speeds; for entries with a converged
+        ``orbit`` (:mod:`experiments.papers.orbit_convergence`) also [min, max] over the
+        window of ``roll_amplitude_deg`` (half the roll range [deg]), ``orbit_period_s``
+        [s], ``orbit_speed_mean`` (mean speed over the orbit [m/s]) and ``speed_gain``
+        (that minus the initial speed [m/s])).
 
     Raises
     ------
@@ -711,6 +748,16 @@ def scan_windows(points) -> dict[str, list]:
             runs.append(w)
         if q.get("period_n") is not None and q["period_n"] not in w["period_n"]:
             w["period_n"] = sorted(w["period_n"] + [q["period_n"]])
+        o = q.get("orbit") or {}
+        if o.get("outcome") == "periodic":
+            for key, val in (
+                ("roll_amplitude_deg", 0.5 * (o["roll_max"] - o["roll_min"])),
+                ("orbit_period_s", o["period"]),
+                ("orbit_speed_mean", o["speed_mean"]),
+                ("speed_gain", o["speed_mean"] - q["v0"]),
+            ):
+                lo_hi = w.get(key)
+                w[key] = [val, val] if lo_hi is None else [min(lo_hi[0], val), max(lo_hi[1], val)]
     per = [[w["low"], w["high"], w["family"]] for w in runs if w["outcome"] == "periodic"]
     return {"periodic": per, "all": runs}
 
@@ -741,7 +788,8 @@ def speed_scan(
     speeds : sequence of float
         Initial speeds [m/s].
     duration : float
-        Length of each run [s]; a motion still growing at the end is ``irregular``.
+        T_max, the length of each run [s]; a run still ``growing`` or ``periodic`` at the
+        end is decided by Newton from its end (``periodic`` or ``not converged``).
     ic : InitialCondition, optional
         Initial roll, steer and rates (default :data:`SCAN_CONDITION`).
     workers : int, optional

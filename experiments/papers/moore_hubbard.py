@@ -488,7 +488,9 @@ def reproduce(
     }
 
 
-def arm_model_summary(rider: str = "B", vmax: float = 10.0) -> dict[str, Any]:
+def arm_model_summary(
+    rider: str = "B", vmax: float = 10.0, arms: ArmParameters | None = None
+) -> dict[str, Any]:
     """Stability of the rider's arm model and Whipple model from 0.01 to ``vmax`` m/s.
 
     Parameters
@@ -497,6 +499,10 @@ def arm_model_summary(rider: str = "B", vmax: float = 10.0) -> dict[str, Any]:
         A key of :data:`RIDERS`. Default the benchmark rider.
     vmax : float, optional
         Highest speed [m/s] (the paper's figures reach 10 m/s).
+    arms : ArmParameters, optional
+        The arms (posture, segment masses); default the nominal arms scaled like the rider
+        (:data:`RIDER_SCALES`).  ``benchmarks/arm_model_map.py`` varies them to map where
+        the finding holds.
 
     Returns
     -------
@@ -508,7 +514,9 @@ def arm_model_summary(rider: str = "B", vmax: float = 10.0) -> dict[str, Any]:
         mode unstable at every speed and a stable oscillatory mode (Moore's dissertation);
         ``arms_mass`` [kg]; ``vmax`` [m/s].
     """
-    arm = stability_summary(_arm_matrices(rider), vmax=vmax)
+    if arms is None:
+        arms = ArmParameters().scaled(RIDER_SCALES[rider])
+    arm = stability_summary(arm_model_matrices(rider_parameters(rider), arms), vmax=vmax)
     whipple = stability_summary(_model_matrices(rider, None)[0], vmax=vmax)
     return {
         "stable_ranges": arm["stable_ranges"],
@@ -520,7 +528,7 @@ def arm_model_summary(rider: str = "B", vmax: float = 10.0) -> dict[str, Any]:
             and arm["real_unstable_everywhere"]
             and arm["oscillatory_stable_everywhere"]
         ),
-        "arms_mass": ArmParameters().scaled(RIDER_SCALES[rider]).mass,
+        "arms_mass": arms.mass,
         "vmax": vmax,
     }
 

@@ -93,9 +93,10 @@ def _grid(lo: float, hi: float, step: float) -> tuple[float, ...]:
 
 
 #: The coasting speed scan: 3.2-4.3 m/s (below Chen & Dao's 3.152 every run falls; above
-#: v_w = 4.29 m/s upright coasting is stable) at 0.01 m/s (full) / 0.02 m/s (quick), 300 s
-#: runs in both (the irregular windows stay irregular at 300 s: shorter runs would call
-#: motions still settling irregular).
+#: v_w = 4.29 m/s upright coasting is stable) at 0.01 m/s (full) / 0.02 m/s (quick), runs
+#: capped at T_max = 300 s in both (the irregular windows stay irregular at 300 s); a run
+#: still growing or periodic at T_max is decided by Newton on the Poincare map from its end
+#: (:mod:`experiments.papers.orbit_convergence`).
 SCAN_RANGE = (3.2, 4.3)
 FULL = Settings(
     name="full",
@@ -294,7 +295,8 @@ def reproduce(
     log(
         "  periodic windows (initial speed, family): "
         + ("; ".join(f"{a:.2f}-{b:.2f} {f}" for a, b, f in scan["periodic_windows"]) or "none")
-        + f" m/s ({scan['grid_note']}; paper: one range 3.152-3.994)"
+        + f" m/s ({scan['grid_note']}; paper: 3.152-3.994, the band v_l..v_w of its "
+        "identified linear models, not a scan)"
     )
     times["speed_scan"] = time.perf_counter() - t0
     t0 = stage("Chen & Dao Fig. 7: pole-placement roll tracking at 15 km/h")
