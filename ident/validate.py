@@ -43,7 +43,7 @@ from bikeid.dataset.run import Run
 from bikeid.ident.direct import DirectResult, vaf_moore, vaf_variance
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.pem import CanonicalModel
-from bikeid.sim.errors import UntrustworthyResult
+from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
 __all__ = [
@@ -324,6 +324,30 @@ def k_step_prediction(
     return pred
 
 
+def _data_first(runs, model, name: str) -> list[Run]:
+    """The runs as a list, refusing a model given first (the order is data, then model,
+    as MATLAB's ``compare(data, model)`` and ``resid(data, model)``)."""
+
+    def is_runs(x) -> bool:
+        return isinstance(x, Run) or (
+            isinstance(x, (list, tuple)) and len(x) > 0 and all(isinstance(r, Run) for r in x)
+        )
+
+    if not is_runs(runs):
+        if is_runs(model):
+            raise InputError(
+                f"{name}(model, runs): the arguments are swapped; the data come first, as in "
+                f"MATLAB: {name}(runs, model)"
+            )
+        if isinstance(runs, (list, tuple)) and not runs:
+            raise InputError(f"{name}: no runs given; pass a Run or a list of Runs first")
+        raise InputError(
+            f"{name}: the first argument is a {type(runs).__name__}, not a Run or a list of "
+            f"Runs; call {name}(runs, model)"
+        )
+    return [runs] if isinstance(runs, Run) else list(runs)
+
+
 def compare(
     runs: Run | Sequence[Run],
     model,
@@ -358,8 +382,11 @@ def compare(
         run (growth of the largest discrete eigenvalue over the run above 1e12): use a finite
         horizon or a shorter window (``Run.window``), as Moore's 8 s windows; likewise for a
         prediction whose predictor Ad - K C is unstable (K = 0 and an unstable model).
+    InputError
+        If ``runs`` is not a Run or a non-empty list of Runs, e.g. the arguments swapped
+        (``compare(model, runs)``; the data come first, as MATLAB's ``compare(data, model)``).
     """
-    runs = [runs] if isinstance(runs, Run) else list(runs)
+    runs = _data_first(runs, model, "compare")
     if horizon is not None and horizon < 1:
         raise ValueError(f"horizon={horizon}: need an integer >= 1 or None (simulation)")
     yh_all, x0_all, ys = [], [], []
@@ -492,11 +519,12 @@ def resid(
     Raises
     ------
     ValueError
-        If ``input="dither"`` and a run has no logged dither, or :func:`compare` raises.
+        If ``input="dither"`` and a run has no logged dither, or :func:`compare` raises
+        (InputError for arguments swapped: ``resid(runs, model)``).
     """
     from scipy.stats import norm
 
-    runs = [runs] if isinstance(runs, Run) else list(runs)
+    runs = _data_first(runs, model, "resid")
     pred = compare(runs, model, horizon=1)
     res, uin = [], []
     for run, yh in zip(runs, pred.yhat, strict=True):

@@ -878,6 +878,10 @@ def validate_model(
         model, K = 0): validate on shorter windows.  A simulation alone that diverges is
         not an error (the k-step fit is then the headline, ``simulation_note`` says why).
     """
+    if isinstance(model, Run) or (isinstance(model, (list, tuple)) and model
+                                  and all(isinstance(r, Run) for r in model)):  # fmt: skip
+        raise InputError("validate_model(runs, model): the arguments are swapped; the model "
+                         "comes first: validate_model(model, runs)")  # fmt: skip
     runs = _runs(runs)
     if not (isinstance(k_step, (int, np.integer)) and k_step >= 1):
         raise ValueError(f"k_step={k_step}: need an integer >= 1 [samples]")
