@@ -337,3 +337,75 @@ def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_
     save_model(ExperimentModel(), exp)
     assert main(["validate", "--model", str(exp), str(data)]) == 3
     assert "measured evaluate" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """A closed-loop run of the linear plant under the roll PID at 5 m/s, 30 s, and the model
+    bikeid identify saves (a per-speed PEM fit with its noise model)."""
+    from bikeid.controllers import UniformDither, make
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.store import write_runs
+    from bikeid.experiments.cli import main
+
+    run = simulate_run(P, make("pid", P), speed=5.0, duration=30.0,
+                       dither=UniformDither(1.0, seed=2), seed=2, plant="linear")  # fmt: skip
+    root = tmp_path_factory.mktemp("identified")
+    data, model = root / "run.h5", root / "m.json"
+    write_runs(data, [run])
+    assert main(["identify", str(data), "--out", str(model), "--quiet"]) == 0
+    return data, model
+
+
+def test_identify_and_validate_agree_on_the_same_data(identified, capsys):
+    """On the data a model was identified from, validate's residual tests are identify's
+    (the structure check saved in the model file: every test's statistic and p-value
+    equal, the same Bonferroni level), so the two agree on every output's whiteness; the
+    printed row's verdict is the JSON's."""
+    from bikeid.experiments.cli import main
+
+    data, model = map(str, identified)
+    capsys.readouterr()
+    assert main(["validate", data, "--model", model, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    saved = json.loads(identified[1].read_text())["results"]["structure_check"]
+    tests = doc["residual_tests"]
+    assert tests["tests"] == saved["tests"] and tests["per_test_level"] == saved["per_test_level"]
+    assert any(t["kind"] == "whiteness" for t in saved["tests"]["5"])  # a noise model: tested
+    white = doc["per_speed"][0]["whiteness"]
+    assert {o: w["p_value"] for o, w in white.items()} == {
+        t["output"]: t["p_value"] for t in saved["tests"]["5"] if t["kind"] == "whiteness"}
+    from bikeid.experiments.cli.validate import table
+    from bikeid.ident.model_file import load_model
+
+    assert main(["validate", data, "--model", model]) == 0
+    text = capsys.readouterr().out
+    row = next(ln for ln in text.splitlines() if ln.startswith("      5    1 ")).split()
+    assert row[2:6] == [f"{doc['per_speed'][0]['fit_simulation'][o]:.1f}" for o in
+                        doc["outputs"]]  # fmt: skip
+    bad = [o for o, w in white.items() if not w["white"]]
+    assert " ".join(row[6:]).startswith(f"NOT white: {', '.join(bad)}" if bad else "white")
+    assert load_model(model).outputs == tuple(doc["outputs"]) and callable(table)
+
+
+def test_a_refused_simulation_is_said_once_and_the_k_step_fit_leads():
+    """Two speeds (2.0 and 2.1 m/s, 20 s each) where the 2 m/s model is unstable: the
+    simulation is refused at both, the summary says so once (not per row) and leads with
+    the 5-step prediction's fit, which for the true model's deadbeat predictor
+    (Ad - K C = 0) on noise-free data is 100 % to rounding (1e-6 %), and lower at 2.1 m/s
+    (the model's speed 5 % off); one row per speed."""
+    from bikeid.experiments.cli.validate import table
+
+    runs = [simulate(P, v, duration=20, seed=1, dither=1.0) for v in (2.0, 2.1)]
+    m = _canonical(2.0, runs[0].dt, outputs=("phi", "phidot", "delta", "deltadot"))
+    Ad, _, C, _ = m.predictor()
+    rep = validate_model(dataclasses.replace(m, K=Ad @ C.T), runs[:1] * 2 + runs[1:], k_step=5)
+    assert rep.headline == "k_step" and rep.simulation_note.startswith(
+        "simulation refused at every speed")
+    text = table(rep, "m.json")
+    assert text.count("simulation refused") == 1 and "fit %: the 5-step prediction's" in text
+    rows = [ln.split() for ln in text.splitlines() if ln.startswith(("      2 ", "    2.1 "))]
+    assert [r[:2] for r in rows] == [["2", "2"], ["2.1", "1"]]
+    assert rows[0][2] == "100.0" and rep.per_speed[0].fit_k_step["phi"] == pytest.approx(
+        100.0, abs=1e-6)
+    assert float(rows[1][2]) < 99.9
