@@ -5,9 +5,10 @@ Three PNG figures, written atomically (:func:`bikeid.experiments.plots.save`):
 - :func:`plot_compare`: per output, measured, simulated and k-step-predicted signals of one
   run against time, with MATLAB ``compare``'s fit [%] in the legend;
 - :func:`plot_resid`: per output, the residual autocorrelation (lags 1..M; lag 0 is 1) and
-  the residual-input cross-correlation against lag with the 99 % band and the chi-squared
-  test verdicts;
-- :func:`plot_bode`: per output and speed, the model's Bode plot (sampled response) with
+  the residual-T_delta cross-correlation against lag, one line per speed, with the 99 %
+  band and the verdicts of :mod:`bikeid.ident.structure`'s tests over the speeds;
+- :func:`plot_bode`: one figure per speed (:func:`bode_names`), per output the model's Bode
+  plot (sampled response) with
   its 95 % band (when the model has a parameter covariance; calibrated on the linear plant
   only) under the nonparametric estimate and its error bars at the frequencies the
   coherence allows, and the coherence itself.

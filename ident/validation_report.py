@@ -8,15 +8,19 @@ judge the model (MATLAB System Identification Toolbox habits, all built on
   None) and the k-step-ahead predicted outputs (``horizon = k``), with MATLAB ``compare``'s
   NRMSE fit 100 (1 - ||y - yhat|| / ||y - mean y||) [%] per output;
 - one-step residuals (:func:`~bikeid.ident.validate.resid`): autocorrelation and
-  residual-input cross-correlation with the 99 % band, and the chi-squared whiteness and
-  independence tests computed from them;
+  residual-input cross-correlation with the 99 % band per speed, judged by the one residual
+  test of the project, :func:`bikeid.ident.structure.check_structure` (whiteness when the
+  model has a noise model, independence from the past input; the test ``bikeid identify``
+  runs before it prints intervals, so both say the same of the same data);
 - a nonparametric frequency response from the steer torque to each output
   (:func:`frequency_response_estimate`, Welch spectra), kept only at frequencies whose
   coherence shows excitation, to lay over the model's Bode plot, with the model's 95 %
   Bode band (:func:`bikeid.ident.uncertainty.bode_bands`, for models with a parameter
   covariance) and which estimated points lie inside it.
 
-The result, :class:`ValidationReport`, turns into plain JSON types with
+The runs are taken one speed at a time and reduced to fits, correlations and spectra
+before the next speed, keeping the time series of the first :data:`SERIES_RUNS` runs only
+(the compare figures).  The result, :class:`ValidationReport`, turns into plain JSON types with
 :meth:`ValidationReport.to_json`; the figures are drawn by
 :mod:`bikeid.experiments.validation_plots`.  :func:`validate_decays` applies the same fit and
 residual tests to the steer-by-wire experiment model on measured free decays (``bikeid

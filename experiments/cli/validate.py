@@ -2,10 +2,12 @@
 
 Loads the model with :func:`bikeid.ident.model_file.load_model`, reads the runs as
 ``bikeid identify`` does (same ``--format`` options), computes
-:func:`bikeid.ident.validation_report.validate_model`, prints a table (fit [%] per output,
-whiteness and independence verdicts, the excited band of the frequency-response estimate)
-and, with ``--out DIR``, writes ``validation.json`` and the figures of
-:mod:`bikeid.experiments.validation_plots` there.
+:func:`bikeid.ident.validation_report.validate_model` one speed at a time, and prints one
+screen: one row per speed (fit [%] per output, the whiteness verdict of
+:mod:`bikeid.ident.structure`'s residual test, the Bode points inside the model's band),
+then each note once.  With ``--out DIR`` it writes ``validation.json`` (every number) and
+the figures of :mod:`bikeid.experiments.validation_plots` (one Bode figure per speed)
+there; ``--json`` prints the JSON instead of the table.
 """
 
 from __future__ import annotations
@@ -27,8 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Compare a model saved by 'bikeid identify --out' with runs: measured vs "
             "simulated and k-step-predicted outputs (MATLAB compare's NRMSE fit in %), "
-            "one-step residual whiteness and independence from the input (chi-squared tests "
-            "at 1 %), and a nonparametric frequency response from T_delta to each output "
+            "one-step residual whiteness and independence from the past input (the residual "
+            "test of bikeid identify, chi-squared at family level 1 % over the speeds), and a "
+            "nonparametric frequency response from T_delta to each output "
             "where the coherence shows excitation, with the model's 95 % Bode band (models with "
             "a parameter covariance). Data are read as by 'bikeid identify' "
             "(--format bikeid|csv|hdf5|sbw and its options); the data options the model "
@@ -59,8 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument(
         "--out", default=None, metavar="DIR",
-        help="write validation.json, compare_*.png, resid.png and bode.png into DIR (a new or "
-        "empty folder, or one written by bikeid validate)",
+        help="write validation.json, compare_*.png, resid.png and the Bode figures (bode.png, "
+        "or bode_v<speed>.png per speed) into DIR (a new or empty folder, or one written by "
+        "bikeid validate)",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
     p.set_defaults(func=cmd_validate)
