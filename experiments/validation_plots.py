@@ -101,8 +101,9 @@ def _verdict_text(report: ValidationReport, output: str, kind: str) -> str:
     if not rows:
         return f"{kind}: not tested (K = 0)" if kind == "whiteness" else f"{kind}: not tested"
     bad = sum(t["rejected"] for t in rows)
-    n = len(report.structure.tests)
-    return f"{kind}: {'rejected at ' + str(bad) if bad else 'passed at all'} of {n} speed(s)"
+    if len(rows) == 1:
+        return f"{kind}: {'rejected' if bad else 'passed'} (p = {rows[0]['p_value']:.2g})"
+    return f"{kind}: {f'rejected at {bad}' if bad else 'passed at all'} of {len(rows)} speeds"
 
 
 def plot_resid(report: ValidationReport, path: str | Path) -> Path:

@@ -261,7 +261,7 @@ def test_validation_figures_of_many_speeds_stay_readable(captured, tmp_path):
     bad = sum(t["rejected"] for rows in rep.structure.tests.values() for t in rows
               if t["kind"] == "independence" and t["output"] == "phi")  # fmt: skip
     word = f"rejected at {bad}" if bad else "passed at all"
-    assert f"independence: {word} of 2 speed(s)" in resid.axes[1].get_title().replace("\n", " ")
+    assert f"independence: {word} of 2 speeds" in resid.axes[1].get_title().replace("\n", " ")
 
 
 def test_eigenvalue_plot_title_says_whether_bars_are_drawn(tmp_path, monkeypatch):
