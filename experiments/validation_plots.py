@@ -157,7 +157,7 @@ def plot_resid(report: ValidationReport, path: str | Path) -> Path:
             ax.grid(alpha=0.3)
         a.set_ylabel("correlation [-]")
     if len(cs) > 1:
-        axes[0, 0].legend(fontsize=7, title="speed", title_fontsize=7)
+        axes[0, 0].legend(fontsize=7, title="speed", title_fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel(wrap_title(f"lag [samples] (tests: ident.structure, each at p < "
                                       f"{level:.2g})", width))  # fmt: skip
     axes[-1, 1].set_xlabel(wrap_title("lag [samples] (residual at k vs T_delta at k - lag)",
@@ -253,7 +253,7 @@ def plot_bode(
         ph.set_ylabel("phase [deg]")
         co.set_ylabel("coherence [-]")
         co.set_xlabel("frequency [Hz]")
-        mag.legend(fontsize=7)
+        mag.legend(fontsize=7, loc="best")  # explicit: no timing warning on a busy machine
         for ax in (mag, ph, co):
             ax.grid(alpha=0.3, which="both")
     return save(fig, path)

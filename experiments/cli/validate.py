@@ -197,17 +197,18 @@ def _num(x) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.1f}"
 
 
-def _residual_text(row) -> str:
-    """``white``, ``NOT white: phi`` (and input correlation) of one speed's row."""
+def _whiteness_text(row) -> str:
+    """``white``, ``NOT: phi,delta`` or ``not tested (K = 0)`` of one speed's row."""
     if row.whiteness is None:
-        text = "not tested (K = 0)"
-    else:
-        bad = [o for o, t in row.whiteness.items() if not t["white"]]
-        text = f"NOT white: {', '.join(bad)}" if bad else "white"
-    dep = [o for o, t in row.independence.items() if not t["independent"]]
-    if dep:
-        text += f"; input-correlated: {', '.join(dep)}"
-    return text
+        return "not tested (K = 0)"
+    bad = [o for o, t in row.whiteness.items() if not t["white"]]
+    return f"NOT: {','.join(bad)}" if bad else "white"
+
+
+def _independence_text(row) -> str:
+    """``yes`` or ``NOT: phi,delta``: the residual independent of the past input."""
+    bad = [o for o, t in row.independence.items() if not t["independent"]]
+    return f"NOT: {','.join(bad)}" if bad else "yes"
 
 
 def _band_text(frf: dict) -> str:
@@ -251,18 +252,20 @@ def table(report, model_path: str) -> str:
         f"whiteness: ident.structure's residual test, as bikeid identify's (one-step "
         f"residuals, lags 1..{m}, family level {st.level:g}: each test at p < "
         f"{st.per_test_level:.2g})",
-        "in band: Bode points of the data inside the model's 95 % band (of those excited)",
+        "independent: of the past T_delta (same test family); in band: Bode points of the "
+        "data inside the model's 95 % band (of those excited)",
     ]
-    texts = [_residual_text(row) for row in report.per_speed]
-    w = max(len("whiteness"), *map(len, texts))
+    white = [_whiteness_text(row) for row in report.per_speed]
+    indep = [_independence_text(row) for row in report.per_speed]
+    w1, w2 = max(len("whiteness"), *map(len, white)), max(len("independent"), *map(len, indep))
     head = f"{'v [m/s]':>7s} {'runs':>4s} " + "".join(f"{o:>9s}" for o in report.outputs)
-    lines.append(f"{head}  {'whiteness':{w}s}  in band")
-    for row, text in zip(report.per_speed, texts, strict=True):
+    lines.append(f"{head}  {'whiteness':{w1}s}  {'independent':{w2}s}  in band")
+    for row, wt, it in zip(report.per_speed, white, indep, strict=True):
         fits = row.fit_simulation if sim else row.fit_k_step
         lines.append(
             f"{row.speed:7g} {row.runs:4d} " + "".join(f"{_num(fits[o]):>9s}" for o in
                                                        report.outputs)
-            + f"  {text:{w}s}  {_band_text(row.frf)}"
+            + f"  {wt:{w1}s}  {it:{w2}s}  {_band_text(row.frf)}"
         )  # fmt: skip
     if len(report.per_speed) > 1:
         fits = report.fit if sim else report.fit_k_step
@@ -270,7 +273,7 @@ def table(report, model_path: str) -> str:
         band = "" if all_band is None else _band_text(all_band)
         lines.append(f"{'all':>7s} {len(report.runs):4d} "
                      + "".join(f"{_num(fits[o]):>9s}" for o in report.outputs)
-                     + f"  {'':{w}s}  {band}")  # fmt: skip
+                     + f"  {'':{w1}s}  {'':{w2}s}  {band}")  # fmt: skip
     causes = st.causes()
     lines.append(f"residual tests reject: {causes}" if causes else
                  "residual tests: no test rejects")  # fmt: skip
@@ -309,6 +312,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
         if not runs:
             raise ValueError(f"{', '.join(args.file)} hold no runs")
         report = validate_model(model, runs, k_step=args.k_step, coherence_min=args.coherence)
+        from bikeid.experiments.plots import angle_unit
+
+        # angles in the user's unit: degrees unless their logs were in radians; then the runs
+        # go (the report holds what the figures need), so the figures reuse their memory
+        angle = angle_unit(runs)
+        del runs
         doc = {"command": MARKER, "model": str(args.model), "data": list(map(str, args.file)),
                "settings_from_model": taken, **report.to_json()}  # fmt: skip
         note = _speed_note(args.model, report.speeds)
@@ -319,13 +328,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
             doc["notes"] = [*doc.get("notes", []), note]
         written = []
         if out is not None:
-            from bikeid.experiments.plots import angle_unit
             from bikeid.experiments.validation_plots import write_figures
 
-            # angles in the user's unit: degrees unless their logs were in radians
             atomic_write_text(out / "validation.json", dump_json(doc) + "\n")
             written = [out / "validation.json"]
-            written += write_figures(report, out, angle=angle_unit(runs))
+            written += write_figures(report, out, angle=angle)
     if args.json:
         print(dump_json(doc))
     else:
