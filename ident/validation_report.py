@@ -697,8 +697,10 @@ class ValidationReport:
                 "from T_delta N r' R_u^-1 r on lags 1..M, Bonferroni over the speeds",
                 "max_lag": int(self.correlations[0].lags[-1]) if self.correlations else None,
                 "rejects": self.structure.causes(),
-                **{k: s[k] for k in ("level", "per_test_level", "n_tests", "rejected_speeds",
-                                     "tests")},
+                **{
+                    k: s[k]
+                    for k in ("level", "per_test_level", "n_tests", "rejected_speeds", "tests")
+                },
             },  # fmt: skip
             "frequency_responses": [e.to_json() for e in self.frequency_responses],
             "bode_band": self.band_summary(),
@@ -909,7 +911,8 @@ def validate_model(
         except UntrustworthyResult as exc:
             raise UntrustworthyResult(
                 f"neither simulation nor prediction can be trusted at {v:g} m/s: {exc}"
-                if sim is None else str(exc)
+                if sim is None
+                else str(exc)
             ) from None
         if outputs is None:
             outputs = pred.outputs

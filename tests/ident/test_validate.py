@@ -273,8 +273,11 @@ def test_correlations_by_fft_equal_the_sums_per_lag(n, seed, m):
 
 
 @settings(max_examples=40, deadline=None)
-@given(sizes=st.lists(st.integers(1, 50), min_size=1, max_size=6), seed=st.integers(0, 2**16),
-       offset=st.floats(-1e3, 1e3))
+@given(
+    sizes=st.lists(st.integers(1, 50), min_size=1, max_size=6),
+    seed=st.integers(0, 2**16),
+    offset=st.floats(-1e3, 1e3),
+)
 def test_fit_accumulated_per_block_equals_the_stacked_fit(sizes, seed, offset):
     """validate_model's per-speed accumulation of the stacked NRMSE fit (block means and sums
     of squares combined as Chan, Golub & LeVeque) equals goodness_of_fit on the stacked

@@ -375,7 +375,8 @@ def test_identify_and_validate_agree_on_the_same_data(identified, capsys):
     assert any(t["kind"] == "whiteness" for t in saved["tests"]["5"])  # a noise model: tested
     white = doc["per_speed"][0]["whiteness"]
     assert {o: w["p_value"] for o, w in white.items()} == {
-        t["output"]: t["p_value"] for t in saved["tests"]["5"] if t["kind"] == "whiteness"}
+        t["output"]: t["p_value"] for t in saved["tests"]["5"] if t["kind"] == "whiteness"
+    }
     from bikeid.experiments.cli.validate import table
     from bikeid.ident.model_file import load_model
 
@@ -402,11 +403,13 @@ def test_a_refused_simulation_is_said_once_and_the_k_step_fit_leads():
     Ad, _, C, _ = m.predictor()
     rep = validate_model(dataclasses.replace(m, K=Ad @ C.T), runs[:1] * 2 + runs[1:], k_step=5)
     assert rep.headline == "k_step" and rep.simulation_note.startswith(
-        "simulation refused at every speed")
+        "simulation refused at every speed"
+    )
     text = table(rep, "m.json")
     assert text.count("simulation refused") == 1 and "fit %: the 5-step prediction's" in text
     rows = [ln.split() for ln in text.splitlines() if ln.startswith(("      2 ", "    2.1 "))]
     assert [r[:2] for r in rows] == [["2", "2"], ["2.1", "1"]]
     assert rows[0][2] == "100.0" and rep.per_speed[0].fit_k_step["phi"] == pytest.approx(
-        100.0, abs=1e-6)
+        100.0, abs=1e-6
+    )
     assert float(rows[1][2]) < 99.9
