@@ -39,7 +39,7 @@ from scipy import signal
 from bikeid.dataset.run import SPEED_TOLERANCE, Run
 from bikeid.ident.direct import DirectResult
 from bikeid.ident.greybox import GreyboxModel
-from bikeid.ident.structure import StructureCheck
+from bikeid.ident.structure import StructureCheck, _speeds_text
 from bikeid.ident.uncertainty import bode_bands, z_value
 from bikeid.ident.validate import (
     compare,
@@ -988,11 +988,9 @@ def validate_model(
 
 
 def _speed_list(speeds) -> str:
-    """``1, 3 m/s``, or for more than four ``6 speeds in 5-15 m/s``."""
-    speeds = sorted(speeds)
-    if len(speeds) <= 4:
-        return ", ".join(f"{v:g}" for v in speeds) + " m/s"
-    return f"{len(speeds)} speeds in {min(speeds):g}-{max(speeds):g} m/s"
+    """``1, 3 m/s``, or for more than four ``6 speeds in 5-15 m/s`` (the structure check's
+    wording, sorted)."""
+    return _speeds_text(sorted(speeds))
 
 
 def _frf_notes(frf: Sequence[FrequencyResponseEstimate]) -> list[str]:
