@@ -456,6 +456,21 @@ def _interval_rows(identified: Sequence[Any]) -> list[tuple[float, np.ndarray, A
     return rows
 
 
+def _bars_title(rows: Sequence[tuple[float, np.ndarray, Any]]) -> str:
+    """The complex plane's title, saying whether the points carry interval bars: at every
+    speed, at some (naming them), or at none (withheld or not computed)."""
+    drawn = [v for v, _, b in rows if b is not None and np.isfinite(b).any()]
+    if len(drawn) == len(rows):
+        return "eigenvalues with 95 % intervals (bars) vs nominal (squares)"
+    if not drawn:
+        return ("eigenvalues (no 95 % intervals: withheld or not computed) vs nominal "
+                "(squares)")  # fmt: skip
+    at = f"{len(drawn)} of {len(rows)} speeds"
+    if len(drawn) <= 4:
+        at = f"{', '.join(f'{v:g}' for v in drawn)} m/s only"
+    return f"eigenvalues, 95 % intervals (bars) at {at}, vs nominal (squares)"
+
+
 def _errorbars(ax, x, y, xlo, xhi, ylo, yhi, **kw) -> None:
     """Points with (asymmetric) error bars; a missing or non-finite end draws no bar."""
 
@@ -547,7 +562,7 @@ def plot_identified_eigenvalues(
     plane.set_ylabel("imaginary part [rad/s]")
     plane.grid(alpha=0.3)
     plane.legend(fontsize=7, loc="best")
-    plane.set_title("eigenvalues with 95 % intervals (bars) vs nominal (squares)", fontsize=9)
+    plane.set_title(_bars_title(rows), fontsize=9)
     if over_speed:
         grid = np.linspace(max(0.2, min(speeds) - 1.0), max(speeds) + 1.0, 120)
         curves = [(eigenvalues_vs_speed(nominal, grid).values, "-", nominal_label)]

@@ -43,7 +43,7 @@ from bikeid.dataset.run import Run
 from bikeid.ident.direct import DirectResult, vaf_moore, vaf_variance
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.pem import CanonicalModel
-from bikeid.sim.errors import UntrustworthyResult
+from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
 __all__ = [
@@ -324,6 +324,30 @@ def k_step_prediction(
     return pred
 
 
+def _data_first(runs, model, name: str) -> list[Run]:
+    """The runs as a list, refusing a model given first (the order is data, then model,
+    as MATLAB's ``compare(data, model)`` and ``resid(data, model)``)."""
+
+    def is_runs(x) -> bool:
+        return isinstance(x, Run) or (
+            isinstance(x, (list, tuple)) and len(x) > 0 and all(isinstance(r, Run) for r in x)
+        )
+
+    if not is_runs(runs):
+        if is_runs(model):
+            raise InputError(
+                f"{name}(model, runs): the arguments are swapped; the data come first, as in "
+                f"MATLAB: {name}(runs, model)"
+            )
+        if isinstance(runs, (list, tuple)) and not runs:
+            raise InputError(f"{name}: no runs given; pass a Run or a list of Runs first")
+        raise InputError(
+            f"{name}: the first argument is a {type(runs).__name__}, not a Run or a list of "
+            f"Runs; call {name}(runs, model)"
+        )
+    return [runs] if isinstance(runs, Run) else list(runs)
+
+
 def compare(
     runs: Run | Sequence[Run],
     model,
@@ -358,8 +382,11 @@ def compare(
         run (growth of the largest discrete eigenvalue over the run above 1e12): use a finite
         horizon or a shorter window (``Run.window``), as Moore's 8 s windows; likewise for a
         prediction whose predictor Ad - K C is unstable (K = 0 and an unstable model).
+    InputError
+        If ``runs`` is not a Run or a non-empty list of Runs, e.g. the arguments swapped
+        (``compare(model, runs)``; the data come first, as MATLAB's ``compare(data, model)``).
     """
-    runs = [runs] if isinstance(runs, Run) else list(runs)
+    runs = _data_first(runs, model, "compare")
     if horizon is not None and horizon < 1:
         raise ValueError(f"horizon={horizon}: need an integer >= 1 or None (simulation)")
     yh_all, x0_all, ys = [], [], []
@@ -444,13 +471,18 @@ class ResidResult:
     input: str = "T_delta"
 
 
-def _xcorr(a: np.ndarray, b: np.ndarray, lag: int) -> float:
-    """sum_k a[k] b[k - lag] / sqrt(sum a^2 sum b^2)."""
-    if lag >= 0:
-        s = np.dot(a[lag:], b[: len(b) - lag])
-    else:
-        s = np.dot(a[: len(a) + lag], b[-lag:])
-    return float(s / np.sqrt(np.dot(a, a) * np.dot(b, b)))
+def _xcorr(a: np.ndarray, b: np.ndarray, lags) -> np.ndarray:
+    """sum_k a[k] b[k - lag] / sqrt(sum a^2 sum b^2) at each of ``lags`` (|lag| < N).
+
+    All lags from one FFT product of the zero-padded signals (length >= 2N, so the circular
+    correlation is the linear one): O(N log N) instead of a dot product per lag; it equals
+    the per-lag sums to rounding (about 1e-15 of sqrt(sum a^2 sum b^2)).
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    lags = np.asarray(list(lags), int)
+    nfft = 1 << int(2 * len(a) - 1).bit_length()
+    c = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft)
+    return c[lags % nfft] / np.sqrt(np.dot(a, a) * np.dot(b, b))
 
 
 def resid(
@@ -487,11 +519,12 @@ def resid(
     Raises
     ------
     ValueError
-        If ``input="dither"`` and a run has no logged dither, or :func:`compare` raises.
+        If ``input="dither"`` and a run has no logged dither, or :func:`compare` raises
+        (InputError for arguments swapped: ``resid(runs, model)``).
     """
     from scipy.stats import norm
 
-    runs = [runs] if isinstance(runs, Run) else list(runs)
+    runs = _data_first(runs, model, "resid")
     pred = compare(runs, model, horizon=1)
     res, uin = [], []
     for run, yh in zip(runs, pred.yhat, strict=True):
@@ -514,7 +547,7 @@ def resid(
     for j, o in enumerate(pred.outputs):
         e = E[:, j] - E[:, j].mean()
         auto[o] = _acf(e, range(max_lag + 1))
-        cross[o] = np.array([_xcorr(e, u, int(k)) for k in lags])
+        cross[o] = _xcorr(e, u, lags)
         frac[o] = float(np.mean(np.abs(auto[o][1:]) > band))
         xfrac[o] = float(np.mean(np.abs(cross[o][max_lag:]) > band))
         wtest[o] = portmanteau(auto[o][1:], N, confidence)
@@ -697,7 +730,7 @@ def independence_test(
 
 def _acf(x: np.ndarray, lags) -> np.ndarray:
     """Normalized autocorrelation of a mean-removed signal at ``lags``."""
-    return np.array([_xcorr(x, x, int(k)) for k in lags])
+    return _xcorr(x, x, lags)
 
 
 def whiteness(e: np.ndarray, max_lag: int = 25, confidence: float = 0.99) -> dict:
@@ -751,7 +784,7 @@ def cross_correlation(
     e = np.asarray(e, float) - np.mean(e)
     u = np.asarray(u, float) - np.mean(u)
     lags = np.arange(-max_lag, max_lag + 1)
-    r = np.array([_xcorr(e, u, int(k)) for k in lags])
+    r = _xcorr(e, u, lags)
     band = _band(e.size, confidence)
     test = independence_test(r[max_lag + 1 :], _acf(u, range(max_lag)), e.size, confidence)
     return {"lags": lags, "ccf": r, "band": band,

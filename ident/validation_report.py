@@ -8,15 +8,19 @@ judge the model (MATLAB System Identification Toolbox habits, all built on
   None) and the k-step-ahead predicted outputs (``horizon = k``), with MATLAB ``compare``'s
   NRMSE fit 100 (1 - ||y - yhat|| / ||y - mean y||) [%] per output;
 - one-step residuals (:func:`~bikeid.ident.validate.resid`): autocorrelation and
-  residual-input cross-correlation with the 99 % band, and the chi-squared whiteness and
-  independence tests computed from them;
+  residual-input cross-correlation with the 99 % band per speed, judged by the one residual
+  test of the project, :func:`bikeid.ident.structure.check_structure` (whiteness when the
+  model has a noise model, independence from the past input; the test ``bikeid identify``
+  runs before it prints intervals, so both say the same of the same data);
 - a nonparametric frequency response from the steer torque to each output
   (:func:`frequency_response_estimate`, Welch spectra), kept only at frequencies whose
   coherence shows excitation, to lay over the model's Bode plot, with the model's 95 %
   Bode band (:func:`bikeid.ident.uncertainty.bode_bands`, for models with a parameter
   covariance) and which estimated points lie inside it.
 
-The result, :class:`ValidationReport`, turns into plain JSON types with
+The runs are taken one speed at a time and reduced to fits, correlations and spectra
+before the next speed, keeping the time series of the first :data:`SERIES_RUNS` runs only
+(the compare figures).  The result, :class:`ValidationReport`, turns into plain JSON types with
 :meth:`ValidationReport.to_json`; the figures are drawn by
 :mod:`bikeid.experiments.validation_plots`.  :func:`validate_decays` applies the same fit and
 residual tests to the steer-by-wire experiment model on measured free decays (``bikeid
@@ -25,6 +29,7 @@ measured evaluate``).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -32,10 +37,11 @@ import numpy as np
 from scipy import signal
 
 from bikeid.dataset.run import SPEED_TOLERANCE, Run
+from bikeid.ident.direct import DirectResult
+from bikeid.ident.greybox import GreyboxModel
+from bikeid.ident.structure import StructureCheck, _speeds_text
 from bikeid.ident.uncertainty import bode_bands, z_value
 from bikeid.ident.validate import (
-    CompareResult,
-    ResidResult,
     compare,
     cross_correlation,
     goodness_of_fit,
@@ -47,7 +53,10 @@ from bikeid.sim.errors import InputError, UntrustworthyResult
 
 __all__ = [
     "INTERVAL_CALIBRATION",
+    "Correlations",
     "FrequencyResponseEstimate",
+    "RunSeries",
+    "SpeedRow",
     "ValidationReport",
     "bode_band_halfwidths",
     "frequency_response_estimate",
@@ -488,9 +497,118 @@ def residual_tests(
     return out
 
 
+#: Runs whose time series a report keeps for the compare figures (the first ones).
+SERIES_RUNS = 6
+
+
+@dataclass(frozen=True)
+class RunSeries:
+    """Time series of one run kept for the compare figure.
+
+    Attributes
+    ----------
+    label : str
+        Run label.
+    speed : float
+        Speed [m/s].
+    t : (N,) ndarray
+        Time [s].
+    measured, predicted : (N, p) ndarray
+        Measured and k-step-predicted outputs (columns in the report's ``outputs`` order;
+        rad, rad/s).
+    simulated : (N, p) ndarray or None
+        Simulated outputs (None where the simulation was refused).
+    fit : dict
+        ``{"simulation": {output: %} or None, "k_step": {output: %}}``.
+    """
+
+    label: str
+    speed: float
+    t: np.ndarray
+    measured: np.ndarray
+    predicted: np.ndarray
+    simulated: np.ndarray | None
+    fit: dict
+
+
+@dataclass(frozen=True)
+class Correlations:
+    """Residual correlations of the runs at one speed, for the resid figure.
+
+    Attributes
+    ----------
+    speed : float
+        Speed of the group [m/s].
+    n : int
+        Samples stacked.
+    band : float
+        Half-width of the 99 % band of a white residual, z / sqrt(n).
+    lags : (2 M + 1,) int ndarray
+        Lags -M..M [samples] of ``crosscorr``.
+    autocorr : dict of str to (M + 1,) ndarray
+        Normalized autocorrelation of each output's one-step residual at lags 0..M.
+    crosscorr : dict of str to (2 M + 1,) ndarray
+        Normalized cross-correlation with T_delta at ``lags`` (positive lag: residual at k
+        against T_delta at k - lag), the input of :mod:`bikeid.ident.structure`'s
+        independence test.
+    """
+
+    speed: float
+    n: int
+    band: float
+    lags: np.ndarray
+    autocorr: dict[str, np.ndarray]
+    crosscorr: dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class SpeedRow:
+    """The one-line verdict of the runs at one speed.
+
+    Attributes
+    ----------
+    speed : float
+        Speed [m/s] (runs within :data:`SPEED_GROUP` of it).
+    runs : int
+        Number of runs.
+    fit_simulation : dict of str to float or None
+        Simulation fit per output over the runs [%]; None when refused at this speed.
+    fit_k_step : dict of str to float
+        k-step prediction fit per output [%].
+    whiteness : dict of str to dict or None
+        Per output the whiteness test of :func:`bikeid.ident.structure.check_structure`
+        (``white``, ``p_value``, ``per_test_level``); None when the check makes none (a
+        model without a noise model, K = 0).
+    independence : dict of str to dict
+        Per output the structure check's test of independence from the past input
+        (``independent``, ``p_value``).
+    frf : dict
+        ``n_points`` (excited frequencies over the outputs), ``n_inside`` and
+        ``n_consistent`` (None without a Bode band), and ``fraction`` inside (None without
+        points or band).
+    """
+
+    speed: float
+    runs: int
+    fit_simulation: dict[str, float] | None
+    fit_k_step: dict[str, float]
+    whiteness: dict[str, dict] | None
+    independence: dict[str, dict]
+    frf: dict
+
+    def to_json(self) -> dict:
+        """The row as plain JSON types (:func:`bikeid.sim.textformats.to_jsonable`)."""
+        from bikeid.sim.textformats import to_jsonable
+
+        return to_jsonable(dataclasses.asdict(self))
+
+
 @dataclass(frozen=True)
 class ValidationReport:
-    """How a model meets data: fits, residual tests and frequency responses.
+    """How a model meets data: fits, residual tests and frequency responses, per speed.
+
+    Computed one speed at a time (:func:`validate_model`): it keeps the time series of the
+    first few runs only (:attr:`series`), so its size does not grow with the runs' length.
 
     Attributes
     ----------
@@ -500,28 +618,32 @@ class ValidationReport:
         Run labels (``meta["name"]`` or ``meta["file"]``, else "run i").
     speeds : tuple of float
         Speed of each run [m/s].
-    t : tuple of (N_i,) ndarray
-        Time of each run [s].
-    measured : tuple of (N_i, p) ndarray
-        Measured outputs per run (columns in ``outputs`` order).
-    simulation : CompareResult or None
-        Simulated outputs and fits (None when refused, see ``simulation_note``).
-    simulation_note : str
-        Why there is no simulation (e.g. an unstable model over a long run), or "".
-    prediction : CompareResult
-        k-step-ahead predicted outputs and fits.
     k_step : int
         The prediction horizon k [samples] (MATLAB ``compare(data, model, k)``).
+    headline : {"simulation", "k_step"}
+        The fit the summary leads with: the simulation's when the model could be simulated
+        at every speed, else the k-step prediction's (:attr:`simulation_note` says why).
+    simulation_note : str
+        Where and why the simulation was refused, or "".
     fit : dict of str to float or None
-        Simulation fit per output over all runs [%] (MATLAB ``compare``'s NRMSE fit x 100).
+        Simulation fit per output over all runs [%] (MATLAB ``compare``'s NRMSE fit x 100);
+        None when the simulation was refused at any speed.
     fit_k_step : dict of str to float
-        k-step prediction fit per output [%].
+        k-step prediction fit per output over all runs [%].
     fit_per_run : tuple of dict
-        Per run: ``{"simulation": {output: %}, "k_step": {output: %}}``.
-    residuals : ResidResult
-        One-step residual analysis with the chi-squared tests.
+        Per run: ``{"simulation": {output: %} or None, "k_step": {output: %}}``.
+    per_speed : tuple of SpeedRow
+        Per speed: fits, the structure check's residual verdicts, Bode-band counts.
+    structure : StructureCheck
+        :func:`bikeid.ident.structure.check_structure` on these runs: the residual tests
+        (whiteness, independence from the past input, and for a model over speed the
+        comparison with its per-speed fits), as ``bikeid identify`` runs them.
+    correlations : tuple of Correlations
+        Per speed the residual correlations the tests judge (for the resid figure).
     frequency_responses : tuple of FrequencyResponseEstimate
         Per speed group and output.
+    series : tuple of RunSeries
+        Time series of the first :data:`SERIES_RUNS` runs (the compare figures).
     notes : tuple of str
         Remarks for the reader (e.g. K = 0: k-step prediction is a simulation).
     """
@@ -529,17 +651,17 @@ class ValidationReport:
     outputs: tuple[str, ...]
     runs: tuple[str, ...]
     speeds: tuple[float, ...]
-    t: tuple[np.ndarray, ...]
-    measured: tuple[np.ndarray, ...]
-    simulation: CompareResult | None
-    simulation_note: str
-    prediction: CompareResult
     k_step: int
+    headline: str
+    simulation_note: str
     fit: dict[str, float | None]
     fit_k_step: dict[str, float]
     fit_per_run: tuple[dict, ...]
-    residuals: ResidResult
+    per_speed: tuple[SpeedRow, ...]
+    structure: StructureCheck
+    correlations: tuple[Correlations, ...]
     frequency_responses: tuple[FrequencyResponseEstimate, ...]
+    series: tuple[RunSeries, ...] = ()
     notes: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
@@ -549,21 +671,13 @@ class ValidationReport:
         -------
         dict
             ``fit_definition``; ``outputs``, ``runs``, ``speeds`` [m/s], ``k_step``
-            [samples]; ``fit`` and ``fit_k_step`` [%] per output; ``fit_per_run``;
-            ``simulation_note``; ``residuals`` (input, band, per output the fraction of
-            lags outside it and the whiteness / independence tests); the frequency
-            responses (:meth:`FrequencyResponseEstimate.to_json`); ``notes``.
+            [samples], ``headline``; ``fit`` and ``fit_k_step`` [%] per output;
+            ``fit_per_run``; ``simulation_note``; ``per_speed`` (:meth:`SpeedRow.to_json`);
+            ``residual_tests`` (the structure check's level, per-test level, rejected
+            speeds, what it rejects and every test); the frequency responses
+            (:meth:`FrequencyResponseEstimate.to_json`); ``bode_band``; ``notes``.
         """
-        rr = self.residuals
-        res = {
-            o: {
-                "fraction_outside": rr.fraction_outside[o],
-                "cross_outside": rr.cross_outside[o],
-                "whiteness": rr.whiteness_test[o],
-                "independence": rr.independence_test[o],
-            }
-            for o in self.outputs
-        }
+        s = self.structure.to_json()
         return {
             "fit_definition": "100 (1 - ||y - yhat|| / ||y - mean y||) [%] (MATLAB compare's "
             "NRMSE fit), over all runs stacked",
@@ -571,18 +685,23 @@ class ValidationReport:
             "runs": list(self.runs),
             "speeds": [float(v) for v in self.speeds],
             "k_step": int(self.k_step),
+            "headline": self.headline,
             "fit": dict(self.fit),
             "fit_k_step": dict(self.fit_k_step),
             "fit_per_run": [dict(d) for d in self.fit_per_run],
             "simulation_note": self.simulation_note,
-            "residuals": {
-                "input": rr.input,
-                "band": rr.band,
-                "max_lag": int(rr.lags[-1]),
-                "tests": "chi-squared at level 1 - confidence: whiteness N sum r(k)^2, "
-                "k = 1..M; independence N r' R_u^-1 r on lags 1..M",
-                "outputs": res,
-            },
+            "per_speed": [r.to_json() for r in self.per_speed],
+            "residual_tests": {
+                "test": "ident.structure.check_structure (as bikeid identify): one-step "
+                "residuals per speed, chi-squared whiteness N sum r(k)^2 and independence "
+                "from T_delta N r' R_u^-1 r on lags 1..M, Bonferroni over the speeds",
+                "max_lag": int(self.correlations[0].lags[-1]) if self.correlations else None,
+                "rejects": self.structure.causes(),
+                **{
+                    k: s[k]
+                    for k in ("level", "per_test_level", "n_tests", "rejected_speeds", "tests")
+                },
+            },  # fmt: skip
             "frequency_responses": [e.to_json() for e in self.frequency_responses],
             "bode_band": self.band_summary(),
             "notes": list(self.notes),
@@ -599,24 +718,113 @@ class ValidationReport:
             points), ``calibration`` (what the band is worth:
             :data:`INTERVAL_CALIBRATION`); None when the model has no parameter covariance.
         """
-        marks = [e.in_band for e in self.frequency_responses]
-        if not marks or any(m is None for m in marks):
-            return None
-        n_in = sum(int(m.sum()) for m in marks)
-        n_ok = sum(int(e.consistent.sum()) for e in self.frequency_responses)
-        n = sum(int(e.valid.sum()) for e in self.frequency_responses)
-        return {"level": BAND_LEVEL, "n_inside": n_in, "n_consistent": n_ok, "n_points": n,
-                "fraction": n_in / n if n else None,
-                "fraction_consistent": n_ok / n if n else None,
-                "calibration": INTERVAL_CALIBRATION,
-                "inside_means": "magnitude [dB] and phase [deg] of the estimate both within "
-                "the band's half-widths about the model's sampled response",
-                "consistent_means": "the same with the band widened by the estimate's own "
-                "95 % random error (in quadrature)"}  # fmt: skip
+        return _band_counts(self.frequency_responses, summary=True)
+
+
+def _band_counts(ests: Sequence[FrequencyResponseEstimate], summary: bool = False) -> dict | None:
+    """Points inside the Bode band over ``ests`` (None without a band)."""
+    marks = [e.in_band for e in ests]
+    n = sum(int(e.valid.sum()) for e in ests)
+    if not marks or any(m is None for m in marks):
+        return None if summary else {"n_points": n, "n_inside": None, "n_consistent": None,
+                                     "fraction": None}  # fmt: skip
+    n_in = sum(int(m.sum()) for m in marks)
+    n_ok = sum(int(e.consistent.sum()) for e in ests)
+    if not summary:
+        return {"n_points": n, "n_inside": n_in, "n_consistent": n_ok,
+                "fraction": n_in / n if n else None}  # fmt: skip
+    return {"level": BAND_LEVEL, "n_inside": n_in, "n_consistent": n_ok, "n_points": n,
+            "fraction": n_in / n if n else None,
+            "fraction_consistent": n_ok / n if n else None,
+            "calibration": INTERVAL_CALIBRATION,
+            "inside_means": "magnitude [dB] and phase [deg] of the estimate both within "
+            "the band's half-widths about the model's sampled response",
+            "consistent_means": "the same with the band widened by the estimate's own "
+            "95 % random error (in quadrature)"}  # fmt: skip
 
 
 def _fits(Y: np.ndarray, Yh: np.ndarray, outputs: Sequence[str]) -> dict[str, float]:
     return {o: 100 * goodness_of_fit(Y[:, j], Yh[:, j])["nrmse_fit"] for j, o in enumerate(outputs)}
+
+
+class _StackedFit:
+    """NRMSE fit of all runs stacked, accumulated one block at a time.
+
+    Sums of squared errors add; the sum of squares about the overall mean combines the
+    blocks' means and sums of squares about their own means (Chan, Golub & LeVeque 1983),
+    so the result equals :func:`~bikeid.ident.validate.goodness_of_fit` on the stacked
+    arrays up to rounding without holding them.
+    """
+
+    def __init__(self, p: int) -> None:
+        self.n, self.mean, self.m2, self.sse = 0, np.zeros(p), np.zeros(p), np.zeros(p)
+
+    def add(self, Y: np.ndarray, Yh: np.ndarray) -> None:
+        nb, mb = Y.shape[0], Y.mean(axis=0)
+        m2b = ((Y - mb) ** 2).sum(axis=0)
+        n = self.n + nb
+        d = mb - self.mean
+        self.m2 = self.m2 + m2b + d**2 * self.n * nb / n
+        self.mean = self.mean + d * nb / n
+        self.n = n
+        self.sse = self.sse + ((Y - Yh) ** 2).sum(axis=0)
+
+    def fit(self, outputs: Sequence[str]) -> dict[str, float]:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(self.m2 > 0, np.sqrt(self.sse) / np.sqrt(self.m2), np.nan)
+        return {o: float(100 * (1 - ratio[j])) for j, o in enumerate(outputs)}
+
+
+def _speed_groups(runs: Sequence[Run]) -> dict[float, list[int]]:
+    """Run indices by speed: runs within :data:`SPEED_GROUP` of a group's first speed."""
+    groups: dict[float, list[int]] = {}
+    for i, r in enumerate(runs):
+        key = next((s for s in groups if abs(s - r.speed) <= SPEED_GROUP), r.speed)
+        groups.setdefault(key, []).append(i)
+    return groups
+
+
+def _at_speed(model, group: Sequence[Run]):
+    """A model over speed taken once at the group's speed (when its runs share one), as
+    :func:`~bikeid.ident.validate.sampled_model` would take it for each run; else as is."""
+    speeds = {float(r.speed) for r in group}
+    if len(speeds) == 1 and hasattr(model, "at") and not isinstance(model, DirectResult):
+        return model.at(speeds.pop())
+    return model
+
+
+def _structure(model, runs: Sequence[Run], max_lag: int, level: float) -> StructureCheck:
+    """:func:`bikeid.ident.structure.check_structure` with the models ``bikeid identify``
+    passes it: the model at each speed, and a model over speed as ``speed_model``."""
+    from bikeid.ident.pem import SpeedCanonicalModel
+    from bikeid.ident.structure import check_structure
+
+    speeds = sorted({round(float(r.speed), 6) for r in runs})
+    over_speed = hasattr(model, "at") and not isinstance(model, DirectResult)
+    models = {v: model.at(v) if over_speed else model for v in speeds}
+    speed_model = None
+    if isinstance(model, SpeedCanonicalModel):
+        speed_model = model
+    elif isinstance(model, GreyboxModel) and len(model.speeds) >= 2:  # a joint fit
+        speed_model = model.speed_model()
+    return check_structure(runs, models, speed_model=speed_model, level=level,
+                           max_lag=max_lag)  # fmt: skip
+
+
+def _verdicts(check: StructureCheck, keys: Sequence[float]) -> tuple[dict | None, dict]:
+    """Per output the whiteness (None if untested) and independence verdicts at ``keys``."""
+    rows = [t for v in keys for t in check.tests.get(round(float(v), 6), [])]
+    out: dict[str, dict] = {}
+    for kind, word in (("whiteness", "white"), ("independence", "independent")):
+        d = {}
+        for t in rows:
+            if t["kind"] == kind:
+                prev = d.get(t["output"])
+                if prev is None or t["p_value"] < prev["p_value"]:
+                    d[t["output"]] = {word: not t["rejected"], "p_value": t["p_value"],
+                                      "per_test_level": check.per_test_level}  # fmt: skip
+        out[kind] = d
+    return (out["whiteness"] or None), out["independence"]
 
 
 def validate_model(
@@ -626,11 +834,18 @@ def validate_model(
     max_lag: int = 25,
     confidence: float = 0.99,
     coherence_min: float = COHERENCE_MIN,
-    input: str = "auto",
     ic: str | np.ndarray = "estimate",
     nperseg: int | None = None,
+    series_runs: int = SERIES_RUNS,
 ) -> ValidationReport:
     """Validate a model on runs: compare, k-step prediction, resid and frequency response.
+
+    The runs are taken one speed at a time (runs within :data:`SPEED_GROUP`): each group's
+    simulations, predictions and residuals are reduced to fits, correlations and spectra
+    before the next, so memory does not grow with the number of runs beyond the runs
+    themselves.  The residual verdicts are those of
+    :func:`bikeid.ident.structure.check_structure` (the test ``bikeid identify`` applies
+    before it prints intervals), so identify and validate agree on the same data.
 
     Parameters
     ----------
@@ -641,23 +856,23 @@ def validate_model(
     k_step : int, optional
         Prediction horizon k >= 1 [samples] of the k-step comparison.
     max_lag : int, optional
-        Largest lag of the residual correlations [samples].
+        Largest lag M of the residual correlations and tests [samples].
     confidence : float, optional
-        Level of the correlation bands; the tests' level is 1 - confidence.
+        Level of the correlation bands drawn; the residual tests' family level is
+        1 - confidence (the structure check's, default 1 %).
     coherence_min : float, optional
         Coherence threshold of the frequency-response estimate.
-    input : str, optional
-        Signal of the residual cross-correlation: ``"auto"`` (the dither when every run
-        logs a nonzero one, else ``"T_delta"``), ``"dither"`` or a run signal.
     ic : {"estimate", "zero"} or (n,) array_like, optional
         Initial state of the simulations (:func:`~bikeid.ident.validate.compare`).
     nperseg : int, optional
         Welch segment length [samples] (:func:`frequency_response_estimate`).
+    series_runs : int, optional
+        Keep the time series of this many runs (the first) for the compare figures.
 
     Returns
     -------
     ValidationReport
-        Fits [%], residual tests and frequency responses.
+        Fits [%], residual tests and frequency responses, per speed and overall.
 
     Raises
     ------
@@ -667,33 +882,74 @@ def validate_model(
     UntrustworthyResult
         If the model's predictor diverges over the runs (an unstable model without a noise
         model, K = 0): validate on shorter windows.  A simulation alone that diverges is
-        not an error (``simulation`` is None, ``simulation_note`` says why).
+        not an error (the k-step fit is then the headline, ``simulation_note`` says why).
     """
+    if isinstance(model, Run) or (isinstance(model, (list, tuple)) and model
+                                  and all(isinstance(r, Run) for r in model)):  # fmt: skip
+        raise InputError("validate_model(runs, model): the arguments are swapped; the model "
+                         "comes first: validate_model(model, runs)")  # fmt: skip
     runs = _runs(runs)
     if not (isinstance(k_step, (int, np.integer)) and k_step >= 1):
         raise ValueError(f"k_step={k_step}: need an integer >= 1 [samples]")
+    if not 0 < confidence < 1:
+        raise ValueError(f"confidence={confidence}: need a level strictly between 0 and 1")
     notes = []
-    try:
-        sim = compare(runs, model, ic=ic)
-        sim_note = ""
-    except UntrustworthyResult as exc:
-        sim, sim_note = None, f"simulation refused: {exc}"
-    try:
-        pred = compare(runs, model, horizon=int(k_step), ic=ic)
-    except UntrustworthyResult as exc:
-        raise UntrustworthyResult(
-            f"neither simulation nor prediction can be trusted: {exc}" if sim is None else str(exc)
-        ) from None
-    outputs = pred.outputs
-    if input == "auto":
-        dithered = all(r.dither is not None and np.any(r.dither) for r in runs)
-        input = "dither" if dithered else "T_delta"
-    rr = resid(runs, model, input=input, max_lag=max_lag, confidence=confidence)
+    groups = _speed_groups(runs)
+    outputs = None
+    refused: dict[float, str] = {}
+    fit_per_run: list[dict | None] = [None] * len(runs)
+    series, correlations, frf, rows_fits = [], [], [], []
+    for v, idx in groups.items():
+        group = [runs[i] for i in idx]
+        m = _at_speed(model, group)
+        try:
+            sim = compare(group, m, ic=ic)
+        except UntrustworthyResult as exc:
+            sim, refused[v] = None, str(exc)
+        try:
+            pred = compare(group, m, horizon=int(k_step), ic=ic)
+        except UntrustworthyResult as exc:
+            raise UntrustworthyResult(
+                f"neither simulation nor prediction can be trusted at {v:g} m/s: {exc}"
+                if sim is None
+                else str(exc)
+            ) from None
+        if outputs is None:
+            outputs = pred.outputs
+            acc_sim, acc_pred = _StackedFit(len(outputs)), _StackedFit(len(outputs))
+        for k, i in enumerate(idx):
+            Y = np.column_stack([runs[i][o] for o in outputs])
+            acc_pred.add(Y, pred.yhat[k])
+            row = {"k_step": _fits(Y, pred.yhat[k], outputs), "simulation": None}
+            if sim is not None:
+                acc_sim.add(Y, sim.yhat[k])
+                row["simulation"] = _fits(Y, sim.yhat[k], outputs)
+            fit_per_run[i] = row
+            if i < series_runs:
+                series.append(RunSeries(_label(runs[i], i), float(runs[i].speed), runs[i].t, Y,
+                                        pred.yhat[k], None if sim is None else sim.yhat[k],
+                                        row))  # fmt: skip
+        rows_fits.append((v, len(idx), None if sim is None else dict(sim.fit), dict(pred.fit)))
+        del sim, pred
+        rr = resid(group, m, input="T_delta", max_lag=max_lag, confidence=confidence)
+        correlations.append(Correlations(float(v), int(sum(r.n for r in group)), rr.band,
+                                         rr.lags, rr.autocorr, rr.crosscorr))  # fmt: skip
+        del rr
+        frf += frequency_response_estimate(group, m, coherence_min, nperseg)
+    structure = _structure(model, runs, max_lag, round(1 - confidence, 12))
+    per_speed = []
+    for (v, n, fs, fk), idx in zip(rows_fits, groups.values(), strict=True):
+        keys = sorted({round(float(runs[i].speed), 6) for i in idx})
+        white, indep = _verdicts(structure, keys)
+        ests = [e for e in frf if e.speed == v]
+        per_speed.append(SpeedRow(float(v), n, fs, fk, white, indep, _band_counts(ests)))
     K = sampled_model(model, runs[0].dt, runs[0].speed)[3]
     if not np.any(K):
         notes.append(
             "the model has no noise model (K = 0): its k-step prediction and one-step "
-            "residuals are those of a simulation (output error)"
+            "residuals are those of a simulation (output error), and the residual test makes "
+            "no whiteness verdict (the residual holds the disturbance's response, coloured by "
+            "construction; ident.structure)"
         )
     fixed = getattr(model, "speed", None) if hasattr(model, "predictor") else None
     if fixed is not None:  # a fixed-speed model on runs at other speeds: say so
@@ -704,33 +960,57 @@ def validate_model(
                 f"the model was identified at {fixed:g} m/s; runs at {other} m/s differ by "
                 f"more than {tol:g} m/s (a speed-parameterized model covers several speeds)"
             )
-    measured = tuple(np.column_stack([r[o] for o in outputs]) for r in runs)
-    per_run = []
-    for i, Y in enumerate(measured):
-        row = {"k_step": _fits(Y, pred.yhat[i], outputs)}
-        row["simulation"] = _fits(Y, sim.yhat[i], outputs) if sim is not None else None
-        per_run.append(row)
-    frf = frequency_response_estimate(runs, model, coherence_min, nperseg)
-    for e in frf:
-        if e.note:
-            notes.append(f"{e.input} -> {e.output} at v = {e.speed:g} m/s: {e.note}")
+    notes += _frf_notes(frf)
+    sim_note = ""
+    if refused:
+        where = "every speed"
+        if len(refused) < len(groups):
+            where = f"{len(refused)} of {len(groups)} speeds ({_speed_list(refused)})"
+        sim_note = (f"simulation refused at {where}: {next(iter(refused.values()))}; the "
+                    f"{int(k_step)}-step prediction's fit is the headline")  # fmt: skip
     return ValidationReport(
         outputs=tuple(outputs),
         runs=tuple(_label(r, i) for i, r in enumerate(runs)),
         speeds=tuple(float(r.speed) for r in runs),
-        t=tuple(r.t for r in runs),
-        measured=measured,
-        simulation=sim,
-        simulation_note=sim_note,
-        prediction=pred,
         k_step=int(k_step),
-        fit={o: (sim.fit[o] if sim is not None else None) for o in outputs},  # percent
-        fit_k_step={o: pred.fit[o] for o in outputs},
-        fit_per_run=tuple(per_run),
-        residuals=rr,
+        headline="k_step" if refused else "simulation",
+        simulation_note=sim_note,
+        fit=acc_sim.fit(outputs) if not refused else dict.fromkeys(outputs),  # percent
+        fit_k_step=acc_pred.fit(outputs),
+        fit_per_run=tuple(fit_per_run),
+        per_speed=tuple(per_speed),
+        structure=structure,
+        correlations=tuple(correlations),
         frequency_responses=tuple(frf),
+        series=tuple(series),
         notes=tuple(dict.fromkeys(notes)),
     )
+
+
+def _speed_list(speeds) -> str:
+    """``1, 3 m/s``, or for more than four ``6 speeds in 5-15 m/s`` (the structure check's
+    wording, sorted)."""
+    return _speeds_text(sorted(speeds))
+
+
+def _frf_notes(frf: Sequence[FrequencyResponseEstimate]) -> list[str]:
+    """The estimates' notes, one per channel and kind of note, naming its speeds."""
+    import re
+
+    kinds: dict[tuple[str, str, str], list[FrequencyResponseEstimate]] = {}
+    for e in frf:
+        if e.note:
+            # the same note but for its numbers (the largest coherence) counts as one kind
+            key = (e.input, e.output, re.sub(r"\(largest [^)]*\)", "", e.note))
+            kinds.setdefault(key, []).append(e)
+    out = []
+    for (inp, o, _), es in kinds.items():
+        note = es[0].note
+        if len(es) > 1 and "(largest" in note:
+            top = max(float(np.nanmax(e.coherence)) for e in es)
+            note = re.sub(r"\(largest [^)]*\)", f"(largest {top:.2f} over these speeds)", note)
+        out.append(f"{inp} -> {o} at {_speed_list([e.speed for e in es])}: {note}")
+    return out
 
 
 def validate_decays(

@@ -214,11 +214,87 @@ def test_validation_figures_fit_in_degrees_on_one_branch(run, captured, tmp_path
     note = ("simulation refused: the model is unstable (largest eigenvalue modulus 1.07) and "
             "a 30 s free-run simulation would grow by a factor 1e12; the k-step prediction "
             "and the residual tests stand, compare them instead of the simulation fit")
-    plot_compare(dataclasses.replace(rep, simulation=None, simulation_note=note),
+    series = (dataclasses.replace(rep.series[0], simulated=None),)
+    plot_compare(dataclasses.replace(rep, series=series, simulation_note=note),
                  tmp_path / "c.png")  # fmt: skip
     fig = captured["c.png"]
     assert layout_problems(fig) == []
     assert note in fig.axes[0].get_title().replace("\n", " ")
+
+
+def test_validation_figures_of_many_speeds_stay_readable(captured, tmp_path):
+    """A validation at two speeds (a model over speed from the true matrices, 10 s runs at 4
+    and 6 m/s with sensor noise): one Bode figure per speed (bode_v4.png, bode_v6.png),
+    each holding the four outputs' estimates of its speed only and at most 2,000 px wide at
+    save's 130 dpi (the single 116-panel figure of a 58-run sweep was 63,351 px); the resid
+    figure draws one line per speed and its titles give ident.structure's verdicts, counted
+    from the report's structure check; no layout problems."""
+    from bikeid.experiments.validation_plots import write_figures
+    from bikeid.ident.canonical import speed_params_from_matrices, theta_from_matrices
+    from bikeid.ident.pem import CanonicalModel, SpeedCanonicalModel
+    from bikeid.ident.validation_report import validate_model
+    from bikeid.sim.linear import canonical_matrices
+
+    speeds = (4.0, 6.0)
+    runs = [simulate(P, v, duration=10, seed=1, dither=1.0, angle_noise=1e-3, rate_noise=1e-2)
+            for v in speeds]  # fmt: skip
+    cm, dt, outs = canonical_matrices(P), runs[0].dt, ("phi", "phidot", "delta", "deltadot")
+    per = {v: CanonicalModel(theta=theta_from_matrices(cm, v), covariance=np.zeros((10, 10)),
+                             K=np.zeros((4, 4)), dt=dt, speed=v, noise_covariance=np.eye(4),
+                             outputs=outs) for v in speeds}  # fmt: skip
+    model = SpeedCanonicalModel(params=speed_params_from_matrices(cm), per_speed=per, dt=dt,
+                                covariance=np.zeros((14, 14)), g=cm.g)  # fmt: skip
+    rep = validate_model(model, runs)
+    write_figures(rep, tmp_path, max_runs=1)
+    names = {f"bode_v{v:g}.png": v for v in speeds}
+    assert set(captured) == {"compare_1.png", "resid.png", *names}
+    for name, v in names.items():
+        fig = captured[name]
+        assert fig.get_size_inches()[0] * 130 <= 2000, name
+        titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
+        assert len(titles) == 4 and all(f"v = {v:g} m/s" in t for t in titles), titles
+    assert layout_problems(captured["bode_v4.png"]) == []
+    resid = captured["resid.png"]
+    assert layout_problems(resid) == []
+    assert len(resid.axes[0].lines) == len(speeds) + 1  # one per speed and the zero line
+    assert "whiteness: not tested (K = 0)" in resid.axes[0].get_title().replace("\n", " ")
+    bad = sum(t["rejected"] for rows in rep.structure.tests.values() for t in rows
+              if t["kind"] == "independence" and t["output"] == "phi")  # fmt: skip
+    word = f"rejected at {bad}" if bad else "passed at all"
+    assert f"independence: {word} of 2 speeds" in resid.axes[1].get_title().replace("\n", " ")
+
+
+def test_eigenvalue_plot_title_says_whether_bars_are_drawn(tmp_path, monkeypatch):
+    """The complex plane's title names interval bars only when some are drawn: with every
+    speed's intervals withheld (None) it says so and the plot holds no bar segments; with
+    intervals at one of two speeds it names that speed, and bars are drawn (both ways,
+    counted from the drawn error-bar containers)."""
+    figs = {}
+
+    def keep(fig, path):
+        ax = fig.axes[0]
+        segs = sum(len(lc.get_segments()) for c in ax.containers for lc in c.lines[2])
+        figs["title"], figs["segments"] = ax.get_title(), segs
+        plt.close(fig)
+        return Path(path)
+
+    monkeypatch.setattr(plots, "save", keep)
+    ev = eigenvalues(P, 5.0)
+    bounds = {"eigenvalues": [{"value": {"re": z.real, "im": z.imag},
+                               "real": [z.real - 0.1, z.real + 0.1],
+                               "imag": [z.imag - 0.1, z.imag + 0.1]} for z in ev]}  # fmt: skip
+    bare = {"speed": 5.0, "eigenvalues": list(ev), "eigenvalue_intervals": None}
+    plots.plot_identified_eigenvalues([bare], P, tmp_path / "a.png")
+    assert "no 95 % intervals" in figs["title"] and "(bars)" not in figs["title"]
+    assert figs["segments"] == 0
+    plots.plot_identified_eigenvalues([{**bare, "eigenvalue_intervals": bounds}], P,
+                                      tmp_path / "b.png")  # fmt: skip
+    assert figs["title"] == "eigenvalues with 95 % intervals (bars) vs nominal (squares)"
+    assert figs["segments"] >= 8  # real and imaginary bars of four eigenvalues
+    plots.plot_identified_eigenvalues(
+        [{**bare, "eigenvalue_intervals": bounds}, {**bare, "speed": 6.0,
+         "eigenvalues": list(eigenvalues(P, 6.0))}], P, tmp_path / "c.png")  # fmt: skip
+    assert "(bars) at 5 m/s only" in figs["title"]
 
 
 def test_study_bode_figure_one_branch_and_degrees(captured, tmp_path):

@@ -3,6 +3,8 @@
 import control
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bikeid.dataset.linear_loop import simulate
 from bikeid.ident.canonical import theta_from_matrices
@@ -229,3 +231,68 @@ def test_binomial_interval_closed_forms():
     for bad in ((5, 4), (-1, 4), (1.5, 4)):
         with pytest.raises(ValueError, match="successes"):
             binomial_interval(*bad)
+
+
+def test_swapped_arguments_are_named_not_a_type_error():
+    """compare and resid take the data first (MATLAB's compare(data, model)), validate_model
+    the model first (as documented): each called the other way round says the arguments
+    are swapped and gives the right call, in one line (InputError, a ValueError); called
+    the documented way the same objects work (both ways)."""
+    from bikeid.ident.validation_report import validate_model
+    from bikeid.sim.errors import InputError
+
+    r = simulate(P, 5.0, duration=5, seed=1, dither=1.0)
+    sys = state_space(P, 5.0, inputs=("T_delta",))
+    for name, fn in (("compare", compare), ("resid", resid)):
+        with pytest.raises(InputError, match=rf"arguments are swapped.*{name}\(runs, model\)"):
+            fn(sys, r)
+        with pytest.raises(InputError, match="swapped"):
+            fn(sys, [r, r])
+        with pytest.raises(InputError, match="not a Run"):
+            fn("run.h5", sys)
+    with pytest.raises(InputError, match=r"swapped.*validate_model\(model, runs\)"):
+        validate_model(r, sys)
+    assert compare(r, sys).fit["phi"] > 99.999  # noise-free, true model (see above)
+    assert resid([r], sys).input == "T_delta"
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(2, 300), seed=st.integers(0, 2**16), m=st.integers(1, 30))
+def test_correlations_by_fft_equal_the_sums_per_lag(n, seed, m):
+    """The FFT correlation behind resid's and the structure check's tests equals the direct
+    sum_k a[k] b[k - lag] / sqrt(sum a^2 sum b^2) at every lag |lag| < n, to 1e-12 (rounding
+    of an FFT of at most 1024 points on values of order 1)."""
+    from bikeid.ident.validate import _xcorr
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=n), rng.normal(size=n) + 0.3 * rng.normal()
+    lags = np.arange(-min(m, n - 1), min(m, n - 1) + 1)
+    direct = [(np.dot(a[k:], b[: n - k]) if k >= 0 else np.dot(a[: n + k], b[-k:]))
+              / np.sqrt(np.dot(a, a) * np.dot(b, b)) for k in lags]  # fmt: skip
+    np.testing.assert_allclose(_xcorr(a, b, lags), direct, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    sizes=st.lists(st.integers(1, 50), min_size=1, max_size=6),
+    seed=st.integers(0, 2**16),
+    offset=st.floats(-1e3, 1e3),
+)
+def test_fit_accumulated_per_block_equals_the_stacked_fit(sizes, seed, offset):
+    """validate_model's per-speed accumulation of the stacked NRMSE fit (block means and sums
+    of squares combined as Chan, Golub & LeVeque) equals goodness_of_fit on the stacked
+    arrays, to 1e-9 % even with a mean offset of 1e3 against a unit spread."""
+    from bikeid.ident.validation_report import _StackedFit
+
+    rng = np.random.default_rng(seed)
+    ys = [offset + rng.normal(size=(k, 2)) for k in sizes]
+    yh = [y + 0.3 * rng.normal(size=y.shape) for y in ys]
+    acc = _StackedFit(2)
+    for y, h in zip(ys, yh, strict=True):
+        acc.add(y, h)
+    Y, H = np.vstack(ys), np.vstack(yh)
+    got = acc.fit(("a", "b"))
+    for j, o in enumerate(("a", "b")):
+        if np.ptp(Y[:, j]) > 0:
+            assert got[o] == pytest.approx(100 * goodness_of_fit(Y[:, j], H[:, j])["nrmse_fit"],
+                                           abs=1e-9)  # fmt: skip

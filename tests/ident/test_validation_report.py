@@ -131,24 +131,44 @@ def test_portmanteau_and_independence_tests_are_calibrated():
     assert portmanteau(r1, n)["p_value"] < 1e-10
 
 
-def test_residual_tests_pass_for_the_true_model_and_fail_for_a_wrong_one(noisy_run):
-    """True model, K = 0: the one-step residual is the white sensor noise (the plant is driven
-    by exactly the logged torque), so whiteness and independence from the dither pass at the
-    1 % level; the model of 4 m/s (a 20 % speed error) leaves the model error in the
-    residual and fails whiteness on both outputs (p < 1e-10)."""
-    good = validate_model(_canonical(5.0, noisy_run.dt), noisy_run)
-    bad = validate_model(_canonical(4.0, noisy_run.dt), noisy_run)
-    assert good.residuals.input == "dither"
+def _with_gain(m: CanonicalModel, k: float) -> CanonicalModel:
+    """The model with a small innovation gain K = k (all entries): a noise model, so the
+    structure check tests whiteness, changing the one-step prediction by O(k)."""
+    return dataclasses.replace(m, K=np.full_like(m.K, k))
+
+
+def test_whiteness_verdict_is_the_structure_checks_both_ways(noisy_run):
+    """The one whiteness test (ident.structure.check_structure): with a noise model (a small
+    innovation gain K = 1e-4, so whiteness is tested) the true model's one-step residual is
+    the white sensor noise and passes; the 4 m/s model (a 20 % speed error) leaves the model
+    error in the residual and fails on both outputs (p < 1e-10).  Each verdict and p-value
+    is check_structure's own on the same run and model (exact equality: one mechanism), and
+    without a noise model (K = 0) there is no whiteness verdict, as in identify."""
+    from bikeid.ident.structure import check_structure
+
+    good_m = _with_gain(_canonical(5.0, noisy_run.dt), 1e-4)
+    bad_m = _with_gain(_canonical(4.0, noisy_run.dt), 1e-4)
+    good, bad = validate_model(good_m, noisy_run), validate_model(bad_m, noisy_run)
+    for rep, m in ((good, good_m), (bad, bad_m)):
+        ref = check_structure([noisy_run], {5.0: m})
+        p = {t["output"]: t["p_value"] for t in ref.tests[5.0] if t["kind"] == "whiteness"}
+        assert {o: w["p_value"] for o, w in rep.per_speed[0].whiteness.items()} == p
+        assert rep.to_json()["residual_tests"]["tests"] == ref.to_json()["tests"]
     for o in ("phi", "delta"):
-        assert good.residuals.whiteness_test[o]["passed"]
-        assert good.residuals.independence_test[o]["passed"]
-        assert not bad.residuals.whiteness_test[o]["passed"]
-        assert bad.residuals.whiteness_test[o]["p_value"] < 1e-10
-        assert bad.fit[o] < good.fit[o]
+        assert good.per_speed[0].whiteness[o]["white"] is True
+        assert good.per_speed[0].independence[o]["independent"] is True
+        assert bad.per_speed[0].whiteness[o]["white"] is False
+        assert bad.per_speed[0].whiteness[o]["p_value"] < 1e-10
+        assert bad.fit_k_step[o] < good.fit_k_step[o]
     assert not any("identified at" in n for n in good.notes)
     assert any("identified at 4 m/s" in n for n in bad.notes)  # 1 m/s > max(0.5, 15 % of 4)
-    j = good.to_json()["residuals"]["outputs"]["phi"]["whiteness"]
-    assert j["passed"] is True and j["dof"] == 25
+    oe = validate_model(_canonical(5.0, noisy_run.dt), noisy_run)  # K = 0: output error
+    assert oe.per_speed[0].whiteness is None and any("no whiteness verdict" in n for n in oe.notes)
+    from bikeid.experiments.cli.validate import table
+
+    assert "not tested (K = 0)" in table(oe, "m.json")
+    row = next(ln for ln in table(bad, "m.json").splitlines() if ln.startswith("      5 "))
+    assert row.split()[4:6] == ["NOT:", "phi,delta"]
 
 
 def test_frequency_response_estimate_within_its_bound(noisy_run):
@@ -182,7 +202,6 @@ def test_no_dither_reports_not_enough_excitation():
     the report says so (an H1 estimate there would be -1/controller, not the bicycle)."""
     r = simulate(P, 5.0, duration=20, seed=1, dither=0.0, angle_noise=1e-3)
     rep = validate_model(_canonical(5.0, r.dt), r)
-    assert rep.residuals.input == "T_delta"
     assert all(not e.excited for e in rep.frequency_responses)
     assert any("not enough excitation" in n for n in rep.notes)
     assert rep.to_json()["frequency_responses"][0]["f"] == []
@@ -203,7 +222,8 @@ def test_unstable_model_simulation_refused_prediction_kept():
                               speed=2.0, noise_covariance=m.noise_covariance,
                               outputs=m.outputs)  # fmt: skip
     rep = validate_model(deadbeat, r, k_step=5)
-    assert rep.simulation is None and "unstable" in rep.simulation_note
+    assert rep.headline == "k_step" and "unstable" in rep.simulation_note
+    assert rep.series[0].simulated is None and rep.per_speed[0].fit_simulation is None
     assert rep.fit["phi"] is None and rep.to_json()["fit"]["phi"] is None
     for o in m.outputs:
         assert rep.fit_k_step[o] == pytest.approx(100.0, abs=1e-6)
@@ -296,11 +316,18 @@ def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_
     assert json.loads((out / "validation.json").read_text())["fit_k_step"] == doc["fit_k_step"]
     for name in ("compare_1.png", "resid.png", "bode.png"):
         assert (out / name).stat().st_size > 1000
+    # the PNG header's width (bytes 16-19): four output panels, under 2,000 px
+    assert int.from_bytes((out / "bode.png").read_bytes()[16:20], "big") <= 2000
     # the same folder again is fine (written by bikeid validate); a foreign one is not
     assert main(["validate", "--model", str(model), str(data), "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "sim fit %" in text and "inside the model's 95 % Bode band" in text
+    assert "fit %: the simulation's" in text and "inside the model's 95 % band" in text
     assert "calibrated on the linear plant only" in text
+    row = next(ln for ln in text.splitlines() if ln.startswith("      5    1 "))
+    band = lib.band_summary()
+    assert row.endswith(f"{band['n_inside']}/{band['n_points']} ({band['n_consistent']} with "
+                        "own error)")  # fmt: skip
+    assert f"{lib.fit['phi']:.1f}" in row.split()
     foreign = tmp_path / "mine"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("keep")
@@ -311,3 +338,78 @@ def test_cli_validate_writes_report_and_refuses_foreign_folders(tmp_path, noisy_
     save_model(ExperimentModel(), exp)
     assert main(["validate", "--model", str(exp), str(data)]) == 3
     assert "measured evaluate" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """A closed-loop run of the linear plant under the roll PID at 5 m/s, 30 s, and the model
+    bikeid identify saves (a per-speed PEM fit with its noise model)."""
+    from bikeid.controllers import UniformDither, make
+    from bikeid.dataset.closed_loop import simulate_run
+    from bikeid.dataset.store import write_runs
+    from bikeid.experiments.cli import main
+
+    run = simulate_run(P, make("pid", P), speed=5.0, duration=30.0,
+                       dither=UniformDither(1.0, seed=2), seed=2, plant="linear")  # fmt: skip
+    root = tmp_path_factory.mktemp("identified")
+    data, model = root / "run.h5", root / "m.json"
+    write_runs(data, [run])
+    assert main(["identify", str(data), "--out", str(model), "--quiet"]) == 0
+    return data, model
+
+
+def test_identify_and_validate_agree_on_the_same_data(identified, capsys):
+    """On the data a model was identified from, validate's residual tests are identify's
+    (the structure check saved in the model file: every test's statistic and p-value
+    equal, the same Bonferroni level), so the two agree on every output's whiteness; the
+    printed row's verdict is the JSON's."""
+    from bikeid.experiments.cli import main
+
+    data, model = map(str, identified)
+    capsys.readouterr()
+    assert main(["validate", data, "--model", model, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    saved = json.loads(identified[1].read_text())["results"]["structure_check"]
+    tests = doc["residual_tests"]
+    assert tests["tests"] == saved["tests"] and tests["per_test_level"] == saved["per_test_level"]
+    assert any(t["kind"] == "whiteness" for t in saved["tests"]["5"])  # a noise model: tested
+    white = doc["per_speed"][0]["whiteness"]
+    assert {o: w["p_value"] for o, w in white.items()} == {
+        t["output"]: t["p_value"] for t in saved["tests"]["5"] if t["kind"] == "whiteness"
+    }
+    from bikeid.experiments.cli.validate import table
+    from bikeid.ident.model_file import load_model
+
+    assert main(["validate", data, "--model", model]) == 0
+    text = capsys.readouterr().out
+    row = next(ln for ln in text.splitlines() if ln.startswith("      5    1 ")).split()
+    assert row[2:6] == [f"{doc['per_speed'][0]['fit_simulation'][o]:.1f}" for o in
+                        doc["outputs"]]  # fmt: skip
+    bad = [o for o, w in white.items() if not w["white"]]
+    assert row[6:8] == ["NOT:", ",".join(bad)] if bad else row[6] == "white"
+    assert load_model(model).outputs == tuple(doc["outputs"]) and callable(table)
+
+
+def test_a_refused_simulation_is_said_once_and_the_k_step_fit_leads():
+    """Two speeds (2.0 and 2.1 m/s, 20 s each) where the 2 m/s model is unstable: the
+    simulation is refused at both, the summary says so once (not per row) and leads with
+    the 5-step prediction's fit, which for the true model's deadbeat predictor
+    (Ad - K C = 0) on noise-free data is 100 % to rounding (1e-6 %), and lower at 2.1 m/s
+    (the model's speed 5 % off); one row per speed."""
+    from bikeid.experiments.cli.validate import table
+
+    runs = [simulate(P, v, duration=20, seed=1, dither=1.0) for v in (2.0, 2.1)]
+    m = _canonical(2.0, runs[0].dt, outputs=("phi", "phidot", "delta", "deltadot"))
+    Ad, _, C, _ = m.predictor()
+    rep = validate_model(dataclasses.replace(m, K=Ad @ C.T), runs[:1] * 2 + runs[1:], k_step=5)
+    assert rep.headline == "k_step" and rep.simulation_note.startswith(
+        "simulation refused at every speed"
+    )
+    text = table(rep, "m.json")
+    assert text.count("simulation refused") == 1 and "fit %: the 5-step prediction's" in text
+    rows = [ln.split() for ln in text.splitlines() if ln.startswith(("      2 ", "    2.1 "))]
+    assert [r[:2] for r in rows] == [["2", "2"], ["2.1", "1"]]
+    assert rows[0][2] == "100.0" and rep.per_speed[0].fit_k_step["phi"] == pytest.approx(
+        100.0, abs=1e-6
+    )
+    assert float(rows[1][2]) < 99.9
