@@ -260,8 +260,18 @@ def plot_bode(
 
 
 def bode_names(report: ValidationReport) -> dict[float, str]:
-    """File name of each speed's Bode figure: ``bode.png`` for one speed, else
-    ``bode_v<speed>.png`` (e.g. ``bode_v12.5.png``)."""
+    """File name of each speed's Bode figure.
+
+    Parameters
+    ----------
+    report : ValidationReport
+        The validation (its frequency responses' speeds).
+
+    Returns
+    -------
+    dict of float to str
+        ``bode.png`` for one speed, else ``bode_v<speed>.png`` (e.g. ``bode_v12.5.png``).
+    """
     speeds = list(dict.fromkeys(e.speed for e in report.frequency_responses))
     if len(speeds) == 1:
         return {speeds[0]: "bode.png"}

@@ -597,7 +597,13 @@ class SpeedRow:
     frf: dict
 
     def to_json(self) -> dict:
-        """The row as plain JSON types (:func:`bikeid.sim.textformats.to_jsonable`)."""
+        """The row as plain JSON types.
+
+        Returns
+        -------
+        dict
+            The fields by name (:func:`bikeid.sim.textformats.to_jsonable`).
+        """
         from bikeid.sim.textformats import to_jsonable
 
         return to_jsonable(dataclasses.asdict(self))

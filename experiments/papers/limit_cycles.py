@@ -48,7 +48,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from bikeid.experiments.papers.orbit_convergence import converge_from_run_end
+from bikeid.experiments.papers.orbit_convergence import (  # noqa: F401 (re-exported)
+    FAMILY_REL,
+    converge_from_run_end,
+    orbit_family,
+)
 from bikeid.experiments.parallel import map_jobs
 from bikeid.experiments.plots import plt, save
 from bikeid.sim.integrate import DEFAULT_SUBSTEPS, simulate
@@ -606,48 +610,6 @@ SCAN_CONDITION = InitialCondition("delta0=0.1, phidot0=0", delta=0.1)
 #: :data:`FAMILY_REL` of the roll amplitude (max - min) / 2, else ``turning`` (lopsided: a
 #: mean lean, a mean turn).
 FAMILIES = ("symmetric", "turning")
-#: Benchmark bicycle, 0.1 deg steer start, 300 s runs on a 0.02 m/s grid over 3.2-4.3 m/s:
-#: the symmetric cycles have |mean roll| / amplitude <= 0.006 (the half-run mean over a
-#: non-integer number of periods) and |max + min| / amplitude < 1e-5; the lopsided ones
-#: have both >= 0.12.  0.03 lies between with a margin of 4-5 both ways.
-FAMILY_REL = 0.03
-
-
-def orbit_family(
-    roll_min: float, roll_max: float, roll_mean: float, rel: float = FAMILY_REL
-) -> str:
-    """Family of a periodic coasting orbit from its roll statistics (last half of the run).
-
-    Parameters
-    ----------
-    roll_min, roll_max : float
-        Minimum and maximum roll over the last half [deg].
-    roll_mean : float
-        Mean roll over the last half [deg].
-    rel : float, optional
-        Tolerance relative to the amplitude (roll_max - roll_min) / 2 (default
-        :data:`FAMILY_REL`).
-
-    Returns
-    -------
-    str
-        ``"symmetric"`` (about upright: |mean| and |max + min| both below ``rel`` times the
-        amplitude) or ``"turning"`` (lopsided).
-
-    Raises
-    ------
-    ValueError
-        If ``roll_max < roll_min``.
-    """
-    if roll_max < roll_min:
-        raise ValueError(f"roll_max {roll_max} below roll_min {roll_min}: pass (min, max, mean)")
-    amp = 0.5 * (roll_max - roll_min)
-    if amp <= 0:
-        return "turning"
-    sym = abs(roll_mean) < rel * amp and abs(roll_max + roll_min) < rel * 2 * amp
-    return "symmetric" if sym else "turning"
-
-
 def _scan_point(args: tuple) -> dict:
     """Class of one coasting run at initial speed v (picklable worker: parameters, initial
     condition, speed [m/s], duration [s]); a numerical stop is rerun at a 4x finer RK4 step
