@@ -59,9 +59,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import (
@@ -74,16 +74,23 @@ from bikeid.ident.canonical import (
     to_canonical_form,
 )
 from bikeid.ident.informativity import guard
+from bikeid.ident.innovation_gain import (
+    FIXED_NOISE_STARTS,
+    NOISE_LOG_RANGE,
+    NOISE_STARTS,
+    KalmanGainProblem,
+    alternate,
+    kalman_gain_of,
+    sensor_variances,
+)
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
     INPUT,
     PredictionProblem,
     discretize,
-    discretize_with_derivatives,
     initial_gain,
     output_matrix,
-    prediction_kernel,
     run_data,
     sandwich_covariance,
     single_threaded_blas,
@@ -92,7 +99,6 @@ from bikeid.ident.predictor import (
 from bikeid.ident.signals import check_sampling
 from bikeid.ident.subspace import d2c, decimate, pbsid
 from bikeid.sim.linear import CanonicalMatrices
-from bikeid.sim.sampling import zoh
 
 __all__ = [
     "CanonicalModel",
@@ -173,6 +179,10 @@ class CanonicalModel(LinearModel):
     cost: float = float("nan")
     nfev: int = 0
     notes: tuple[str, ...] = field(default_factory=tuple)
+    noise_model: str = "gain"
+    gain_noise: np.ndarray | None = None
+    noise_on_bound: tuple[str, ...] = ()
+    structure: Any = None
 
     @property
     def A_chen_dao(self) -> np.ndarray:
@@ -436,6 +446,14 @@ def subspace_start(
     return to_canonical_form(Ac, Bc, C)
 
 
+#: Noise models of :func:`fit`: "free" (the noise model estimated, by
+#: :data:`FREE_NOISE_MODEL`), "kalman" (K the Kalman gain of fitted noise covariances: a
+#: stable predictor by construction), "gain" (K's entries free, the former default), "none"
+#: (K = 0, output error).
+NOISE_MODELS = ("free", "kalman", "gain", "none")
+#: What ``noise_model="free"`` fits (docs/uncertainty.md, "A predictor stable by construction").
+FREE_NOISE_MODEL = "kalman"
+
 #: Subspace starts tried by ``fit(..., multistart=True)``: (past window [s], coarse dt [s]).
 SUBSPACE_STARTS = ((0.5, 0.01), (1.5, 0.02))
 
@@ -539,8 +557,9 @@ def fit(
     if not runs:
         raise ValueError("no runs given")
     check_sampling(runs, "pem.fit")
-    if noise_model not in ("free", "none"):
-        raise ValueError(f"noise_model {noise_model!r}: choose 'free' or 'none'")
+    if noise_model not in NOISE_MODELS:
+        raise ValueError(f"noise_model {noise_model!r}: choose one of {', '.join(NOISE_MODELS)}")
+    kind = FREE_NOISE_MODEL if noise_model == "free" else noise_model
     outputs = tuple(outputs)
     C, _ = output_matrix(outputs)
     data = run_data(runs, outputs)
@@ -555,28 +574,35 @@ def fit(
     _, told = guard(runs, len(THETA_NAMES), what=f"the canonical PEM model at {data[0].v:g} m/s",
                     informativity=informativity)  # fmt: skip
     dt = data[0].dt
-    free_k = noise_model == "free"
+    free_k = kind == "gain"
     yvar = np.mean([np.var(d.y, axis=0) for d in data], axis=0)
     w = 1.0 / np.sqrt(yvar)
     mapping = [np.eye(10)] * len(data)
     best = None
     for name, theta in _candidates(runs, theta0, starts, multistart):
-        K = initial_gain(theta, dt, C, data, yvar, free_k)
+        K = initial_gain(theta, dt, C, data, yvar, kind != "none")
         if K is None:
             continue
         x = np.concatenate([theta, K.ravel()]) if free_k else theta
         prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
         r = prob.residual(x)
         if r is not None and (best is None or float(r @ r) < best[0]):
-            best = (float(r @ r), name, x, K)
+            best = (float(r @ r), name, x, K, r)
     if best is None:
         raise ValueError(
             "no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
             "neighbouring speed)"
         )
-    _, start_name, x, K = best
-    nfev = 0
+    _, start_name, x, K, r = best
     notes = [f"start: {start_name}"]
+    if told:
+        notes.append(told)
+    if kind == "kalman":
+        w = 1.0 / np.sqrt(np.mean((r.reshape(-1, len(outputs)) / w) ** 2, axis=0))
+        return _fit_kalman(data, x[:10], w, outputs, max_nfev, method, passes, notes)
+    if kind == "none":
+        K = np.zeros_like(K)
+    nfev = 0
     for _ in range(max(1, passes)):
         prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
         sol = solve(prob, x, max_nfev, method)
@@ -585,215 +611,77 @@ def fit(
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
     if not sol.success:
         notes.append(f"least_squares: {sol.message}")
-    if told:
-        notes.append(told)
     cov = sandwich_covariance(prob, 4 * len(data))
     theta, Kf = prob.split(x)
     return CanonicalModel(
         theta=theta.copy(), covariance=cov[:10, :10], K=Kf.copy() if free_k else K, dt=dt,
         speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
         outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
-        notes=tuple(notes),
+        notes=tuple(notes), noise_model=kind,
     )  # fmt: skip
 
 
-#: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
-#: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
-NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
-#: Range of the log standard deviations of that noise relative to its reference
-#: (the input's std times |b1|, |b2|); beyond it the gain no longer changes.
-NOISE_LOG_RANGE = (-40.0, 5.0)
-#: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
-NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
-#: Rounds of the joint fit's alternation (speed parameters, then the noise's eta) per
-#: weighting pass; a round whose eta step lowers the cost by less than :data:`JOINT_TOL`
-#: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
-JOINT_ROUNDS = 6
-JOINT_TOL = 1e-2
+def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> CanonicalModel:
+    """The fixed-speed fit with K the Kalman gain of the model for a fitted noise covariance.
 
-
-def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
-    """Steady-state Kalman gain of the canonical model ``theta`` for acceleration noise.
-
-    Process noise: white noise in the roll and steer accelerations, held over each sample
-    (``Q = G L L' G'``, G the zero-order-hold sampling of :data:`NOISE_INPUT`, L =
-    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]); sensor noise diag(``rdiag``).  The
-    predictor Ad - K C is stable for every ``eta`` (the stabilizing Riccati solution).
-
-    Parameters
-    ----------
-    theta : (10,) ndarray
-        Canonical parameters [a1, ..., a8, b1, b2].
-    dt : float
-        Sample period [s].
-    C : (L, 4) ndarray
-        Output matrix.
-    rdiag : (L,) ndarray
-        Sensor-noise variances (squared output units).
-    eta : (3,) ndarray
-        [log s1, s21, log s2] of the noise's Cholesky factor, relative to ``ref``
-        (logs clipped to :data:`NOISE_LOG_RANGE`).
-    ref : (2,) ndarray
-        Reference standard deviations of the roll and steer acceleration noise [rad/s^2].
-
-    Returns
-    -------
-    (4, L) ndarray
-        K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k] (Chen & Dao's state order).
+    eta = [log s1, s21, log s2] of the acceleration noise relative to |b| std(u); the
+    sensor-noise variances are the one-step prediction errors' (1 / w^2, the output weights,
+    updated with them after each pass); fitted alternately with theta
+    (:func:`bikeid.ident.innovation_gain.alternate`); process-noise standard deviations the
+    data cannot hold off their lower bound are put on it and the covariance of theta is
+    conditional on them (:func:`bikeid.ident.innovation_gain.settle_bounds`).
     """
-    A, _ = canonical_ab(theta)
-    Ad, G = zoh(A, NOISE_INPUT, dt)
+    dt = data[0].dt
+    C = output_matrix(outputs)[0]
+    uvar = float(np.mean([np.var(d.u) for d in data]))
+    ref = np.maximum(np.abs(theta[8:10]), 1e-6) * math.sqrt(uvar)
+    mapping, weights = [np.eye(10)] * len(data), [w]
+
+    def rdiag() -> np.ndarray:
+        r = 1.0 / weights[0] ** 2
+        return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
+
+    def problem(z, free):
+        return KalmanGainProblem(data, mapping, [rdiag()] * len(data), weights[0], outputs,
+                                 ref, z, free)  # fmt: skip
+
+    z = _noise_start(problem, theta, 3, FIXED_NOISE_STARTS)
+    if z is None:
+        raise ValueError(
+            "no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
+            "neighbouring speed)"
+        )
+    z, nfev, stopped, held = alternate(
+        problem, z, 10, max_nfev, method, passes,
+        lambda prob: weights.__setitem__(0, _weights(prob)), settle=True,
+    )  # fmt: skip
     lo, hi = NOISE_LOG_RANGE
-    s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
-    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * np.asarray(ref)[:, None]
-    GL = G @ Lf
-    Q = GL @ GL.T + 1e-12 * np.eye(4)
-    R = np.diag(rdiag)
-    P = solve_discrete_are(Ad.T, C.T, Q, R)
-    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-
-
-def sensor_variances(model: CanonicalModel) -> np.ndarray:
-    """The sensor-noise variances a joint fit's Kalman gains use at a fitted speed.
-
-    Parameters
-    ----------
-    model : CanonicalModel
-        The per-speed fit.
-
-    Returns
-    -------
-    (L,) ndarray
-        The diagonal of its ``noise_covariance`` (squared output units), raised to at
-        least 1e-12 of its largest entry and to 1e-30 (noise-free data: a solvable
-        Riccati equation).
-    """
-    r = np.diag(np.atleast_2d(model.noise_covariance)).astype(float)
-    return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
-
-
-class _KalmanGainProblem(PredictionProblem):
-    """The joint problem with each run's K the Kalman gain of the joint model at its speed.
-
-    z = [speed parameters (14), eta (3)]: the innovation gains follow the model (and a
-    shared acceleration-noise covariance), so the predictor is stable at every point and
-    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dz to the
-    kernel's dE/dtheta (dK by central differences of the Riccati solution).  Only the
-    entries ``free`` of z are the minimizer's x (the others held at ``z``): the fit
-    alternates between the speed parameters and eta, because where the noise is
-    negligible K hardly depends on eta, and those near-zero Jacobian columns made the
-    joint Levenberg-Marquardt steps so damped that it stopped short of the optimum.
-    """
-
-    def __init__(self, data, mapping, rdiag, weights, outputs, ref, z, free):
-        super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
-        self.rdiag, self.ref = rdiag, np.asarray(ref, float)
-        self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
-
-    def full(self, x) -> np.ndarray:
-        """z with the free entries set to x."""
-        z = self.z.copy()
-        z[self.free] = x
-        return z
-
-    def split(self, z):
-        return z[: self.mapping[0].shape[1]], None
-
-    def residual(self, x):
-        return super().residual(self.full(x))
-
-    def gain(self, theta, dt, rdiag, eta):
-        return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
-
-    def _needs(self) -> tuple[bool, bool]:
-        """Whether speed parameters, and whether noise parameters, are free."""
-        P = self.mapping[0].shape[1]
-        return bool(np.any(self.free < P)), bool(np.any(self.free >= P))
-
-    def _models(self, x, derivatives: bool):
-        P = self.mapping[0].shape[1]
-        p, eta = x[:P], x[P:]
-        need_theta, need_eta = self._needs()
-        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
-        out, cache = [], {}
-        for i, d in enumerate(self.data):
-            S = self.mapping[i]
-            theta = S @ p
-            key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
-            if key not in cache:
-                if derivatives and need_theta:
-                    Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
-                else:
-                    (Ad, Bd), dAd, dBd = (
-                        discretize(theta, d.dt),
-                        np.zeros((0, 4, 4)),
-                        np.zeros((0, 4)),
-                    )
-                try:
-                    K = self.gain(theta, d.dt, self.rdiag[i], eta)
-                except (ValueError, np.linalg.LinAlgError):
-                    return None
-                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
-                    return None
-                dK = (self._gain_derivative(theta, d.dt, self.rdiag[i], eta, K, rows)
-                      if derivatives else None)  # fmt: skip
-                cache[key] = (Ad, Bd, dAd, dBd, K, dK)
-            Ad, Bd, dAd, dBd, K, dK = cache[key]
-            out.append((Ad, Bd, dAd, dBd, K, S, dK))
-        return out
-
-    def _gain_derivative(self, theta, dt, rdiag, eta, K0, rows):
-        """(13, 4 L): dK/d[theta, eta] by central differences in ``rows`` (zero in the
-        others; one-sided where the Riccati equation has no stabilizing solution on one
-        side, zero where on neither: the derivative only steers the search, the cost is
-        exact)."""
-        z = np.concatenate([theta, eta])
-        out = np.zeros((z.size, K0.size))
-        for j in rows:
-            h = 1e-6 * max(abs(z[j]), 1.0)
-            side = {}
-            for s in (1.0, -1.0):
-                zs = z.copy()
-                zs[j] += s * h
-                try:
-                    side[s] = self.gain(zs[:10], dt, rdiag, zs[10:])
-                except (ValueError, np.linalg.LinAlgError):
-                    continue
-            if len(side) == 2:
-                out[j] = ((side[1.0] - side[-1.0]) / (2 * h)).ravel()
-            elif side:
-                s, Ks = next(iter(side.items()))
-                out[j] = (s * (Ks - K0) / h).ravel()
-        return out
-
-    def jacobian(self, x):
-        r = self.residual(x)
-        if r is None:
-            return None, None
-        models = self._models(self.full(x), derivatives=True)
-        if models is None:
-            return None, None
-        nk = 4 * self.L
-        need_theta, need_eta = self._needs()
-        P = self.mapping[0].shape[1]
-        cols = self.free - (0 if need_theta else P)  # columns of the blocks computed
-        jac = []
-        for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
-            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
-            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
-            nt = dAd.shape[0]  # 10 or 0
-            JK = J[:, nt : nt + nk]
-            blocks = []
-            if need_theta:
-                blocks.append((J[:, :10] + JK @ dK[:10].T) @ S)
-            if need_eta:
-                blocks.append(JK @ dK[10:].T)
-            Jm = np.hstack(blocks)[:, cols]
-            Q, _ = np.linalg.qr(J[:, nt + nk :])
-            Jm -= Q @ (Q.T @ Jm)
-            jac.append(Jm)
-        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
-        return r, self._J
+    z[10], z[12] = (min(max(z[i], lo), hi) for i in (10, 12))  # same gain, finite
+    free = np.array([i for i in range(z.size) if i not in held])
+    prob = problem(z, free)
+    prob.jacobian(z[free])
+    cov = sandwich_covariance(prob, 4 * len(data))
+    names = ("log_s1", "s21", "log_s2")
+    bound = tuple(names[i - 10] for i in held if i != 11)
+    eta = z[10:]
+    notes.append(
+        "innovation gain: Kalman gain of the model for fitted noise covariances (" +
+        ", ".join(f"{k} {v:.3g}" for k, v in zip(names, eta, strict=True)) +
+        (f"; on the lower bound: {', '.join(bound)}, covariance conditional on it" if bound
+         else "") + ")"
+    )  # fmt: skip
+    if stopped:
+        notes.append(f"least_squares: {stopped}")
+    theta = z[:10].copy()
+    return CanonicalModel(
+        theta=theta, covariance=cov[:10, :10],
+        K=kalman_gain_of(theta, dt, C, prob.rdiag[0], eta, ref),
+        dt=dt, speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
+        outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
+        notes=tuple(notes), noise_model="kalman",
+        gain_noise=np.concatenate([eta, ref, prob.rdiag[0]]),
+        noise_on_bound=bound,
+    )  # fmt: skip
 
 
 @single_threaded_blas
@@ -889,7 +777,8 @@ def fit_speed_model(
         if v in given:
             per[v] = given[v]
         else:
-            per[v] = fit(groups[v], outputs=outputs, noise_model=noise_model, method=method,
+            per[v] = fit(groups[v], outputs=outputs, method=method,
+                         noise_model="gain" if noise_model == "free" else noise_model,
                          passes=1, starts=() if prev is None else (prev.theta,),
                          informativity=starts_check)  # fmt: skip
         prev = per[v]
@@ -938,37 +827,21 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
     uvar = float(np.mean([np.var(d.u) for d in data]))
     ref = np.abs(params[12:14]) * math.sqrt(uvar)
     n = len(SPEED_NAMES)
-    every, par, noise = np.arange(n + 3), np.arange(n), np.arange(n, n + 3)
+    weights = [w]
 
     def problem(z, free):
-        return _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref, z, free)
+        return KalmanGainProblem(data, mapping, rdiag, weights[0], outputs, ref, z, free)
 
-    best = None
-    for eta in NOISE_STARTS:
-        z = np.concatenate([params, eta])
-        r = problem(z, every).residual(z)
-        if r is not None and (best is None or float(r @ r) < best[0]):
-            best = (float(r @ r), z)
-    if best is None:
+    z = _noise_start(problem, params, 3)
+    if z is None:
         raise ValueError(
             "no stable predictor from the joint start: fit each speed separately and check its data"
         )
-    z = best[1]
-    nfev, stopped = 0, None
-    for _ in range(max(1, passes)):
-        for _ in range(JOINT_ROUNDS):
-            prob = problem(z, par)
-            sol = solve(prob, z[par], max_nfev, method)
-            z[par], nfev = sol.x, nfev + sol.nfev
-            before = float(prob._r @ prob._r)
-            prob = problem(z, noise)
-            sol_n = solve(prob, z[noise], max_nfev, method)
-            z[noise], nfev = sol_n.x, nfev + sol_n.nfev
-            stopped = None if sol.success else str(sol.message)
-            if before - float(prob._r @ prob._r) < JOINT_TOL:
-                break
-        w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
-    prob = problem(z, every)
+    z, nfev, stopped, _ = alternate(
+        problem, z, n, max_nfev, method, passes,
+        lambda prob: weights.__setitem__(0, _weights(prob)),
+    )  # fmt: skip
+    prob = problem(z, np.arange(z.size))
     prob.jacobian(z)
     x = z
     cov = sandwich_covariance(prob, 4 * len(data))
@@ -986,3 +859,21 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev, notes=tuple(notes),
         gain_noise=np.concatenate([x[n:], ref]),
     )  # fmt: skip
+
+
+def _weights(prob) -> np.ndarray:
+    """Output weights: the inverse RMS of each output's prediction errors."""
+    return 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
+
+
+def _noise_start(problem, params: np.ndarray, n_eta: int, starts=NOISE_STARTS
+                 ) -> np.ndarray | None:  # fmt: skip
+    """[params, eta] with the eta of ``starts`` (sensor ratios 0) of least cost, or None
+    when none gives a stable predictor."""
+    best = None
+    for eta in starts:
+        z = np.concatenate([params, eta, np.zeros(n_eta - 3)])
+        r = problem(z, np.arange(z.size)).residual(z)
+        if r is not None and (best is None or float(r @ r) < best[0]):
+            best = (float(r @ r), z)
+    return None if best is None else best[1]

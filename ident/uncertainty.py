@@ -463,10 +463,14 @@ def predictor_radius(model) -> float | None:
         max |eig(Ad - K C)| (dimensionless, per sample); None for a model whose theta and
         K were not fitted together by a prediction-error fit (no innovation gain, or
         ``nfev`` 0: a speed-parameterized model, or one taken from it at a speed by
-        ``SpeedCanonicalModel.at``, whose K belongs to another theta).
+        ``SpeedCanonicalModel.at``, whose K belongs to another theta), and for a fit whose
+        K is the Kalman gain of its noise covariances (``noise_model == "kalman"``: stable
+        for every parameter value, so the fit has no boundary to stop on).
     """
     K, theta = getattr(model, "K", None), getattr(model, "theta", None)
     if K is None or theta is None or callable(theta) or not hasattr(model, "outputs"):
+        return None
+    if getattr(model, "noise_model", "gain") == "kalman":  # K follows theta: no boundary
         return None
     if not getattr(model, "nfev", 0) > 0:  # theta and K not fitted together
         return None
