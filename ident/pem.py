@@ -56,6 +56,7 @@ speed ``run.speed`` is used (per-sample speed variation is ignored here).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -98,6 +99,7 @@ from bikeid.ident.predictor import (
 )
 from bikeid.ident.signals import check_sampling
 from bikeid.ident.subspace import d2c, decimate, pbsid
+from bikeid.ident.trust import PREDICTOR_BOUNDARY_TOL
 from bikeid.sim.linear import CanonicalMatrices
 
 __all__ = [
@@ -166,6 +168,24 @@ class CanonicalModel(LinearModel):
         Number of residual evaluations over all passes.
     notes : tuple of str
         Remarks, e.g. the start used and a minimizer message when it did not converge.
+    noise_model : {"kalman", "gain", "none"}
+        How K was fitted: the Kalman gain of fitted noise covariances (stable by
+        construction), free entries (the former default; may end on the predictor's
+        stability boundary), or K = 0 (output error).  "gain" for models made elsewhere.
+    gain_noise : (8,) ndarray or None
+        For ``"kalman"``: [log s1, s21, log s2] of the acceleration noise's Cholesky factor
+        relative to the reference standard deviations [ref1, ref2] [rad/s^2] that follow,
+        then the sensor-noise variances of the outputs (squared output units)
+        (:func:`bikeid.ident.innovation_gain.kalman_gain_of`).
+    noise_on_bound : tuple of str
+        Noise parameters put on their lower bound (``"log_s1"``, ``"log_s2"``): the data do
+        not reject zero process noise there, and ``covariance`` is conditional on it.
+    structure : StructureCheck or None
+        The residual tests of the fitted runs (:func:`bikeid.ident.structure.check_structure`),
+        which the interval functions read (:mod:`bikeid.ident.trust`).
+    unstable_plant : str
+        For an output-error fit, why the plant is open-loop unstable (the fit on the
+        plant's stability boundary, or an unstable start), else "".
     """
 
     theta: np.ndarray
@@ -183,6 +203,7 @@ class CanonicalModel(LinearModel):
     gain_noise: np.ndarray | None = None
     noise_on_bound: tuple[str, ...] = ()
     structure: Any = None
+    unstable_plant: str = ""
 
     @property
     def A_chen_dao(self) -> np.ndarray:
@@ -294,6 +315,11 @@ class SpeedCanonicalModel(SpeedDependentModel):
         (:func:`kalman_gain_of`; the sensor-noise variances are the diagonal of each
         per-speed fit's ``noise_covariance``).  None when each speed's K was the per-speed
         fit's (``joint_gain="per_speed"`` or ``noise_model="none"``).
+    structure : StructureCheck or None
+        The residual tests of the runs against the model over speed
+        (:func:`bikeid.ident.structure.check_structure` with ``speed_model``).
+    unstable_plant : str
+        For output-error per-speed fits, the speeds whose plant is open-loop unstable, else "".
     """
 
     params: np.ndarray
@@ -306,6 +332,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
     nfev: int = 0
     notes: tuple[str, ...] = ()
     gain_noise: np.ndarray | None = None
+    structure: Any = None
+    unstable_plant: str = ""
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -493,6 +521,7 @@ def fit(
     starts: Sequence[np.ndarray] = (),
     multistart: bool = True,
     informativity: str = "refuse",
+    structure: bool = True,
 ) -> CanonicalModel:
     """Fixed-speed canonical PEM from one or more runs at the same speed and dt.
 
@@ -536,6 +565,10 @@ def fit(
         Before the fit, whether the runs can determine the 10 parameters
         (:func:`bikeid.ident.informativity.guard`): refuse when they cannot (default), or
         fit and say so in ``notes``, or skip the check (``notes`` says so).
+    structure : bool, optional
+        Attach the residual tests of the runs (``model.structure``,
+        :func:`bikeid.ident.structure.check_structure`), which the interval functions of
+        :mod:`bikeid.ident.uncertainty` read (default True).
 
     Returns
     -------
@@ -599,9 +632,9 @@ def fit(
         notes.append(told)
     if kind == "kalman":
         w = 1.0 / np.sqrt(np.mean((r.reshape(-1, len(outputs)) / w) ** 2, axis=0))
-        return _fit_kalman(data, x[:10], w, outputs, max_nfev, method, passes, notes)
-    if kind == "none":
-        K = np.zeros_like(K)
+        model = _fit_kalman(data, x[:10], w, outputs, max_nfev, method, passes, notes)
+        return _checked(runs, model) if structure else model
+    start_re = float(np.max(np.linalg.eigvals(canonical_ab(x[:10])[0]).real))
     nfev = 0
     for _ in range(max(1, passes)):
         prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
@@ -613,12 +646,42 @@ def fit(
         notes.append(f"least_squares: {sol.message}")
     cov = sandwich_covariance(prob, 4 * len(data))
     theta, Kf = prob.split(x)
-    return CanonicalModel(
+    model = CanonicalModel(
         theta=theta.copy(), covariance=cov[:10, :10], K=Kf.copy() if free_k else K, dt=dt,
         speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
         outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
         notes=tuple(notes), noise_model=kind,
+        unstable_plant=_unstable_plant(theta, dt, start_name, start_re) if kind == "none" else "",
     )  # fmt: skip
+    return _checked(runs, model) if structure else model
+
+
+def _unstable_plant(theta, dt, start_name: str, start_re: float) -> str:
+    """Why an output-error fit's plant is open-loop unstable, or "".
+
+    The identified plant cannot be unstable (its predictor is the plant, kept stable), but a
+    fit that ends on that stability boundary (spectral radius of Ad above 1 -
+    :data:`bikeid.ident.trust.PREDICTOR_BOUNDARY_TOL`) wanted to be; the start (a
+    closed-loop-safe subspace estimate, or the caller's) is the nominal plant.
+    """
+    rho = float(np.max(np.abs(np.linalg.eigvals(discretize(theta, dt)[0]))))
+    if rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
+        return f"the fit ended on the plant's stability boundary, spectral radius 1 - {1 - rho:.1e}"
+    if start_re > 0.0:
+        return f"its start ({start_name}) has an eigenvalue with real part {start_re:+.3f} 1/s"
+    return ""
+
+
+def _checked(runs, model):
+    """The model with its structure check attached (:mod:`bikeid.ident.structure`)."""
+    from bikeid.ident.structure import check_structure  # structure imports the intervals
+
+    speeds = sorted({round(r.speed, 6) for r in runs})
+    if hasattr(model, "per_speed"):
+        check = check_structure(runs, {v: model.at(v) for v in speeds}, speed_model=model)
+    else:
+        check = check_structure(runs, {speeds[0]: model})
+    return dataclasses.replace(model, structure=check)
 
 
 def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> CanonicalModel:
@@ -697,6 +760,7 @@ def fit_speed_model(
     passes: int = 2,
     informativity: str = "refuse",
     joint_gain: str = "kalman",
+    structure: bool = True,
 ) -> SpeedCanonicalModel:
     """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
 
@@ -738,6 +802,9 @@ def fit_speed_model(
         Kalman gains (default), or each speed's K held at its per-speed fit's (the former
         fit, biased where those fits end on their predictor's stability boundary; kept for
         comparison).  With ``noise_model="none"`` K = 0 either way.
+    structure : bool, optional
+        Attach the residual tests of the runs against the model over speed
+        (``model.structure``), which the interval functions read (default True).
 
     Returns
     -------
@@ -779,6 +846,7 @@ def fit_speed_model(
         else:
             per[v] = fit(groups[v], outputs=outputs, method=method,
                          noise_model="gain" if noise_model == "free" else noise_model,
+                         structure=False,
                          passes=1, starts=() if prev is None else (prev.theta,),
                          informativity=starts_check)  # fmt: skip
         prev = per[v]
@@ -791,8 +859,9 @@ def fit_speed_model(
     mapping = [speed_map(d.v) for d in data]
     w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     if noise_model == "free" and joint_gain == "kalman":
-        return _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev,
-                             method, passes, told)  # fmt: skip
+        model = _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev,
+                              method, passes, told)  # fmt: skip
+        return _checked(runs, model) if structure else model
     Ks = [per[round(r.speed, 6)].K for r in runs]
     C = output_matrix(outputs)[0]
     for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
@@ -813,11 +882,13 @@ def fit_speed_model(
         params = sol.x
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
     cov = sandwich_covariance(prob, 4 * len(data))
-    return SpeedCanonicalModel(
+    unstable = [f"{v:g} m/s: {m.unstable_plant}" for v, m in per.items() if m.unstable_plant]
+    model = SpeedCanonicalModel(
         params=params.copy(), covariance=cov, per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev,
-        notes=(told,) if told else (),
+        notes=(told,) if told else (), unstable_plant="; ".join(unstable),
     )  # fmt: skip
+    return _checked(runs, model) if structure else model
 
 
 def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, method, passes,
