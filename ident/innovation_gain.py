@@ -324,8 +324,6 @@ class KalmanGainProblem(PredictionProblem):
         return r, self._J
 
 
-
-
 def alternate(problem, z: np.ndarray, n: int, max_nfev: int, method: str, passes: int,
               reweight, settle: bool = False
               ) -> tuple[np.ndarray, int, str | None, tuple[int, ...]]:  # fmt: skip
@@ -437,8 +435,11 @@ def settle_bounds(problem, z: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int
     for held in ((i1, i21, i2), (i1, i21), (i2,)):
         zb = z.copy()
         if i1 in held:
-            zb[i2] = lo if i2 in held else 0.5 * math.log(
-                zb[i21] ** 2 + math.exp(2.0 * min(max(zb[i2], lo), hi)))
+            zb[i2] = (
+                lo
+                if i2 in held
+                else 0.5 * math.log(zb[i21] ** 2 + math.exp(2.0 * min(max(zb[i2], lo), hi)))
+            )
             zb[i21], zb[i1] = 0.0, lo
         else:
             zb[i2] = lo

@@ -186,6 +186,10 @@ class CanonicalModel(LinearModel):
     unstable_plant : str
         For an output-error fit, why the plant is open-loop unstable (the fit on the
         plant's stability boundary, or an unstable start), else "".
+    roll_rms_deg : float
+        RMS roll angle of the fitted runs [deg] (:func:`roll_rms_deg`), NaN for runs of a
+        linear plant or when not recorded; the interval functions refuse above
+        :data:`bikeid.ident.trust.AMPLITUDE_LIMIT_DEG` (amplitude bias).
     """
 
     theta: np.ndarray
@@ -204,6 +208,7 @@ class CanonicalModel(LinearModel):
     noise_on_bound: tuple[str, ...] = ()
     structure: Any = None
     unstable_plant: str = ""
+    roll_rms_deg: float = float("nan")
 
     @property
     def A_chen_dao(self) -> np.ndarray:
@@ -320,6 +325,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
         (:func:`bikeid.ident.structure.check_structure` with ``speed_model``).
     unstable_plant : str
         For output-error per-speed fits, the speeds whose plant is open-loop unstable, else "".
+    roll_rms_deg : float
+        Largest RMS roll angle of the runs at one speed [deg], NaN for a linear plant.
     """
 
     params: np.ndarray
@@ -334,6 +341,7 @@ class SpeedCanonicalModel(SpeedDependentModel):
     gain_noise: np.ndarray | None = None
     structure: Any = None
     unstable_plant: str = ""
+    roll_rms_deg: float = float("nan")
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -673,7 +681,7 @@ def _unstable_plant(theta, dt, start_name: str, start_re: float) -> str:
 
 
 def _checked(runs, model):
-    """The model with its structure check attached (:mod:`bikeid.ident.structure`)."""
+    """The model with its structure check (:mod:`bikeid.ident.structure`) and roll RMS."""
     from bikeid.ident.structure import check_structure  # structure imports the intervals
 
     speeds = sorted({round(r.speed, 6) for r in runs})
@@ -681,7 +689,36 @@ def _checked(runs, model):
         check = check_structure(runs, {v: model.at(v) for v in speeds}, speed_model=model)
     else:
         check = check_structure(runs, {speeds[0]: model})
-    return dataclasses.replace(model, structure=check)
+    rms = [roll_rms_deg([r for r in runs if round(r.speed, 6) == v]) for v in speeds]
+    return dataclasses.replace(model, structure=check, roll_rms_deg=max(rms))
+
+
+def roll_rms_deg(runs: Sequence[Run]) -> float:
+    """RMS roll angle of runs from a nonlinear plant (measured or simulated).
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        Runs with ``phi`` [rad].
+
+    Returns
+    -------
+    float
+        sqrt(mean(phi^2)) over all samples [deg]; NaN when every run comes from a linear
+        plant (``meta["plant"]["model"] == "whipple-linear"`` or the ``linear_loop``
+        simulator), where the amplitude causes no bias.
+    """
+
+    def linear(r) -> bool:
+        meta = getattr(r, "meta", None) or {}
+        plant = meta.get("plant") if isinstance(meta.get("plant"), dict) else {}
+        return (plant.get("model") == "whipple-linear"
+                or "linear_loop" in str(meta.get("simulator", "")))  # fmt: skip
+
+    if all(linear(r) for r in runs):
+        return float("nan")
+    phi = np.concatenate([np.asarray(r["phi"], float) for r in runs])
+    return float(np.degrees(np.sqrt(np.mean(phi**2))))
 
 
 def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> CanonicalModel:

@@ -10,6 +10,10 @@ by name (a keyword):
   (:func:`bikeid.ident.structure.check_structure`, attached by ``pem.fit`` and
   ``pem.fit_speed_model`` as ``model.structure``) rejects it at the speed asked for (any
   speed, for a model over speed);
+- ``refuse_amplitude``: a fit to runs of a nonlinear plant (measured, or simulated by the
+  Whipple model) whose RMS roll angle exceeds :data:`AMPLITUDE_LIMIT_DEG`: the estimate is
+  then the best linear model *at that amplitude*, biased from the upright linearization by
+  more than the residual tests can see;
 - ``refuse_output_error``: an output-error fit (``noise_model="none"``) of an open-loop
   unstable plant, the identified one or the nominal one (the fit's start): output error
   then simulates an unstable plant, which a stable fit cannot follow
@@ -31,6 +35,7 @@ from bikeid.ident.predictor import discretize, output_matrix
 from bikeid.sim.errors import UntrustworthyResult
 
 __all__ = [
+    "AMPLITUDE_LIMIT_DEG",
     "NO_STRUCTURE_NOTE",
     "PREDICTOR_BOUNDARY_TOL",
     "REMEDY_KALMAN",
@@ -58,6 +63,16 @@ NO_STRUCTURE_NOTE = (
     "no structure check is attached to this model, so nothing says the data do not reject "
     "its structure (ident.structure.check_structure; pem.fit attaches one)"
 )
+
+
+#: Largest RMS roll angle [deg] of nonlinear-plant runs whose intervals are given.  Evidence
+#: (benchmarks/bench_bias_amplitude.py, docs/uncertainty.md "Bias against excitation
+#: amplitude"): the weave real-part bias at 4.2 m/s grows as the square of the amplitude,
+#: -0.057 1/s at 3.49 deg RMS (25 printed standard errors of a 50 s fit), -0.014 at 1.74 deg
+#: (14), -0.002 to -0.003 at 0.87 deg (1.3-1.9), within one standard error at 0.44 deg.
+#: Above 0.5 deg it can exceed a standard error, more so for longer or pooled records,
+#: whose standard errors are smaller.
+AMPLITUDE_LIMIT_DEG = 0.5
 
 
 class WithheldIntervals(UntrustworthyResult):
@@ -103,13 +118,12 @@ def predictor_radius(model) -> float | None:
         ``nfev`` 0: a speed-parameterized model, or one taken from it at a speed by
         ``SpeedCanonicalModel.at``, whose K belongs to another theta), and for a fit whose
         K is the Kalman gain of its noise covariances (``noise_model == "kalman"``: stable
-        for every parameter value, so the fit has no boundary to stop on) or zero
-        (``"none"``: output error, checked by :func:`check_trust` instead).
+        for every parameter value, so the fit has no boundary to stop on).
     """
     K, theta = getattr(model, "K", None), getattr(model, "theta", None)
     if K is None or theta is None or callable(theta) or not hasattr(model, "outputs"):
         return None
-    if getattr(model, "noise_model", "gain") in ("kalman", "none"):  # K follows theta, or 0
+    if getattr(model, "noise_model", "gain") == "kalman":  # K follows theta: no boundary
         return None
     if not getattr(model, "nfev", 0) > 0:  # theta and K not fitted together
         return None
@@ -144,7 +158,8 @@ def check_predictor_interior(model) -> float | None:
             f"radius of Ad - K C = 1 - {max(1.0 - rho, 0.0):.1e}, above 1 - "
             f"{PREDICTOR_BOUNDARY_TOL:g}): its covariance is not the curvature of an optimum "
             "and its intervals miss the truth",
-            REMEDY_KALMAN, "refuse_boundary",
+            REMEDY_KALMAN,
+            "refuse_boundary",
         )
     return rho
 
@@ -164,6 +179,7 @@ def check_trust(
     refuse_boundary: bool = True,
     refuse_structure: bool = True,
     refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
 ) -> tuple[float | None, tuple[str, ...]]:
     """Refuse intervals where ``bikeid identify`` withholds them; else the notes to give.
 
@@ -175,7 +191,7 @@ def check_trust(
     speed : float, optional
         The speed [m/s] the intervals are for (None: the model over all its speeds, e.g.
         its critical speeds).
-    refuse_boundary, refuse_structure, refuse_output_error : bool, optional
+    refuse_boundary, refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
         Each refusal (module docstring); False gives the intervals with a note instead.
 
     Returns
@@ -193,8 +209,10 @@ def check_trust(
     notes = []
     why = getattr(model, "unstable_plant", "")
     if why:
-        reason = (f"an output-error fit of an open-loop unstable plant ({why}): output error "
-                  "simulates the plant, and a stable fit of an unstable one is biased")
+        reason = (
+            f"an output-error fit of an open-loop unstable plant ({why}): output error "
+            "simulates the plant, and a stable fit of an unstable one is biased"
+        )
         if refuse_output_error:
             raise WithheldIntervals(reason, REMEDY_KALMAN, "refuse_output_error")
         notes.append(reason)
@@ -213,5 +231,14 @@ def check_trust(
                   "its standard errors")  # fmt: skip
         if refuse_structure:
             raise WithheldIntervals(reason, "", "refuse_structure")
+        notes.append(reason)
+    rms = float(getattr(model, "roll_rms_deg", float("nan")))
+    if rms > AMPLITUDE_LIMIT_DEG:
+        reason = (f"the runs' RMS roll angle, {rms:.2g} deg, exceeds {AMPLITUDE_LIMIT_DEG:g} "
+                  "deg: on a nonlinear plant the estimate is the linear model at that "
+                  "amplitude, biased from the upright linearization by more than the "
+                  "intervals show")  # fmt: skip
+        if refuse_amplitude:
+            raise WithheldIntervals(reason, "", "refuse_amplitude")
         notes.append(reason)
     return rho, tuple(notes)

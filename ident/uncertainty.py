@@ -456,6 +456,7 @@ def eigenvalue_intervals(
     refuse_boundary: bool = True,
     refuse_structure: bool = True,
     refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
 ) -> EigenIntervals:
     """Confidence intervals on the eigenvalues of a fitted model.
 
@@ -473,10 +474,11 @@ def eigenvalue_intervals(
         parameters' confidence ellipsoid (:func:`profile_interval`; the mode is followed
         by :func:`bikeid.sim.linear.match_eigenvalues`), which holds its coverage where an
         eigenvalue is curved in the parameters; ``"delta"``: value -+ z std.
-    refuse_boundary, refuse_structure, refuse_output_error : bool, optional
+    refuse_boundary, refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
         Refuse (default) what ``bikeid identify`` withholds: a fit on its one-step
         predictor's stability boundary, a structure its attached check rejects, an
-        output-error fit of an unstable plant (:func:`bikeid.ident.trust.check_trust`);
+        output-error fit of an unstable plant, nonlinear-plant runs above the roll
+        amplitude whose bias the intervals do not show (:func:`bikeid.ident.trust.check_trust`);
         False gives the intervals with that said in ``notes``.
 
     Returns
@@ -500,7 +502,8 @@ def eigenvalue_intervals(
     p, cov, S, speed = _parameters(model, v)
     rho, notes = check_trust(model, speed, refuse_boundary=refuse_boundary,
                              refuse_structure=refuse_structure,
-                             refuse_output_error=refuse_output_error)  # fmt: skip
+                             refuse_output_error=refuse_output_error,
+                             refuse_amplitude=refuse_amplitude)  # fmt: skip
     lam, jac, cond = eigenvalue_jacobian(S @ p)
     Jp = jac @ S  # d lambda / d p
     J = np.vstack([Jp.real, Jp.imag])
@@ -672,6 +675,7 @@ def critical_speed_intervals(
     *,
     refuse_structure: bool = True,
     refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
 ) -> CriticalSpeedIntervals:
     """Confidence intervals on v_w and v_c of a speed-parameterized model.
 
@@ -686,9 +690,10 @@ def critical_speed_intervals(
     method : {"profile", "delta"}, optional
         ``"profile"`` (default): the least and greatest speed over the parameters'
         confidence ellipsoid (:func:`profile_interval`); ``"delta"``: value -+ z std.
-    refuse_structure, refuse_output_error : bool, optional
-        Refuse (default) a model over speed whose attached structure check rejects it, or
-        an output-error fit of an unstable plant (:func:`bikeid.ident.trust.check_trust`);
+    refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
+        Refuse (default) a model over speed whose attached structure check rejects it, an
+        output-error fit of an unstable plant, or runs above the roll amplitude whose bias
+        the intervals do not show (:func:`bikeid.ident.trust.check_trust`);
         False gives the intervals with that said in ``notes``.
 
     Returns
@@ -716,7 +721,8 @@ def critical_speed_intervals(
         )
     p, cov, _, _ = _parameters(model, 1.0)
     _, notes = check_trust(model, None, refuse_structure=refuse_structure,
-                           refuse_output_error=refuse_output_error)  # fmt: skip
+                           refuse_output_error=refuse_output_error,
+                           refuse_amplitude=refuse_amplitude)  # fmt: skip
     g = float(model.g)
     crit = critical_speeds(matrices_from_speed_params(p, g), vmax)
     out: dict[str, Any] = {"method": method}
@@ -894,6 +900,7 @@ def bode_bands(
     refuse_boundary: bool = True,
     refuse_structure: bool = True,
     refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
 ) -> list[BodeBand]:
     """Delta-method bands on the Bode magnitude and phase of each output/T_delta channel.
 
@@ -907,10 +914,11 @@ def bode_bands(
         Speed [m/s] (required for a speed-parameterized model).
     level : float, optional
         Confidence level (default 0.95).
-    refuse_boundary, refuse_structure, refuse_output_error : bool, optional
+    refuse_boundary, refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
         Refuse (default) what ``bikeid identify`` withholds: a fit on its one-step
         predictor's stability boundary, a structure its attached check rejects, an
-        output-error fit of an unstable plant (:func:`bikeid.ident.trust.check_trust`);
+        output-error fit of an unstable plant, nonlinear-plant runs above the roll
+        amplitude whose bias the intervals do not show (:func:`bikeid.ident.trust.check_trust`);
         False gives the intervals with that said in ``notes``.
 
     Returns
@@ -932,7 +940,8 @@ def bode_bands(
     p, cov, S, speed = _parameters(model, v)
     _, notes = check_trust(model, speed, refuse_boundary=refuse_boundary,
                            refuse_structure=refuse_structure,
-                           refuse_output_error=refuse_output_error)  # fmt: skip
+                           refuse_output_error=refuse_output_error,
+                           refuse_amplitude=refuse_amplitude)  # fmt: skip
     C = output_matrix(model.outputs)[0]
     G, dG = _frequency_response(S @ p, C, w)
     rel = (dG / G[:, :, None]) @ S  # d ln G / dp  (L, F, P)
