@@ -1,7 +1,8 @@
 """The predictor stable by construction against the free innovation gain, on the README example.
 
     OPENBLAS_NUM_THREADS=1 nice python benchmarks/bench_predictor.py --processes 2 \
-        [--seeds 20] [--first-seed 1000] [--json FILE]
+        [--seeds 20] [--first-seed 1000] [--json FILE] [--lines FILE.jsonl]
+    python benchmarks/bench_predictor.py --report FILE.jsonl   # the tables of a saved run
 
 The README example: the nonlinear benchmark bicycle (Meijaard 2007) under the roll PID
 (``controllers.make("pid")``, 100 Hz) with a 1 N m uniform steer-torque dither
@@ -197,6 +198,12 @@ def main() -> None:
     ap.add_argument("--first-seed", type=int, default=1000)
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--json", help="also write every record's results to this JSON file")
+    ap.add_argument(
+        "--lines",
+        help="append each record's results to this JSON-lines file "
+        "as it finishes (records already in it are not rerun)",
+    )
+    ap.add_argument("--report", help="only print the tables of this JSON-lines file")
     ap.add_argument("--speeds", help="comma-separated speeds [m/s] (default 3,4,5)")
     ap.add_argument("--durations", help="comma-separated record lengths [s] (default 30,60)")
     args = ap.parse_args()
@@ -207,11 +214,26 @@ def main() -> None:
         DURATIONS = tuple(float(x) for x in args.durations.split(","))
     items = [(v, d, s) for v in SPEEDS for d in DURATIONS
              for s in range(args.first_seed, args.first_seed + args.seeds)]  # fmt: skip
-    t0 = time.perf_counter()
+    if args.report:
+        with open(args.report) as fh:
+            rows = [json.loads(line) for line in fh if line.strip()]
+        print(table(rows))
+        print(done_when(rows))
+        print(remedies(rows))
+        return
     rows = []
-    for _, row in imap(job, items, args.processes, None, ordered=True):
+    if args.lines and os.path.exists(args.lines):
+        with open(args.lines) as fh:
+            rows = [json.loads(line) for line in fh if line.strip()]
+    done = {(r["speed"], r["duration"], r["seed"]) for r in rows}
+    items = [i for i in items if i not in done]
+    t0 = time.perf_counter()
+    for _, row in imap(job, items, args.processes, None, ordered=False):
         rows.append(row)
-        print(f"{len(rows)}/{len(items)} {row['speed']:g} m/s {row['duration']:g} s seed "
+        if args.lines:
+            with open(args.lines, "a") as fh:
+                fh.write(json.dumps(row) + "\n")
+        print(f"{len(rows)} {row['speed']:g} m/s {row['duration']:g} s seed "
               f"{row['seed']}", flush=True)  # fmt: skip
     print(f"wall {time.perf_counter() - t0:.0f} s, {args.processes} processes")
     print(table(rows))

@@ -85,7 +85,8 @@ def test_missing_delay_is_rejected_and_its_intervals_would_miss(linear_run):
     assert "independence" in rejected  # measured p = 0 (underflow) on all four outputs
     assert "correlate with the past input" in check.causes()
     note = check.note()
-    assert "no 95 % intervals are given for 5 m/s" in note and "Fix:" in note
+    assert "no 95 % intervals are given for 5 m/s" in note
+    assert "Fix:" not in note  # no remedy is printed that was not measured to cover
     # and rightly so: the intervals the check withholds exclude the truth (measured
     # z = -2.4, -7.8, -7.8, -10.7 for caster, weave pair, capsize)
     assert np.max(np.abs(_z(model))) > 5.0
