@@ -378,7 +378,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
             fitted speed nearest to ``v`` and K the Kalman gain of theta with the joint
             fit's noise model (:attr:`gain_noise`), or, without one (or without a
             stabilizing Riccati solution at ``v``), the K of that nearest fitted speed;
-            ``x0``, ``cost`` and ``nfev`` are left at their defaults.
+            ``structure``, ``unstable_plant`` and ``roll_rms_deg`` those of the model over
+            speed; ``x0``, ``cost`` and ``nfev`` are left at their defaults.
         """
         S = speed_map(v)
         near = min(self.per_speed, key=lambda s: abs(s - v))
@@ -395,6 +396,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
             theta=S @ self.params, covariance=S @ self.covariance @ S.T,
             K=K, dt=self.dt, speed=v,
             noise_covariance=self.per_speed[near].noise_covariance, outputs=self.outputs,
+            structure=self.structure, unstable_plant=self.unstable_plant,
+            roll_rms_deg=self.roll_rms_deg,
         )  # fmt: skip
 
     def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -620,7 +623,12 @@ def fit(
     w = 1.0 / np.sqrt(yvar)
     mapping = [np.eye(10)] * len(data)
     best = None
-    for name, theta in _candidates(runs, theta0, starts, multistart):
+    cands = _candidates(runs, theta0, starts, multistart)
+    # the nominal plant of an output-error fit: the most unstable start (closed-loop-safe
+    # subspace estimates, or the caller's), whose predictor K = 0 could not even be scored
+    nominal = max(((float(np.max(np.linalg.eigvals(canonical_ab(t)[0]).real)), n)
+                   for n, t in cands), key=lambda c: c[0])  # fmt: skip
+    for name, theta in cands:
         K = initial_gain(theta, dt, C, data, yvar, kind != "none")
         if K is None:
             continue
@@ -642,7 +650,6 @@ def fit(
         w = 1.0 / np.sqrt(np.mean((r.reshape(-1, len(outputs)) / w) ** 2, axis=0))
         model = _fit_kalman(data, x[:10], w, outputs, max_nfev, method, passes, notes)
         return _checked(runs, model) if structure else model
-    start_re = float(np.max(np.linalg.eigvals(canonical_ab(x[:10])[0]).real))
     nfev = 0
     for _ in range(max(1, passes)):
         prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
@@ -659,24 +666,26 @@ def fit(
         speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
         outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
         notes=tuple(notes), noise_model=kind,
-        unstable_plant=_unstable_plant(theta, dt, start_name, start_re) if kind == "none" else "",
+        unstable_plant=_unstable_plant(theta, dt, *nominal) if kind == "none" else "",
     )  # fmt: skip
     return _checked(runs, model) if structure else model
 
 
-def _unstable_plant(theta, dt, start_name: str, start_re: float) -> str:
+def _unstable_plant(theta, dt, start_re: float, start_name: str) -> str:
     """Why an output-error fit's plant is open-loop unstable, or "".
 
     The identified plant cannot be unstable (its predictor is the plant, kept stable), but a
     fit that ends on that stability boundary (spectral radius of Ad above 1 -
-    :data:`bikeid.ident.trust.PREDICTOR_BOUNDARY_TOL`) wanted to be; the start (a
-    closed-loop-safe subspace estimate, or the caller's) is the nominal plant.
+    :data:`bikeid.ident.trust.PREDICTOR_BOUNDARY_TOL`) wanted to be; the starts (closed-loop
+    safe subspace estimates, or the caller's) are the nominal plant: an output-error fit of a
+    plant one of them finds unstable ends on a stable, wrong model (the README example at
+    4 m/s: weave real part -0.24 for a true +0.41, docs/uncertainty.md).
     """
     rho = float(np.max(np.abs(np.linalg.eigvals(discretize(theta, dt)[0]))))
     if rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
         return f"the fit ended on the plant's stability boundary, spectral radius 1 - {1 - rho:.1e}"
     if start_re > 0.0:
-        return f"its start ({start_name}) has an eigenvalue with real part {start_re:+.3f} 1/s"
+        return f"a start ({start_name}) has an eigenvalue with real part {start_re:+.3f} 1/s"
     return ""
 
 
