@@ -8,14 +8,19 @@ innovations (steady-state Kalman) predictor::
     yhat[k] = C xhat[k],  e[k] = y[k] - yhat[k],
     xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k]
 
-``noise_model="free"``: the discrete-time innovation gain K (4x2, at the data's dt)
-is estimated with the plant (the model set then contains any plant-input and
-sensor noise of the true loop, which makes direct PEM consistent in closed loop,
-reference F1).  ``noise_model="none"``: K = 0, output error (biased in closed loop,
-diverges for an unstable plant over long runs).  K is started from the Kalman gain
-of the start model with Q = Bd Bd' var(u), R = diag(var(y)) 1e-2 (any stabilizing
-gain would do).  Because the predictor is stable (Ad - K C), unstable plants do not
-blow up.
+``noise_model="free"`` (default): the noise model is estimated with the plant (the model
+set then contains any plant-input and sensor noise of the true loop, which makes direct PEM
+consistent in closed loop, reference F1), by :data:`FREE_NOISE_MODEL`, ``"kalman"``: K is
+the Kalman gain of the model for fitted acceleration-noise covariances
+(:mod:`ident.innovation_gain`), so Ad - K C is stable for every parameter value, also
+where the bicycle is open-loop unstable, and the fit cannot stop on the predictor's
+stability boundary.  ``noise_model="gain"``: the discrete-time innovation gain K (4 x L)
+has free entries (the former default; on short records it ends on that boundary, where
+its covariance describes no optimum: docs/uncertainty.md), started from the Kalman gain of
+the start model with Q = Bd Bd' var(u), R = diag(var(y)) 1e-2.  ``noise_model="none"``:
+K = 0, output error (biased in closed loop, and for an open-loop unstable plant it
+simulates an unstable plant: the interval functions refuse it there,
+:mod:`ident.trust`).
 
 Initial state.  Estimated per run by variable projection: e is affine in x0, so
 x0 is solved by least squares at each evaluation and the Jacobian is projected
@@ -542,8 +547,8 @@ def fit(
     estimate); ``multistart``: also try the PBSID starts of :data:`SUBSPACE_STARTS`.
     All candidates are scored by their one-step prediction cost (Kalman K of each
     candidate) and the best is refined, which avoids the local minima a single poor
-    subspace start ran into.  ``noise_model`` "free" (K estimated) or "none" (output
-    error); ``method`` "lm" (Levenberg-Marquardt on the normal equations, default) or
+    subspace start ran into.  ``noise_model`` "free" (the noise model estimated,
+    :data:`FREE_NOISE_MODEL`), "kalman", "gain" or "none" (module docstring); ``method`` "lm" (Levenberg-Marquardt on the normal equations, default) or
     "scipy" (``scipy.optimize.least_squares``, MINPACK; same optimum, slower);
     ``passes``: fits with re-estimated output weights (1 = weights from the output
     variances only).  Returns a :class:`CanonicalModel` (``notes`` names the start used).
@@ -560,8 +565,11 @@ def fit(
         Measured states fitted; must include phi and delta.
     theta0 : (10,) array_like, optional
         Start [a1, ..., a8, b1, b2]; when given, the subspace starts are not tried.
-    noise_model : {"free", "none"}, optional
-        Innovation gain K estimated, or K = 0 (output error).
+    noise_model : {"free", "kalman", "gain", "none"}, optional
+        "free" (default): the noise model estimated, as :data:`FREE_NOISE_MODEL`
+        ("kalman"); "kalman": K the Kalman gain of fitted noise covariances (a stable
+        predictor by construction); "gain": K's entries free; "none": K = 0 (output
+        error).
     max_nfev : int, optional
         Residual evaluations allowed per pass.
     method : {"lm", "scipy"}, optional
@@ -830,7 +838,8 @@ def fit_speed_model(
         Gravitational acceleration [m/s^2] stored in the result (for
         :meth:`SpeedCanonicalModel.canonical_matrices`); does not affect the fit.
     noise_model : {"free", "none"}, optional
-        Noise model of the per-speed fits (:func:`fit`).
+        Noise model: "free" (the joint fit's Kalman gains; the per-speed start fits have
+        free gains, ``fit(noise_model="gain")``) or "none" (output error throughout).
     max_nfev : int, optional
         Residual evaluations allowed per pass of the joint fit.
     method : {"lm", "scipy"}, optional
