@@ -548,7 +548,8 @@ def fit(
     All candidates are scored by their one-step prediction cost (Kalman K of each
     candidate) and the best is refined, which avoids the local minima a single poor
     subspace start ran into.  ``noise_model`` "free" (the noise model estimated,
-    :data:`FREE_NOISE_MODEL`), "kalman", "gain" or "none" (module docstring); ``method`` "lm" (Levenberg-Marquardt on the normal equations, default) or
+    :data:`FREE_NOISE_MODEL`), "kalman", "gain" or "none" (module docstring); ``method``
+    "lm" (Levenberg-Marquardt on the normal equations, default) or
     "scipy" (``scipy.optimize.least_squares``, MINPACK; same optimum, slower);
     ``passes``: fits with re-estimated output weights (1 = weights from the output
     variances only).  Returns a :class:`CanonicalModel` (``notes`` names the start used).
