@@ -190,7 +190,8 @@ class CanonicalModel(LinearModel):
         which the interval functions read (:mod:`bikeid.ident.trust`).
     unstable_plant : str
         For an output-error fit, why the plant is open-loop unstable (the fit on the
-        plant's stability boundary, or an unstable start), else "".
+        plant's stability boundary, an unstable start, or an unstable default fit of the
+        same runs), else "".
     roll_rms_deg : float
         RMS roll angle of the fitted runs [deg] (:func:`roll_rms_deg`), NaN for runs of a
         linear plant or when not recorded; the interval functions refuse above
@@ -675,8 +676,18 @@ def fit(
         speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
         outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
         notes=tuple(notes), noise_model=kind,
-        unstable_plant=_unstable_plant(theta, dt, *nominal) if kind == "none" else "",
     )  # fmt: skip
+    if kind == "none":
+        why = _unstable_plant(theta, dt, *nominal)
+        if not why:  # the nominal plant: the default fit's (consistent in closed loop)
+            ref = fit(runs, outputs=outputs, theta0=theta0, noise_model="kalman",
+                      max_nfev=max_nfev, method=method, passes=passes, starts=starts,
+                      multistart=multistart, informativity="skip", structure=False)  # fmt: skip
+            re = float(np.max(np.linalg.eigvals(ref.A).real))
+            if re > 0.0:
+                why = (f"the default (Kalman-gain) fit of the same runs has an eigenvalue "
+                       f"with real part {re:+.3f} 1/s")  # fmt: skip
+        model = dataclasses.replace(model, unstable_plant=why)
     return _checked(runs, model) if structure else model
 
 
@@ -686,9 +697,10 @@ def _unstable_plant(theta, dt, start_re: float, start_name: str) -> str:
     The identified plant cannot be unstable (its predictor is the plant, kept stable), but a
     fit that ends on that stability boundary (spectral radius of Ad above 1 -
     :data:`bikeid.ident.trust.PREDICTOR_BOUNDARY_TOL`) wanted to be; the starts (closed-loop
-    safe subspace estimates, or the caller's) are the nominal plant: an output-error fit of a
-    plant one of them finds unstable ends on a stable, wrong model (the README example at
-    4 m/s: weave real part -0.24 for a true +0.41, docs/uncertainty.md).
+    safe subspace estimates, or the caller's) and, failing them, the default fit of the same
+    runs (:func:`fit`) are the nominal plant: an output-error fit of a plant that is unstable
+    ends on a stable, wrong model (the README example at 4 m/s: weave real part -0.24 for a
+    true +0.41, docs/uncertainty.md).
     """
     rho = float(np.max(np.abs(np.linalg.eigvals(discretize(theta, dt)[0]))))
     if rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
