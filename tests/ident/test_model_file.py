@@ -92,7 +92,9 @@ def test_round_trip_bit_for_bit(kind, models, runs, tmp_path):
     m = models[kind]
     path = save_model(m, tmp_path / "m.json", settings={"method": kind})
     back = load_model(path)
-    _same(m, back)
+    # the attached structure check is a verdict on the fitted runs, saved by identify as
+    # results.structure_check, not a field of the saved model
+    _same(dataclasses.replace(m, structure=None) if hasattr(m, "structure") else m, back)
     r = runs[0]
     u, y = r["T_delta"], np.column_stack([r["phi"], r["delta"]])
     if kind == "canonical-pem":
