@@ -23,6 +23,8 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   ``eigenvalues_vs_speed``, ``critical_speeds``).
 - :mod:`~bikeid.ident.predictor`: the innovations predictor, Levenberg-Marquardt minimizer
   and sandwich covariance shared by ``pem`` and ``greybox``.
+- :mod:`~bikeid.ident.innovation_gain`: the innovation gain as the Kalman gain of fitted
+  noise covariances (a one-step predictor stable by construction; ``pem.fit``'s default).
 - :mod:`~bikeid.ident.greybox`: grey-box PEM of entries of M, C1, K0, K2 (any free set, one
   fit over all speeds), with standard errors and the conditioning of the free set.
 - :mod:`~bikeid.ident.validate`: ``compare`` (simulation and k-step prediction),
@@ -34,6 +36,8 @@ The papers' estimators (on any :class:`~bikeid.dataset.run.Run`):
   format of every identified model (parameters bit for bit, covariance, provenance).
 - :mod:`~bikeid.ident.uncertainty`: profile and delta-method intervals on eigenvalues, v_w,
   v_c, Bode.
+- :mod:`~bikeid.ident.trust`: what the interval functions refuse by default (boundary fit,
+  rejected structure, output error of an unstable plant, roll amplitude), each by keyword.
 - :mod:`~bikeid.ident.structure`: ``check_structure``, whether the data reject the model
   structure the intervals assume (residual tests valid in closed loop), run before
   ``bikeid identify`` prints intervals.

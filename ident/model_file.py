@@ -225,6 +225,11 @@ def _canonical_section(m: CanonicalModel) -> dict:
         "cost": _num(m.cost, "cost", nullable=True),
         "nfev": int(m.nfev),
         "notes": [str(n) for n in m.notes],
+        "noise_model": str(m.noise_model),
+        "gain_noise": None if m.gain_noise is None else _arr(m.gain_noise, "gain_noise"),
+        "noise_on_bound": [str(n) for n in m.noise_on_bound],
+        "unstable_plant": str(m.unstable_plant),
+        "roll_rms_deg": _num(m.roll_rms_deg, "roll_rms_deg", nullable=True),
     }
 
 
@@ -241,6 +246,8 @@ def _speed_section(m: SpeedCanonicalModel) -> dict:
         "per_speed": [_canonical_section(pm) for _, pm in sorted(m.per_speed.items())],
         "gain_noise": None if m.gain_noise is None else _arr(m.gain_noise, "gain_noise"),
         "notes": [str(n) for n in m.notes],
+        "unstable_plant": str(m.unstable_plant),
+        "roll_rms_deg": _num(m.roll_rms_deg, "roll_rms_deg", nullable=True),
     }
 
 
@@ -731,7 +738,27 @@ def _canonical_model(r: _Reader, sec: Any, prefix: str) -> CanonicalModel:
         cost=r.number(sec, "cost", prefix, nullable=True),
         nfev=r.integer(sec, "nfev", prefix),
         notes=r.texts(sec, "notes", prefix),
+        **_fit_facts(r, sec, prefix, gain=True),
     )
+
+
+def _fit_facts(r: _Reader, sec: Any, prefix: str, gain: bool) -> dict:
+    """How a PEM fit was made and what the interval functions check (``noise_model``, its
+    noise parameters, ``unstable_plant``, ``roll_rms_deg``); absent in older files, whose
+    models get the defaults (a free gain, nothing recorded).  The structure check is a
+    verdict on the fitted runs, saved by ``bikeid identify`` as
+    ``results.structure_check``, not with the model."""
+    out: dict[str, Any] = {}
+    if "unstable_plant" in sec:
+        out["unstable_plant"] = str(r.get(sec, "unstable_plant", prefix))
+    if "roll_rms_deg" in sec:
+        out["roll_rms_deg"] = r.number(sec, "roll_rms_deg", prefix, nullable=True)
+    if gain and "noise_model" in sec:
+        out["noise_model"] = str(r.get(sec, "noise_model", prefix))
+        out["noise_on_bound"] = r.texts(sec, "noise_on_bound", prefix)
+        if sec.get("gain_noise") is not None:
+            out["gain_noise"] = r.array(sec, "gain_noise", prefix, (3 + 2 + len(sec["outputs"]),))
+    return out
 
 
 def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
@@ -756,6 +783,7 @@ def _speed_model(r: _Reader, sec: Any, prefix: str) -> SpeedCanonicalModel:
         gain_noise=(None if sec.get("gain_noise") is None  # absent in older files
                     else r.array(sec, "gain_noise", prefix, (5,))),
         notes=r.texts(sec, "notes", prefix) if "notes" in sec else (),
+        **_fit_facts(r, sec, prefix, gain=False),
     )
 
 

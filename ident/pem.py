@@ -8,14 +8,19 @@ innovations (steady-state Kalman) predictor::
     yhat[k] = C xhat[k],  e[k] = y[k] - yhat[k],
     xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k]
 
-``noise_model="free"``: the discrete-time innovation gain K (4x2, at the data's dt)
-is estimated with the plant (the model set then contains any plant-input and
-sensor noise of the true loop, which makes direct PEM consistent in closed loop,
-reference F1).  ``noise_model="none"``: K = 0, output error (biased in closed loop,
-diverges for an unstable plant over long runs).  K is started from the Kalman gain
-of the start model with Q = Bd Bd' var(u), R = diag(var(y)) 1e-2 (any stabilizing
-gain would do).  Because the predictor is stable (Ad - K C), unstable plants do not
-blow up.
+``noise_model="free"`` (default): the noise model is estimated with the plant (the model
+set then contains any plant-input and sensor noise of the true loop, which makes direct PEM
+consistent in closed loop, reference F1), by :data:`FREE_NOISE_MODEL`, ``"kalman"``: K is
+the Kalman gain of the model for fitted acceleration-noise covariances
+(:mod:`ident.innovation_gain`), so Ad - K C is stable for every parameter value, also
+where the bicycle is open-loop unstable, and the fit cannot stop on the predictor's
+stability boundary.  ``noise_model="gain"``: the discrete-time innovation gain K (4 x L)
+has free entries (the former default; on short records it ends on that boundary, where
+its covariance describes no optimum: docs/uncertainty.md), started from the Kalman gain of
+the start model with Q = Bd Bd' var(u), R = diag(var(y)) 1e-2.  ``noise_model="none"``:
+K = 0, output error (biased in closed loop, and for an open-loop unstable plant it
+simulates an unstable plant: the interval functions refuse it there,
+:mod:`ident.trust`).
 
 Initial state.  Estimated per run by variable projection: e is affine in x0, so
 x0 is solved by least squares at each evaluation and the Jacobian is projected
@@ -56,12 +61,13 @@ speed ``run.speed`` is used (per-sample speed variation is ignored here).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import (
@@ -74,16 +80,23 @@ from bikeid.ident.canonical import (
     to_canonical_form,
 )
 from bikeid.ident.informativity import guard
+from bikeid.ident.innovation_gain import (
+    FIXED_NOISE_STARTS,
+    NOISE_LOG_RANGE,
+    NOISE_STARTS,
+    KalmanGainProblem,
+    alternate,
+    kalman_gain_of,
+    sensor_variances,
+)
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.ident.predictor import (
     DEFAULT_OUTPUTS,
     INPUT,
     PredictionProblem,
     discretize,
-    discretize_with_derivatives,
     initial_gain,
     output_matrix,
-    prediction_kernel,
     run_data,
     sandwich_covariance,
     single_threaded_blas,
@@ -91,8 +104,8 @@ from bikeid.ident.predictor import (
 )
 from bikeid.ident.signals import check_sampling
 from bikeid.ident.subspace import d2c, decimate, pbsid
+from bikeid.ident.trust import PREDICTOR_BOUNDARY_TOL
 from bikeid.sim.linear import CanonicalMatrices
-from bikeid.sim.sampling import zoh
 
 __all__ = [
     "CanonicalModel",
@@ -160,6 +173,29 @@ class CanonicalModel(LinearModel):
         Number of residual evaluations over all passes.
     notes : tuple of str
         Remarks, e.g. the start used and a minimizer message when it did not converge.
+    noise_model : {"kalman", "gain", "none"}
+        How K was fitted: the Kalman gain of fitted noise covariances (stable by
+        construction), free entries (the former default; may end on the predictor's
+        stability boundary), or K = 0 (output error).  "gain" for models made elsewhere.
+    gain_noise : (8,) ndarray or None
+        For ``"kalman"``: [log s1, s21, log s2] of the acceleration noise's Cholesky factor
+        relative to the reference standard deviations [ref1, ref2] [rad/s^2] that follow,
+        then the sensor-noise variances of the outputs (squared output units)
+        (:func:`bikeid.ident.innovation_gain.kalman_gain_of`).
+    noise_on_bound : tuple of str
+        Noise parameters put on their lower bound (``"log_s1"``, ``"log_s2"``): the data do
+        not reject zero process noise there, and ``covariance`` is conditional on it.
+    structure : StructureCheck or None
+        The residual tests of the fitted runs (:func:`bikeid.ident.structure.check_structure`),
+        which the interval functions read (:mod:`bikeid.ident.trust`).
+    unstable_plant : str
+        For an output-error fit, why the plant is open-loop unstable (the fit on the
+        plant's stability boundary, an unstable start, or an unstable default fit of the
+        same runs), else "".
+    roll_rms_deg : float
+        RMS roll angle of the fitted runs [deg] (:func:`roll_rms_deg`), NaN for runs of a
+        linear plant or when not recorded; the interval functions refuse above
+        :data:`bikeid.ident.trust.AMPLITUDE_LIMIT_DEG` (amplitude bias).
     """
 
     theta: np.ndarray
@@ -173,6 +209,12 @@ class CanonicalModel(LinearModel):
     cost: float = float("nan")
     nfev: int = 0
     notes: tuple[str, ...] = field(default_factory=tuple)
+    noise_model: str = "gain"
+    gain_noise: np.ndarray | None = None
+    noise_on_bound: tuple[str, ...] = ()
+    structure: Any = None
+    unstable_plant: str = ""
+    roll_rms_deg: float = float("nan")
 
     @property
     def A_chen_dao(self) -> np.ndarray:
@@ -284,6 +326,13 @@ class SpeedCanonicalModel(SpeedDependentModel):
         (:func:`kalman_gain_of`; the sensor-noise variances are the diagonal of each
         per-speed fit's ``noise_covariance``).  None when each speed's K was the per-speed
         fit's (``joint_gain="per_speed"`` or ``noise_model="none"``).
+    structure : StructureCheck or None
+        The residual tests of the runs against the model over speed
+        (:func:`bikeid.ident.structure.check_structure` with ``speed_model``).
+    unstable_plant : str
+        For output-error per-speed fits, the speeds whose plant is open-loop unstable, else "".
+    roll_rms_deg : float
+        Largest RMS roll angle of the runs at one speed [deg], NaN for a linear plant.
     """
 
     params: np.ndarray
@@ -296,6 +345,9 @@ class SpeedCanonicalModel(SpeedDependentModel):
     nfev: int = 0
     notes: tuple[str, ...] = ()
     gain_noise: np.ndarray | None = None
+    structure: Any = None
+    unstable_plant: str = ""
+    roll_rms_deg: float = float("nan")
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -332,7 +384,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
             fitted speed nearest to ``v`` and K the Kalman gain of theta with the joint
             fit's noise model (:attr:`gain_noise`), or, without one (or without a
             stabilizing Riccati solution at ``v``), the K of that nearest fitted speed;
-            ``x0``, ``cost`` and ``nfev`` are left at their defaults.
+            ``structure``, ``unstable_plant`` and ``roll_rms_deg`` those of the model over
+            speed; ``x0``, ``cost`` and ``nfev`` are left at their defaults.
         """
         S = speed_map(v)
         near = min(self.per_speed, key=lambda s: abs(s - v))
@@ -349,6 +402,8 @@ class SpeedCanonicalModel(SpeedDependentModel):
             theta=S @ self.params, covariance=S @ self.covariance @ S.T,
             K=K, dt=self.dt, speed=v,
             noise_covariance=self.per_speed[near].noise_covariance, outputs=self.outputs,
+            structure=self.structure, unstable_plant=self.unstable_plant,
+            roll_rms_deg=self.roll_rms_deg,
         )  # fmt: skip
 
     def _matrices_at(self, speed: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -436,6 +491,14 @@ def subspace_start(
     return to_canonical_form(Ac, Bc, C)
 
 
+#: Noise models of :func:`fit`: "free" (the noise model estimated, by
+#: :data:`FREE_NOISE_MODEL`), "kalman" (K the Kalman gain of fitted noise covariances: a
+#: stable predictor by construction), "gain" (K's entries free, the former default), "none"
+#: (K = 0, output error).
+NOISE_MODELS = ("free", "kalman", "gain", "none")
+#: What ``noise_model="free"`` fits (docs/uncertainty.md, "A predictor stable by construction").
+FREE_NOISE_MODEL = "kalman"
+
 #: Subspace starts tried by ``fit(..., multistart=True)``: (past window [s], coarse dt [s]).
 SUBSPACE_STARTS = ((0.5, 0.01), (1.5, 0.02))
 
@@ -475,6 +538,7 @@ def fit(
     starts: Sequence[np.ndarray] = (),
     multistart: bool = True,
     informativity: str = "refuse",
+    structure: bool = True,
 ) -> CanonicalModel:
     """Fixed-speed canonical PEM from one or more runs at the same speed and dt.
 
@@ -484,8 +548,9 @@ def fit(
     estimate); ``multistart``: also try the PBSID starts of :data:`SUBSPACE_STARTS`.
     All candidates are scored by their one-step prediction cost (Kalman K of each
     candidate) and the best is refined, which avoids the local minima a single poor
-    subspace start ran into.  ``noise_model`` "free" (K estimated) or "none" (output
-    error); ``method`` "lm" (Levenberg-Marquardt on the normal equations, default) or
+    subspace start ran into.  ``noise_model`` "free" (the noise model estimated,
+    :data:`FREE_NOISE_MODEL`), "kalman", "gain" or "none" (module docstring); ``method``
+    "lm" (Levenberg-Marquardt on the normal equations, default) or
     "scipy" (``scipy.optimize.least_squares``, MINPACK; same optimum, slower);
     ``passes``: fits with re-estimated output weights (1 = weights from the output
     variances only).  Returns a :class:`CanonicalModel` (``notes`` names the start used).
@@ -502,8 +567,11 @@ def fit(
         Measured states fitted; must include phi and delta.
     theta0 : (10,) array_like, optional
         Start [a1, ..., a8, b1, b2]; when given, the subspace starts are not tried.
-    noise_model : {"free", "none"}, optional
-        Innovation gain K estimated, or K = 0 (output error).
+    noise_model : {"free", "kalman", "gain", "none"}, optional
+        "free" (default): the noise model estimated, as :data:`FREE_NOISE_MODEL`
+        ("kalman"); "kalman": K the Kalman gain of fitted noise covariances (a stable
+        predictor by construction); "gain": K's entries free; "none": K = 0 (output
+        error).
     max_nfev : int, optional
         Residual evaluations allowed per pass.
     method : {"lm", "scipy"}, optional
@@ -518,6 +586,10 @@ def fit(
         Before the fit, whether the runs can determine the 10 parameters
         (:func:`bikeid.ident.informativity.guard`): refuse when they cannot (default), or
         fit and say so in ``notes``, or skip the check (``notes`` says so).
+    structure : bool, optional
+        Attach the residual tests of the runs (``model.structure``,
+        :func:`bikeid.ident.structure.check_structure`), which the interval functions of
+        :mod:`bikeid.ident.uncertainty` read (default True).
 
     Returns
     -------
@@ -539,8 +611,9 @@ def fit(
     if not runs:
         raise ValueError("no runs given")
     check_sampling(runs, "pem.fit")
-    if noise_model not in ("free", "none"):
-        raise ValueError(f"noise_model {noise_model!r}: choose 'free' or 'none'")
+    if noise_model not in NOISE_MODELS:
+        raise ValueError(f"noise_model {noise_model!r}: choose one of {', '.join(NOISE_MODELS)}")
+    kind = FREE_NOISE_MODEL if noise_model == "free" else noise_model
     outputs = tuple(outputs)
     C, _ = output_matrix(outputs)
     data = run_data(runs, outputs)
@@ -555,28 +628,39 @@ def fit(
     _, told = guard(runs, len(THETA_NAMES), what=f"the canonical PEM model at {data[0].v:g} m/s",
                     informativity=informativity)  # fmt: skip
     dt = data[0].dt
-    free_k = noise_model == "free"
+    free_k = kind == "gain"
     yvar = np.mean([np.var(d.y, axis=0) for d in data], axis=0)
     w = 1.0 / np.sqrt(yvar)
     mapping = [np.eye(10)] * len(data)
     best = None
-    for name, theta in _candidates(runs, theta0, starts, multistart):
-        K = initial_gain(theta, dt, C, data, yvar, free_k)
+    cands = _candidates(runs, theta0, starts, multistart)
+    # the nominal plant of an output-error fit: the most unstable start (closed-loop-safe
+    # subspace estimates, or the caller's), whose predictor K = 0 could not even be scored
+    nominal = max(((float(np.max(np.linalg.eigvals(canonical_ab(t)[0]).real)), n)
+                   for n, t in cands), key=lambda c: c[0])  # fmt: skip
+    for name, theta in cands:
+        K = initial_gain(theta, dt, C, data, yvar, kind != "none")
         if K is None:
             continue
         x = np.concatenate([theta, K.ravel()]) if free_k else theta
         prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
         r = prob.residual(x)
         if r is not None and (best is None or float(r @ r) < best[0]):
-            best = (float(r @ r), name, x, K)
+            best = (float(r @ r), name, x, K, r)
     if best is None:
         raise ValueError(
             "no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
             "neighbouring speed)"
         )
-    _, start_name, x, K = best
-    nfev = 0
+    _, start_name, x, K, r = best
     notes = [f"start: {start_name}"]
+    if told:
+        notes.append(told)
+    if kind == "kalman":
+        w = 1.0 / np.sqrt(np.mean((r.reshape(-1, len(outputs)) / w) ** 2, axis=0))
+        model = _fit_kalman(data, x[:10], w, outputs, max_nfev, method, passes, notes)
+        return _checked(runs, model) if structure else model
+    nfev = 0
     for _ in range(max(1, passes)):
         prob = PredictionProblem(data, mapping, [K] * len(data), free_k, w, outputs)
         sol = solve(prob, x, max_nfev, method)
@@ -585,215 +669,149 @@ def fit(
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
     if not sol.success:
         notes.append(f"least_squares: {sol.message}")
-    if told:
-        notes.append(told)
     cov = sandwich_covariance(prob, 4 * len(data))
     theta, Kf = prob.split(x)
-    return CanonicalModel(
+    model = CanonicalModel(
         theta=theta.copy(), covariance=cov[:10, :10], K=Kf.copy() if free_k else K, dt=dt,
         speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
         outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
-        notes=tuple(notes),
+        notes=tuple(notes), noise_model=kind,
     )  # fmt: skip
+    if kind == "none":
+        why = _unstable_plant(theta, dt, *nominal)
+        if not why:  # the nominal plant: the default fit's (consistent in closed loop)
+            ref = fit(runs, outputs=outputs, theta0=theta0, noise_model="kalman",
+                      max_nfev=max_nfev, method=method, passes=passes, starts=starts,
+                      multistart=multistart, informativity="skip", structure=False)  # fmt: skip
+            re = float(np.max(np.linalg.eigvals(ref.A).real))
+            if re > 0.0:
+                why = (f"the default (Kalman-gain) fit of the same runs has an eigenvalue "
+                       f"with real part {re:+.3f} 1/s")  # fmt: skip
+        model = dataclasses.replace(model, unstable_plant=why)
+    return _checked(runs, model) if structure else model
 
 
-#: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
-#: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
-NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
-#: Range of the log standard deviations of that noise relative to its reference
-#: (the input's std times |b1|, |b2|); beyond it the gain no longer changes.
-NOISE_LOG_RANGE = (-40.0, 5.0)
-#: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
-NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
-#: Rounds of the joint fit's alternation (speed parameters, then the noise's eta) per
-#: weighting pass; a round whose eta step lowers the cost by less than :data:`JOINT_TOL`
-#: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
-JOINT_ROUNDS = 6
-JOINT_TOL = 1e-2
+def _unstable_plant(theta, dt, start_re: float, start_name: str) -> str:
+    """Why an output-error fit's plant is open-loop unstable, or "".
+
+    The identified plant cannot be unstable (its predictor is the plant, kept stable), but a
+    fit that ends on that stability boundary (spectral radius of Ad above 1 -
+    :data:`bikeid.ident.trust.PREDICTOR_BOUNDARY_TOL`) wanted to be; the starts (closed-loop
+    safe subspace estimates, or the caller's) and, failing them, the default fit of the same
+    runs (:func:`fit`) are the nominal plant: an output-error fit of a plant that is unstable
+    ends on a stable, wrong model (the README example at 4 m/s: weave real part -0.24 for a
+    true +0.41, docs/uncertainty.md).
+    """
+    rho = float(np.max(np.abs(np.linalg.eigvals(discretize(theta, dt)[0]))))
+    if rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
+        return f"the fit ended on the plant's stability boundary, spectral radius 1 - {1 - rho:.1e}"
+    if start_re > 0.0:
+        return f"a start ({start_name}) has an eigenvalue with real part {start_re:+.3f} 1/s"
+    return ""
 
 
-def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
-    """Steady-state Kalman gain of the canonical model ``theta`` for acceleration noise.
+def _checked(runs, model):
+    """The model with its structure check (:mod:`bikeid.ident.structure`) and roll RMS."""
+    from bikeid.ident.structure import check_structure  # structure imports the intervals
 
-    Process noise: white noise in the roll and steer accelerations, held over each sample
-    (``Q = G L L' G'``, G the zero-order-hold sampling of :data:`NOISE_INPUT`, L =
-    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]); sensor noise diag(``rdiag``).  The
-    predictor Ad - K C is stable for every ``eta`` (the stabilizing Riccati solution).
+    speeds = sorted({round(r.speed, 6) for r in runs})
+    if hasattr(model, "per_speed"):
+        check = check_structure(runs, {v: model.at(v) for v in speeds}, speed_model=model)
+    else:
+        check = check_structure(runs, {speeds[0]: model})
+    rms = [roll_rms_deg([r for r in runs if round(r.speed, 6) == v]) for v in speeds]
+    return dataclasses.replace(model, structure=check, roll_rms_deg=max(rms))
+
+
+def roll_rms_deg(runs: Sequence[Run]) -> float:
+    """RMS roll angle of runs from a nonlinear plant (measured or simulated).
 
     Parameters
     ----------
-    theta : (10,) ndarray
-        Canonical parameters [a1, ..., a8, b1, b2].
-    dt : float
-        Sample period [s].
-    C : (L, 4) ndarray
-        Output matrix.
-    rdiag : (L,) ndarray
-        Sensor-noise variances (squared output units).
-    eta : (3,) ndarray
-        [log s1, s21, log s2] of the noise's Cholesky factor, relative to ``ref``
-        (logs clipped to :data:`NOISE_LOG_RANGE`).
-    ref : (2,) ndarray
-        Reference standard deviations of the roll and steer acceleration noise [rad/s^2].
+    runs : sequence of Run
+        Runs with ``phi`` [rad].
 
     Returns
     -------
-    (4, L) ndarray
-        K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k] (Chen & Dao's state order).
+    float
+        sqrt(mean(phi^2)) over all samples [deg]; NaN when every run comes from a linear
+        plant (``meta["plant"]["model"] == "whipple-linear"`` or the ``linear_loop``
+        simulator), where the amplitude causes no bias.
     """
-    A, _ = canonical_ab(theta)
-    Ad, G = zoh(A, NOISE_INPUT, dt)
+
+    def linear(r) -> bool:
+        meta = getattr(r, "meta", None) or {}
+        plant = meta.get("plant") if isinstance(meta.get("plant"), dict) else {}
+        return (plant.get("model") == "whipple-linear"
+                or "linear_loop" in str(meta.get("simulator", "")))  # fmt: skip
+
+    if all(linear(r) for r in runs):
+        return float("nan")
+    phi = np.concatenate([np.asarray(r["phi"], float) for r in runs])
+    return float(np.degrees(np.sqrt(np.mean(phi**2))))
+
+
+def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> CanonicalModel:
+    """The fixed-speed fit with K the Kalman gain of the model for a fitted noise covariance.
+
+    eta = [log s1, s21, log s2] of the acceleration noise relative to |b| std(u); the
+    sensor-noise variances are the one-step prediction errors' (1 / w^2, the output weights,
+    updated with them after each pass); fitted alternately with theta
+    (:func:`bikeid.ident.innovation_gain.alternate`); process-noise standard deviations the
+    data cannot hold off their lower bound are put on it and the covariance of theta is
+    conditional on them (:func:`bikeid.ident.innovation_gain.settle_bounds`).
+    """
+    dt = data[0].dt
+    C = output_matrix(outputs)[0]
+    uvar = float(np.mean([np.var(d.u) for d in data]))
+    ref = np.maximum(np.abs(theta[8:10]), 1e-6) * math.sqrt(uvar)
+    mapping, weights = [np.eye(10)] * len(data), [w]
+
+    def rdiag() -> np.ndarray:
+        r = 1.0 / weights[0] ** 2
+        return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
+
+    def problem(z, free):
+        return KalmanGainProblem(data, mapping, [rdiag()] * len(data), weights[0], outputs,
+                                 ref, z, free)  # fmt: skip
+
+    z = _noise_start(problem, theta, 3, FIXED_NOISE_STARTS)
+    if z is None:
+        raise ValueError(
+            "no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
+            "neighbouring speed)"
+        )
+    z, nfev, stopped, held = alternate(
+        problem, z, 10, max_nfev, method, passes,
+        lambda prob: weights.__setitem__(0, _weights(prob)), settle=True,
+    )  # fmt: skip
     lo, hi = NOISE_LOG_RANGE
-    s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
-    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * np.asarray(ref)[:, None]
-    GL = G @ Lf
-    Q = GL @ GL.T + 1e-12 * np.eye(4)
-    R = np.diag(rdiag)
-    P = solve_discrete_are(Ad.T, C.T, Q, R)
-    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-
-
-def sensor_variances(model: CanonicalModel) -> np.ndarray:
-    """The sensor-noise variances a joint fit's Kalman gains use at a fitted speed.
-
-    Parameters
-    ----------
-    model : CanonicalModel
-        The per-speed fit.
-
-    Returns
-    -------
-    (L,) ndarray
-        The diagonal of its ``noise_covariance`` (squared output units), raised to at
-        least 1e-12 of its largest entry and to 1e-30 (noise-free data: a solvable
-        Riccati equation).
-    """
-    r = np.diag(np.atleast_2d(model.noise_covariance)).astype(float)
-    return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
-
-
-class _KalmanGainProblem(PredictionProblem):
-    """The joint problem with each run's K the Kalman gain of the joint model at its speed.
-
-    z = [speed parameters (14), eta (3)]: the innovation gains follow the model (and a
-    shared acceleration-noise covariance), so the predictor is stable at every point and
-    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dz to the
-    kernel's dE/dtheta (dK by central differences of the Riccati solution).  Only the
-    entries ``free`` of z are the minimizer's x (the others held at ``z``): the fit
-    alternates between the speed parameters and eta, because where the noise is
-    negligible K hardly depends on eta, and those near-zero Jacobian columns made the
-    joint Levenberg-Marquardt steps so damped that it stopped short of the optimum.
-    """
-
-    def __init__(self, data, mapping, rdiag, weights, outputs, ref, z, free):
-        super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
-        self.rdiag, self.ref = rdiag, np.asarray(ref, float)
-        self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
-
-    def full(self, x) -> np.ndarray:
-        """z with the free entries set to x."""
-        z = self.z.copy()
-        z[self.free] = x
-        return z
-
-    def split(self, z):
-        return z[: self.mapping[0].shape[1]], None
-
-    def residual(self, x):
-        return super().residual(self.full(x))
-
-    def gain(self, theta, dt, rdiag, eta):
-        return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
-
-    def _needs(self) -> tuple[bool, bool]:
-        """Whether speed parameters, and whether noise parameters, are free."""
-        P = self.mapping[0].shape[1]
-        return bool(np.any(self.free < P)), bool(np.any(self.free >= P))
-
-    def _models(self, x, derivatives: bool):
-        P = self.mapping[0].shape[1]
-        p, eta = x[:P], x[P:]
-        need_theta, need_eta = self._needs()
-        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
-        out, cache = [], {}
-        for i, d in enumerate(self.data):
-            S = self.mapping[i]
-            theta = S @ p
-            key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
-            if key not in cache:
-                if derivatives and need_theta:
-                    Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
-                else:
-                    (Ad, Bd), dAd, dBd = (
-                        discretize(theta, d.dt),
-                        np.zeros((0, 4, 4)),
-                        np.zeros((0, 4)),
-                    )
-                try:
-                    K = self.gain(theta, d.dt, self.rdiag[i], eta)
-                except (ValueError, np.linalg.LinAlgError):
-                    return None
-                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
-                    return None
-                dK = (self._gain_derivative(theta, d.dt, self.rdiag[i], eta, K, rows)
-                      if derivatives else None)  # fmt: skip
-                cache[key] = (Ad, Bd, dAd, dBd, K, dK)
-            Ad, Bd, dAd, dBd, K, dK = cache[key]
-            out.append((Ad, Bd, dAd, dBd, K, S, dK))
-        return out
-
-    def _gain_derivative(self, theta, dt, rdiag, eta, K0, rows):
-        """(13, 4 L): dK/d[theta, eta] by central differences in ``rows`` (zero in the
-        others; one-sided where the Riccati equation has no stabilizing solution on one
-        side, zero where on neither: the derivative only steers the search, the cost is
-        exact)."""
-        z = np.concatenate([theta, eta])
-        out = np.zeros((z.size, K0.size))
-        for j in rows:
-            h = 1e-6 * max(abs(z[j]), 1.0)
-            side = {}
-            for s in (1.0, -1.0):
-                zs = z.copy()
-                zs[j] += s * h
-                try:
-                    side[s] = self.gain(zs[:10], dt, rdiag, zs[10:])
-                except (ValueError, np.linalg.LinAlgError):
-                    continue
-            if len(side) == 2:
-                out[j] = ((side[1.0] - side[-1.0]) / (2 * h)).ravel()
-            elif side:
-                s, Ks = next(iter(side.items()))
-                out[j] = (s * (Ks - K0) / h).ravel()
-        return out
-
-    def jacobian(self, x):
-        r = self.residual(x)
-        if r is None:
-            return None, None
-        models = self._models(self.full(x), derivatives=True)
-        if models is None:
-            return None, None
-        nk = 4 * self.L
-        need_theta, need_eta = self._needs()
-        P = self.mapping[0].shape[1]
-        cols = self.free - (0 if need_theta else P)  # columns of the blocks computed
-        jac = []
-        for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
-            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
-            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
-            nt = dAd.shape[0]  # 10 or 0
-            JK = J[:, nt : nt + nk]
-            blocks = []
-            if need_theta:
-                blocks.append((J[:, :10] + JK @ dK[:10].T) @ S)
-            if need_eta:
-                blocks.append(JK @ dK[10:].T)
-            Jm = np.hstack(blocks)[:, cols]
-            Q, _ = np.linalg.qr(J[:, nt + nk :])
-            Jm -= Q @ (Q.T @ Jm)
-            jac.append(Jm)
-        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
-        return r, self._J
+    z[10], z[12] = (min(max(z[i], lo), hi) for i in (10, 12))  # same gain, finite
+    free = np.array([i for i in range(z.size) if i not in held])
+    prob = problem(z, free)
+    prob.jacobian(z[free])
+    cov = sandwich_covariance(prob, 4 * len(data))
+    names = ("log_s1", "s21", "log_s2")
+    bound = tuple(names[i - 10] for i in held if i != 11)
+    eta = z[10:]
+    notes.append(
+        "innovation gain: Kalman gain of the model for fitted noise covariances (" +
+        ", ".join(f"{k} {v:.3g}" for k, v in zip(names, eta, strict=True)) +
+        (f"; on the lower bound: {', '.join(bound)}, covariance conditional on it" if bound
+         else "") + ")"
+    )  # fmt: skip
+    if stopped:
+        notes.append(f"least_squares: {stopped}")
+    theta = z[:10].copy()
+    return CanonicalModel(
+        theta=theta, covariance=cov[:10, :10],
+        K=kalman_gain_of(theta, dt, C, prob.rdiag[0], eta, ref),
+        dt=dt, speed=data[0].v, noise_covariance=np.atleast_2d(np.cov(prob.residuals().T)),
+        outputs=outputs, x0=tuple(prob.x0s), cost=float(prob._r @ prob._r), nfev=nfev,
+        notes=tuple(notes), noise_model="kalman",
+        gain_noise=np.concatenate([eta, ref, prob.rdiag[0]]),
+        noise_on_bound=bound,
+    )  # fmt: skip
 
 
 @single_threaded_blas
@@ -809,6 +827,7 @@ def fit_speed_model(
     passes: int = 2,
     informativity: str = "refuse",
     joint_gain: str = "kalman",
+    structure: bool = True,
 ) -> SpeedCanonicalModel:
     """Speed-parameterized canonical PEM over runs at >= 2 distinct speeds (see module doc).
 
@@ -832,7 +851,8 @@ def fit_speed_model(
         Gravitational acceleration [m/s^2] stored in the result (for
         :meth:`SpeedCanonicalModel.canonical_matrices`); does not affect the fit.
     noise_model : {"free", "none"}, optional
-        Noise model of the per-speed fits (:func:`fit`).
+        Noise model: "free" (the joint fit's Kalman gains; the per-speed start fits have
+        free gains, ``fit(noise_model="gain")``) or "none" (output error throughout).
     max_nfev : int, optional
         Residual evaluations allowed per pass of the joint fit.
     method : {"lm", "scipy"}, optional
@@ -850,6 +870,9 @@ def fit_speed_model(
         Kalman gains (default), or each speed's K held at its per-speed fit's (the former
         fit, biased where those fits end on their predictor's stability boundary; kept for
         comparison).  With ``noise_model="none"`` K = 0 either way.
+    structure : bool, optional
+        Attach the residual tests of the runs against the model over speed
+        (``model.structure``), which the interval functions read (default True).
 
     Returns
     -------
@@ -889,7 +912,9 @@ def fit_speed_model(
         if v in given:
             per[v] = given[v]
         else:
-            per[v] = fit(groups[v], outputs=outputs, noise_model=noise_model, method=method,
+            per[v] = fit(groups[v], outputs=outputs, method=method,
+                         noise_model="gain" if noise_model == "free" else noise_model,
+                         structure=False,
                          passes=1, starts=() if prev is None else (prev.theta,),
                          informativity=starts_check)  # fmt: skip
         prev = per[v]
@@ -902,8 +927,9 @@ def fit_speed_model(
     mapping = [speed_map(d.v) for d in data]
     w = 1.0 / np.sqrt(np.mean([np.var(d.y, axis=0) for d in data], axis=0))
     if noise_model == "free" and joint_gain == "kalman":
-        return _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev,
-                             method, passes, told)  # fmt: skip
+        model = _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev,
+                              method, passes, told)  # fmt: skip
+        return _checked(runs, model) if structure else model
     Ks = [per[round(r.speed, 6)].K for r in runs]
     C = output_matrix(outputs)[0]
     for i, d in enumerate(data):  # a per-speed K may not stabilize the joint start
@@ -924,11 +950,13 @@ def fit_speed_model(
         params = sol.x
         w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
     cov = sandwich_covariance(prob, 4 * len(data))
-    return SpeedCanonicalModel(
+    unstable = [f"{v:g} m/s: {m.unstable_plant}" for v, m in per.items() if m.unstable_plant]
+    model = SpeedCanonicalModel(
         params=params.copy(), covariance=cov, per_speed=per, dt=data[0].dt, g=g,
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev,
-        notes=(told,) if told else (),
+        notes=(told,) if told else (), unstable_plant="; ".join(unstable),
     )  # fmt: skip
+    return _checked(runs, model) if structure else model
 
 
 def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, method, passes,
@@ -938,37 +966,21 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
     uvar = float(np.mean([np.var(d.u) for d in data]))
     ref = np.abs(params[12:14]) * math.sqrt(uvar)
     n = len(SPEED_NAMES)
-    every, par, noise = np.arange(n + 3), np.arange(n), np.arange(n, n + 3)
+    weights = [w]
 
     def problem(z, free):
-        return _KalmanGainProblem(data, mapping, rdiag, w, outputs, ref, z, free)
+        return KalmanGainProblem(data, mapping, rdiag, weights[0], outputs, ref, z, free)
 
-    best = None
-    for eta in NOISE_STARTS:
-        z = np.concatenate([params, eta])
-        r = problem(z, every).residual(z)
-        if r is not None and (best is None or float(r @ r) < best[0]):
-            best = (float(r @ r), z)
-    if best is None:
+    z = _noise_start(problem, params, 3)
+    if z is None:
         raise ValueError(
             "no stable predictor from the joint start: fit each speed separately and check its data"
         )
-    z = best[1]
-    nfev, stopped = 0, None
-    for _ in range(max(1, passes)):
-        for _ in range(JOINT_ROUNDS):
-            prob = problem(z, par)
-            sol = solve(prob, z[par], max_nfev, method)
-            z[par], nfev = sol.x, nfev + sol.nfev
-            before = float(prob._r @ prob._r)
-            prob = problem(z, noise)
-            sol_n = solve(prob, z[noise], max_nfev, method)
-            z[noise], nfev = sol_n.x, nfev + sol_n.nfev
-            stopped = None if sol.success else str(sol.message)
-            if before - float(prob._r @ prob._r) < JOINT_TOL:
-                break
-        w = 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
-    prob = problem(z, every)
+    z, nfev, stopped, _ = alternate(
+        problem, z, n, max_nfev, method, passes,
+        lambda prob: weights.__setitem__(0, _weights(prob)),
+    )  # fmt: skip
+    prob = problem(z, np.arange(z.size))
     prob.jacobian(z)
     x = z
     cov = sandwich_covariance(prob, 4 * len(data))
@@ -986,3 +998,21 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
         outputs=outputs, cost=float(prob._r @ prob._r), nfev=nfev, notes=tuple(notes),
         gain_noise=np.concatenate([x[n:], ref]),
     )  # fmt: skip
+
+
+def _weights(prob) -> np.ndarray:
+    """Output weights: the inverse RMS of each output's prediction errors."""
+    return 1.0 / np.sqrt(np.mean(prob.residuals() ** 2, axis=0))
+
+
+def _noise_start(problem, params: np.ndarray, n_eta: int, starts=NOISE_STARTS
+                 ) -> np.ndarray | None:  # fmt: skip
+    """[params, eta] with the eta of ``starts`` (sensor ratios 0) of least cost, or None
+    when none gives a stable predictor."""
+    best = None
+    for eta in starts:
+        z = np.concatenate([params, eta, np.zeros(n_eta - 3)])
+        r = problem(z, np.arange(z.size)).residual(z)
+        if r is not None and (best is None or float(r @ r) < best[0]):
+            best = (float(r @ r), z)
+    return None if best is None else best[1]

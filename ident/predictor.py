@@ -412,6 +412,9 @@ def levenberg_marquardt(
     lam, nu = 1e-3, 2.0
     nfev, success, message = 1, False, "maximum number of evaluations reached"
     while nfev < max_nfev:
+        if not np.any(g):  # e.g. parameters held where they no longer act (a clipped bound)
+            success, message = True, "converged (zero gradient)"
+            break
         D = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
         try:
             h = np.linalg.solve(H + lam * np.diag(D), -g)

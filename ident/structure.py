@@ -98,23 +98,24 @@ STRUCTURE_LEVEL = 0.01
 #: Largest lag [samples] of the residual tests (MATLAB ``resid``'s default, 25).
 MAX_LAG = 25
 
-#: The one-line cause and fix printed when the structure is rejected.
+#: The one-line cause printed when the structure is rejected.  It names no fix: none of
+#: the candidates (shorter or gentler records, a per-speed fit, longer records) has been
+#: measured to give intervals that cover when followed, and a remedy is printed only when it
+#: has (docs/uncertainty.md, "Remedies that are printed").
 REJECTED_NOTE = (
     "the data reject the model structure (residual tests at family level {level:g}, "
     "ident.structure): {causes}; the estimates' bias can exceed their standard errors, so no "
-    "95 % intervals are given for {where} (the estimates stand). Fix: {fix}"
+    "95 % intervals are given for {where} (the estimates stand)"
 )
-#: The fix of a rejected fixed-speed model, and of a rejected model over speed.
-FIX_FIXED = ("shorter or less aggressive records (smaller roll amplitude), or a model with "
-             "the missing effect")  # fmt: skip
-#: The fixes of a rejected model over speed one at a time, for a caller that names the one
-#: that applies (``bikeid identify``: a longer record where a per-speed fit ended on its
-#: predictor's stability boundary, else the per-speed fit, which these data allow).
+#: The one fix printed for a rejected model over speed (``bikeid identify``): the per-speed
+#: fits these data allow, whose intervals are then checked speed by speed (structure,
+#: amplitude), so following it cannot print an unchecked interval.
 FIX_PER_SPEED = ("fit each speed alone (per-speed PEM: bikeid identify without "
-                 "--speed-parameterized) and compare")  # fmt: skip
-FIX_LONGER = "record longer so that no per-speed fit ends on its predictor's stability boundary"
-FIX_AMPLITUDE = "use smaller roll amplitudes"
-FIX_OVER_SPEED = f"{FIX_PER_SPEED}, {FIX_LONGER}, or {FIX_AMPLITUDE}"
+                 "--speed-parameterized), whose intervals are checked speed by speed")  # fmt: skip
+#: The fix where a per-speed fit ended on its predictor's stability boundary (a free
+#: innovation gain): the measured remedy of :data:`bikeid.ident.trust.REMEDY_KALMAN`.
+FIX_LONGER = ("refit with the default noise model (a Kalman gain: its predictor is stable by "
+              "construction)")  # fmt: skip
 #: What a passed check does not show, printed beside the intervals.
 PASSED_NOTE = (
     "the residual tests do not reject the model structure (family level {level:g}); they "
@@ -219,8 +220,7 @@ class StructureCheck:
         if self.speed_model_rejected:
             where = (f"the model over speed (rejected at {_speeds_text(self.rejected_speeds)}): "
                      "v_w, v_c and its eigenvalues at every speed")  # fmt: skip
-        fix = FIX_OVER_SPEED if self.speed_model_rejected else FIX_FIXED
-        return REJECTED_NOTE.format(level=self.level, causes=self.causes(), where=where, fix=fix)
+        return REJECTED_NOTE.format(level=self.level, causes=self.causes(), where=where)
 
     def to_json(self) -> dict[str, Any]:
         """The verdict as plain JSON types.

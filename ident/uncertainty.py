@@ -52,7 +52,14 @@ import numpy as np
 
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, matrices_from_speed_params, speed_map
 from bikeid.ident.linear_model import mode_names
-from bikeid.ident.predictor import discretize, output_matrix
+from bikeid.ident.predictor import output_matrix
+from bikeid.ident.trust import (
+    PREDICTOR_BOUNDARY_TOL,
+    WithheldIntervals,
+    check_predictor_interior,
+    check_trust,
+    predictor_radius,
+)
 from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.linear import (
     CanonicalMatrices,
@@ -76,7 +83,9 @@ __all__ = [
     "eigenvalue_jacobian",
     "monte_carlo",
     "PREDICTOR_BOUNDARY_TOL",
+    "WithheldIntervals",
     "check_predictor_interior",
+    "check_trust",
     "predictor_radius",
     "profile_interval",
     "z_value",
@@ -85,14 +94,6 @@ __all__ = [
 #: Step [m/s] of the central difference dh/dv in :func:`critical_speed_intervals`.
 SPEED_STEP = 1e-4
 
-#: A fixed-speed PEM fit whose one-step predictor Ad - K C has spectral radius above
-#: 1 - PREDICTOR_BOUNDARY_TOL ended on the stability boundary the fit keeps its predictor
-#: inside (:func:`predictor_radius`).  Measured on the default path (benchmark, nonlinear
-#: plant, roll PID, 5 m/s, 1 N m dither, 20 seeds each of 30, 60, 90, 120 and 300 s, and
-#: the output-error and 3 N m variants): the 73 fits stopped there have 1 - radius of at
-#: most 8.3e-7, the 107 others 6.6e-4 or more (the slowest plant pole, exp(-0.32 dt) at
-#: K = 0, is 1 - 3.2e-3); 1e-4 lies between the two groups (docs/uncertainty.md).
-PREDICTOR_BOUNDARY_TOL = 1e-4
 
 #: Interval methods: the quadratic-likelihood profile (default) and the first-order one
 #: (not the identification methods, which are :data:`bikeid.ident.methods.METHODS`).
@@ -336,6 +337,9 @@ class EigenIntervals:
         None for a speed-parameterized model).  Above 1 - :data:`PREDICTOR_BOUNDARY_TOL`
         the fit ended on the predictor's stability boundary and the intervals are not to be
         trusted (:attr:`at_predictor_boundary`).
+    notes : tuple of str
+        What the intervals come with (:func:`bikeid.ident.trust.check_trust`: no structure
+        check attached, or a refusal opted out of).
     """
 
     speed: float
@@ -351,6 +355,7 @@ class EigenIntervals:
     converged: np.ndarray | None = None
     modes: tuple[str, ...] = ()
     predictor_radius: float | None = None
+    notes: tuple[str, ...] = ()
 
     @property
     def at_predictor_boundary(self) -> bool:
@@ -442,77 +447,16 @@ class EigenIntervals:
                           "method": self.method, "eigenvalues": rows})  # fmt: skip
 
 
-def predictor_radius(model) -> float | None:
-    """Spectral radius of the one-step predictor Ad - K C of a fixed-speed PEM fit.
-
-    A prediction-error fit keeps Ad - K C stable (radius < 1: a trial step beyond is
-    rejected).  A fit that needs a radius at 1 to lower its cost further stops *on* that
-    boundary: its estimate is not a stationary point of the cost, so the covariance from
-    the cost's curvature, and every interval built on it, describes nothing.  This happens
-    when the free innovation gain K tries to model noise the loop does not have (the
-    default testbed loop has no process noise: its optimal K is 0) and the record is short.
-
-    Parameters
-    ----------
-    model : ident.pem.CanonicalModel
-        A fixed-speed fit with ``theta``, ``K`` (4 x L), ``dt`` [s] and ``outputs``.
-
-    Returns
-    -------
-    float or None
-        max |eig(Ad - K C)| (dimensionless, per sample); None for a model whose theta and
-        K were not fitted together by a prediction-error fit (no innovation gain, or
-        ``nfev`` 0: a speed-parameterized model, or one taken from it at a speed by
-        ``SpeedCanonicalModel.at``, whose K belongs to another theta).
-    """
-    K, theta = getattr(model, "K", None), getattr(model, "theta", None)
-    if K is None or theta is None or callable(theta) or not hasattr(model, "outputs"):
-        return None
-    if not getattr(model, "nfev", 0) > 0:  # theta and K not fitted together
-        return None
-    C, _ = output_matrix(model.outputs)
-    Ad, _ = discretize(np.asarray(theta, float), float(model.dt))
-    return float(np.max(np.abs(np.linalg.eigvals(Ad - np.asarray(K, float) @ C))))
-
-
-def check_predictor_interior(model) -> float | None:
-    """Refuse intervals from a fit that ended on its predictor's stability boundary.
-
-    Parameters
-    ----------
-    model : ident.pem.CanonicalModel
-        A fixed-speed fit (a model without an innovation gain passes unchecked).
-
-    Returns
-    -------
-    float or None
-        The predictor's spectral radius (:func:`predictor_radius`).
-
-    Raises
-    ------
-    UntrustworthyResult
-        If the radius exceeds 1 - :data:`PREDICTOR_BOUNDARY_TOL`; the message names the
-        fixes measured on the default path (output-error fit, a record about 4x longer).
-    """
-    rho = predictor_radius(model)
-    if rho is not None and rho > 1.0 - PREDICTOR_BOUNDARY_TOL:
-        raise UntrustworthyResult(
-            f"the fit ended on the stability boundary of its one-step predictor (spectral "
-            f"radius of Ad - K C = 1 - {max(1.0 - rho, 0.0):.1e}, above 1 - "
-            f"{PREDICTOR_BOUNDARY_TOL:g}): its covariance is not the curvature of an optimum "
-            "and its intervals miss the truth; refit with noise_model='none' if the loop has "
-            "no process noise, or record about 4x longer (default path at 5 m/s: 30 s fits "
-            "end there in 19 of 20 seeds, 120 s fits in 1)"
-        )
-    return rho
-
-
 def eigenvalue_intervals(
     model,
     v: float | None = None,
     level: float = 0.95,
     method: str = "profile",
-    refuse_boundary: bool = False,
+    *,
+    refuse_boundary: bool = True,
+    refuse_structure: bool = True,
+    refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
 ) -> EigenIntervals:
     """Confidence intervals on the eigenvalues of a fitted model.
 
@@ -530,10 +474,12 @@ def eigenvalue_intervals(
         parameters' confidence ellipsoid (:func:`profile_interval`; the mode is followed
         by :func:`bikeid.sim.linear.match_eigenvalues`), which holds its coverage where an
         eigenvalue is curved in the parameters; ``"delta"``: value -+ z std.
-    refuse_boundary : bool, optional
-        Raise instead of returning intervals when a fixed-speed fit ended on its
-        predictor's stability boundary (:func:`check_predictor_interior`); default False:
-        the radius is recorded (``predictor_radius``, ``at_predictor_boundary``).
+    refuse_boundary, refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
+        Refuse (default) what ``bikeid identify`` withholds: a fit on its one-step
+        predictor's stability boundary, a structure its attached check rejects, an
+        output-error fit of an unstable plant, nonlinear-plant runs above the roll
+        amplitude whose bias the intervals do not show (:func:`bikeid.ident.trust.check_trust`);
+        False gives the intervals with that said in ``notes``.
 
     Returns
     -------
@@ -547,14 +493,17 @@ def eigenvalue_intervals(
     InputError
         If the model has no usable covariance, ``v`` is missing or inconsistent,
         ``level`` is not in (0, 1) or ``method`` is unknown.
-    UntrustworthyResult
-        With ``refuse_boundary=True``, if the fit ended on its predictor's stability
-        boundary.
+    WithheldIntervals
+        (an UntrustworthyResult) on a refusal not opted out of; its ``reason`` and
+        ``remedy`` say why and what to do.
     """
     z_value(level)
     _check_method(method)
     p, cov, S, speed = _parameters(model, v)
-    rho = check_predictor_interior(model) if refuse_boundary else predictor_radius(model)
+    rho, notes = check_trust(model, speed, refuse_boundary=refuse_boundary,
+                             refuse_structure=refuse_structure,
+                             refuse_output_error=refuse_output_error,
+                             refuse_amplitude=refuse_amplitude)  # fmt: skip
     lam, jac, cond = eigenvalue_jacobian(S @ p)
     Jp = jac @ S  # d lambda / d p
     J = np.vstack([Jp.real, Jp.imag])
@@ -564,7 +513,7 @@ def eigenvalue_intervals(
     ei = EigenIntervals(speed=speed, level=level, values=lam, std_real=sd[:4],
                         std_imag=sd[4:], covariance=C, condition=cond,
                         modes=mode_names(lam, matrices, speed),
-                        predictor_radius=rho)  # fmt: skip
+                        predictor_radius=rho, notes=notes)  # fmt: skip
     if method == "delta":
         return ei
     bounds = np.empty((2, 4, 2))
@@ -626,6 +575,8 @@ class CriticalSpeedIntervals:
         exists also when the estimate itself has no v_c in (0, vmax].
     open_v_w, open_v_c : bool
         The confidence ellipsoid holds parameters without the critical speed in (0, vmax].
+    notes : tuple of str
+        What the intervals come with (:func:`bikeid.ident.trust.check_trust`).
     """
 
     level: float
@@ -640,6 +591,7 @@ class CriticalSpeedIntervals:
     bounds_v_c: tuple[float, float] | None = None
     open_v_w: bool = False
     open_v_c: bool = False
+    notes: tuple[str, ...] = ()
 
     def interval(self, name: str) -> tuple[float, float] | None:
         """The confidence interval of one critical speed.
@@ -716,7 +668,14 @@ def _critical_gradient(p: np.ndarray, g: float, v0: float, func, name: str) -> n
 
 
 def critical_speed_intervals(
-    model, level: float = 0.95, vmax: float = 30.0, method: str = "profile"
+    model,
+    level: float = 0.95,
+    vmax: float = 30.0,
+    method: str = "profile",
+    *,
+    refuse_structure: bool = True,
+    refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
 ) -> CriticalSpeedIntervals:
     """Confidence intervals on v_w and v_c of a speed-parameterized model.
 
@@ -731,6 +690,11 @@ def critical_speed_intervals(
     method : {"profile", "delta"}, optional
         ``"profile"`` (default): the least and greatest speed over the parameters'
         confidence ellipsoid (:func:`profile_interval`); ``"delta"``: value -+ z std.
+    refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
+        Refuse (default) a model over speed whose attached structure check rejects it, an
+        output-error fit of an unstable plant, or runs above the roll amplitude whose bias
+        the intervals do not show (:func:`bikeid.ident.trust.check_trust`);
+        False gives the intervals with that said in ``notes``.
 
     Returns
     -------
@@ -745,6 +709,9 @@ def critical_speed_intervals(
     UntrustworthyResult
         If h crosses zero tangentially (dh/dv = 0) at a critical speed, where the first-
         order derivative does not exist.
+    WithheldIntervals
+        (an UntrustworthyResult) on a refusal not opted out of; its ``reason`` and
+        ``remedy`` say why and what to do.
     """
     z_value(level)
     _check_method(method)
@@ -753,6 +720,9 @@ def critical_speed_intervals(
             "critical speeds need a speed-parameterized model (ident.pem.fit_speed_model)"
         )
     p, cov, _, _ = _parameters(model, 1.0)
+    _, notes = check_trust(model, None, refuse_structure=refuse_structure,
+                           refuse_output_error=refuse_output_error,
+                           refuse_amplitude=refuse_amplitude)  # fmt: skip
     g = float(model.g)
     crit = critical_speeds(matrices_from_speed_params(p, g), vmax)
     out: dict[str, Any] = {"method": method}
@@ -775,7 +745,7 @@ def critical_speed_intervals(
             out[f"open_{name}"] = not (math.isfinite(lo) and math.isfinite(hi))
             out[f"bounds_{name}"] = (lo if math.isfinite(lo) else 0.0,
                                      hi if math.isfinite(hi) else float(vmax))  # fmt: skip
-    return CriticalSpeedIntervals(level=level, **out)
+    return CriticalSpeedIntervals(level=level, notes=notes, **out)
 
 
 #: Speed grid step [m/s] of :func:`_capsize_speed_set` (each end then bisected 12 times).
@@ -868,6 +838,8 @@ class BodeBand:
         Unwrapped phase of G(jw) and its band [deg].
     std_magnitude_db, std_phase_deg : (F,) ndarray
         Standard errors [dB, deg].
+    notes : tuple of str
+        What the bands come with (:func:`bikeid.ident.trust.check_trust`).
     """
 
     output: str
@@ -882,6 +854,7 @@ class BodeBand:
     phase_upper_deg: np.ndarray
     std_magnitude_db: np.ndarray
     std_phase_deg: np.ndarray
+    notes: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """The band as plain JSON types.
@@ -918,7 +891,17 @@ def _check_frequencies(frequencies) -> np.ndarray:
     return w
 
 
-def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) -> list[BodeBand]:
+def bode_bands(
+    model,
+    frequencies,
+    v: float | None = None,
+    level: float = 0.95,
+    *,
+    refuse_boundary: bool = True,
+    refuse_structure: bool = True,
+    refuse_output_error: bool = True,
+    refuse_amplitude: bool = True,
+) -> list[BodeBand]:
     """Delta-method bands on the Bode magnitude and phase of each output/T_delta channel.
 
     Parameters
@@ -931,6 +914,12 @@ def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) 
         Speed [m/s] (required for a speed-parameterized model).
     level : float, optional
         Confidence level (default 0.95).
+    refuse_boundary, refuse_structure, refuse_output_error, refuse_amplitude : bool, optional
+        Refuse (default) what ``bikeid identify`` withholds: a fit on its one-step
+        predictor's stability boundary, a structure its attached check rejects, an
+        output-error fit of an unstable plant, nonlinear-plant runs above the roll
+        amplitude whose bias the intervals do not show (:func:`bikeid.ident.trust.check_trust`);
+        False gives the intervals with that said in ``notes``.
 
     Returns
     -------
@@ -942,10 +931,17 @@ def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) 
     ------
     InputError
         On a model without covariance, a missing speed, bad frequencies or level.
+    WithheldIntervals
+        (an UntrustworthyResult) on a refusal not opted out of; its ``reason`` and
+        ``remedy`` say why and what to do.
     """
     z = z_value(level)
     w = _check_frequencies(frequencies)
-    p, cov, S, _ = _parameters(model, v)
+    p, cov, S, speed = _parameters(model, v)
+    _, notes = check_trust(model, speed, refuse_boundary=refuse_boundary,
+                           refuse_structure=refuse_structure,
+                           refuse_output_error=refuse_output_error,
+                           refuse_amplitude=refuse_amplitude)  # fmt: skip
     C = output_matrix(model.outputs)[0]
     G, dG = _frequency_response(S @ p, C, w)
     rel = (dG / G[:, :, None]) @ S  # d ln G / dp  (L, F, P)
@@ -961,7 +957,7 @@ def bode_bands(model, frequencies, v: float | None = None, level: float = 0.95) 
                             magnitude_db=mag, magnitude_lower_db=mag - z * sm,
                             magnitude_upper_db=mag + z * sm, phase_deg=ph,
                             phase_lower_deg=ph - z * sp, phase_upper_deg=ph + z * sp,
-                            std_magnitude_db=sm, std_phase_deg=sp))  # fmt: skip
+                            std_magnitude_db=sm, std_phase_deg=sp, notes=notes))  # fmt: skip
     return out
 
 

@@ -307,6 +307,8 @@ def bode_band_halfwidths(model, f: np.ndarray, v: float) -> dict | None:
         bands = bode_bands(m, 2 * np.pi * np.asarray(f, float), level=BAND_LEVEL)
     except InputError:  # no usable (finite) covariance: no band, as for a direct model
         return None
+    except UntrustworthyResult:  # refused as the intervals are (ident.trust): no band
+        return None
     return {b.output: (z * b.std_magnitude_db, z * b.std_phase_deg) for b in bands}
 
 

@@ -54,8 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "ident.uncertainty.check_predictor_interior); --controller is then ignored",
     )  # fmt: skip
     p.add_argument(
-        "--noise-model", choices=("free", "none"), default="free",
-        help="with --plant: pem.fit's noise model (default free; none = output error)",
+        "--noise-model", choices=("free", "kalman", "gain", "none"), default="free",
+        help="with --plant: pem.fit's noise model (default free = kalman; gain = free "
+        "innovation gain; none = output error)",
     )  # fmt: skip
     p.add_argument(
         "--restart", action="store_true",

@@ -308,14 +308,19 @@ def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[st
     from bikeid.ident.uncertainty import eigenvalue_intervals
     from bikeid.sim.linear import match_eigenvalues
 
-    model = pem.fit(_closed_loop_run(p, settings, settings["speed"], seed))
+    # the free innovation gain (the estimator the documented 1000-seed study measured; its
+    # fits end inside the predictor's stability boundary at these lengths), every interval
+    # counted: no structure check, no boundary refusal
+    model = pem.fit(_closed_loop_run(p, settings, settings["speed"], seed), noise_model="gain",
+                    structure=False)  # fmt: skip
     model = dataclasses.replace(model, covariance=model.covariance * settings["covariance_scale"])
     se = np.sqrt(np.diag(model.covariance))
     r = model.theta - theta_true
     z = dict(zip(QUANTITIES[:10], r / se, strict=True))
     z["d2"] = float(r @ np.linalg.solve(model.covariance, r))
     z.update({f"se_{q}": float(e) for q, e in zip(QUANTITIES[:10], se, strict=True)})
-    ei = eigenvalue_intervals(model, level=settings["level"])  # profile ends + first-order SE
+    ei = eigenvalue_intervals(model, level=settings["level"],  # profile ends + first-order SE
+                              refuse_boundary=False)  # fmt: skip
     _, col = match_eigenvalues(ei.values, targets, return_index=True)
     for i, name in ((0, "weave"), (2, "capsize"), (3, "caster")):
         j = col[i]
@@ -453,7 +458,7 @@ def _critical_job(p, settings: dict[str, Any], seed: int):
     sp = settings["speeds"]
     try:
         runs = [_closed_loop_run(p, settings, v, seed * len(sp) + k) for k, v in enumerate(sp)]
-        model = pem.fit_speed_model(runs)
+        model = pem.fit_speed_model(runs, structure=False)  # every interval counted
         scale = settings["covariance_scale"]
         model = dataclasses.replace(model, covariance=model.covariance * scale)
         ci = critical_speed_intervals(model, level=settings["level"], vmax=settings["vmax"])
@@ -671,7 +676,9 @@ def _default_path_job(settings: dict[str, Any], targets, theta_true, seed: int):
             max_amplitude=max(1.0, settings["dither"])), seed=seed, plant=settings["plant"],
         )  # fmt: skip
         model = pem.fit(run, noise_model=settings["noise_model"])
-        ei = eigenvalue_intervals(model, level=settings["level"])
+        ei = eigenvalue_intervals(model, level=settings["level"], refuse_boundary=False,
+                                  refuse_structure=False, refuse_output_error=False,
+                                  refuse_amplitude=False)  # every fit counted  # fmt: skip
     except ValueError as exc:  # UntrustworthyResult / InputError: count, do not hide
         return seed, None, str(exc).splitlines()[0]
     _, col = match_eigenvalues(ei.values, targets, return_index=True)
@@ -735,8 +742,9 @@ def run_default_path_coverage(
         Dither amplitude [N m] (1 on the default path).
     speed : float, optional
         Forward speed [m/s].
-    noise_model : {"free", "none"}, optional
-        ``pem.fit``'s noise model.
+    noise_model : {"free", "kalman", "gain", "none"}, optional
+        ``pem.fit``'s noise model ("free": its default, the Kalman gain; "gain": the free
+        innovation gain of the study in docs/uncertainty.md).
     restart : bool, optional
         Also fit from the true parameters and compare costs under common weights.
     level : float, optional
@@ -773,8 +781,8 @@ def run_default_path_coverage(
     _check_settings(seeds, 1.0, level)
     if plant not in ("nonlinear", "linear"):
         raise InputError(f"plant={plant!r}: choose nonlinear or linear")
-    if noise_model not in ("free", "none"):
-        raise InputError(f"noise_model={noise_model!r}: choose free or none")
+    if noise_model not in ("free", "kalman", "gain", "none"):
+        raise InputError(f"noise_model={noise_model!r}: choose free, kalman, gain or none")
     p = benchmark()
     targets, _ = _mode_targets(p, speed)
     theta_true = theta_from_matrices(canonical_matrices(p), speed)

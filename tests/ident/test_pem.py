@@ -14,6 +14,7 @@ from bikeid.ident.canonical import (
     to_bikeid_order,
 )
 from bikeid.ident.subspace import pbsid
+from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import canonical_matrices, critical_speeds, eigenvalues, state_space
 from bikeid.sim.parameters import benchmark
 
@@ -137,7 +138,10 @@ def test_speed_model_recovers_critical_speeds_on_the_linear_tour():
     new = pem.fit_speed_model(runs, per_speed=old.per_speed)
     truth = speed_params_from_matrices(CM)
     for model, biased in ((old, True), (new, False)):
-        ci = critical_speed_intervals(model, method="delta")
+        if biased:  # refused by default: the attached structure check rejects it
+            with pytest.raises(UntrustworthyResult, match="reject the model structure"):
+                critical_speed_intervals(model, method="delta")
+        ci = critical_speed_intervals(model, method="delta", refuse_structure=not biased)
         z = {"v_w": (ci.v_w - 4.2924) / ci.std_v_w, "v_c": (ci.v_c - 6.0243) / ci.std_v_c}
         d = model.params - truth
         stat = d @ np.linalg.solve(model.covariance, d)

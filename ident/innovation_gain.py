@@ -1,0 +1,450 @@
+"""Innovation gains from noise covariances: a one-step predictor stable by construction.
+
+The prediction-error fits (:mod:`ident.pem`) predict with
+``xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k]`` (:mod:`ident.predictor`).  Estimating the
+entries of K freely lets a fit on a short record lower its cost by moving the predictor's
+poles (eig(Ad - K C)) onto the unit circle, where it stops: not at an optimum, so its
+covariance describes nothing.  Here K is instead the steady-state Kalman gain of the model
+for a noise model whose covariances are the parameters (Ljung 1999, sec. 4.3, the
+"innovations form" from process and measurement noise):
+
+- process noise: white noise in the roll and steer accelerations held over each sample,
+  ``Q = G L L' G'`` (G the zero-order-hold sampling of :data:`NOISE_INPUT`, L a lower
+  triangular factor relative to reference standard deviations ``ref``, its logs and
+  off-diagonal entry ``eta[:3]``);
+- sensor noise: diag(``rdiag``), held (the fixed-speed fit takes each output's one-step
+  prediction-error variance, the speed model its per-speed fits'; K is unchanged when Q and
+  R scale together, and the three entries of L carry the scale).
+
+The stabilizing solution of the discrete Riccati equation makes Ad - K C stable for every
+parameter value, also where the bicycle itself is unstable (an unstable mode's predictor
+pole is its mirror image inside the unit circle as the process noise vanishes).  The fit
+alternates between the model parameters and eta (:func:`alternate`), because where the
+process noise is negligible K hardly depends on eta and those near-zero Jacobian columns
+made joint Levenberg-Marquardt steps so damped that they stopped short of the optimum.
+A noise standard deviation whose lower bound (:data:`NOISE_LOG_RANGE`) the data cannot
+reject is put on it and the covariance is taken conditional on it (:func:`settle_bounds`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from scipy.linalg import solve_discrete_are
+
+from bikeid.ident.canonical import canonical_ab
+from bikeid.ident.predictor import (
+    PredictionProblem,
+    discretize,
+    discretize_with_derivatives,
+    prediction_kernel,
+    solve,
+)
+from bikeid.sim.sampling import zoh
+
+__all__ = [
+    "BOUND_CHI2",
+    "FIXED_NOISE_STARTS",
+    "JOINT_ROUNDS",
+    "JOINT_TOL",
+    "KalmanGainProblem",
+    "NOISE_INPUT",
+    "NOISE_LOG_RANGE",
+    "NOISE_STARTS",
+    "alternate",
+    "filter_riccati",
+    "kalman_gain_of",
+    "sensor_variances",
+    "settle_bounds",
+]
+
+#: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
+#: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
+NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
+#: Range of the log standard deviations of that noise relative to its reference
+#: (the input's std times |b1|, |b2|); beyond it the gain no longer changes.
+NOISE_LOG_RANGE = (-40.0, 5.0)
+#: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
+NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
+#: Start values of eta tried by the fixed-speed fit: :data:`NOISE_STARTS` and no process
+#: noise (both standard deviations on the lower bound), the optimum of a loop without it.
+FIXED_NOISE_STARTS = (*NOISE_STARTS, (NOISE_LOG_RANGE[0], 0.0, NOISE_LOG_RANGE[0]))
+#: Rounds of the joint fit's alternation (speed parameters, then the noise's eta) per
+#: weighting pass; a round whose eta step lowers the cost by less than :data:`JOINT_TOL`
+#: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
+JOINT_ROUNDS = 6
+JOINT_TOL = 1e-2
+
+
+def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
+    """Steady-state Kalman gain of the canonical model ``theta`` for acceleration noise.
+
+    Process noise: white noise in the roll and steer accelerations, held over each sample
+    (``Q = G L L' G'``, G the zero-order-hold sampling of :data:`NOISE_INPUT`, L =
+    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]); sensor noise diag(``rdiag``).  The
+    predictor Ad - K C is stable for every ``eta`` (the stabilizing Riccati solution).
+
+    Parameters
+    ----------
+    theta : (10,) ndarray
+        Canonical parameters [a1, ..., a8, b1, b2].
+    dt : float
+        Sample period [s].
+    C : (L, 4) ndarray
+        Output matrix.
+    rdiag : (L,) ndarray
+        Sensor-noise variances (squared output units).
+    eta : (3,) ndarray
+        [log s1, s21, log s2] of the noise's Cholesky factor, relative to ``ref``
+        (logs clipped to :data:`NOISE_LOG_RANGE`).
+    ref : (2,) ndarray
+        Reference standard deviations of the roll and steer acceleration noise [rad/s^2].
+
+    Returns
+    -------
+    (4, L) ndarray
+        K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k] (Chen & Dao's state order).
+    """
+    A, _ = canonical_ab(theta)
+    Ad, G = zoh(A, NOISE_INPUT, dt)
+    lo, hi = NOISE_LOG_RANGE
+    s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
+    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * np.asarray(ref)[:, None]
+    GL = G @ Lf
+    Q = GL @ GL.T + 1e-12 * np.eye(4)
+    R = np.diag(rdiag)
+    P = filter_riccati(Ad, C, Q, R)
+    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+
+
+@numba.njit(cache=True)
+def _doubling(A, G, H, max_iter, tol):
+    """Structure-preserving doubling for X = A' X A - A' X G-part ... (see filter_riccati).
+
+    Returns (X, converged).
+    """
+    n = A.shape[0]
+    eye = np.eye(n)
+    for _ in range(max_iter):
+        W = np.linalg.inv(eye + G @ H)
+        AW = A @ W
+        G1 = G + AW @ G @ A.T
+        H1 = H + A.T @ H @ W @ A
+        A = AW @ A
+        G = 0.5 * (G1 + G1.T)
+        dH = np.max(np.abs(H1 - H))
+        H = 0.5 * (H1 + H1.T)
+        if dH <= tol * max(np.max(np.abs(H)), 1e-300):
+            return H, True
+    return H, False
+
+
+def filter_riccati(Ad, C, Q, R) -> np.ndarray:
+    """Stabilizing solution P of the filter Riccati equation
+    P = Ad P Ad' - Ad P C' (C P C' + R)^-1 C P Ad' + Q.
+
+    Structure-preserving doubling (Chu, Fan & Lin 2005: A0 = Ad', G0 = C' R^-1 C, H0 = Q;
+    quadratic convergence, error ~ rho^(2^k) for the predictor's spectral radius rho), a
+    few tens of microseconds for 4 states against milliseconds for the QZ method of
+    ``scipy.linalg.solve_discrete_are``, which is the fallback where doubling does not
+    converge in 64 steps (a predictor pole within ~1e-15 of the unit circle).
+
+    Parameters
+    ----------
+    Ad : (n, n) ndarray
+        Discrete state matrix.
+    C : (L, n) ndarray
+        Output matrix.
+    Q : (n, n) ndarray
+        Process-noise covariance (symmetric, positive semi-definite).
+    R : (L, L) ndarray
+        Sensor-noise covariance (symmetric, positive definite).
+
+    Returns
+    -------
+    (n, n) ndarray
+        P (the one-step prediction covariance of the state).
+
+    Raises
+    ------
+    ValueError, numpy.linalg.LinAlgError
+        Where no stabilizing solution exists (from the fallback).
+    """
+    G = C.T @ np.linalg.solve(R, C)
+    P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (G + G.T), np.ascontiguousarray(Q),
+                      64, 1e-14)  # fmt: skip
+    if ok and np.all(np.isfinite(P)):
+        return P
+    return solve_discrete_are(Ad.T, C.T, Q, R)
+
+
+def sensor_variances(model) -> np.ndarray:
+    """The sensor-noise variances a joint fit's Kalman gains use at a fitted speed.
+
+    Parameters
+    ----------
+    model : CanonicalModel
+        The per-speed fit.
+
+    Returns
+    -------
+    (L,) ndarray
+        The diagonal of its ``noise_covariance`` (squared output units), raised to at
+        least 1e-12 of its largest entry and to 1e-30 (noise-free data: a solvable
+        Riccati equation).
+    """
+    r = np.diag(np.atleast_2d(model.noise_covariance)).astype(float)
+    return np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
+
+
+class KalmanGainProblem(PredictionProblem):
+    """Prediction errors with each run's K the Kalman gain of the model at its speed.
+
+    z = [model parameters (14 over speed, or 10 at one speed), eta (3)]: the innovation
+    gains follow the model (and a shared acceleration-noise covariance), so the predictor
+    is stable at every point and
+    the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dz to the
+    kernel's dE/dtheta (dK by central differences of the Riccati solution).  Only the
+    entries ``free`` of z are the minimizer's x (the others held at ``z``): the fit
+    alternates between the speed parameters and eta, because where the noise is
+    negligible K hardly depends on eta, and those near-zero Jacobian columns made the
+    joint Levenberg-Marquardt steps so damped that it stopped short of the optimum.
+    """
+
+    def __init__(self, data, mapping, rdiag, weights, outputs, ref, z, free):
+        super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
+        self.rdiag, self.ref = rdiag, np.asarray(ref, float)
+        self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
+
+    def full(self, x) -> np.ndarray:
+        """z with the free entries set to x."""
+        z = self.z.copy()
+        z[self.free] = x
+        return z
+
+    def split(self, z):
+        return z[: self.mapping[0].shape[1]], None
+
+    def residual(self, x):
+        return super().residual(self.full(x))
+
+    def gain(self, theta, dt, rdiag, eta):
+        return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
+
+    def _needs(self) -> tuple[bool, bool]:
+        """Whether speed parameters, and whether noise parameters, are free."""
+        P = self.mapping[0].shape[1]
+        return bool(np.any(self.free < P)), bool(np.any(self.free >= P))
+
+    def _models(self, x, derivatives: bool):
+        P = self.mapping[0].shape[1]
+        p, eta = x[:P], x[P:]
+        need_theta, need_eta = self._needs()
+        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
+        out, cache = [], {}
+        for i, d in enumerate(self.data):
+            S = self.mapping[i]
+            theta = S @ p
+            key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
+            if key not in cache:
+                if derivatives and need_theta:
+                    Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
+                else:
+                    (Ad, Bd), dAd, dBd = (
+                        discretize(theta, d.dt),
+                        np.zeros((0, 4, 4)),
+                        np.zeros((0, 4)),
+                    )
+                try:
+                    K = self.gain(theta, d.dt, self.rdiag[i], eta)
+                except (ValueError, np.linalg.LinAlgError):
+                    return None
+                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
+                    return None
+                dK = (self._gain_derivative(theta, d.dt, self.rdiag[i], eta, K, rows)
+                      if derivatives else None)  # fmt: skip
+                cache[key] = (Ad, Bd, dAd, dBd, K, dK)
+            Ad, Bd, dAd, dBd, K, dK = cache[key]
+            out.append((Ad, Bd, dAd, dBd, K, S, dK))
+        return out
+
+    def _gain_derivative(self, theta, dt, rdiag, eta, K0, rows):
+        """(13, 4 L): dK/d[theta, eta] by central differences in ``rows`` (zero in the
+        others; one-sided where the Riccati equation has no stabilizing solution on one
+        side, zero where on neither: the derivative only steers the search, the cost is
+        exact)."""
+        z = np.concatenate([theta, eta])
+        out = np.zeros((z.size, K0.size))
+        for j in rows:
+            h = 1e-6 * max(abs(z[j]), 1.0)
+            side = {}
+            for s in (1.0, -1.0):
+                zs = z.copy()
+                zs[j] += s * h
+                try:
+                    side[s] = self.gain(zs[:10], dt, rdiag, zs[10:])
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+            if len(side) == 2:
+                out[j] = ((side[1.0] - side[-1.0]) / (2 * h)).ravel()
+            elif side:
+                s, Ks = next(iter(side.items()))
+                out[j] = (s * (Ks - K0) / h).ravel()
+        return out
+
+    def jacobian(self, x):
+        r = self.residual(x)
+        if r is None:
+            return None, None
+        models = self._models(self.full(x), derivatives=True)
+        if models is None:
+            return None, None
+        nk = 4 * self.L
+        need_theta, need_eta = self._needs()
+        P = self.mapping[0].shape[1]
+        cols = self.free - (0 if need_theta else P)  # columns of the blocks computed
+        jac = []
+        for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
+            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
+            nt = dAd.shape[0]  # 10 or 0
+            JK = J[:, nt : nt + nk]
+            blocks = []
+            if need_theta:
+                blocks.append((J[:, :10] + JK @ dK[:10].T) @ S)
+            if need_eta:
+                blocks.append(JK @ dK[10:].T)
+            Jm = np.hstack(blocks)[:, cols]
+            Q, _ = np.linalg.qr(J[:, nt + nk :])
+            Jm -= Q @ (Q.T @ Jm)
+            jac.append(Jm)
+        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
+        return r, self._J
+
+
+def alternate(problem, z: np.ndarray, n: int, max_nfev: int, method: str, passes: int,
+              reweight, settle: bool = False
+              ) -> tuple[np.ndarray, int, str | None, tuple[int, ...]]:  # fmt: skip
+    """Fit z = [model parameters (n), eta] by alternating the two blocks.
+
+    Parameters
+    ----------
+    problem : callable
+        ``problem(z, free) -> KalmanGainProblem`` with the current output weights.
+    z : ndarray
+        Start (modified in place and returned).
+    n : int
+        Number of model parameters (the first n entries of z).
+    max_nfev : int
+        Residual evaluations per Levenberg-Marquardt solve.
+    method : {"lm", "scipy"}
+        Minimizer (:func:`bikeid.ident.predictor.solve`).
+    passes : int
+        Weighting passes; after each, ``reweight(prob)`` sets new output weights.
+    reweight : callable
+        Receives the last problem at the end of each pass.
+    settle : bool, optional
+        After each noise step, put the process-noise standard deviations the data do not
+        hold off their lower bound on it and hold them there (:func:`settle_bounds`).
+
+    Returns
+    -------
+    z : ndarray
+        The fitted parameters.
+    nfev : int
+        Residual evaluations in all.
+    stopped : str or None
+        The minimizer's message when its last model-parameter solve did not converge.
+    held : tuple of int
+        Indices into z of the noise parameters held on their bound (``settle``).
+    """
+    par = np.arange(n)
+    nfev, stopped, held = 0, None, ()
+    for _ in range(max(1, passes)):
+        for _ in range(JOINT_ROUNDS):
+            prob = problem(z, par)
+            sol = solve(prob, z[par], max_nfev, method)
+            z[par], nfev = sol.x, nfev + sol.nfev
+            stopped = None if sol.success else str(sol.message)
+            before = float(prob._r @ prob._r)
+            noise = np.array([i for i in range(n, z.size) if i not in held], dtype=int)
+            if noise.size == 0:
+                break
+            prob = problem(z, noise)
+            sol_n = solve(prob, z[noise], max_nfev, method)
+            z[noise], nfev = sol_n.x, nfev + sol_n.nfev
+            after = float(prob._r @ prob._r)
+            if settle:
+                z, newly, k = settle_bounds(problem, z, n)
+                nfev += k
+                if newly and set(newly) != set(held):
+                    held = newly
+                    continue  # refit the model parameters at the bound
+            if before - after < JOINT_TOL:
+                break
+        reweight(prob)
+    return z, nfev, stopped, held
+
+
+#: A noise standard deviation is put on its lower bound when that raises the cost (squared
+#: whitened prediction errors: -2 log-likelihood for Gaussian innovations of the weights'
+#: variances) by less than chi^2_1(0.95) = 3.84 with the model parameters held (refitting
+#: them could only lower it), i.e. when a likelihood-ratio test at 5 % does not reject the
+#: bound.  The estimate of such a parameter is then the bound, and the other parameters'
+#: covariance is conditional on it (a near-flat direction towards a bound has no quadratic
+#: likelihood to give a marginal covariance).
+BOUND_CHI2 = 3.841458820694124
+
+
+def settle_bounds(problem, z: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int, ...], int]:
+    """Put the noise standard deviations the data do not hold off their bound on it.
+
+    Tries, in turn, both process-noise standard deviations (s1, s2) at the lower end of
+    :data:`NOISE_LOG_RANGE`, then each alone; the first whose cost is within
+    :data:`BOUND_CHI2` of the cost at ``z`` is kept.  With s1 on its bound s21 and s2
+    describe one steer-noise variance (s21^2 + s2^2): s21 is folded into s2 and held at 0.
+
+    Parameters
+    ----------
+    problem : callable
+        ``problem(z, free) -> KalmanGainProblem``.
+    z : ndarray
+        [model parameters (n), eta].
+    n : int
+        Number of model parameters.
+
+    Returns
+    -------
+    z : ndarray
+        The parameters with the settled entries on their bound (a copy when changed).
+    held : tuple of int
+        Indices into z of the noise parameters held (on their bound, or s21 folded away),
+        empty when none is; the covariance is to be taken without them.
+    nfev : int
+        Residual evaluations used.
+    """
+    lo, hi = NOISE_LOG_RANGE
+    every = np.arange(z.size)
+    base = problem(z, every).residual(z)
+    if base is None:
+        return z, (), 1
+    cost0, nfev = float(base @ base), 1
+    i1, i21, i2 = n, n + 1, n + 2
+    for held in ((i1, i21, i2), (i1, i21), (i2,)):
+        zb = z.copy()
+        if i1 in held:
+            zb[i2] = (
+                lo
+                if i2 in held
+                else 0.5 * math.log(zb[i21] ** 2 + math.exp(2.0 * min(max(zb[i2], lo), hi)))
+            )
+            zb[i21], zb[i1] = 0.0, lo
+        else:
+            zb[i2] = lo
+        r = problem(zb, every).residual(zb)
+        nfev += 1
+        if r is not None and float(r @ r) - cost0 < BOUND_CHI2:
+            return zb, held, nfev
+    return z, (), nfev
