@@ -25,7 +25,7 @@ from bikeid.experiments.cli.args import (
 )
 from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import quiet, stage_lines, terminal_progress
-from bikeid.ident.method_names import MethodChoices
+from bikeid.experiments.testbed.method_choices import MethodChoices
 
 
 def register(sub: argparse._SubParsersAction) -> None:
