@@ -75,7 +75,7 @@ __all__ = [
     "CONTROLLERS",
     "DESIGN",
     "FULL_SPEEDS",
-    "METHODS",
+    "METHODS",  # noqa: F822 - module __getattr__: read from the method table
     "QUICK_SPEEDS",
     "Band",
     "eigen_errors",
@@ -102,6 +102,7 @@ def __getattr__(name: str) -> Any:
     if name == "METHODS":
         return ident_methods.names()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 FULL_SPEEDS = tuple(float(v) for v in np.round(np.arange(1.0, 15.0 + 1e-9, 0.5), 6))
 #: One speed below v_w (4.29), one between v_w and v_c (6.02), one above v_c (benchmark).

@@ -78,8 +78,9 @@ def _context(scenario: Scenario, level: float) -> Context:
     from bikeid.sim.parameters import by_name
 
     p = by_name(scenario.bicycle)
-    return Context(scenario, p, make(scenario.controller, p, sample_time=scenario.sample_time),
-                   level)  # fmt: skip
+    return Context(
+        scenario, p, make(scenario.controller, p, sample_time=scenario.sample_time), level
+    )
 
 
 def _job(scenario: Scenario, level: float, job: tuple[Any, float, int]) -> dict[str, Any]:
@@ -224,8 +225,13 @@ def run_consistency(
         by_name[name].append(records[i])
     ref = by_name.pop("reference", None)
     methods = {n: summarize(by_name[n], scenario, truth, ref) for n in names}
-    return {"scenario": scenario.to_json(), "level": float(level), "against": scenario.against,
-            "methods": methods, "jobs": {"computed": len(todo), "reused": reused}}  # fmt: skip
+    return {
+        "scenario": scenario.to_json(),
+        "level": float(level),
+        "against": scenario.against,
+        "methods": methods,
+        "jobs": {"computed": len(todo), "reused": reused},
+    }
 
 
 def _uploads(ests: Sequence[Estimator], dask: str | None) -> list[str]:
@@ -239,9 +245,11 @@ def _uploads(ests: Sequence[Estimator], dask: str | None) -> list[str]:
             continue
         f = module_file_of(str(e.spec))
         if f is None:
-            raise InputError(f"estimator {e.spec!r}: only a single-file module can be sent to "
-                             "the Dask workers; install the package on every worker or put "
-                             "its folder on the workers' PYTHONPATH")  # fmt: skip
+            raise InputError(
+                f"estimator {e.spec!r}: only a single-file module can be sent to "
+                "the Dask workers; install the package on every worker or put "
+                "its folder on the workers' PYTHONPATH"
+            )
         files.append(str(f))
     return files
 
@@ -294,9 +302,12 @@ def hotelling(errors: np.ndarray) -> tuple[float, float, float]:
     return t2, float(fdist.sf(t2 / scale, p, n - p)), scale
 
 
-def summarize(records: list[dict[str, Any]], scenario: Scenario,
-              truth: dict[float, np.ndarray],
-              reference: list[dict[str, Any]] | None = None) -> dict[str, Any]:  # fmt: skip
+def summarize(
+    records: list[dict[str, Any]],
+    scenario: Scenario,
+    truth: dict[float, np.ndarray],
+    reference: list[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     """Figures and verdict of one estimator from its job records.
 
     Parameters
@@ -318,7 +329,8 @@ def summarize(records: list[dict[str, Any]], scenario: Scenario,
         messages); ``bias``, ``std``, ``rmse_by``: per speed per component a list over
         lengths [1/s]; ``rmse``: over lengths, the RMS of the whole error vector [1/s];
         ``slope``, ``slope_ci``; ``coverage``: per length ``covered``, ``n``, ``fraction``,
-        ``nees`` (mean; 4 per speed if the standard errors are right), or None;
+        ``nees`` (mean over the seeds with finite ratios, ``nees_seeds`` of them; 4 per
+        speed if the standard errors are right), or None;
         ``efficiency``: per speed per component, over lengths, or None; ``verdict`` and
         ``verdict_detail`` (reason, ``t2``, ``p_value``, ``smallest_detectable_bias`` per
         speed per component [1/s], ``seeds_needed``, ``against``).
@@ -333,29 +345,50 @@ def summarize(records: list[dict[str, Any]], scenario: Scenario,
     fitted = {d: [r for r in records if r["duration"] == d and "speeds" in r] for d in durs}
     tried = sum(1 for r in records if "error" not in r)
     errs: dict[float, np.ndarray] = {}
-    out: dict[str, Any] = {"durations": durs, "n": [len(fitted[d]) for d in durs],
-                           "refused": {"count": len(refused), "of": tried,
-                                       "messages": sorted({r["refused"] for r in refused})[:3]},
-                           "bias": {}, "std": {}, "rmse_by": {}}  # fmt: skip
+    out: dict[str, Any] = {
+        "durations": durs,
+        "n": [len(fitted[d]) for d in durs],
+        "refused": {
+            "count": len(refused),
+            "of": tried,
+            "messages": sorted({r["refused"] for r in refused})[:3],
+        },
+        "bias": {},
+        "std": {},
+        "rmse_by": {},
+    }
     for d in durs:
         rows = fitted[d]
-        errs[d] = np.array([np.concatenate([np.asarray(r["speeds"][f"{v:g}"]["est"]) - tv[v]
-                                            for v in speeds]) for r in rows]).reshape(
-            len(rows), 4 * len(speeds))  # fmt: skip
+        errs[d] = np.array(
+            [
+                np.concatenate([np.asarray(r["speeds"][f"{v:g}"]["est"]) - tv[v] for v in speeds])
+                for r in rows
+            ]
+        ).reshape(len(rows), 4 * len(speeds))
     for k, v in enumerate(speeds):
         key = f"{v:g}"
-        for what, f in (("bias", lambda e: e.mean(0)),
-                        ("std", lambda e: e.std(0, ddof=1) if len(e) > 1 else e * np.nan),
-                        ("rmse_by", lambda e: np.sqrt((e**2).mean(0)))):  # fmt: skip
-            out[what][key] = {c: [float(f(errs[d][:, 4 * k:4 * k + 4])[i]) if len(errs[d])
-                                  else None for d in durs] for i, c in enumerate(COMPONENTS)}  # fmt: skip
-    out["rmse"] = [float(np.sqrt(np.mean(np.sum(errs[d] ** 2, axis=1)))) if len(errs[d])
-                   else None for d in durs]  # fmt: skip
+        for what, f in (
+            ("bias", lambda e: e.mean(0)),
+            ("std", lambda e: e.std(0, ddof=1) if len(e) > 1 else e * np.nan),
+            ("rmse_by", lambda e: np.sqrt((e**2).mean(0))),
+        ):
+            out[what][key] = {
+                c: [
+                    float(f(errs[d][:, 4 * k : 4 * k + 4])[i]) if len(errs[d]) else None
+                    for d in durs
+                ]
+                for i, c in enumerate(COMPONENTS)
+            }
+    out["rmse"] = [
+        float(np.sqrt(np.mean(np.sum(errs[d] ** 2, axis=1)))) if len(errs[d]) else None
+        for d in durs
+    ]
     logn = np.log(np.array(durs) / scenario.sample_time)
     ok = [d for d in durs if len(errs[d]) >= 2]
     if len(ok) >= 2:
-        out["slope"], out["slope_ci"] = _slope(logn[[durs.index(d) for d in ok]],
-                                               [errs[d] for d in ok])  # fmt: skip
+        out["slope"], out["slope_ci"] = _slope(
+            logn[[durs.index(d) for d in ok]], [errs[d] for d in ok]
+        )
     else:
         out["slope"], out["slope_ci"] = None, None
     # coverage and NEES of the estimator's own intervals
@@ -365,16 +398,28 @@ def summarize(records: list[dict[str, Any]], scenario: Scenario,
         if not rows:
             cov.append(None)
             continue
-        e = np.array([np.concatenate([np.asarray(r["speeds"][f"{v:g}"]["est"]) - tv[v]
-                                      for v in speeds]) for r in rows])  # fmt: skip
-        se = np.array([np.concatenate([r["speeds"][f"{v:g}"]["se"] for v in speeds])
-                       for r in rows])  # fmt: skip
+        e = np.array(
+            [
+                np.concatenate([np.asarray(r["speeds"][f"{v:g}"]["est"]) - tv[v] for v in speeds])
+                for r in rows
+            ]
+        )
+        se = np.array([np.concatenate([r["speeds"][f"{v:g}"]["se"] for v in speeds]) for r in rows])
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.abs(e) / se
         covered = int(np.sum(ratio <= z))
-        cov.append({"covered": covered, "n": int(ratio.size),
-                    "fraction": covered / ratio.size,
-                    "nees": float(np.mean(np.sum(ratio**2, axis=1)))})  # fmt: skip
+        finite = np.all(np.isfinite(ratio), axis=1)  # a zero SE (a real weave pair): no NEES
+        cov.append(
+            {
+                "covered": covered,
+                "n": int(ratio.size),
+                "fraction": covered / ratio.size,
+                "nees": float(np.mean(np.sum(ratio[finite] ** 2, axis=1)))
+                if finite.any()
+                else None,
+                "nees_seeds": int(finite.sum()),
+            }
+        )
     out["coverage"] = cov if any(c is not None for c in cov) else None
     out["efficiency"] = _efficiency(errs, reference, scenario, tv) if reference else None
     out["verdict"], out["verdict_detail"] = verdict(out, errs[durs[-1]], scenario)
@@ -387,13 +432,19 @@ def _efficiency(errs, reference, scenario: Scenario, tv) -> dict[str, Any] | Non
         key = f"{v:g}"
         out[key] = {c: [] for c in COMPONENTS}
         for d in scenario.durations:
-            ses = [np.asarray(r["speeds"][key]["se"]) for r in reference
-                   if r["duration"] == d and "speeds" in r and "se" in r["speeds"][key]]  # fmt: skip
-            e = errs[d][:, 4 * k:4 * k + 4]
+            ses = [
+                np.asarray(r["speeds"][key]["se"])
+                for r in reference
+                if r["duration"] == d and "speeds" in r and "se" in r["speeds"][key]
+            ]
+            e = errs[d][:, 4 * k : 4 * k + 4]
             for i, c in enumerate(COMPONENTS):
                 ok = bool(ses) and len(e) > 1
-                val = float(np.var(e[:, i], ddof=1) / np.mean([s[i] for s in ses]) ** 2) if ok \
-                    else None  # fmt: skip
+                val = (
+                    float(np.var(e[:, i], ddof=1) / np.mean([s[i] for s in ses]) ** 2)
+                    if ok
+                    else None
+                )
                 out[key][c].append(val)
     return out
 
@@ -428,45 +479,62 @@ def verdict(fig: dict[str, Any], last: np.ndarray, scenario: Scenario) -> tuple[
     if n > 4:  # the T^2 test and its detectable bias
         det["t2"], det["p_value"], det["smallest_detectable_bias"] = {}, {}, {}
         for k, v in enumerate(scenario.speeds):
-            e = last[:, 4 * k:4 * k + 4]
+            e = last[:, 4 * k : 4 * k + 4]
             t2, pv, scale = hotelling(e)
             crit = scale * float(fdist.isf(alpha, 4, n - 4))
             sd = e.std(0, ddof=1)
             det["t2"][f"{v:g}"], det["p_value"][f"{v:g}"] = t2, pv
             det["smallest_detectable_bias"][f"{v:g}"] = {
-                c: float(sd[i] * math.sqrt(crit / n)) for i, c in enumerate(COMPONENTS)}
+                c: float(sd[i] * math.sqrt(crit / n)) for i, c in enumerate(COMPONENTS)
+            }
     sdb = det.get("smallest_detectable_bias")
-    sdb_txt = ("; smallest detectable bias at the largest N: " + ", ".join(
-        f"{c} {max(b[c] for b in sdb.values()):.3g}" for c in COMPONENTS) + " 1/s") if sdb \
-        else ""  # fmt: skip
+    sdb_txt = (
+        (
+            "; smallest detectable bias at the largest N: "
+            + ", ".join(f"{c} {max(b[c] for b in sdb.values()):.3g}" for c in COMPONENTS)
+            + " 1/s"
+        )
+        if sdb
+        else ""
+    )
     tail = f" (against {against}){sdb_txt}"
     if ref["of"] and ref["count"] / ref["of"] > MAX_REFUSED:
-        det["reason"] = (f"raised on {ref['count']} of {ref['of']} fits (> 10 %): "
-                         f"{ref['messages'][0] if ref['messages'] else ''}")  # fmt: skip
+        det["reason"] = (
+            f"raised on {ref['count']} of {ref['of']} fits (> 10 %): "
+            f"{ref['messages'][0] if ref['messages'] else ''}"
+        )
         return "refused", det
     if n < MIN_SEEDS or len(scenario.durations) < MIN_LENGTHS:
-        det["reason"] = (f"{n} seeds fitted at the largest N and {len(scenario.durations)} "
-                         f"lengths: need >= {MIN_SEEDS} and >= {MIN_LENGTHS}{tail}")  # fmt: skip
+        det["reason"] = (
+            f"{n} seeds fitted at the largest N and {len(scenario.durations)} "
+            f"lengths: need >= {MIN_SEEDS} and >= {MIN_LENGTHS}{tail}"
+        )
         det["seeds_needed"] = MIN_SEEDS if n < MIN_SEEDS else None
         return "inconclusive", det
     worst = min(det["p_value"].values())
     if worst < alpha:
         v = min(det["p_value"], key=det["p_value"].get)
-        det["reason"] = (f"Hotelling T^2 = {det['t2'][v]:.1f} at {v} m/s rejects a zero mean "
-                         f"error at the largest N (p = {worst:.2g} < {alpha:.2g}){tail}")  # fmt: skip
+        det["reason"] = (
+            f"Hotelling T^2 = {det['t2'][v]:.1f} at {v} m/s rejects a zero mean "
+            f"error at the largest N (p = {worst:.2g} < {alpha:.2g}){tail}"
+        )
         return "biased", det
     slope, (lo, hi) = fig["slope"], fig["slope_ci"]
     if hi < SLOPE_BOUND:
-        det["reason"] = (f"no bias detected (smallest p = {worst:.2g}) and log RMSE falls "
-                         f"with slope {slope:.2f} [{lo:.2f}, {hi:.2f}] in log N{tail}")  # fmt: skip
+        det["reason"] = (
+            f"no bias detected (smallest p = {worst:.2g}) and log RMSE falls "
+            f"with slope {slope:.2f} [{lo:.2f}, {hi:.2f}] in log N{tail}"
+        )
         return CONSISTENT, det
     if slope < SLOPE_BOUND:
         det["seeds_needed"] = int(math.ceil(n * ((hi - slope) / (SLOPE_BOUND - slope)) ** 2))
         more = f"about {det['seeds_needed']} seeds would settle it"
     else:
         more = "no number of seeds settles it: the RMSE does not fall like 1/sqrt(N) here"
-    det["reason"] = (f"no bias detected but the slope {slope:.2f} [{lo:.2f}, {hi:.2f}] does "
-                     f"not lie below {SLOPE_BOUND}; {more}{tail}")  # fmt: skip
+    det["reason"] = (
+        f"no bias detected but the slope {slope:.2f} [{lo:.2f}, {hi:.2f}] does "
+        f"not lie below {SLOPE_BOUND}; {more}{tail}"
+    )
     return "inconclusive", det
 
 
@@ -485,21 +553,33 @@ def table_text(result: dict[str, Any]) -> str:
         The report (no trailing newline).
     """
     s = result["scenario"]
-    lines = [f"consistency: {s['bicycle']}, {s['plant']} plant, {s['controller']}, speeds "
-             f"{','.join(f'{v:g}' for v in s['speeds'])} m/s, dither {s['dither']:g} N m, "
-             f"process noise {s['disturbance']:g} N m, sensors {s['angle_noise']:g} rad / "
-             f"{s['rate_noise']:g} rad/s, {s['seeds']} seeds; truth: {result['against']}"]  # fmt: skip
+    lines = [
+        f"consistency: {s['bicycle']}, {s['plant']} plant, {s['controller']}, speeds "
+        f"{','.join(f'{v:g}' for v in s['speeds'])} m/s, dither {s['dither']:g} N m, "
+        f"process noise {s['disturbance']:g} N m, sensors {s['angle_noise']:g} rad / "
+        f"{s['rate_noise']:g} rad/s, {s['seeds']} seeds; truth: {result['against']}"
+    ]
     for name, m in result["methods"].items():
         rm = ", ".join("-" if r is None else f"{r:.3g}" for r in m["rmse"])
-        sl = "-" if m["slope"] is None else (f"{m['slope']:.2f} [{m['slope_ci'][0]:.2f}, "
-                                             f"{m['slope_ci'][1]:.2f}]")  # fmt: skip
+        sl = (
+            "-"
+            if m["slope"] is None
+            else (f"{m['slope']:.2f} [{m['slope_ci'][0]:.2f}, {m['slope_ci'][1]:.2f}]")
+        )
         cov = ""
         if m["coverage"]:
             c = m["coverage"][-1]
-            cov = (f"; coverage at the largest N {c['covered']}/{c['n']}, NEES "
-                   f"{c['nees']:.1f}" if c else "")  # fmt: skip
-        lines.append(f"{name}: RMSE [1/s] at {','.join(f'{d:g}' for d in m['durations'])} s: "
-                     f"{rm}; slope {sl}{cov}; refused {m['refused']['count']}/"
-                     f"{m['refused']['of']}")  # fmt: skip
+            nees = "-" if not c or c["nees"] is None else f"{c['nees']:.1f}"
+            cov = (
+                f"; coverage at the largest N {c['covered']}/{c['n']}, NEES {nees} "
+                f"({4 * len(s['speeds'])} if the SEs are right)"
+                if c
+                else ""
+            )
+        lines.append(
+            f"{name}: RMSE [1/s] at {','.join(f'{d:g}' for d in m['durations'])} s: "
+            f"{rm}; slope {sl}{cov}; refused {m['refused']['count']}/"
+            f"{m['refused']['of']}"
+        )
         lines.append(f"  verdict: {m['verdict']}: {m['verdict_detail']['reason']}")
     return "\n".join(lines)

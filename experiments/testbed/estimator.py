@@ -118,8 +118,10 @@ def _load(spec: str) -> Callable[..., Any]:
     try:
         module = importlib.import_module(mod)
     except ImportError as exc:
-        raise InputError(f"estimator {spec!r}: cannot import {mod!r} ({exc}); run from its "
-                         "folder or put that folder on PYTHONPATH") from None  # fmt: skip
+        raise InputError(
+            f"estimator {spec!r}: cannot import {mod!r} ({exc}); run from its "
+            "folder or put that folder on PYTHONPATH"
+        ) from None
     f = getattr(module, fn, None)
     if not callable(f):
         raise InputError(f"estimator {spec!r}: {mod} has no function {fn!r}")
@@ -150,8 +152,9 @@ class Estimator:
             self.name = name or getattr(spec, "__name__", "estimator")
             return
         if not isinstance(spec, str) or not spec.strip():
-            raise InputError(f"estimator {spec!r}: give a method name, module:function or a "
-                             "callable")  # fmt: skip
+            raise InputError(
+                f"estimator {spec!r}: give a method name, module:function or a callable"
+            )
         text = spec.strip()
         self.name = name or text
         from bikeid.ident import methods
@@ -166,9 +169,11 @@ class Estimator:
             self.kind = "module"
             _load(text)  # refuse now, one line, not on every seed
         else:
-            raise InputError(f"estimator {text!r}: give one of {', '.join(methods.names())} "
-                             f"(settings as NAME:KEY=VALUE), a peer ({', '.join(PEERS)}), "
-                             "module:function or a callable")  # fmt: skip
+            raise InputError(
+                f"estimator {text!r}: give one of {', '.join(methods.names())} "
+                f"(settings as NAME:KEY=VALUE), a peer ({', '.join(PEERS)}), "
+                "module:function or a callable"
+            )
 
     def __repr__(self) -> str:
         return f"Estimator({self.name!r})"
@@ -201,8 +206,9 @@ class Estimator:
         fn = self.spec if self.kind == "callable" else _load(str(self.spec))
         return fn(list(runs), context)  # type: ignore[operator]
 
-    def estimate(self, runs: Sequence[Any], context: Context,
-                 truth: Mapping[float, np.ndarray]) -> dict[float, dict[str, Any]]:  # fmt: skip
+    def estimate(
+        self, runs: Sequence[Any], context: Context, truth: Mapping[float, np.ndarray]
+    ) -> dict[float, dict[str, Any]]:
         """Fit and reduce to :data:`COMPONENTS` per speed, with interval figures if any.
 
         Parameters
@@ -262,8 +268,10 @@ def _eigenvalues(out: Any, speed: float) -> np.ndarray:
         v = speed if isinstance(m, SpeedDependentModel) else None
         if v is None and getattr(m, "speed", speed) is not None:
             if abs(float(getattr(m, "speed", speed)) - speed) > 1e-6:
-                raise InputError(f"the estimator's model is at {m.speed:g} m/s, not "  # type: ignore[attr-defined]
-                                 f"{speed:g} m/s; return one per speed")  # fmt: skip
+                raise InputError(
+                    f"the estimator's model is at {m.speed:g} m/s, not "  # type: ignore[attr-defined]
+                    f"{speed:g} m/s; return one per speed"
+                )
         return np.asarray(m.eigenvalues(v), complex)
     A = getattr(m, "A", None)
     if A is not None:  # control.StateSpace
@@ -274,8 +282,10 @@ def _eigenvalues(out: Any, speed: float) -> np.ndarray:
         if dt is True:
             raise InputError("the estimator returned a discrete StateSpace without its dt")
         return lam
-    raise InputError(f"the estimator returned {type(m).__name__}; return a LinearModel, a "
-                     "control.StateSpace or a mapping speed -> one of these")  # fmt: skip
+    raise InputError(
+        f"the estimator returned {type(m).__name__}; return a LinearModel, a "
+        "control.StateSpace or a mapping speed -> one of these"
+    )
 
 
 def _intervals(out: Any, level: float) -> dict[float, Any] | None:
@@ -286,8 +296,11 @@ def _intervals(out: Any, level: float) -> dict[float, Any] | None:
             return None
         from bikeid.ident.uncertainty import eigenvalue_intervals
 
-        return {v: eigenvalue_intervals(m, level=level, method="delta")
-                for v, m in out.interval_models.items() if m is not None}  # fmt: skip
+        return {
+            v: eigenvalue_intervals(m, level=level, method="delta")
+            for v, m in out.interval_models.items()
+            if m is not None
+        }
     f = getattr(out, "eigenvalue_intervals", None)
     if not callable(f):
         return None
@@ -304,13 +317,15 @@ def _nfoursid(run) -> Any:
         import pandas as pd
         from nfoursid.nfoursid import NFourSID
     except ImportError:
-        raise InputError("estimator 'nfoursid' needs the bench extra: pip install "
-                         "'bikeid[bench]'") from None  # fmt: skip
+        raise InputError(
+            "estimator 'nfoursid' needs the bench extra: pip install 'bikeid[bench]'"
+        ) from None
     import control
 
     frame = pd.DataFrame({k: np.asarray(run[k]) for k in ("T_delta", "phi", "delta")})
-    n4 = NFourSID(frame, output_columns=["phi", "delta"], input_columns=["T_delta"],
-                  num_block_rows=40)  # fmt: skip
+    n4 = NFourSID(
+        frame, output_columns=["phi", "delta"], input_columns=["T_delta"], num_block_rows=40
+    )
     n4.subspace_identification()
     ss, _ = n4.system_identification(rank=4)
     return control.ss(ss.a, ss.b, ss.c, ss.d, run.dt)

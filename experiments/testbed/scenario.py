@@ -121,8 +121,10 @@ class Scenario:
                 raise InputError(f"{name}={v!r}: give a whole number >= {low}")
             object.__setattr__(self, name, int(v))
         if self.plant == "nonlinear" and (self.disturbance or self.roll_torque):
-            raise InputError("the nonlinear plant models no process noise: give "
-                             "disturbance=0 and roll_torque=0, or plant='linear'")  # fmt: skip
+            raise InputError(
+                "the nonlinear plant models no process noise: give "
+                "disturbance=0 and roll_torque=0, or plant='linear'"
+            )
 
     @property
     def against(self) -> str:
@@ -205,22 +207,40 @@ def closed_loop_run(scenario: Scenario, speed: float, duration: float, seed: int
         from bikeid.dataset.linear_loop import simulate
 
         return simulate(
-            p, float(speed), duration=float(duration), controller=controller, seed=int(seed),
-            dither=scenario.dither, dither_hold=scenario.dither_hold,
-            disturbance=scenario.disturbance, roll_torque=scenario.roll_torque,
-            angle_noise=scenario.angle_noise, rate_noise=scenario.rate_noise,
-        )  # fmt: skip
+            p,
+            float(speed),
+            duration=float(duration),
+            controller=controller,
+            seed=int(seed),
+            dither=scenario.dither,
+            dither_hold=scenario.dither_hold,
+            disturbance=scenario.disturbance,
+            roll_torque=scenario.roll_torque,
+            angle_noise=scenario.angle_noise,
+            rate_noise=scenario.rate_noise,
+        )
     from bikeid.controllers import UniformDither
     from bikeid.dataset.closed_loop import simulate_run
     from bikeid.dataset.sensors import ANGLES, RATES, Channel, Sensors
 
     chans = {n: Channel(std=scenario.angle_noise) for n in ANGLES}
     chans.update({n: Channel(std=scenario.rate_noise) for n in RATES})
-    dither = UniformDither(scenario.dither, hold=scenario.dither_hold * scenario.sample_time,
-                           seed=int(seed), max_amplitude=max(1.0, scenario.dither))  # fmt: skip
-    return simulate_run(p, controller, float(speed), float(duration), dither=dither,
-                        sensors=Sensors(chans, 1.0 / scenario.sample_time), seed=int(seed),
-                        plant="nonlinear")  # fmt: skip
+    dither = UniformDither(
+        scenario.dither,
+        hold=scenario.dither_hold * scenario.sample_time,
+        seed=int(seed),
+        max_amplitude=max(1.0, scenario.dither),
+    )
+    return simulate_run(
+        p,
+        controller,
+        float(speed),
+        float(duration),
+        dither=dither,
+        sensors=Sensors(chans, 1.0 / scenario.sample_time),
+        seed=int(seed),
+        plant="nonlinear",
+    )
 
 
 def true_modes(scenario: Scenario) -> dict[float, np.ndarray]:
@@ -250,8 +270,9 @@ def true_modes(scenario: Scenario) -> dict[float, np.ndarray]:
     for v in scenario.speeds:
         m = table[round(v, 6)]
         if set(m) != {"weave", "capsize", "caster"}:
-            raise InputError(f"at {v:g} m/s {scenario.bicycle} has modes {sorted(m)}, not a "
-                             "weave pair, capsize and caster; choose another speed")  # fmt: skip
+            raise InputError(
+                f"at {v:g} m/s {scenario.bicycle} has modes {sorted(m)}, not a "
+                "weave pair, capsize and caster; choose another speed"
+            )
         out[v] = np.array([m["weave"], np.conj(m["weave"]), m["capsize"], m["caster"]])
     return out
-
