@@ -260,17 +260,17 @@ def _truth_vec(truth: np.ndarray) -> np.ndarray:
 
 
 def _slope(logn: np.ndarray, errs: list[np.ndarray]) -> tuple[float, list[float]]:
-    """Least-squares slope of log RMSE on log N and its 95 % seed-bootstrap interval."""
-    rmse = np.array([math.sqrt(np.mean(np.sum(e**2, axis=1))) for e in errs])
-    slope = float(np.polyfit(logn, np.log(rmse), 1)[0])
+    """Least-squares slope of log RMSE on log N and its 95 % seed-bootstrap interval
+    (seeds resampled with replacement within each length, :data:`BOOTSTRAP` times)."""
+    x = logn - logn.mean()
+    sq = [np.sum(e**2, axis=1) for e in errs]  # squared error norm per seed
+    y = np.log([math.sqrt(np.mean(q)) for q in sq])
+    slope = float(x @ (y - y.mean()) / (x @ x))
     rng = np.random.default_rng(BOOTSTRAP_SEED)
-    boots = np.empty(BOOTSTRAP)
-    for b in range(BOOTSTRAP):
-        r = []
-        for e in errs:
-            sel = e[rng.integers(0, len(e), len(e))]
-            r.append(math.sqrt(np.mean(np.sum(sel**2, axis=1))))
-        boots[b] = np.polyfit(logn, np.log(r), 1)[0]
+    yb = np.column_stack(
+        [np.log(np.sqrt(q[rng.integers(0, len(q), (BOOTSTRAP, len(q)))].mean(axis=1))) for q in sq]
+    )
+    boots = (yb - yb.mean(axis=1, keepdims=True)) @ x / (x @ x)
     return slope, [float(np.quantile(boots, 0.025)), float(np.quantile(boots, 0.975))]
 
 
@@ -285,21 +285,30 @@ def hotelling(errors: np.ndarray) -> tuple[float, float, float]:
     Returns
     -------
     t2 : float
-        n m' S^-1 m (m the mean, S the sample covariance).
+        n m' S^-1 m (m the mean, S the sample covariance).  A component that does not
+        vary over the seeds (a fixed model) but has a non-zero mean gives infinity; one
+        that does not vary and is zero is left out.
     p_value : float
-        From (n - p) T^2 / (p (n - 1)) ~ F(p, n - p).
-    critical : float
-        The T^2 a test at :data:`ALPHA` would need (per speed Bonferroni applied by the
-        caller through ``alpha``): returned at level ALPHA.
+        From (n - q) T^2 / (q (n - 1)) ~ F(q, n - q), q the components kept.
+    scale : float
+        q (n - 1) / (n - q): T^2 = scale * F.
     """
     from scipy.stats import f as fdist
 
-    n, p = errors.shape
+    n = errors.shape[0]
     m = errors.mean(axis=0)
-    S = np.cov(errors, rowvar=False, ddof=1)
+    sd = errors.std(axis=0, ddof=1)
+    flat = sd <= 1e-12 * np.maximum(np.abs(errors).max(axis=0), 1e-300)
+    if np.any(flat & (np.abs(m) > 0)):
+        return math.inf, 0.0, math.nan
+    e, m = errors[:, ~flat], m[~flat]
+    q = e.shape[1]
+    if q == 0:
+        return 0.0, 1.0, math.nan
+    S = np.atleast_2d(np.cov(e, rowvar=False, ddof=1))
     t2 = float(n * m @ np.linalg.solve(S, m))
-    scale = p * (n - 1) / (n - p)
-    return t2, float(fdist.sf(t2 / scale, p, n - p)), scale
+    scale = q * (n - 1) / (n - q)
+    return t2, float(fdist.sf(t2 / scale, q, n - q)), scale
 
 
 def summarize(
@@ -384,7 +393,7 @@ def summarize(
         for d in durs
     ]
     logn = np.log(np.array(durs) / scenario.sample_time)
-    ok = [d for d in durs if len(errs[d]) >= 2]
+    ok = [d for d in durs if len(errs[d]) >= 2 and np.any(errs[d])]
     if len(ok) >= 2:
         out["slope"], out["slope_ci"] = _slope(
             logn[[durs.index(d) for d in ok]], [errs[d] for d in ok]
@@ -480,8 +489,8 @@ def verdict(fig: dict[str, Any], last: np.ndarray, scenario: Scenario) -> tuple[
         det["t2"], det["p_value"], det["smallest_detectable_bias"] = {}, {}, {}
         for k, v in enumerate(scenario.speeds):
             e = last[:, 4 * k : 4 * k + 4]
-            t2, pv, scale = hotelling(e)
-            crit = scale * float(fdist.isf(alpha, 4, n - 4))
+            t2, pv, _ = hotelling(e)
+            crit = 4 * (n - 1) / (n - 4) * float(fdist.isf(alpha, 4, n - 4))
             sd = e.std(0, ddof=1)
             det["t2"][f"{v:g}"], det["p_value"][f"{v:g}"] = t2, pv
             det["smallest_detectable_bias"][f"{v:g}"] = {
@@ -519,6 +528,9 @@ def verdict(fig: dict[str, Any], last: np.ndarray, scenario: Scenario) -> tuple[
             f"error at the largest N (p = {worst:.2g} < {alpha:.2g}){tail}"
         )
         return "biased", det
+    if fig["slope"] is None:
+        det["reason"] = f"no slope: fewer than 2 lengths with non-zero errors{tail}"
+        return "inconclusive", det
     slope, (lo, hi) = fig["slope"], fig["slope_ci"]
     if hi < SLOPE_BOUND:
         det["reason"] = (
