@@ -157,6 +157,9 @@ def scenarios(
     n_speeds: int = 1,
     durations: Sequence[float] = (25.0, 50.0, 100.0),
     seeds: int = 8,
+    speed_range: tuple[float, float] = (3.0, 8.0),
+    dither_range: tuple[float, float] = (1.0, 3.0),
+    first_seeds: tuple[int, int] = (0, 10_000),
     **fixed: Any,
 ):
     """Closed-loop scenarios for a consistency property test.
@@ -173,6 +176,10 @@ def scenarios(
         Record lengths [s] of every scenario.
     seeds : int, optional
         Seeds per length (the verdict needs >= 8).
+    speed_range, dither_range : tuple of float, optional
+        Ranges of :func:`speeds` [m/s] and :func:`dither_levels` [N m].
+    first_seeds : tuple of int, optional
+        Range of the first seed (``(0, 0)``: seeds 0.. every time).
     **fixed
         Other :class:`~bikeid.experiments.testbed.scenario.Scenario` fields, fixed (e.g.
         ``disturbance=0.5``, ``plant="linear"``).
@@ -190,13 +197,15 @@ def scenarios(
 
     @st.composite
     def draw(draw_):
-        vs = draw_(st.lists(speeds(), min_size=n_speeds, max_size=n_speeds, unique=True))
+        vs = draw_(
+            st.lists(speeds(*speed_range), min_size=n_speeds, max_size=n_speeds, unique=True)
+        )
         return Scenario(
             bicycle=draw_(st.sampled_from(tuple(bicycle_names))),
             controller=draw_(controllers(controller_names)),
-            speeds=tuple(sorted(vs)), dither=draw_(dither_levels()),
+            speeds=tuple(sorted(vs)), dither=draw_(dither_levels(*dither_range)),
             durations=tuple(durations), seeds=n_seeds,
-            first_seed=draw_(st.integers(0, 10_000)), **fixed,
+            first_seed=draw_(st.integers(*first_seeds)), **fixed,
         )  # fmt: skip
 
     return draw()

@@ -10,20 +10,24 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import Any
 
 from bikeid.experiments.cli.args import MAX_WORKERS, dump_json, integer, number
 from bikeid.experiments.parallel import DASK_HELP
 
 
-def _list(kind, what: str):
-    def parse(text: str):
+def _list(kind: Callable[[str], Any], what: str) -> Callable[[str], list]:
+    """An argparse ``type=``: comma-separated items, each checked by ``kind``, none twice."""
+
+    def parse(text: str) -> list:
         items = [t.strip() for t in str(text).split(",") if t.strip()]
         if not items:
             raise argparse.ArgumentTypeError(f"give one or more comma-separated {what}")
-        try:
-            return [kind(t) for t in items]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated {what}") from None
+        out = [kind(t) for t in items]  # kind raises ArgumentTypeError naming the item
+        if len(set(out)) != len(out):
+            raise argparse.ArgumentTypeError(f"{text!r}: give each of the {what} once")
+        return out
 
     parse.__name__ = what
     return parse
@@ -65,14 +69,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--speeds",
-        type=_list(float, "speeds [m/s]"),
+        type=_list(number(0.1, 30.0, unit="m/s"), "speeds [m/s]"),
         default=[DEFAULTS["speed"]],
         metavar="V,...",
         help="speeds [m/s] fitted together (default 5)",
     )
     p.add_argument(
         "--durations",
-        type=_list(float, "lengths [s]"),
+        type=_list(number(0.5, 36000.0, unit="s"), "lengths [s]"),
         default=[25.0, 100.0, 400.0],
         metavar="T,...",
         help="record lengths [s] (default 25,100,400)",

@@ -23,7 +23,7 @@ from bikeid.ident.validate import resid
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import canonical_matrices, eigenvalues
 from bikeid.sim.parameters import benchmark
-from bikeid.testing import bicycles, seeds, speeds
+from bikeid.testing import bicycles, scenarios, seeds, speeds
 
 BASE = benchmark()
 FAST = settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -163,30 +163,40 @@ def test_t7_open_loop_subspace_biased_pem_not(seed):
     assert pem.fit(r).eigenvalues().real.max() > 0
 
 
-@pytest.mark.slow
-@SLOW
-@given(seed=seeds())
-def test_t8_pem_consistency(seed):
-    """T8 (F1): innovations-model PEM on closed-loop data with process and sensor
-    noise: errors within 5 standard errors at N = 10k and 40k and the standard errors
-    shrink like 1/sqrt(N) (ratio 2 +- 25 %); output-error PEM (K = 0) on the same kind
-    of data at a stable speed is biased (Mahalanobis distance > 10x the chi2_10
-    99.9 % point 29.6).  Started at the truth: consistency concerns the minimizer
-    near it; local minima are a separate matter (see docs)."""
-    kw = dict(seed=seed, dither=1.0, dither_hold=5, disturbance=0.5, angle_noise=1e-3,
-              rate_noise=1e-2)  # fmt: skip
-    v = 5.0
-    true = theta_from_matrices(canonical_matrices(BASE), v)
-    se = []
-    for T in (100, 400):
-        m = pem.fit(simulate(BASE, v, duration=T, **kw), theta0=true)
-        s = np.sqrt(np.diag(m.covariance))
-        assert np.all(np.abs(m.theta - true) < 5 * s)
-        se.append(s)
-    assert np.median(se[0] / se[1]) == pytest.approx(2.0, rel=0.25)
-    oe = pem.fit(simulate(BASE, v, duration=400, **kw), theta0=true, noise_model="none")
-    d = oe.theta - true
-    assert d @ np.linalg.solve(oe.covariance, d) > 296
+def pem_at_truth(runs, context):
+    """Innovations-model PEM per run, started at the truth (T8)."""
+    return {r.speed: pem.fit(r, theta0=_truth(context, r.speed), multistart=False) for r in runs}
+
+
+def oe_at_truth(runs, context):
+    """Output-error PEM (K = 0) per run, started at the truth (T8)."""
+    return {r.speed: pem.fit(r, theta0=_truth(context, r.speed), multistart=False,
+                             noise_model="none") for r in runs}  # fmt: skip
+
+
+def _truth(context, v):
+    return theta_from_matrices(canonical_matrices(context.bicycle), v)
+
+
+@pytest.mark.slow  # 2 x 24 PEM fits of 25-100 s: 39 s of CPU measured under load
+@settings(max_examples=1, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenario=scenarios(durations=(25.0, 50.0, 100.0), seeds=8, speed_range=(5.0, 5.0),
+                          dither_range=(1.0, 1.0), first_seeds=(0, 0)))  # fmt: skip
+def test_t8_pem_consistency(scenario):
+    """T8 (F1), as a consistency study of :mod:`bikeid.testing`: innovations-model PEM on
+    closed-loop data with process (0.5 N m) and sensor noise is not biased (Hotelling T^2 at
+    100 s does not reject at 0.01) and its RMSE falls with N (slope below -0.25; measured
+    -0.67 [-0.99, -0.08] at seeds 0-7: 8 seeds over lengths 25-100 s cannot narrow the
+    interval below -0.25, so the verdict is ``inconclusive`` rather than ``consistent``;
+    the full-size study in docs/consistency.md gives the verdict); output-error PEM on the
+    same data is ``biased`` (measured T^2 = 2.6e4, p = 2e-7).  Both started at the truth:
+    consistency concerns the minimizer near it; local minima are a separate matter."""
+    from bikeid.testing import assert_verdict
+
+    res = assert_verdict(("consistent with 1/sqrt(N)", "inconclusive"), pem_at_truth, scenario)
+    assert min(res["verdict_detail"]["p_value"].values()) > 0.01
+    assert res["slope"] < -0.25
+    assert_verdict("biased", oe_at_truth, scenario)
 
 
 @FAST

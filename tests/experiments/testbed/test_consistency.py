@@ -112,6 +112,17 @@ def test_verdicts_of_known_estimators(fn, verdict):
         assert set(sdb) == {"weave_re", "weave_im", "capsize", "caster"}
 
 
+def test_assert_consistent_passes_and_fails():
+    """``bikeid.testing.assert_consistent`` passes the estimator the study calls consistent
+    and raises AssertionError naming the verdict for the biased one (same fixed seeds as
+    :func:`test_verdicts_of_known_estimators`)."""
+    from bikeid.testing import assert_consistent
+
+    assert assert_consistent(shrinking, SMALL)["verdict"] == CONSISTENT
+    with pytest.raises(AssertionError, match="offset: biased"):
+        assert_consistent(offset, SMALL)
+
+
 def test_too_few_seeds_or_lengths_is_inconclusive():
     """7 seeds (< 8) of the estimator the full study calls consistent: inconclusive, and 8
     seeds named as what settles it; likewise 2 lengths."""
