@@ -183,6 +183,7 @@ def run_consistency(
     if len(set(names)) != len(names):
         raise InputError(f"estimator names {names}: give each once (name= to tell them apart)")
     truth = true_modes(scenario)  # refuses a speed without the three modes, up front
+    _context(scenario, level)  # and an unknown bicycle or controller
     uploads = _uploads(ests, dask)
     kinds: list[tuple[str, Any]] = [(e.name, e) for e in ests]
     if efficiency:
