@@ -290,7 +290,9 @@ def hotelling(errors: np.ndarray) -> tuple[float, float, float]:
         vary over the seeds (a fixed model) but has a non-zero mean gives infinity; one
         that does not vary and is zero is left out.
     p_value : float
-        From (n - q) T^2 / (q (n - 1)) ~ F(q, n - q), q the components kept.
+        From (n - q) T^2 / (q (n - 1)) ~ F(q, n - q), q the components kept (the rank of
+        the sample covariance: collinear errors are tested in its range; a mean error
+        outside it, where the errors never vary, gives infinity).
     scale : float
         q (n - 1) / (n - q): T^2 = scale * F.
     """
@@ -307,7 +309,15 @@ def hotelling(errors: np.ndarray) -> tuple[float, float, float]:
     if q == 0:
         return 0.0, 1.0, math.nan
     S = np.atleast_2d(np.cov(e, rowvar=False, ddof=1))
-    t2 = float(n * m @ np.linalg.solve(S, m))
+    w, V = np.linalg.eigh(S)  # a singular S (collinear errors): the test in its range
+    keep = w > 1e-12 * w.max()
+    proj = V.T @ m
+    if np.any(np.abs(proj[~keep]) > 1e-9 * np.linalg.norm(m)):
+        return math.inf, 0.0, math.nan  # a mean error where the errors never vary
+    q = int(keep.sum())
+    if q >= n:
+        return math.nan, math.nan, math.nan  # too few seeds for this many components
+    t2 = float(n * np.sum(proj[keep] ** 2 / w[keep]))
     scale = q * (n - 1) / (n - q)
     return t2, float(fdist.sf(t2 / scale, q, n - q)), scale
 

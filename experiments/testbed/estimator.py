@@ -19,8 +19,9 @@ indirect and two-stage methods).  It returns a
 ``control.StateSpace`` (continuous, or discrete with its dt: eigenvalues log(z)/dt), an
 :class:`~bikeid.ident.methods.Identified`, or a mapping speed -> one of these.  If the
 returned object has ``eigenvalue_intervals(level)`` (giving, per speed or for its one
-speed, an object with ``values`` and ``std_real``, ``std_imag`` [1/s]) the study counts how
-often its intervals contain the truth.
+speed, an object with ``values`` and ``std_real``, ``std_imag`` [1/s]), or is a canonical
+PEM model (or a mapping of them) with its covariance, the study counts how often its
+first-order intervals contain the truth.
 
 :meth:`Estimator.estimate` reduces whatever came back to the four figures the studies
 score per speed, :data:`COMPONENTS`: the weave's real and imaginary part and the capsize
@@ -301,6 +302,18 @@ def _intervals(out: Any, level: float) -> dict[float, Any] | None:
             for v, m in out.interval_models.items()
             if m is not None
         }
+    from bikeid.ident.pem import CanonicalModel
+
+    if isinstance(out, CanonicalModel) or (
+        isinstance(out, Mapping)
+        and out
+        and all(isinstance(m, CanonicalModel) for m in out.values())
+    ):  # canonical models carry their covariance: first-order intervals
+        from bikeid.ident.uncertainty import eigenvalue_intervals
+
+        models = out if isinstance(out, Mapping) else {out.speed: out}
+        return {float(v): eigenvalue_intervals(m, level=level, method="delta")
+                for v, m in models.items()}  # fmt: skip
     f = getattr(out, "eigenvalue_intervals", None)
     if not callable(f):
         return None
