@@ -33,6 +33,8 @@ def plot_consistency(studies: list[dict[str, Any]], path: str | Path) -> Path:
     Path
         The file written.
     """
+    from matplotlib.ticker import NullFormatter
+
     from bikeid.experiments.plots import plt, save
 
     fig, axes = plt.subplots(len(studies), 2, figsize=(10, 3.6 * len(studies)), squeeze=False)
@@ -51,6 +53,10 @@ def plot_consistency(studies: list[dict[str, Any]], path: str | Path) -> Path:
         if starts:
             r0, n = min(starts, key=lambda s: s[0])
             ax.loglog(n, r0 * np.sqrt(n[0] / n), "k--", label="slope -1/2")
+        n_all = np.array(st["scenario"]["durations"]) / dt
+        for a in (ax, axc):  # ticks at the lengths studied, no crowded minor labels
+            a.set_xticks(n_all, [f"{x:g}" for x in n_all])
+            a.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("samples N")
         ax.set_ylabel("RMSE of the eigenvalue errors [1/s]")
         ax.set_title(f"{st.get('controller', '')}: against {st['against']}")

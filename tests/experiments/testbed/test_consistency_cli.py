@@ -61,10 +61,13 @@ def test_several_controllers_give_a_list_of_studies(tmp_path, monkeypatch, capsy
     (tmp_path / "usermod.py").write_text(USER)
     monkeypatch.chdir(tmp_path)
     monkeypatch.syspath_prepend(str(tmp_path))
-    argv = ["consistency", "--methods", "usermod:wrong", "--controller", "pid,pole", *ARGS]
+    fig = tmp_path / "study.png"
+    argv = ["consistency", "--methods", "usermod:wrong", "--controller", "pid,pole", *ARGS,
+            "--plot", str(fig)]  # fmt: skip
     assert main(argv) == 0
     res = json.loads(capsys.readouterr().out)
     assert [s["controller"] for s in res["studies"]] == ["pid", "pole"]
+    assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # one figure, a row per study
     assert all(s["methods"]["usermod:wrong"]["verdict"] == "biased" for s in res["studies"])
 
 
