@@ -136,7 +136,7 @@ def dither_levels(low: float = 1.0, high: float = 3.0):
 
 
 def seeds(high: int = 999):
-    """Seeds 0..``high``.
+    """Seeds from 0 to ``high``.
 
     Parameters
     ----------
