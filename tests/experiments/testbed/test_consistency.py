@@ -26,6 +26,21 @@ from bikeid.sim.errors import InputError
 
 #: 12 seeds at lengths 1, 4, 16 s (N = 100, 400, 1600): a synthetic study costs < 1 s.
 SMALL = Scenario(speeds=(5.0,), durations=(1.0, 4.0, 16.0), seeds=12)
+_RUNS: dict = {}
+_simulate = Scenario.runs
+
+
+@pytest.fixture(autouse=True)
+def _shared_runs(monkeypatch):
+    """The synthetic studies share their simulated runs (read only) within this file."""
+
+    def runs(self, duration, seed):
+        key = (self, duration, seed)
+        if key not in _RUNS:
+            _RUNS[key] = _simulate(self, duration, seed)
+        return _RUNS[key]
+
+    monkeypatch.setattr(Scenario, "runs", runs)
 
 
 def _rng(run) -> np.random.Generator:
