@@ -62,13 +62,17 @@ def test_several_controllers_give_a_list_of_studies(tmp_path, monkeypatch, capsy
     monkeypatch.chdir(tmp_path)
     monkeypatch.syspath_prepend(str(tmp_path))
     fig = tmp_path / "study.png"
-    argv = ["consistency", "--methods", "usermod:wrong", "--controller", "pid,pole", *ARGS,
+    few = ["--speeds", "5", "--durations", "1,2,4", "--seeds", "2", "--no-efficiency", "--json"]
+    argv = ["consistency", "--methods", "usermod:wrong", "--controller", "pid,pole", *few,
             "--plot", str(fig)]  # fmt: skip
     assert main(argv) == 0
     res = json.loads(capsys.readouterr().out)
     assert [s["controller"] for s in res["studies"]] == ["pid", "pole"]
     assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # one figure, a row per study
-    assert all(s["methods"]["usermod:wrong"]["verdict"] == "biased" for s in res["studies"])
+    for s in res["studies"]:  # 2 seeds: too few for a verdict, and said so
+        m = s["methods"]["usermod:wrong"]
+        assert m["verdict"] == "inconclusive"
+        assert m["rmse"] == pytest.approx([(3 * 0.2**2) ** 0.5] * 3, rel=1e-9)
 
 
 @pytest.mark.parametrize(
