@@ -143,7 +143,7 @@ class Scenario:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     def seed_list(self) -> list[int]:
-        """The seeds: ``first_seed .. first_seed + seeds - 1``.
+        """The seeds, from ``first_seed`` to ``first_seed + seeds - 1``.
 
         Returns
         -------
