@@ -26,7 +26,7 @@ The function run on the workers must be picklable: a module-level function, or a
 from __future__ import annotations
 
 import uuid
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 from bikeid.sim.errors import InputError
@@ -82,6 +82,7 @@ def imap(
     workers: int = 1,
     dask: str | None = None,
     ordered: bool = False,
+    upload: Sequence[str] = (),
 ) -> Iterator[tuple[int, Any]]:
     """``fn(job)`` for every job, yielded as ``(index, result)``.
 
@@ -98,6 +99,9 @@ def imap(
         ``"local"`` or a Dask scheduler address; None (default): local processes.
     ordered : bool, optional
         Yield in job order (results that finish early wait) instead of completion order.
+    upload : sequence of str, optional
+        Python files the Dask workers must import (``Client.upload_file``: a user's module
+        named by ``module:function``); local processes import them from ``sys.path``.
 
     Yields
     ------
@@ -115,7 +119,7 @@ def imap(
     workers = check_workers(workers)
     jobs = list(jobs)
     if dask:
-        source = _dask(fn, jobs, workers, str(dask))
+        source = _dask(fn, jobs, workers, str(dask), tuple(upload))
     elif workers == 1 or len(jobs) <= 1:
         source = ((i, fn(job)) for i, job in enumerate(jobs))
     else:
@@ -178,7 +182,8 @@ def _processes(fn, jobs: list, workers: int) -> Iterator[tuple[int, Any]]:
             raise
 
 
-def _dask(fn, jobs: list, workers: int, address: str) -> Iterator[tuple[int, Any]]:
+def _dask(fn, jobs: list, workers: int, address: str,
+          upload: tuple[str, ...] = ()) -> Iterator[tuple[int, Any]]:  # fmt: skip
     # lazy: distributed is an optional dependency (the dask extra), needed only with --dask
     try:
         from distributed import Client, LocalCluster
@@ -200,6 +205,8 @@ def _dask(fn, jobs: list, workers: int, address: str) -> Iterator[tuple[int, Any
                 "start one (dask scheduler) or use --dask local"
             ) from None
     try:
+        for path in upload:  # a user's module: on every worker's path before any job
+            client.upload_file(path)
         # unique keys: a long-lived cluster must never hand back another call's result
         tag = f"bikeid-{_name(fn)}-{uuid.uuid4().hex[:12]}"
         futures = [

@@ -64,7 +64,10 @@ __all__ = [
     "Identified",
     "Method",
     "ModelCodec",
+    "PRESETS",
     "PemSettings",
+    "Preset",
+    "Resolved",
     "Target",
     "check_informativity",
     "fit_direct",
@@ -73,6 +76,8 @@ __all__ = [
     "method",
     "model_codecs",
     "model_kinds",
+    "names",
+    "resolve",
     "split_free",
 ]
 
@@ -1087,3 +1092,149 @@ def model_kinds() -> dict[str, type]:
         E.g. ``{"canonical-pem": CanonicalModel, ..., "direct": DirectResult}``.
     """
     return {k: c for m in METHODS.values() for k, c in zip(m.kinds, m.model_classes, strict=True)}
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A named setting of a method of the table, usable wherever a method name is.
+
+    Attributes
+    ----------
+    name : str
+        The preset's name (``bikeid identify accuracy`` row, consistency study estimator).
+    method : str
+        The :data:`METHODS` entry it runs.
+    options : mapping
+        Settings options (``Method.settings``), e.g. ``{"preset": "moore-hubbard"}``.
+    description : str
+        One line: what the preset estimates.
+    """
+
+    name: str
+    method: str
+    options: Mapping[str, Any]
+    description: str
+
+
+#: Named presets of the table's methods.  ``direct_ls`` is Moore & Hubbard's own estimator
+#: as published (ordinary least squares, central differences of the 15 Hz low-passed rates,
+#: :data:`DIRECT_PRESETS` ``"moore-hubbard"``): the accuracy table's row beside its IV
+#: ``direct``.
+PRESETS: dict[str, Preset] = {
+    "direct_ls": Preset(
+        "direct_ls", "direct", {"preset": "moore-hubbard"},
+        "Moore & Hubbard's least squares as published (central differences, 15 Hz)",
+    ),
+}  # fmt: skip
+
+
+def names() -> tuple[str, ...]:
+    """Every name the table answers to: each method followed by its presets.
+
+    Returns
+    -------
+    tuple of str
+        :data:`METHODS` keys in table order, each followed by the :data:`PRESETS` of that
+        method (e.g. ``("pem", "greybox", "direct", "direct_ls")``); read at call time, so
+        an entry added to either table appears in every list built from it.
+    """
+    out: list[str] = []
+    for m in METHODS:
+        out.append(m)
+        out += [k for k, p in PRESETS.items() if p.method == m]
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """A method name or preset with its settings, ready to fit.
+
+    Attributes
+    ----------
+    label : str
+        The text it was resolved from (``"pem:noise_model=none"``), the name in reports.
+    method : Method
+        The table entry.
+    settings : DirectSettings, PemSettings or GreyboxSettings
+        The settings (preset options, then the text's overrides).
+    """
+
+    label: str
+    method: Method
+    settings: Any
+
+    def fit(self, runs: Sequence[Run], **kw: Any) -> Identified:
+        """``method.fit(runs, settings, **kw)``.
+
+        Parameters
+        ----------
+        runs : sequence of Run
+            The runs.
+        **kw
+            Keyword arguments of :attr:`Method.fit` (``reference``, ``free``, ...).
+
+        Returns
+        -------
+        Identified
+            The fit.
+        """
+        return self.method.fit(list(runs), self.settings, **kw)
+
+
+def _value(text: str) -> Any:
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low == "null":
+        return None
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+def resolve(spec: str) -> Resolved:
+    """A method from its name, a preset, or either with settings: ``NAME[:KEY=VALUE]...``.
+
+    Parameters
+    ----------
+    spec : str
+        E.g. ``"pem"``, ``"direct_ls"``, ``"pem:noise_model=none"``,
+        ``"direct:iv=lagged:lags=2"``.  Values ``true``/``false`` are booleans, ``null``
+        is None (``iv=null``: least squares), numbers are numbers, anything else a string.
+
+    Returns
+    -------
+    Resolved
+        The method and its settings (checked by the settings dataclass).
+
+    Raises
+    ------
+    InputError
+        Naming the known names if the name is unknown, the method's settings if a key is
+        not one, or the bad value.
+    """
+    name, *pairs = str(spec).strip().split(":")
+    if name in PRESETS:
+        preset = PRESETS[name]
+        base, options = method(preset.method), dict(preset.options)
+    elif name in METHODS:
+        base, options = METHODS[name], {}
+    else:
+        raise InputError(f"method {name!r}: choose one of {', '.join(names())} "
+                         "(settings as NAME:KEY=VALUE, e.g. pem:noise_model=none)")  # fmt: skip
+    keys = [f.name for f in fields(base.settings_type)]
+    for pair in pairs:
+        key, eq, val = pair.partition("=")
+        key = key.strip()
+        if not eq or key not in keys:
+            raise InputError(f"{spec!r}: {pair!r} is not KEY=VALUE with KEY one of "
+                             f"{', '.join(keys)} (settings of {base.name})")  # fmt: skip
+        options[key] = _value(val)
+    try:
+        settings = base.settings(options)
+    except TypeError as exc:  # a value of the wrong kind for the dataclass
+        raise InputError(f"{spec!r}: {exc}") from None
+    return Resolved(str(spec).strip(), base, settings)

@@ -28,8 +28,14 @@ STAGES = ("sim", "controllers", "dataset", "ident", "experiments")
 RANK = {s: i for i, s in enumerate(STAGES)}
 
 
+#: Root modules besides the package's ``__init__`` (after every stage: ``bikeid.testing``
+#: builds on the experiments; no stage may import them).
+ROOT_MODULES = ("__main__", "testing")
+
+
 def _modules() -> dict[str, Path]:
     out = {"bikeid": ROOT / "__init__.py"}
+    out.update({f"bikeid.{m}": ROOT / f"{m}.py" for m in ROOT_MODULES})
     for stage in STAGES:
         for f in sorted((ROOT / stage).rglob("*.py")):  # subpackages too
             parts = ["bikeid", *f.relative_to(ROOT).with_suffix("").parts]
@@ -83,14 +89,15 @@ def test_every_stage_import_is_spelled_bikeid():
 def test_imports_follow_the_data_flow():
     graph, _ = _graph()
     wrong = []
+    top = len(STAGES)  # the root modules come after every stage
     for src, targets in graph.items():
         if src == "bikeid":
             continue
-        s = RANK[src.split(".")[1]]
+        s = RANK.get(src.split(".")[1], top)
         for t in sorted(targets):
             if t == "bikeid":
                 continue
-            if RANK[t.split(".")[1]] > s:
+            if RANK.get(t.split(".")[1], top) > s:
                 wrong.append(f"{src} imports {t} (a later stage)")
     print(f"{len(graph)} modules, {sum(map(len, graph.values()))} internal imports checked")
     assert not wrong, "\n".join(wrong)
@@ -136,10 +143,7 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def test_no_import_cycles_between_modules():
     graph, _ = _graph()
     # A package __init__ re-exporting its own submodules is not a cycle of two topics.
-    pruned = {
-        m: {t for t in ts if not t.startswith(m + ".")}
-        for m, ts in graph.items()
-    }
+    pruned = {m: {t for t in ts if not t.startswith(m + ".")} for m, ts in graph.items()}
     assert not _cycles(pruned), f"import cycles: {_cycles(pruned)}"
 
 
@@ -202,8 +206,8 @@ def test_every_subpackage_is_installed():
     packages (a missing one would be left out of the wheel)."""
     import tomllib
 
-    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
-        "packages"
-    ])
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
     found = {m for m, f in _modules().items() if f.name == "__init__.py"}
     assert found <= listed, f"not in pyproject.toml packages: {sorted(found - listed)}"

@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "bikeid.experiments.cli.reproduce",  # reproduce
     "bikeid.experiments.cli.measured",  # measured fit/evaluate, data fetch
     "bikeid.experiments.cli.coverage",  # coverage
+    "bikeid.experiments.cli.consistency",  # consistency
 )
 
 #: The exit statuses of ``bikeid`` (also in ``bikeid --help``).

@@ -83,6 +83,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="local worker processes, one seed each (default 1; same numbers for any value)",
     )  # fmt: skip
     p.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
+    p.add_argument(
+        "--estimator", default="pem", metavar="EST",
+        help="the estimator whose intervals are counted (linear-plant study): a name of the "
+        "method table with settings, or module:function returning a canonical model with "
+        "covariance (default pem)",
+    )  # fmt: skip
     p.set_defaults(func=cmd_coverage)
 
 
@@ -99,6 +105,9 @@ def cmd_coverage(args: argparse.Namespace) -> int:
     if args.plant is None and (args.noise_model != "free" or args.restart):
         raise ValueError("--noise-model and --restart apply to --plant (the default-path "
                          "study); add --plant nonlinear or --plant linear")  # fmt: skip
+    if args.estimator != "pem" and (args.plant is not None or args.critical):
+        raise ValueError("--estimator applies to the linear-plant study; drop --plant or "
+                         "--critical, or --estimator")  # fmt: skip
     if args.plant is not None:
         if args.covariance_scale != 1.0:
             raise ValueError("--covariance-scale is not used with --plant; drop one of them")
@@ -132,6 +141,7 @@ def cmd_coverage(args: argparse.Namespace) -> int:
             args.seeds, speed=args.speed, duration=args.duration, dither=args.dither,
             controller=args.controller, level=args.level,
             covariance_scale=args.covariance_scale, workers=args.workers, dask=args.dask,
+            estimator=args.estimator,
         )  # fmt: skip
     if result.n < 2:
         why = f" (seed {result.failed[0][0]}: {result.failed[0][1]})" if result.failed else ""

@@ -20,6 +20,7 @@ from bikeid.experiments.cli.args import (
 from bikeid.experiments.cli.log_options import FORMATS, add_data_options, log_options
 from bikeid.experiments.parallel import DASK_HELP
 from bikeid.experiments.progress import quiet, stage_lines, terminal_progress
+from bikeid.experiments.testbed.method_choices import MethodChoices
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,10 +47,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(default T_delta; e.g. sil_command of the steer-by-wire logs)",
     )  # fmt: skip
     p.add_argument(
-        "--method", choices=("direct", "pem", "greybox"), default="pem",
-        help="pem: canonical prediction-error model per speed (Chen & Dao); greybox: PEM of "
-        "chosen matrix entries over all speeds; direct: least squares of the equations of "
-        "motion (Moore & Hubbard; biased on stiff loops, README)",
+        "--method", choices=MethodChoices(presets=False), default="pem", metavar="METHOD",
+        help="one of %(choices)s (the table ident.methods.METHODS). pem: canonical "
+        "prediction-error model per speed (Chen & Dao); greybox: PEM of chosen matrix entries "
+        "over all speeds; direct: least squares of the equations of motion (Moore & Hubbard; "
+        "biased on stiff loops, README)",
     )  # fmt: skip
     p.add_argument(
         "--free", default=None, metavar="NAME,...",
@@ -152,13 +154,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=",".join(STUDY_CONTROLLERS),
         help=f"comma-separated subset of {','.join(STUDY_CONTROLLERS)} (default all)",
     )
-    a.add_argument(
+    rows = a.add_argument(
         "--methods",
         type=_names_arg(ACCURACY_METHODS, "methods"),
-        default=",".join(ACCURACY_METHODS),
-        help=f"comma-separated subset of {','.join(ACCURACY_METHODS)} (default all; direct: "
-        "instrumental variables, direct_ls: Moore & Hubbard's least squares)",
+        default=None,
+        metavar="NAME,...",
+        help="comma-separated subset of %(rows)s (default all: every method and preset of "
+        "ident.methods; direct: instrumental variables, direct_ls: Moore & Hubbard's least "
+        "squares)",
     )
+    rows.rows = ACCURACY_METHODS  # type: ignore[attr-defined]  # read by the help text
     a.add_argument(
         "--seeds",
         type=integer(1, 100),
@@ -196,9 +201,9 @@ class DefaultsFormatter(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
-#: The rows of ``bikeid accuracy`` (``experiments.testbed.accuracy.METHODS``; spelled here
-#: so that ``--help`` does not import the study, a test keeps the two equal).
-ACCURACY_METHODS = ("direct", "direct_ls", "pem", "greybox")
+#: The rows of ``bikeid accuracy``: every name of the method table
+#: (``ident.methods.names()``, read on first use so that ``--help`` does not import it).
+ACCURACY_METHODS = MethodChoices()
 
 def _truth(runs):
     """The simulated bicycle: ``meta['parameters']`` or ``meta['bicycle']['parameters']``
@@ -790,7 +795,7 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     from bikeid.experiments.testbed import accuracy as acc
 
     controllers = _names(args.controllers, acc.CONTROLLERS, "controllers")
-    methods = _names(args.methods, acc.METHODS, "methods")
+    methods = _names(args.methods or ",".join(acc.METHODS), acc.METHODS, "methods")
     if args.quick and args.speeds:
         raise ValueError("--quick fixes the speeds; drop --speeds or --quick")
     if args.speeds:

@@ -75,7 +75,7 @@ __all__ = [
     "CONTROLLERS",
     "DESIGN",
     "FULL_SPEEDS",
-    "METHODS",
+    "METHODS",  # noqa: F822 - module __getattr__: read from the method table
     "QUICK_SPEEDS",
     "Band",
     "eigen_errors",
@@ -85,6 +85,7 @@ __all__ = [
     "direct_prepare",
     "generate",
     "identify_controller",
+    "model_steer_zeros",
     "markdown",
     "run_accuracy",
     "summarize",
@@ -93,7 +94,16 @@ __all__ = [
 
 #: Controllers studied, by their stored names (``controllers.registry``).
 CONTROLLERS = STUDY_CONTROLLERS
-METHODS = ("direct", "direct_ls", "pem", "greybox")
+
+
+def __getattr__(name: str) -> Any:
+    """``METHODS``: the rows, every name of the method table (``ident.methods.names()``),
+    read at each use so that an entry added to the table is a row with no edit here."""
+    if name == "METHODS":
+        return ident_methods.names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 FULL_SPEEDS = tuple(float(v) for v in np.round(np.arange(1.0, 15.0 + 1e-9, 0.5), 6))
 #: One speed below v_w (4.29), one between v_w and v_c (6.02), one above v_c (benchmark).
 QUICK_SPEEDS = (2.0, 5.0, 10.0)
@@ -386,7 +396,7 @@ def row_settings(
     Parameters
     ----------
     row : str
-        One of :data:`METHODS`.
+        One of :data:`METHODS` (a name of ``ident.methods.names()``).
     direct_cutoff : float, optional
         Low-pass cut-off [Hz] of the ``direct`` row.
     direct_lags : int, optional
@@ -402,7 +412,8 @@ def row_settings(
         ``direct``: IV on the external signals (the testbed preset, or tailor-made),
         interval-averaged equation; ``direct_ls``: Moore & Hubbard's published least
         squares (central differences, 15 Hz); ``pem``: per speed and over speed;
-        ``greybox``: one fit over all speeds (or per speed).
+        ``greybox``: one fit over all speeds (or per speed); any other name: its table
+        settings (:func:`bikeid.ident.methods.resolve`).
     """
     if row == "direct":
         return ident_methods.DirectSettings(derivative="interval", cutoff_hz=direct_cutoff,
@@ -412,7 +423,9 @@ def row_settings(
         return ident_methods.DIRECT_PRESETS["moore-hubbard"]
     if row == "pem":
         return ident_methods.PemSettings(speed_parameterized=True)
-    return ident_methods.GreyboxSettings(mode=greybox_mode)
+    if row == "greybox":
+        return ident_methods.GreyboxSettings(mode=greybox_mode)
+    return ident_methods.resolve(row).settings  # any other entry of the table: as named
 
 
 def _greybox(runs: Sequence[Run], p, mode: str) -> list[tuple[Any, list[Run]]]:
@@ -432,7 +445,7 @@ def _greybox(runs: Sequence[Run], p, mode: str) -> list[tuple[Any, list[Run]]]:
 def identify_controller(
     runs: Sequence[Run],
     p,
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] | None = None,
     direct_cutoff: float = 3.0,
     direct_lags: int = 40,
     direct_instruments: str = "external",
@@ -449,7 +462,9 @@ def identify_controller(
     p : BicycleParameters
         The simulated bicycle (truth, and fixed entries of the direct method).
     methods : sequence of str, optional
-        Subset of :data:`METHODS`.
+        Subset of :data:`METHODS` (default all).  A row other than the four built-in ones
+        runs its table entry (:func:`bikeid.ident.methods.resolve`) on all runs, with the
+        simulated bicycle as reference for fixed entries.
     direct_cutoff : float, optional
         Low-pass cut-off [Hz] of :func:`direct_prepare`.
     direct_lags : int, optional
@@ -481,6 +496,7 @@ def identify_controller(
     """
 
     log = log or (lambda msg: None)
+    methods = ident_methods.names() if methods is None else methods
 
     stops = [run_stop(r) for r in runs]
     ok = [r for r, st in zip(runs, stops, strict=True) if st is None]
@@ -561,6 +577,19 @@ def identify_controller(
                     glob["free"] = fits[-1][0].free
                     glob["stderr"] = fits[-1][0].stderr
                     glob["condition"] = max(gm.condition for gm, _ in fits)
+            elif ok:  # any other entry of the method table, as named there
+                try:
+                    fitted = ident_methods.resolve(method).fit(ok, reference=p)
+                except ValueError as exc:
+                    glob["error"] = str(exc).splitlines()[0]
+                else:
+                    for r in ok:
+                        v = round(r.speed, 6)
+                        m = fitted.at_speed[v]
+                        rows.append(_row(v, fitted.eigenvalues(v), truth[v],
+                                         model_steer_zeros(m, v), true_zero))  # fmt: skip
+                    if fitted.speed_model is not None:
+                        glob["critical_speeds"] = fitted.speed_model.critical_speeds()
             if "critical_speeds" in glob:
                 cs = {}
                 for k in ("v_w", "v_c"):
@@ -592,6 +621,38 @@ def steer_zeros_true(p) -> np.ndarray:
     return steer_zeros(theta_from_matrices(canonical_matrices(p), 5.0))
 
 
+def model_steer_zeros(model, speed: float) -> np.ndarray:
+    """Zeros of delta/T_delta of any identified linear model at one speed.
+
+    Parameters
+    ----------
+    model : LinearModel
+        An identified model (:mod:`bikeid.ident.linear_model`) with ``T_delta`` among its
+        inputs.
+    speed : float
+        Forward speed [m/s].
+
+    Returns
+    -------
+    ndarray
+        The finite transmission zeros [1/s]: the finite generalized eigenvalues of the
+        pencil ([[A, b], [c, 0]], diag(I, 0)) with b the T_delta column, c selecting delta.
+    """
+    from scipy.linalg import eigvals
+
+    from bikeid.ident.linear_model import SpeedDependentModel
+
+    A, cols = model._matrices_at(speed if isinstance(model, SpeedDependentModel)
+                                 else getattr(model, "speed", speed))  # fmt: skip
+    n = A.shape[0]
+    big = np.zeros((n + 1, n + 1))
+    big[:n, :n], big[:n, n], big[n, 1] = A, cols["T_delta"], 1.0  # state 1 = delta
+    E = np.zeros_like(big)
+    E[:n, :n] = np.eye(n)
+    z = eigvals(big, E)
+    return z[np.isfinite(z)]
+
+
 def _row(v, eig, truth, zeros, true_zero) -> dict[str, Any]:
     modes = eigen_errors(eig, truth)
     zeros = np.asarray(zeros, complex)
@@ -608,7 +669,7 @@ def _row(v, eig, truth, zeros, true_zero) -> dict[str, Any]:
 def run_accuracy(
     out_dir: str | Path,
     controllers: Sequence[str] = CONTROLLERS,
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] | None = None,
     speeds: Sequence[float] = FULL_SPEEDS,
     workers: int = 2,
     bicycle: str = "benchmark",
@@ -626,7 +687,7 @@ def run_accuracy(
     controllers : sequence of str, optional
         Subset of :data:`CONTROLLERS`.
     methods : sequence of str, optional
-        Subset of :data:`METHODS`.
+        Subset of :data:`METHODS` (default all).
     speeds : sequence of float, optional
         Forward speeds [m/s].
     workers : int, optional
@@ -664,9 +725,11 @@ def run_accuracy(
     bad = [c for c in controllers if c not in CONTROLLERS]
     if bad or not controllers:
         raise ValueError(f"controllers {bad or '(none)'}: choose from {', '.join(CONTROLLERS)}")
-    bad = [m for m in methods if m not in METHODS]
+    rows = ident_methods.names()
+    methods = rows if methods is None else methods
+    bad = [m for m in methods if m not in rows]
     if bad or not methods:
-        raise ValueError(f"methods {bad or '(none)'}: choose from {', '.join(METHODS)}")
+        raise ValueError(f"methods {bad or '(none)'}: choose from {', '.join(rows)}")
     seeds = [int(x) for x in seeds]
     if not seeds or any(x < 0 for x in seeds) or len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds {seeds}: give distinct non-negative integers")
@@ -874,7 +937,8 @@ def _summary_lines(result: dict[str, Any]) -> list[str]:
             out.append(f"  {key}: {', '.join(str(n) for n in d['passed'])} of "
                        f"{d['mean_checks']:g}; mean {d['mean']:.1f} +- {d['std']:.1f}")  # fmt: skip
     for m, text in result.get("method_settings", {}).items():
-        out.append(f"{m} scores ident.methods {'direct' if m == 'direct_ls' else m}: {text}")
+        base = ident_methods.PRESETS[m].method if m in ident_methods.PRESETS else m
+        out.append(f"{m} scores ident.methods {base}: {text}")
     out.append(f"total run time {result['seconds']:.1f} s")
     return out
 

@@ -287,32 +287,61 @@ def _check_settings(seeds: int, covariance_scale: float, level: float) -> None:
     z_value(level)
 
 
-def _closed_loop_run(p, settings: dict[str, Any], speed: float, seed: int):
-    """One run of the linear closed loop of ``settings`` at ``speed`` [m/s]."""
-    # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
-    from bikeid.controllers.registry import make
-    from bikeid.dataset.linear_loop import simulate
+def _scenario(settings: dict[str, Any], speed: float):
+    """The :class:`~bikeid.experiments.testbed.scenario.Scenario` of a settings dict."""
+    from bikeid.experiments.testbed.scenario import Scenario
 
-    controller = make(settings["controller"], p, sample_time=0.01)
-    return simulate(
-        p, speed, duration=settings["duration"], controller=controller, seed=seed,
+    return Scenario(
+        controller=settings["controller"], speeds=(float(speed),),
         dither=settings["dither"], dither_hold=settings["dither_hold"],
         disturbance=settings["disturbance"], angle_noise=settings["angle_noise"],
-        rate_noise=settings["rate_noise"],
+        rate_noise=settings["rate_noise"], durations=(settings["duration"],), seeds=1,
     )  # fmt: skip
+
+
+def _closed_loop_run(p, settings: dict[str, Any], speed: float, seed: int):
+    """One run of the linear closed loop of ``settings`` at ``speed`` [m/s]: the public
+    builder :func:`bikeid.experiments.testbed.scenario.closed_loop_run` (the bicycle is the
+    benchmark, ``p`` is kept for the existing callers)."""
+    from bikeid.experiments.testbed.scenario import closed_loop_run
+
+    return closed_loop_run(_scenario(settings, speed), speed, settings["duration"], seed)
+
+
+def _canonical(out: Any, speed: float):
+    """The canonical model with covariance an estimator returned (coverage needs one)."""
+    from bikeid.ident.methods import Identified
+    from bikeid.ident.pem import CanonicalModel
+
+    if isinstance(out, Identified) and out.interval_models:
+        out = out.interval_models.get(round(float(speed), 6))
+    if not isinstance(out, CanonicalModel):
+        raise InputError(
+            f"coverage counts canonical parameters: the estimator returned "
+            f"{type(out).__name__}, not a CanonicalModel with its covariance"
+        )
+    return out
 
 
 def _one(p, settings: dict[str, Any], seed: int, theta_true, targets) -> dict[str, float]:
     # lazy: `bikeid --help` imports this module for DEFAULTS; numerics load on first use
-    from bikeid.ident import pem
+    from bikeid.experiments.testbed.consistency import _context
+    from bikeid.experiments.testbed.estimator import Estimator
     from bikeid.ident.uncertainty import eigenvalue_intervals
     from bikeid.sim.linear import match_eigenvalues
 
-    # the free innovation gain (the estimator the documented 1000-seed study measured; its
-    # fits end inside the predictor's stability boundary at these lengths), every interval
-    # counted: no structure check, no boundary refusal
-    model = pem.fit(_closed_loop_run(p, settings, settings["speed"], seed), noise_model="gain",
-                    structure=False)  # fmt: skip
+    run = _closed_loop_run(p, settings, settings["speed"], seed)
+    if settings["fit"] == "pem":
+        # the free innovation gain (the estimator the documented 1000-seed study measured;
+        # its fits end inside the predictor's stability boundary at these lengths), every
+        # interval counted: no structure check, no boundary refusal
+        from bikeid.ident import pem
+
+        model = pem.fit(run, noise_model="gain", structure=False)
+    else:  # any estimator (a table name with settings, a peer, module:function)
+        sc = _scenario(settings, settings["speed"])
+        est = Estimator(settings["fit"])
+        model = _canonical(est.fit([run], _context(sc, settings["level"])), settings["speed"])
     model = dataclasses.replace(model, covariance=model.covariance * settings["covariance_scale"])
     se = np.sqrt(np.diag(model.covariance))
     r = model.theta - theta_true
@@ -367,6 +396,7 @@ def run_coverage(
     log: Callable[[str], None] | None = None,
     workers: int = 1,
     dask: str | None = None,
+    estimator: str = "pem",
 ) -> CoverageResult:
     """Identify ``seeds`` linear closed-loop runs and record the z-score of every quantity.
 
@@ -401,6 +431,11 @@ def run_coverage(
         Local worker processes (default 1); the result does not depend on it.
     dask : str or None, optional
         ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`).
+    estimator : str, optional
+        The estimator (:class:`bikeid.experiments.testbed.estimator.Estimator` text: a
+        name of the method table with settings, or ``module:function``) whose intervals are
+        counted; it must return a canonical model with covariance (default ``"pem"``, the
+        table's canonical PEM per speed, i.e. ``ident.pem.fit``).
 
     Returns
     -------
@@ -428,7 +463,11 @@ def run_coverage(
                 "covariance_scale": float(covariance_scale),
                 "seeds": [int(first_seed), int(first_seed + seeds - 1)],
                 "plant": "benchmark, linear (dataset.linear_loop, exact ZOH)",
-                "estimator": "ident.pem.fit, 4 outputs, free K"}  # fmt: skip
+                "estimator": f"{estimator} (ident.methods / experiments.testbed.estimator)",
+                "fit": str(estimator)}  # fmt: skip
+    from bikeid.experiments.testbed.estimator import Estimator
+
+    Estimator(estimator)  # an unknown estimator: one line before any seed
     rows: list[dict[str, float]] = []
     failed: list[tuple[int, str]] = []
     job = partial(_seed_job, p, settings, theta_true, targets)
@@ -516,6 +555,11 @@ def run_critical_coverage(
         Local worker processes (default 1); the result does not depend on it.
     dask : str or None, optional
         ``"local"`` or a Dask scheduler address (:mod:`bikeid.experiments.parallel`).
+    estimator : str, optional
+        The estimator (:class:`bikeid.experiments.testbed.estimator.Estimator` text: a
+        name of the method table with settings, or ``module:function``) whose intervals are
+        counted; it must return a canonical model with covariance (default ``"pem"``, the
+        table's canonical PEM per speed, i.e. ``ident.pem.fit``).
 
     Returns
     -------

@@ -1,9 +1,11 @@
 """Property tests T1-T11 of the identification reference (§4.2), with hypothesis.
 
-Plant: ``dataset.linear_loop`` (exact ZOH, so the truth is known exactly).  Bicycles are
-the benchmark with perturbed trail, steer tilt, front-frame mass and rear-body
-inertia, kept only if ``BicycleParameters`` validates them and the roll PID
-stabilizes them.  Tolerances are stated per test.
+Plant: ``dataset.linear_loop`` (exact ZOH, so the truth is known exactly).  Scenarios are
+drawn from :mod:`bikeid.testing` (the strategies any user's property test uses): bicycles
+are the benchmark with perturbed trail, steer tilt, front-frame mass and rear-body inertia
+(``bicycles()``), kept only if ``BicycleParameters`` validates them and the roll PID
+stabilizes them; speeds and seeds from ``speeds()`` and ``seeds()``.  T8 is a consistency
+study (``assert_consistent``).  Tolerances are stated per test.
 """
 
 import numpy as np
@@ -21,22 +23,12 @@ from bikeid.ident.validate import resid
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import canonical_matrices, eigenvalues
 from bikeid.sim.parameters import benchmark
+from bikeid.testing import bicycles, scenarios, seeds, speeds
 
 BASE = benchmark()
 FAST = settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 SLOW = settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 STEER = ("Mdd", "C1dp", "C1dd", "K0dd", "K2dd")
-
-
-@st.composite
-def bicycles(draw):
-    f = draw(st.lists(st.floats(0.8, 1.2), min_size=4, max_size=4))
-    try:
-        p = BASE.replace(c=BASE.c * f[0], lam=BASE.lam * f[1], mH=BASE.mH * f[2],
-                         IBxx=BASE.IBxx * f[3], name="perturbed")  # fmt: skip
-    except ValueError:
-        assume(False)
-    return p
 
 
 def _sim(p, v, **kw):
@@ -59,7 +51,7 @@ def _logged(run):
 
 
 @FAST
-@given(p=bicycles(), v1=st.floats(1.5, 4.0), dv=st.floats(1.0, 6.0), seed=st.integers(0, 999))
+@given(p=bicycles(), v1=speeds(1.5, 4.0), dv=st.floats(1.0, 6.0), seed=seeds())
 def test_t1_exact_recovery(p, v1, dv, seed):
     """T1: noise-free states, exact accelerations, dither, 2 speeds: free entries to
     1e-9 relative (float64 LS at cond <~ 100; reference measured 3e-15)."""
@@ -72,7 +64,7 @@ def test_t1_exact_recovery(p, v1, dv, seed):
 
 
 @FAST
-@given(p=bicycles(), v=st.floats(2.0, 8.0), dither=st.sampled_from([0.0, 1.0]))
+@given(p=bicycles(), v=speeds(2.0, 8.0), dither=st.sampled_from([0.0, 1.0]))
 def test_t2_roll_relation_makes_free_steer_row_singular(p, v, dither):
     """T2: with T_phi = F = 0 the roll equation is an exact linear relation among the
     steer regressors; freeing all seven steer entries must raise (cond >~ 1e15,
@@ -88,7 +80,7 @@ def test_t2_roll_relation_makes_free_steer_row_singular(p, v, dither):
 
 
 @FAST
-@given(p=bicycles(), v=st.floats(1.5, 10.0))
+@given(p=bicycles(), v=speeds(1.5, 10.0))
 def test_t3_single_speed_separability(p, v):
     """T3: at one constant speed g*delta and v^2*delta are collinear -> ValueError that
     names K0/K2 and asks for other speeds; per-sample speed variation fixes it."""
@@ -101,7 +93,7 @@ def test_t3_single_speed_separability(p, v):
 
 
 @FAST
-@given(seed=st.integers(0, 999))
+@given(seed=seeds())
 def test_t4_attenuation_monotone(seed):
     """T4 (multi-regressor): noise on deltadot only shrinks C1dd monotonically with the
     noise level (ref sim: ratio 0.727, 0.397 at sigma_n/sigma_x = 0.5, 1)."""
@@ -124,7 +116,7 @@ def test_t4_attenuation_monotone(seed):
 
 
 @SLOW
-@given(seed=st.integers(0, 999), sigma_w=st.sampled_from([1.0, 3.0]))
+@given(seed=seeds(), sigma_w=st.sampled_from([1.0, 3.0]))
 def test_t5_disturbance_biases_ls_iv_fixes(seed, sigma_w):
     """T5: an unlogged white steer torque enters q''(k) and, through the loop, the
     regressors: LS is biased (Mdd off by > 10 of its own standard errors; ref sim 0.39
@@ -141,7 +133,7 @@ def test_t5_disturbance_biases_ls_iv_fixes(seed, sigma_w):
 
 
 @FAST
-@given(seed=st.integers(0, 999))
+@given(seed=seeds())
 def test_t6_logged_torque_noise_is_benign(seed):
     """T6: noise only on the recorded T_delta is regressand noise: LS stays unbiased
     (every entry within 4.5 standard errors), unlike T5."""
@@ -156,7 +148,7 @@ def test_t6_logged_torque_noise_is_benign(seed):
 
 
 @SLOW
-@given(seed=st.integers(0, 999))
+@given(seed=seeds())
 def test_t7_open_loop_subspace_biased_pem_not(seed):
     """T7 (v = 3 m/s, true weave real part +1.71): weak dither 0.5 N m under a 2 N m
     disturbance.  Open-loop PO-MOESP returns a stable model (the closed loop's
@@ -171,34 +163,44 @@ def test_t7_open_loop_subspace_biased_pem_not(seed):
     assert pem.fit(r).eigenvalues().real.max() > 0
 
 
-@pytest.mark.slow
-@SLOW
-@given(seed=st.integers(0, 999))
-def test_t8_pem_consistency(seed):
-    """T8 (F1): innovations-model PEM on closed-loop data with process and sensor
-    noise: errors within 5 standard errors at N = 10k and 40k and the standard errors
-    shrink like 1/sqrt(N) (ratio 2 +- 25 %); output-error PEM (K = 0) on the same kind
-    of data at a stable speed is biased (Mahalanobis distance > 10x the chi2_10
-    99.9 % point 29.6).  Started at the truth: consistency concerns the minimizer
-    near it; local minima are a separate matter (see docs)."""
-    kw = dict(seed=seed, dither=1.0, dither_hold=5, disturbance=0.5, angle_noise=1e-3,
-              rate_noise=1e-2)  # fmt: skip
-    v = 5.0
-    true = theta_from_matrices(canonical_matrices(BASE), v)
-    se = []
-    for T in (100, 400):
-        m = pem.fit(simulate(BASE, v, duration=T, **kw), theta0=true)
-        s = np.sqrt(np.diag(m.covariance))
-        assert np.all(np.abs(m.theta - true) < 5 * s)
-        se.append(s)
-    assert np.median(se[0] / se[1]) == pytest.approx(2.0, rel=0.25)
-    oe = pem.fit(simulate(BASE, v, duration=400, **kw), theta0=true, noise_model="none")
-    d = oe.theta - true
-    assert d @ np.linalg.solve(oe.covariance, d) > 296
+def pem_at_truth(runs, context):
+    """Innovations-model PEM per run, started at the truth (T8)."""
+    return {r.speed: pem.fit(r, theta0=_truth(context, r.speed), multistart=False) for r in runs}
+
+
+def oe_at_truth(runs, context):
+    """Output-error PEM (K = 0) per run, started at the truth (T8)."""
+    return {r.speed: pem.fit(r, theta0=_truth(context, r.speed), multistart=False,
+                             noise_model="none") for r in runs}  # fmt: skip
+
+
+def _truth(context, v):
+    return theta_from_matrices(canonical_matrices(context.bicycle), v)
+
+
+@pytest.mark.slow  # 2 x 24 PEM fits of 25-100 s: 39 s of CPU measured under load
+@settings(max_examples=1, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenario=scenarios(durations=(25.0, 50.0, 100.0), seeds=8, speed_range=(5.0, 5.0),
+                          dither_range=(1.0, 1.0), first_seeds=(0, 0)))  # fmt: skip
+def test_t8_pem_consistency(scenario):
+    """T8 (F1), as a consistency study of :mod:`bikeid.testing`: innovations-model PEM on
+    closed-loop data with process (0.5 N m) and sensor noise is not biased (Hotelling T^2 at
+    100 s does not reject at 0.01) and its RMSE falls with N (slope below -0.25; measured
+    -0.67 [-0.99, -0.08] at seeds 0-7: 8 seeds over lengths 25-100 s cannot narrow the
+    interval below -0.25, so the verdict is ``inconclusive`` rather than ``consistent``;
+    the full-size study in docs/consistency.md gives the verdict); output-error PEM on the
+    same data is ``biased`` (measured T^2 = 2.6e4, p = 2e-7).  Both started at the truth:
+    consistency concerns the minimizer near it; local minima are a separate matter."""
+    from bikeid.testing import assert_verdict
+
+    res = assert_verdict(("consistent with 1/sqrt(N)", "inconclusive"), pem_at_truth, scenario)
+    assert min(res["verdict_detail"]["p_value"].values()) > 0.01
+    assert res["slope"] < -0.25
+    assert_verdict("biased", oe_at_truth, scenario)
 
 
 @FAST
-@given(seed=st.integers(0, 999))
+@given(seed=seeds())
 def test_t10_residual_band(seed):
     """T10: with the true model and its Kalman gain, white innovations: about 1 % of the
     autocorrelations at lags 1..25 leave the 99 % band (allow <= 3 of 25 per output,
