@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .effect_law import Law, parse_law, same_unit
 
@@ -326,6 +326,7 @@ def _table(entries: Iterable[Effect]) -> dict[str, Effect]:
 #: those of :func:`register_effects` (a user's file).
 EFFECTS: dict[str, Effect] = _table(_BUILT_IN)
 _LISTENERS: list[Callable[[tuple[Effect, ...], bool], None]] = []
+_SHADOWED: dict[str, Effect] = {}  # built-in entries a user's declaration adopted
 
 #: Why an entry without a law has none, by layer (or by name).
 _NO_LAW = {
@@ -400,12 +401,22 @@ def linear_entry(e: Effect) -> str:
     return f"{mat}[{row}, {col}] += {val}"
 
 
+def _adopted(builtin: Effect, e: Effect) -> Effect:
+    """A built-in entry adopted by a user's declaration of its name and law: the built-in
+    facts (layer, plant term, doc, unit) with the declaration's range, library membership,
+    scale and origin."""
+    return replace(builtin, plausible=e.plausible, in_library=e.in_library, scale=e.scale,
+                   origin=e.origin)  # fmt: skip
+
+
 def register_effects(entries: Iterable[Effect]) -> tuple[str, ...]:
     """Add effects (a user's declarations) to :data:`EFFECTS`, after the built-in ones.
 
     An entry identical to a registered one is accepted again (a model file re-declares
-    the effects it was fitted with); an entry with a built-in name and the same law
-    is that entry, with its built-in facts.
+    the effects it was fitted with).  An entry with a built-in name and the same law adopts
+    that entry: its built-in facts with the declaration's plausible range, library
+    membership, scale and origin (so an entry outside the library becomes a candidate);
+    :func:`unregister_effects` restores it.
 
     Parameters
     ----------
@@ -415,7 +426,7 @@ def register_effects(entries: Iterable[Effect]) -> tuple[str, ...]:
     Returns
     -------
     tuple of str
-        The names of the newly registered entries.
+        The names of the newly registered (or adopted) entries.
 
     Raises
     ------
@@ -423,23 +434,40 @@ def register_effects(entries: Iterable[Effect]) -> tuple[str, ...]:
         If a name is already registered with another declaration, or a law repeats a
         registered entry's (naming both).
     """
-    new = []
+    new: list[Effect] = []
+    adopt: list[Effect] = []
     for e in entries:
         old = EFFECTS.get(e.name)
-        if old is not None and (old == e or (not old.user and old.law is not None
-                                             and old.law == e.law)):  # fmt: skip
+        builtin = _SHADOWED.get(e.name, old)
+        if (
+            old is not None
+            and builtin is not None
+            and not builtin.user
+            and (builtin.law is not None and builtin.law == e.law)
+        ):
+            if replace(old, origin=e.origin) != _adopted(builtin, e):
+                if old.user:
+                    raise ValueError(f"effect {e.name!r} is already adopted from "
+                                     f"{old.origin}; declare it once")  # fmt: skip
+                adopt.append(_adopted(builtin, e))
             continue
+        if old is not None and old.user and replace(old, origin=e.origin) == e:
+            continue  # declared again (a model file re-declares its effects)
         new.append(e)
     _refuse_duplicates(new, EFFECTS)
+    for e in adopt:
+        _SHADOWED[e.name] = EFFECTS[e.name]
+        EFFECTS[e.name] = e
     for e in new:
         EFFECTS[e.name] = e
     for listener in _LISTENERS:
-        listener(tuple(new), True)
-    return tuple(e.name for e in new)
+        listener((*adopt, *new), True)
+    return tuple(e.name for e in (*adopt, *new))
 
 
 def unregister_effects(names: Iterable[str]) -> None:
-    """Remove registered user effects from :data:`EFFECTS` (built-in names are refused).
+    """Remove registered user effects from :data:`EFFECTS` (an adopted built-in entry is
+    restored; built-in names are refused).
 
     Parameters
     ----------
@@ -449,7 +477,7 @@ def unregister_effects(names: Iterable[str]) -> None:
     Raises
     ------
     ValueError
-        For a built-in name.
+        For a built-in name that no user adopted.
     """
     gone = []
     for n in names:
@@ -458,7 +486,11 @@ def unregister_effects(names: Iterable[str]) -> None:
             continue
         if not e.user:
             raise ValueError(f"effect {n!r} is built in; only a user's effects can be removed")
-        gone.append(EFFECTS.pop(n))
+        gone.append(e)
+        if n in _SHADOWED:
+            EFFECTS[n] = _SHADOWED.pop(n)
+        else:
+            del EFFECTS[n]
     for listener in _LISTENERS:
         listener(tuple(gone), False)
 
