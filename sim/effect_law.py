@@ -335,17 +335,18 @@ def all_laws(
 
 
 # -- units ------------------------------------------------------------------------------
-_BASE = {"kg": (1, 0, 0), "m": (0, 1, 0), "s": (0, 0, 1), "N": (1, 1, -2), "rad": (0, 0, 0),
-         "-": (0, 0, 0), "1": (0, 0, 0)}  # fmt: skip
+_BASE = {"kg": (1, 0, 0, 0), "m": (0, 1, 0, 0), "s": (0, 0, 1, 0), "N": (1, 1, -2, 0),
+         "rad": (0, 0, 0, 1), "-": (0, 0, 0, 0), "1": (0, 0, 0, 0)}  # fmt: skip
 _UNIT_TOKEN = re.compile(r"\s*([*/])?\s*([A-Za-z]+|-|1)(?:\^(-?\d+))?")
 
 
-def unit_dimensions(unit: str) -> tuple[int, int, int]:
-    """(kg, m, s) exponents of a unit written as the registry writes them.
+def unit_dimensions(unit: str) -> tuple[int, int, int, int]:
+    """(kg, m, s, rad) exponents of a unit written as the registry writes them.
 
     Tokens are separated by spaces or ``*``; ``/`` divides by the next token only
-    (``"N m s/rad * m/s"`` = N m s rad^-1 m s^-1); ``^n`` raises a token; rad is
-    dimensionless (SI).
+    (``"N m s/rad * m/s"`` = N m s rad^-1 m s^-1); ``^n`` raises a token.  The radian is
+    counted (dimensionless in SI, but a stiffness per radian and a torque are not
+    interchangeable in a declaration); an inertia is written kg m^2 (:attr:`Law.unit`).
 
     Parameters
     ----------
@@ -355,14 +356,14 @@ def unit_dimensions(unit: str) -> tuple[int, int, int]:
     Returns
     -------
     tuple of int
-        Exponents of kg, m, s.
+        Exponents of kg, m, s and rad.
 
     Raises
     ------
     ValueError
         For a token other than kg, m, s, N, rad, - or 1.
     """
-    dims = [0, 0, 0]
+    dims = [0, 0, 0, 0]
     pos, u = 0, str(unit).strip()
     while pos < len(u):
         m = _UNIT_TOKEN.match(u, pos)
@@ -373,13 +374,13 @@ def unit_dimensions(unit: str) -> tuple[int, int, int]:
         if tok not in _BASE:
             raise ValueError(f"unit {unit!r}: unknown unit {tok!r}; use kg, m, s, N, rad or -")
         k = (int(exp) if exp else 1) * (-1 if op == "/" else 1)
-        for i in range(3):
+        for i in range(4):
             dims[i] += k * _BASE[tok][i]
     return tuple(dims)
 
 
 def same_unit(a: str, b: str) -> bool:
-    """Whether two unit strings have the same SI dimensions (rad dimensionless).
+    """Whether two unit strings have the same dimensions (kg, m, s and rad).
 
     Parameters
     ----------

@@ -95,9 +95,25 @@ LIBRARY: dict[str, Candidate] = {
 }
 
 
+#: Start grid of a user's effect whose absent value is a bound of its range [its scale].
+USER_GRID = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+
+
 def _user_candidate(e: Effect) -> Candidate:
-    """A user's library effect: additive, bounded by its plausible range, its own scale."""
-    return Candidate(e.name, "additive", float(e.scale), bounded=True)
+    """A user's library effect, fitted within its plausible range in steps of its scale.
+
+    Additive from absent when absent lies inside the range.  When absent is a bound (a
+    damping in [0, 100]), a least-squares start on the bound does not move (its finite
+    differences see no descent), so the start is scanned instead on :data:`USER_GRID` times
+    the scale towards the open side (kept inside the range), as a structural effect's."""
+    lo, hi = e.plausible
+    scale = float(e.scale)
+    if lo < e.absent < hi:
+        return Candidate(e.name, "additive", scale, bounded=True)
+    sign = 1.0 if e.absent == lo else -1.0
+    points = (e.absent + sign * g * scale for g in USER_GRID)
+    grid = tuple(x for x in points if lo < x < hi)
+    return Candidate(e.name, "structural", scale, bounded=True, grid=grid or ((lo + hi) / 2,))
 
 
 _BUILT_IN = dict(LIBRARY)

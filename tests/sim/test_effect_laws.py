@@ -65,15 +65,17 @@ def test_the_registry_laws_by_hand(name, text, unit, entry):
 
 def test_the_language_round_trips_and_units_by_dimension():
     """Every term of the language parses back from its text; units by dimensional analysis:
-    N m per unit of signal, times (m/s)^-p (e.g. c in -c v phidot is N m s^2/m)."""
+    N m per unit of signal, times (m/s)^-p (e.g. c in -c v phidot is N m s^2/rad/m); the
+    radian counts (a torque is not a stiffness per radian)."""
     laws = all_laws()
     assert len({law.key for law in laws}) == len(laws)
     # 2 equations x (7 signals with 4 speed powers + 3 without) = 62
     assert len(laws) == 2 * (7 * 4 + 3)
     for law in laws:
         assert parse_law(law.text("k")) == law
-    assert same_unit(Law("roll", "phidot", 1).unit, "N m s^2/m")
-    assert same_unit(Law("steer", "delta", 2).unit, "kg")  # N m s^2/m^2 = kg
+    assert same_unit(Law("roll", "phidot", 1).unit, "N m s^2/rad/m")
+    assert same_unit(Law("steer", "delta", 2).unit, "kg/rad")  # N m s^2/m^2/rad = kg/rad
+    assert not same_unit(Law("steer", "delta").unit, "N m")
     assert not same_unit(Law("steer", "deltadot").unit, "N m/rad")
 
 
