@@ -77,7 +77,8 @@ from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.greybox import GreyboxModel
 from bikeid.ident.methods import model_codecs, model_kinds
 from bikeid.ident.pem import INPUT, CanonicalModel, SpeedCanonicalModel, output_matrix
-from bikeid.sim.effect_registry import check_values
+from bikeid.sim.effect_files import declaration, declarations_from, register
+from bikeid.sim.effect_registry import check_values, effect
 from bikeid.sim.errors import InputError
 from bikeid.sim.parameters import from_mapping
 from bikeid.sim.textformats import loads_json
@@ -284,13 +285,17 @@ def _direct_section(m: DirectResult) -> dict:
 
 
 def _experiment_section(m: ExperimentModel) -> dict:
-    return {
+    out = {
         "effects": {k: _num(v, f"effect {k}") for k, v in m.effects.items()},
         "K": _num(m.K, "K"),
         "V": _num(m.V, "V"),
         "bicycle": m.p.name,
         "parameters": {k: _num(v, k) for k, v in m.p.as_dict().items()},
     }
+    user = [declaration(effect(k)) for k in m.effects if effect(k).user]
+    if user:  # a user's effects (--effects-file): declared again when the file is read
+        out["user_effects"] = user
+    return out
 
 
 def _greybox_section(m: GreyboxModel) -> dict:
@@ -826,6 +831,9 @@ def _direct_model(r: _Reader, sec: Any, prefix: str) -> DirectResult:
 
 
 def _experiment_model(r: _Reader, sec: Any, prefix: str) -> ExperimentModel:
+    if isinstance(sec, dict) and "user_effects" in sec:  # declare them before the values
+        register(declarations_from(sec["user_effects"], f"{r.where}: field "
+                                   f"'{prefix}user_effects'", origin=r.where))  # fmt: skip
     effects = r.numbers(sec, "effects", prefix)
     try:
         check_values(effects, f"{r.where}: field '{prefix}effects'")

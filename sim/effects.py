@@ -5,9 +5,12 @@ are two kinds:
 
 * **Plant-side** effects act as extra generalized forces on the dynamic equations
   of (u4, u6, u7) = (roll rate, rear wheel rate, steer rate) of
-  :mod:`sim.nonlinear`.  They are compiled into one parameter vector
-  (:func:`plant_vector`) that the numba kernel passes to :func:`plant_forces`, so
-  they stay on the compiled fast path.
+  :mod:`sim.nonlinear`.  Each is the law of its registry entry
+  (:mod:`bikeid.sim.effect_law`: ``sign * value * v^p * signal`` on the roll or steer
+  equation); :func:`plant_vector` compiles them into a table of rows that the numba kernel
+  :func:`plant_forces` sums in a loop, so they stay on the compiled fast path.
+  :class:`PlantLaw` carries any law; the named classes below (:class:`SteerDamping`, ...)
+  are the built-in entries under their historical names.
 * **Input-side** effects shape the commanded steer torque before it reaches the
   plant: gain, pure delay (a whole number of controller samples), first-order lag.
   Order: command -> delay -> gain -> lag -> plant.
@@ -15,25 +18,13 @@ are two kinds:
 Signs follow :mod:`sim.conventions`: a damping torque opposes the rate, so a steer
 damping c gives the generalized force -c * deltadot on the steer equation.
 
-Adding an effect: its facts (name, unit, absent value, plausible range, layer, whether the
-identification library may select it) are declared once, as an entry of
-:data:`bikeid.sim.effect_registry.EFFECTS`; this module only implements the ``plant`` and
-``input`` layers for the nonlinear simulator.  For an effect the plant carries:
-
-1. give it a dataclass below with a ``kind`` of ``"plant"`` or ``"input"``;
-2. for a plant effect, append its slots to :data:`PLANT_SLOTS`, fill them in
-   :func:`plant_vector` and add its generalized force to :func:`plant_forces`;
-   for an input effect, handle it in :func:`input_chain` and in
-   ``sim.integrate`` (only there are commands shaped);
-3. name it as the entry's ``plant_term`` and add its class to the registry's builders
-   (``effect_registry._plant_builders``), so that
-   :func:`bikeid.sim.effect_registry.nonlinear_effects` builds it from a value;
-4. apply the entry in the linear experiment model (``bikeid.ident.effects.experiment_model``) and,
-   if the identification may select it, give it fit settings in
-   ``bikeid.ident.effects.library.LIBRARY`` (tests/sim/test_effect_registry.py checks both).
-
-An effect the plant cannot carry states why in the entry's ``no_plant`` instead (sensor
-effects are applied by :meth:`bikeid.dataset.sensors.Sensors.with_effects`).
+Adding a plant effect: declare it, with its law, in
+:data:`bikeid.sim.effect_registry.EFFECTS`; nothing here changes (the registry builds a
+:class:`PlantLaw` for it).  A law the compiled plant does not evaluate (an acceleration: the
+plant's mass matrix is the rigid bodies') states why in the entry's ``no_plant``.  An input
+effect needs a dataclass here (with ``effect``, the registry name), its handling in
+:func:`input_chain` and in ``sim.integrate`` (only there are commands shaped).  Sensor effects
+are applied by :meth:`bikeid.dataset.sensors.Sensors.with_effects`.
 """
 
 from __future__ import annotations
@@ -41,15 +32,20 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
 
+from .effect_law import KERNEL_SIGNALS, Law, parse_law
+
 __all__ = [
+    "PLANT_COLUMNS",
     "PLANT_SLOTS",
     "ActuatorLag",
     "InputChain",
     "InputDelay",
+    "PlantLaw",
     "RollDamping",
     "RollStiffness",
     "SteerCoulomb",
@@ -58,6 +54,7 @@ __all__ = [
     "TorqueGain",
     "describe",
     "input_chain",
+    "named_class",
     "plant_forces",
     "plant_vector",
 ]
@@ -92,6 +89,13 @@ class SteerDamping:
 
     c: float
     kind = "plant"
+    effect: ClassVar[str] = "steer_viscous_damping"
+    nonnegative: ClassVar[bool] = True
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.c
 
     def __post_init__(self) -> None:
         _check("SteerDamping.c", self.c, "N m s/rad")
@@ -126,6 +130,13 @@ class SteerCoulomb:
     torque: float
     smoothing: float = 0.01
     kind = "plant"
+    effect: ClassVar[str] = "steer_coulomb_friction"
+    nonnegative: ClassVar[bool] = True
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.torque
 
     def __post_init__(self) -> None:
         _check("SteerCoulomb.torque", self.torque, "N m")
@@ -154,6 +165,13 @@ class RollDamping:
 
     c: float
     kind = "plant"
+    effect: ClassVar[str] = "roll_viscous_damping"
+    nonnegative: ClassVar[bool] = True
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.c
 
     def __post_init__(self) -> None:
         _check("RollDamping.c", self.c, "N m s/rad")
@@ -186,6 +204,13 @@ class RollStiffness:
 
     k: float
     kind = "plant"
+    effect: ClassVar[str] = "roll_stiffness"
+    nonnegative: ClassVar[bool] = True
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.k
 
     def __post_init__(self) -> None:
         _check("RollStiffness.k", self.k, "N m/rad")
@@ -219,6 +244,13 @@ class SteerStiffness:
 
     k: float
     kind = "plant"
+    effect: ClassVar[str] = "steer_stiffness"
+    nonnegative: ClassVar[bool] = False
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.k
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.k):
@@ -247,6 +279,13 @@ class TorqueGain:
 
     gain: float
     kind = "input"
+    effect: ClassVar[str] = "command_gain"
+    nonnegative: ClassVar[bool] = False
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.gain
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.gain):
@@ -275,6 +314,13 @@ class ActuatorLag:
 
     tau: float
     kind = "input"
+    effect: ClassVar[str] = "actuator_lag"
+    nonnegative: ClassVar[bool] = True
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.tau
 
     def __post_init__(self) -> None:
         _check("ActuatorLag.tau", self.tau, "s")
@@ -303,28 +349,124 @@ class InputDelay:
 
     delay: float
     kind = "input"
+    effect: ClassVar[str] = "input_delay"
+    nonnegative: ClassVar[bool] = False
+
+    @property
+    def value(self) -> float:
+        """The registry value [the entry's unit]."""
+        return self.delay
 
     def __post_init__(self) -> None:
         _check("InputDelay.delay", self.delay, "s")
 
 
-#: Slots of the plant-effect vector consumed by :func:`plant_forces`.
-PLANT_SLOTS = (
-    "steer_damping",
-    "steer_coulomb",
-    "steer_coulomb_smoothing",
-    "roll_damping",
-    "roll_stiffness",
-    "steer_stiffness",
-)
-_S = {name: i for i, name in enumerate(PLANT_SLOTS)}
+@dataclass(frozen=True)
+class PlantLaw:
+    """Any additive term of the language of :mod:`bikeid.sim.effect_law` on the plant.
+
+    The generalized force ``sign * value * v**speed_power * signal`` of ``law`` at the run's
+    speed ``speed`` (held fixed: the speed factor is evaluated once, as the registry folds
+    1/v terms), a sign term smoothed as tanh(rate / smoothing).  The registry builds one for
+    an entry without a named class (:func:`bikeid.sim.effect_registry.nonlinear_effects`).
+
+    Parameters
+    ----------
+    law : Law or str
+        The term (a string is parsed); a constant, a state or the sign of a rate (the
+        plant's mass matrix and torque input are the rigid bodies': accelerations and the
+        torque are refused).
+    value : float
+        The effect's value [the law's unit], finite.
+    speed : float, optional
+        Forward speed [m/s] of the speed factor (default 0: none allowed with a factor v).
+    smoothing : float, optional
+        tanh smoothing [rad/s] of a sign term, > 0 (default 0.01, as :class:`SteerCoulomb`).
+
+    Attributes
+    ----------
+    kind : str
+        ``"plant"``.
+
+    Raises
+    ------
+    ValueError
+        For a term the plant does not evaluate, a value that is not finite, a speed that is
+        negative or not finite, or a smoothing that is not positive.
+    """
+
+    law: Law | str
+    value: float
+    speed: float = 0.0
+    smoothing: float = 0.01
+    kind = "plant"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.law, str):
+            object.__setattr__(self, "law", parse_law(self.law))
+        if self.law.kernel_code is None:
+            raise ValueError(
+                f"PlantLaw {self.law.text()!r}: the nonlinear plant carries constants, states "
+                "and signs of rates, not accelerations or the torque (its mass matrix and "
+                "torque input are the rigid bodies'); use the linear experiment model"
+            )
+        if not math.isfinite(self.value):
+            raise ValueError(f"PlantLaw.value must be finite {self.law.unit}, got {self.value!r}")
+        _check("PlantLaw.speed", self.speed, "m/s")
+        _check("PlantLaw.smoothing", self.smoothing, "rad/s", strict=True)
+
+    def row(self) -> tuple[int, int, float, float]:
+        """(output index, kernel code, coefficient [N m per unit of signal], smoothing)."""
+        from .effect_registry import V_FLOOR
+
+        coef = self.law.coefficient(self.value, self.speed, V_FLOOR)
+        return 2 * self.law.index, self.law.kernel_code, coef, self.smoothing
+
+
+def named_class(name: str) -> type | None:
+    """The class of this module implementing registry entry ``name`` (None: none, the entry
+    is carried as a :class:`PlantLaw`).
+
+    Parameters
+    ----------
+    name : str
+        Registry name.
+
+    Returns
+    -------
+    type or None
+    """
+    return _NAMED.get(name)
+
+
+def _row(e: object) -> tuple[int, int, float, float] | None:
+    """The plant-table row of an effect object, or None for an input-side one."""
+    if isinstance(e, PlantLaw):
+        return e.row()
+    name = getattr(type(e), "effect", None)
+    if getattr(e, "kind", None) == "plant" and name in _NAMED:
+        from .effect_registry import effect
+
+        law = effect(name).law
+        smooth = getattr(e, "smoothing", 1.0)
+        return 2 * law.index, law.kernel_code, law.coefficient(e.value, 0.0, 1.0), smooth
+    if getattr(e, "kind", None) == "input":
+        return None
+    raise ValueError(f"unknown effect {e!r}; use one of the dataclasses in sim.effects")
+
+
+#: Columns of a plant-table row: output index (0 roll, 2 steer), kernel code
+#: (:data:`bikeid.sim.effect_law.KERNEL_SIGNALS`), coefficient, tanh smoothing [rad/s].
+PLANT_COLUMNS = ("output", "signal", "coefficient", "smoothing")
 
 
 def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
-    """Compile the plant-side effects into the vector read by :func:`plant_forces`.
+    """Compile the plant-side effects into the table read by :func:`plant_forces`.
 
-    Effects of the same type add up (two dampers in parallel); input-side effects
-    are ignored here.
+    One row per term (:data:`PLANT_COLUMNS`): terms with the same equation, signal and
+    smoothing add up (two dampers in parallel); rows are sorted by equation and then in the
+    kernels' summation order (:data:`bikeid.sim.effect_law.KERNEL_SIGNALS`).  Input-side
+    effects are ignored here.
 
     Parameters
     ----------
@@ -333,48 +475,48 @@ def plant_vector(effects: Iterable[object] | None = None) -> np.ndarray:
 
     Returns
     -------
-    (6,) ndarray
-        Values in :data:`PLANT_SLOTS` order: steer damping [N m s/rad], steer Coulomb
-        torque [N m], its smoothing rate [rad/s] (1.0 without Coulomb friction), roll
-        damping [N m s/rad], roll stiffness [N m/rad], steer stiffness [N m/rad].
+    (n, 4) ndarray
+        The rows: output index, signal code, coefficient [N m per unit of the signal, with
+        the law's sign and speed factor], smoothing [rad/s] (that of a sign term, else 1).
 
     Raises
     ------
     ValueError
-        For an object that is not an effect of this module, or a second
-        :class:`SteerCoulomb` (after one with a positive torque).
+        For an object that is not an effect of this module, or a second sign term of the
+        same rate on the same equation (e.g. a second :class:`SteerCoulomb`).
     """
-    vec = np.zeros(len(PLANT_SLOTS))
-    vec[_S["steer_coulomb_smoothing"]] = 1.0
+    rows: dict[tuple[int, int, float], float] = {}
     for e in effects or ():
-        if isinstance(e, SteerDamping):
-            vec[_S["steer_damping"]] += e.c
-        elif isinstance(e, RollDamping):
-            vec[_S["roll_damping"]] += e.c
-        elif isinstance(e, RollStiffness):
-            vec[_S["roll_stiffness"]] += e.k
-        elif isinstance(e, SteerStiffness):
-            vec[_S["steer_stiffness"]] += e.k
-        elif isinstance(e, SteerCoulomb):
-            if vec[_S["steer_coulomb"]] > 0.0:
-                raise ValueError("give at most one SteerCoulomb effect")
-            vec[_S["steer_coulomb"]] = e.torque
-            vec[_S["steer_coulomb_smoothing"]] = e.smoothing
-        elif getattr(e, "kind", None) != "input":
-            raise ValueError(f"unknown effect {e!r}; use one of the dataclasses in sim.effects")
-    return vec
+        r = _row(e)
+        if r is None:
+            continue
+        out, code, coef, smooth = r
+        if KERNEL_SIGNALS[code].startswith("sign"):
+            if any(k[:2] == (out, code) for k in rows):
+                raise ValueError("give at most one SteerCoulomb effect (one sign term per "
+                                 "rate and equation)")  # fmt: skip
+        else:
+            smooth = 1.0
+        key = (out, code, smooth)
+        rows[key] = rows[key] + coef if key in rows else coef
+    table = np.zeros((len(rows), 4))
+    for i, key in enumerate(sorted(rows, key=lambda k: (k[0], k[1]))):
+        table[i] = (key[0], key[1], rows[key], key[2])
+    return table
 
 
 @njit(cache=True)
 def plant_forces(ev, q4, q7, u4, u6, u7, out):
     """Extra generalized forces [N m] on the (u4, u6, u7) equations; fills ``out``.
 
-    Compiled with numba (called from the integrator's kernel).
+    Compiled with numba (called from the integrator's kernel).  Each row of the table adds
+    ``coefficient * signal`` to its equation, the signals as
+    :data:`bikeid.sim.effect_law.KERNEL_SIGNALS` (a sign as tanh(rate / smoothing)).
 
     Parameters
     ----------
-    ev : (6,) ndarray
-        Plant-effect vector from :func:`plant_vector`.
+    ev : (n, 4) ndarray
+        Plant table from :func:`plant_vector`.
     q4 : float
         Roll angle phi [rad].
     q7 : float
@@ -387,17 +529,33 @@ def plant_forces(ev, q4, q7, u4, u6, u7, out):
         Steer rate deltadot [rad/s].
     out : (3,) ndarray
         Output, overwritten: generalized forces [N m] on the roll, rear-wheel and steer
-        equations, i.e. -c_phi phidot - k_phi phi, 0 and
-        -c_delta deltadot - T_c tanh(deltadot / s) - k_delta delta.
+        equations (the wheel's is 0).
 
     Returns
     -------
     None
         The result is written into ``out``.
     """
-    out[0] = -ev[3] * u4 - ev[4] * q4
+    out[0] = 0.0
     out[1] = 0.0
-    out[2] = -ev[0] * u7 - ev[1] * math.tanh(u7 / ev[2]) - ev[5] * q7
+    out[2] = 0.0
+    for i in range(ev.shape[0]):
+        code = int(ev[i, 1])
+        if code == 0:
+            x = 1.0
+        elif code == 1:
+            x = u4
+        elif code == 2:
+            x = u7
+        elif code == 3:
+            x = math.tanh(u4 / ev[i, 3])
+        elif code == 4:
+            x = math.tanh(u7 / ev[i, 3])
+        elif code == 5:
+            x = q4
+        else:
+            x = q7
+        out[int(ev[i, 0])] += ev[i, 2] * x
 
 
 @dataclass(frozen=True)
@@ -478,3 +636,19 @@ def describe(effects: Iterable[object] | None) -> list[dict]:
         One dict per effect: ``type`` (class name) and its fields in SI units.
     """
     return [{"type": type(e).__name__, **asdict(e)} for e in effects or ()]
+
+
+_CLASSES = (SteerDamping, SteerCoulomb, RollDamping, RollStiffness, SteerStiffness, TorqueGain,
+            ActuatorLag, InputDelay)  # fmt: skip
+_NAMED: dict[str, type] = {c.effect: c for c in _CLASSES}
+
+
+def _plant_slots() -> tuple[str, ...]:
+    from .effect_registry import EFFECTS
+
+    return tuple(n for n, e in EFFECTS.items() if e.layer == "plant" and e.plant_term == n)
+
+
+#: The built-in plant entries the table carries, one row each, generated from the registry's
+#: declarations (those folded into another, like the 1/v tyre terms, share its row).
+PLANT_SLOTS = _plant_slots()

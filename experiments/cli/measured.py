@@ -197,6 +197,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the weight, 0 fits the decay signals only (docs/measured.md)",
     )
     add_acceptance_options(f)
+    add_effects_file_option(f, "candidates of the selection (those with in_library)")
     f.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     f.set_defaults(func=cmd_fit)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
@@ -215,6 +216,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     e.add_argument("--json", action="store_true", help="print JSON")
     e.add_argument("--decays", choices=("listed", "detected"), default="listed", help=DECAYS_HELP)
+    add_effects_file_option(e, "known to the model (a model file re-declares its own)")
     e.set_defaults(func=cmd_evaluate)
     t = msub.add_parser(
         "trials", help="randomized undeclared-effect trials on the nonlinear plant (rates)"
@@ -315,6 +317,32 @@ def _log_files(report: dict, obj: dict) -> list[Path]:
             if Path(p).name in used or Path(p).name == "segments.csv"]  # fmt: skip
 
 
+def add_effects_file_option(p: argparse.ArgumentParser, role: str) -> None:
+    """``--effects-file FILE``: a user's effect declarations (:mod:`bikeid.sim.effect_files`)."""
+    p.add_argument(
+        "--effects-file", metavar="FILE",
+        help=f"YAML/JSON file declaring extra effects in the law language (e.g. law: 'roll: "
+        f"-c * phidot'; bikeid.sim.effect_files), {role}",
+    )  # fmt: skip
+
+
+def use_effects_file(args: argparse.Namespace) -> tuple[str, ...]:
+    """Register the effects of ``--effects-file`` (none without it); their names.
+
+    Raises
+    ------
+    InputError
+        One line naming the file's line and the fix.
+    """
+    if not getattr(args, "effects_file", None):
+        return ()
+    from bikeid.dataset.files import check_input_file
+    from bikeid.sim.effect_files import load_effects_file
+
+    check_input_file(args.effects_file, "--effects-file")
+    return load_effects_file(args.effects_file).names
+
+
 def cmd_fit(args) -> int:
     import sys
 
@@ -323,6 +351,7 @@ def cmd_fit(args) -> int:
 
     ww = parse_weave_weight(str(args.weave_weight))
     _check_model_output(args)  # before minutes of fitting
+    user = use_effects_file(args)
     ws, base, law, report = load_log_decays(args, _speeds(args.speeds),
                                             min_decays=MIN_FIT_DECAYS)  # fmt: skip
     bar = terminal_progress("measured fit", unit="fit", quiet=args.quiet)
@@ -360,6 +389,13 @@ def cmd_fit(args) -> int:
               f"{'agree' if pc['agree'] else 'disagree'} (up to their ambiguity sets): linear "
               f"{pc['linear']['verdict']}, nonlinear {pc['nonlinear']['verdict']}")  # fmt: skip
     print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    if user:  # the user's effects, marked
+        from bikeid.ident.effects.library import LIBRARY
+
+        cands = [n for n in user if n in LIBRARY]
+        chosen = [n for n in cands if n in out["effects"]]
+        print(f"user effects from {args.effects_file}: candidates {', '.join(cands) or 'none'}"
+              f"; selected {', '.join(chosen) or 'none'}")  # fmt: skip
     from bikeid.ident.effects.selection import evidence_lines
 
     uncertain = bool(ch.get("uncertain"))  # the chosen plant's evidence names no effect
@@ -399,6 +435,7 @@ def cmd_evaluate(args) -> int:
     )
 
     check_input_file(args.model, "--model")  # /dev/zero or a FIFO would never end
+    use_effects_file(args)
     plant_model = plant_model_file(args.model)
     if plant_model is not None:  # an identified plant model (bikeid identify --out)
         if args.format != "sbw":

@@ -79,9 +79,44 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--fall-limit", type=number(0.0, 90.0, lo_open=True, unit="deg"), default=60.0,
         help="|roll| fall limit [deg], in (0, 90]",
     )  # fmt: skip
+    p.add_argument(
+        "--effects-file", metavar="FILE",
+        help="YAML/JSON file declaring extra effects in the law language "
+        "(bikeid.sim.effect_files); those given a 'value' act on the plant (a speed factor "
+        "of a law is taken at --speed)",
+    )  # fmt: skip
     p.add_argument("--energy", action="store_true", help="add the total energy column [J]")
     p.add_argument("--out", required=True, help="output file, .csv or .json")
     p.set_defaults(func=cmd_simulate)
+
+
+def _file_effects(args: argparse.Namespace) -> tuple[list, dict]:
+    """The plant objects of the ``--effects-file`` declarations that give a value, and the
+    values carried (none without the option).
+
+    Raises
+    ------
+    InputError
+        For an invalid file, or a declaration with a value that the nonlinear plant cannot
+        carry (an acceleration term).
+    """
+    if not args.effects_file:
+        return [], {}
+    from bikeid.dataset.files import check_input_file
+    from bikeid.sim.effect_files import load_effects_file
+    from bikeid.sim.effect_registry import effect, nonlinear_effects
+
+    check_input_file(args.effects_file, "--effects-file")
+    f = load_effects_file(args.effects_file)
+    for name in f.values:
+        if effect(name).plant_term is None:
+            raise InputError(f"{args.effects_file}: effect {name!r}: {effect(name).no_plant}; "
+                             "drop its value here")  # fmt: skip
+    if not f.values:
+        raise InputError(f"{args.effects_file}: no declaration gives a value; add value: X "
+                         "to the effects to simulate")  # fmt: skip
+    objects, eq = nonlinear_effects(f.values, args.speed, args.dt)
+    return objects, eq
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -118,13 +153,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         controller, control = (lambda t, y: T), {"steer_torque": T}
     else:
         controller, control = None, {}
+    effects, values = _file_effects(args)
     tr = simulate(
         bike, x0, args.duration, controller=controller, dt=args.dt, substeps=args.substeps,
         mode=args.mode, fall_limit=math.radians(args.fall_limit), energy=args.energy,
+        effects=effects or None,
     )  # fmt: skip
     cols = tr.columns()
     meta = {
         **tr.meta,
+        **({"effects_file": {"file": args.effects_file, "values": values}} if values else {}),
         "speed": args.speed,
         "initial": {"phi": x0[3], "delta": x0[5], "phidot": x0[7], "deltadot": x0[9]},
         "control": control,

@@ -26,6 +26,7 @@ from bikeid.ident.effects.weave import (
     simulated_weave,
     weave_uncertainty,
 )
+from bikeid.sim.effect_registry import EFFECTS, V_FLOOR
 
 __all__ = [
     "before_after_summary",
@@ -49,11 +50,13 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
 
     r = [0, T] - (M q'' + v C1 q' + (g K0 + v^2 K2) q), with q'' from filtered central
     differences of the measured rates (2nd-order 15 Hz Butterworth, zero phase) and T the
-    logged command.  Regressors (per unit of effect) for the steer row:
+    logged command.  Regressors (per unit of effect): for the steer row, the law of every
+    library entry on the steer equation (:mod:`bikeid.sim.effect_registry`, e.g.
     steer_viscous_damping -deltadot, steer_coulomb_friction -tanh(deltadot/0.1),
-    tire_scrub_torque -deltadot/v, command_gain T, steer_torque_bias 1,
-    steer_inertia -deltaddot, steer_stiffness -delta; for the roll row: roll_viscous_damping -phidot
-    (outside the library, used only to show the residual pattern).
+    tire_scrub_torque -deltadot/v, steer_torque_bias 1, steer_inertia -deltaddot,
+    steer_stiffness -delta, and a user's library effects) and command_gain T (an input
+    entry: its code); for the roll row: roll_viscous_damping -phidot (outside the library,
+    used only to show the residual pattern).
 
     Parameters
     ----------
@@ -70,10 +73,10 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
     """
     cm = model.canonical()
     rows = {k: [] for k in ("roll", "steer", "T", "v")}
-    reg = {k: [] for k in ("steer_viscous_damping", "steer_coulomb_friction",
-                           "tire_scrub_torque", "command_gain", "steer_torque_bias",
-                           "steer_inertia", "steer_stiffness",
-                           "roll_viscous_damping")}  # fmt: skip
+    laws = {n: e.law for n, e in EFFECTS.items()
+            if e.law is not None and e.in_library and e.law.equation == "steer"}  # fmt: skip
+    laws["roll_viscous_damping"] = EFFECTS["roll_viscous_damping"].law
+    reg = {k: [] for k in (*laws, "command_gain")}
     sims = model.simulate(windows)
     for w, s in zip(windows, sims, strict=True):
         v = model.true_speed(float(np.mean(w.v_sensor)))
@@ -87,14 +90,13 @@ def equation_error(model: ExperimentModel, windows: list[Window]) -> dict[str, n
         rows["steer"].append(T - lhs[1])
         rows["T"].append(T)
         rows["v"].append(np.full(w.n, v))
-        reg["steer_viscous_damping"].append(-w.deltadot)
-        reg["steer_coulomb_friction"].append(-np.tanh(w.deltadot / COULOMB_EPS))
-        reg["tire_scrub_torque"].append(-w.deltadot / v)
+        signals = {"1": np.ones(w.n), "phi": w.phi, "delta": w.delta, "phidot": w.phidot,
+                   "deltadot": w.deltadot, "phiddot": qdd[0], "deltaddot": qdd[1],
+                   "sign(phidot)": np.tanh(w.phidot / COULOMB_EPS),
+                   "sign(deltadot)": np.tanh(w.deltadot / COULOMB_EPS)}  # fmt: skip
+        for n, law in laws.items():  # the law's force per unit of the effect
+            reg[n].append(law.coefficient(signals[law.signal], v, V_FLOOR))
         reg["command_gain"].append(T)
-        reg["steer_torque_bias"].append(np.ones(w.n))
-        reg["steer_inertia"].append(-qdd[1])
-        reg["steer_stiffness"].append(-w.delta)
-        reg["roll_viscous_damping"].append(-w.phidot)
     out = {k: np.concatenate(v) for k, v in rows.items()}
     out.update({f"reg:{k}": np.concatenate(v) for k, v in reg.items()})
     return out

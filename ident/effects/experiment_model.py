@@ -14,9 +14,12 @@ free decays).  Sign: with roll/steer positive to the right, +K stabilizes (see
 
 Effects: every name, unit, absent value, plausible range and one-line term is declared once
 in :mod:`bikeid.sim.effect_registry` (``EFFECTS``); all default to absent.  This model
-applies every entry to the linear model (plant terms to the matrices, input terms to the
-command, sensor terms to the outputs, parameter corrections through :meth:`plant_params`);
-the steer Coulomb friction is smoothed as -T_c * tanh(deltadot / 0.1 rad/s) here.
+applies every entry to the linear model: the entries with a law from the table (each law's
+term to M, C or K, or, for a constant or the sign of a rate, to the forcing of the sampled
+loop: :meth:`ExperimentModel.law_matrix`, :meth:`ExperimentModel.forcing_rows`), input terms
+to the command, sensor terms to the outputs, parameter corrections through
+:meth:`plant_params`; a sign term (the steer Coulomb friction) is smoothed as
+tanh(rate / 0.1 rad/s) here.
 
 ``tire_twist_stiffness`` (a contact-patch twist torque that falls with speed) can be fitted
 by name but is kept out of the identification library: the per-file fits contradict its 1/v
@@ -77,7 +80,7 @@ import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.dataset.windows import Window
-from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, effect, nonlinear_effects
+from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, Effect, effect, nonlinear_effects
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
 from bikeid.sim.parameters import BicycleParameters, steer_by_wire
 from bikeid.sim.sampling import zoh
@@ -277,9 +280,77 @@ class ExperimentModel:
             If the parameter corrections are invalid (:meth:`plant_params`).
         """
         cm = canonical_matrices(self.plant_params())
-        M = cm.M.copy()
-        M[1, 1] += self.e("steer_inertia")
+        M = cm.M + self.law_matrix("acceleration", 0.0)
         return CanonicalMatrices(M=M, C1=cm.C1, K0=cm.K0, K2=cm.K2, g=cm.g)
+
+    def law_effects(self) -> list[tuple[Effect, float]]:
+        """The set effects that carry a law, with their values, in registry order.
+
+        Returns
+        -------
+        list of (Effect, float)
+            Entries of :data:`bikeid.sim.effect_registry.EFFECTS` with a law and their
+            values [the entry's unit].
+        """
+        return [(e, float(self.effects[n])) for n, e in EFFECTS.items()
+                if e.law is not None and n in self.effects]  # fmt: skip
+
+    def law_matrix(self, kind: str, v: float) -> np.ndarray:
+        """The 2 x 2 addition of the laws of one kind to the left side M, C or K at speed v.
+
+        A law's force ``coef * x`` on the right side (coef = sign * value * v^p,
+        :meth:`bikeid.sim.effect_law.Law.coefficient`) is ``-coef`` in the matrix row of
+        its equation and the column of its state.
+
+        Parameters
+        ----------
+        kind : {"acceleration", "rate", "angle"}
+            Which matrix: M [kg m^2], C [N m s/rad] or K [N m/rad].
+        v : float
+            True speed [m/s].
+
+        Returns
+        -------
+        (2, 2) ndarray
+            Rows and columns [phi, delta].
+        """
+        D = np.zeros((2, 2))
+        for e, value in self.law_effects():
+            law = e.law
+            if law.kind == kind:
+                col = 1 if "delta" in law.signal else 0
+                D[law.index, col] -= law.coefficient(value, v, V_FLOOR)
+        return D
+
+    def forcing_rows(self, speeds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The constant and sign laws as rows of the sampled loop's forcing.
+
+        Parameters
+        ----------
+        speeds : array_like
+            True speed of each window [m/s].
+
+        Returns
+        -------
+        eq : (nr,) ndarray of int
+            Equation of each row (0 roll, 1 steer).
+        code : (nr,) ndarray of int
+            Signal code (:data:`bikeid.sim.effect_law.KERNEL_SIGNALS`: 0 constant, 3 and 4
+            the signs of the roll and steer rates, as tanh(rate / COULOMB_EPS)).
+        coef : (len(speeds), nr) ndarray
+            Signed coefficients [N m] at each window's speed; rows in the kernels' order
+            (constants before signs).
+        """
+        rows = [(e.law, value) for e, value in self.law_effects()
+                if e.law.kind in ("constant", "sign")]  # fmt: skip
+        rows.sort(key=lambda r: r[0].kernel_code)  # stable: registry order within a code
+        vs = np.atleast_1d(np.asarray(speeds, dtype=float))
+        eq = np.array([law.index for law, _ in rows], dtype=np.int64)
+        code = np.array([law.kernel_code for law, _ in rows], dtype=np.int64)
+        coef = np.zeros((vs.size, len(rows)))
+        for j, (law, value) in enumerate(rows):
+            coef[:, j] = [law.coefficient(value, v, V_FLOOR) for v in vs]
+        return eq, code, coef
 
     def continuous(self, v: float, cm: CanonicalMatrices | None = None):
         """(A, B) of [phi, delta, phidot, deltadot(, Ta)(, delta_k)] with inputs [u, w, T_phi].
@@ -338,15 +409,8 @@ class ExperimentModel:
         """
         cm = cm or self.canonical()
         Minv = np.linalg.inv(cm.M)
-        C = v * cm.C1 + np.diag(
-            [
-                self.e("roll_viscous_damping"),
-                self.e("steer_viscous_damping") + self.e("tire_scrub_torque") / max(v, V_FLOOR),
-            ]
-        )
-        Kq = cm.stiffness(v).copy()
-        Kq[0, 0] += self.e("roll_stiffness")
-        Kq[1, 1] += self.e("steer_stiffness") + self.e("tire_twist_stiffness") / max(v, V_FLOOR)
+        C = v * cm.C1 + self.law_matrix("rate", v)
+        Kq = cm.stiffness(v) + self.law_matrix("angle", v)
         lag = self.e("actuator_lag")
         sigma = self.e("tire_relaxation")
         relax = relax or sigma > 0
@@ -479,7 +543,13 @@ class ExperimentModel:
         G[:npl] = Bd[:, 0] * uext
         G[npl] = 1.0
         c = np.zeros(nz)
-        c[:npl] = Bd[:, 0] * uext * c0 + Bd[:, 1] * self.e("steer_torque_bias")
+        feq, fcode, fcoef = self.forcing_rows([v])
+        const = [0.0, 0.0]  # roll, steer constant torques [N m] (the sign terms are dropped)
+        for j in np.flatnonzero(fcode == 0):
+            const[feq[j]] += fcoef[0, j]
+        c[:npl] = Bd[:, 0] * uext * c0 + Bd[:, 1] * const[1]
+        if const[0] != 0.0:
+            c[:npl] += Bd[:, 2] * const[0]
         c[npl] = c0
         return Phi, G, c, npl
 
@@ -615,7 +685,7 @@ class ExperimentModel:
             self.e("roll_angle_bias"),
             self.e("steer_angle_bias"),
         )
-        bias_T, tc = self.e("steer_torque_bias"), self.e("steer_coulomb_friction")
+        feq, fcode, fcoef = self.forcing_rows([self.true_speed(v) for v in vs])
         Kc = self.K * (self.V - vs)
         H = max(m + 2, 2)
         hist = np.stack([w.command_history(H) for w in windows])  # oldest first
@@ -650,7 +720,7 @@ class ExperimentModel:
         cmd[:, :H] = hist
         X, U = _sampled_loop(
             np.ascontiguousarray(Ad), np.ascontiguousarray(Bd), x, cmd, H, logged, tlog, text,
-            tphi, Kc, s, brr, g, f, m, nsub, bias_T, tc, COULOMB_EPS,
+            tphi, Kc, s, brr, g, f, m, nsub, feq, fcode, fcoef, COULOMB_EPS,
         )  # fmt: skip
         out = []
         for i, w in enumerate(windows):
@@ -761,14 +831,17 @@ def with_nonlinear_correction(
 
 @numba.njit(cache=True)
 def _sampled_loop(Ad, Bd, x, cmd, H, logged, tlog, text, tphi, Kc, s, brr, g, f, m, nsub,
-                  bias_T, tc, eps):  # fmt: skip
+                  feq, fcode, fcoef, eps):  # fmt: skip
     """The sampled loop of :meth:`ExperimentModel.simulate`, compiled (same arithmetic).
 
     Per window i and loop k: the command Tc_k (logged, or the law on the measured-equivalent
     roll rate plus T_ext) goes into ``cmd[i, H + k]``; the plant input is the delayed,
-    interpolated command times the gain; ``nsub`` ZOH substeps with the Coulomb torque
-    re-evaluated.  Returns the states X (nw, nmax, npl) at each loop start and the inputs U.
+    interpolated command times the gain; ``nsub`` ZOH substeps with the forcing rows
+    (:meth:`ExperimentModel.forcing_rows`: constants, and signs of rates as
+    tanh(rate / eps)) re-evaluated into the steer torque w and the roll torque.  Returns
+    the states X (nw, nmax, npl) at each loop start and the inputs U.
     """
+    nr = feq.shape[0]
     nw, npl = x.shape
     nmax = tlog.shape[1]
     X = np.zeros((nw, nmax, npl))
@@ -786,12 +859,24 @@ def _sampled_loop(Ad, Bd, x, cmd, H, logged, tlog, text, tphi, Kc, s, brr, g, f,
             u = g * ((1 - f) * cmd[i, H + k - m] + f * cmd[i, H + k - m - 1])
             U[i, k] = u
             for _ in range(nsub):
-                wtq = bias_T - tc * np.tanh(x[i, 3] / eps) if tc != 0.0 else bias_T
+                wtq = 0.0
+                wroll = tphi[i, k]
+                for j in range(nr):
+                    if fcode[j] == 0:
+                        term = fcoef[i, j]
+                    elif fcode[j] == 3:
+                        term = fcoef[i, j] * np.tanh(x[i, 2] / eps)
+                    else:
+                        term = fcoef[i, j] * np.tanh(x[i, 3] / eps)
+                    if feq[j] == 1:
+                        wtq += term
+                    else:
+                        wroll += term
                 for r in range(npl):
                     acc = 0.0
                     for c in range(npl):
                         acc += Ad[i, r, c] * x[i, c]
-                    xn[r] = acc + Bd[i, r, 0] * u + Bd[i, r, 1] * wtq + Bd[i, r, 2] * tphi[i, k]
+                    xn[r] = acc + Bd[i, r, 0] * u + Bd[i, r, 1] * wtq + Bd[i, r, 2] * wroll
                 for r in range(npl):
                     x[i, r] = xn[r]
     return X, U

@@ -5,7 +5,9 @@ Each effect's facts (name, unit, absent value, its one-line doc) are those of th
 it: additive or structural, the scale the optimizer works in, the fit bounds and, for a
 structural effect, the grid its start value is scanned on.  ``LIBRARY`` holds exactly the
 registry's entries with ``in_library`` (tests/ident/effects/test_diagnostics.py), in the order the
-selection tries them.
+selection tries them.  A user's effects (:func:`bikeid.sim.effect_registry.register_effects`,
+``--effects-file``) with ``in_library`` join it as they are registered, after the built-in
+ones: additive, fitted within their plausible range, in steps of their declared ``scale``.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bikeid.sim.effect_registry import RegistryFacts
+from bikeid.sim.effect_registry import Effect, RegistryFacts, on_register, user_effects
 
 __all__ = ["LIBRARY", "Candidate"]
 
@@ -91,3 +93,43 @@ LIBRARY: dict[str, Candidate] = {
                   grid=(0.02, 0.05, 0.1, 0.2, 0.35, 0.5)),
     )  # fmt: skip
 }
+
+
+#: Start grid of a user's effect whose absent value is a bound of its range [its scale].
+USER_GRID = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+
+
+def _user_candidate(e: Effect) -> Candidate:
+    """A user's library effect, fitted within its plausible range in steps of its scale.
+
+    Additive from absent when absent lies inside the range.  When absent is a bound (a
+    damping in [0, 100]), a least-squares start on the bound does not move (its finite
+    differences see no descent), so the start is scanned instead on :data:`USER_GRID` times
+    the scale towards the open side (kept inside the range), as a structural effect's."""
+    lo, hi = e.plausible
+    scale = float(e.scale)
+    if lo < e.absent < hi:
+        return Candidate(e.name, "additive", scale, bounded=True)
+    sign = 1.0 if e.absent == lo else -1.0
+    points = (e.absent + sign * g * scale for g in USER_GRID)
+    grid = tuple(x for x in points if lo < x < hi)
+    return Candidate(e.name, "structural", scale, bounded=True, grid=grid or ((lo + hi) / 2,))
+
+
+_BUILT_IN = dict(LIBRARY)
+
+
+def _follow_registry(entries: tuple[Effect, ...], added: bool) -> None:
+    """Keep LIBRARY the registry's in_library set as user effects come and go (an adopted
+    built-in library entry keeps its built-in fit settings)."""
+    for e in entries:
+        LIBRARY.pop(e.name, None)
+        if not added or not e.user:
+            if e.name in _BUILT_IN:
+                LIBRARY[e.name] = _BUILT_IN[e.name]
+        elif e.in_library:
+            LIBRARY[e.name] = _BUILT_IN.get(e.name) or _user_candidate(e)
+
+
+_follow_registry(user_effects(), True)  # registered before this module was imported
+on_register(_follow_registry)
