@@ -211,6 +211,19 @@ class KalmanGainProblem(PredictionProblem):
     alternates between the speed parameters and eta, because where the noise is
     negligible K hardly depends on eta, and those near-zero Jacobian columns made the
     joint Levenberg-Marquardt steps so damped that it stopped short of the optimum.
+
+    Parameters
+    ----------
+    data, mapping, weights, outputs
+        As :class:`bikeid.ident.predictor.PredictionProblem`.
+    rdiag : ndarray
+        Sensor noise variances of the outputs.
+    ref : ndarray
+        Reference model parameters of the noise scaling.
+    z : ndarray
+        The full parameter vector (model parameters, then eta).
+    free : ndarray of int
+        Indices of z the minimizer moves.
     """
 
     def __init__(self, data, mapping, rdiag, weights, outputs, ref, z, free):
@@ -219,18 +232,71 @@ class KalmanGainProblem(PredictionProblem):
         self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
 
     def full(self, x) -> np.ndarray:
-        """z with the free entries set to x."""
+        """z with the free entries set to x.
+
+        Parameters
+        ----------
+        x : ndarray
+            Values of the free entries.
+
+        Returns
+        -------
+        ndarray
+            The full parameter vector.
+        """
         z = self.z.copy()
         z[self.free] = x
         return z
 
     def split(self, z):
+        """The model parameters of z and no free gains (the gains follow the model).
+
+        Parameters
+        ----------
+        z : ndarray
+            The full parameter vector.
+
+        Returns
+        -------
+        tuple
+            (model parameters, None).
+        """
         return z[: self.mapping[0].shape[1]], None
 
     def residual(self, x):
+        """The stacked weighted prediction errors at the free entries x.
+
+        Parameters
+        ----------
+        x : ndarray
+            Values of the free entries.
+
+        Returns
+        -------
+        ndarray or None
+            The residual vector (None where a model cannot be evaluated).
+        """
         return super().residual(self.full(x))
 
     def gain(self, theta, dt, rdiag, eta):
+        """The Kalman gain of the model ``theta`` at sample period ``dt``.
+
+        Parameters
+        ----------
+        theta : ndarray
+            Model parameters at one speed.
+        dt : float
+            Sample period [s].
+        rdiag : ndarray
+            Sensor noise variances.
+        eta : ndarray
+            Noise parameters.
+
+        Returns
+        -------
+        ndarray
+            The steady-state Kalman gain K.
+        """
         return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
 
     def _needs(self) -> tuple[bool, bool]:
@@ -295,6 +361,18 @@ class KalmanGainProblem(PredictionProblem):
         return out
 
     def jacobian(self, x):
+        """Residual and its Jacobian in the free entries x.
+
+        Parameters
+        ----------
+        x : ndarray
+            Values of the free entries.
+
+        Returns
+        -------
+        tuple
+            (residual, Jacobian), or (None, None) where a model cannot be evaluated.
+        """
         r = self.residual(x)
         if r is None:
             return None, None

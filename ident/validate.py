@@ -42,7 +42,6 @@ from scipy.stats import binomtest
 from bikeid.dataset.run import Run
 from bikeid.ident.direct import DirectResult, vaf_moore, vaf_variance
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
-from bikeid.ident.pem import CanonicalModel
 from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.sampling import zoh
 
@@ -564,7 +563,9 @@ def _ss(model, v: float | None = None) -> control.StateSpace:
         raise ValueError(
             f"a {type(model).__name__} is defined over speed: pass the speed, v=... [m/s]"
         )
-    order = "chen_dao" if isinstance(model, CanonicalModel) else "bikeid"
+    # (a model with Chen & Dao's matrices, ident.pem.CanonicalModel, by what it has: this
+    # module is below ident.pem, whose fit runs the structure check built on it)
+    order = "chen_dao" if hasattr(model, "A_chen_dao") else "bikeid"
     return model.state_space(v if isinstance(model, SpeedDependentModel) else None, order=order)
 
 

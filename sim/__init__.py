@@ -24,7 +24,10 @@ Modules:
 - :mod:`~bikeid.sim.effects`: optional physical effects the Whipple model lacks (steer
   friction, actuator lag, ...), injected by the simulator.
 - :mod:`~bikeid.sim.effect_registry`: every such effect declared once (name, unit,
-  plausible range, layer, how the plant carries it).
+  plausible range, layer, its law, how the plant carries it).
+- :mod:`~bikeid.sim.effect_law`: the small language of effect laws (which equation, which
+  term, its unit), shared by the registry, user files and discovery.
+- :mod:`~bikeid.sim.effect_files`: a user's effects declared in a YAML or JSON file.
 - :mod:`~bikeid.sim.sampling`: the one exact zero-order-hold discretization (:func:`zoh`).
 - :mod:`~bikeid.sim.periodic_orbits`: periodic orbits of the uncontrolled bicycle converged
   on a Poincare map, and their Floquet multipliers.

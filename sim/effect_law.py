@@ -168,7 +168,18 @@ class Law:
         return base + _SPEED_UNIT[self.speed_power]
 
     def text(self, symbol: str = "c") -> str:
-        """The law as written in the language, e.g. ``"steer: -c / v * deltadot"``."""
+        """The law as written in the language.
+
+        Parameters
+        ----------
+        symbol : str, optional
+            The coefficient's symbol (default ``"c"``).
+
+        Returns
+        -------
+        str
+            E.g. ``"steer: -c / v * deltadot"``.
+        """
         sig = "+" if self.sign > 0 else "-"
         tail = "" if self.signal == "1" else f" * {self.signal}"
         return f"{self.equation}: {sig}{symbol}{_SPEED_TEXT[self.speed_power]}{tail}"

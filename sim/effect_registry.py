@@ -65,7 +65,6 @@ __all__ = [
     "library_names",
     "linear_entry",
     "no_law_reason",
-    "nonlinear_effects",
     "on_register",
     "register_effects",
     "unregister_effects",
@@ -586,95 +585,6 @@ def library_names() -> tuple[str, ...]:
         Names with ``in_library`` true, in registry order.
     """
     return tuple(n for n, e in EFFECTS.items() if e.in_library)
-
-
-def nonlinear_effects(
-    values: Mapping[str, float],
-    speed: float,
-    dt: float,
-    coulomb_smoothing: float | None = None,
-) -> tuple[list[object], dict[str, float]]:
-    """The nonlinear-plant objects carrying the effects ``values`` at one speed.
-
-    Parameters
-    ----------
-    values : mapping of str to float
-        Effect values by registry name; names the plant cannot carry are skipped (their
-        entry's ``no_plant`` says why).
-    speed : float
-        True forward speed [m/s], for the speed factors of the laws.
-    dt : float
-        Controller sample time [s]: an input delay is rounded to whole samples.
-    coulomb_smoothing : float, optional
-        tanh smoothing [rad/s] of the sign terms (default that of
-        :class:`bikeid.sim.effects.SteerCoulomb`).
-
-    Returns
-    -------
-    objects : list
-        :mod:`bikeid.sim.effects` objects for :func:`bikeid.sim.integrate.simulate`: the
-        entry's named class where :mod:`bikeid.sim.effects` has one, else a
-        :class:`bikeid.sim.effects.PlantLaw` (an entry with a law needs nothing more).
-    equivalent : dict of str to float
-        The carried terms as effect values (1/v terms folded in at ``speed``, the delay
-        rounded): the same model expressed in the plant's own terms.
-
-    Raises
-    ------
-    ValueError
-        If a name in ``values`` is not in the registry.
-
-    Notes
-    -----
-    An entry folds into its ``plant_term`` as the value giving the same generalized force at
-    ``speed``.  A term is carried when its value is not absent, except that a damping,
-    friction or stiffness whose named class requires a value >= 0 is carried only when
-    positive; a gain when not 1, a lag when positive and a delay when it rounds to at least
-    one sample.
-    """
-    from . import effects as fx
-
-    folded: dict[str, float] = {}
-    for name, value in values.items():
-        e = effect(name)
-        if e.plant_term is None:
-            continue
-        target = EFFECTS[e.plant_term]
-        if e.plant_term == name:
-            x = float(value)
-        elif e.law is not None:  # the value of the target's law giving the same force
-            per_unit = target.law.coefficient(1.0, speed, V_FLOOR)
-            x = e.law.coefficient(float(value), speed, V_FLOOR) / per_unit
-        else:
-            x = float(value)
-        base = folded.get(e.plant_term, target.absent)
-        folded[e.plant_term] = base * x if e.plant_term == "command_gain" else base + x
-    objects: list[object] = []
-    eq: dict[str, float] = {}
-    for name in EFFECTS:  # registry order, so the result does not depend on dict order
-        if name not in folded:
-            continue
-        x = folded[name]
-        e = EFFECTS[name]
-        cls = fx.named_class(name)
-        if name == "input_delay":
-            x = round(x / dt) * dt
-            keep = x > 0
-        elif getattr(cls, "nonnegative", False):
-            keep = x > 0
-        else:
-            keep = x != e.absent
-        if not keep:
-            continue
-        smooth = {} if coulomb_smoothing is None else {"smoothing": coulomb_smoothing}
-        if cls is None:
-            objects.append(fx.PlantLaw(e.law, x, speed, **smooth))
-        elif e.law is not None and e.law.kind == "sign":
-            objects.append(cls(x, **smooth))
-        else:
-            objects.append(cls(x))
-        eq[name] = x
-    return objects, eq
 
 
 def check_values(values: Mapping[str, object], source: str = "") -> dict[str, float]:

@@ -30,7 +30,7 @@ are applied by :meth:`bikeid.dataset.sensors.Sensors.with_effects`.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
 from typing import ClassVar
 
@@ -38,10 +38,12 @@ import numpy as np
 from numba import njit
 
 from .effect_law import KERNEL_SIGNALS, Law, parse_law
+from .effect_registry import EFFECTS, V_FLOOR, effect
 
 __all__ = [
     "PLANT_COLUMNS",
     "PLANT_SLOTS",
+    "nonlinear_effects",
     "ActuatorLag",
     "InputChain",
     "InputDelay",
@@ -368,7 +370,7 @@ class PlantLaw:
     The generalized force ``sign * value * v**speed_power * signal`` of ``law`` at the run's
     speed ``speed`` (held fixed: the speed factor is evaluated once, as the registry folds
     1/v terms), a sign term smoothed as tanh(rate / smoothing).  The registry builds one for
-    an entry without a named class (:func:`bikeid.sim.effect_registry.nonlinear_effects`).
+    an entry without a named class (:func:`nonlinear_effects`).
 
     Parameters
     ----------
@@ -416,9 +418,13 @@ class PlantLaw:
         _check("PlantLaw.smoothing", self.smoothing, "rad/s", strict=True)
 
     def row(self) -> tuple[int, int, float, float]:
-        """(output index, kernel code, coefficient [N m per unit of signal], smoothing)."""
-        from .effect_registry import V_FLOOR
+        """The plant-table row of this term.
 
+        Returns
+        -------
+        tuple
+            (output index, kernel code, coefficient [N m per unit of signal], smoothing).
+        """
         coef = self.law.coefficient(self.value, self.speed, V_FLOOR)
         return 2 * self.law.index, self.law.kernel_code, coef, self.smoothing
 
@@ -445,8 +451,6 @@ def _row(e: object) -> tuple[int, int, float, float] | None:
         return e.row()
     name = getattr(type(e), "effect", None)
     if getattr(e, "kind", None) == "plant" and name in _NAMED:
-        from .effect_registry import effect
-
         law = effect(name).law
         smooth = getattr(e, "smoothing", 1.0)
         return 2 * law.index, law.kernel_code, law.coefficient(e.value, 0.0, 1.0), smooth
@@ -644,11 +648,96 @@ _NAMED: dict[str, type] = {c.effect: c for c in _CLASSES}
 
 
 def _plant_slots() -> tuple[str, ...]:
-    from .effect_registry import EFFECTS
-
     return tuple(n for n, e in EFFECTS.items() if e.layer == "plant" and e.plant_term == n)
 
 
 #: The built-in plant entries the table carries, one row each, generated from the registry's
 #: declarations (those folded into another, like the 1/v tyre terms, share its row).
 PLANT_SLOTS = _plant_slots()
+
+
+def nonlinear_effects(
+    values: Mapping[str, float],
+    speed: float,
+    dt: float,
+    coulomb_smoothing: float | None = None,
+) -> tuple[list[object], dict[str, float]]:
+    """The nonlinear-plant objects carrying the effects ``values`` at one speed.
+
+    Parameters
+    ----------
+    values : mapping of str to float
+        Effect values by registry name; names the plant cannot carry are skipped (their
+        entry's ``no_plant`` says why).
+    speed : float
+        True forward speed [m/s], for the speed factors of the laws.
+    dt : float
+        Controller sample time [s]: an input delay is rounded to whole samples.
+    coulomb_smoothing : float, optional
+        tanh smoothing [rad/s] of the sign terms (default that of
+        :class:`bikeid.sim.effects.SteerCoulomb`).
+
+    Returns
+    -------
+    objects : list
+        :mod:`bikeid.sim.effects` objects for :func:`bikeid.sim.integrate.simulate`: the
+        entry's named class where :mod:`bikeid.sim.effects` has one, else a
+        :class:`bikeid.sim.effects.PlantLaw` (an entry with a law needs nothing more).
+    equivalent : dict of str to float
+        The carried terms as effect values (1/v terms folded in at ``speed``, the delay
+        rounded): the same model expressed in the plant's own terms.
+
+    Raises
+    ------
+    ValueError
+        If a name in ``values`` is not in the registry.
+
+    Notes
+    -----
+    An entry folds into its ``plant_term`` as the value giving the same generalized force at
+    ``speed``.  A term is carried when its value is not absent, except that a damping,
+    friction or stiffness whose named class requires a value >= 0 is carried only when
+    positive; a gain when not 1, a lag when positive and a delay when it rounds to at least
+    one sample.
+    """
+    folded: dict[str, float] = {}
+    for name, value in values.items():
+        e = effect(name)
+        if e.plant_term is None:
+            continue
+        target = EFFECTS[e.plant_term]
+        if e.plant_term == name:
+            x = float(value)
+        elif e.law is not None:  # the value of the target's law giving the same force
+            per_unit = target.law.coefficient(1.0, speed, V_FLOOR)
+            x = e.law.coefficient(float(value), speed, V_FLOOR) / per_unit
+        else:
+            x = float(value)
+        base = folded.get(e.plant_term, target.absent)
+        folded[e.plant_term] = base * x if e.plant_term == "command_gain" else base + x
+    objects: list[object] = []
+    eq: dict[str, float] = {}
+    for name in EFFECTS:  # registry order, so the result does not depend on dict order
+        if name not in folded:
+            continue
+        x = folded[name]
+        e = EFFECTS[name]
+        cls = named_class(name)
+        if name == "input_delay":
+            x = round(x / dt) * dt
+            keep = x > 0
+        elif getattr(cls, "nonnegative", False):
+            keep = x > 0
+        else:
+            keep = x != e.absent
+        if not keep:
+            continue
+        smooth = {} if coulomb_smoothing is None else {"smoothing": coulomb_smoothing}
+        if cls is None:
+            objects.append(PlantLaw(e.law, x, speed, **smooth))
+        elif e.law is not None and e.law.kind == "sign":
+            objects.append(cls(x, **smooth))
+        else:
+            objects.append(cls(x))
+        eq[name] = x
+    return objects, eq

@@ -104,7 +104,8 @@ def _file_effects(args: argparse.Namespace) -> tuple[list, dict]:
         return [], {}
     from bikeid.dataset.files import check_input_file
     from bikeid.sim.effect_files import load_effects_file
-    from bikeid.sim.effect_registry import effect, nonlinear_effects
+    from bikeid.sim.effect_registry import effect
+    from bikeid.sim.effects import nonlinear_effects
 
     check_input_file(args.effects_file, "--effects-file")
     f = load_effects_file(args.effects_file)

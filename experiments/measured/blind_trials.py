@@ -83,7 +83,7 @@ from bikeid.ident.effects.selection import (
     compare_nominal_plants,
     select_effects,
 )
-from bikeid.sim.effect_registry import nonlinear_effects
+from bikeid.sim.effects import nonlinear_effects
 from bikeid.sim.parameters import steer_by_wire
 
 __all__ = [

@@ -57,7 +57,8 @@ from bikeid.ident.effects.diagnostics import evaluate
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.selection import select_effects
 from bikeid.ident.validate import binomial_interval as binomial_ci
-from bikeid.sim.effect_registry import RegistryFacts, effect, nonlinear_effects
+from bikeid.sim.effect_registry import RegistryFacts, effect
+from bikeid.sim.effects import nonlinear_effects
 from bikeid.sim.parameters import steer_by_wire
 
 __all__ = [
@@ -142,7 +143,7 @@ class EffectSpec(RegistryFacts):
     def sim_effects(self, value: float) -> list:
         """The :mod:`bikeid.sim.effects` objects injecting ``value`` [unit].
 
-        Through :func:`bikeid.sim.effect_registry.nonlinear_effects` with the trials' steer
+        Through :func:`bikeid.sim.effects.nonlinear_effects` with the trials' steer
         Coulomb smoothing TRIAL_COULOMB_SMOOTHING (0.01 rad/s; the experiment model smooths
         with 0.1 rad/s).  The speed does not enter (no 1/v effect is drawn).
 

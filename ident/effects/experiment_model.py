@@ -80,7 +80,8 @@ import numpy as np
 
 from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
 from bikeid.dataset.windows import Window
-from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, Effect, effect, nonlinear_effects
+from bikeid.sim.effect_registry import EFFECTS, V_FLOOR, Effect, effect
+from bikeid.sim.effects import nonlinear_effects
 from bikeid.sim.linear import CanonicalMatrices, canonical_matrices
 from bikeid.sim.parameters import BicycleParameters, steer_by_wire
 from bikeid.sim.sampling import zoh
@@ -743,7 +744,7 @@ def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -
     """The defect correction of one window at ``model``: y_nl(m') - y_lin(m').
 
     m' is the part of ``model`` (default: the nominal) that the nonlinear plant can carry
-    (:func:`bikeid.sim.effect_registry.nonlinear_effects`, Coulomb smoothing COULOMB_EPS).
+    (:func:`bikeid.sim.effects.nonlinear_effects`, Coulomb smoothing COULOMB_EPS).
     The nonlinear Whipple plant (:func:`sim.integrate.simulate`, RK4, 4 substeps per 10 ms,
     speed held at the true speed) and the linear model are both run with m' from the
     window's measured initial state, zero command history, and the same sampled loop

@@ -119,7 +119,7 @@ def test_the_file_damping_simulates_on_the_bicycle(registered):
     linear Meijaard model with C[phi, phi] += 8 (exact exponential) to 1e-3 of the peak (the
     amplitude makes the nonlinear terms 1e-3 relative), and differs from the undamped
     bicycle by far more than that."""
-    from bikeid.sim.effect_registry import nonlinear_effects
+    from bikeid.sim.effects import nonlinear_effects
     from bikeid.sim.integrate import simulate
     from bikeid.sim.linear import canonical_matrices
     from bikeid.sim.nonlinear import WhippleBicycle

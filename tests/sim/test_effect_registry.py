@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bikeid.sim.effect_registry import EFFECTS, library_names, nonlinear_effects
+from bikeid.sim.effect_registry import EFFECTS, library_names
+from bikeid.sim.effects import nonlinear_effects
 
 
 def _inside(name: str, frac: float = 0.2) -> float:

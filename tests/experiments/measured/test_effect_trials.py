@@ -29,7 +29,7 @@ from bikeid.ident.effects.experiment_model import (
     window_errors,
     with_nonlinear_correction,
 )
-from bikeid.sim.effect_registry import nonlinear_effects
+from bikeid.sim.effects import nonlinear_effects
 
 
 def test_draw_trials_seeded_stratified_and_extendable():

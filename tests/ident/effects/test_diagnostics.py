@@ -119,7 +119,7 @@ def test_tire_twist_stiffness_is_a_spring_falling_as_one_over_speed():
 
     from bikeid.dataset.sbw_logs import SPEED_CALIBRATION
     from bikeid.ident.effects.experiment_model import COULOMB_EPS, DT
-    from bikeid.sim.effect_registry import nonlinear_effects
+    from bikeid.sim.effects import nonlinear_effects
 
     a, b = SPEED_CALIBRATION
     for v in (1.5, 4.5):
