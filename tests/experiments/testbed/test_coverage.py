@@ -69,7 +69,7 @@ def test_boundary_fit_is_refused_and_would_have_missed(short_run):
     assert _contains(ei, p) == dict.fromkeys(DEFAULT_PATH_PARTS, False)
     with pytest.raises(UntrustworthyResult, match="stability boundary.*noise_model='kalman'"):
         eigenvalue_intervals(model)
-    with pytest.raises(UntrustworthyResult, match="Kalman gain"):
+    with pytest.raises(UntrustworthyResult, match="stable by construction"):
         check_predictor_interior(model)
 
 
