@@ -57,7 +57,9 @@ PREDICTOR_BOUNDARY_TOL = 1e-4
 #: The remedy of a boundary fit and of an output-error fit of an unstable plant: the default
 #: noise model, whose predictor is stable by construction.  Measured on the README example
 #: (benchmarks/bench_predictor.py, docs/uncertainty.md).
-REMEDY_KALMAN = "refit with pem.fit's default noise model (noise_model='free', a Kalman gain)"
+REMEDY_KALMAN = (
+    "refit with pem.fit(runs, noise_model='kalman') (a predictor stable by construction)"
+)
 #: The note beside intervals of a model that carries no structure check.
 NO_STRUCTURE_NOTE = (
     "no structure check is attached to this model, so nothing says the data do not reject "

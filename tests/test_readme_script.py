@@ -11,9 +11,9 @@ where one 60 s record cannot determine an eigenvalue that well, 2.58 of the fit'
 standard errors (its 99 % first-order interval; their calibration on this example:
 ``benchmarks/bench_predictor.py``, docs/uncertainty.md).  The run is seeded, so the errors
 are deterministic: with the former free innovation gain 0.036, 0.040 and 0.048 1/s (weave,
-capsize, caster) for goals 0.062, 0.050 and 0.243 1/s; with the default Kalman-gain
-predictor 0.018, 0.054 and 0.032 1/s (the capsize's beyond the goal, within its standard
-errors).
+capsize, caster) for goals 0.062, 0.050 and 0.243 1/s (the default); with the Kalman-gain
+predictor (``noise_model="kalman"``) 0.018, 0.054 and 0.032 1/s (the capsize's beyond the
+goal, within its standard errors).
 """
 
 from __future__ import annotations
