@@ -39,7 +39,6 @@ from bikeid.sim.errors import InputError
 
 from .plausibility import CHECKS, bounds_notes, check_runs
 from .run import BOUND_CHECKS, SPEED_RANGE, Run, split_by_speed
-from .signs import nominal_bicycle
 
 __all__ = [
     "FORMATS",
@@ -50,7 +49,6 @@ __all__ = [
     "data_files",
     "import_check_notes",
     "load_runs",
-    "nominal_bicycle",
     "print_note",
     "pool_runs",
     "pool_speeds",
@@ -541,10 +539,10 @@ def load_runs(
     for msg in check_runs(runs, sources, sorted({*data_skip, "sample-period"})):
         if "sample-period" not in msg:
             note(msg)
+    from .signs import check_signs, nominal_bicycle
+
     p = nominal_bicycle(o.bicycle)
     if p is not None and "signs" not in o.skip:
-        from .signs import check_signs
-
         label = sources[0] if len(sources) == 1 else f"{len(sources)} runs"
         for msg in check_signs(runs, p, label):
             note(msg)

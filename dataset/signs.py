@@ -37,8 +37,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import savgol_filter
-from scipy.stats import norm
 
 from bikeid.sim.errors import InputError
 
@@ -114,6 +112,8 @@ def nominal_bicycle(bicycle: Any) -> Any:
 
 
 def _smoothed(x: np.ndarray, dt: float, deriv: int = 0) -> np.ndarray:
+    from scipy.signal import savgol_filter  # (lazy: the command line starts without scipy)
+
     n = x.size
     w = int(round(SMOOTHING / dt)) | 1
     w = min(w, n - 1 if n % 2 == 0 else n)
@@ -165,6 +165,8 @@ def _slope(pairs: list[tuple[np.ndarray, np.ndarray, int]]) -> tuple[float, floa
 
 
 def _verdict(equation: str, b: float, se: float, level: float) -> SignCheck:
+    from scipy.stats import norm
+
     z = float(norm.ppf(1.0 - level / 2.0))
     if not (math.isfinite(b) and math.isfinite(se) and se > 0) or abs(b) < z * se:
         verdict = "undecided"
@@ -237,6 +239,8 @@ def check_signs(
         A mirrored roll axis or steer torque, with the coefficient, its standard error and
         the fixes (``--flip ...``, or ``--skip-check signs`` for data you know are right).
     """
+    from scipy.stats import norm
+
     notes = []
     for c in sign_evidence(runs, p, level):
         if c.verdict == "mirrored" and c.equation == "roll":

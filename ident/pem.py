@@ -681,14 +681,15 @@ def fit(
     )  # fmt: skip
     if kind == "none":
         why = _unstable_plant(theta, dt, *nominal)
-        if not why:  # the nominal plant: the default fit's (consistent in closed loop)
-            ref = fit(runs, outputs=outputs, theta0=theta0, noise_model="kalman",
+        if not why:  # the nominal plant: the default fit's (consistent in closed loop;
+            # the default noise model, FREE_NOISE_MODEL, costs what the fit itself costs)
+            ref = fit(runs, outputs=outputs, theta0=theta0, noise_model="free",
                       max_nfev=max_nfev, method=method, passes=passes, starts=starts,
                       multistart=multistart, informativity="skip", structure=False)  # fmt: skip
             re = float(np.max(np.linalg.eigvals(ref.A).real))
             if re > 0.0:
-                why = (f"the default (Kalman-gain) fit of the same runs has an eigenvalue "
-                       f"with real part {re:+.3f} 1/s")  # fmt: skip
+                why = (f"the default fit ({FREE_NOISE_MODEL} innovation gain) of the same runs "
+                       f"has an eigenvalue with real part {re:+.3f} 1/s")  # fmt: skip
         model = dataclasses.replace(model, unstable_plant=why)
     return _checked(runs, model) if structure else model
 

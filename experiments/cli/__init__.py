@@ -223,8 +223,7 @@ def _main(argv: list[str] | None) -> int:
         try:
             with warnings.catch_warnings():
                 if not debug:  # no raw warning reaches a user: each becomes one note
-                    warnings.showwarning = _warning_note
-                    warnings.simplefilter("default")
+                    warnings.showwarning = _warning_note  # (the caller's filters stand)
                     _seen_warnings.clear()
                 return int(args.func(args) or 0)
         finally:  # progress bars end before any error line (experiments.progress)

@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from bikeid.dataset.logs import LogOptions, import_check_notes, load_runs, nominal_bicycle
+from bikeid.dataset.logs import LogOptions, import_check_notes, load_runs
+from bikeid.dataset.signs import nominal_bicycle
 from bikeid.sim.errors import InputError
 
 __all__ = ["ControlLaw", "check_decay_rates", "decays_from_logs", "toppling_rate"]

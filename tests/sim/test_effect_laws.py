@@ -21,10 +21,10 @@ from bikeid.sim.effect_registry import (
     Effect,
     linear_entry,
     no_law_reason,
-    nonlinear_effects,
     register_effects,
     unregister_effects,
 )
+from bikeid.sim.effects import nonlinear_effects
 
 
 def test_every_plant_entry_has_its_law_and_the_others_say_why():

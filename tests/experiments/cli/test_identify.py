@@ -69,7 +69,9 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys, tmp_path):
     # (under 1 % here) the speed is nearly linear in the parameters over the interval, so
     # each end is within 5 % of the first-order half-width 1.96 SE
     # (ident.uncertainty.z_value(0.95) = 1.959964)
-    crit = critical_speed_intervals(load_model(target)).to_json()
+    # (these runs roll 2.8 deg RMS, above the amplitude limit: the intervals are withheld by
+    # default, ident.trust; asked for by name to show the bias the limit guards against)
+    crit = critical_speed_intervals(load_model(target), refuse_amplitude=False).to_json()
     assert crit["method"] == "profile"
     for name in ("v_w", "v_c"):
         c = crit[name]
