@@ -90,9 +90,10 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys, tmp_path):
     assert not lo <= true_cs["v_w"] <= hi
     iv = out["intervals"]
     assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
-    assert iv["critical_speeds"] is not None and not iv["structure"]["speed_model_rejected"]
-    assert any("cannot see the bias of a linear fit to a nonlinear plant" in n
-               and "half the amplitude" in n for n in iv["notes"])  # fmt: skip
+    # the structure passes, and the amplitude guard (ident.trust, 0.5 deg RMS roll) is what
+    # withholds the intervals by default, saying so: the bias shown above is what it guards
+    assert not iv["structure"]["speed_model_rejected"] and iv["critical_speeds"] is None
+    assert "RMS roll angle" in json.dumps(iv), iv
     # the verdict is recorded in the model file beside the covariance it judges
     doc = json.loads(target.read_text())
     assert doc["results"]["structure_check"]["passed"] is True
