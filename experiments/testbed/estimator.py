@@ -289,19 +289,26 @@ def _eigenvalues(out: Any, speed: float) -> np.ndarray:
     )
 
 
+def _given(model: Any, level: float) -> Any:
+    """The model's first-order eigenvalue intervals, or None where they are withheld
+    (ident.trust: a refused interval is no coverage figure, while the estimate still counts
+    for bias and RMSE)."""
+    from bikeid.ident.uncertainty import eigenvalue_intervals
+    from bikeid.sim.errors import UntrustworthyResult
+
+    try:
+        return eigenvalue_intervals(model, level=level, method="delta")
+    except UntrustworthyResult:
+        return None
+
+
 def _intervals(out: Any, level: float) -> dict[float, Any] | None:
     from bikeid.ident.methods import Identified
 
     if isinstance(out, Identified):
         if not out.interval_models:
             return None
-        from bikeid.ident.uncertainty import eigenvalue_intervals
-
-        return {
-            v: eigenvalue_intervals(m, level=level, method="delta")
-            for v, m in out.interval_models.items()
-            if m is not None
-        }
+        return {v: _given(m, level) for v, m in out.interval_models.items() if m is not None}
     from bikeid.ident.pem import CanonicalModel
 
     if isinstance(out, CanonicalModel) or (
@@ -309,11 +316,8 @@ def _intervals(out: Any, level: float) -> dict[float, Any] | None:
         and out
         and all(isinstance(m, CanonicalModel) for m in out.values())
     ):  # canonical models carry their covariance: first-order intervals
-        from bikeid.ident.uncertainty import eigenvalue_intervals
-
         models = out if isinstance(out, Mapping) else {out.speed: out}
-        return {float(v): eigenvalue_intervals(m, level=level, method="delta")
-                for v, m in models.items()}  # fmt: skip
+        return {float(v): _given(m, level) for v, m in models.items()}
     f = getattr(out, "eigenvalue_intervals", None)
     if not callable(f):
         return None
