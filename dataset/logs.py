@@ -86,13 +86,12 @@ def print_note(msg: str) -> None:
     print(f"note: {msg}", file=sys.stderr, flush=True)
 
 
-def _names(value: Any, what: str) -> tuple[str, ...]:
+def _names(value: Any) -> tuple[str, ...]:
     if value is None:
         return ()
     if isinstance(value, str):
         value = value.split(",")
-    out = tuple(dict.fromkeys(str(v).strip() for v in value if str(v).strip()))
-    return out
+    return tuple(dict.fromkeys(str(v).strip() for v in value if str(v).strip()))
 
 
 @dataclass(frozen=True)
@@ -158,8 +157,8 @@ class LogOptions:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, dict(value))
-        object.__setattr__(self, "flip", _names(self.flip, "flip"))
-        skip = _names(self.skip, "skip")
+        object.__setattr__(self, "flip", _names(self.flip))
+        skip = _names(self.skip)
         bad = [s for s in skip if s not in CHECKS]
         if bad:
             raise InputError(f"skip {','.join(bad)}: unknown check; choose from "
