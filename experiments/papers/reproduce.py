@@ -131,6 +131,9 @@ QUICK = Settings(
 
 #: Controllers studied, by their stored names (``controllers.registry``).
 CONTROLLERS = STUDY_CONTROLLERS
+#: Stages of a reproduction (Fig. 2, the identification runs, Fig. 3, Figs. 4-5, the speed
+#: scan, Fig. 7, Moore & Hubbard, the sweep summary), announced 0/8 .. 7/8, then the report.
+STAGES = 8
 #: Controllers identified only for the sweep summary (Fig. 3's fuzzy runs are reused there).
 SWEEP_ONLY = tuple(c for c in CONTROLLERS if c != "fuzzy")
 METHODS = ("pem", "direct")
@@ -205,7 +208,7 @@ def reproduce(
     bicycle : str
         ``sim.parameters.by_name`` name of the simulated bicycle.
     progress : callable, optional
-        ``progress(done, 7, label)`` before each of the 7 stages and at the end
+        ``progress(done, 8, label)`` before each of the 8 stages and at the end
         (:mod:`bikeid.experiments.progress`).
     dask : str or None, optional
         ``"local"`` or a Dask scheduler address for the batch jobs
@@ -228,7 +231,7 @@ def reproduce(
     times: dict[str, float] = {}
     t_all = time.perf_counter()
 
-    stage = stage_announcer(log, progress, 7)
+    stage = stage_announcer(log, progress, STAGES)
     t0 = stage("Chen & Dao Fig. 2 / eqs. 5-6 (identification at 4.2 m/s)")
     f2 = cdf.fig2(p, out, st.fig2_duration)
     times["fig2"] = time.perf_counter() - t0
@@ -312,7 +315,7 @@ def reproduce(
     sw = _sweep_summary(sweep, out, direct)
     times["sweep"] = time.perf_counter() - t0
     if progress:
-        progress(7, 7, "report")
+        progress(STAGES, STAGES, "report")
     times["total"] = time.perf_counter() - t_all
     crit = critical_speeds(p)
     summary = {
