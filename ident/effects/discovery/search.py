@@ -283,6 +283,7 @@ def discover(
     max_terms: int = 3,
     rule: AcceptanceRule | None = None,
     terms: list[Term] | None = None,
+    family: int | None = None,
     progress: Callable[[int, int, str], None] | None = None,
 ) -> Discovery:
     """Terms of the equations of motion the decays support (module docstring).
@@ -309,6 +310,11 @@ def discover(
         ``unexplained`` settings are not used).
     terms : list of Term, optional
         The dictionary (default :func:`dictionary`).
+    family : int, optional
+        The Bonferroni family: the number of tests the search is charged with (default
+        the tests it makes, K + (K - 1) + ... over ``max_terms`` rounds for the K terms
+        tried).  When ``terms`` were screened from a larger dictionary on the same decays,
+        give that dictionary's count: the screen chose them by the same data.
     progress : callable, optional
         ``progress(done, total, label)`` before each term's fit.
 
@@ -334,6 +340,12 @@ def discover(
         cands = [t for t in fit_able if model.e(t.entry) == t.absent]
         k = len(cands)
         tests = sum(max(k - r, 0) for r in range(max_terms))
+        done, total = 0, tests
+        if family is not None:
+            if family < tests:
+                raise ValueError(f"family {family} is smaller than the {tests} tests the "
+                                 "search makes; give at least that many")  # fmt: skip
+            tests = int(family)
         level = rule.level(tests)
         raw = list(windows)
         ws = corrected(raw, model, nonlinear)
@@ -344,7 +356,6 @@ def discover(
         rounds: list[dict] = []
         cur = model
         cur_val = _costs(error, cur, ws[1::2])
-        done, total = 0, tests
         for _round in range(max_terms):
             fit_w, val_w = ws[0::2], ws[1::2]
             base = float(np.sum(_costs(error, cur, fit_w)))
