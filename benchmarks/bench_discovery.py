@@ -43,20 +43,23 @@ DEFAULT_TERMS = ("roll: phidot=-3",)
 KEYS = ("found", "direct", "within35", "covers")
 
 
-def _truth(term: str, coef: float, folder: Path) -> ExperimentModel:
-    """The experiment model with ``term`` injected through an effects file."""
-    f = load_effects_file(injection_file(folder / "inject.yaml", {term: coef}))
+def _decays(term: str | None, coef: float, seed: int, speeds, per_speed: int, noise: float):
+    """Decays of the experiment model with ``term`` injected through an effects file (None:
+    none); the file's entry stays registered while the generator simulates it."""
+    if not term:
+        return synthetic_windows(ExperimentModel(), speeds, per_speed, noise=noise, seed=seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        f = load_effects_file(injection_file(Path(tmp) / "inject.yaml", {term: coef}))
     try:
-        return ExperimentModel(effects=dict(f.values))
+        truth = ExperimentModel(effects=dict(f.values))
+        return synthetic_windows(truth, speeds, per_speed, noise=noise, seed=seed)
     finally:
         unregister_effects(f.names)
 
 
 def one(term: str | None, coef: float, seed: int, speeds, per_speed: int, noise: float) -> dict:
     """One seed: the discovery on decays with ``term`` (None: no term) injected."""
-    with tempfile.TemporaryDirectory() as tmp:
-        truth = _truth(term, coef, Path(tmp)) if term else ExperimentModel()
-    ws = synthetic_windows(truth, speeds, per_speed, noise=noise, seed=seed)
+    ws = _decays(term, coef, seed, speeds, per_speed, noise)
     t0 = time.process_time()
     d = discover(ExperimentModel(), ws)
     row = {"term": term, "coefficient": coef, "seed": seed,

@@ -108,13 +108,15 @@ def run(term: str | None, coef: float, seed: int, keep: int) -> list[dict]:
     from bikeid.sim.effect_files import load_effects_file
     from bikeid.sim.effect_registry import unregister_effects
 
-    truth = ExperimentModel()
-    if term:
+    ws = synthetic_windows(ExperimentModel(), [2.0, 3.5], 4, noise=0.005, seed=seed)
+    if term:  # the file's entry registered while the generator simulates it
         with tempfile.TemporaryDirectory() as tmp:
             f = load_effects_file(injection_file(Path(tmp) / "i.yaml", {term: coef}))
+        try:
             truth = ExperimentModel(effects=dict(f.values))
+            ws = synthetic_windows(truth, [2.0, 3.5], 4, noise=0.005, seed=seed)
+        finally:
             unregister_effects(f.names)
-    ws = synthetic_windows(truth, [2.0, 3.5], 4, noise=0.005, seed=seed)
     model = ExperimentModel()
     out = []
     with registered(dictionary()) as terms:
