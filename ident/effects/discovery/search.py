@@ -294,7 +294,9 @@ def discover(
         The nominal (or a fitted model: its effects are kept, and the terms it already
         carries are not tried).
     windows : list of Window
-        The decays (at least 4: half fit, half held out).
+        The decays (at least 4: half fit, half held out), e.g. those of
+        :func:`bikeid.ident.effects.decays_from_logs` (the loader of ``measured fit``), with
+        the nominal experiment it returns as ``model``.
     nonlinear : bool, optional
         Nonlinear plant by the defect correction, taken at the nominal and again at each
         kept term (default False: the linear experiment model).
