@@ -12,12 +12,14 @@ import argparse
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bikeid.ident.effects.discovery import dictionary, discover, injection_file, term_by_name
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.synthetic_decays import synthetic_windows
 from bikeid.sim.effect_files import load_effects_file, read_effects_file
-from bikeid.sim.effect_law import unit_dimensions
+from bikeid.sim.effect_law import parse_law, unit_dimensions
 from bikeid.sim.effect_registry import EFFECTS, unregister_effects
 
 # (kg, m, s, rad) of each signal, by hand: an angle is rad, a rate rad/s, an acceleration
@@ -67,6 +69,19 @@ def test_dictionary_is_the_briefs_terms_with_hand_derived_units():
     damping = term_by_name("roll: phidot")
     assert damping.entry == "roll_viscous_damping" and damping.value(-3.0) == 3.0
     assert [t.label for t in d if t.no_closure] == ["roll: T"]
+
+
+@settings(max_examples=60, deadline=None)
+@given(i=st.integers(0, 43), c=st.floats(-1e4, 1e4, allow_nan=False))
+def test_coefficient_and_entry_value_are_inverse_and_laws_reparse(i, c):
+    """For any term and coefficient, the entry value maps back to the coefficient (to
+    rounding), and the term's law text parses back to the same term (the language's own
+    parser: the dictionary writes only what the language reads)."""
+    t = dictionary()[i]
+    assert t.coefficient(t.value(c)) == pytest.approx(c, rel=1e-12, abs=1e-12)
+    if t.law.kind != "torque":
+        assert parse_law(t.law.text()).key == t.law.key
+        assert term_by_name(t.label).label == t.label
 
 
 def test_an_injected_term_is_what_the_generator_simulates(tmp_path):
