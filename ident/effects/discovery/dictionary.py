@@ -327,13 +327,14 @@ def injection_file(path: str | Path, values: Mapping[str, float]) -> Path:
             raise ValueError(f"{text}: coefficient {c!r} must be a finite number")
         chosen[term_by_name(text, terms).label] = float(c)
     decl = declarations([term_by_name(k, terms) for k in chosen], chosen)
-    p = Path(path)
-    if p.suffix.lower() == ".json":
-        p.write_text(json.dumps({"effects": decl}, indent=1))
-    else:
-        import yaml
+    import yaml
 
-        p.write_text(yaml.safe_dump({"effects": decl}, sort_keys=False))
+    from bikeid.dataset.files import atomic_write_text
+
+    p = Path(path)
+    text = (json.dumps({"effects": decl}, indent=1) if p.suffix.lower() == ".json"
+            else yaml.safe_dump({"effects": decl}, sort_keys=False))  # fmt: skip
+    atomic_write_text(p, text)
     return p
 
 

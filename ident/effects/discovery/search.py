@@ -232,13 +232,15 @@ class Discovery:
 
         import yaml
 
+        from bikeid.dataset.files import atomic_write_text
+
         terms = [t for t in self.kept if t.law.kind != "torque"]
         vals = {d["equation"] + ": " + d["term"]: d["coefficient"] for d in self.terms}
         decl = declarations(terms, {t.label: vals[t.label] for t in terms}, in_library=True)
         p = Path(path)
         text = (json.dumps({"effects": decl}, indent=1) if p.suffix.lower() == ".json"
                 else yaml.safe_dump({"effects": decl}, sort_keys=False))  # fmt: skip
-        p.write_text(text)
+        atomic_write_text(p, text)
         return p
 
 
