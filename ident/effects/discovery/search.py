@@ -178,7 +178,9 @@ class Discovery:
         round's fit on the fitting half), ``unit``, ``reading``,
         ``fit_gain``, ``joint_p_value`` of the kept term and ``joint_p_value_rival``).
     model : ExperimentModel
-        The nominal with the kept terms (joint fit on all decays).
+        The nominal with the kept terms (joint fit on all decays).  A kept term without a
+        registered entry of its own is declared only during the search: to simulate this
+        model, load :meth:`effects_file`'s file first (an unregistered entry is refused).
     kept : list of Term
         The kept terms' dictionary entries, in the order of :attr:`terms`.
     rounds : list of dict
@@ -305,7 +307,7 @@ def discover(
     error : callable, optional
         The closure error ``error(model, windows) -> list of per-decay residual arrays``
         (default :func:`window_error`); coefficients, standard errors, the held-out checks
-        and the paired tests all come from it.
+        and the joint fits of the indistinguishable sets all come from it.
     max_terms : int, optional
         At most this many rounds (default 3).
     rule : AcceptanceRule, optional
