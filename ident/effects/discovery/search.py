@@ -180,7 +180,8 @@ class Discovery:
     model : ExperimentModel
         The nominal with the kept terms (joint fit on all decays).  A kept term without a
         registered entry of its own is declared only during the search: to simulate this
-        model, load :meth:`effects_file`'s file first (an unregistered entry is refused).
+        model, load :meth:`effects_file`'s file first (else that term is not simulated, and
+        a copy of the model with other effects is refused).
     kept : list of Term
         The kept terms' dictionary entries, in the order of :attr:`terms`.
     rounds : list of dict
