@@ -4,8 +4,8 @@ Each group of subcommands lives in a module of this package with a
 ``register(subparsers)`` function: :mod:`.plant` (``eig``, ``linearize``,
 ``critical-speeds``), :mod:`.simulate`, :mod:`.data` (``sweep``, ``stabilization``),
 :mod:`.identify` (``identify``, ``export``, ``accuracy``), :mod:`.validate`,
-:mod:`.reproduce`, :mod:`.measured` (``measured ...``, ``data fetch``), :mod:`.coverage`,
-:mod:`.consistency`;
+:mod:`.reproduce`, :mod:`.measured` (``measured ...``, ``data fetch``), :mod:`.discover`
+(``measured discover``), :mod:`.coverage`, :mod:`.consistency`;
 :mod:`.args` holds the argument types and helpers they share, :mod:`.log_options` the
 data options that parse into the one loader's :class:`~bikeid.dataset.logs.LogOptions`.
 Handlers import the study modules lazily so that ``bikeid --help`` stays fast (start-up
@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "bikeid.experiments.cli.validate",  # validate
     "bikeid.experiments.cli.reproduce",  # reproduce
     "bikeid.experiments.cli.measured",  # measured fit/evaluate, data fetch
+    "bikeid.experiments.cli.discover",  # measured discover (after measured)
     "bikeid.experiments.cli.coverage",  # coverage
     "bikeid.experiments.cli.consistency",  # consistency
 )

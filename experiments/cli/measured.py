@@ -200,6 +200,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_effects_file_option(f, "candidates of the selection (those with in_library)")
     f.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     f.set_defaults(func=cmd_fit)
+    p.subcommands = msub  # its subcommands, which other modules extend (cli.discover)
     e = msub.add_parser("evaluate", help="error before/after per file and speed")
     e.add_argument(
         "--model",

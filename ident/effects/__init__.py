@@ -13,6 +13,8 @@ Front door:
 - :func:`evaluate`: before/after errors of a model on held-out decays.
 - :func:`decays_from_logs`: the free-decay windows of anyone's logs (the one loader,
   :func:`bikeid.dataset.logs.load_runs`, with every check) and their nominal experiment.
+- :func:`discover`: the terms of the roll and steer equations the decays support, from a
+  dictionary generated from the effect laws' language (:mod:`.discovery`).
 - :class:`ExperimentModel`: the plant of the experiment (linear or nonlinear Whipple
   bicycle, its controller or the replayed torque, effects of
   :mod:`bikeid.sim.effect_registry`).
@@ -30,6 +32,7 @@ paired test and verdict) and :mod:`.pipeline` (fit, save, load, evaluate).
 
 from bikeid.ident.effects.acceptance import AcceptanceRule
 from bikeid.ident.effects.diagnostics import evaluate
+from bikeid.ident.effects.discovery import discover
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.log_decays import ControlLaw, decays_from_logs
 from bikeid.ident.effects.pipeline import fit_model
@@ -40,6 +43,7 @@ __all__ = [
     "ControlLaw",
     "ExperimentModel",
     "decays_from_logs",
+    "discover",
     "evaluate",
     "fit_model",
     "select_effects",
