@@ -214,53 +214,59 @@ def test_real_logs_sign_and_controller():
     assert segs and abs(treadmill_speed(run.meta["speed_sensor"]) - segs[0].speed) < 0.1
 
 
+@pytest.fixture(scope="module")
+def fit_2545(tmp_path_factory) -> Path:
+    """``bikeid measured fit --data DATA --speeds 2.5,4.5``: the default path's model file
+    (one fit shared by the evaluate and report tests below)."""
+    if not DATA:
+        pytest.skip("needs the measured data ($BIKEID_DATA)")
+    from bikeid.experiments.cli import main
+
+    model = tmp_path_factory.mktemp("fit_2545") / "m.json"
+    args = ["measured", "fit", "--data", DATA, "--speeds", "2.5,4.5", "--out", str(model)]
+    assert main(args) == 0
+    return model
+
+
 @needs_data
 @pytest.mark.slow
-@pytest.mark.parametrize("fit, held, ratio, ci", [
-    ("2.5,4.5", {1.5, 3.5}, 0.43, (0.35, 0.58)),
-    ("1.5,3.5", {2.5, 4.5}, 0.58, (0.52, 0.65)),
-])  # fmt: skip
-def test_cli_fit_evaluate_states_the_goal_on_each_split(tmp_path, capsys, fit, held, ratio, ci):
-    """The goal (held-out decay error halved) on the two two-speed splits, by the default
-    path (``measured fit`` with ``--plant auto``, the default acceptance rule and nominal
-    uncertainty; ``measured evaluate --json``).  The verdict is computed here from the
+def test_cli_fit_evaluate_states_the_goal(fit_2545, capsys):
+    """The goal (held-out decay error halved) on the 2.5 + 4.5 m/s -> 1.5 + 3.5 m/s split, by
+    the default path (``measured fit`` with ``--plant auto``, the default acceptance rule and
+    nominal uncertainty; ``measured evaluate --json``).  The verdict is computed here from the
     interval (``halved`` only when its upper end is below 0.5, ``reduced`` when below 1), and
-    must be what evaluate prints; on both splits it is ``reduced``: the goal is **not shown**
-    (measured 0.43, 95 % interval 0.35-0.58, fitting 2.5 + 4.5; 0.58, 0.52-0.65, fitting
-    1.5 + 3.5, a steer damping and spring since the nominal's offsets are refitted with each
-    candidate (a tyre scrub torque and a spring before, 0.61, 0.55-0.67); docs/measured.md).
-    The interval's ends are checked to 0.02, the bootstrap's
-    resampling scatter at 2000 resamples (fixed seed: the ends are reproduced exactly; the
-    band only allows the printed rounding).  The weave ratio has no interval (one median per
-    file), so only its direction is asserted.  The other four splits are in
-    ``benchmarks/measured_speed_splits.py`` (none halved by its interval)."""
+    must be what evaluate prints: ``reduced``, the goal is **not shown** (measured 0.43, 95 %
+    interval 0.35-0.58; docs/measured.md).  The interval's ends are checked to 0.02, the
+    bootstrap's resampling scatter at 2000 resamples (fixed seed: the ends are reproduced
+    exactly; the band only allows the printed rounding).  The weave ratio has no interval (one
+    median per file), so only its direction is asserted.  The other five splits (1.5 + 3.5 ->
+    2.5 + 4.5: 0.58, 0.52-0.65, the same verdict) are ``benchmarks/measured_speed_splits.py``'s
+    (none halved by its interval)."""
     import json
 
     from bikeid.experiments.cli import main
 
-    model = tmp_path / "m.json"
-    assert main(["measured", "fit", "--data", DATA, "--speeds", fit, "--out", str(model)]) == 0
     capsys.readouterr()
-    assert main(["measured", "evaluate", "--model", str(model), "--data", DATA, "--json"]) == 0
+    assert main(["measured", "evaluate", "--model", str(fit_2545), "--data", DATA, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["plant"] == "nonlinear"
     assert all({"name", "value", "std", "unit"} <= set(e) for e in out["effects"])
     assert all({"file", "speed", "error_before", "error_after", "weave_error_before",
                 "weave_error_after"} <= set(f) for f in out["files"])  # fmt: skip
-    assert {round(f["speed"], 1) for f in out["files"]} == held
+    assert {round(f["speed"], 1) for f in out["files"]} == {1.5, 3.5}
     s = out["summary"]
     lo, hi = s["ratio_ci"]
     assert lo <= s["ratio"] <= hi
     expected = "halved" if hi < 0.5 else "reduced" if hi < 1 and s["p_value"] < 0.05 else None
     assert s["verdict"] == expected == "reduced"
-    assert s["ratio"] == pytest.approx(ratio, abs=0.01)
-    assert lo == pytest.approx(ci[0], abs=0.02) and hi == pytest.approx(ci[1], abs=0.02)
+    assert s["ratio"] == pytest.approx(0.43, abs=0.01)
+    assert lo == pytest.approx(0.35, abs=0.02) and hi == pytest.approx(0.58, abs=0.02)
     assert s["weave_error_after"] < s["weave_error_before"]
 
 
 @needs_data
 @pytest.mark.slow
-def test_report_bode_runs_are_an_independent_check(tmp_path):
+def test_report_bode_runs_are_an_independent_check(fit_2545, tmp_path):
     """``bikeid measured report``: a model fitted on the 2.5 + 4.5 m/s free decays predicts the
     4 m/s Bode runs (handlebar torque sweeps, never used in the fit: independent data) better
     than the nominal model: median relative complex error of T_ext -> (roll rate, steer)
@@ -270,11 +276,8 @@ def test_report_bode_runs_are_an_independent_check(tmp_path):
 
     from bikeid.experiments.cli import main
 
-    model = tmp_path / "m.json"
-    fit = ["measured", "fit", "--data", DATA, "--speeds", "2.5,4.5", "--out", str(model)]
-    assert main(fit) == 0
     out = tmp_path / "report"
-    rep_args = ["measured", "report", "--model", str(model), "--data", DATA, "--out", str(out)]
+    rep_args = ["measured", "report", "--model", str(fit_2545), "--data", DATA, "--out", str(out)]
     assert main(rep_args) == 0
     rep = json.loads((out / "report.json").read_text())
     rows = rep["bode"]
