@@ -50,6 +50,7 @@ def main() -> None:
         prof = cProfile.Profile(time.process_time)
         prof.runcall(lambda: [pem.fit(one) for _ in range(3)])
         pstats.Stats(prof).sort_stats("tottime").print_stats(15)
+        pstats.Stats(prof).sort_stats("cumulative").print_stats(30)
         return
     if args.what == "one":
         t0 = time.process_time()

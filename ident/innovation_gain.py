@@ -127,15 +127,38 @@ def _noise_factor(eta, ref) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _gain(Ad, G, C, rdiag, eta, ref):
-    """K, the Riccati solution P, (C P C' + R)^-1 and the noise factor of :func:`kalman_gain_of`
-    from the sampled model (Ad, G)."""
+    """K, the Riccati solution P, (C P C' + R)^-1, the noise factor of :func:`kalman_gain_of`
+    and its derivatives, and the predictor's spectral radius, from the sampled model (Ad, G)."""
     Lf, dL = _noise_factor(eta, ref)
+    rdiag = np.ascontiguousarray(rdiag, dtype=float)
+    f = np.ascontiguousarray
+    K, P, Sinv, rho, ok = _gain_core(f(Ad, dtype=float), f(G), f(C, dtype=float), rdiag, Lf)
+    if not ok:  # doubling did not converge: the QZ fallback of filter_riccati
+        GL = G @ Lf
+        R = np.diag(rdiag)
+        P = filter_riccati(Ad, C, GL @ GL.T + 1e-12 * np.eye(4), R)
+        Sinv = np.linalg.inv(C @ P @ C.T + R)
+        K = Ad @ P @ C.T @ Sinv
+        rho = float(np.max(np.abs(np.linalg.eigvals(Ad - K @ C))))
+    return K, P, Sinv, Lf, dL, rho
+
+
+@numba.njit(cache=True)
+def _gain_core(Ad, G, C, rdiag, Lf):
+    """(K, P, (C P C' + R)^-1, spectral radius of Ad - K C, converged) by doubling
+    (:func:`filter_riccati` without its fallback)."""
+    L = C.shape[0]
+    Ct = np.ascontiguousarray(C.T)
     GL = G @ Lf
-    Q = GL @ GL.T + 1e-12 * np.eye(4)
-    R = np.diag(rdiag)
-    P = filter_riccati(Ad, C, Q, R)
-    Sinv = np.linalg.inv(C @ P @ C.T + R)
-    return Ad @ P @ C.T @ Sinv, P, Sinv, Lf, dL
+    Q = GL @ np.ascontiguousarray(GL.T) + 1e-12 * np.eye(4)
+    Gm = Ct @ np.diag(1.0 / rdiag) @ C
+    P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (Gm + Gm.T), Q, 64, 1e-14)
+    if not ok or not np.all(np.isfinite(P)):
+        return np.zeros((4, L)), P, np.zeros((L, L)), np.inf, False
+    Sinv = np.linalg.inv(C @ P @ Ct + np.diag(rdiag))
+    K = Ad @ P @ Ct @ Sinv
+    rho = np.max(np.abs(np.linalg.eigvals((Ad - K @ C).astype(np.complex128))))
+    return K, P, Sinv, rho, True
 
 
 def gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG) -> np.ndarray:
@@ -160,18 +183,41 @@ def gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG) -> np.ndarray:
     (n + 3, 4, L) ndarray
         dK in the model parameters, then in eta.
     """
+    f = np.ascontiguousarray
+    return _gain_derivative_core(f(Ad), f(G), f(C), f(K), f(P), f(Sinv), f(Lf), f(dL), f(dAd),
+                                 f(dG))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG):
+    """:func:`gain_derivative` compiled: one LU of I - Abar (x) Abar for all directions."""
     n = dAd.shape[0]
-    D = np.concatenate([dAd, np.zeros((3, 4, 4))])
+    m = n + 3
     GL = G @ Lf
-    dGL = np.concatenate([dG @ Lf, G @ dL])  # (n + 3, 4, 2)
-    dQ = dGL @ GL.T
-    dQ = dQ + dQ.transpose(0, 2, 1)
     Abar = Ad - K @ C
-    APt = P @ Abar.T
-    W = D @ APt + (D @ APt).transpose(0, 2, 1) + dQ
-    M = np.eye(16) - np.kron(Abar, Abar)
-    dP = np.linalg.solve(M, W.reshape(n + 3, 16).T).T.reshape(n + 3, 4, 4)
-    return (D @ P @ C.T + Abar @ dP @ C.T) @ Sinv
+    APt = P @ np.ascontiguousarray(Abar.T)
+    PCt = P @ np.ascontiguousarray(C.T)
+    Wm = np.empty((16, m))
+    D = np.zeros((4, 4))
+    for j in range(m):
+        if j < n:
+            D = dAd[j]
+            dGL = dG[j] @ Lf
+        else:
+            D = np.zeros((4, 4))
+            dGL = G @ dL[j - n]
+        dQ = dGL @ np.ascontiguousarray(GL.T)
+        W = D @ APt
+        W = W + W.T + dQ + dQ.T
+        Wm[:, j] = W.ravel()
+    dPm = np.linalg.solve(np.eye(16) - np.kron(Abar, Abar), Wm)
+    out = np.empty((m, 4, C.shape[0]))
+    Ct = np.ascontiguousarray(C.T)
+    for j in range(m):
+        D = dAd[j] if j < n else np.zeros((4, 4))
+        dP = np.ascontiguousarray(dPm[:, j]).reshape(4, 4)
+        out[j] = (D @ PCt + Abar @ (dP @ Ct)) @ Sinv
+    return out
 
 
 @numba.njit(cache=True)
@@ -353,10 +399,11 @@ class KalmanGainProblem(PredictionProblem):
                     theta, d.dt, NOISE_INPUT, derivatives=derivatives and need_theta
                 )
                 try:
-                    K, Pr, Sinv, Lf, dL = _gain(Ad, G, self.C, self.rdiag[i], eta, self.ref)
+                    K, Pr, Sinv, Lf, dL, rho = _gain(Ad, G, self.C, self.rdiag[i], eta,
+                                                     self.ref)  # fmt: skip
                 except (ValueError, np.linalg.LinAlgError):
                     return None
-                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
+                if not rho < 1.0:
                     return None
                 dK = None
                 if derivatives:

@@ -82,6 +82,18 @@ def prediction_kernel(Ad, Bd, K, dAd, dBd, dK, u, y, out_idx, x0, free_k, w):
     for r in range(4):
         for c in range(L):
             F[r, out_idx[c]] -= K[r, c]
+    # the chained terms as one product per sample: s[:, j] += D[:, :, j]' [x, u, e]
+    D = np.zeros((5 + L, 4, P))
+    for j in range(Pa):
+        for r in range(4):
+            for i in range(4):
+                D[i, r, j] = dAd[j, r, i]
+            D[4, r, j] = dBd[j, r]
+    for j in range(Pk):
+        for r in range(4):
+            for c in range(L):
+                D[5 + c, r, j] = dK[j, r, c]
+    v = np.zeros(5 + L)
     E = np.empty((N, L))
     J = np.empty((N, L, npar))
     x = x0.copy()
@@ -105,18 +117,18 @@ def prediction_kernel(Ad, Bd, K, dAd, dBd, dK, u, y, out_idx, x0, free_k, w):
             for j in range(npar):
                 Snr[j] = (F[r, 0] * S[0, j] + F[r, 1] * S[1, j]
                           + F[r, 2] * S[2, j] + F[r, 3] * S[3, j])  # fmt: skip
-        for j in range(Pa):
+        for i in range(4):
+            v[i] = x[i]
+        v[4] = u[k]
+        for c in range(L):
+            v[5 + c] = e[c]
+        for t in range(5 + L):
+            vt = v[t]
             for r in range(4):
-                acc = dBd[j, r] * u[k]
-                for i in range(4):
-                    acc += dAd[j, r, i] * x[i]
-                Sn[r, j] += acc
-        for j in range(Pk):
-            for r in range(4):
-                acc = 0.0
-                for c in range(L):
-                    acc += dK[j, r, c] * e[c]
-                Sn[r, j] += acc
+                Snr = Sn[r]
+                Dtr = D[t, r]
+                for j in range(P):
+                    Snr[j] += vt * Dtr[j]
         if free_k:
             for r in range(4):
                 for c in range(L):
@@ -552,18 +564,46 @@ class PredictionProblem:
 
 def _least_squares_x0(Psi: np.ndarray, e0: np.ndarray) -> np.ndarray:
     """x0 minimizing |e0 + Psi x0| by the 4 x 4 normal equations (columns scaled; SVD
-    least squares where they are ill-conditioned, condition above 1e8)."""
+    least squares where they are ill-conditioned, condition above ~1e8)."""
+    x0, ok = _normal_x0(Psi, e0)
+    return x0 if ok else np.linalg.lstsq(Psi, -e0, rcond=None)[0]
+
+
+@numba.njit(cache=True)
+def _normal_x0(Psi, e0):
+    """(x0, ok): Cholesky of the column-scaled Psi'Psi; ok False where a pivot falls below
+    1e-8 (condition above ~1e8) or a column is zero."""
+    n = Psi.shape[1]
     G = Psi.T @ Psi
+    b = Psi.T @ e0
     d = np.sqrt(np.diag(G))
-    if np.all(d > 0):
-        try:
-            Lc = np.linalg.cholesky(G / np.outer(d, d))
-        except np.linalg.LinAlgError:
-            Lc = None
-        if Lc is not None and np.min(np.diag(Lc)) ** 2 > 1e-8:  # condition below ~1e8
-            z = np.linalg.solve(Lc, (Psi.T @ e0) / d)
-            return -np.linalg.solve(Lc.T, z) / d
-    return np.linalg.lstsq(Psi, -e0, rcond=None)[0]
+    x0 = np.zeros(n)
+    if np.any(d <= 0.0):
+        return x0, False
+    Lc = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            acc = G[i, j] / (d[i] * d[j])
+            for k in range(j):
+                acc -= Lc[i, k] * Lc[j, k]
+            if i == j:
+                if acc <= 1e-8:
+                    return x0, False
+                Lc[i, i] = np.sqrt(acc)
+            else:
+                Lc[i, j] = acc / Lc[j, j]
+    z = np.zeros(n)
+    for i in range(n):
+        acc = -b[i] / d[i]
+        for k in range(i):
+            acc -= Lc[i, k] * z[k]
+        z[i] = acc / Lc[i, i]
+    for i in range(n - 1, -1, -1):
+        acc = z[i]
+        for k in range(i + 1, n):
+            acc -= Lc[k, i] * x0[k]
+        x0[i] = acc / Lc[i, i]
+    return x0 / d, True
 
 
 @dataclass

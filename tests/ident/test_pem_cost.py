@@ -233,7 +233,7 @@ def test_gain_derivative_matches_central_differences(v):
     rd, ref = np.array([1e-6, 1e-4, 1e-6, 1e-4]), np.array([0.2, 6.0])
     eta, dt = np.array([np.log(0.1), 0.3, np.log(0.03)]), 0.01
     Ad, _, dAd, _, G, dG = discretize_with_derivatives(theta, dt, NOISE_INPUT)
-    K, P, Sinv, Lf, dL = _gain(Ad, G, C, rd, eta, ref)
+    K, P, Sinv, Lf, dL, _ = _gain(Ad, G, C, rd, eta, ref)
     dK = gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG)
     z = np.concatenate([theta, eta])
     for j in range(13):
