@@ -11,7 +11,7 @@ speed-parameterized fit over 29 speeds (1..15 m/s step 0.5) x 50 s, ``pem.fit_sp
 with its defaults (the joint Kalman gain), after one warm-up fixed-speed fit.  Each prints
 the CPU seconds of its fits (``time.process_time``, this process: single-threaded BLAS) and
 the estimates, so two checkouts' results can be compared.  ``profile``: cProfile of three
-fixed-speed fits, by own time (where the time goes).
+fixed-speed fits, by own and by cumulative time (where the time goes).
 
 PYTHONPATH picks the checkout (the directory holding the ``bikeid`` package), so the same
 command times an older commit against this one in the same run: the ratios of such pairs,
