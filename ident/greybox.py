@@ -72,6 +72,7 @@ from bikeid.ident.predictor import (
     PredictionProblem,
     discretize,
     discretize_with_derivatives,
+    eliminate_initial_state,
     initial_gain,
     levenberg_marquardt,
     output_matrix,
@@ -300,8 +301,9 @@ class _GreyProblem(PredictionProblem):
             return 0.0
         Ad, K, Bfd = model[0], model[4], model[6]
         Ef, _ = prediction_kernel(Ad, Bfd, K, np.zeros((0, 4, 4)), np.zeros((0, 4)),
-                                  self.forces[i], np.zeros_like(self.data[i].y), self.idx,
-                                  np.zeros(4), False)  # fmt: skip
+                                  np.zeros((0, 4, self.L)), self.forces[i],
+                                  np.zeros_like(self.data[i].y), self.idx, np.zeros(4),
+                                  False, self.w)  # fmt: skip
         return Ef
 
     def normal_equations(self, x):
@@ -316,14 +318,16 @@ class _GreyProblem(PredictionProblem):
         start = 0
         for i, (d, x0, model) in enumerate(zip(self.data, self.x0s, models, strict=True)):
             Ad, Bd, dAd, dBd, K, S = model[:6]
-            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
+            no_dk = np.zeros((0, 4, self.L))
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, no_dk, d.u, d.y, self.idx, x0,
+                                     self.free_k, self.w)  # fmt: skip
             if self.forces is not None:  # superposition: + the pass over (F, 0) from x = 0
                 Bfd, dBfd = model[6:]
-                _, Jf = prediction_kernel(Ad, Bfd, K, dAd, dBfd, self.forces[i],
+                _, Jf = prediction_kernel(Ad, Bfd, K, dAd, dBfd, no_dk, self.forces[i],
                                           np.zeros_like(d.y), self.idx, np.zeros(4),
-                                          self.free_k)  # fmt: skip
+                                          self.free_k, self.w)  # fmt: skip
                 J[:, :, :-4] += Jf[:, :, :-4]
-            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
+            J = J.reshape(-1, J.shape[2])  # weighted by the kernel
             ri = r[start : start + J.shape[0]]
             start += J.shape[0]
             # Gram of [d e/d theta, d e/d K, d e/d x0], chained to the entries; the x0 columns
@@ -334,13 +338,7 @@ class _GreyProblem(PredictionProblem):
             T = np.zeros((J.shape[1], P + rest))
             T[:nt, :P] = S
             T[nt:, P:] = np.eye(rest)
-            G = T.T @ (J.T @ J) @ T
-            gi = T.T @ (J.T @ ri)
-            m = P + rest - 4
-            Gxx = G[m:, m:]
-            Gmx = G[:m, m:]
-            G_proj = G[:m, :m] - Gmx @ np.linalg.solve(Gxx, Gmx.T)
-            g_proj = gi[:m] - Gmx @ np.linalg.solve(Gxx, gi[m:])
+            G_proj, g_proj = eliminate_initial_state(T.T @ (J.T @ J) @ T, T.T @ (J.T @ ri))
             cols = np.arange(P)
             if self.free_k:
                 k0 = P + self.groups[i] * nk

@@ -40,7 +40,6 @@ recorded with the model.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -223,14 +222,11 @@ def _order(freqs: Sequence[np.ndarray], resolutions: Sequence[float], bins: int)
     if not freqs or all(len(f) == 0 for f in freqs):
         return 0
     df = max(resolutions)
-    grid = sorted({int(round(x / df)) for f in freqs for x in f})
+    grid = np.unique(np.rint(np.concatenate([np.asarray(f, float) for f in freqs]) / df))
     # contiguous excited bins are one line, or several when wider than one tone
-    lines, start = 0, 0
-    for i in range(1, len(grid) + 1):
-        if i == len(grid) or grid[i] != grid[i - 1] + 1:
-            lines += math.ceil((i - start) / bins)
-            start = i
-    return 2 * lines
+    ends = np.append(np.flatnonzero(np.diff(grid) != 1.0), grid.size - 1)
+    widths = np.diff(np.concatenate([[-1], ends]))
+    return 2 * int(np.sum(-(-widths // bins)))
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,6 @@ from scipy.linalg import solve_discrete_are
 from bikeid.ident.canonical import canonical_ab
 from bikeid.ident.predictor import (
     PredictionProblem,
-    discretize,
     discretize_with_derivatives,
     prediction_kernel,
     solve,
@@ -55,6 +54,7 @@ __all__ = [
     "NOISE_STARTS",
     "alternate",
     "filter_riccati",
+    "gain_derivative",
     "kalman_gain_of",
     "sensor_variances",
     "settle_bounds",
@@ -109,14 +109,115 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
     """
     A, _ = canonical_ab(theta)
     Ad, G = zoh(A, NOISE_INPUT, dt)
+    return _gain(Ad, G, C, rdiag, eta, ref)[0]
+
+
+def _noise_factor(eta, ref) -> tuple[np.ndarray, np.ndarray]:
+    """L = diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]] (logs clipped to
+    :data:`NOISE_LOG_RANGE`) and dL/deta (3, 2, 2), zero for a clipped log."""
     lo, hi = NOISE_LOG_RANGE
+    ref = np.asarray(ref, float)
     s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
-    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * np.asarray(ref)[:, None]
+    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * ref[:, None]
+    dL = np.zeros((3, 2, 2))
+    dL[0, 0, 0] = s1 * ref[0] if lo < eta[0] < hi else 0.0
+    dL[1, 1, 0] = ref[1]
+    dL[2, 1, 1] = s2 * ref[1] if lo < eta[2] < hi else 0.0
+    return Lf, dL
+
+
+def _gain(Ad, G, C, rdiag, eta, ref):
+    """K, the Riccati solution P, (C P C' + R)^-1, the noise factor of :func:`kalman_gain_of`
+    and its derivatives, and the predictor's spectral radius, from the sampled model (Ad, G)."""
+    Lf, dL = _noise_factor(eta, ref)
+    rdiag = np.ascontiguousarray(rdiag, dtype=float)
+    f = np.ascontiguousarray
+    K, P, Sinv, rho, ok = _gain_core(f(Ad, dtype=float), f(G), f(C, dtype=float), rdiag, Lf)
+    if not ok:  # doubling did not converge: the QZ fallback of filter_riccati
+        GL = G @ Lf
+        R = np.diag(rdiag)
+        P = filter_riccati(Ad, C, GL @ GL.T + 1e-12 * np.eye(4), R)
+        Sinv = np.linalg.inv(C @ P @ C.T + R)
+        K = Ad @ P @ C.T @ Sinv
+        rho = float(np.max(np.abs(np.linalg.eigvals(Ad - K @ C))))
+    return K, P, Sinv, Lf, dL, rho
+
+
+@numba.njit(cache=True)
+def _gain_core(Ad, G, C, rdiag, Lf):
+    """(K, P, (C P C' + R)^-1, spectral radius of Ad - K C, converged) by doubling
+    (:func:`filter_riccati` without its fallback)."""
+    L = C.shape[0]
+    Ct = np.ascontiguousarray(C.T)
     GL = G @ Lf
-    Q = GL @ GL.T + 1e-12 * np.eye(4)
-    R = np.diag(rdiag)
-    P = filter_riccati(Ad, C, Q, R)
-    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    Q = GL @ np.ascontiguousarray(GL.T) + 1e-12 * np.eye(4)
+    Gm = Ct @ np.diag(1.0 / rdiag) @ C
+    P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (Gm + Gm.T), Q, 64, 1e-14)
+    if not ok or not np.all(np.isfinite(P)):
+        return np.zeros((4, L)), P, np.zeros((L, L)), np.inf, False
+    Sinv = np.linalg.inv(C @ P @ Ct + np.diag(rdiag))
+    K = Ad @ P @ Ct @ Sinv
+    rho = np.max(np.abs(np.linalg.eigvals((Ad - K @ C).astype(np.complex128))))
+    return K, P, Sinv, rho, True
+
+
+def gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG) -> np.ndarray:
+    """Exact derivatives of the steady-state Kalman gain K (:func:`kalman_gain_of`).
+
+    Differentiating the filter Riccati equation at its stabilizing solution gives a Stein
+    equation for each direction, dP = Abar dP Abar' + dAd P Abar' + Abar P dAd' + dQ with
+    Abar = Ad - K C, and dK = (dAd P C' + Abar dP C') (C P C' + R)^-1 (R held).
+
+    Parameters
+    ----------
+    Ad, G, C, K, P, Sinv : ndarray
+        The sampled model, its noise input, the output matrix and :func:`_gain`'s K, P and
+        (C P C' + R)^-1.
+    Lf, dL : ndarray
+        The noise factor (2, 2) and its derivatives in eta (3, 2, 2).
+    dAd, dG : ndarray
+        Derivatives of Ad (n, 4, 4) and G (n, 4, 2) in the model parameters (n may be 0).
+
+    Returns
+    -------
+    (n + 3, 4, L) ndarray
+        dK in the model parameters, then in eta.
+    """
+    f = np.ascontiguousarray
+    return _gain_derivative_core(f(Ad), f(G), f(C), f(K), f(P), f(Sinv), f(Lf), f(dL), f(dAd),
+                                 f(dG))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG):
+    """:func:`gain_derivative` compiled: one LU of I - Abar (x) Abar for all directions."""
+    n = dAd.shape[0]
+    m = n + 3
+    GL = G @ Lf
+    Abar = Ad - K @ C
+    APt = P @ np.ascontiguousarray(Abar.T)
+    PCt = P @ np.ascontiguousarray(C.T)
+    Wm = np.empty((16, m))
+    D = np.zeros((4, 4))
+    for j in range(m):
+        if j < n:
+            D = dAd[j]
+            dGL = dG[j] @ Lf
+        else:
+            D = np.zeros((4, 4))
+            dGL = G @ dL[j - n]
+        dQ = dGL @ np.ascontiguousarray(GL.T)
+        W = D @ APt
+        W = W + W.T + dQ + dQ.T
+        Wm[:, j] = W.ravel()
+    dPm = np.linalg.solve(np.eye(16) - np.kron(Abar, Abar), Wm)
+    out = np.empty((m, 4, C.shape[0]))
+    Ct = np.ascontiguousarray(C.T)
+    for j in range(m):
+        D = dAd[j] if j < n else np.zeros((4, 4))
+        dP = np.ascontiguousarray(dPm[:, j]).reshape(4, 4)
+        out[j] = (D @ PCt + Abar @ (dP @ Ct)) @ Sinv
+    return out
 
 
 @numba.njit(cache=True)
@@ -278,27 +379,6 @@ class KalmanGainProblem(PredictionProblem):
         """
         return super().residual(self.full(x))
 
-    def gain(self, theta, dt, rdiag, eta):
-        """The Kalman gain of the model ``theta`` at sample period ``dt``.
-
-        Parameters
-        ----------
-        theta : ndarray
-            Model parameters at one speed.
-        dt : float
-            Sample period [s].
-        rdiag : ndarray
-            Sensor noise variances.
-        eta : ndarray
-            Noise parameters.
-
-        Returns
-        -------
-        ndarray
-            The steady-state Kalman gain K.
-        """
-        return kalman_gain_of(theta, dt, self.C, rdiag, eta, self.ref)
-
     def _needs(self) -> tuple[bool, bool]:
         """Whether speed parameters, and whether noise parameters, are free."""
         P = self.mapping[0].shape[1]
@@ -315,91 +395,54 @@ class KalmanGainProblem(PredictionProblem):
             theta = S @ p
             key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
             if key not in cache:
-                if derivatives and need_theta:
-                    Ad, Bd, dAd, dBd = discretize_with_derivatives(theta, d.dt)
-                else:
-                    (Ad, Bd), dAd, dBd = (
-                        discretize(theta, d.dt),
-                        np.zeros((0, 4, 4)),
-                        np.zeros((0, 4)),
-                    )
+                Ad, Bd, dAd, dBd, G, dG = discretize_with_derivatives(
+                    theta, d.dt, NOISE_INPUT, derivatives=derivatives and need_theta
+                )
                 try:
-                    K = self.gain(theta, d.dt, self.rdiag[i], eta)
+                    K, Pr, Sinv, Lf, dL, rho = _gain(Ad, G, self.C, self.rdiag[i], eta,
+                                                     self.ref)  # fmt: skip
                 except (ValueError, np.linalg.LinAlgError):
                     return None
-                if not np.max(np.abs(np.linalg.eigvals(Ad - K @ self.C))) < 1.0:
+                if not rho < 1.0:
                     return None
-                dK = (self._gain_derivative(theta, d.dt, self.rdiag[i], eta, K, rows)
-                      if derivatives else None)  # fmt: skip
+                dK = None
+                if derivatives:
+                    dK = np.zeros((13, 4, self.L))
+                    dK[rows] = gain_derivative(Ad, G, self.C, K, Pr, Sinv, Lf, dL, dAd,
+                                               dG)[rows if need_theta else [0, 1, 2]]  # fmt: skip
+                    dK = dK.reshape(13, -1)
                 cache[key] = (Ad, Bd, dAd, dBd, K, dK)
             Ad, Bd, dAd, dBd, K, dK = cache[key]
             out.append((Ad, Bd, dAd, dBd, K, S, dK))
         return out
 
-    def _gain_derivative(self, theta, dt, rdiag, eta, K0, rows):
-        """(13, 4 L): dK/d[theta, eta] by central differences in ``rows`` (zero in the
-        others; one-sided where the Riccati equation has no stabilizing solution on one
-        side, zero where on neither: the derivative only steers the search, the cost is
-        exact)."""
-        z = np.concatenate([theta, eta])
-        out = np.zeros((z.size, K0.size))
-        for j in rows:
-            h = 1e-6 * max(abs(z[j]), 1.0)
-            side = {}
-            for s in (1.0, -1.0):
-                zs = z.copy()
-                zs[j] += s * h
-                try:
-                    side[s] = self.gain(zs[:10], dt, rdiag, zs[10:])
-                except (ValueError, np.linalg.LinAlgError):
-                    continue
-            if len(side) == 2:
-                out[j] = ((side[1.0] - side[-1.0]) / (2 * h)).ravel()
-            elif side:
-                s, Ks = next(iter(side.items()))
-                out[j] = (s * (Ks - K0) / h).ravel()
-        return out
-
-    def jacobian(self, x):
-        """Residual and its Jacobian in the free entries x.
-
-        Parameters
-        ----------
-        x : ndarray
-            Values of the free entries.
-
-        Returns
-        -------
-        tuple
-            (residual, Jacobian), or (None, None) where a model cannot be evaluated.
-        """
-        r = self.residual(x)
-        if r is None:
-            return None, None
-        models = self._models(self.full(x), derivatives=True)
+    def _jacobian_blocks(self, x):
+        """Per run the weighted raw Jacobian in [theta, eta] (the blocks needed) and x0, with
+        dK/d[theta, eta] chained inside the kernel, and its map to the free entries then x0."""
+        z = self.full(x)
+        models = self._models(z, derivatives=True)
         if models is None:
-            return None, None
-        nk = 4 * self.L
+            return None
         need_theta, need_eta = self._needs()
         P = self.mapping[0].shape[1]
-        cols = self.free - (0 if need_theta else P)  # columns of the blocks computed
-        jac = []
+        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
+        m = self.free.size
+        blocks = []
         for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
-            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, True)
-            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
-            nt = dAd.shape[0]  # 10 or 0
-            JK = J[:, nt : nt + nk]
-            blocks = []
+            dKr = np.ascontiguousarray(dK[rows].reshape(len(rows), 4, self.L))
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, dKr, d.u, d.y, self.idx, x0, False,
+                                     self.w)  # fmt: skip
+            J = J.reshape(-1, J.shape[2])
+            Tz = np.zeros((len(rows), P + 3))  # raw columns -> entries of z
             if need_theta:
-                blocks.append((J[:, :10] + JK @ dK[:10].T) @ S)
+                Tz[:10, :P] = S
             if need_eta:
-                blocks.append(JK @ dK[10:].T)
-            Jm = np.hstack(blocks)[:, cols]
-            Q, _ = np.linalg.qr(J[:, nt + nk :])
-            Jm -= Q @ (Q.T @ Jm)
-            jac.append(Jm)
-        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
-        return r, self._J
+                Tz[len(rows) - 3 :, P:] = np.eye(3)
+            T = np.zeros((J.shape[1], m + 4))
+            T[: len(rows), :m] = Tz[:, self.free]
+            T[len(rows) :, m:] = np.eye(4)
+            blocks.append((J, T))
+        return blocks
 
 
 def alternate(problem, z: np.ndarray, n: int, max_nfev: int, method: str, passes: int,

@@ -799,7 +799,7 @@ def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> Can
     z[10], z[12] = (min(max(z[i], lo), hi) for i in (10, 12))  # same gain, finite
     free = np.array([i for i in range(z.size) if i not in held])
     prob = problem(z, free)
-    prob.jacobian(z[free])
+    prob.normal_equations(z[free])
     cov = sandwich_covariance(prob, 4 * len(data))
     names = ("log_s1", "s21", "log_s2")
     bound = tuple(names[i - 10] for i in held if i != 11)
@@ -991,7 +991,7 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
         lambda prob: weights.__setitem__(0, _weights(prob)),
     )  # fmt: skip
     prob = problem(z, np.arange(z.size))
-    prob.jacobian(z)
+    prob.normal_equations(z)
     x = z
     cov = sandwich_covariance(prob, 4 * len(data))
     lo, hi = NOISE_LOG_RANGE

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.linalg import expm_frechet, solve_discrete_are
+from scipy.linalg import solve_discrete_are
 from scipy.optimize import least_squares
 
 from bikeid.dataset.run import Run
@@ -40,6 +40,7 @@ __all__ = [
     "DEFAULT_OUTPUTS",
     "INPUT",
     "discretize",
+    "eliminate_initial_state",
     "initial_gain",
     "kalman_gain",
     "levenberg_marquardt",
@@ -59,13 +60,40 @@ INPUT = "T_delta"
 
 
 @numba.njit(cache=True)
-def prediction_kernel(Ad, Bd, K, dAd, dBd, u, y, out_idx, x0, free_k):
-    """Prediction errors e (N, l) and de/dparam (N, l, P + 4 l free_k + 4)."""
+def prediction_kernel(Ad, Bd, K, dAd, dBd, dK, u, y, out_idx, x0, free_k, w):
+    """Prediction errors e (N, l) and the weighted sensitivities w de/dparam
+    (N, l, P + 4 l free_k + 4).
+
+    P = max(len(dAd), len(dK)) chained parameters: column j < P moves Ad by dAd[j] and Bd
+    by dBd[j] (j < len(dAd)) and K by dK[j] (j < len(dK)); then, with ``free_k``, the
+    4 l entries of K row by row; then the 4 entries of x0.  ``w`` (l,) weights each
+    output's rows of the sensitivities (not e).  The recursions run on the predictor
+    matrix F = Ad - K C: xhat[k+1] = F xhat[k] + Bd u[k] + K y[k], and per column
+    s[k+1] = F s[k] + dAd x + dBd u + dK e (+ e_c in row r for K's entry (r, c)).
+    """
     N = u.shape[0]
     L = out_idx.shape[0]
-    P = dAd.shape[0]
+    Pa = dAd.shape[0]
+    Pk = dK.shape[0]
+    P = max(Pa, Pk)
     nK = 4 * L if free_k else 0
     npar = P + nK + 4
+    F = Ad.copy()
+    for r in range(4):
+        for c in range(L):
+            F[r, out_idx[c]] -= K[r, c]
+    # the chained terms as one product per sample: s[:, j] += D[:, :, j]' [x, u, e]
+    D = np.zeros((5 + L, 4, P))
+    for j in range(Pa):
+        for r in range(4):
+            for i in range(4):
+                D[i, r, j] = dAd[j, r, i]
+            D[4, r, j] = dBd[j, r]
+    for j in range(Pk):
+        for r in range(4):
+            for c in range(L):
+                D[5 + c, r, j] = dK[j, r, c]
+    v = np.zeros(5 + L)
     E = np.empty((N, L))
     J = np.empty((N, L, npar))
     x = x0.copy()
@@ -79,22 +107,28 @@ def prediction_kernel(Ad, Bd, K, dAd, dBd, u, y, out_idx, x0, free_k):
         for c in range(L):
             e[c] = y[k, c] - x[out_idx[c]]
             E[k, c] = e[c]
+            wc = -w[c]
+            Srow = S[out_idx[c]]
+            Jk = J[k, c]
             for j in range(npar):
-                J[k, c, j] = -S[out_idx[c], j]
+                Jk[j] = wc * Srow[j]
         for r in range(4):
+            Snr = Sn[r]
             for j in range(npar):
-                acc = 0.0
-                for c in range(L):
-                    acc += K[r, c] * J[k, c, j]
-                for i in range(4):
-                    acc += Ad[r, i] * S[i, j]
-                Sn[r, j] = acc
-        for j in range(P):
+                Snr[j] = (F[r, 0] * S[0, j] + F[r, 1] * S[1, j]
+                          + F[r, 2] * S[2, j] + F[r, 3] * S[3, j])  # fmt: skip
+        for i in range(4):
+            v[i] = x[i]
+        v[4] = u[k]
+        for c in range(L):
+            v[5 + c] = e[c]
+        for t in range(5 + L):
+            vt = v[t]
             for r in range(4):
-                acc = dBd[j, r] * u[k]
-                for i in range(4):
-                    acc += dAd[j, r, i] * x[i]
-                Sn[r, j] += acc
+                Snr = Sn[r]
+                Dtr = D[t, r]
+                for j in range(P):
+                    Snr[j] += vt * Dtr[j]
         if free_k:
             for r in range(4):
                 for c in range(L):
@@ -102,34 +136,145 @@ def prediction_kernel(Ad, Bd, K, dAd, dBd, u, y, out_idx, x0, free_k):
         for r in range(4):
             acc = Bd[r] * u[k]
             for c in range(L):
-                acc += K[r, c] * e[c]
+                acc += K[r, c] * y[k, c]
             for i in range(4):
-                acc += Ad[r, i] * x[i]
+                acc += F[r, i] * x[i]
             xn[r] = acc
         for r in range(4):
             x[r] = xn[r]
-            for j in range(npar):
-                S[r, j] = Sn[r, j]
+        S, Sn = Sn, S
     return E, J
 
 
-def discretize_with_derivatives(theta: np.ndarray, dt: float):
-    """Ad, Bd and their derivatives with respect to the 10 canonical parameters."""
+def eliminate_initial_state(G: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normal equations of one run with its initial state (the last 4 columns) eliminated.
+
+    The Schur complement G_mm - G_mx G_xx^-1 G_xm equals J'J of the Kaufman-projected
+    Jacobian (the x0 columns projected out, variable projection), without forming it.
+
+    Parameters
+    ----------
+    G : (m + 4, m + 4) ndarray
+        J'J of the run's weighted Jacobian, parameters then x0.
+    g : (m + 4,) ndarray
+        J'r of the run.
+
+    Returns
+    -------
+    H : (m, m) ndarray
+        Projected J'J.
+    gm : (m,) ndarray
+        Projected J'r.
+    """
+    m = G.shape[0] - 4
+    Gmx = G[:m, m:]
+    B = np.linalg.solve(G[m:, m:], np.column_stack([Gmx.T, g[m:]]))
+    return G[:m, :m] - Gmx @ B[:, :m], g[:m] - Gmx @ B[:, m]
+
+
+#: Coefficients of the [13/13] Pade approximant of exp and the 1-norm up to which it needs
+#: no scaling (Al-Mohy & Higham 2009, as ``scipy.linalg.expm_frechet``).
+_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0,
+           1187353796428800.0, 129060195264000.0, 10559470521600.0, 670442572800.0,
+           33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0)  # fmt: skip
+_ELL13 = 4.74
+
+
+@numba.njit(cache=True)
+def expm_frechet_stack(A, Es):
+    """expm(A) and its Frechet derivatives in the directions Es (P, n, n), sharing the
+    Pade powers and the one factorization (scipy's scaling-and-squaring algorithm of order
+    13, Al-Mohy & Higham 2009; equal to ``scipy.linalg.expm_frechet`` to rounding)."""
+    b = _PADE13
+    n = A.shape[0]
+    norm = 0.0
+    for j in range(n):
+        col = 0.0
+        for i in range(n):
+            col += abs(A[i, j])
+        norm = max(norm, col)
+    s = 0
+    if norm > _ELL13:
+        s = int(np.ceil(np.log2(norm / _ELL13)))
+    scale = 2.0**-s
+    A = A * scale
+    ident = np.eye(n)
+    A2 = A @ A
+    A4 = A2 @ A2
+    A6 = A2 @ A4
+    W1 = b[13] * A6 + b[11] * A4 + b[9] * A2
+    W2 = b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * ident
+    Z1 = b[12] * A6 + b[10] * A4 + b[8] * A2
+    Z2 = b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * ident
+    W = A6 @ W1 + W2
+    U = A @ W
+    V = A6 @ Z1 + Z2
+    Minv = np.linalg.inv(V - U)
+    R = Minv @ (U + V)
+    Ls = np.empty((Es.shape[0], n, n))
+    for p in range(Es.shape[0]):
+        E = Es[p] * scale
+        M2 = A @ E + E @ A
+        M4 = A2 @ M2 + M2 @ A2
+        M6 = A4 @ M2 + M4 @ A2
+        Lw1 = b[13] * M6 + b[11] * M4 + b[9] * M2
+        Lw2 = b[7] * M6 + b[5] * M4 + b[3] * M2
+        Lz1 = b[12] * M6 + b[10] * M4 + b[8] * M2
+        Lz2 = b[6] * M6 + b[4] * M4 + b[2] * M2
+        Lw = A6 @ Lw1 + M6 @ W1 + Lw2
+        Lu = A @ Lw + E @ W
+        Lv = A6 @ Lz1 + M6 @ Z1 + Lz2
+        Ls[p] = Minv @ (Lu + Lv + (Lu - Lv) @ R)
+    for _ in range(s):
+        for p in range(Es.shape[0]):
+            Ls[p] = R @ Ls[p] + Ls[p] @ R
+        R = R @ R
+    return R, Ls
+
+
+def discretize_with_derivatives(theta: np.ndarray, dt: float, noise_input=None,
+                                derivatives: bool = True):  # fmt: skip
+    """Ad, Bd and their derivatives with respect to the 10 canonical parameters (exact: the
+    Frechet derivatives of the matrix exponential, :func:`expm_frechet_stack`).
+
+    Parameters
+    ----------
+    theta : (10,) ndarray
+        Canonical parameters [a1, ..., a8, b1, b2].
+    dt : float
+        Sample period [s].
+    noise_input : (4, q) ndarray, optional
+        Further input columns held over each sample (e.g. process noise), sampled with the
+        model in the same matrix exponential.
+    derivatives : bool, optional
+        False: the derivative arrays are empty (first dimension 0), only the sampling.
+
+    Returns
+    -------
+    Ad, Bd, dAd, dBd : ndarray
+        (4, 4), (4,), (10, 4, 4), (10, 4): the zero-order-hold model and its derivatives.
+    G, dG : ndarray
+        Only with ``noise_input``: its sampling (4, q) and derivatives (10, 4, q).
+
+    Notes
+    -----
+    Ad is dimensionless, Bd in rad/(N m) or rad/(N m s) by row, G in the noise input's
+    units times s; the derivatives in those per unit of each parameter.
+    """
     A, B = canonical_ab(theta)
-    Z = np.zeros((5, 5))
-    Z[:4, :4], Z[:4, 4:] = A * dt, B * dt
-    dAd = np.empty((10, 4, 4))
-    dBd = np.empty((10, 4))
-    E = None
-    for i in range(10):
-        dZ = np.zeros((5, 5))
-        if i < 8:
-            dZ[A_POS[i]] = dt
-        else:
-            dZ[B_POS[i - 8], 4] = dt
-        E, dE = expm_frechet(Z, dZ)
-        dAd[i], dBd[i] = dE[:4, :4], dE[:4, 4]
-    return E[:4, :4], E[:4, 4], dAd, dBd
+    q = 0 if noise_input is None else noise_input.shape[1]
+    Z = np.zeros((5 + q, 5 + q))
+    Z[:4, :4], Z[:4, 4:5] = A * dt, B * dt
+    if q:
+        Z[:4, 5:] = np.asarray(noise_input, float) * dt
+    dZ = np.zeros((10 if derivatives else 0, 5 + q, 5 + q))
+    for i, pos in enumerate(A_POS if derivatives else ()):
+        dZ[i][pos] = dt
+    for i, row in enumerate(B_POS if derivatives else ()):
+        dZ[8 + i, row, 4] = dt
+    E, dE = expm_frechet_stack(Z, dZ)
+    out = (E[:4, :4].copy(), E[:4, 4].copy(), dE[:, :4, :4].copy(), dE[:, :4, 4].copy())
+    return out if not q else (*out, E[:4, 5:].copy(), dE[:, :4, 5:].copy())
 
 
 def discretize(theta: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -253,8 +398,11 @@ class PredictionProblem:
     """Stacked, weighted, x0-projected prediction errors of several runs.
 
     ``residual(x)`` costs one state-only kernel pass per run (the errors are affine in
-    x0: e = E0 + Psi x0, x0 by least squares); ``jacobian(x)`` adds the sensitivity
-    pass.  Both return None at a point whose predictor Ad - K C is unstable.
+    x0: e = E0 + Psi x0, x0 by least squares); ``normal_equations(x)`` adds the
+    sensitivity pass and forms each run's J'J with x0 eliminated
+    (:func:`eliminate_initial_state`), without stacking the Jacobian; ``jacobian(x)``
+    also stacks the projected Jacobian (for MINPACK).  All return None at a point whose
+    predictor Ad - K C is unstable.
     """
 
     def __init__(self, data, mapping, Ks, free_k, weights, outputs):
@@ -262,7 +410,10 @@ class PredictionProblem:
         self.C, self.idx = output_matrix(outputs)
         self.L = len(outputs)
         self.w = np.asarray(weights, float)
-        self._x, self._r, self._J, self.x0s = None, None, None, []
+        self._x, self._r, self._H, self.x0s = None, None, None, []
+        self._blocks: list = []  # per run: weighted raw Jacobian (N L, c), map T (c, m + 4)
+        self._stacked = None
+        self._memo = None  # (x, residual, x0s) of the last stable residual
         self._cache: dict = {}
 
     def split(self, x):
@@ -293,52 +444,103 @@ class PredictionProblem:
 
     def residual(self, x):
         """Weighted prediction errors (x0 projected out), or None (unstable predictor)."""
+        if self._memo is not None and np.array_equal(self._memo[0], x):
+            self.x0s = list(self._memo[2])
+            return self._memo[1]
         models = self._models(x, derivatives=False)
         if models is None:
             return None
         res, x0s = [], []
         empty_a, empty_b = np.zeros((0, 4, 4)), np.zeros((0, 4))
+        empty_k = np.zeros((0, 4, self.L))
         for i, (d, model) in enumerate(zip(self.data, models, strict=True)):
             Ad, Bd, _, _, K = model[:5]
-            E0, Psi = prediction_kernel(
-                Ad, Bd, K, empty_a, empty_b, d.u, d.y, self.idx, np.zeros(4), False
-            )
-            Psi = (Psi * self.w[None, :, None]).reshape(-1, 4)
+            E0, Psi = prediction_kernel(Ad, Bd, K, empty_a, empty_b, empty_k, d.u, d.y,
+                                        self.idx, np.zeros(4), False, self.w)  # fmt: skip
+            Psi = Psi.reshape(-1, 4)
             e0 = ((E0 + self._extra_error(i, model)) * self.w).ravel()
-            x0, *_ = np.linalg.lstsq(Psi, -e0, rcond=None)
+            x0 = _least_squares_x0(Psi, e0)
             res.append(e0 + Psi @ x0)
             x0s.append(x0)
         self.x0s = x0s
-        return np.concatenate(res)
+        r = np.concatenate(res)
+        self._memo = (np.array(x, dtype=float), r, tuple(x0s))
+        return r
 
     def _extra_error(self, i: int, model) -> np.ndarray | float:
         """Prediction errors of run ``i`` from inputs beyond u, added to the kernel's (none)."""
         return 0.0
 
-    def jacobian(self, x):
-        """(residual, projected Jacobian) at x, or (None, None)."""
-        r = self.residual(x)
-        if r is None:
-            return None, None
+    def _jacobian_blocks(self, x):
+        """Per run the weighted raw Jacobian (N L, c) at the residual's x0 and the map T
+        (c, m + 4) of its columns to the problem's m parameters then x0; None if unstable."""
         models = self._models(x, derivatives=True)
-        jac = []
+        if models is None:
+            return None
+        empty_k = np.zeros((0, 4, self.L))
+        blocks = []
         for d, x0, (Ad, Bd, dAd, dBd, K, S) in zip(self.data, self.x0s, models, strict=True):
-            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, d.u, d.y, self.idx, x0, self.free_k)
-            J = (J * self.w[None, :, None]).reshape(-1, J.shape[2])
-            nm = J.shape[1] - 4
-            Jm = np.hstack([J[:, :10] @ S, J[:, 10:nm]])
-            Q, _ = np.linalg.qr(J[:, nm:])
-            Jm -= Q @ (Q.T @ Jm)
-            jac.append(Jm)
-        self._x, self._r, self._J = x.copy(), r, np.vstack(jac)
-        return r, self._J
+            _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, empty_k, d.u, d.y, self.idx, x0,
+                                     self.free_k, self.w)  # fmt: skip
+            J = J.reshape(-1, J.shape[2])
+            P, c = S.shape[1], J.shape[1]
+            T = np.zeros((c, P + c - 10))
+            T[:10, :P] = S
+            T[10:, P:] = np.eye(c - 10)
+            blocks.append((J, T))
+        return blocks
 
     def normal_equations(self, x):
-        """(residual, J'J, J'r) at x (the Levenberg-Marquardt inputs), or (None, None, None)."""
-        r, J = self.jacobian(x)
+        """(residual, J'J, J'r) at x (the Levenberg-Marquardt inputs), or (None, None, None).
+
+        J is the weighted Jacobian with each run's x0 columns projected out (Kaufman); its
+        J'J and J'r are summed run by run from the runs' Schur complements.
+        """
+        r = self.residual(x)
         if r is None:
             return None, None, None
-        return r, J.T @ J, J.T @ r
+        blocks = self._jacobian_blocks(x)
+        if blocks is None:
+            return None, None, None
+        H, g, start = 0.0, 0.0, 0
+        for J, T in blocks:
+            ri = r[start : start + J.shape[0]]
+            start += J.shape[0]
+            Hi, gi = eliminate_initial_state(T.T @ (J.T @ J) @ T, T.T @ (J.T @ ri))
+            H, g = H + Hi, g + gi
+        self._x, self._r, self._H = np.array(x, dtype=float), r, H
+        self._blocks, self._stacked = blocks, None
+        return r, H, g
+
+    def projected_blocks(self):
+        """Per run the weighted Jacobian (N L, m) at the last ``normal_equations`` point,
+        its x0 columns projected out.
+
+        Yields
+        ------
+        (N L, m) ndarray
+            The run's rows of the projected Jacobian.
+        """
+        for J, T in self._blocks:
+            Jt = J @ T
+            Jm, Jx = Jt[:, :-4], Jt[:, -4:]
+            yield Jm - Jx @ np.linalg.solve(Jx.T @ Jx, Jx.T @ Jm)
+
+    @property
+    def _J(self):
+        """The stacked projected Jacobian at the last ``normal_equations`` point, or None."""
+        if self._x is None:
+            return None
+        if self._stacked is None:
+            self._stacked = np.vstack(list(self.projected_blocks()))
+        return self._stacked
+
+    def jacobian(self, x):
+        """(residual, projected Jacobian) at x, or (None, None)."""
+        r, H, _ = self.normal_equations(x)
+        if r is None:
+            return None, None
+        return r, self._J
 
     # scipy.optimize.least_squares interface (method="scipy")
     def fun(self, x):
@@ -353,11 +555,55 @@ class PredictionProblem:
 
     def evaluate(self, x):
         if self._x is None or not np.array_equal(x, self._x):
-            self.jacobian(x)
+            self.normal_equations(x)
 
     def residuals(self) -> np.ndarray:
         """Unweighted prediction errors (N_total, L) at the last Jacobian point."""
         return self._r.reshape(-1, self.L) / self.w
+
+
+def _least_squares_x0(Psi: np.ndarray, e0: np.ndarray) -> np.ndarray:
+    """x0 minimizing |e0 + Psi x0| by the 4 x 4 normal equations (columns scaled; SVD
+    least squares where they are ill-conditioned, condition above ~1e8)."""
+    x0, ok = _normal_x0(Psi, e0)
+    return x0 if ok else np.linalg.lstsq(Psi, -e0, rcond=None)[0]
+
+
+@numba.njit(cache=True)
+def _normal_x0(Psi, e0):
+    """(x0, ok): Cholesky of the column-scaled Psi'Psi; ok False where a pivot falls below
+    1e-8 (condition above ~1e8) or a column is zero."""
+    n = Psi.shape[1]
+    G = Psi.T @ Psi
+    b = Psi.T @ e0
+    d = np.sqrt(np.diag(G))
+    x0 = np.zeros(n)
+    if np.any(d <= 0.0):
+        return x0, False
+    Lc = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            acc = G[i, j] / (d[i] * d[j])
+            for k in range(j):
+                acc -= Lc[i, k] * Lc[j, k]
+            if i == j:
+                if acc <= 1e-8:
+                    return x0, False
+                Lc[i, i] = np.sqrt(acc)
+            else:
+                Lc[i, j] = acc / Lc[j, j]
+    z = np.zeros(n)
+    for i in range(n):
+        acc = -b[i] / d[i]
+        for k in range(i):
+            acc -= Lc[i, k] * z[k]
+        z[i] = acc / Lc[i, i]
+    for i in range(n - 1, -1, -1):
+        acc = z[i]
+        for k in range(i + 1, n):
+            acc -= Lc[k, i] * x0[k]
+        x0[i] = acc / Lc[i, i]
+    return x0 / d, True
 
 
 @dataclass
@@ -480,7 +726,7 @@ def solve(problem: PredictionProblem, x0: np.ndarray, max_nfev: int, method: str
     sol = least_squares(problem.fun, x0, jac=problem.jac, method="lm", x_scale="jac",
                         max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)  # fmt: skip
     problem.evaluate(sol.x)
-    if problem._J is None:
+    if problem._H is None:
         raise UntrustworthyResult("the prediction-error fit ended at an unstable predictor")
     return sol
 
@@ -493,12 +739,13 @@ def sandwich_covariance(problem: PredictionProblem, n_extra: int) -> np.ndarray:
     freedom N L - P - n_extra).  The per-output weights whiten each output but not the
     correlation between outputs; this sandwich accounts for it (a prediction-error
     estimate under a non-optimal weighting; Ljung 1999, Sec. 9.3) and equals
-    sigma^2 (J'J)^-1 when Lambda = sigma^2 I.
+    sigma^2 (J'J)^-1 when Lambda = sigma^2 I.  The middle term is summed run by run as
+    W'W, W_t = F' J_t with Lambda = F F'.
 
     Parameters
     ----------
     problem : PredictionProblem
-        The problem at the optimum (its last Jacobian and residuals are used).
+        The problem at the optimum (its last ``normal_equations`` point is used).
     n_extra : int
         Parameters not in the Jacobian's columns (the projected initial states), for the
         degrees of freedom.
@@ -508,14 +755,18 @@ def sandwich_covariance(problem: PredictionProblem, n_extra: int) -> np.ndarray:
     (P, P) ndarray
         Symmetric covariance of the Jacobian's parameters (their squared units).
     """
-    J, r = problem._J, problem._r
-    n_out = problem.L
-    dof = max(r.size - J.shape[1] - n_extra, 1)
+    H, r = problem._H, problem._r
+    n_out, P = problem.L, H.shape[0]
+    dof = max(r.size - P - n_extra, 1)
     R = r.reshape(-1, n_out)
     lam = (R.T @ R) / dof * n_out
-    Jt = J.reshape(R.shape[0], n_out, -1)
-    inv = np.linalg.pinv(J.T @ J)
-    meat = np.einsum("tlp,lm,tmq->pq", Jt, lam, Jt)
+    s, V = np.linalg.eigh(lam)
+    F = V * np.sqrt(np.clip(s, 0.0, None))
+    meat = np.zeros((P, P))
+    for Jp in problem.projected_blocks():
+        W = np.tensordot(F, Jp.reshape(-1, n_out, P), axes=([0], [1])).reshape(-1, P)
+        meat += W.T @ W
+    inv = np.linalg.pinv(H)
     cov = inv @ meat @ inv
     return 0.5 * (cov + cov.T)
 

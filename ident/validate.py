@@ -36,6 +36,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import control
+import numba
 import numpy as np
 from scipy.stats import binomtest
 
@@ -193,6 +194,40 @@ def _as_columns(u: np.ndarray) -> np.ndarray:
     return u.reshape(u.shape[0], -1)
 
 
+def _f64(a) -> np.ndarray:
+    """A C-contiguous float64 copy or view (the compiled loops' argument type)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+@numba.njit(cache=True)
+def _forced_and_free(Ad, Bd, C, U):
+    """Outputs of x[k+1] = Ad x[k] + Bd u[k] from x = 0 (N, p) and C Ad^k (N, p, n)."""
+    N, n, ny = U.shape[0], Ad.shape[0], C.shape[0]
+    xf = np.zeros(n)
+    forced = np.empty((N, ny))
+    Phi = np.empty((N, ny, n))  # response to each unit initial state
+    Ak = np.eye(n)
+    for k in range(N):
+        forced[k] = C @ xf
+        Phi[k] = C @ Ak
+        xf = Ad @ xf + Bd @ U[k]
+        Ak = Ad @ Ak
+    return forced, Phi
+
+
+@numba.njit(cache=True)
+def _predictor_states(Ad, Bd, C, K, U, y, x0):
+    """States xhat[j] (N, n) of xhat[j+1] = Ad xhat[j] + Bd u[j] + K (y[j] - C xhat[j])."""
+    N = U.shape[0]
+    xh = np.zeros((N, Ad.shape[0]))
+    x = x0.copy()
+    for j in range(N):
+        xh[j] = x
+        e = y[j] - C @ x
+        x = Ad @ x + Bd @ U[j] + K @ e
+    return xh
+
+
 def simulation(
     Ad: np.ndarray,
     Bd: np.ndarray,
@@ -231,16 +266,8 @@ def simulation(
         The initial state used (state units).
     """
     U = _as_columns(u)
-    N, n, ny = U.shape[0], Ad.shape[0], C.shape[0]
-    xf = np.zeros(n)
-    forced = np.empty((N, ny))
-    Phi = np.empty((N, ny, n))  # response to each unit initial state
-    Ak = np.eye(n)
-    for k in range(N):
-        forced[k] = C @ xf
-        Phi[k] = C @ Ak
-        xf = Ad @ xf + Bd @ U[k]
-        Ak = Ad @ Ak
+    n = Ad.shape[0]
+    forced, Phi = _forced_and_free(_f64(Ad), _f64(Bd), _f64(C), _f64(U))
     if isinstance(ic, str):
         if ic == "estimate":
             if y is None:
@@ -303,12 +330,8 @@ def k_step_prediction(
         raise ValueError(f"head={head!r}: use 'one-step' or 'open-loop'")
     U = _as_columns(u)
     N, n = U.shape[0], Ad.shape[0]
-    xh = np.zeros((N, n))
-    x = np.zeros(n) if x0 is None else np.asarray(x0, float).reshape(n).copy()
-    for j in range(N):
-        xh[j] = x
-        e = y[j] - C @ x
-        x = Ad @ x + Bd @ U[j] + K @ e
+    x = np.zeros(n) if x0 is None else np.asarray(x0, float).reshape(n)
+    xh = _predictor_states(_f64(Ad), _f64(Bd), _f64(C), _f64(K), _f64(U), _f64(y), _f64(x))
     pred = (xh @ C.T).copy()
     if k < N:
         X = xh[: N - k].copy()
