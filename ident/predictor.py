@@ -42,6 +42,7 @@ __all__ = [
     "discretize",
     "initial_gain",
     "kalman_gain",
+    "kstep_kernel",
     "levenberg_marquardt",
     "output_matrix",
     "run_data",
@@ -184,31 +185,114 @@ def output_matrix(outputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.eye(4)[idx], idx
 
 
-def kalman_gain(Ad, Bd, C, q: float, r: np.ndarray) -> np.ndarray:
-    """Steady-state Kalman (innovation) gain for process noise through the input column.
+def kalman_gain(Ad, Bd, C, q, r, covariance: bool = False):
+    """Steady-state Kalman (innovation) gain for process noise through the input columns.
 
     Parameters
     ----------
-    Ad : (4, 4) ndarray
-        Discrete state matrix.
-    Bd : (4,) ndarray
-        Discrete input column.
-    C : (L, 4) ndarray
+    Ad : (n, n) ndarray
+        Discrete state matrix (n = 4 for the canonical models; more for an augmented one).
+    Bd : (n,) or (n, m) ndarray
+        Discrete input column(s) the process noise enters through.
+    C : (L, n) ndarray
         Output matrix.
-    q : float
-        Variance of the input noise [(N m)^2] (process noise Bd Bd' q).
+    q : float or (m,) ndarray
+        Variance of each input noise [(N m)^2] (process noise Bd diag(q) Bd').
     r : (L,) ndarray
         Variances of the output noises (squared output units).
+    covariance : bool, optional
+        Also return the a-priori state error covariance P of the predictor.
 
     Returns
     -------
-    (4, L) ndarray
+    K : (n, L) ndarray
         The innovation gain K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k].
+    P : (n, n) ndarray
+        Only with ``covariance``: the stabilizing solution of the Riccati equation, the
+        covariance of x[k] - xhat[k] (state units squared).
     """
-    Q = np.outer(Bd, Bd) * q + 1e-12 * np.eye(4)
+    G = np.asarray(Bd, float).reshape(Ad.shape[0], -1)
+    Q = (G * np.broadcast_to(np.asarray(q, float), G.shape[1])) @ G.T
+    Q = Q + 1e-12 * np.eye(Ad.shape[0])
     R = np.diag(r)
     P = solve_discrete_are(Ad.T, C.T, Q, R)
-    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    K = Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    return (K, P) if covariance else K
+
+
+@numba.njit(cache=True)
+def kstep_kernel(Ad, Bd, K, C, d, u, y, x0, k, sidx, scol, scoef, eps):
+    """k-step-ahead predictions of the innovations predictor (one window).
+
+    The one-step predictor xhat[t+1] = Ad xhat[t] + Bd u_t + K (y[t] - C xhat[t] - d) runs
+    over the data; the output at t is predicted from xhat[s], s = max(t - k + 1, 0) (data
+    up to s - 1), propagated t - s steps with the known inputs and no innovation:
+    k = 1 is the one-step predictor, k >= N the simulation from x0.  ``u_t`` is the known
+    input row u[t] plus the smoothed signs of states: column scol[j] receives
+    scoef[j] tanh(x[sidx[j]] / eps) (the sign evaluated on the state being propagated).
+
+    Returns the predicted outputs (N, L) (offset d included) and the one-step predictor's
+    states (N, n).
+    """
+    N = u.shape[0]
+    n = Ad.shape[0]
+    L = C.shape[0]
+    m = u.shape[1]
+    ns = sidx.shape[0]
+    Xp = np.empty((N, n))
+    Yh = np.empty((N, L))
+    x = x0.copy()
+    xn = np.zeros(n)
+    ut = np.zeros(m)
+    e = np.zeros(L)
+    for t in range(N):  # the one-step predictor
+        for i in range(n):
+            Xp[t, i] = x[i]
+        for c in range(L):
+            acc = d[c]
+            for i in range(n):
+                acc += C[c, i] * x[i]
+            e[c] = y[t, c] - acc
+        for j in range(m):
+            ut[j] = u[t, j]
+        for j in range(ns):
+            ut[scol[j]] += scoef[j] * np.tanh(x[sidx[j]] / eps)
+        for r in range(n):
+            acc = 0.0
+            for i in range(n):
+                acc += Ad[r, i] * x[i]
+            for j in range(m):
+                acc += Bd[r, j] * ut[j]
+            for c in range(L):
+                acc += K[r, c] * e[c]
+            xn[r] = acc
+        for r in range(n):
+            x[r] = xn[r]
+    z = np.zeros(n)
+    for t in range(N):  # propagate from xhat[s] to t without innovations
+        s = max(t - k + 1, 0)
+        for i in range(n):
+            z[i] = Xp[s, i]
+        for tt in range(s, t):
+            for j in range(m):
+                ut[j] = u[tt, j]
+            for j in range(ns):
+                ut[scol[j]] += scoef[j] * np.tanh(z[sidx[j]] / eps)
+            for r in range(n):
+                acc = 0.0
+                for i in range(n):
+                    acc += Ad[r, i] * z[i]
+                for j in range(m):
+                    acc += Bd[r, j] * ut[j]
+                xn[r] = acc
+            for r in range(n):
+                z[r] = xn[r]
+        for c in range(L):
+            acc = d[c]
+            for i in range(n):
+                acc += C[c, i] * z[i]
+            Yh[t, c] = acc
+    return Yh, Xp
 
 
 @dataclass

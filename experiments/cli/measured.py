@@ -625,9 +625,11 @@ LOG_FORMATS = {
 }
 INPUT_HELP = (
     "what drives the model over each window: 'loop' the known controller law closed around "
-    "the model (the steer-by-wire logs' steer-into-lean law, or --controller); 'logged' the "
-    "logged steer torque replayed open loop (no controller needed; unstable models grow). "
-    "Default: loop for the steer-by-wire logs and with --controller, else logged"
+    "the model (the steer-by-wire logs' steer-into-lean law, or --controller); 'kstep' the "
+    "logged steer torque through the model's Kalman filter, each output predicted one weave "
+    "period ahead (no controller needed, the error stays bounded where the bicycle is "
+    "unstable); 'logged' the logged steer torque replayed open loop (unstable models grow). "
+    "Default: loop for the steer-by-wire logs and with --controller, else kstep"
 )
 
 
@@ -660,15 +662,16 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--controller", choices=("steer-into-lean",), default=None,
         help="the logs' controller law, T = K (V - v) phidot, with --gains (default: none for "
-        "your own logs: the logged steer torque is replayed; the steer-by-wire logs' law "
-        "K=2, V=6.5 for --format sbw)",
+        "your own logs: the model is scored by its k-step prediction error; the steer-by-wire "
+        "logs' law K=2, V=6.5 for --format sbw)",
     )  # fmt: skip
     p.add_argument(
         "--gains", type=mapping_arg("--gains"), default=None, metavar="K=..,V=..",
         help="the law's parameters: K [N s^2/rad] and V [m/s] (default K=2,V=6.5)",
     )  # fmt: skip
-    p.add_argument("--drive", dest="input", choices=("loop", "logged"), default=None,
-                   help=INPUT_HELP)
+    p.add_argument(
+        "--drive", dest="input", choices=("loop", "kstep", "logged"), default=None, help=INPUT_HELP
+    )
 
 
 def _law(args: argparse.Namespace):
