@@ -41,7 +41,7 @@ class _RuleHelp(str):
         d = {**{k: v for k, v in r.as_dict().items() if k != "nominal_uncertainty"},
              "heldout_gain": r.heldout_gain, "explained_min": acc.EXPLAINED_MIN,
              "explained_min_calibrated": acc.EXPLAINED_MIN_CALIBRATED,
-             "residual_max": acc.RESIDUAL_MAX}  # fmt: skip
+             "residual_max": acc.RESIDUAL_MAX, "instrument_max": acc.INSTRUMENT_MAX}  # fmt: skip
         return str.__mod__(str.format(self, **d), params)
 
 
@@ -92,9 +92,11 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--unexplained-rule",
-        choices=("floor", "coloured", "residual"),
+        choices=("instruments", "floor", "coloured", "residual"),
         default=None,
-        help=_RuleHelp("how 'unexplained' is decided: explained fraction above the "
+        help=_RuleHelp("how 'unexplained' is decided: final cost over the instruments' floor "
+                       "(instruments: coloured noise, drift, quantization, speed wander "
+                       "measured on the decays), explained fraction above the "
                        "second-difference (floor) or coloured-noise floor, or final cost over "
                        "the residual's noise floor (residual) (default {unexplained_rule})"),
     )
@@ -103,7 +105,8 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
         type=number(0.0, lo_open=True),
         default=None,
         metavar="X",
-        help=_RuleHelp("threshold of that rule, > 0 (default {explained_min_calibrated} for "
+        help=_RuleHelp("threshold of that rule, > 0 (default {instrument_max} for instruments, "
+                       "{explained_min_calibrated} for "
                        "floor and coloured, {explained_min} with --nominal-uncertainty none; "
                        "{residual_max} for residual)"),  # fmt: skip
     )

@@ -121,11 +121,25 @@ def with_horizon(windows: list[Window], model) -> list[Window]:
     Returns
     -------
     list of Window
-        New windows with ``drive == "kstep"`` and ``meta["kstep_horizon"]`` [samples].
+        New windows with ``drive == "kstep"``, ``meta["kstep_horizon"]`` [samples] and
+        ``meta["kstep_gain"]``, the steady-state Kalman gain of ``model`` at the window's
+        speed ((n, 4) for its n states).
     """
-    return [replace(w, drive=KSTEP, meta={**w.meta, "kstep_horizon":
-                                          horizon(model, float(np.mean(w.v_sensor)))})
-            for w in windows]  # fmt: skip
+    out = []
+    for w in windows:
+        vs = float(np.mean(w.v_sensor))
+        Ad, Bd = model.discrete(model.true_speed(vs))
+        C = _output_matrix(model, Ad.shape[0])
+        K = _gain(Ad, Bd, C, measurement_variances(w))
+        out.append(replace(w, drive=KSTEP, meta={**w.meta, "kstep_horizon": horizon(model, vs),
+                                                 "kstep_gain": K}))  # fmt: skip
+    return out
+
+
+def _output_matrix(model, npl: int) -> np.ndarray:
+    C = np.zeros((4, npl))
+    C[0, 0], C[1, 1], C[2, 2], C[3, 3] = 1.0, 1.0, model.e("roll_rate_scale"), 1.0
+    return C
 
 
 def measurement_variances(w: Window) -> np.ndarray:
@@ -212,8 +226,7 @@ def kstep_outputs(model, windows: list[Window], k: int | None = None) -> list[di
         v = model.true_speed(vs)
         Ad, Bd = model.discrete(v, None, cms)
         npl = Ad.shape[0]
-        C = np.zeros((4, npl))
-        C[0, 0], C[1, 1], C[2, 2], C[3, 3] = 1.0, 1.0, s, 1.0
+        C = _output_matrix(model, npl)
         feq, fcode, fcoef = model.forcing_rows([v])
         u = _inputs(model, w, H, m_, f)
         for j in np.flatnonzero(fcode == 0):  # constants: known inputs
@@ -226,12 +239,15 @@ def kstep_outputs(model, windows: list[Window], k: int | None = None) -> list[di
         if w.correction is not None:  # the linear-equivalent measurement
             for j, c in enumerate(("phi", "delta", "phidot", "deltadot")):
                 y[:, j] -= w.correction[c]
-        key = (round(w.speed, 3), npl)
-        if key not in gains:  # one filter per speed: the model's own Riccati equation
-            gains[key] = _gain(Ad, Bd, C, measurement_variances(w))
-        K = gains[key]
-        if not np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0:
-            K = _gain(Ad, Bd, C, measurement_variances(w))
+        K = np.zeros((npl, 4))
+        Kw = w.meta.get("kstep_gain")
+        if Kw is not None:  # the stated nominal's filter, fixed with the window
+            K[: min(npl, Kw.shape[0])] = Kw[:npl]
+        if Kw is None or not np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0:
+            key = (round(w.speed, 3), npl)  # the candidate's own filter, one per speed
+            if key not in gains:
+                gains[key] = _gain(Ad, Bd, C, measurement_variances(w))
+            K = gains[key]
         x0 = np.zeros(npl)
         x0[0], x0[1] = x0m[0] - bphi, x0m[1] - bdel
         x0[2], x0[3] = (x0m[2] - brr) / s, x0m[3]

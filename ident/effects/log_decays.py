@@ -197,7 +197,9 @@ def decays_from_logs(
     Returns
     -------
     windows : list of Window
-        The decays, each with its ``drive``.
+        The decays, each with its ``drive`` and its log's instrument nuisances measured on
+        the log's quietest stretch (``meta["instrument_noise"]``,
+        :func:`bikeid.ident.effects.instrument_floor.with_noise`).
     model : ExperimentModel
         The nominal experiment: bicycle, sample period [s], speed calibration, law gains.
     law : ControlLaw or None
@@ -259,6 +261,9 @@ def decays_from_logs(
                                        exclude, min_decays, purpose)  # fmt: skip
     check_decay_rates(windows, p, () if sbw else options.skip)  # a glitch inside the
     # generic bound, beyond this bicycle's
+    from bikeid.ident.effects.instrument_floor import with_noise
+
+    windows = with_noise(windows, runs)  # each log's quiet-stretch nuisances
     if drive == "logged":
         windows = [replace(w, drive="logged") for w in windows]
     elif drive == "kstep":  # the k-step error, its horizon fixed at the stated bicycle

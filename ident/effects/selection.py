@@ -26,7 +26,12 @@ Workflow (identification.md section 5, approaches A/B/E):
    are refitted jointly on all fit windows, and those no longer significant there are
    pruned.  Each accepted effect's p-value is reported; with the nominal calibrated on its
    box's edge, the tests are marked as conditional on that edge.
-4. **"unexplained".**  The measurement-noise floor of each window is estimated from
+4. **"unexplained".**  By default (rule ``instruments``) the verdict is ``unexplained`` when
+   the final model's cost exceeds :data:`INSTRUMENT_MAX` times the floor of the instruments
+   (:func:`bikeid.ident.effects.instrument_floor.instrument_floor`: coloured sensor noise,
+   quantization, drift and speed wander measured on the windows); with no effect accepted
+   and no structure left, nothing is said.  The older rules: the measurement-noise floor of
+   each window is estimated from
    second differences (sigma^2 = mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6).  If the
    accepted effects remove less than the rule's threshold (``EXPLAINED_MIN`` = 90 %; 85 %
    with the nominal calibrated) of the nominal cost
@@ -94,6 +99,7 @@ from bikeid.ident.effects.fit import (
     output_residuals,
     residual_noise_floor,
 )
+from bikeid.ident.effects.instrument_floor import instrument_floor
 from bikeid.ident.effects.library import LIBRARY, Candidate
 from bikeid.ident.effects.nominal_uncertainty import Calibration, NominalUncertainty
 from bikeid.ident.effects.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_targets
@@ -491,7 +497,8 @@ class _Search:
 
 
 def _unexplained(rule: AcceptanceRule, cost0: float, cost_sig: float, floor: float,
-                 windows: list[Window], r_sig: np.ndarray) -> dict:  # fmt: skip
+                 windows: list[Window], r_sig: np.ndarray, model: ExperimentModel
+                 ) -> dict:  # fmt: skip
     """The ``unexplained`` test of the final model (module docstring, step 4)."""
     explained = (cost0 - cost_sig) / max(cost0 - floor, 1e-12 * cost0)
     floor_c = noise_floor(windows, "coloured")
@@ -499,7 +506,11 @@ def _unexplained(rule: AcceptanceRule, cost0: float, cost_sig: float, floor: flo
     floor_r = residual_noise_floor(r_sig, [w.n for w in windows for _ in range(2)])
     left_r = cost_sig / max(floor_r, 1e-300)
     thr = rule.threshold
-    if rule.unexplained_rule == "residual":
+    inst = instrument_floor(model, windows)
+    left_i = cost_sig / max(inst["floor"], 1e-300)
+    if rule.unexplained_rule == "instruments":
+        structured = left_i > thr
+    elif rule.unexplained_rule == "residual":
         structured = left_r > thr
     else:
         structured = (explained if rule.unexplained_rule == "floor" else explained_c) < thr
@@ -509,6 +520,7 @@ def _unexplained(rule: AcceptanceRule, cost0: float, cost_sig: float, floor: flo
         "floor_second_difference": floor, "floor_coloured": floor_c,
         "floor_residual": floor_r, "explained": float(explained),
         "explained_coloured": float(explained_c), "final_over_residual_floor": left_r,
+        "floor_instruments": inst, "final_over_instrument_floor": float(left_i),
     }  # fmt: skip
 
 
@@ -638,7 +650,7 @@ def select_effects(
     accepted.sort(key=lambda n: -contrib[n])
     r_sig = output_residuals(final.model, windows)
     cost_sig = float(r_sig @ r_sig)  # decay signals only, as cost0 and the floor
-    unexpl = _unexplained(rule, cost0, cost_sig, floor, windows, r_sig)
+    unexpl = _unexplained(rule, cost0, cost_sig, floor, windows, r_sig, final.model)
     edge = st.conditional_on(final.calibration)
     effects = []
     for n in accepted:
@@ -660,8 +672,8 @@ def select_effects(
         st.accepted, effects = [], []
         final, windows = st.joint_fit_and_prune()  # the model without them
     verdict = [e.name for e in effects]
-    if structured or not effects:
-        verdict = ["unexplained"] + verdict
+    if structured or (not effects and rule.unexplained_rule != "instruments"):
+        verdict = ["unexplained"] + verdict  # (instruments: nothing left, nothing said)
     unexpl["unexplained"] = verdict[0] == "unexplained"
     unexpl["explained_to_name"] = EXPLAINED_TO_NAME
     evidence = {
