@@ -237,62 +237,57 @@ def kstep_kernel(Ad, Bd, K, C, d, u, y, x0, k, sidx, scol, scoef, eps):
     N = u.shape[0]
     n = Ad.shape[0]
     L = C.shape[0]
-    m = u.shape[1]
-    ns = sidx.shape[0]
     Xp = np.empty((N, n))
     Yh = np.empty((N, L))
     x = x0.copy()
     xn = np.zeros(n)
-    ut = np.zeros(m)
+    ut = np.zeros(u.shape[1])
     e = np.zeros(L)
     for t in range(N):  # the one-step predictor
-        for i in range(n):
-            Xp[t, i] = x[i]
+        Xp[t] = x
+        _output(C, d, x, e)
         for c in range(L):
-            acc = d[c]
-            for i in range(n):
-                acc += C[c, i] * x[i]
-            e[c] = y[t, c] - acc
-        for j in range(m):
-            ut[j] = u[t, j]
-        for j in range(ns):
-            ut[scol[j]] += scoef[j] * np.tanh(x[sidx[j]] / eps)
+            e[c] = y[t, c] - e[c]
+        _propagate(Ad, Bd, u[t], sidx, scol, scoef, eps, x, ut, xn)
         for r in range(n):
-            acc = 0.0
-            for i in range(n):
-                acc += Ad[r, i] * x[i]
-            for j in range(m):
-                acc += Bd[r, j] * ut[j]
+            acc = xn[r]
             for c in range(L):
                 acc += K[r, c] * e[c]
-            xn[r] = acc
-        for r in range(n):
-            x[r] = xn[r]
+            x[r] = acc
     z = np.zeros(n)
     for t in range(N):  # propagate from xhat[s] to t without innovations
         s = max(t - k + 1, 0)
-        for i in range(n):
-            z[i] = Xp[s, i]
+        z[:] = Xp[s]
         for tt in range(s, t):
-            for j in range(m):
-                ut[j] = u[tt, j]
-            for j in range(ns):
-                ut[scol[j]] += scoef[j] * np.tanh(z[sidx[j]] / eps)
-            for r in range(n):
-                acc = 0.0
-                for i in range(n):
-                    acc += Ad[r, i] * z[i]
-                for j in range(m):
-                    acc += Bd[r, j] * ut[j]
-                xn[r] = acc
-            for r in range(n):
-                z[r] = xn[r]
-        for c in range(L):
-            acc = d[c]
-            for i in range(n):
-                acc += C[c, i] * z[i]
-            Yh[t, c] = acc
+            _propagate(Ad, Bd, u[tt], sidx, scol, scoef, eps, z, ut, xn)
+            z[:] = xn
+        _output(C, d, z, Yh[t])
     return Yh, Xp
+
+
+@numba.njit(cache=True)
+def _output(C, d, x, out):
+    """out = C x + d, in place (explicit loops: BLAS calls cost more on 4 x 6 matrices)."""
+    for c in range(C.shape[0]):
+        acc = d[c]
+        for i in range(x.shape[0]):
+            acc += C[c, i] * x[i]
+        out[c] = acc
+
+
+@numba.njit(cache=True)
+def _propagate(Ad, Bd, u_t, sidx, scol, scoef, eps, x, ut, xn):
+    """xn = Ad x + Bd (u_t + the smoothed signs of x), in place (``kstep_kernel``)."""
+    ut[:] = u_t
+    for j in range(sidx.shape[0]):
+        ut[scol[j]] += scoef[j] * np.tanh(x[sidx[j]] / eps)
+    for r in range(x.shape[0]):
+        acc = 0.0
+        for i in range(x.shape[0]):
+            acc += Ad[r, i] * x[i]
+        for j in range(ut.shape[0]):
+            acc += Bd[r, j] * ut[j]
+        xn[r] = acc
 
 
 @dataclass
