@@ -391,7 +391,9 @@ def cmd_fit(args) -> int:
         print(f"plant check: the selections with the two plants "
               f"{'agree' if pc['agree'] else 'disagree'} (up to their ambiguity sets): linear "
               f"{pc['linear']['verdict']}, nonlinear {pc['nonlinear']['verdict']}")  # fmt: skip
-    print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    verdict = out["identification"]["verdict"] or ("nothing: no effect, and no structure beyond "
+                                                   "the instruments' floor")
+    print(f"verdict: {verdict}; effects {out['effects']}")
     if user:  # the user's effects, marked
         from bikeid.ident.effects.library import LIBRARY
 

@@ -706,7 +706,7 @@ def select_effects(
     verdict = [e.name for e in effects]
     if structured or (not effects and rule.unexplained_rule != "instruments"):
         verdict = ["unexplained"] + verdict  # (instruments: nothing left, nothing said)
-    unexpl["unexplained"] = verdict[0] == "unexplained"
+    unexpl["unexplained"] = bool(verdict) and verdict[0] == "unexplained"
     unexpl["explained_to_name"] = EXPLAINED_TO_NAME
     evidence = {
         "effects": {e.name: st.ev_effects[e.name] for e in effects},
