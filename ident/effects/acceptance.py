@@ -120,8 +120,8 @@ PIPELINE_DEFAULTS: dict[str, dict] = {
                          "tuned_on": "= min_gain; the strict 0.25 on the blind trials"},
     "min_improved": {"value": 0.0, "where": "AcceptanceRule.min_improved",
                      "tuned_on": "not used by default (strict 0.75: blind trials)"},
-    "unexplained_rule": {"value": "instruments", "where": "AcceptanceRule.unexplained_rule",
-                         "tuned_on": "closure benchmark seed 0 (no effect, roll damping)"},
+    "unexplained_rule": {"value": "floor", "where": "AcceptanceRule.unexplained_rule",
+                         "tuned_on": "first blind trials"},
     "INSTRUMENT_MAX": {"value": INSTRUMENT_MAX, "where": "acceptance.INSTRUMENT_MAX",
                        "tuned_on": "closure benchmark seed 0 (no effect, roll damping)"},
     "EXPLAINED_MIN_CALIBRATED": {"value": 0.85, "where": "acceptance.EXPLAINED_MIN_CALIBRATED",
@@ -256,10 +256,11 @@ class AcceptanceRule:
         [0, 1] (a paired sign criterion; default 0: only the summed held-out cost; the
         strict setting is 0.75).
     unexplained_rule : str
-        How ``"unexplained"`` is decided (:data:`UNEXPLAINED_RULES`): ``"instruments"``
-        (default: final cost over the instruments' floor above :data:`INSTRUMENT_MAX`; no
-        effect and no structure left: nothing is said), ``"floor"``, ``"coloured"`` or
-        ``"residual"``
+        How ``"unexplained"`` is decided (:data:`UNEXPLAINED_RULES`): ``"floor"`` (default),
+        ``"instruments"`` (final cost over the instruments' floor above
+        :data:`INSTRUMENT_MAX`; no effect and no structure left: nothing is said; not the
+        default: on the closure's seed-18 roll-damping logs it let a steer inertia be named
+        where ``floor`` says ``unexplained``), ``"coloured"`` or ``"residual"``
         (:func:`bikeid.ident.effects.selection.select_effects`).
     unexplained_threshold : float or None
         That rule's threshold (> 0); None (default): :data:`INSTRUMENT_MAX` for
@@ -284,7 +285,7 @@ class AcceptanceRule:
     min_gain: float = 0.02
     min_heldout_gain: float | None = None
     min_improved: float = 0.0
-    unexplained_rule: str = "instruments"
+    unexplained_rule: str = "floor"
     unexplained_threshold: float | None = None
     nominal_uncertainty: NominalUncertainty | None = field(default_factory=NominalUncertainty)
 

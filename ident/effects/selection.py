@@ -28,12 +28,12 @@ Workflow (identification.md section 5, approaches A/B/E):
    are refitted jointly on all fit windows, and those no longer significant there are
    pruned.  Each accepted effect's p-value is reported; with the nominal calibrated on its
    box's edge, the tests are marked as conditional on that edge.
-4. **"unexplained".**  By default (rule ``instruments``) the verdict is ``unexplained`` when
-   the final model's cost exceeds :data:`INSTRUMENT_MAX` times the floor of the instruments
+4. **"unexplained".**  With the rule ``instruments`` (opt-in) the verdict is ``unexplained``
+   when the final model's cost exceeds ``INSTRUMENT_MAX`` times the floor of the instruments
    (:func:`bikeid.ident.effects.instrument_floor.instrument_floor`: coloured sensor noise,
-   quantization, drift and speed wander measured on the windows); with no effect accepted
-   and no structure left, nothing is said.  The older rules: the measurement-noise floor of
-   each window is estimated from
+   quantization, drift and speed wander measured on the logs); with no effect accepted
+   and no structure left, nothing is said.  The default rule ``floor``: the
+   measurement-noise floor of each window is estimated from
    second differences (sigma^2 = mean((y[k+1] - 2 y[k] + y[k-1])^2) / 6).  If the
    accepted effects remove less than the rule's threshold (``EXPLAINED_MIN`` = 90 %; 85 %
    with the nominal calibrated) of the nominal cost

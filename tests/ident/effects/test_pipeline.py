@@ -437,9 +437,7 @@ def test_fit_model_plant_uncertain_names_no_effect(monkeypatch):
     real = pipeline.fit_model(ws, max_effects=0, rule=rule, stability=2)
     assert real["plant"] == "linear" and not real["plant_choice"]["uncertain"]
     assert real["stability"]["plant"] == "linear"  # the subsamples run the chosen plant
-    # no effect in the truth: nothing selected and nothing left beyond the instruments' floor,
-    # so no subsample says anything (the instruments rule; the floor rule said "unexplained")
-    assert real["selection_frequency"] == {}
+    assert real["selection_frequency"] == {"unexplained": 1.0}  # nothing else to select
     assert real["plant_check"]["test"]["separated"] and "linear plant fits better" in \
         real["plant_choice"]["reason"]  # fmt: skip
     side = {"verdict": ["steer_viscous_damping"], "effects": {"steer_viscous_damping": 0.5},
