@@ -18,7 +18,8 @@ Usage::
 
     python benchmarks/bench_closure_rates.py --seeds 8 [--first-seed 0] [--processes 1]
         [--truth independent_linear|bikeid_nonlinear|trial] [--fit-plant auto|linear|nonlinear]
-        [--drive loop|kstep] [--torque-only] [--effects none,input_delay] [--json rates.json]
+        [--drive loop|kstep] [--torque-only] [--effects none,input_delay]
+        [--unexplained-rule instruments] [--json rates.json]
 
 ``--torque-only`` reads the logs as a stranger's (no controller law: the k-step error);
 ``--drive kstep`` with the law scores the same logs by the k-step error instead of the loop
@@ -46,10 +47,11 @@ from bikeid.experiments.parallel import imap
 
 
 def _job(args: tuple) -> dict:
-    trial, truth, fit_plant, drive, torque_only = args
+    trial, truth, fit_plant, drive, torque_only, unexplained_rule = args
     t0 = time.process_time()
     extra = () if fit_plant == "auto" else ("--plant", fit_plant)
     extra += () if drive is None else ("--drive", drive)
+    extra += () if unexplained_rule is None else ("--unexplained-rule", unexplained_rule)
     with tempfile.TemporaryDirectory() as d:
         row = run_log_trial(trial, d, None if truth == "trial" else truth, extra, torque_only)
         model = Path(d) / "model.json"
@@ -105,6 +107,8 @@ def main() -> None:
                     help="measured fit's --drive (default: loop with the law, kstep without)")
     ap.add_argument("--torque-only", action="store_true",
                     help="read the logs without the controller law (the logged torque only)")
+    ap.add_argument("--unexplained-rule", default=None,
+                    help="measured fit's --unexplained-rule (default: its default)")
     ap.add_argument("--effects", default=None,
                     help="comma-separated subset of the hidden effects (default: all)")
     ap.add_argument("--json", help="write rows and summary to this file")
@@ -114,7 +118,8 @@ def main() -> None:
               for t in draw_blind_trials(len(CLOSURE_EFFECTS), s, CLOSURE_EFFECTS)
               if t.effect in keep]  # fmt: skip
     rows = []
-    jobs = [(t, args.truth, args.fit_plant, args.drive, args.torque_only) for t in trials]
+    jobs = [(t, args.truth, args.fit_plant, args.drive, args.torque_only, args.unexplained_rule)
+            for t in trials]  # fmt: skip
     for _, r in imap(_job, jobs, args.processes, None, ordered=True):
         rows.append(r)
         t = r["plant_test"]
