@@ -231,8 +231,37 @@ def kstep_kernel(Ad, Bd, K, C, d, u, y, x0, k, sidx, scol, scoef, eps):
     input row u[t] plus the smoothed signs of states: column scol[j] receives
     scoef[j] tanh(x[sidx[j]] / eps) (the sign evaluated on the state being propagated).
 
-    Returns the predicted outputs (N, L) (offset d included) and the one-step predictor's
-    states (N, n).
+    Parameters
+    ----------
+    Ad, Bd : (n, n), (n, m) ndarray
+        Sampled state and input matrices.
+    K : (n, L) ndarray
+        Innovation gain (Ad - K C stable).
+    C : (L, n) ndarray
+        Output matrix; ``d`` (L,) the output offsets (output units).
+    d : (L,) ndarray
+        Output offsets.
+    u : (N, m) ndarray
+        Known inputs per sample (N m).
+    y : (N, L) ndarray
+        Measured outputs (rad, rad/s).
+    x0 : (n,) ndarray
+        Start state estimate.
+    k : int
+        Horizon [samples], >= 1.
+    sidx, scol : (ns,) int64 ndarray
+        State and input column of each sign term.
+    scoef : (ns,) ndarray
+        Coefficient of each sign term (N m).
+    eps : float
+        Smoothing of the signs (state units).
+
+    Returns
+    -------
+    Yh : (N, L) ndarray
+        The k-step predicted outputs (offset d included).
+    Xp : (N, n) ndarray
+        The one-step predictor's states.
     """
     N = u.shape[0]
     n = Ad.shape[0]

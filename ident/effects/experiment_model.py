@@ -677,7 +677,9 @@ class ExperimentModel:
         if ks:  # k-step windows: predicted through the model's Kalman filter
             from bikeid.ident.effects.kstep import kstep_outputs
 
-            out_k = dict(zip(ks, kstep_outputs(self, [windows[i] for i in ks]), strict=True))
+            kw = [windows[i] for i in ks]
+            out_k = dict(zip(ks, kstep_outputs(self, kw, initial_states(kw), COULOMB_EPS),
+                             strict=True))  # fmt: skip
             rest = [i for i in range(len(windows)) if i not in out_k]
             out_r = dict(zip(rest, self.simulate([windows[i] for i in rest], nsub), strict=True))
             return [out_k[i] if i in out_k else out_r[i] for i in range(len(windows))]

@@ -183,8 +183,11 @@ def _inputs(model, w: Window, H: int, m: int, f: float):
     return u
 
 
-def kstep_outputs(model, windows: list[Window], k: int | None = None) -> list[dict]:
+def kstep_outputs(model, windows: list[Window], x0s: np.ndarray, eps: float,
+                  k: int | None = None) -> list[dict]:  # fmt: skip
     """k-step predictions of each window's outputs (the ``simulate`` of a k-step window).
+
+    Called by :meth:`ExperimentModel.simulate` for the windows with ``drive == "kstep"``.
 
     Parameters
     ----------
@@ -192,6 +195,11 @@ def kstep_outputs(model, windows: list[Window], k: int | None = None) -> list[di
         The candidate model.
     windows : list of Window
         Decays with ``T_logged``.
+    x0s : (len(windows), 4) ndarray
+        Measured start states [rad, rad, rad/s, rad/s]
+        (:func:`bikeid.ident.effects.experiment_model.initial_states`).
+    eps : float
+        Smoothing of the sign laws [rad/s] (tanh(rate / eps)).
     k : int, optional
         Horizon [samples] for every window (default: each window's
         ``meta["kstep_horizon"]``, else :func:`horizon` at the window's speed).
@@ -218,9 +226,6 @@ def kstep_outputs(model, windows: list[Window], k: int | None = None) -> list[di
     d = np.array([bphi, bdel, brr, 0.0])
     gains: dict = {}
     out = []
-    from bikeid.ident.effects.experiment_model import COULOMB_EPS, initial_states
-
-    x0s = initial_states(windows)
     for w, x0m in zip(windows, x0s, strict=True):
         vs = float(np.mean(w.v_sensor))
         v = model.true_speed(vs)
@@ -257,7 +262,7 @@ def kstep_outputs(model, windows: list[Window], k: int | None = None) -> list[di
             x0[-1] = x0[1] - model.e("tire_relaxation") / v * x0[3]
         kw = int(k if k is not None else w.meta.get("kstep_horizon") or horizon(model, vs))
         Yh, _ = kstep_kernel(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd), K, C, d,
-                             u, y, x0, kw, sidx, scol, scoef, COULOMB_EPS)  # fmt: skip
+                             u, y, x0, kw, sidx, scol, scoef, eps)  # fmt: skip
         o = {c: Yh[:, j].copy() for j, c in enumerate(("phi", "delta", "phidot", "deltadot"))}
         o["T"] = u[:, 0]
         if w.correction is not None:
@@ -280,8 +285,8 @@ class KStepError:
     ----------
     residuals : ndarray
         Stacked (prediction - measured) of roll rate and steer angle, each window and
-        channel divided by its ||y - mean y|| (as
-        :func:`bikeid.ident.effects.fit.output_residuals`; dimensionless).
+        channel divided by its ||y - mean y|| (the residuals of the effect fits;
+        dimensionless).
     per_window : (n_windows,) ndarray
         Each window's cost: the sum of its two channels' NRMSE^2.
     cost : float
@@ -314,21 +319,17 @@ def kstep_error(model, windows: list[Window], k: int | None = None) -> KStepErro
     KStepError
         The normalized residuals, per-window costs, total cost and horizons.
     """
-    from bikeid.ident.effects.fit import output_residuals
-
-    ws = [w if w.drive == KSTEP else replace(w, drive=KSTEP) for w in windows]
-    r = output_residuals(model, ws) if k is None else _residuals_at(model, ws, k)
-    sizes = np.cumsum([0] + [2 * w.n for w in ws])
-    per = np.array([float(r[a:b] @ r[a:b]) for a, b in zip(sizes[:-1], sizes[1:], strict=True)])
-    ks = [int(k or w.meta.get("kstep_horizon") or horizon(model, float(np.mean(w.v_sensor))))
-          for w in ws]  # fmt: skip
-    return KStepError(r, per, float(per.sum()), ks)
-
-
-def _residuals_at(model, windows: list[Window], k: int) -> np.ndarray:
+    ws = [w if w.drive == KSTEP and k is None else
+          replace(w, drive=KSTEP, meta={**w.meta, **({} if k is None else {"kstep_horizon": k})})
+          for w in windows]  # fmt: skip
     parts = []
-    for w, o in zip(windows, kstep_outputs(model, windows, k), strict=True):
+    for w, o in zip(ws, model.simulate(ws), strict=True):
         for c in ("phidot", "delta"):
             y = getattr(w, c)
             parts.append((o[c] - y) / max(np.linalg.norm(y - y.mean()), 1e-12))
-    return np.concatenate(parts)
+    r = np.concatenate(parts)
+    sizes = np.cumsum([0] + [2 * w.n for w in ws])
+    per = np.array([float(r[a:b] @ r[a:b]) for a, b in zip(sizes[:-1], sizes[1:], strict=True)])
+    ks = [int(w.meta.get("kstep_horizon") or horizon(model, float(np.mean(w.v_sensor))))
+          for w in ws]  # fmt: skip
+    return KStepError(r, per, float(per.sum()), ks)
