@@ -18,7 +18,12 @@ Usage::
 
     python benchmarks/bench_closure_rates.py --seeds 8 [--first-seed 0] [--processes 1]
         [--truth independent_linear|bikeid_nonlinear|trial] [--fit-plant auto|linear|nonlinear]
-        [--json rates.json]
+        [--drive loop|kstep] [--torque-only] [--effects none,input_delay]
+        [--unexplained-rule instruments] [--json rates.json]
+
+``--torque-only`` reads the logs as a stranger's (no controller law: the k-step error);
+``--drive kstep`` with the law scores the same logs by the k-step error instead of the loop
+simulation (the comparison of docs/measured.md).
 """
 
 from __future__ import annotations
@@ -42,11 +47,13 @@ from bikeid.experiments.parallel import imap
 
 
 def _job(args: tuple) -> dict:
-    trial, truth, fit_plant = args
+    trial, truth, fit_plant, drive, torque_only, unexplained_rule = args
     t0 = time.process_time()
     extra = () if fit_plant == "auto" else ("--plant", fit_plant)
+    extra += () if drive is None else ("--drive", drive)
+    extra += () if unexplained_rule is None else ("--unexplained-rule", unexplained_rule)
     with tempfile.TemporaryDirectory() as d:
-        row = run_log_trial(trial, d, None if truth == "trial" else truth, extra)
+        row = run_log_trial(trial, d, None if truth == "trial" else truth, extra, torque_only)
         model = Path(d) / "model.json"
         res = json.loads(model.read_text())["results"] if row["rc"] == 0 else {}
     check = res.get("plant_check")
@@ -76,6 +83,8 @@ def summarize(rows: list[dict]) -> dict:
     out = {}
     for eff in CLOSURE_EFFECTS:
         rs = [r for r in rows if r["effect"] == eff]
+        if not rs:
+            continue
         out[eff] = _counts(rs)
         if rs and rs[0]["kind"] == "library":
             out[eff]["value_ok"] = sum(bool(r["value_ok"]) for r in rs)
@@ -94,13 +103,24 @@ def main() -> None:
     ap.add_argument("--fit-plant", choices=("auto", "linear", "nonlinear"), default="auto",
                     help="measured fit's --plant (auto: the default, with the plant check; "
                     "nonlinear with a linear truth: the mismatch the check is for)")
+    ap.add_argument("--drive", choices=("loop", "kstep"), default=None,
+                    help="measured fit's --drive (default: loop with the law, kstep without)")
+    ap.add_argument("--torque-only", action="store_true",
+                    help="read the logs without the controller law (the logged torque only)")
+    ap.add_argument("--unexplained-rule", default=None,
+                    help="measured fit's --unexplained-rule (default: its default)")
+    ap.add_argument("--effects", default=None,
+                    help="comma-separated subset of the hidden effects (default: all)")
     ap.add_argument("--json", help="write rows and summary to this file")
     args = ap.parse_args()
+    keep = set(args.effects.split(",")) if args.effects else set(CLOSURE_EFFECTS)
     trials = [t for s in range(args.first_seed, args.first_seed + args.seeds)
-              for t in draw_blind_trials(len(CLOSURE_EFFECTS), s, CLOSURE_EFFECTS)]  # fmt: skip
+              for t in draw_blind_trials(len(CLOSURE_EFFECTS), s, CLOSURE_EFFECTS)
+              if t.effect in keep]  # fmt: skip
     rows = []
-    for _, r in imap(_job, [(t, args.truth, args.fit_plant) for t in trials], args.processes, None,
-                     ordered=True):  # fmt: skip
+    jobs = [(t, args.truth, args.fit_plant, args.drive, args.torque_only, args.unexplained_rule)
+            for t in trials]  # fmt: skip
+    for _, r in imap(_job, jobs, args.processes, None, ordered=True):
         rows.append(r)
         t = r["plant_test"]
         after = "" if not t else (f" (after selection: out-of-fold ratio {t['ratio']:.3g}, p "

@@ -43,6 +43,7 @@ __all__ = [
     "eliminate_initial_state",
     "initial_gain",
     "kalman_gain",
+    "kstep_kernel",
     "levenberg_marquardt",
     "output_matrix",
     "run_data",
@@ -329,31 +330,138 @@ def output_matrix(outputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.eye(4)[idx], idx
 
 
-def kalman_gain(Ad, Bd, C, q: float, r: np.ndarray) -> np.ndarray:
-    """Steady-state Kalman (innovation) gain for process noise through the input column.
+def kalman_gain(Ad, Bd, C, q, r, covariance: bool = False):
+    """Steady-state Kalman (innovation) gain for process noise through the input columns.
 
     Parameters
     ----------
-    Ad : (4, 4) ndarray
-        Discrete state matrix.
-    Bd : (4,) ndarray
-        Discrete input column.
-    C : (L, 4) ndarray
+    Ad : (n, n) ndarray
+        Discrete state matrix (n = 4 for the canonical models; more for an augmented one).
+    Bd : (n,) or (n, m) ndarray
+        Discrete input column(s) the process noise enters through.
+    C : (L, n) ndarray
         Output matrix.
-    q : float
-        Variance of the input noise [(N m)^2] (process noise Bd Bd' q).
+    q : float or (m,) ndarray
+        Variance of each input noise [(N m)^2] (process noise Bd diag(q) Bd').
     r : (L,) ndarray
         Variances of the output noises (squared output units).
+    covariance : bool, optional
+        Also return the a-priori state error covariance P of the predictor.
 
     Returns
     -------
-    (4, L) ndarray
+    K : (n, L) ndarray
         The innovation gain K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k].
+    P : (n, n) ndarray
+        Only with ``covariance``: the stabilizing solution of the Riccati equation, the
+        covariance of x[k] - xhat[k] (state units squared).
     """
-    Q = np.outer(Bd, Bd) * q + 1e-12 * np.eye(4)
+    G = np.asarray(Bd, float).reshape(Ad.shape[0], -1)
+    Q = (G * np.broadcast_to(np.asarray(q, float), G.shape[1])) @ G.T
+    Q = Q + 1e-12 * np.eye(Ad.shape[0])
     R = np.diag(r)
     P = solve_discrete_are(Ad.T, C.T, Q, R)
-    return Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    K = Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    return (K, P) if covariance else K
+
+
+@numba.njit(cache=True)
+def kstep_kernel(Ad, Bd, K, C, d, u, y, x0, k, sidx, scol, scoef, eps):
+    """k-step-ahead predictions of the innovations predictor (one window).
+
+    The one-step predictor xhat[t+1] = Ad xhat[t] + Bd u_t + K (y[t] - C xhat[t] - d) runs
+    over the data; the output at t is predicted from xhat[s], s = max(t - k + 1, 0) (data
+    up to s - 1), propagated t - s steps with the known inputs and no innovation:
+    k = 1 is the one-step predictor, k >= N the simulation from x0.  ``u_t`` is the known
+    input row u[t] plus the smoothed signs of states: column scol[j] receives
+    scoef[j] tanh(x[sidx[j]] / eps) (the sign evaluated on the state being propagated).
+
+    Parameters
+    ----------
+    Ad, Bd : (n, n), (n, m) ndarray
+        Sampled state and input matrices.
+    K : (n, L) ndarray
+        Innovation gain (Ad - K C stable).
+    C : (L, n) ndarray
+        Output matrix; ``d`` (L,) the output offsets (output units).
+    d : (L,) ndarray
+        Output offsets.
+    u : (N, m) ndarray
+        Known inputs per sample (N m).
+    y : (N, L) ndarray
+        Measured outputs (rad, rad/s).
+    x0 : (n,) ndarray
+        Start state estimate.
+    k : int
+        Horizon [samples], >= 1.
+    sidx, scol : (ns,) int64 ndarray
+        State and input column of each sign term.
+    scoef : (ns,) ndarray
+        Coefficient of each sign term (N m).
+    eps : float
+        Smoothing of the signs (state units).
+
+    Returns
+    -------
+    Yh : (N, L) ndarray
+        The k-step predicted outputs (offset d included).
+    Xp : (N, n) ndarray
+        The one-step predictor's states.
+    """
+    N = u.shape[0]
+    n = Ad.shape[0]
+    L = C.shape[0]
+    Xp = np.empty((N, n))
+    Yh = np.empty((N, L))
+    x = x0.copy()
+    xn = np.zeros(n)
+    ut = np.zeros(u.shape[1])
+    e = np.zeros(L)
+    for t in range(N):  # the one-step predictor
+        Xp[t] = x
+        _output(C, d, x, e)
+        for c in range(L):
+            e[c] = y[t, c] - e[c]
+        _propagate(Ad, Bd, u[t], sidx, scol, scoef, eps, x, ut, xn)
+        for r in range(n):
+            acc = xn[r]
+            for c in range(L):
+                acc += K[r, c] * e[c]
+            x[r] = acc
+    z = np.zeros(n)
+    for t in range(N):  # propagate from xhat[s] to t without innovations
+        s = max(t - k + 1, 0)
+        z[:] = Xp[s]
+        for tt in range(s, t):
+            _propagate(Ad, Bd, u[tt], sidx, scol, scoef, eps, z, ut, xn)
+            z[:] = xn
+        _output(C, d, z, Yh[t])
+    return Yh, Xp
+
+
+@numba.njit(cache=True)
+def _output(C, d, x, out):
+    """out = C x + d, in place (explicit loops: BLAS calls cost more on 4 x 6 matrices)."""
+    for c in range(C.shape[0]):
+        acc = d[c]
+        for i in range(x.shape[0]):
+            acc += C[c, i] * x[i]
+        out[c] = acc
+
+
+@numba.njit(cache=True)
+def _propagate(Ad, Bd, u_t, sidx, scol, scoef, eps, x, ut, xn):
+    """xn = Ad x + Bd (u_t + the smoothed signs of x), in place (``kstep_kernel``)."""
+    ut[:] = u_t
+    for j in range(sidx.shape[0]):
+        ut[scol[j]] += scoef[j] * np.tanh(x[sidx[j]] / eps)
+    for r in range(x.shape[0]):
+        acc = 0.0
+        for i in range(x.shape[0]):
+            acc += Ad[r, i] * x[i]
+        for j in range(ut.shape[0]):
+            acc += Bd[r, j] * ut[j]
+        xn[r] = acc
 
 
 @dataclass

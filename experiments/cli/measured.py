@@ -41,7 +41,7 @@ class _RuleHelp(str):
         d = {**{k: v for k, v in r.as_dict().items() if k != "nominal_uncertainty"},
              "heldout_gain": r.heldout_gain, "explained_min": acc.EXPLAINED_MIN,
              "explained_min_calibrated": acc.EXPLAINED_MIN_CALIBRATED,
-             "residual_max": acc.RESIDUAL_MAX}  # fmt: skip
+             "residual_max": acc.RESIDUAL_MAX, "instrument_max": acc.INSTRUMENT_MAX}  # fmt: skip
         return str.__mod__(str.format(self, **d), params)
 
 
@@ -92,9 +92,11 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--unexplained-rule",
-        choices=("floor", "coloured", "residual"),
+        choices=("instruments", "floor", "coloured", "residual"),
         default=None,
-        help=_RuleHelp("how 'unexplained' is decided: explained fraction above the "
+        help=_RuleHelp("how 'unexplained' is decided: final cost over the instruments' floor "
+                       "(instruments: coloured noise, drift, quantization, speed wander "
+                       "measured on the decays), explained fraction above the "
                        "second-difference (floor) or coloured-noise floor, or final cost over "
                        "the residual's noise floor (residual) (default {unexplained_rule})"),
     )
@@ -103,7 +105,8 @@ def add_acceptance_options(p: argparse.ArgumentParser) -> None:
         type=number(0.0, lo_open=True),
         default=None,
         metavar="X",
-        help=_RuleHelp("threshold of that rule, > 0 (default {explained_min_calibrated} for "
+        help=_RuleHelp("threshold of that rule, > 0 (default {instrument_max} for instruments, "
+                       "{explained_min_calibrated} for "
                        "floor and coloured, {explained_min} with --nominal-uncertainty none; "
                        "{residual_max} for residual)"),  # fmt: skip
     )
@@ -389,7 +392,9 @@ def cmd_fit(args) -> int:
         print(f"plant check: the selections with the two plants "
               f"{'agree' if pc['agree'] else 'disagree'} (up to their ambiguity sets): linear "
               f"{pc['linear']['verdict']}, nonlinear {pc['nonlinear']['verdict']}")  # fmt: skip
-    print(f"verdict: {out['identification']['verdict']}; effects {out['effects']}")
+    verdict = out["identification"]["verdict"] or ("nothing: no effect, and no structure beyond "
+                                                   "the instruments' floor")
+    print(f"verdict: {verdict}; effects {out['effects']}")
     if user:  # the user's effects, marked
         from bikeid.ident.effects.library import LIBRARY
 
@@ -626,9 +631,11 @@ LOG_FORMATS = {
 }
 INPUT_HELP = (
     "what drives the model over each window: 'loop' the known controller law closed around "
-    "the model (the steer-by-wire logs' steer-into-lean law, or --controller); 'logged' the "
-    "logged steer torque replayed open loop (no controller needed; unstable models grow). "
-    "Default: loop for the steer-by-wire logs and with --controller, else logged"
+    "the model (the steer-by-wire logs' steer-into-lean law, or --controller); 'kstep' the "
+    "logged steer torque through the model's Kalman filter, each output predicted one weave "
+    "period ahead (no controller needed, the error stays bounded where the bicycle is "
+    "unstable); 'logged' the logged steer torque replayed open loop (unstable models grow). "
+    "Default: loop for the steer-by-wire logs and with --controller, else kstep"
 )
 
 
@@ -661,15 +668,16 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--controller", choices=("steer-into-lean",), default=None,
         help="the logs' controller law, T = K (V - v) phidot, with --gains (default: none for "
-        "your own logs: the logged steer torque is replayed; the steer-by-wire logs' law "
-        "K=2, V=6.5 for --format sbw)",
+        "your own logs: the model is scored by its k-step prediction error; the steer-by-wire "
+        "logs' law K=2, V=6.5 for --format sbw)",
     )  # fmt: skip
     p.add_argument(
         "--gains", type=mapping_arg("--gains"), default=None, metavar="K=..,V=..",
         help="the law's parameters: K [N s^2/rad] and V [m/s] (default K=2,V=6.5)",
     )  # fmt: skip
-    p.add_argument("--drive", dest="input", choices=("loop", "logged"), default=None,
-                   help=INPUT_HELP)
+    p.add_argument(
+        "--drive", dest="input", choices=("loop", "kstep", "logged"), default=None, help=INPUT_HELP
+    )
 
 
 def _law(args: argparse.Namespace):

@@ -1112,7 +1112,8 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
 
 
 def run_log_trial(trial: BlindTrial, folder, plant: str | None = None,
-                  extra_args: tuple[str, ...] = ()) -> dict:  # fmt: skip
+                  extra_args: tuple[str, ...] = (), torque_only: bool = False
+                  ) -> dict:  # fmt: skip
     """Write a trial's logs as CSV (:func:`write_trial_logs`), fit them with ``bikeid
     measured fit`` and its import options, and score the fit (:func:`score_log_fit`).
 
@@ -1126,6 +1127,9 @@ def run_log_trial(trial: BlindTrial, folder, plant: str | None = None,
         The truth's plant (:func:`log_signals`; default the trial's).
     extra_args : tuple of str, optional
         More ``measured fit`` options (e.g. ``("--plant", "linear")``).
+    torque_only : bool, optional
+        Read the logs without the controller law (no ``--controller``/``--gains``): the
+        logged torque only, as a stranger's logs come.
 
     Returns
     -------
@@ -1142,9 +1146,12 @@ def run_log_trial(trial: BlindTrial, folder, plant: str | None = None,
     files = write_trial_logs(trial, folder, plant)
     out = folder / "model.json"
     err = io.StringIO()
+    opts = log_import_options()
+    if torque_only:
+        opts = opts[: opts.index("--controller")]
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        rc = main(["measured", "fit", *map(str, files), *log_import_options(), "--out",
-                   str(out), "--quiet", *extra_args])  # fmt: skip
+        rc = main(["measured", "fit", *map(str, files), *opts, "--out", str(out), "--quiet",
+                   *extra_args])  # fmt: skip
     model = json.loads(out.read_text()) if rc == 0 else None
     row = {"index": trial.index, "seed": trial.seed, "fit_speeds": list(trial.fit_speeds),
            "truth_plant": plant or trial.nuisance.plant, "rc": rc,

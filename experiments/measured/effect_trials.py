@@ -453,7 +453,7 @@ def run_trial(
         **select_kw,
     )  # fmt: skip
     ev = evaluate(nominal, res.model, held, nonlinear=nonlinear)["summary"]
-    first = res.verdict[0]
+    first = res.verdict[0] if res.verdict else None  # empty: nothing found, nothing said
     est = next((e for e in res.effects if e.name == spec.effect), None)
     value = None if est is None else float(est.value)
     dev = abs(spec.value - es.absent)
@@ -537,7 +537,8 @@ def summarize(rows: list[dict]) -> dict:
         d = {k: rate(rs, k) for k in keys}
         firsts: dict[str, int] = {}
         for r in rs:
-            firsts[r["verdict"][0]] = firsts.get(r["verdict"][0], 0) + 1
+            name = r["verdict"][0] if r["verdict"] else "nothing"
+            firsts[name] = firsts.get(name, 0) + 1
         d["named_first"] = firsts
         d["median_error_ratio"] = float(np.median([r["error_ratio"] for r in rs]))
         per[name] = d

@@ -25,7 +25,9 @@ settings), :mod:`.acceptance` (the acceptance rule and its test), :mod:`.fit` (f
 effect values, standard errors), :mod:`.nominal_uncertainty`
 (the stated bicycle's uncertainty and its calibration), :mod:`.selection`,
 :mod:`.diagnostics` (equation error, residual spectra, push asymmetry, ``evaluate``),
-:mod:`.weave` (the measured weave eigenvalue of decays), :mod:`.synthetic_decays` (decays of
+:mod:`.weave` (the measured weave eigenvalue of decays), :mod:`.kstep` (the k-step
+prediction error of logs without the controller law, ``kstep_error``),
+:mod:`.instrument_floor` (the cost the instruments alone leave), :mod:`.synthetic_decays` (decays of
 a known model, for tests), :mod:`.before_after` (a before/after error ratio with its interval,
 paired test and verdict) and :mod:`.pipeline` (fit, save, load, evaluate).
 """

@@ -652,9 +652,11 @@ class ExperimentModel:
         deltadot (sensor biases/scale applied), and the applied command T.  A window with
         ``drive == "logged"`` is driven open loop by its logged command ``T_logged`` (the
         input-path effects, delay, gain and lag, still act on it; an unstable model simply
-        grows over the window); the others by the steer-into-lean law.
-        ``nsub`` substeps per 10 ms loop re-evaluate the Coulomb friction (the
-        controller is still sampled every 10 ms).
+        grows over the window); a window with ``drive == "kstep"`` is predicted k samples
+        ahead through the model's steady-state Kalman filter on its logged command
+        (:func:`bikeid.ident.effects.kstep.kstep_outputs`; ``nsub`` does not apply); the
+        others by the steer-into-lean law.  ``nsub`` substeps per 10 ms loop re-evaluate the
+        Coulomb friction (the controller is still sampled every 10 ms).
 
         Parameters
         ----------
@@ -671,6 +673,16 @@ class ExperimentModel:
         """
         if not windows:
             return []
+        ks = [i for i, w in enumerate(windows) if w.drive == "kstep"]
+        if ks:  # k-step windows: predicted through the model's Kalman filter
+            from bikeid.ident.effects.kstep import kstep_outputs
+
+            kw = [windows[i] for i in ks]
+            out_k = dict(zip(ks, kstep_outputs(self, kw, initial_states(kw), COULOMB_EPS),
+                             strict=True))  # fmt: skip
+            rest = [i for i in range(len(windows)) if i not in out_k]
+            out_r = dict(zip(rest, self.simulate([windows[i] for i in rest], nsub), strict=True))
+            return [out_k[i] if i in out_k else out_r[i] for i in range(len(windows))]
         nw = len(windows)
         nmax = max(w.n for w in windows)
         cms = self.canonical()
@@ -707,8 +719,8 @@ class ExperimentModel:
         logged = np.array([w.drive == "logged" for w in windows])
         for i, w in enumerate(windows):
             if w.drive not in ("loop", "logged"):
-                raise ValueError(f"{w.file}@{w.start}: drive must be 'loop' or 'logged', "
-                                 f"got {w.drive!r}")  # fmt: skip
+                raise ValueError(f"{w.file}@{w.start}: drive must be 'loop', 'logged' or "
+                                 f"'kstep', got {w.drive!r}")  # fmt: skip
             if logged[i]:
                 if w.T_logged is None or np.size(w.T_logged) != w.n:
                     raise ValueError(f"{w.file}@{w.start}: drive 'logged' needs the logged "
@@ -749,7 +761,10 @@ def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -
     speed held at the true speed) and the linear model are both run with m' from the
     window's measured initial state, zero command history, and the same sampled loop
     ``T = K (V - v_s) phidot`` (v_s the window's mean sensor speed), or, for a window with
-    ``drive == "logged"``, the same logged command replayed open loop.
+    ``drive == "logged"``, the same logged command replayed open loop.  A window with
+    ``drive == "kstep"`` is cut into segments of its horizon k (one weave period at most,
+    :func:`bikeid.ident.effects.kstep.horizon`), each replayed from its own measured start,
+    so that the open-loop plant does not run long enough to fall.
 
     Parameters
     ----------
@@ -774,6 +789,17 @@ def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -
     from bikeid.sim.nonlinear import WhippleBicycle
 
     model = model or ExperimentModel()
+    if window.drive == "kstep":  # replayed over segments of one horizon (ident.effects.kstep)
+        from bikeid.ident.effects.kstep import horizon
+
+        w = window
+        k = int(w.meta.get("kstep_horizon") or horizon(model, float(np.mean(w.v_sensor))))
+        parts = [nonlinear_correction(_segment(w, a, min(a + k, w.n)), model)
+                 for a in range(0, w.n, k) if min(a + k, w.n) - a >= 2]  # fmt: skip
+        out = {c: np.concatenate([p[c] for p in parts]) for c in parts[0]}
+        if out["phi"].size < w.n:  # a last segment of one sample: no correction there
+            out = {c: np.pad(y, (0, w.n - y.size), mode="edge") for c, y in out.items()}
+        return out
     bike = WhippleBicycle(model.plant_params())
     w = window
     vs = float(np.mean(w.v_sensor))
@@ -798,6 +824,14 @@ def nonlinear_correction(window: Window, model: ExperimentModel | None = None) -
     if tr.stop_reason is not None or tr.t.size != w.n:
         raise SimulationFailed(w.file, w.start, str(tr.stop_reason or "ended early"))
     return {c: tr.signal(c) - sl[c] for c in ("phi", "delta", "phidot", "deltadot")}
+
+
+def _segment(w: Window, a: int, b: int) -> Window:
+    """Rows a..b-1 of a k-step window as a window replaying its logged command."""
+    arr = ("phi", "delta", "phidot", "deltadot", "v_sensor", "T_ext", "T_phi", "T_logged")
+    cut = {c: getattr(w, c)[a:b] for c in arr if getattr(w, c) is not None}
+    hist = np.concatenate([w.hist, w.T_logged[:a]])[-max(w.hist.size, 1) :]
+    return replace(w, **cut, start=w.start + a, hist=hist, drive="logged", correction=None)
 
 
 def with_nonlinear_correction(

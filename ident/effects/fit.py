@@ -33,6 +33,7 @@ __all__ = [
     "joint_fit",
     "noise_floor",
     "noise_variance_coloured",
+    "coloured_noise",
     "residual_noise_floor",
     "output_residuals",
 ]
@@ -132,20 +133,41 @@ def noise_variance_coloured(y: np.ndarray, spacings: int = 4) -> float:
     float
         The noise variance s2 [u^2].
     """
+    return coloured_noise(y, spacings)[0]
+
+
+def coloured_noise(y: np.ndarray, spacings: int = 4) -> tuple[float, float]:
+    """Variance and lag-one coefficient of AR(1) noise on a smooth signal
+    (:func:`noise_variance_coloured`'s fit, both numbers).
+
+    Parameters
+    ----------
+    y : ndarray
+        One channel of one window (any unit u).
+    spacings : int, optional
+        Largest spacing m [samples].
+
+    Returns
+    -------
+    s2 : float
+        Noise variance [u^2] (0 when a spaced difference vanishes).
+    a : float
+        Lag-one coefficient in [0, 0.95].
+    """
     from scipy.optimize import nnls
 
     y = np.asarray(y, dtype=float)
     m = np.arange(1, min(spacings, (y.size - 2) // 2) + 1)
     v = np.array([np.mean((y[2 * k :] - 2 * y[k:-k] + y[: -2 * k]) ** 2) for k in m])
     if not np.all(v > 0):
-        return 0.0
-    best = (np.inf, 0.0)
+        return 0.0, 0.0
+    best = (np.inf, 0.0, 0.0)
     for a in np.arange(0.0, 0.951, 0.05):
         A = np.column_stack([2 * (3 - 4 * a**m + a ** (2 * m)), m.astype(float) ** 4])
         x, rn = nnls(A / v[:, None], np.ones(m.size))
         if rn < best[0]:
-            best = (rn, float(x[0]))
-    return best[1]
+            best = (rn, float(x[0]), float(a))
+    return best[1], best[2]
 
 
 def residual_noise_floor(r: np.ndarray, sizes: list[int], lags: int = 8) -> float:

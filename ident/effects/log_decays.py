@@ -171,15 +171,17 @@ def decays_from_logs(
         logs; default the steer-by-wire bicycle for its logs and for ``experiment``).
     law : ControlLaw, optional
         The logs' controller law (default: the steer-by-wire logs' steer-into-lean law for
-        ``format="sbw"``; none for a user's logs, whose logged torque is then replayed).
+        ``format="sbw"``; none for a user's logs, which are then scored by the k-step error).
     decays : str, optional
         steer-by-wire logs: ``"listed"`` (the transcribed windows) or ``"detected"``; a user's
         logs are always detected from the roll rate.
     data : path, optional
         steer-by-wire: the data folder when no files are given.
     drive : str, optional
-        ``"loop"`` (the law closed around the model) or ``"logged"`` (the logged torque
-        replayed); default loop with a law, else logged.
+        ``"loop"`` (the law closed around the model), ``"kstep"`` (the k-step prediction
+        error through the model's Kalman filter on the logged torque,
+        :mod:`bikeid.ident.effects.kstep`) or ``"logged"`` (the logged torque replayed open
+        loop); default loop with a law, else kstep.
     speeds, exclude : list of float, optional
         Keep only / drop windows near these speeds [m/s].
     min_decays : int, optional
@@ -195,12 +197,14 @@ def decays_from_logs(
     Returns
     -------
     windows : list of Window
-        The decays, each with its ``drive``.
+        The decays, each with its ``drive`` and its log's instrument nuisances measured on
+        the log's quietest stretch (``meta["instrument_noise"]``,
+        :func:`bikeid.ident.effects.instrument_floor.with_noise`).
     model : ExperimentModel
         The nominal experiment: bicycle, sample period [s], speed calibration, law gains.
     law : ControlLaw or None
         The logs' law (given, the steer-by-wire logs', or the model file's), None when
-        none is known (the logged torque is replayed).
+        none is known (the k-step error on the logged torque, or its replay).
     report : dict
         :func:`bikeid.dataset.decays.decays_from_runs`'s report, plus ``read`` (files read).
     """
@@ -247,17 +251,24 @@ def decays_from_logs(
         law = ControlLaw()
     if experiment and not given and experiment.get("law"):  # the model's own law
         law = ControlLaw(experiment["law"], float(experiment["K"]), float(experiment["V"]))
-    drive = drive or ("loop" if law else "logged")
+    drive = drive or ("loop" if law else "kstep")
     if drive == "loop" and law is None:
         raise InputError("--drive loop needs the controller law: give --controller "
-                         "steer-into-lean --gains K=..,V=.. or use --drive logged")  # fmt: skip
+                         "steer-into-lean --gains K=..,V=.. or use --drive kstep")  # fmt: skip
     gains = law or ControlLaw()
     model = ExperimentModel(p=p, K=gains.K, V=gains.V, dt=dt, speed_calibration=tuple(cal))
     windows, report = decays_from_runs(runs, "listed" if sbw else "detected", listed, speeds,
                                        exclude, min_decays, purpose)  # fmt: skip
     check_decay_rates(windows, p, () if sbw else options.skip)  # a glitch inside the
     # generic bound, beyond this bicycle's
+    from bikeid.ident.effects.instrument_floor import with_noise
+
+    windows = with_noise(windows, runs)  # each log's quiet-stretch nuisances
     if drive == "logged":
         windows = [replace(w, drive="logged") for w in windows]
+    elif drive == "kstep":  # the k-step error, its horizon fixed at the stated bicycle
+        from bikeid.ident.effects.kstep import with_horizon
+
+        windows = with_horizon(windows, model)
     report["read"] = read
     return windows, model, law, report

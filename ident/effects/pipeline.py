@@ -563,7 +563,8 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         The metric's description, plant, verdict, effects with standard errors, fit speeds,
         :func:`bikeid.ident.effects.diagnostics.evaluate`'s ``files`` and ``summary``
         (NRMSE, dimensionless; weave eigenvalues [1/s]), ``input`` (``"loop"`` or
-        ``"logged"``: what drove the model, :attr:`bikeid.dataset.windows.Window.drive`;
+        ``"kstep"`` or ``"logged"``: what drove the model,
+        :attr:`bikeid.dataset.windows.Window.drive`;
         a nonlinear-plant model is replayed with the linear plant, and ``note`` says so),
         ``dropped_windows`` (file, start, reason of each window the nonlinear plant of the
         nominal or of the model cannot simulate: left out of both, and ``note`` says so),
@@ -622,7 +623,7 @@ def evaluate_json(model_obj: dict, windows: list[Window]) -> dict:
         "fits to the decays (measured; simulated from the same initial states); "
         "weave_root_error: lambda_model = nearest root of the sampled linear loop",
         "plant": plant,
-        "input": "logged" if replay else "loop",
+        "input": windows[0].drive if windows else "loop",
         "note": note,
         "dropped_windows": dropped,
         "verdict": ident.get("verdict"),

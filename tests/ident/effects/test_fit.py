@@ -53,11 +53,13 @@ def test_fitting_twice_on_the_same_windows_gives_the_same_result():
 
 def test_acceptance_rule_defaults_and_refusals():
     """Defaults stated once (the held-out gain follows the fit gain; the unexplained
-    threshold follows the nominal uncertainty), Bonferroni level alpha / m, and every field
-    outside its range refused by name."""
+    threshold follows the nominal uncertainty; the ``instruments`` rule's is 1.3 times the
+    instruments' floor), Bonferroni level alpha / m, and every field outside its range
+    refused by name."""
     r = AcceptanceRule()
     assert r.heldout_gain == r.min_gain == 0.02
     assert r.threshold == 0.85 and AcceptanceRule.exact().threshold == 0.9
+    assert AcceptanceRule(unexplained_rule="instruments").threshold == 1.3
     assert AcceptanceRule(unexplained_rule="residual").threshold == 2.0
     assert r.level(54) == pytest.approx(0.05 / 54)
     assert AcceptanceRule(correction="none").level(54) == 0.05
