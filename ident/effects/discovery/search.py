@@ -70,7 +70,12 @@ _STEP_TORQUE = 0.1
 
 
 def window_error(model: ExperimentModel, windows: list[Window]) -> list[np.ndarray]:
-    """The window output error of the effect fits, per decay.
+    """The closure error of the effect fits, per decay.
+
+    It is the error ``measured fit`` uses: each decay through
+    :meth:`ExperimentModel.simulate`, which replays a decay with a controller law in a loop
+    and predicts a decay of logs without a law k samples ahead through the nominal's Kalman
+    filter (``drive == "kstep"``, :mod:`bikeid.ident.effects.kstep`).
 
     Parameters
     ----------
