@@ -78,8 +78,9 @@ EXPLAINED_TO_NAME = 0.5
 #: (white noise and the right model give about 1).
 RESIDUAL_MAX = 2.0
 #: The ``instruments`` rule's threshold: ``unexplained`` when the final cost exceeds this
-#: multiple of the instruments' floor (:func:`bikeid.ident.effects.instrument_floor.
-#: instrument_floor`).  Set on the closure benchmark's seed-0 logs (building seed), nominal
+#: multiple of the instruments' floor
+#: (:func:`~bikeid.ident.effects.instrument_floor.instrument_floor`).  Set on the closure
+#: benchmark's seed-0 logs (building seed), nominal
 #: model: no-effect logs gave cost / floor 0.95 (CSV without the law, k-step error) and 1.00
 #: (with the law, loop), an outside-library roll damping 2.15 and 1.84.
 INSTRUMENT_MAX = 1.3
