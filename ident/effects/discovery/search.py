@@ -147,12 +147,15 @@ def _fit(model: ExperimentModel, windows: list[Window], terms: list[Term], steps
     sc = np.array([steps[t.label] for t in terms])
     x0 = np.array([start.get(t.label, 0.0) for t in terms]) / sc
 
+    sizes: list[int] = []  # each decay's residual length (fixed: read at the first call)
+
     def fun(x):
-        r = np.concatenate(error(_with(model, terms, x * sc), windows))
+        per = error(_with(model, terms, x * sc), windows)
+        sizes[:] = [len(e) for e in per]
+        r = np.concatenate(per)
         return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
 
     sol = least_squares(fun, x0, x_scale=1.0, diff_step=1e-3, max_nfev=60)
-    sizes = [len(e) for e in error(_with(model, terms, sol.x * sc), windows)]
     r = sol.fun
     std = effect_std(sol.jac, r, sizes) * sc
     coef = sol.x * sc
