@@ -8,7 +8,12 @@ and add any failure it finds as an ``@example``.
 
 import os
 
-from hypothesis import settings
+# One BLAS thread per test worker, set before numpy loads OpenBLAS: pytest-xdist runs one
+# worker per core, and bikeid's 4x4-10x10 products gain nothing from more threads, which
+# only spin against the other worker (the CLI and the fitting API limit it the same way).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from hypothesis import settings  # noqa: E402
 
 settings.register_profile("bikeid", derandomize=True)
 settings.register_profile("explore", derandomize=False)

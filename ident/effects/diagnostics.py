@@ -26,6 +26,7 @@ from bikeid.ident.effects.weave import (
     simulated_weave,
     weave_uncertainty,
 )
+from bikeid.ident.predictor import single_threaded_blas
 from bikeid.sim.effect_registry import EFFECTS, V_FLOOR
 
 __all__ = [
@@ -240,6 +241,7 @@ def _check_finite_windows(windows: list[Window]) -> None:
                 )
 
 
+@single_threaded_blas
 def evaluate(
     nominal: ExperimentModel,
     augmented: ExperimentModel,

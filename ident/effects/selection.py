@@ -105,6 +105,7 @@ from bikeid.ident.effects.instrument_floor import instrument_floor
 from bikeid.ident.effects.library import LIBRARY, Candidate
 from bikeid.ident.effects.nominal_uncertainty import Calibration, NominalUncertainty
 from bikeid.ident.effects.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_targets
+from bikeid.ident.predictor import single_threaded_blas
 
 __all__ = [
     "AcceptanceRule",
@@ -556,6 +557,7 @@ def _unexplained(rule: AcceptanceRule, cost0: float, cost_sig: float, floor: flo
     }  # fmt: skip
 
 
+@single_threaded_blas
 def select_effects(
     model: ExperimentModel,
     windows: list[Window],

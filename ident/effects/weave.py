@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numba
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -178,26 +179,44 @@ def decay_eigenvalue(w: Window) -> complex:
                 f"decay_eigenvalue: {w.file}: window at row {w.start}: {name!r} has {what}; "
                 "no weave can be fitted (load windows through bikeid.dataset)"
             )
-    ys = [w.delta / np.std(w.delta), w.phidot / np.std(w.phidot)]
-
-    def resid(th):
-        sg, om, pp = th
-        basis = np.column_stack(
-            [np.exp(sg * t) * np.cos(om * t), np.exp(sg * t) * np.sin(om * t),
-             np.exp(-pp * t), np.ones_like(t)]
-        )  # fmt: skip
-        out = []
-        for y in ys:
-            c, *_ = np.linalg.lstsq(basis, y, rcond=None)
-            out.append(basis @ c - y)
-        return np.concatenate(out)
+    ys = np.column_stack([w.delta / np.std(w.delta), w.phidot / np.std(w.phidot)]).astype(float)
 
     best = None
     for om0 in (5.0, 7.5, 10.0, 12.5):
-        sol = least_squares(resid, [-2.0, om0, 1.0], bounds=([-30, 1.0, 0.0], [10, 40, 60]))
+        sol = least_squares(
+            _projected_residuals,
+            [-2.0, om0, 1.0],
+            bounds=([-30, 1.0, 0.0], [10, 40, 60]),
+            args=(t, ys),
+        )
         if best is None or sol.cost < best.cost:
             best = sol
     return complex(best.x[0], best.x[1])
+
+
+@numba.njit(cache=True)
+def _projected_residuals(th, t, ys):  # pragma: no cover - compiled
+    """Residuals (channel 0 then 1) of the linear least-squares fit of the basis
+    [e^{sigma t} cos wt, e^{sigma t} sin wt, e^{-p t}, 1] to each column of ``ys``, at
+    th = (sigma, omega, p) (variable projection; LAPACK gelsd as numpy's lstsq, with its
+    default cutoff): ~5 us of overhead per call against ~70 us in numpy."""
+    sg, om, pp = th[0], th[1], th[2]
+    n = t.shape[0]
+    basis = np.empty((n, 4))
+    for i in range(n):
+        e = np.exp(sg * t[i])
+        basis[i, 0] = e * np.cos(om * t[i])
+        basis[i, 1] = e * np.sin(om * t[i])
+        basis[i, 2] = np.exp(-pp * t[i])
+        basis[i, 3] = 1.0
+    out = np.empty(2 * n)
+    for c in range(ys.shape[1]):
+        y = np.ascontiguousarray(ys[:, c])
+        coef = np.linalg.lstsq(basis, y, rcond=2.220446049250313e-16 * max(n, 4))[0]
+        fit = basis @ coef
+        for i in range(n):
+            out[c * n + i] = fit[i] - y[i]
+    return out
 
 
 def weave_error(windows: list[Window], sims, lam_data) -> float:

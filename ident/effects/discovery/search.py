@@ -58,6 +58,7 @@ from bikeid.ident.effects.acceptance import AcceptanceRule, t_p_value
 from bikeid.ident.effects.discovery.dictionary import Term, declarations, dictionary, registered
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.fit import corrected, effect_dof, effect_std, output_residuals
+from bikeid.ident.predictor import single_threaded_blas
 
 __all__ = ["Discovery", "ErrorFunction", "INTERVAL_LEVEL", "discover", "window_error"]
 
@@ -287,6 +288,7 @@ def _row(t: Term, f: _Fit) -> dict:
             "std": f.std[t.label], "p_value": f.p_value(t.label)}  # fmt: skip
 
 
+@single_threaded_blas
 def discover(
     model: ExperimentModel,
     windows: list[Window],
