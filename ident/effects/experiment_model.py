@@ -203,6 +203,15 @@ class ExperimentModel:
         v = self.effects.get(name)
         return float(effect(name).absent if v is None else v)
 
+    def _cached(self, key: str, make):
+        """``make()``, computed once per model: a model is a value (frozen, its effects never
+        changed in place; :meth:`with_effects` makes a new one), so what depends only on it
+        is kept on the instance (not a field: equality, ``replace`` and ``repr`` ignore it)."""
+        d = self.__dict__
+        if key not in d:
+            object.__setattr__(self, key, make())
+        return d[key]
+
     def with_effects(self, **values: float) -> ExperimentModel:
         """A copy with the effects ``values`` (registry names) set or replaced.
 
@@ -243,6 +252,9 @@ class ExperimentModel:
             If ``front_mass_shift`` leaves a frame without mass, or the corrected
             parameters fail validation.
         """
+        return self._cached("_plant_params", self._plant_params)
+
+    def _plant_params(self) -> BicycleParameters:
         p = self.p
         ch: dict[str, float] = {}
         if self.e("trail_correction"):
@@ -280,6 +292,9 @@ class ExperimentModel:
         ValueError
             If the parameter corrections are invalid (:meth:`plant_params`).
         """
+        return self._cached("_canonical", self._canonical)
+
+    def _canonical(self) -> CanonicalMatrices:
         cm = canonical_matrices(self.plant_params())
         M = cm.M + self.law_matrix("acceleration", 0.0)
         return CanonicalMatrices(M=M, C1=cm.C1, K0=cm.K0, K2=cm.K2, g=cm.g)
@@ -293,8 +308,9 @@ class ExperimentModel:
             Entries of :data:`bikeid.sim.effect_registry.EFFECTS` with a law and their
             values [the entry's unit].
         """
-        return [(e, float(self.effects[n])) for n, e in EFFECTS.items()
-                if e.law is not None and n in self.effects]  # fmt: skip
+        return list(self._cached("_law_effects", lambda: tuple(
+            (e, float(self.effects[n])) for n, e in EFFECTS.items()
+            if e.law is not None and n in self.effects)))  # fmt: skip
 
     def law_matrix(self, kind: str, v: float) -> np.ndarray:
         """The 2 x 2 addition of the laws of one kind to the left side M, C or K at speed v.
@@ -409,7 +425,9 @@ class ExperimentModel:
             Input matrix for [u, w, T_phi] [N m] (as :meth:`continuous`).
         """
         cm = cm or self.canonical()
-        Minv = np.linalg.inv(cm.M)
+        Minv = self._cached("_minv", lambda: np.linalg.inv(self.canonical().M))
+        if cm is not self.canonical():  # matrices given from elsewhere
+            Minv = np.linalg.inv(cm.M)
         C = v * cm.C1 + self.law_matrix("rate", v)
         Kq = cm.stiffness(v) + self.law_matrix("angle", v)
         lag = self.e("actuator_lag")
