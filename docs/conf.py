@@ -36,7 +36,7 @@ extensions = [
     "myst_parser",  # the Markdown guides and the README's tour
 ]
 root_doc = "index"
-templates_path = ["_templates"]  # autosummary: a page per function and class
+templates_path = ["_templates"]  # autosummary: a page per module, every docstring on it
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 # Builds are outputs, not sources; every Markdown guide is a page (index.rst lists them).
 exclude_patterns = ["_build"]
@@ -65,7 +65,7 @@ autodoc_typehints = "none"  # numpydoc's Parameters/Returns sections carry the t
 autodoc_member_order = "bysource"
 
 # -- numpydoc ------------------------------------------------------------------------------
-numpydoc_show_class_members = False  # autosummary's class pages list the members
+numpydoc_show_class_members = False  # autoclass :members: renders them in full
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False  # types are prose ("array_like, shape (n,)"), not targets
 numpydoc_validation_checks: set[str] = set()  # tests/test_docstrings.py is the style gate

@@ -18,3 +18,20 @@ from hypothesis import settings  # noqa: E402
 settings.register_profile("bikeid", derandomize=True)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "bikeid"))
+
+
+def pytest_collection_modifyitems(config, items):
+    """Test files with the most ``slow`` tests first (then the most tests), each file's
+    tests in their own order.  With ``--dist loadfile --no-loadscope-reorder`` the workers
+    take files in this order, so the long files start first and the short ones fill the end
+    (longest first: the workers finish together instead of one waiting on a late long file).
+    """
+    files: dict[str, list] = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
+
+    def weight(name: str) -> tuple[int, int]:
+        tests = files[name]
+        return (-sum(1 for t in tests if t.get_closest_marker("slow")), -len(tests))
+
+    items[:] = [t for name in sorted(files, key=weight) for t in files[name]]

@@ -50,7 +50,7 @@ def _copy_sources(root: Path) -> Path:
     return dest
 
 
-@pytest.mark.slow  # ~30 s: imports every module and writes ~600 pages
+@pytest.mark.slow  # ~60 s: imports every module and writes a page per module (~120)
 def test_site_builds_without_warnings(tmp_path):
     """The site: front page, the README's tour, the Markdown guides and the API reference,
     built with ``-W`` (any warning fails), with a search index covering the guides."""

@@ -208,6 +208,7 @@ WEIRD = st.one_of(
 )  # fmt: skip
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(
     changes=st.dictionaries(st.sampled_from(sorted(_benchmark_params())), WEIRD, max_size=3),

@@ -242,6 +242,7 @@ def test_score_log_fit_both_ways():
     assert score_log_fit(none, None)["outcome"] == "refused"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, effect", [(0, "none"), (1, "steer_viscous_damping")])
 def test_fit_on_csv_logs_linear_truth(seed, effect, tmp_path):
     """End to end, ``bikeid measured fit`` on the CSV logs of the independent linear truth:
@@ -306,6 +307,7 @@ def test_pipeline_defaults_are_the_live_values():
     assert selection.WEAVE_EPS is acceptance.WEAVE_EPS
 
 
+@pytest.mark.slow
 def test_fit_on_csv_logs_nonlinear_truth(tmp_path):
     """End to end on logs of bikeid's nonlinear plant with a command gain (seed 0's trial):
     the case a choice before any effect got wrong the other way: the injected gain makes the
@@ -325,6 +327,7 @@ def test_fit_on_csv_logs_nonlinear_truth(tmp_path):
     assert math.isclose(r["effects"]["command_gain"], tr.value, rel_tol=0.2)
 
 
+@pytest.mark.slow
 def test_nearest_member_of_an_outside_effect_is_not_named(tmp_path, monkeypatch):
     """Roll damping (outside the library) on the independent linear truth, seed 18's trial:
     the tests accept a steer inertia, yet with it only 0.18 of the nominal's excess over the
