@@ -93,7 +93,7 @@ def _grid(lo: float, hi: float, step: float) -> tuple[float, ...]:
 
 
 #: The coasting speed scan: 3.2-4.3 m/s (below Chen & Dao's 3.152 every run falls; above
-#: v_w = 4.29 m/s upright coasting is stable) at 0.01 m/s (full) / 0.02 m/s (quick), runs
+#: v_w = 4.29 m/s upright coasting is stable) at 0.01 m/s (full) / 0.04 m/s (quick), runs
 #: capped at T_max = 300 s in both (the irregular windows stay irregular at 300 s); a run
 #: still growing or periodic at T_max is decided by Newton on the Poincare map from its end
 #: (:mod:`experiments.papers.orbit_convergence`).
@@ -122,8 +122,8 @@ QUICK = Settings(
     fig2_duration=50.0,
     fig7_duration=50.0,
     limit_cycle_duration=100.0,
-    scan_speeds=_grid(*SCAN_RANGE, 0.02),
-    scan_step=0.02,
+    scan_speeds=_grid(*SCAN_RANGE, 0.04),
+    scan_step=0.04,
     scan_duration=300.0,
     mh_speeds=(3.0, 6.0),
     mh_duration=20.0,

@@ -664,20 +664,21 @@ def test_quick_reproduction_end_to_end(tmp_path):
     # linearization's v_d = 0.684 m/s is below the data), so the data cannot find it
     vd = s["chen_dao"]["fig3"]["v_d_identified"]
     assert vd["v_d"] is None and "below the data" in vd["reason"]
-    # the speed scan: one entry per grid speed (3.2-4.3 m/s at 0.02 m/s in --quick, said in
+    # the speed scan: one entry per grid speed (3.2-4.28 m/s at 0.04 m/s in --quick, said in
     # its note), periodic windows only below the linear v_w (upright stable above it), the
     # windows those of the entries (limit_cycles.scan_windows), both families present (the
-    # turning orbits of Figs. 4-5 at 3.5 m/s, the symmetric weave cycle at 4.0 m/s: the
-    # classes test_limit_cycles.py checks against linear theory), no single interval
+    # turning orbits of Figs. 4-5 (3.52 m/s on the grid), the symmetric weave cycle at
+    # 4.0 m/s: the classes test_limit_cycles.py checks against linear theory), no single
+    # interval
     from bikeid.experiments.papers import limit_cycles as lcm
 
     pts = s["speed_scan"]
-    assert [q["v0"] for q in pts] == pytest.approx(list(np.arange(3.2, 4.3 + 1e-9, 0.02)))
+    assert [q["v0"] for q in pts] == pytest.approx(list(np.arange(3.2, 4.3 + 1e-9, 0.04)))
     for q in pts:
         assert {"v0", "outcome", "period_n", "family"} <= set(q)
         assert (q["family"] is None) == (q["outcome"] != "periodic")
     by_v = {round(q["v0"], 2): q for q in pts}
-    assert by_v[3.5]["family"] == "turning" and by_v[4.0]["family"] == "symmetric"
+    assert by_v[3.52]["family"] == "turning" and by_v[4.0]["family"] == "symmetric"
     wins = s["chen_dao"]["periodic_windows"]
     assert "periodic_range" not in s["chen_dao"]
     assert wins == [list(w) for w in lcm.scan_windows(pts)["periodic"]]
