@@ -256,7 +256,7 @@ def _with(**changes) -> str:
         ("w: 1.02\nw: 1.03\n", "b.yaml", ("key 'w' appears twice (line 2)",)),
         (_with()[:-1] + ', "mB": NaN}', "b.json", ("NaN is not a number JSON allows",)),
         ("[" * 100_000 + "]" * 100_000, "b.json", ("nested 100000 levels deep",)),
-        ("[" * 100_000 + "]" * 100_000, "b.yaml", ("nested too deeply",)),
+        ("[" * 100_000 + "]" * 100_000, "b.yaml", ("nested more than 64 levels deep",)),
         ("".join(" " * i + "k:\n" for i in range(1000)), "b.yaml", ("nested",)),  # block style
         ("{", "b.json", ("is not valid JSON", "line 1 column 2")),
         ("a: [1", "b.yaml", ("is not valid YAML",)),
