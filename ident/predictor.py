@@ -32,6 +32,7 @@ from scipy.optimize import least_squares
 
 from bikeid.dataset.run import Run
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab
+from bikeid.sim.blas import one_blas_thread, single_threaded_blas  # re-exported here
 from bikeid.sim.conventions import CANONICAL_STATE
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.sampling import zoh
@@ -48,6 +49,7 @@ __all__ = [
     "output_matrix",
     "run_data",
     "sandwich_covariance",
+    "one_blas_thread",
     "single_threaded_blas",
     "solve",
 ]
@@ -914,27 +916,3 @@ def initial_gain(theta, dt, C, data, yvar, free_k) -> np.ndarray | None:
     return K if np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0 else None
 
 
-def single_threaded_blas(func):
-    """Run ``func`` with one BLAS thread: the fits are loops over 4x4 and 10x10 products,
-    which threaded OpenBLAS makes ~10x slower on a shared 2-core machine (bench_ident).
-
-    Parameters
-    ----------
-    func : callable
-        The function to wrap.
-
-    Returns
-    -------
-    callable
-        ``func`` run under ``threadpoolctl.threadpool_limits(1)``.
-    """
-    import functools
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(1):
-            return func(*args, **kwargs)
-
-    return wrapper

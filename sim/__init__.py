@@ -28,6 +28,8 @@ Modules:
 - :mod:`~bikeid.sim.effect_law`: the small language of effect laws (which equation, which
   term, its unit), shared by the registry, user files and discovery.
 - :mod:`~bikeid.sim.effect_files`: a user's effects declared in a YAML or JSON file.
+- :mod:`~bikeid.sim.blas`: one BLAS thread for the small-matrix numerics (a context and
+  a decorator), unless the user set a thread count.
 - :mod:`~bikeid.sim.sampling`: the one exact zero-order-hold discretization (:func:`zoh`).
 - :mod:`~bikeid.sim.periodic_orbits`: periodic orbits of the uncontrolled bicycle converged
   on a Poincare map, and their Floquet multipliers.

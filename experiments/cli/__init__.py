@@ -17,15 +17,14 @@ warning becomes one ``note:`` line saying its consequence.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
-import os
 import re
 import signal
 import sys
 import traceback
 import warnings
 
+from bikeid.sim.blas import one_blas_thread
 from bikeid.sim.errors import (
     EXIT_INPUT,
     EXIT_INTERNAL,
@@ -224,7 +223,7 @@ def _main(argv: list[str] | None) -> int:
         return EXIT_USAGE
     try:
         try:
-            with warnings.catch_warnings(), _blas_threads():
+            with warnings.catch_warnings(), one_blas_thread():  # small matrices: threads spin
                 if not debug:  # no raw warning reaches a user: each becomes one note
                     warnings.showwarning = _warning_note  # (the caller's filters stand)
                     _seen_warnings.clear()
@@ -253,22 +252,6 @@ def _main(argv: list[str] | None) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERNAL
-
-
-def _blas_threads():
-    """One BLAS thread for the command, unless the user set a thread count.
-
-    bikeid's numerics are loops over 4x4 to 10x10 matrices, for which threaded OpenBLAS only
-    spins: a measured fit took 93 s of CPU with the default threads and 65 s with one, in
-    the same 65 s of wall time (2-core machine).  ``OPENBLAS_NUM_THREADS``,
-    ``OMP_NUM_THREADS`` or ``MKL_NUM_THREADS`` in the environment are left to stand.
-    """
-    if any(os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
-                                        "MKL_NUM_THREADS")):  # fmt: skip
-        return contextlib.nullcontext()
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(1, user_api="blas")
 
 
 #: What a warning of each category means for the result (the note printed with it).

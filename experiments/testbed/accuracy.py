@@ -54,7 +54,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from bikeid.controllers.registry import STUDY_CONTROLLERS
 from bikeid.dataset.run import Run, run_stop
@@ -63,6 +62,7 @@ from bikeid.experiments.testbed.sweep import EXCITATION_BANDS, SweepSpec, run_sw
 from bikeid.ident import methods as ident_methods
 from bikeid.ident.canonical import steer_zeros, theta_from_matrices
 from bikeid.ident.signals import prepare
+from bikeid.sim.blas import one_blas_thread
 from bikeid.sim.linear import (
     canonical_matrices,
     critical_speeds,
@@ -527,7 +527,7 @@ def identify_controller(
     out: dict[str, Any] = {"fell": fell, "methods": {}}
     if failed:  # only when present, so earlier results keep their exact form
         out["failed"] = failed
-    with threadpool_limits(1):
+    with one_blas_thread():
         for method in methods:
             t0 = time.perf_counter()
             rows, glob = [], {}

@@ -26,7 +26,7 @@ from bikeid.ident.effects.weave import (
     simulated_weave,
     weave_uncertainty,
 )
-from bikeid.ident.predictor import single_threaded_blas
+from bikeid.sim.blas import single_threaded_blas
 from bikeid.sim.effect_registry import EFFECTS, V_FLOOR
 
 __all__ = [

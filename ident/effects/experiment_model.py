@@ -308,9 +308,13 @@ class ExperimentModel:
             Entries of :data:`bikeid.sim.effect_registry.EFFECTS` with a law and their
             values [the entry's unit].
         """
-        return list(self._cached("_law_effects", lambda: tuple(
+        return list(self._law_effects())
+
+    def _law_effects(self) -> tuple[tuple[Effect, float], ...]:
+        """:meth:`law_effects`, computed once (the matrices' hot loops read this tuple)."""
+        return self._cached("_law_effects_t", lambda: tuple(
             (e, float(self.effects[n])) for n, e in EFFECTS.items()
-            if e.law is not None and n in self.effects)))  # fmt: skip
+            if e.law is not None and n in self.effects))  # fmt: skip
 
     def law_matrix(self, kind: str, v: float) -> np.ndarray:
         """The 2 x 2 addition of the laws of one kind to the left side M, C or K at speed v.
@@ -332,7 +336,7 @@ class ExperimentModel:
             Rows and columns [phi, delta].
         """
         D = np.zeros((2, 2))
-        for e, value in self.law_effects():
+        for e, value in self._law_effects():
             law = e.law
             if law.kind == kind:
                 col = 1 if "delta" in law.signal else 0
@@ -358,7 +362,7 @@ class ExperimentModel:
             Signed coefficients [N m] at each window's speed; rows in the kernels' order
             (constants before signs).
         """
-        rows = [(e.law, value) for e, value in self.law_effects()
+        rows = [(e.law, value) for e, value in self._law_effects()
                 if e.law.kind in ("constant", "sign")]  # fmt: skip
         rows.sort(key=lambda r: r[0].kernel_code)  # stable: registry order within a code
         vs = np.atleast_1d(np.asarray(speeds, dtype=float))

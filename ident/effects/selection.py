@@ -105,7 +105,7 @@ from bikeid.ident.effects.instrument_floor import instrument_floor
 from bikeid.ident.effects.library import LIBRARY, Candidate
 from bikeid.ident.effects.nominal_uncertainty import Calibration, NominalUncertainty
 from bikeid.ident.effects.weave import WeaveTerm, decay_eigenvalue, weave_error, weave_targets
-from bikeid.ident.predictor import single_threaded_blas
+from bikeid.sim.blas import single_threaded_blas
 
 __all__ = [
     "AcceptanceRule",

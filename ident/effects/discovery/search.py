@@ -58,7 +58,7 @@ from bikeid.ident.effects.acceptance import AcceptanceRule, t_p_value
 from bikeid.ident.effects.discovery.dictionary import Term, declarations, dictionary, registered
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.fit import corrected, effect_dof, effect_std, output_residuals
-from bikeid.ident.predictor import single_threaded_blas
+from bikeid.sim.blas import single_threaded_blas
 
 __all__ = ["Discovery", "ErrorFunction", "INTERVAL_LEVEL", "discover", "window_error"]
 
