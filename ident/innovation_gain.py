@@ -52,10 +52,13 @@ __all__ = [
     "NOISE_INPUT",
     "NOISE_LOG_RANGE",
     "NOISE_STARTS",
+    "NOISE_STRUCTURES",
+    "SENSOR_LOG_RANGE",
     "alternate",
     "filter_riccati",
     "gain_derivative",
     "kalman_gain_of",
+    "noise_input",
     "sensor_variances",
     "settle_bounds",
 ]
@@ -63,14 +66,29 @@ __all__ = [
 #: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
 #: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
 NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
+#: Number of noise parameters of each noise structure: "acceleration" (eta = [log s1, s21,
+#: log s2], the roll and steer acceleration noise of :data:`NOISE_INPUT`; the speed model's
+#: joint gains) and "acceleration+angle" (and [log s3, log s4]: independent white noise in
+#: the roll and steer angle rows, an angle signal that is not the integral of its logged
+#: rate; the fixed-speed fit, where measured logs need it: docs/uncertainty.md).
+NOISE_STRUCTURES = {"acceleration": 3, "acceleration+angle": 5}
+#: Range of the log sensor-noise standard-deviation ratios (eta[5:], relative to each
+#: output's one-step prediction-error standard deviation, the first output's held at 1).
+SENSOR_LOG_RANGE = (-20.0, 20.0)
 #: Range of the log standard deviations of that noise relative to its reference
 #: (the input's std times |b1|, |b2|); beyond it the gain no longer changes.
 NOISE_LOG_RANGE = (-40.0, 5.0)
 #: Start values [log s1, s21, log s2] of that noise tried by the joint fit (best kept).
 NOISE_STARTS = ((math.log(1e-3), 0.0, math.log(1e-3)), (math.log(1e-1), 0.0, math.log(1e-1)))
-#: Start values of eta tried by the fixed-speed fit: :data:`NOISE_STARTS` and no process
-#: noise (both standard deviations on the lower bound), the optimum of a loop without it.
-FIXED_NOISE_STARTS = (*NOISE_STARTS, (NOISE_LOG_RANGE[0], 0.0, NOISE_LOG_RANGE[0]))
+#: Start values of eta tried by the fixed-speed fit (five parameters): the acceleration
+#: noise of :data:`NOISE_STARTS` and none (both standard deviations on the lower bound, the
+#: optimum of a loop without it), each with no angle-row noise and with 10 % of the angles'
+#: RMS rates.
+FIXED_NOISE_STARTS = tuple(
+    (*acc, *angle)
+    for angle in ((NOISE_LOG_RANGE[0],) * 2, (math.log(1e-1),) * 2)
+    for acc in (*NOISE_STARTS, (NOISE_LOG_RANGE[0], 0.0, NOISE_LOG_RANGE[0]))
+)
 #: Rounds of the joint fit's alternation (speed parameters, then the noise's eta) per
 #: weighting pass; a round whose eta step lowers the cost by less than :data:`JOINT_TOL`
 #: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
@@ -82,9 +100,11 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
     """Steady-state Kalman gain of the canonical model ``theta`` for acceleration noise.
 
     Process noise: white noise in the roll and steer accelerations, held over each sample
-    (``Q = G L L' G'``, G the zero-order-hold sampling of :data:`NOISE_INPUT`, L =
-    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]); sensor noise diag(``rdiag``).  The
-    predictor Ad - K C is stable for every ``eta`` (the stabilizing Riccati solution).
+    (``Q = G L L' G'``, G the zero-order-hold sampling of :func:`noise_input`, L =
+    diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]), and with five ``eta`` also in the roll
+    and steer angle rows (exp(eta3) ref[2], exp(eta4) ref[3]); sensor noise
+    diag(``rdiag``).  The predictor Ad - K C is stable for every ``eta`` (the stabilizing
+    Riccati solution).
 
     Parameters
     ----------
@@ -96,11 +116,13 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
         Output matrix.
     rdiag : (L,) ndarray
         Sensor-noise variances (squared output units).
-    eta : (3,) ndarray
-        [log s1, s21, log s2] of the noise's Cholesky factor, relative to ``ref``
-        (logs clipped to :data:`NOISE_LOG_RANGE`).
-    ref : (2,) ndarray
-        Reference standard deviations of the roll and steer acceleration noise [rad/s^2].
+    eta : (3,) or (5,) ndarray
+        [log s1, s21, log s2] of the acceleration noise's Cholesky factor, then (five
+        entries) [log s3, log s4] of the angle-row noise, relative to ``ref`` (logs
+        clipped to :data:`NOISE_LOG_RANGE`).
+    ref : (2,) or (4,) ndarray
+        Reference standard deviations of the roll and steer acceleration noise
+        [rad/s^2], then of the roll and steer angle-row noise [rad/s].
 
     Returns
     -------
@@ -108,28 +130,78 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
         K of xhat[k+1] = Ad xhat[k] + Bd u[k] + K e[k] (Chen & Dao's state order).
     """
     A, _ = canonical_ab(theta)
-    Ad, G = zoh(A, NOISE_INPUT, dt)
+    Ad, G = zoh(A, noise_input(len(eta)), dt)
     return _gain(Ad, G, C, rdiag, eta, ref)[0]
 
 
+def noise_input(n_eta: int) -> np.ndarray:
+    """The continuous-time process-noise input of a noise structure with ``n_eta``
+    parameters (:data:`NOISE_STRUCTURES`): :data:`NOISE_INPUT` (4 x 2) for 3, the identity
+    (every state row) for 5.
+
+    Parameters
+    ----------
+    n_eta : int
+        3, or 5 and more (the entries after the fifth scale the sensor noise).
+
+    Returns
+    -------
+    (4, 2) or (4, 4) ndarray
+        The input columns, in Chen & Dao's state order.
+    """
+    if n_eta != 3 and n_eta < 5:
+        raise ValueError(f"{n_eta} noise parameters: a noise structure has 3, or 5 and more")
+    return NOISE_INPUT if n_eta == 3 else np.eye(4)
+
+
 def _noise_factor(eta, ref) -> tuple[np.ndarray, np.ndarray]:
-    """L = diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]] (logs clipped to
-    :data:`NOISE_LOG_RANGE`) and dL/deta (3, 2, 2), zero for a clipped log."""
+    """L (:func:`kalman_gain_of`; logs clipped to :data:`NOISE_LOG_RANGE`) and dL/deta
+    (n_eta, rows, columns), zero for a clipped log."""
     lo, hi = NOISE_LOG_RANGE
     ref = np.asarray(ref, float)
-    s1, s2 = (math.exp(min(max(e, lo), hi)) for e in (eta[0], eta[2]))
-    Lf = np.array([[s1, 0.0], [eta[1], s2]]) * ref[:, None]
-    dL = np.zeros((3, 2, 2))
-    dL[0, 0, 0] = s1 * ref[0] if lo < eta[0] < hi else 0.0
-    dL[1, 1, 0] = ref[1]
-    dL[2, 1, 1] = s2 * ref[1] if lo < eta[2] < hi else 0.0
+
+    def scale(e: float, r: float) -> tuple[float, float]:  # exp(e) r and its derivative
+        s = math.exp(min(max(e, lo), hi)) * r
+        return s, (s if lo < e < hi else 0.0)
+
+    (s1, d1), (s2, d2) = scale(eta[0], ref[0]), scale(eta[2], ref[1])
+    if len(eta) == 3:
+        Lf = np.array([[s1, 0.0], [eta[1] * ref[1], s2]])
+        dL = np.zeros((3, 2, 2))
+        dL[0, 0, 0], dL[1, 1, 0], dL[2, 1, 1] = d1, ref[1], d2
+        return Lf, dL
+    (s3, d3), (s4, d4) = scale(eta[3], ref[2]), scale(eta[4], ref[3])
+    Lf = np.zeros((4, 4))
+    Lf[1, 1], Lf[3, 1], Lf[3, 3], Lf[0, 0], Lf[2, 2] = s1, eta[1] * ref[1], s2, s3, s4
+    dL = np.zeros((len(eta), 4, 4))  # none in the sensor ratios
+    dL[0, 1, 1], dL[1, 3, 1], dL[2, 3, 3], dL[3, 0, 0], dL[4, 2, 2] = d1, ref[1], d2, d3, d4
     return Lf, dL
+
+
+def _sensor(eta, rdiag) -> tuple[np.ndarray, np.ndarray]:
+    """The sensor-noise variances R (``rdiag``, with eta[5:] scaling outputs 1.. by
+    exp(2 eta), clipped to :data:`SENSOR_LOG_RANGE`) and dR/deta (n_eta, L), zero for the
+    process-noise entries and a clipped ratio."""
+    rdiag = np.asarray(rdiag, dtype=float)
+    dR = np.zeros((len(eta), rdiag.size))
+    if len(eta) <= 5:
+        return rdiag, dR
+    lo, hi = SENSOR_LOG_RANGE
+    rho = np.asarray(eta[5:], dtype=float)
+    R = rdiag.copy()
+    R[1 : 1 + rho.size] *= np.exp(2.0 * np.clip(rho, lo, hi))
+    for j, e in enumerate(rho):
+        if lo < e < hi:
+            dR[5 + j, 1 + j] = 2.0 * R[1 + j]
+    return R, dR
 
 
 def _gain(Ad, G, C, rdiag, eta, ref):
     """K, the Riccati solution P, (C P C' + R)^-1, the noise factor of :func:`kalman_gain_of`
-    and its derivatives, and the predictor's spectral radius, from the sampled model (Ad, G)."""
+    and its derivatives, the predictor's spectral radius, and dR/deta, from the sampled
+    model (Ad, G)."""
     Lf, dL = _noise_factor(eta, ref)
+    rdiag, dR = _sensor(eta, rdiag)
     rdiag = np.ascontiguousarray(rdiag, dtype=float)
     f = np.ascontiguousarray
     K, P, Sinv, rho, ok = _gain_core(f(Ad, dtype=float), f(G), f(C, dtype=float), rdiag, Lf)
@@ -140,7 +212,7 @@ def _gain(Ad, G, C, rdiag, eta, ref):
         Sinv = np.linalg.inv(C @ P @ C.T + R)
         K = Ad @ P @ C.T @ Sinv
         rho = float(np.max(np.abs(np.linalg.eigvals(Ad - K @ C))))
-    return K, P, Sinv, Lf, dL, rho
+    return K, P, Sinv, Lf, dL, rho, dR
 
 
 @numba.njit(cache=True)
@@ -161,12 +233,12 @@ def _gain_core(Ad, G, C, rdiag, Lf):
     return K, P, Sinv, rho, True
 
 
-def gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG) -> np.ndarray:
+def gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG, dR=None) -> np.ndarray:
     """Exact derivatives of the steady-state Kalman gain K (:func:`kalman_gain_of`).
 
     Differentiating the filter Riccati equation at its stabilizing solution gives a Stein
-    equation for each direction, dP = Abar dP Abar' + dAd P Abar' + Abar P dAd' + dQ with
-    Abar = Ad - K C, and dK = (dAd P C' + Abar dP C') (C P C' + R)^-1 (R held).
+    equation for each direction, dP = Abar dP Abar' + dAd P Abar' + Abar P dAd' + dQ
+    + K dR K' with Abar = Ad - K C, and dK = (dAd P C' + Abar dP C' - K dR) (C P C' + R)^-1.
 
     Parameters
     ----------
@@ -174,25 +246,28 @@ def gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG) -> np.ndarray:
         The sampled model, its noise input, the output matrix and :func:`_gain`'s K, P and
         (C P C' + R)^-1.
     Lf, dL : ndarray
-        The noise factor (2, 2) and its derivatives in eta (3, 2, 2).
+        The noise factor (q, q) and its derivatives in eta (n_eta, q, q).
     dAd, dG : ndarray
         Derivatives of Ad (n, 4, 4) and G (n, 4, 2) in the model parameters (n may be 0).
+    dR : (n_eta, L) ndarray, optional
+        Derivatives of the sensor-noise variances in eta (default none).
 
     Returns
     -------
-    (n + 3, 4, L) ndarray
+    (n + n_eta, 4, L) ndarray
         dK in the model parameters, then in eta.
     """
     f = np.ascontiguousarray
+    dR = np.zeros((dL.shape[0], C.shape[0])) if dR is None else dR
     return _gain_derivative_core(f(Ad), f(G), f(C), f(K), f(P), f(Sinv), f(Lf), f(dL), f(dAd),
-                                 f(dG))  # fmt: skip
+                                 f(dG), f(dR, dtype=float))  # fmt: skip
 
 
 @numba.njit(cache=True)
-def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG):
+def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG, dR):
     """:func:`gain_derivative` compiled: one LU of I - Abar (x) Abar for all directions."""
     n = dAd.shape[0]
-    m = n + 3
+    m = n + dL.shape[0]
     GL = G @ Lf
     Abar = Ad - K @ C
     APt = P @ np.ascontiguousarray(Abar.T)
@@ -209,6 +284,8 @@ def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG):
         dQ = dGL @ np.ascontiguousarray(GL.T)
         W = D @ APt
         W = W + W.T + dQ + dQ.T
+        if j >= n:
+            W = W + K @ np.diag(dR[j - n]) @ np.ascontiguousarray(K.T)
         Wm[:, j] = W.ravel()
     dPm = np.linalg.solve(np.eye(16) - np.kron(Abar, Abar), Wm)
     out = np.empty((m, 4, C.shape[0]))
@@ -216,7 +293,10 @@ def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG):
     for j in range(m):
         D = dAd[j] if j < n else np.zeros((4, 4))
         dP = np.ascontiguousarray(dPm[:, j]).reshape(4, 4)
-        out[j] = (D @ PCt + Abar @ (dP @ Ct)) @ Sinv
+        dK = D @ PCt + Abar @ (dP @ Ct)
+        if j >= n:
+            dK = dK - K @ np.diag(dR[j - n])
+        out[j] = dK @ Sinv
     return out
 
 
@@ -303,7 +383,7 @@ def sensor_variances(model) -> np.ndarray:
 class KalmanGainProblem(PredictionProblem):
     """Prediction errors with each run's K the Kalman gain of the model at its speed.
 
-    z = [model parameters (14 over speed, or 10 at one speed), eta (3)]: the innovation
+    z = [model parameters (14 over speed, or 10 at one speed), eta (3 or 5)]: the innovation
     gains follow the model (and a shared acceleration-noise covariance), so the predictor
     is stable at every point and
     the fit cannot stop on its stability boundary.  The Jacobian adds dE/dK dK/dz to the
@@ -331,6 +411,8 @@ class KalmanGainProblem(PredictionProblem):
         super().__init__(data, mapping, [None] * len(data), False, weights, outputs)
         self.rdiag, self.ref = rdiag, np.asarray(ref, float)
         self.z, self.free = np.asarray(z, float).copy(), np.asarray(free)
+        self.n_eta = self.z.size - self.mapping[0].shape[1]
+        self.noise_input = noise_input(self.n_eta)
 
     def full(self, x) -> np.ndarray:
         """z with the free entries set to x.
@@ -388,7 +470,8 @@ class KalmanGainProblem(PredictionProblem):
         P = self.mapping[0].shape[1]
         p, eta = x[:P], x[P:]
         need_theta, need_eta = self._needs()
-        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
+        ne = self.n_eta
+        rows = [*(range(10) if need_theta else ()), *(range(10, 10 + ne) if need_eta else ())]
         out, cache = [], {}
         for i, d in enumerate(self.data):
             S = self.mapping[i]
@@ -396,21 +479,22 @@ class KalmanGainProblem(PredictionProblem):
             key = (d.dt, theta.tobytes(), self.rdiag[i].tobytes())
             if key not in cache:
                 Ad, Bd, dAd, dBd, G, dG = discretize_with_derivatives(
-                    theta, d.dt, NOISE_INPUT, derivatives=derivatives and need_theta
+                    theta, d.dt, self.noise_input, derivatives=derivatives and need_theta
                 )
                 try:
-                    K, Pr, Sinv, Lf, dL, rho = _gain(Ad, G, self.C, self.rdiag[i], eta,
-                                                     self.ref)  # fmt: skip
+                    K, Pr, Sinv, Lf, dL, rho, dR = _gain(Ad, G, self.C, self.rdiag[i], eta,
+                                                         self.ref)  # fmt: skip
                 except (ValueError, np.linalg.LinAlgError):
                     return None
                 if not rho < 1.0:
                     return None
                 dK = None
                 if derivatives:
-                    dK = np.zeros((13, 4, self.L))
+                    dK = np.zeros((10 + ne, 4, self.L))
+                    pick = rows if need_theta else list(range(ne))
                     dK[rows] = gain_derivative(Ad, G, self.C, K, Pr, Sinv, Lf, dL, dAd,
-                                               dG)[rows if need_theta else [0, 1, 2]]  # fmt: skip
-                    dK = dK.reshape(13, -1)
+                                               dG, dR)[pick]  # fmt: skip
+                    dK = dK.reshape(10 + ne, -1)
                 cache[key] = (Ad, Bd, dAd, dBd, K, dK)
             Ad, Bd, dAd, dBd, K, dK = cache[key]
             out.append((Ad, Bd, dAd, dBd, K, S, dK))
@@ -424,8 +508,8 @@ class KalmanGainProblem(PredictionProblem):
         if models is None:
             return None
         need_theta, need_eta = self._needs()
-        P = self.mapping[0].shape[1]
-        rows = [*(range(10) if need_theta else ()), *(range(10, 13) if need_eta else ())]
+        P, ne = self.mapping[0].shape[1], self.n_eta
+        rows = [*(range(10) if need_theta else ()), *(range(10, 10 + ne) if need_eta else ())]
         m = self.free.size
         blocks = []
         for d, x0, (Ad, Bd, dAd, dBd, K, S, dK) in zip(self.data, self.x0s, models, strict=True):
@@ -433,11 +517,11 @@ class KalmanGainProblem(PredictionProblem):
             _, J = prediction_kernel(Ad, Bd, K, dAd, dBd, dKr, d.u, d.y, self.idx, x0, False,
                                      self.w)  # fmt: skip
             J = J.reshape(-1, J.shape[2])
-            Tz = np.zeros((len(rows), P + 3))  # raw columns -> entries of z
+            Tz = np.zeros((len(rows), P + ne))  # raw columns -> entries of z
             if need_theta:
                 Tz[:10, :P] = S
             if need_eta:
-                Tz[len(rows) - 3 :, P:] = np.eye(3)
+                Tz[len(rows) - ne :, P:] = np.eye(ne)
             T = np.zeros((J.shape[1], m + 4))
             T[: len(rows), :m] = Tz[:, self.free]
             T[len(rows) :, m:] = np.eye(4)
@@ -522,10 +606,12 @@ BOUND_CHI2 = 3.841458820694124
 def settle_bounds(problem, z: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int, ...], int]:
     """Put the noise standard deviations the data do not hold off their bound on it.
 
-    Tries, in turn, both process-noise standard deviations (s1, s2) at the lower end of
-    :data:`NOISE_LOG_RANGE`, then each alone; the first whose cost is within
+    Tries, in turn, both acceleration-noise standard deviations (s1, s2) at the lower end
+    of :data:`NOISE_LOG_RANGE`, then each alone; the first whose cost is within
     :data:`BOUND_CHI2` of the cost at ``z`` is kept.  With s1 on its bound s21 and s2
     describe one steer-noise variance (s21^2 + s2^2): s21 is folded into s2 and held at 0.
+    With five noise parameters the angle-row standard deviations (s3, s4) are then tried
+    the same way (both, then each), against the cost after the first step.
 
     Parameters
     ----------
@@ -547,14 +633,9 @@ def settle_bounds(problem, z: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int
         Residual evaluations used.
     """
     lo, hi = NOISE_LOG_RANGE
-    every = np.arange(z.size)
-    base = problem(z, every).residual(z)
-    if base is None:
-        return z, (), 1
-    cost0, nfev = float(base @ base), 1
     i1, i21, i2 = n, n + 1, n + 2
-    for held in ((i1, i21, i2), (i1, i21), (i2,)):
-        zb = z.copy()
+
+    def acceleration(zb: np.ndarray, held: tuple[int, ...]) -> None:
         if i1 in held:
             zb[i2] = (
                 lo
@@ -564,8 +645,28 @@ def settle_bounds(problem, z: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int
             zb[i21], zb[i1] = 0.0, lo
         else:
             zb[i2] = lo
-        r = problem(zb, every).residual(zb)
+
+    def angle(zb: np.ndarray, held: tuple[int, ...]) -> None:
+        zb[list(held)] = lo
+
+    steps = [(((i1, i21, i2), (i1, i21), (i2,)), acceleration)]
+    if z.size - n >= 5:
+        steps.append((((n + 3, n + 4), (n + 3,), (n + 4,)), angle))
+    every = np.arange(z.size)
+    held_all: tuple[int, ...] = ()
+    nfev = 0
+    for candidates, put in steps:
+        base = problem(z, every).residual(z)
         nfev += 1
-        if r is not None and float(r @ r) - cost0 < BOUND_CHI2:
-            return zb, held, nfev
-    return z, (), nfev
+        if base is None:
+            return z, held_all, nfev
+        cost0 = float(base @ base)
+        for held in candidates:
+            zb = z.copy()
+            put(zb, held)
+            r = problem(zb, every).residual(zb)
+            nfev += 1
+            if r is not None and float(r @ r) - cost0 < BOUND_CHI2:
+                z, held_all = zb, held_all + held
+                break
+    return z, held_all, nfev

@@ -360,8 +360,11 @@ class PemSettings(_Settings):
     speed_parameterized : bool
         One model over all speeds (a_odd = alpha + beta v^2, a_even = gamma v; needs runs at
         two or more speeds) instead of one model per speed (default False).
-    noise_model : {"free", "none"}
-        Innovation gain estimated (default, consistent in closed loop) or zero.
+    noise_model : {"free", "kalman", "gain", "none"}
+        Innovation gain estimated (default "free", consistent in closed loop: the Kalman
+        gain of fitted noise covariances, :data:`bikeid.ident.pem.FREE_NOISE_MODEL`),
+        "kalman" (the same, named), "gain" (K's entries free; per speed only) or "none"
+        (K = 0, output error).
 
     Attributes
     ----------
@@ -373,7 +376,13 @@ class PemSettings(_Settings):
     noise_model: str = "free"
 
     def __post_init__(self) -> None:
-        _choice("noise_model", self.noise_model, ("free", "none"))
+        _choice("noise_model", self.noise_model, ("free", "kalman", "gain", "none"))
+        if self.speed_parameterized and self.noise_model in ("kalman", "gain"):
+            raise InputError(
+                f"noise_model={self.noise_model} is a per-speed noise model: a "
+                "speed-parameterized model takes noise_model free (its joint Kalman gains) "
+                "or none"
+            )
 
     def targets(self, runs: Sequence[Run], free: Sequence[str] | None = None) -> list[Target]:
         """The canonical models: one per speed (10 parameters each), or one over speed.
@@ -410,7 +419,9 @@ class PemSettings(_Settings):
         what = ("canonical models per speed, then one speed-parameterized model started "
                 "from them" if self.speed_parameterized
                 else "one canonical model per speed")  # fmt: skip
-        k = "innovation gain estimated" if self.noise_model == "free" else "output error"
+        k = {"free": "innovation gain estimated", "kalman": "innovation gain estimated (Kalman "
+             "gain of fitted noise covariances)", "gain": "innovation gain estimated (free "
+             "entries)", "none": "output error"}[self.noise_model]  # fmt: skip
         return f"{what}, {k}"
 
 

@@ -761,8 +761,12 @@ def _fit_facts(r: _Reader, sec: Any, prefix: str, gain: bool) -> dict:
     if gain and "noise_model" in sec:
         out["noise_model"] = str(r.get(sec, "noise_model", prefix))
         out["noise_on_bound"] = r.texts(sec, "noise_on_bound", prefix)
-        if sec.get("gain_noise") is not None:
-            out["gain_noise"] = r.array(sec, "gain_noise", prefix, (3 + 2 + len(sec["outputs"]),))
+        if sec.get("gain_noise") is not None:  # eta, its references, the sensor variances:
+            # with angle-row noise and sensor ratios; without either (the previous release)
+            L, raw = len(sec["outputs"]), sec.get("gain_noise")
+            sizes = (3 + 2 + L, 5 + 4 + L, 5 + (L - 1) + 4 + L)  # the layouts, oldest first
+            n = len(raw) if isinstance(raw, list) and len(raw) in sizes else sizes[-1]
+            out["gain_noise"] = r.array(sec, "gain_noise", prefix, (n,))
     return out
 
 

@@ -54,8 +54,8 @@ __all__ = [
 #: K = 0, is 1 - 3.2e-3); 1e-4 lies between the two groups (docs/uncertainty.md).
 PREDICTOR_BOUNDARY_TOL = 1e-4
 
-#: The remedy of a boundary fit and of an output-error fit of an unstable plant: the default
-#: noise model, whose predictor is stable by construction.  Measured on the README example
+#: The remedy of a boundary fit and of an output-error fit of an unstable plant: the Kalman
+#: gain, whose predictor is stable by construction.  Measured on the README example
 #: (benchmarks/bench_predictor.py, docs/uncertainty.md).
 REMEDY_KALMAN = (
     "refit with pem.fit(runs, noise_model='kalman') (a predictor stable by construction)"

@@ -65,6 +65,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "below ident.greybox.MAX_CONDITION (default: refuse, exit 4)",
     )  # fmt: skip
     p.add_argument(
+        "--noise-model", choices=("free", "kalman", "gain", "none"), default=None,
+        help="pem: the one-step predictor's innovation gain: free (default: estimated as the "
+        "Kalman gain of fitted noise covariances, a predictor stable by construction), "
+        "kalman (the same, named), gain (free entries; may end on the predictor's stability "
+        "boundary, where intervals are withheld), none (output error: biased in closed loop, "
+        "refused where the plant is open-loop unstable)",
+    )  # fmt: skip
+    p.add_argument(
         "--speed-parameterized",
         action="store_true",
         help="pem: one model over all speeds (odd a's = alpha + beta v^2, even a's = gamma v)",
@@ -532,6 +540,9 @@ def _method_settings(args: argparse.Namespace):
                          "always one model over all speeds)")  # fmt: skip
     if args.iv and args.method != "direct":
         raise ValueError("--iv applies to --method direct")
+    if args.noise_model and args.method != "pem":
+        raise ValueError(f"--noise-model applies to --method pem ({args.method} estimates "
+                         "its own innovation gain)")  # fmt: skip
     return m, m.settings(vars(args))
 
 

@@ -486,3 +486,24 @@ def test_critical_speed_intervals_and_note_saved_verbatim(models, tmp_path):
     doc["critical_speeds"] = json.loads(path.read_text())["critical_speeds"]
     with pytest.raises(InputError, match="'critical_speeds' is given for a fixed-speed"):
         model_from_text(json.dumps(doc))
+
+
+def test_kalman_gain_models_of_every_layout_load(runs, tmp_path):
+    """A Kalman-gain fit saves its noise parameters (eta: 5 process-noise entries and 3 sensor
+    ratios for four outputs, 4 references, 4 sensor variances = 16 values) and loads bit for
+    bit; files of the earlier layouts (3 + 2 + 4 and 5 + 4 + 4 values) load with the same K
+    (K is saved itself) and any other length is refused naming the field."""
+    m = pem.fit(runs[1], multistart=False, noise_model="kalman")
+    assert m.gain_noise.shape == (16,)
+    back = load_model(save_model(m, tmp_path / "k.json"))
+    _same(_without_structure(m), back)
+    text = model_json(m)
+    for n in (9, 13):
+        obj = json.loads(text)
+        obj["model"]["gain_noise"] = obj["model"]["gain_noise"][:n]
+        old = model_from_text(json.dumps(obj)).model
+        assert old.gain_noise.shape == (n,) and np.array_equal(old.K, m.K)
+    obj = json.loads(text)
+    obj["model"]["gain_noise"] = obj["model"]["gain_noise"][:11]
+    with pytest.raises(InputError, match="gain_noise"):
+        model_from_text(json.dumps(obj))

@@ -20,7 +20,7 @@ from scipy.linalg import expm_frechet
 from bikeid.dataset.linear_loop import simulate
 from bikeid.ident import pem, subspace
 from bikeid.ident.canonical import A_POS, B_POS, canonical_ab, theta_from_matrices
-from bikeid.ident.innovation_gain import NOISE_INPUT, _gain, gain_derivative, kalman_gain_of
+from bikeid.ident.innovation_gain import _gain, gain_derivative, kalman_gain_of, noise_input
 from bikeid.ident.predictor import (
     PredictionProblem,
     discretize,
@@ -222,21 +222,27 @@ def test_expm_frechet_stack_matches_scipy(scale):
         assert np.allclose(L, L0, rtol=1e-12, atol=1e-12 * np.abs(L0).max())
 
 
+@pytest.mark.parametrize("n_eta", [3, 5, 8])
 @pytest.mark.parametrize("v", [2.0, 6.0])
-def test_gain_derivative_matches_central_differences(v):
+def test_gain_derivative_matches_central_differences(v, n_eta):
     """dK/d[theta, eta] from the Stein equation against central differences (step 1e-6
     relative) of the Riccati solution, on the benchmark bicycle (unstable at 2 m/s, stable
-    at 6 m/s): agreement within 1e-6 of the largest entry, the differences' own error
-    (truncation ~h^2, round-off ~1e-14 / h = 1e-8)."""
+    at 6 m/s), for each noise structure (acceleration noise; angle-row noise too; and the
+    sensor-noise ratios of outputs 1-3 as well):
+    agreement within 1e-6 of the largest entry, the differences' own error (truncation
+    ~h^2, round-off ~1e-14 / h = 1e-8)."""
     theta = theta_from_matrices(linear.canonical_matrices(benchmark()), v)
     C = output_matrix(("phi", "phidot", "delta", "deltadot"))[0]
-    rd, ref = np.array([1e-6, 1e-4, 1e-6, 1e-4]), np.array([0.2, 6.0])
-    eta, dt = np.array([np.log(0.1), 0.3, np.log(0.03)]), 0.01
-    Ad, _, dAd, _, G, dG = discretize_with_derivatives(theta, dt, NOISE_INPUT)
-    K, P, Sinv, Lf, dL, _ = _gain(Ad, G, C, rd, eta, ref)
-    dK = gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG)
+    rd, ref = np.array([1e-6, 1e-4, 1e-6, 1e-4]), np.array([0.2, 6.0, 0.5, 1.5])[:min(n_eta, 5) - 1]
+    eta = np.array([np.log(0.1), 0.3, np.log(0.03), np.log(0.02), np.log(0.05), 0.4, -0.7,
+                    1.1])[:n_eta]  # fmt: skip
+    dt = 0.01
+    Ad, _, dAd, _, G, dG = discretize_with_derivatives(theta, dt, noise_input(n_eta))
+    K, P, Sinv, Lf, dL, _, dR = _gain(Ad, G, C, rd, eta, ref)
+    dK = gain_derivative(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG, dR)
+    assert dK.shape[0] == 10 + n_eta
     z = np.concatenate([theta, eta])
-    for j in range(13):
+    for j in range(10 + n_eta):
         h = 1e-6 * max(abs(z[j]), 1.0)
         zp, zm = z.copy(), z.copy()
         zp[j] += h

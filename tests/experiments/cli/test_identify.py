@@ -670,3 +670,39 @@ def test_the_same_refusal_at_several_speeds_is_one_note(monkeypatch):
         "no eigenvalue intervals at 3 m/s: the fit ended on the boundary (a)",
         "no eigenvalue intervals at 4 m/s: the fit ended on the boundary (b)",
     ]
+
+
+def test_noise_model_option_chooses_the_innovation_gain(sweeps, capsys, tmp_path):
+    """``--noise-model``: ``kalman`` fits the Kalman gain of fitted noise covariances, whose
+    one-step predictor is stable by construction; the default fits K's entries free.  Checked
+    on the saved models (each speed's ``noise_model``, and the spectral radius of Ad - K C,
+    computed here, below 1).  ``none`` (output error) on these runs, whose plant is
+    open-loop unstable at 3 m/s, a speed-parameterized model and the other methods refuse
+    with exit 3, a message naming the cause and the fix (for output error: leave out
+    --noise-model, followed by the default run above), and no file written."""
+    from bikeid.experiments.cli import main
+    from bikeid.ident.model_file import load_model
+    from bikeid.sim.errors import EXIT_INPUT
+
+    noisy, _ = sweeps
+    for choice, kind in ((None, "gain"), ("kalman", "kalman")):
+        target = tmp_path / f"{choice}.json"
+        extra = [] if choice is None else ["--noise-model", choice]
+        _identify(capsys, "--method", "pem", noisy, *extra, "--out", target)
+        for v in SPEEDS:  # per-speed pem over several speeds: one file per speed
+            m = load_model(tmp_path / f"{choice}-v{v:g}.json")
+            assert m.noise_model == kind
+            Ad, _, C, K = m.predictor()
+            assert np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0
+    for argv, phrase in (
+        (["--method", "pem", "--noise-model", "none"], "output error simulates the plant"),
+        (["--method", "pem", "--noise-model", "none"], "(leave out --noise-model, a predictor"),
+        (["--method", "direct", "--noise-model", "gain"], "--noise-model applies to --method pem"),
+        (["--method", "pem", "--speed-parameterized", "--noise-model", "kalman"],
+         "per-speed noise model"),
+    ):  # fmt: skip
+        out = tmp_path / "refused.json"
+        assert main(["identify", str(noisy), *argv, "--out", str(out)]) == EXIT_INPUT
+        err = [ln for ln in capsys.readouterr().err.splitlines() if "error:" in ln]
+        assert len(err) == 1 and phrase in err[0], err
+        assert not out.exists()

@@ -151,9 +151,9 @@ def test_cli_default_path_runs_and_counts(capsys):
 
 def test_identify_withholds_intervals_of_a_boundary_fit(short_run, tmp_path, capsys):
     """``bikeid identify`` on the 30 s default-path record: the estimate is printed, the
-    eigenvalue intervals are withheld with the reason; on the same record fitted inside the
-    boundary (``--method pem`` cannot select output error, so the interior case is the
-    library call of test_interior_fit_passes_and_covers) the JSON carries them."""
+    eigenvalue intervals are withheld with the reason (the free gain ends on the predictor's
+    stability boundary); the remedy printed, the Kalman gain (``--noise-model kalman``),
+    cannot end there, and its JSON carries the intervals."""
     import json
 
     from bikeid.dataset.store import write_runs
@@ -166,3 +166,7 @@ def test_identify_withholds_intervals_of_a_boundary_fit(short_run, tmp_path, cap
     assert doc["per_speed"][0]["eigenvalues"]  # the estimate stands
     assert doc["per_speed"][0].get("eigenvalue_intervals") is None
     assert any("stability boundary" in n for n in doc["intervals"]["notes"])
+    rc = main(["identify", str(path), "--method", "pem", "--noise-model", "kalman", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert doc["per_speed"][0].get("eigenvalue_intervals") is not None
