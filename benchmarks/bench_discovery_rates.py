@@ -39,7 +39,7 @@ command's default, ``nonlinear``, costs about 5x more CPU on the torque-only log
 bicycle is then the truth's).  Progress lines go to stderr, one JSON row per trial and
 format to stdout, the summary last.
 
-Seeds used while building (development data, not to be quoted): 0-3.
+Seeds used while building (development data, not to be quoted): 0 and 1.
 """
 
 from __future__ import annotations
