@@ -34,7 +34,8 @@ Usage::
 Trial ``i`` of seed ``s`` is ``draw_term_trials(1, s, ..., first=i)`` with ``i`` the term's
 position in ``--terms`` (no-effect trials: ``i = len(terms)``), so every kind draws its own
 nuisances.  ``--plant`` is discover's nominal plant (default ``linear``, the truth's; the
-command's default, ``nonlinear``, costs about 5x more CPU on the torque-only logs).
+command's default, ``nonlinear``, cost 5.6x more CPU on the torque-only logs of a building
+seed).
 ``--exact-bicycle`` removes the inertia and trail perturbation (a diagnostic: the stated
 bicycle is then the truth's).  Progress lines go to stderr, one JSON row per trial and
 format to stdout, the summary last.
