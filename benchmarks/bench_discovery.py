@@ -32,6 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bikeid.experiments.measured.discovery_scores import score_discovery
 from bikeid.experiments.measured.effect_trials import rate
 from bikeid.ident.effects.discovery import discover, injection_file
 from bikeid.ident.effects.experiment_model import ExperimentModel
@@ -62,24 +63,8 @@ def one(term: str | None, coef: float, seed: int, speeds, per_speed: int, noise:
     ws = _decays(term, coef, seed, speeds, per_speed, noise)
     t0 = time.process_time()
     d = discover(ExperimentModel(), ws)
-    row = {"term": term, "coefficient": coef, "seed": seed,
-           "kept": [f"{x['equation']}: {x['term']}" for x in d.terms],
-           "cpu_s": time.process_time() - t0}  # fmt: skip
-    if term is None:
-        row["false_discovery"] = bool(d.terms)
-        return row
-    eq, tt = (s.strip() for s in term.split(":"))
-    hit = None
-    for x in d.terms:
-        for y in (x, *x["indistinguishable"]):
-            if (y["equation"], y["term"]) == (eq, tt):
-                hit = y
-    one_kept = len(d.terms) == 1
-    row.update(found=hit is not None and one_kept,
-               direct=one_kept and (d.terms[0]["equation"], d.terms[0]["term"]) == (eq, tt),
-               within35=hit is not None and abs(hit["coefficient"] - coef) <= 0.35 * abs(coef),
-               covers=hit is not None and hit["interval"][0] <= coef <= hit["interval"][1],
-               estimate=None if hit is None else hit["coefficient"])  # fmt: skip
+    row = {"term": term, "coefficient": coef, "seed": seed, "cpu_s": time.process_time() - t0}
+    row.update(score_discovery(d.terms, term, coef))
     return row
 
 

@@ -21,6 +21,9 @@ Generator (per trial, everything drawn from the trial's seed):
   (roll viscous damping, roll stiffness), or none.  The linear plant applies them here:
   steer torques -c deltadot, -T_c tanh(deltadot / 0.01 rad/s), -k delta; roll torques
   -c_r phidot, -k_r phi; the command path delay (whole samples) -> gain -> first-order lag.
+- **Injected terms** (optional, :func:`with_terms`): any term of the discovery's dictionary
+  with a coefficient, added by the independent linear plant as generalized torque to its
+  equation (:mod:`bikeid.experiments.measured.injected_terms`).
 - **Loop**: the firmware's steer-into-lean law T = 2 (6.5 - v_s) phidot_m on the measured
   roll rate and the sensor speed v_s = 1.066 v - 0.128 (data README), zero-order hold.
 - **Push**: an initial state like the logs' window starts, or a half-sine roll-torque pulse
@@ -75,6 +78,7 @@ from bikeid.experiments.measured.effect_trials import (
     _speeds,
     rate,
 )
+from bikeid.experiments.measured.injected_terms import InjectedTerms, normalized_terms
 from bikeid.ident.effects.diagnostics import evaluate
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.selection import (
@@ -97,6 +101,7 @@ __all__ = [
     "CLASSES",
     "draw_blind_classes",
     "draw_blind_trials",
+    "draw_term_trials",
     "generate_windows",
     "nominal_comparison",
     "parse_per_class",
@@ -109,6 +114,7 @@ __all__ = [
     "score_log_fit",
     "score",
     "summarize_blind",
+    "with_terms",
     "write_trial_logs",
 ]
 
@@ -197,6 +203,10 @@ class BlindTrial:
         Treadmill speeds [m/s] of the decays fitted and held out.
     nuisance : Nuisance
         The nuisances.
+    terms : dict of str to float
+        Dictionary terms the independent linear plant adds on top of the hidden effect,
+        coefficient [SI] by ``"equation: term"`` label (default none;
+        :mod:`bikeid.experiments.measured.injected_terms`, :func:`with_terms`).
     """
 
     index: int
@@ -206,6 +216,7 @@ class BlindTrial:
     fit_speeds: tuple[float, float]
     eval_speeds: tuple[float, float]
     nuisance: Nuisance
+    terms: dict = field(default_factory=dict)
 
 
 def _perturbed(p, nz: Nuisance):
@@ -308,6 +319,58 @@ def draw_blind_trials(
     return out
 
 
+_NONLINEAR_TERMS = ("injected dictionary terms need the independent linear plant; draw the "
+                    "trial with with_terms() or pass plant='independent_linear'")  # fmt: skip
+
+
+def with_terms(trial: BlindTrial, terms: dict[str, float]) -> BlindTrial:
+    """The trial with dictionary terms injected, on the independent linear plant.
+
+    Parameters
+    ----------
+    trial : BlindTrial
+        A drawn trial (its hidden effect, speeds, nuisances and seed are kept).
+    terms : dict of str to float
+        Coefficient [SI, the term's unit] by term, ``{"steer: v*deltadot": -0.1}``: the
+        generalized torque ``coefficient * term`` [N m] added to the term's equation,
+        positive adding torque (:mod:`bikeid.experiments.measured.injected_terms`).
+
+    Returns
+    -------
+    BlindTrial
+        A copy with ``terms`` (keyed by the dictionary's labels) and ``nuisance.plant``
+        ``"independent_linear"`` (bikeid's nonlinear plant carries no injected term).
+
+    Raises
+    ------
+    ValueError
+        One line naming an unknown term or a coefficient that is not finite.
+    """
+    nz = replace(trial.nuisance, plant="independent_linear")
+    return replace(trial, terms=normalized_terms(terms), nuisance=nz)
+
+
+def draw_term_trials(n: int, seed: int, terms: dict[str, float] | None,
+                     first: int = 0) -> list[BlindTrial]:  # fmt: skip
+    """``n`` trials without a hidden library effect, each carrying ``terms``.
+
+    The draws of :func:`draw_blind_trials` with the effect ``"none"`` (speeds, nuisances
+    and seeds from (seed, index)), then :func:`with_terms`.
+
+    Parameters
+    ----------
+    n, seed, first : int
+        As :func:`draw_blind_trials`.
+    terms : dict of str to float, optional
+        The injected terms (none: no-effect trials on the independent linear plant).
+
+    Returns
+    -------
+    list of BlindTrial
+    """
+    return [with_terms(t, terms or {}) for t in draw_blind_trials(n, seed, ("none",), first)]
+
+
 def parse_per_class(text: str) -> dict[str, int]:
     """``--per-class`` text ``CLASS=N,...`` as an ordered dict of class -> count.
 
@@ -377,11 +440,16 @@ def _ar1(rng: np.random.Generator, n: int, std: float, a: float) -> np.ndarray:
 
 
 class _LinearPlant:
-    """The independent linear plant with the hidden effect (module docstring)."""
+    """The independent linear plant with the hidden effect (module docstring) and any
+    injected dictionary terms (``terms``: ``{"roll: phidot": -3.0}``, the generalized torque
+    ``coefficient * term`` [N m] added to its equation, positive adding torque, as the
+    discovery's ``coefficient``; an acceleration term enters the mass matrix:
+    :mod:`bikeid.experiments.measured.injected_terms`)."""
 
-    def __init__(self, p, effect: str, value: float):
+    def __init__(self, p, effect: str, value: float, terms: dict | None = None):
         self.M, self.C1, self.K0, self.K2 = linear_plant_matrices(p)
-        self.Minv = np.linalg.inv(self.M)
+        self.injected = InjectedTerms.from_mapping(terms)
+        self.Minv = np.linalg.inv(self.injected.mass_matrix(self.M))
         self.g = float(p.g)
         fx = {} if effect == "none" else {effect: value}
         self.c = fx.get("steer_viscous_damping", 0.0)
@@ -402,6 +470,8 @@ class _LinearPlant:
             T_phi - self.cr * qd[0] - self.kr * q[0],
             Td - self.c * qd[1] - self.tc * math.tanh(qd[1] / 0.01) - self.k * q[1],
         ])  # fmt: skip
+        if self.injected:
+            tq = tq + self.injected.torques(v, q, qd, Td)
         qdd = self.Minv @ (tq - v * self.C1 @ qd - (self.g * self.K0 + v * v * self.K2) @ q)
         dTa = 0.0 if self.tau == 0.0 else (T_target - Ta) / self.tau
         return np.array([qd[0], qd[1], qdd[0], qdd[1], dTa])
@@ -523,7 +593,9 @@ def generate_windows(trial: BlindTrial, speeds, per_speed: int, seed: int, label
     lin = None
     fx: list = []
     if nz.plant == "independent_linear":
-        lin = _LinearPlant(p, trial.effect, trial.value)
+        lin = _LinearPlant(p, trial.effect, trial.value, trial.terms)
+    elif trial.terms:
+        raise ValueError(_NONLINEAR_TERMS)
     elif trial.effect != "none":
         fx, _ = nonlinear_effects({trial.effect: trial.value}, 1.0, DT, 0.01)
     out = []
@@ -751,8 +823,10 @@ def log_signals(trial: BlindTrial, speed: float, seed: int, plant: str | None = 
         rng = np.random.default_rng(seed)
         try:
             if plant == "independent_linear":
-                return _linear_log(_LinearPlant(p, trial.effect, trial.value), float(speed),
-                                   nz, int(pushes), scale, rng)  # fmt: skip
+                lin = _LinearPlant(p, trial.effect, trial.value, trial.terms)
+                return _linear_log(lin, float(speed), nz, int(pushes), scale, rng)
+            if trial.terms:
+                raise ValueError(_NONLINEAR_TERMS)
             hidden = {} if trial.effect == "none" else {trial.effect: trial.value}
             fx = nonlinear_effects(hidden, 1.0, DT, 0.01)[0] if hidden else []
             return _nonlinear_log(p, fx, float(speed), nz, int(pushes), scale, rng)
