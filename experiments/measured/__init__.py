@@ -8,4 +8,7 @@
 - :mod:`.effect_trials`: randomized undeclared-effect trials on the nonlinear plant
   (``bikeid measured trials``).
 - :mod:`.blind_trials`: effect-selection trials on logs from an independent generator.
+- :mod:`.injected_terms`: any term of the discovery's dictionary as a generalized torque of
+  that generator's plant.
+- :mod:`.discovery_scores`: how a discovery's kept terms score against an injected one.
 """
