@@ -49,6 +49,7 @@ def _runs(folder: Path, hz: tuple[str, ...]) -> list:
 def main() -> None:
     from bikeid.ident import pem
     from bikeid.ident.validate import compare
+    from bikeid.sim.errors import UntrustworthyResult
     from bikeid.sim.linear import eigenvalues
     from bikeid.sim.parameters import steer_by_wire
 
@@ -80,7 +81,7 @@ def main() -> None:
         logdet = float(np.linalg.slogdet(np.atleast_2d(m.noise_covariance))[1])
         try:
             held_fit = compare(held, m, horizon=10).fit
-        except Exception as exc:  # noqa: BLE001 -- reported, the other models still run
+        except (ValueError, UntrustworthyResult) as exc:  # reported; the others still run
             held_fit = {"error": str(exc).splitlines()[0]}
         row = {"eigenvalues": [[z.real, z.imag] for z in lam], "logdet": logdet,
                "radius": radius, "noise_on_bound": list(m.noise_on_bound),

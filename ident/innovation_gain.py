@@ -66,12 +66,13 @@ __all__ = [
 #: Continuous-time process-noise input of the joint fit's Kalman gains: white noise in the
 #: roll and steer accelerations (rows phidot and deltadot of Chen & Dao's state order).
 NOISE_INPUT = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
-#: Number of noise parameters of each noise structure: "acceleration" (eta = [log s1, s21,
-#: log s2], the roll and steer acceleration noise of :data:`NOISE_INPUT`; the speed model's
-#: joint gains) and "acceleration+angle" (and [log s3, log s4]: independent white noise in
-#: the roll and steer angle rows, an angle signal that is not the integral of its logged
-#: rate; the fixed-speed fit, where measured logs need it: docs/uncertainty.md).
-NOISE_STRUCTURES = {"acceleration": 3, "acceleration+angle": 5}
+#: The noise structures, by the length of eta: 3, the roll and steer acceleration noise of
+#: :data:`NOISE_INPUT` ([log s1, s21, log s2]; the speed model's joint gains); 5 and more,
+#: that plus independent white noise in the roll and steer angle rows ([log s3, log s4]: an
+#: angle signal that is not the integral of its logged rate) and then the log sensor-noise
+#: ratios of outputs 1.. (the fixed-speed fit, where measured logs need them:
+#: docs/uncertainty.md).
+NOISE_STRUCTURES = {"acceleration": 3, "acceleration+angle(+sensor ratios)": 5}
 #: Range of the log sensor-noise standard-deviation ratios (eta[5:], relative to each
 #: output's one-step prediction-error standard deviation, the first output's held at 1).
 SENSOR_LOG_RANGE = (-20.0, 20.0)
@@ -103,8 +104,8 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
     (``Q = G L L' G'``, G the zero-order-hold sampling of :func:`noise_input`, L =
     diag(ref) [[exp(eta0), 0], [eta1, exp(eta2)]]), and with five ``eta`` also in the roll
     and steer angle rows (exp(eta3) ref[2], exp(eta4) ref[3]); sensor noise
-    diag(``rdiag``).  The predictor Ad - K C is stable for every ``eta`` (the stabilizing
-    Riccati solution).
+    diag(``rdiag``), outputs 1.. scaled by exp(2 eta[5:]).  The predictor Ad - K C is stable
+    for every ``eta`` (the stabilizing Riccati solution).
 
     Parameters
     ----------
@@ -116,10 +117,11 @@ def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
         Output matrix.
     rdiag : (L,) ndarray
         Sensor-noise variances (squared output units).
-    eta : (3,) or (5,) ndarray
-        [log s1, s21, log s2] of the acceleration noise's Cholesky factor, then (five
-        entries) [log s3, log s4] of the angle-row noise, relative to ``ref`` (logs
-        clipped to :data:`NOISE_LOG_RANGE`).
+    eta : (3,) or (5 + k,) ndarray
+        [log s1, s21, log s2] of the acceleration noise's Cholesky factor, then [log s3,
+        log s4] of the angle-row noise, relative to ``ref`` (logs clipped to
+        :data:`NOISE_LOG_RANGE`), then k <= L - 1 log sensor-noise standard-deviation
+        ratios of outputs 1.. (clipped to :data:`SENSOR_LOG_RANGE`).
     ref : (2,) or (4,) ndarray
         Reference standard deviations of the roll and steer acceleration noise
         [rad/s^2], then of the roll and steer angle-row noise [rad/s].
@@ -284,7 +286,7 @@ def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG, dR):
         dQ = dGL @ np.ascontiguousarray(GL.T)
         W = D @ APt
         W = W + W.T + dQ + dQ.T
-        if j >= n:
+        if j >= n and np.any(dR[j - n]):  # a sensor ratio's direction
             W = W + K @ np.diag(dR[j - n]) @ np.ascontiguousarray(K.T)
         Wm[:, j] = W.ravel()
     dPm = np.linalg.solve(np.eye(16) - np.kron(Abar, Abar), Wm)
@@ -294,7 +296,7 @@ def _gain_derivative_core(Ad, G, C, K, P, Sinv, Lf, dL, dAd, dG, dR):
         D = dAd[j] if j < n else np.zeros((4, 4))
         dP = np.ascontiguousarray(dPm[:, j]).reshape(4, 4)
         dK = D @ PCt + Abar @ (dP @ Ct)
-        if j >= n:
+        if j >= n and np.any(dR[j - n]):
             dK = dK - K @ np.diag(dR[j - n])
         out[j] = dK @ Sinv
     return out
@@ -653,20 +655,18 @@ def settle_bounds(problem, z: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int
     if z.size - n >= 5:
         steps.append((((n + 3, n + 4), (n + 3,), (n + 4,)), angle))
     every = np.arange(z.size)
+    base = problem(z, every).residual(z)
+    if base is None:
+        return z, (), 1
+    cost0, nfev = float(base @ base), 1
     held_all: tuple[int, ...] = ()
-    nfev = 0
     for candidates, put in steps:
-        base = problem(z, every).residual(z)
-        nfev += 1
-        if base is None:
-            return z, held_all, nfev
-        cost0 = float(base @ base)
         for held in candidates:
             zb = z.copy()
             put(zb, held)
             r = problem(zb, every).residual(zb)
             nfev += 1
-            if r is not None and float(r @ r) - cost0 < BOUND_CHI2:
-                z, held_all = zb, held_all + held
+            if r is not None and float(r @ r) - cost0 < BOUND_CHI2:  # the next step's
+                z, held_all, cost0 = zb, held_all + held, float(r @ r)  # test from here
                 break
     return z, held_all, nfev

@@ -179,12 +179,14 @@ class CanonicalModel(LinearModel):
         How K was fitted: the Kalman gain of fitted noise covariances (stable by
         construction), free entries (the former default; may end on the predictor's
         stability boundary), or K = 0 (output error).  "gain" for models made elsewhere.
-    gain_noise : (13,) ndarray or None
+    gain_noise : (5 + (L - 1) + 4 + L,) ndarray or None
         For ``"kalman"``: eta = [log s1, s21, log s2, log s3, log s4] (the acceleration
-        noise's Cholesky factor, then the roll and steer angle-row noise) relative to the
+        noise's Cholesky factor, then the roll and steer angle-row noise, relative to the
         reference standard deviations [ref1, ref2] [rad/s^2] and [ref3, ref4] [rad/s] that
-        follow, then the sensor-noise variances of the outputs (squared output units)
-        (:func:`bikeid.ident.innovation_gain.kalman_gain_of`; 5 + 4 + L entries).
+        follow the eta) and the log sensor-noise standard-deviation ratios of outputs 1..,
+        then those references, then the outputs' one-step prediction-error variances
+        (squared output units) the ratios scale
+        (:func:`bikeid.ident.innovation_gain.kalman_gain_of`).
     noise_on_bound : tuple of str
         Noise parameters put on their lower bound (``"log_s1"``, ``"log_s2"``): the data do
         not reject zero process noise there, and ``covariance`` is conditional on it.
@@ -665,8 +667,8 @@ def fit(
         raise ValueError(
             "no start gives a stable output-error predictor: output error simulates the "
             f"plant, and every start is open-loop unstable (most unstable eigenvalue real "
-            f"part {nominal[0]:+.3f} 1/s); fit the default noise model (noise_model='free', "
-            "a predictor stable by construction)"
+            f"part {nominal[0]:+.3f} 1/s); fit the Kalman gain (noise_model='kalman', a "
+            "predictor stable by construction)"
         )
     if best is None:
         raise ValueError(
@@ -779,9 +781,11 @@ def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> Can
 
     eta = [log s1, s21, log s2] of the acceleration noise relative to |b| std(u), and
     [log s3, log s4] of the roll and steer angle-row noise relative to the angles' RMS
-    rates (:func:`bikeid.ident.innovation_gain.kalman_gain_of`); the sensor-noise
-    variances are the one-step prediction errors' (1 / w^2, the output weights, updated
-    with them after each pass); fitted alternately with theta
+    rates, and the log sensor-noise ratios of outputs 1.. (the sensor variances are the
+    one-step prediction errors', 1 / w^2, updated with the output weights after each pass,
+    scaled by those ratios; the first output's held, as K does not change when all noise
+    covariances scale together) (:func:`bikeid.ident.innovation_gain.kalman_gain_of`);
+    fitted together with theta, then alternately
     (:func:`bikeid.ident.innovation_gain.alternate`); noise standard deviations the data
     cannot hold off their lower bound are put on it and the covariance of theta is
     conditional on them (:func:`bikeid.ident.innovation_gain.settle_bounds`).
@@ -796,30 +800,25 @@ def _fit_kalman(data, theta, w, outputs, max_nfev, method, passes, notes) -> Can
     ]
     ref = np.concatenate([np.maximum(np.abs(theta[8:10]), 1e-6) * math.sqrt(uvar),
                           np.maximum(angle_rate, 1e-12)])  # fmt: skip
-    mapping = [np.eye(10)] * len(data)
+    mapping, weights = [np.eye(10)] * len(data), [w]
 
-    def problem_with(weights: list):
-        def problem(z, free):
-            r = 1.0 / weights[0] ** 2
-            rd = np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
-            return KalmanGainProblem(data, mapping, [rd] * len(data), weights[0], outputs,
-                                     ref, z, free)  # fmt: skip
-
-        return problem
+    def problem(z, free):
+        r = 1.0 / weights[0] ** 2
+        rd = np.maximum(r, max(1e-12 * float(np.max(r)), 1e-30))
+        return KalmanGainProblem(data, mapping, [rd] * len(data), weights[0], outputs,
+                                 ref, z, free)  # fmt: skip
 
     n_eta = 5 + len(outputs) - 1  # and the sensor ratios of outputs 1.. (start: none)
-    z0 = _noise_start(problem_with([w]), theta, n_eta, FIXED_NOISE_STARTS)
+    z0 = _noise_start(problem, theta, n_eta, FIXED_NOISE_STARTS)
     if z0 is None:
         raise ValueError(
             "no start gives a stable one-step predictor; pass theta0= (e.g. a model at a "
             "neighbouring speed)"
         )
 
-    # every entry together first, then alternately (settling the bounds): on measured logs
-    # whose angles are not the integrals of their rates, alternating from a subspace start
-    # stopped in a basin of nonsense (a -3e4 1/s caster; docs/uncertainty.md)
-    weights = [w]
-    problem = problem_with(weights)
+    # every entry together first, then alternately (settling the bounds): on the tutorial's
+    # measured logs alternating alone from the subspace start stopped in a basin of nonsense
+    # (a caster of about -3e4 1/s; docs/uncertainty.md)
     prob = problem(z0, np.arange(z0.size))
     sol = solve(prob, z0, max_nfev, method)
     weights[0] = _weights(prob)

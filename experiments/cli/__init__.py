@@ -143,7 +143,7 @@ _CLI_FIXES = (
     (r"; pass theta0=(?: \([^)]*\))?", "; give more informative data (longer runs, more "
      "excitation) or fit this speed with its neighbours (--speed-parameterized)"),
     (r"Fix one of them \(free=\.\.\.\)", "Fix one of them (leave it out of --free)"),
-    (r"\(noise_model='free', a predictor", "(leave out --noise-model, a predictor"),
+    (r"\(noise_model='kalman', a predictor", "(--noise-model kalman, a predictor"),
     (r"pass drop_unidentifiable=True \(CLI: --drop-unidentifiable\)",
      "give --drop-unidentifiable"),
 )

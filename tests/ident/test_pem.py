@@ -165,8 +165,9 @@ def test_angle_noise_follows_angles_that_are_not_integrals_of_their_rates(v):
 
     - logged angles that are the integrals of their rates (the simulation's): the likelihood-
       ratio test puts both angle-row noises on their lower bound, and the eigenvalues lie
-      within 0.03 1/s of the truth (Meijaard 2007 via ``sim.linear``; the fit's standard
-      errors on this record are 0.003-0.01 1/s, so 0.03 is about 3-10 of them);
+      within 0.03 1/s of the truth (Meijaard 2007 via ``sim.linear``; the real parts'
+      standard errors of these fits, from ``eigenvalue_intervals``, are 0.003-0.015 1/s and
+      the errors 0.001-0.018, so 0.03 is 2-10 standard errors);
     - the same angles through a first-order estimator lag (tau 30 ms, as from a filtered
       attitude estimate, unlike their rates): neither angle-row noise is put on its lower
       bound, the data hold it off (on the tutorial's measured logs, where the roll angle is

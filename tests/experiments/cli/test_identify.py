@@ -678,8 +678,8 @@ def test_noise_model_option_chooses_the_innovation_gain(sweeps, capsys, tmp_path
     on the saved models (each speed's ``noise_model``, and the spectral radius of Ad - K C,
     computed here, below 1).  ``none`` (output error) on these runs, whose plant is
     open-loop unstable at 3 m/s, a speed-parameterized model and the other methods refuse
-    with exit 3, a message naming the cause and the fix (for output error: leave out
-    --noise-model, followed by the default run above), and no file written."""
+    with exit 3, a message naming the cause and the fix (for output error: --noise-model
+    kalman, followed by the kalman run above), and no file written."""
     from bikeid.experiments.cli import main
     from bikeid.ident.model_file import load_model
     from bikeid.sim.errors import EXIT_INPUT
@@ -696,7 +696,7 @@ def test_noise_model_option_chooses_the_innovation_gain(sweeps, capsys, tmp_path
             assert np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0
     for argv, phrase in (
         (["--method", "pem", "--noise-model", "none"], "output error simulates the plant"),
-        (["--method", "pem", "--noise-model", "none"], "(leave out --noise-model, a predictor"),
+        (["--method", "pem", "--noise-model", "none"], "(--noise-model kalman, a predictor"),
         (["--method", "direct", "--noise-model", "gain"], "--noise-model applies to --method pem"),
         (["--method", "pem", "--speed-parameterized", "--noise-model", "kalman"],
          "per-speed noise model"),
