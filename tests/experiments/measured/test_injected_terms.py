@@ -63,8 +63,8 @@ def test_injected_term_adds_coefficient_times_term(term, c, eq, value):
     p = steer_by_wire()
     extra = np.zeros(2)
     extra[eq] = c * value
-    with_term = _LinearPlant(p, "none", NAN, {term: c}).rhs(X, V, T_CMD, T_PHI)[2:4]
-    without = _LinearPlant(p, "none", NAN, {}).rhs(X, V, T_CMD, T_PHI)[2:4]
+    with_term = np.asarray(_LinearPlant(p, "none", NAN, {term: c}).rhs(X, V, T_CMD, T_PHI)[2:4])
+    without = np.asarray(_LinearPlant(p, "none", NAN, {}).rhs(X, V, T_CMD, T_PHI)[2:4])
     np.testing.assert_allclose(with_term, _hand_qdd(extra), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(without, _hand_qdd(np.zeros(2)), rtol=1e-12, atol=1e-12)
     assert np.max(np.abs(with_term - without)) > 1e-3 * np.max(np.abs(without))
@@ -77,7 +77,7 @@ def test_acceleration_term_enters_the_mass_matrix():
     c = 0.02
     M = linear_plant_matrices(p)[0].copy()
     M[1, 1] -= c
-    got = _LinearPlant(p, "none", NAN, {"steer: deltaddot": c}).rhs(X, V, T_CMD, T_PHI)[2:4]
+    got = np.asarray(_LinearPlant(p, "none", NAN, {"steer: deltaddot": c}).rhs(X, V, T_CMD, T_PHI)[2:4])
     np.testing.assert_allclose(got, _hand_qdd(np.zeros(2), M), rtol=1e-12, atol=1e-12)
     assert np.max(np.abs(got - _hand_qdd(np.zeros(2)))) > 1e-3 * np.max(np.abs(got))
 
