@@ -497,11 +497,16 @@ class _LinearPlant:
         step's start, middle and end (the command held)."""
         v, T_cmd, T_phi = float(v), float(T_cmd), [float(f) for f in T_phi]
         k1 = self.rhs(x, v, T_cmd, T_phi[0])
-        k2 = self.rhs(tuple(a + h / 2 * b for a, b in zip(x, k1)), v, T_cmd, T_phi[1])
-        k3 = self.rhs(tuple(a + h / 2 * b for a, b in zip(x, k2)), v, T_cmd, T_phi[1])
-        k4 = self.rhs(tuple(a + h * b for a, b in zip(x, k3)), v, T_cmd, T_phi[2])
+        k2 = self.rhs(_step(x, h / 2, k1), v, T_cmd, T_phi[1])
+        k3 = self.rhs(_step(x, h / 2, k2), v, T_cmd, T_phi[1])
+        k4 = self.rhs(_step(x, h, k3), v, T_cmd, T_phi[2])
         return tuple(a + h / 6 * (b + 2 * c + 2 * d + e)
-                     for a, b, c, d, e in zip(x, k1, k2, k3, k4))  # fmt: skip
+                     for a, b, c, d, e in zip(x, k1, k2, k3, k4, strict=True))  # fmt: skip
+
+
+def _step(x: tuple[float, ...], h: float, k: tuple[float, ...]) -> tuple[float, ...]:
+    """``x + h k`` on tuples of floats."""
+    return tuple(a + h * b for a, b in zip(x, k, strict=True))
 
 
 def _linear_decay(plant: _LinearPlant, v0: float, nz: Nuisance, init: dict, rng) -> dict:

@@ -77,7 +77,8 @@ def test_acceleration_term_enters_the_mass_matrix():
     c = 0.02
     M = linear_plant_matrices(p)[0].copy()
     M[1, 1] -= c
-    got = np.asarray(_LinearPlant(p, "none", NAN, {"steer: deltaddot": c}).rhs(X, V, T_CMD, T_PHI)[2:4])
+    plant = _LinearPlant(p, "none", NAN, {"steer: deltaddot": c})
+    got = np.asarray(plant.rhs(X, V, T_CMD, T_PHI)[2:4])
     np.testing.assert_allclose(got, _hand_qdd(np.zeros(2), M), rtol=1e-12, atol=1e-12)
     assert np.max(np.abs(got - _hand_qdd(np.zeros(2)))) > 1e-3 * np.max(np.abs(got))
 
