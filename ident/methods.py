@@ -419,9 +419,16 @@ class PemSettings(_Settings):
         what = ("canonical models per speed, then one speed-parameterized model started "
                 "from them" if self.speed_parameterized
                 else "one canonical model per speed")  # fmt: skip
-        k = {"free": "innovation gain estimated", "kalman": "innovation gain estimated (Kalman "
-             "gain of fitted noise covariances)", "gain": "innovation gain estimated (free "
-             "entries)", "none": "output error"}[self.noise_model]  # fmt: skip
+        from bikeid.ident.pem import FREE_NOISE_MODEL
+
+        kinds = {"kalman": "innovation gain estimated (Kalman gain of fitted noise "
+                 "covariances)", "gain": "innovation gain estimated (free entries)",
+                 "none": "output error"}  # fmt: skip
+        noise = self.noise_model
+        if noise == "free":  # what "free" fits: per speed pem's choice, over speed joint gains
+            noise = "joint" if self.speed_parameterized else FREE_NOISE_MODEL
+        kinds["joint"] = "innovation gain estimated (Kalman gains of joint noise covariances)"
+        k = kinds[noise]
         return f"{what}, {k}"
 
 

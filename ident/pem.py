@@ -10,7 +10,7 @@ innovations (steady-state Kalman) predictor::
 
 ``noise_model="free"`` (default): the noise model is estimated with the plant (the model
 set then contains any plant-input and sensor noise of the true loop, which makes direct PEM
-consistent in closed loop, reference F1), by :data:`FREE_NOISE_MODEL` ("gain").
+consistent in closed loop, reference F1), by :data:`FREE_NOISE_MODEL` ("kalman").
 ``"kalman"``: K is the Kalman gain of the model for fitted noise covariances (roll and
 steer acceleration noise, and angle-row noise for angle signals that are not the integrals
 of their logged rates; :mod:`ident.innovation_gain`), so Ad - K C is stable for every
@@ -501,13 +501,12 @@ def subspace_start(
 #: stable predictor by construction), "gain" (K's entries free, the former default), "none"
 #: (K = 0, output error).
 NOISE_MODELS = ("free", "kalman", "gain", "none")
-#: What ``noise_model="free"`` fits: the free gain, for now.  The Kalman gain ("kalman") is
-#: better on the README example (never on the predictor's stability boundary; coverage
-#: 16-20 of 20 where the free gain's fell to 10-14), predicts the tutorial's measured
-#: held-out runs better and is as consistent with process noise; switching changes every
-#: PEM number the documents quote, which are to be regenerated with it (docs/uncertainty.md,
-#: "A predictor stable by construction").
-FREE_NOISE_MODEL = "gain"
+#: What ``noise_model="free"`` fits: the Kalman gain.  Measured better than the free gain
+#: (docs/uncertainty.md, "A predictor stable by construction"): never on the predictor's
+#: stability boundary on the README example (the free gain: 7-20 of 20 records at 30 s),
+#: coverage 16-20 of 20 where the free gain's fell to 10-14, better held-out predictions on
+#: the tutorial's measured runs, as consistent with process noise; 1.76x its CPU per fit.
+FREE_NOISE_MODEL = "kalman"
 
 #: Subspace starts tried by ``fit(..., multistart=True)``: (past window [s], coarse dt [s]).
 SUBSPACE_STARTS = ((0.5, 0.01), (1.5, 0.02))
@@ -580,7 +579,7 @@ def fit(
         Start [a1, ..., a8, b1, b2]; when given, the subspace starts are not tried.
     noise_model : {"free", "kalman", "gain", "none"}, optional
         "free" (default): the noise model estimated, as :data:`FREE_NOISE_MODEL`
-        ("gain"); "kalman": K the Kalman gain of fitted noise covariances (a stable
+        ("kalman"); "kalman": K the Kalman gain of fitted noise covariances (a stable
         predictor by construction); "gain": K's entries free; "none": K = 0 (output
         error).
     max_nfev : int, optional

@@ -114,9 +114,9 @@ FIX_PER_SPEED = ("fit each speed alone (per-speed PEM: bikeid identify without "
                  "--speed-parameterized), whose intervals are checked speed by speed")  # fmt: skip
 #: The fix where a per-speed fit ended on its predictor's stability boundary (a free
 #: innovation gain): the measured remedy of :data:`bikeid.ident.trust.REMEDY_KALMAN`.
-FIX_LONGER = ("refit with --noise-model kalman (bikeid identify; in Python pem.fit(runs, "
-              "noise_model='kalman')): a Kalman gain, whose predictor is stable by "
-              "construction")  # fmt: skip
+FIX_LONGER = ("refit with --noise-model kalman, the default (bikeid identify; in Python "
+              "pem.fit(runs, noise_model='kalman')): a Kalman gain, whose predictor is stable "
+              "by construction")  # fmt: skip
 #: What a passed check does not show, printed beside the intervals.
 PASSED_NOTE = (
     "the residual tests do not reject the model structure (family level {level:g}); they "

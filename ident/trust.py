@@ -38,6 +38,7 @@ __all__ = [
     "AMPLITUDE_LIMIT_DEG",
     "NO_STRUCTURE_NOTE",
     "PREDICTOR_BOUNDARY_TOL",
+    "CLI_REMEDIES",
     "REMEDY_KALMAN",
     "WithheldIntervals",
     "check_predictor_interior",
@@ -58,8 +59,14 @@ PREDICTOR_BOUNDARY_TOL = 1e-4
 #: gain, whose predictor is stable by construction.  Measured on the README example
 #: (benchmarks/bench_predictor.py, docs/uncertainty.md).
 REMEDY_KALMAN = (
-    "refit with pem.fit(runs, noise_model='kalman') (a predictor stable by construction)"
+    "refit with pem.fit(runs, noise_model='kalman'), the default (a predictor stable by "
+    "construction)"
 )
+#: The same remedies as the command line states them (``bikeid identify``).
+CLI_REMEDIES = {
+    REMEDY_KALMAN: "refit with --noise-model kalman, the default (a predictor stable by "
+                   "construction)",
+}  # fmt: skip
 #: The note beside intervals of a model that carries no structure check.
 NO_STRUCTURE_NOTE = (
     "no structure check is attached to this model, so nothing says the data do not reject "
@@ -95,6 +102,17 @@ class WithheldIntervals(UntrustworthyResult):
         self.reason, self.remedy, self.check = reason, remedy, check
         fix = f"; {remedy}" if remedy else ""
         super().__init__(f"{reason}{fix} (to get the intervals anyway: {check}=False)")
+
+    def cli_message(self) -> str:
+        """The reason and the remedy as ``bikeid`` commands state them (no Python keyword).
+
+        Returns
+        -------
+        str
+            ``reason; remedy`` with the remedy of :data:`CLI_REMEDIES` where it has one.
+        """
+        remedy = CLI_REMEDIES.get(self.remedy, self.remedy)
+        return f"{self.reason}; {remedy}" if remedy else self.reason
 
 
 def predictor_radius(model) -> float | None:

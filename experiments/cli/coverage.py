@@ -55,8 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument(
         "--noise-model", choices=("free", "kalman", "gain", "none"), default="free",
-        help="with --plant: pem.fit's noise model (default free, pem.FREE_NOISE_MODEL = gain, the "
-        "free innovation gain; kalman = the Kalman gain of fitted noise; none = output error)",
+        help="with --plant: pem.fit's noise model (default free, pem.FREE_NOISE_MODEL = kalman, "
+        "the Kalman gain of fitted noise; gain = the free innovation gain; none = output "
+        "error)",
     )  # fmt: skip
     p.add_argument(
         "--restart", action="store_true",

@@ -620,6 +620,7 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
         critical_speed_intervals,
         eigenvalue_intervals,
     )
+    from bikeid.ident.trust import WithheldIntervals
     from bikeid.ident.validation_report import INTERVAL_CALIBRATION
     from bikeid.sim.errors import InputError, UntrustworthyResult
 
@@ -645,7 +646,8 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
                 out["eigenvalues"].append(eigenvalue_intervals(m, refuse_boundary=True).to_json())
         except (InputError, UntrustworthyResult) as exc:  # the estimate stands, no interval
             out["eigenvalues"].append(None)
-            refused.setdefault(str(exc), []).append(v)
+            why = exc.cli_message() if isinstance(exc, WithheldIntervals) else str(exc)
+            refused.setdefault(why, []).append(v)
     notes += [f"no eigenvalue intervals at {_speed_list(at)}: {why}"
               for why, at in refused.items()]  # fmt: skip
     if over_speed_rejected:

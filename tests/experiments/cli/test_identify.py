@@ -90,13 +90,28 @@ def test_pem_per_speed_and_speed_model_match_truth(sweeps, capsys, tmp_path):
     assert not lo <= true_cs["v_w"] <= hi
     iv = out["intervals"]
     assert "linear plant only" in iv["calibration"] and iv["level"] == 0.95
-    # the structure passes, and the amplitude guard (ident.trust, 0.5 deg RMS roll) is what
-    # withholds the intervals by default, saying so: the bias shown above is what it guards
-    assert not iv["structure"]["speed_model_rejected"] and iv["critical_speeds"] is None
-    assert "RMS roll angle" in json.dumps(iv), iv
+    # the amplitude guard (ident.trust, 0.5 deg RMS roll) withholds them by default, saying
+    # so: the bias shown above is what it guards
+    from bikeid.ident.trust import WithheldIntervals
+
+    with pytest.raises(WithheldIntervals, match="RMS roll angle"):
+        critical_speed_intervals(load_model(target))
+    assert iv["critical_speeds"] is None
+    # the Kalman-gain per-speed fits are all off the predictor's stability boundary, so each
+    # is compared with the model over speed (a fit on the boundary has no usable covariance
+    # and is skipped); at 3 m/s the comparison sees the same bias (measured p = 3e-4 with the
+    # Kalman gain, 1.5e-3 with the free gain, whose fits at 4.5 and 8 m/s sat on the boundary)
+    st = iv["structure"]
+    hausman = {float(v): r for v, rows in st["tests"].items() for r in rows
+               if r["kind"] == "speed_model"}  # fmt: skip
+    assert sorted(hausman) == list(SPEEDS)
+    assert hausman[3.0]["p_value"] < 0.01
+    rejected = any(r["p_value"] < st["per_test_level"] for rows in st["tests"].values()
+                   for r in rows if not r["advisory"])  # fmt: skip
+    assert st["speed_model_rejected"] is rejected
     # the verdict is recorded in the model file beside the covariance it judges
     doc = json.loads(target.read_text())
-    assert doc["results"]["structure_check"]["passed"] is True
+    assert doc["results"]["structure_check"]["passed"] is (not rejected)
 
 
 def test_greybox_intervals_match_monte_carlo(sweeps, capsys, tmp_path):
@@ -673,19 +688,20 @@ def test_the_same_refusal_at_several_speeds_is_one_note(monkeypatch):
 
 
 def test_noise_model_option_chooses_the_innovation_gain(sweeps, capsys, tmp_path):
-    """``--noise-model``: ``kalman`` fits the Kalman gain of fitted noise covariances, whose
-    one-step predictor is stable by construction; the default fits K's entries free.  Checked
+    """``--noise-model``: the default (``free``, the Kalman gain) fits the Kalman gain of
+    fitted noise covariances, whose one-step predictor is stable by construction; ``gain``
+    fits K's entries free (its predictor is stable, if at all, by the fit's bound).  Checked
     on the saved models (each speed's ``noise_model``, and the spectral radius of Ad - K C,
     computed here, below 1).  ``none`` (output error) on these runs, whose plant is
     open-loop unstable at 3 m/s, a speed-parameterized model and the other methods refuse
     with exit 3, a message naming the cause and the fix (for output error: --noise-model
-    kalman, followed by the kalman run above), and no file written."""
+    kalman, followed by the default run above), and no file written."""
     from bikeid.experiments.cli import main
     from bikeid.ident.model_file import load_model
     from bikeid.sim.errors import EXIT_INPUT
 
     noisy, _ = sweeps
-    for choice, kind in ((None, "gain"), ("kalman", "kalman")):
+    for choice, kind in ((None, "kalman"), ("gain", "gain")):
         target = tmp_path / f"{choice}.json"
         extra = [] if choice is None else ["--noise-model", choice]
         _identify(capsys, "--method", "pem", noisy, *extra, "--out", target)

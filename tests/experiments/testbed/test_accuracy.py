@@ -84,11 +84,14 @@ def CM_entry(name: str) -> float:
 def test_lm_matches_minpack():
     """Second method: the normal-equation LM and MINPACK (scipy least_squares) reach the
     same optimum within 0.2 standard errors (the LM stops when a step gains less than
-    1e-3 residual variances, i.e. ~0.03 standard errors)."""
+    1e-3 residual variances, i.e. ~0.03 standard errors).  On the free gain's cost, one
+    fixed function of all parameters; the Kalman-gain fit re-weights its outputs and noise
+    between passes, so there the two minimizers' paths end at different weightings (its
+    optimum is checked against the truth and Monte Carlo instead: T8, bench_predictor)."""
     r = simulate(P, 4.0, duration=30, seed=3, dither=1.0, dither_hold=5, disturbance=0.5,
                  angle_noise=1e-3, rate_noise=1e-2)  # fmt: skip
-    a = pem.fit(r, method="lm")
-    b = pem.fit(r, method="scipy", theta0=a.theta)
+    a = pem.fit(r, method="lm", noise_model="gain")
+    b = pem.fit(r, method="scipy", theta0=a.theta, noise_model="gain")
     se = np.sqrt(np.diag(a.covariance))
     assert np.max(np.abs(a.theta - b.theta) / se) < 0.2
 

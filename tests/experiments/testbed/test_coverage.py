@@ -150,22 +150,24 @@ def test_cli_default_path_runs_and_counts(capsys):
 
 
 def test_identify_withholds_intervals_of_a_boundary_fit(short_run, tmp_path, capsys):
-    """``bikeid identify`` on the 30 s default-path record: the estimate is printed, the
-    eigenvalue intervals are withheld with the reason (the free gain ends on the predictor's
-    stability boundary); the remedy printed, the Kalman gain (``--noise-model kalman``),
-    cannot end there, and its JSON carries the intervals."""
+    """``bikeid identify --noise-model gain`` on the 30 s default-path record: the estimate
+    is printed, the eigenvalue intervals are withheld with the reason (the free gain ends on
+    the predictor's stability boundary); the remedy printed, the Kalman gain
+    (``--noise-model kalman``, the default), cannot end there, and its JSON carries the
+    intervals."""
     import json
 
     from bikeid.dataset.store import write_runs
 
     _, run = short_run
     path = write_runs(tmp_path / "short.h5", [run])
-    rc = main(["identify", str(path), "--method", "pem", "--json"])
+    rc = main(["identify", str(path), "--method", "pem", "--noise-model", "gain", "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert rc == 0
     assert doc["per_speed"][0]["eigenvalues"]  # the estimate stands
     assert doc["per_speed"][0].get("eigenvalue_intervals") is None
-    assert any("stability boundary" in n for n in doc["intervals"]["notes"])
+    assert any("stability boundary" in n and "--noise-model kalman" in n
+               for n in doc["intervals"]["notes"])  # fmt: skip
     rc = main(["identify", str(path), "--method", "pem", "--noise-model", "kalman", "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert rc == 0
