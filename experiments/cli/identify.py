@@ -615,12 +615,12 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
     to ``"notes"``: a rejected model over speed as two lines (:func:`_withheld_lines`: what
     was rejected, the one fix), the same refusal at several speeds as one line.
     """
+    from bikeid.ident.trust import WithheldIntervals
     from bikeid.ident.uncertainty import (
         check_predictor_interior,
         critical_speed_intervals,
         eigenvalue_intervals,
     )
-    from bikeid.ident.trust import WithheldIntervals
     from bikeid.ident.validation_report import INTERVAL_CALIBRATION
     from bikeid.sim.errors import InputError, UntrustworthyResult
 
