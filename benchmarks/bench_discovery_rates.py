@@ -28,7 +28,8 @@ Usage::
 
     nice python benchmarks/bench_discovery_rates.py [--terms "roll: phidot=-5" ...]
         [--seeds 5] [--first-seed 300] [--no-effect 10] [--formats torque,law]
-        [--plant linear|nonlinear] [--exact-bicycle] [--agreement] [--processes 1]
+        [--plant linear|nonlinear] [--exact-bicycle] [--nominal-uncertainty U]
+        [--agreement] [--processes 1]
         [--json rates.json]
 
 Trial ``i`` of seed ``s`` is ``draw_term_trials(1, s, ..., first=i)`` with ``i`` the term's
@@ -106,7 +107,7 @@ def _fit_agrees(files, fmt: str, plant: str, folder: Path) -> dict:
 
 def _job(args: tuple) -> list[dict]:
     """One trial: write its logs, discover in every format (and fit, for the agreement)."""
-    trial, term, coef, grid_seed, formats, plant, agreement = args
+    trial, term, coef, grid_seed, formats, plant, agreement, uncertainty = args
     rows = []
     t0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
@@ -121,7 +122,8 @@ def _job(args: tuple) -> list[dict]:
         for fmt in formats:
             t1 = time.process_time()
             rc, out, err = _cli(["measured", "discover", *map(str, files), *_options(fmt),
-                                 "--plant", plant, "--json"])  # fmt: skip
+                                 "--plant", plant, "--nominal-uncertainty", uncertainty,
+                                 "--json"])  # fmt: skip
             row = {"term": term, "coefficient": coef, "index": trial.index, "seed": grid_seed,
                    "format": fmt, "fit_speeds": list(trial.fit_speeds),
                    "noise": trial.nuisance.noise, "rc": rc, "error": None if rc == 0 else err,
@@ -215,6 +217,11 @@ def main(argv=None) -> int:
         "--exact-bicycle", action="store_true", help="no inertia/trail perturbation (diagnostic)"
     )
     ap.add_argument(
+        "--nominal-uncertainty", default="default", metavar="U",
+        help="discover's --nominal-uncertainty (default 'default'; 'none': the stated "
+        "bicycle taken as exact, the behaviour before the calibration)",
+    )  # fmt: skip
+    ap.add_argument(
         "--agreement",
         action="store_true",
         help=f"also fit the '{AGREE_TERM}' trials with measured fit",
@@ -228,7 +235,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"--formats: give some of {', '.join(FORMATS)}")
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     quiet = range(a.first_seed, a.first_seed + a.no_effect)
-    jobs = [(t, term, c, s, formats, a.plant, a.agreement)
+    jobs = [(t, term, c, s, formats, a.plant, a.agreement, a.nominal_uncertainty)
             for t, term, c, s in _trials(spec, seeds, quiet, a.exact_bicycle)]  # fmt: skip
     rows: list[dict] = []
     t0 = time.perf_counter()

@@ -30,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         DECAYS_HELP,
         add_effects_file_option,
         add_log_options,
+        uncertainty_arg,
     )
 
     msub = sub.choices["measured"].subcommands
@@ -64,6 +65,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="A",
         help="family-wise error rate over every test of the search (Bonferroni over terms x "
         "rounds; default 0.05)",
+    )  # fmt: skip
+    d.add_argument(
+        "--nominal-uncertainty", type=uncertainty_arg, default="default", metavar="U",
+        help="the stated bicycle's uncertainty, as for 'measured fit': its inertias and "
+        "trail are calibrated within it, and a term must stay significant with them refitted "
+        "('default': each body's inertia tensor +-5 %%, trail +-2 mm; 'none': the bicycle "
+        "taken as exact; or inertia=F,trail=M)",
     )  # fmt: skip
     add_effects_file_option(d, "known to the model (not tried again)")
     d.add_argument(
@@ -127,7 +135,7 @@ def cmd_discover(args) -> int:
                             quiet=args.quiet or args.json)  # fmt: skip
     rule = AcceptanceRule(alpha=args.alpha)
     res = discover(model, ws, nonlinear=nonlinear, max_terms=args.max_terms, rule=rule,
-                   progress=bar)  # fmt: skip
+                   uncertainty=args.nominal_uncertainty, progress=bar)  # fmt: skip
     out = {**res.as_dict(), "plant": plant, "decays": len(ws), "dropped_windows": dropped,
            "start": args.model or "nominal"}  # fmt: skip
     if args.out:

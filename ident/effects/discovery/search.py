@@ -21,7 +21,13 @@ the window output error of the effect fits):
    coefficients) is kept.  On decays with no missing term, the probability that any term
    is kept (the familywise error rate) is then at most ``alpha`` under the test's
    assumptions (the model right, the decays independent), whatever the dependence between
-   the tests.
+   the tests.  With the stated bicycle's uncertainty (``uncertainty``, as ``measured fit``
+   takes it) the model is right only up to that uncertainty: the nominal's offsets (each
+   body's inertia scale, the trail) are calibrated within their box on the fitting half
+   first, the terms are screened with the offsets held there, and a passing term is kept
+   only if its p-value stays at most ``alpha / m`` with the offsets refitted jointly with
+   it, as the final joint fit's are (a term that only does what an inertia or trail within
+   its uncertainty would do is then not significant).
 4. A term the decays cannot tell from the kept one joins its ``indistinguishable`` set:
    among the terms significant at ``alpha`` alone in that round that remove at least half
    as much of the cost, those which, fitted jointly with the kept term on all decays, leave
@@ -32,7 +38,8 @@ the window output error of the effect fits):
 5. The kept terms are refitted jointly on all decays (coefficients, standard errors and 95 %
    intervals, t quantile on the clusters' degrees of freedom) and pruned backwards of any
    whose p-value is above ``alpha / m``.
-6. Before/after: the nominal against the kept terms fitted on the fitting half, on the
+6. Before/after: the nominal (calibrated, with an uncertainty) against the kept terms
+   fitted on the fitting half, on the
    held-out half (:func:`bikeid.ident.effects.diagnostics.evaluate`, the ``measured
    evaluate`` figures with the ratio's interval).  Those decays were not used for the
    coefficients of that model but were used to choose the terms: the figure is not out of
@@ -46,7 +53,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +65,7 @@ from bikeid.ident.effects.acceptance import AcceptanceRule, t_p_value
 from bikeid.ident.effects.discovery.dictionary import Term, declarations, dictionary, registered
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.fit import corrected, effect_dof, effect_std, output_residuals
+from bikeid.ident.effects.nominal_uncertainty import Calibration, NominalUncertainty
 from bikeid.sim.blas import single_threaded_blas
 
 __all__ = ["Discovery", "ErrorFunction", "INTERVAL_LEVEL", "discover", "window_error"]
@@ -129,6 +137,7 @@ class _Fit:
     std: dict[str, float]
     cost: float
     dof: float
+    calibration: Calibration | None = None
 
     def p_value(self, label: str) -> float:
         sd = self.std[label]
@@ -141,29 +150,50 @@ def _with(model: ExperimentModel, terms: list[Term], coefs) -> ExperimentModel:
 
 
 def _fit(model: ExperimentModel, windows: list[Window], terms: list[Term], steps: dict,
-         error: ErrorFunction, start: dict | None = None) -> _Fit:  # fmt: skip
+         error: ErrorFunction, start: dict | None = None,
+         calibration: Calibration | None = None) -> _Fit:  # fmt: skip
     """Least squares of ``error`` over the terms' coefficients, standard errors clustered by
-    decay."""
+    decay; with ``calibration``, the nominal's offsets fitted too within their box, as the
+    effect fits do (:func:`bikeid.ident.effects.fit.fit_effects`: an offset on the box's
+    edge is held there, one inside stays in the covariance with the box as prior
+    information, so a term's standard error counts what the offsets can mimic)."""
     start = start or {}
+    k = len(terms)
     sc = np.array([steps[t.label] for t in terms])
     x0 = np.array([start.get(t.label, 0.0) for t in terms]) / sc
+    lo, hi = np.full(k, -np.inf), np.full(k, np.inf)
+    ncal = 0 if calibration is None else len(calibration.offsets)
+    if ncal:
+        x0 = np.concatenate([x0, np.clip(calibration.offsets, -1 + 1e-9, 1 - 1e-9)])
+        lo, hi = np.concatenate([lo, -np.ones(ncal)]), np.concatenate([hi, np.ones(ncal)])
+
+    def mk(x):
+        m = _with(model, terms, x[:k] * sc)
+        return replace(m, p=calibration.params(x[k:])) if ncal else m
 
     sizes: list[int] = []  # each decay's residual length (fixed: read at the first call)
 
     def fun(x):
-        per = error(_with(model, terms, x * sc), windows)
+        per = error(mk(x), windows)
         sizes[:] = [len(e) for e in per]
         r = np.concatenate(per)
         return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
 
-    sol = least_squares(fun, x0, x_scale=1.0, diff_step=1e-3, max_nfev=60)
+    if x0.size == 0:  # nothing to fit: the model's cost
+        r = fun(x0)
+        return _Fit(model, {}, {}, float(r @ r), float("inf"))
+    sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
-    std = effect_std(sol.jac, r, sizes) * sc
-    coef = sol.x * sc
+    free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)  # an offset on the box's edge is held
+    is_term = np.arange(sol.x.size) < k
+    std = np.where(is_term, np.inf, 0.0)
+    std[free] = effect_std(sol.jac[:, free], r, sizes, np.where(is_term, 0.0, 3.0)[free])
+    coef = sol.x[:k] * sc
     labels = [t.label for t in terms]
-    return _Fit(_with(model, terms, coef), dict(zip(labels, map(float, coef), strict=True)),
-                dict(zip(labels, map(float, std), strict=True)), float(r @ r),
-                effect_dof(r, sizes, len(terms)))  # fmt: skip
+    cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None
+    return _Fit(mk(sol.x), dict(zip(labels, map(float, coef), strict=True)),
+                dict(zip(labels, map(float, std[:k] * sc), strict=True)), float(r @ r),
+                effect_dof(r, sizes, int(free.sum())), cal)  # fmt: skip
 
 
 def _costs(error: ErrorFunction, model: ExperimentModel, windows: list[Window]) -> np.ndarray:
@@ -256,6 +286,19 @@ class Discovery:
         return p
 
 
+def _confirmed(stated, windows, kept, passing, steps, error, cal, level, log) -> bool:
+    """Whether a passing term stays significant at ``level`` with the nominal's offsets
+    fitted jointly with it (and the kept terms) on the fitting half; its row of ``log``
+    records that p-value (``p_value_calibrated``)."""
+    _c, t, f, _gain = passing
+    g = _fit(stated, windows, kept + [t], steps, error, f.coef, cal)
+    p = g.p_value(t.label)
+    for row in log:
+        if row["equation"] == t.equation and row["term"] == t.term:
+            row["p_value_calibrated"] = p
+    return p <= level
+
+
 def _alike(model, windows, kept, best, coef, rivals, gain, steps, error, alpha) -> list[dict]:
     """The rivals the decays cannot tell from ``best``: fitted jointly with it (and the kept
     terms) on all decays, ``best`` is no longer significant at ``alpha`` (the rival can
@@ -299,6 +342,7 @@ def discover(
     rule: AcceptanceRule | None = None,
     terms: list[Term] | None = None,
     family: int | None = None,
+    uncertainty: NominalUncertainty | None = None,
     progress: Callable[[int, int, str], None] | None = None,
 ) -> Discovery:
     """Terms of the equations of motion the decays support (module docstring).
@@ -332,6 +376,13 @@ def discover(
         the tests it makes, K + (K - 1) + ... over ``max_terms`` rounds for the K terms
         tried).  When ``terms`` were screened from a larger dictionary on the same decays,
         give that dictionary's count: the screen chose them by the same data.
+    uncertainty : NominalUncertainty, optional
+        The stated bicycle's uncertainty (``measured fit``'s ``--nominal-uncertainty``;
+        default None: the bicycle taken as exact).  Its offsets are calibrated on the
+        fitting half before any term; the terms are screened with them held there, and a
+        term is kept only if it stays significant with the offsets fitted jointly with it
+        (module docstring, step 3), as are the final joint fit's p-values and intervals:
+        a nominal off by no more than its uncertainty is not a term.
     progress : callable, optional
         ``progress(done, total, label)`` before each term's fit.
 
@@ -365,8 +416,17 @@ def discover(
             tests = int(family)
         level = rule.level(tests)
         raw = list(windows)
+        stated = model
         ws = corrected(raw, model, nonlinear)
         steps = _steps(cands, ws, model.dt)
+        cal, calibration = None, None
+        if uncertainty is not None and uncertainty.names:
+            cal = _fit(model, ws[0::2], [], steps, error,
+                       calibration=Calibration(uncertainty, model.p)).calibration  # fmt: skip
+            model = replace(model, p=cal.params())  # the nominal within its uncertainty
+            calibration = {"fit_half": cal.as_dict()}
+            if nonlinear:
+                ws = corrected(raw, model, True)
         kept: list[Term] = []
         coef: dict[str, float] = {}
         sets: dict[str, list[dict]] = {}
@@ -396,10 +456,14 @@ def discover(
                 rivals.append((t, gain, f.coef[t.label], _interval(f, t.label)))
                 if row["p_value"] <= level and row["heldout_cost_ratio"] < 1 - rule.heldout_gain:
                     passing.append((f.cost + float(np.sum(val_wn)), t, f, gain))
+            passing.sort(key=lambda z: z[0])
+            if cal is not None:  # kept only if significant with the offsets fitted with it
+                passing = [z for z in passing if _confirmed(stated, fit_w, kept, z, steps,
+                                                            error, cal, level, log)]  # fmt: skip
             if not passing:
                 rounds.append({"kept": None, "terms": log})
                 break
-            _c, best, f, gain = min(passing, key=lambda z: z[0])
+            _c, best, f, gain = passing[0]
             sets[best.label] = _alike(model, ws, kept, best, f.coef, rivals, gain, steps, error,
                                       rule.alpha)  # fmt: skip
             kept.append(best)
@@ -410,10 +474,11 @@ def discover(
                 ws = corrected(raw, cur, True)
             cur_val = _costs(error, cur, ws[1::2])
         final = None
-        while kept:  # joint fit on all decays, pruned backwards
+        while kept:  # joint fit on all decays (with the offsets), pruned backwards
             if nonlinear:
                 ws = corrected(raw, _with(model, kept, [coef[t.label] for t in kept]), True)
-            final = _fit(model, ws, kept, steps, error, coef)
+            final = (_fit(model, ws, kept, steps, error, coef) if cal is None
+                     else _fit(stated, ws, kept, steps, error, coef, cal))  # fmt: skip
             worst = max(kept, key=lambda t: final.p_value(t.label))
             if final.p_value(worst.label) <= level:
                 break
@@ -444,4 +509,8 @@ def discover(
             "interval_level": INTERVAL_LEVEL,
             "reference": "Student t, G - 1 degrees of freedom for G decay clusters",
         }
+        if calibration is not None:
+            if final is not None and final.calibration is not None:
+                calibration["final"] = final.calibration.as_dict()
+            test["nominal_calibration"] = calibration
         return Discovery(out, final.model if final else model, kept, rounds, test, ba)
