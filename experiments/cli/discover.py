@@ -133,9 +133,9 @@ def cmd_discover(args) -> int:
                          f"needs {MIN_FIT_DECAYS} (give more logs or --plant linear)")  # fmt: skip
     bar = terminal_progress("measured discover", unit="fit",
                             quiet=args.quiet or args.json)  # fmt: skip
-    rule = AcceptanceRule(alpha=args.alpha)
+    rule = AcceptanceRule(alpha=args.alpha, nominal_uncertainty=args.nominal_uncertainty)
     res = discover(model, ws, nonlinear=nonlinear, max_terms=args.max_terms, rule=rule,
-                   uncertainty=args.nominal_uncertainty, progress=bar)  # fmt: skip
+                   progress=bar)  # fmt: skip
     out = {**res.as_dict(), "plant": plant, "decays": len(ws), "dropped_windows": dropped,
            "start": args.model or "nominal"}  # fmt: skip
     if args.out:

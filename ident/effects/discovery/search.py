@@ -21,13 +21,14 @@ the window output error of the effect fits):
    coefficients) is kept.  On decays with no missing term, the probability that any term
    is kept (the familywise error rate) is then at most ``alpha`` under the test's
    assumptions (the model right, the decays independent), whatever the dependence between
-   the tests.  With the stated bicycle's uncertainty (``uncertainty``, as ``measured fit``
-   takes it) the model is right only up to that uncertainty: the nominal's offsets (each
-   body's inertia scale, the trail) are calibrated within their box on the fitting half
-   first, the terms are screened with the offsets held there, and a passing term is kept
-   only if its p-value stays at most ``alpha / m`` with the offsets refitted jointly with
-   it, as the final joint fit's are (a term that only does what an inertia or trail within
-   its uncertainty would do is then not significant).
+   the tests.  With the stated bicycle's uncertainty (the rule's ``nominal_uncertainty``,
+   as ``measured fit`` takes it; by default) the model is right only up to that
+   uncertainty: the nominal's offsets (each body's inertia scale, the trail) are
+   calibrated within their box on the fitting half first, the terms are screened with the
+   offsets held there, and a passing term is kept only if its p-value stays at most
+   ``alpha / m`` with the offsets refitted jointly with it, as the final joint fit's are (a
+   term that only does what an inertia or trail within its uncertainty would do is then not
+   significant).
 4. A term the decays cannot tell from the kept one joins its ``indistinguishable`` set:
    among the terms significant at ``alpha`` alone in that round that remove at least half
    as much of the cost, those which, fitted jointly with the kept term on all decays, leave
@@ -65,7 +66,7 @@ from bikeid.ident.effects.acceptance import AcceptanceRule, t_p_value
 from bikeid.ident.effects.discovery.dictionary import Term, declarations, dictionary, registered
 from bikeid.ident.effects.experiment_model import ExperimentModel
 from bikeid.ident.effects.fit import corrected, effect_dof, effect_std, output_residuals
-from bikeid.ident.effects.nominal_uncertainty import Calibration, NominalUncertainty
+from bikeid.ident.effects.nominal_uncertainty import Calibration
 from bikeid.sim.blas import single_threaded_blas
 
 __all__ = ["Discovery", "ErrorFunction", "INTERVAL_LEVEL", "discover", "window_error"]
@@ -342,7 +343,6 @@ def discover(
     rule: AcceptanceRule | None = None,
     terms: list[Term] | None = None,
     family: int | None = None,
-    uncertainty: NominalUncertainty | None = None,
     progress: Callable[[int, int, str], None] | None = None,
 ) -> Discovery:
     """Terms of the equations of motion the decays support (module docstring).
@@ -366,9 +366,15 @@ def discover(
     max_terms : int, optional
         At most this many rounds (default 3).
     rule : AcceptanceRule, optional
-        ``alpha``, ``correction``, ``min_gain`` and the held-out gain (default
-        :class:`AcceptanceRule` with its defaults; its nominal uncertainty and
-        ``unexplained`` settings are not used).
+        ``alpha``, ``correction``, ``min_gain``, the held-out gain and the stated
+        bicycle's ``nominal_uncertainty`` (default :class:`AcceptanceRule` with its
+        defaults, as ``measured fit``: the default uncertainty; its ``unexplained``
+        settings are not used).  With an uncertainty (None: the bicycle taken as exact) its
+        offsets are calibrated on the fitting half before any term; the terms are screened
+        with them held there, and a term is kept only if it stays significant with the
+        offsets fitted jointly with it (module docstring, step 3), as are the final joint
+        fit's p-values and intervals: a nominal off by no more than its uncertainty is not
+        a term.
     terms : list of Term, optional
         The dictionary (default :func:`dictionary`).
     family : int, optional
@@ -376,13 +382,6 @@ def discover(
         the tests it makes, K + (K - 1) + ... over ``max_terms`` rounds for the K terms
         tried).  When ``terms`` were screened from a larger dictionary on the same decays,
         give that dictionary's count: the screen chose them by the same data.
-    uncertainty : NominalUncertainty, optional
-        The stated bicycle's uncertainty (``measured fit``'s ``--nominal-uncertainty``;
-        default None: the bicycle taken as exact).  Its offsets are calibrated on the
-        fitting half before any term; the terms are screened with them held there, and a
-        term is kept only if it stays significant with the offsets fitted jointly with it
-        (module docstring, step 3), as are the final joint fit's p-values and intervals:
-        a nominal off by no more than its uncertainty is not a term.
     progress : callable, optional
         ``progress(done, total, label)`` before each term's fit.
 
@@ -420,6 +419,7 @@ def discover(
         ws = corrected(raw, model, nonlinear)
         steps = _steps(cands, ws, model.dt)
         cal, calibration = None, None
+        uncertainty = rule.nominal_uncertainty
         if uncertainty is not None and uncertainty.names:
             cal = _fit(model, ws[0::2], [], steps, error,
                        calibration=Calibration(uncertainty, model.p)).calibration  # fmt: skip

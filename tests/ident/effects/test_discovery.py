@@ -111,7 +111,11 @@ def damped(tmp_path_factory):
     finally:
         unregister_effects(f.names)
     quiet = synthetic_windows(ExperimentModel(), [2.0, 3.5], 4, noise=0.005, seed=0)
-    return discover(ExperimentModel(), ws), discover(ExperimentModel(), quiet)
+    from bikeid.ident.effects.acceptance import AcceptanceRule
+
+    exact = AcceptanceRule.exact()  # the generator's bicycle is the stated one (the rates)
+    return discover(ExperimentModel(), ws, rule=exact), discover(ExperimentModel(), quiet,
+                                                                 rule=exact)  # fmt: skip
 
 
 def test_injected_roll_damping_is_found_and_no_effect_decays_give_nothing(damped):
@@ -181,10 +185,11 @@ def test_a_nominal_off_by_its_uncertainty_is_not_a_term():
     roll-rate noise 8 mrad/s, 8192-count encoder) whose bicycle is the stated one with every
     body's inertia 5 % off (alternating signs) and the trail 2 mm long, the edges of the
     default band (as ``test_nominal_uncertainty``'s selection test), 2 speeds x 10 decays,
-    seed 11 (that test's).  No term: the stated nominal taken as exact keeps one (measured:
-    ``roll: deltadot/v``, p = 1.4e-5 against 0.05 / 126); calibrated within the default
-    uncertainty, nothing (its best p = 0.16).  With a roll damping of -5 N m s/rad injected
-    (outside the library), the calibrated discovery keeps ``roll: phidot`` (or a term whose
+    seed 11 (that test's).  No term: the stated nominal taken as exact
+    (``AcceptanceRule.exact()``) keeps one (measured: ``roll: deltadot/v``, p = 1.4e-5
+    against 0.05 / 126); calibrated within the default uncertainty (the default rule's),
+    nothing (its best p = 0.16).  With a roll damping of -5 N m s/rad injected (outside the
+    library), the calibrated discovery keeps ``roll: phidot`` (or a term whose
     indistinguishable set holds it) within 35 % of -5, its 95 % interval covering -5
     (measured -4.88 [-5.35, -4.41]); taken as exact, the interval misses it (measured
     -6.07 [-6.48, -5.66]: the term absorbs the inertia mismatch)."""
@@ -194,8 +199,9 @@ def test_a_nominal_off_by_its_uncertainty_is_not_a_term():
         generate_windows,
         with_terms,
     )
-    from bikeid.ident.effects.nominal_uncertainty import NominalUncertainty
+    from bikeid.ident.effects.acceptance import AcceptanceRule
 
+    exact = AcceptanceRule.exact()  # the stated bicycle taken as exact
     nz = Nuisance(
         plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
         noise=0.008, colour=0.0, steer_noise=0.0, encoder_counts=8192, gyro_bias=0.0,
@@ -208,8 +214,8 @@ def test_a_nominal_off_by_its_uncertainty_is_not_a_term():
         return generate_windows(tr, tr.fit_speeds, 10, tr.seed, "fit")
 
     quiet = windows(trial)
-    assert discover(ExperimentModel(), quiet).terms, "the stated nominal should leave a term"
-    calibrated = discover(ExperimentModel(), quiet, uncertainty=NominalUncertainty())
+    assert discover(ExperimentModel(), quiet, rule=exact).terms, "the stated nominal leaves one"
+    calibrated = discover(ExperimentModel(), quiet)  # the default: the default uncertainty
     assert calibrated.terms == []
     assert set(calibrated.test["nominal_calibration"]["fit_half"]["offsets"]) == {
         "inertia_R", "inertia_B", "inertia_H", "inertia_F", "trail"}  # fmt: skip
@@ -224,9 +230,9 @@ def test_a_nominal_off_by_its_uncertainty_is_not_a_term():
         assert hit, t
         return hit[0]
 
-    got = roll_damping(discover(ExperimentModel(), damped, uncertainty=NominalUncertainty()))
+    got = roll_damping(discover(ExperimentModel(), damped))
     assert abs(got["coefficient"] + 5.0) < 0.35 * 5.0
     lo, hi = got["interval"]
     assert lo < -5.0 < hi
-    lo, hi = roll_damping(discover(ExperimentModel(), damped))["interval"]
+    lo, hi = roll_damping(discover(ExperimentModel(), damped, rule=exact))["interval"]
     assert not lo < -5.0 < hi
