@@ -99,6 +99,7 @@ __all__ = [
     "BlindTrial",
     "Nuisance",
     "CLASSES",
+    "band_edge_nuisance",
     "draw_blind_classes",
     "draw_blind_trials",
     "draw_term_trials",
@@ -243,6 +244,25 @@ def linear_plant_matrices(p) -> tuple[np.ndarray, ...]:
                                               "xH", "zH", "mH", "rF", "mF", *INERTIAS)}  # fmt: skip
     M, C1, K0, K2 = benchmark_par_to_canonical(par)
     return tuple(np.asarray(x, dtype=float) for x in (M, C1, K0, K2))
+
+
+def band_edge_nuisance() -> Nuisance:
+    """A known case for the nominal's uncertainty: the independent linear plant with every
+    body's inertia 5 % off (alternating signs: R +, B -, H +, F -) and the trail 2 mm long,
+    the edges of the default band (:class:`bikeid.ident.effects.nominal_uncertainty.
+    NominalUncertainty`); decays from a state, white roll-rate noise 8 mrad/s, an 8192-count
+    encoder, a steer-rate gyro, no other nuisance.
+
+    Returns
+    -------
+    Nuisance
+    """
+    return Nuisance(
+        plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
+        noise=0.008, colour=0.0, steer_noise=0.0, encoder_counts=8192, gyro_bias=0.0,
+        gyro_walk=0.0, steer_rate="gyro", speed_wander=0.0, wander_freq=0.5,
+        inertia_scale={"R": 1.05, "B": 0.95, "H": 1.05, "F": 0.95}, trail_shift=0.002,
+    )  # fmt: skip
 
 
 def draw_blind_trials(

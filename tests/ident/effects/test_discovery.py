@@ -195,19 +195,14 @@ def test_a_nominal_off_by_its_uncertainty_is_not_a_term():
     -6.07 [-6.48, -5.66]: the term absorbs the inertia mismatch)."""
     from bikeid.experiments.measured.blind_trials import (
         BlindTrial,
-        Nuisance,
+        band_edge_nuisance,
         generate_windows,
         with_terms,
     )
     from bikeid.ident.effects.acceptance import AcceptanceRule
 
     exact = AcceptanceRule.exact()  # the stated bicycle taken as exact
-    nz = Nuisance(
-        plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
-        noise=0.008, colour=0.0, steer_noise=0.0, encoder_counts=8192, gyro_bias=0.0,
-        gyro_walk=0.0, steer_rate="gyro", speed_wander=0.0, wander_freq=0.5,
-        inertia_scale={"R": 1.05, "B": 0.95, "H": 1.05, "F": 0.95}, trail_shift=0.002,
-    )  # fmt: skip
+    nz = band_edge_nuisance()
     trial = BlindTrial(0, 11, "none", float("nan"), (2.0, 3.5), (2.7, 4.2), nz)
 
     def windows(tr):

@@ -107,16 +107,15 @@ def test_nominal_off_by_its_uncertainty_is_not_an_effect():
     gyro scale); calibrated within the band it accepts none.  With a
     steer damping of 0.5 N m s/rad the calibrated selection still names it first, within
     2 % (measured 0.4987: the damping is far outside what the band can mimic)."""
-    from bikeid.experiments.measured.blind_trials import BlindTrial, Nuisance, generate_windows
+    from bikeid.experiments.measured.blind_trials import (
+        BlindTrial,
+        band_edge_nuisance,
+        generate_windows,
+    )
     from bikeid.ident.effects.experiment_model import ExperimentModel
     from bikeid.ident.effects.selection import select_effects
 
-    nz = Nuisance(
-        plant="independent_linear", push="state", pulse_duration=0.2, pulse_torque=0.0,
-        noise=0.008, colour=0.0, steer_noise=0.0, encoder_counts=8192, gyro_bias=0.0,
-        gyro_walk=0.0, steer_rate="gyro", speed_wander=0.0, wander_freq=0.5,
-        inertia_scale={"R": 1.05, "B": 0.95, "H": 1.05, "F": 0.95}, trail_shift=0.002,
-    )  # fmt: skip
+    nz = band_edge_nuisance()
 
     def select(effect, value, uncertainty, correction="bonferroni"):
         tr = BlindTrial(0, 11, effect, value, (2.0, 3.5), (2.7, 4.2), nz)
