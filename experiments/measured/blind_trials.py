@@ -249,9 +249,10 @@ def linear_plant_matrices(p) -> tuple[np.ndarray, ...]:
 def band_edge_nuisance() -> Nuisance:
     """A known case for the nominal's uncertainty: the independent linear plant with every
     body's inertia 5 % off (alternating signs: R +, B -, H +, F -) and the trail 2 mm long,
-    the edges of the default band (:class:`bikeid.ident.effects.nominal_uncertainty.
-    NominalUncertainty`); decays from a state, white roll-rate noise 8 mrad/s, an 8192-count
-    encoder, a steer-rate gyro, no other nuisance.
+    the edges of the default band
+    (:class:`~bikeid.ident.effects.nominal_uncertainty.NominalUncertainty`); decays from a
+    state, white roll-rate noise 8 mrad/s, an 8192-count encoder, a steer-rate gyro, no
+    other nuisance.
 
     Returns
     -------
