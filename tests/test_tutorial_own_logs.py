@@ -2,12 +2,11 @@
 
 The tutorial rewrites the measured steer-by-wire logs at test time as CSV logs with other
 names and units (ms, degrees, deg/s, km/h, roll positive to the left), fits and evaluates them
-end to end with the CLI, and runs the same through the steer-by-wire format.  The second
-method is the independent source: both paths must give the same effects and the same
-before/after numbers.  Tolerance 1e-6 relative: the samples go through degrees, km/h and ms
-and back (round-off ~1e-15 per sample), so anything beyond round-off amplified by the fit's
-conditioning (measured: 1e-11 on the effects) would be a real difference of the two paths.
-The quoted numbers of the tutorial are checked to their printed digits.
+end to end with the CLI, and reads the same decays through the steer-by-wire format.  The
+second reader is the independent source: both paths must give the same decays, signals and
+treadmill speeds equal to 1e-9 (the samples go through degrees, km/h and ms and back:
+round-off ~1e-16 per sample; measured 8.9e-16), so every fit of them is the same.  The
+quoted numbers of the tutorial are checked to their printed digits.
 """
 
 from __future__ import annotations
@@ -50,13 +49,14 @@ def ran(tmp_path_factory):
     if not DATA:
         pytest.skip("needs the measured data ($BIKEID_DATA)")
     folder = tmp_path_factory.mktemp("own_logs")
-    for kind, body in _steps(DOC.read_text()):
+    for k, (kind, body) in enumerate(_steps(DOC.read_text())):
         if kind == "py":
             (folder / "snippet.py").write_text(body)
             body = f"{sys.executable} snippet.py"
         p = subprocess.run(["bash", "-c", body], cwd=folder, env=_env(), capture_output=True,
                            text=True, timeout=900)  # fmt: skip
         assert p.returncode == 0, f"{body}\n{p.stderr}"
+        (folder / f"step{k}.out").write_text(p.stdout)
     return folder
 
 
@@ -66,48 +66,45 @@ def _model(path: Path) -> tuple[dict, dict]:
 
 
 @pytest.mark.slow
-def test_csv_logs_fit_as_the_steer_by_wire_format(ran):
-    """Same effects (1e-6 relative), same decays kept and dropped; the quoted counts: 26
-    decays (10 pushes rejected), 5 dropped (the nonlinear replay falls: a rear wheel lifts or
-    the steer folds), 21 fitted; the quoted values 1.80, 0.27 and 0.53 to their printed
-    digits."""
+def test_csv_logs_fit_and_read_as_the_steer_by_wire_format(ran):
+    """The CSV path reads the decays the steer-by-wire path reads: the tutorial's check
+    (section 4) printed its largest difference over the 26 decays' signals and treadmill
+    speeds, at most 1e-9 (measured 8.9e-16: the samples went through degrees, km/h and ms
+    and back, round-off ~1e-16 amplified by the unit factors); the fit is a deterministic
+    function of the decays, so the two formats' fits are the same (1e-11 relative when both
+    were fitted).  The CSV fit's quoted counts: 26 decays (10 pushes rejected), 5 dropped
+    (the nonlinear replay falls: a rear wheel lifts or the steer folds), 21 fitted; the
+    quoted values 1.80, 0.27 and 0.53 to their printed digits."""
+    printed = [p.read_text() for p in sorted(ran.glob("step*.out"))]
+    line = next(t for t in printed if "largest difference" in t)
+    worst = float(re.search(r"26 decays, largest difference (\S+)", line).group(1))
+    assert worst <= 1e-9
     eff_csv, res_csv = _model(ran / "model.json")
-    eff_sbw, res_sbw = _model(ran / "sbw_model.json")
-    assert sorted(eff_csv) == sorted(eff_sbw) == sorted(
-        ["speed_scale", "roll_rate_scale", "steer_coulomb_friction"])
+    assert sorted(eff_csv) == sorted(["speed_scale", "roll_rate_scale", "steer_coulomb_friction"])
     assert eff_csv["speed_scale"] == pytest.approx(1.80, abs=5e-3)
     assert eff_csv["roll_rate_scale"] == pytest.approx(0.27, abs=5e-3)
     assert eff_csv["steer_coulomb_friction"] == pytest.approx(0.53, abs=5e-3)
-    for k in eff_csv:
-        assert eff_csv[k] == pytest.approx(eff_sbw[k], rel=1e-6)
-    assert len(res_csv["fit_windows"]) == len(res_sbw["fit_windows"]) == 21
-    assert len(res_csv["dropped_windows"]) == len(res_sbw["dropped_windows"]) == 5
+    assert len(res_csv["fit_windows"]) == 21
+    assert len(res_csv["dropped_windows"]) == 5
     assert all(d["reason"].startswith("fell") for d in res_csv["dropped_windows"])
     assert res_csv["decay_report"]["decays"] == 26
     assert sum(len(f["rejected"]) for f in res_csv["decay_report"]["files"]) == 10
     assert res_csv["experiment"]["speed_calibration"] == [1.0, 0.0]
     assert res_csv["experiment"]["dt"] == pytest.approx(0.01, rel=1e-9)
     assert res_csv["experiment"]["law"] is None
-    for a, b in (("linear", "linear"), ("nonlinear", "nonlinear")):
-        assert res_csv["nominal_fit"][a] == pytest.approx(res_sbw["nominal_fit"][b], rel=1e-6)
 
 
 @pytest.mark.slow
-def test_csv_evaluation_is_the_steer_by_wire_one_and_the_quoted_one(ran):
-    """Before/after equal to 1e-6 relative (the bootstrap's draws do not depend on the order
-    of the logs); the quoted 20.486 -> 2.159, ratio 0.11 [0.08, 0.16], verdict halved, zero
-    motion baseline 1.30, and the per-log 38.60 -> 3.55 (1.5 m/s) and 2.38 -> 0.77
-    (3.5 m/s), to the printed digits."""
+def test_csv_evaluation_is_the_quoted_one(ran):
+    """The quoted 20.486 -> 2.159, ratio 0.11 [0.08, 0.16], verdict halved, zero motion
+    baseline 1.30, and the per-log 38.60 -> 3.55 (1.5 m/s) and 2.38 -> 0.77 (3.5 m/s), to
+    the printed digits."""
     a = json.loads((ran / "evaluate_csv.json").read_text())["summary"]
-    b = json.loads((ran / "evaluate_sbw.json").read_text())["summary"]
-    for k in ("error_before", "error_after", "ratio", "baseline_zero", "p_value"):
-        assert a[k] == pytest.approx(b[k], rel=1e-6), k
-    np.testing.assert_allclose(a["ratio_ci"], b["ratio_ci"], rtol=1e-6)
     assert a["error_before"] == pytest.approx(20.486, abs=5e-4)
     assert a["error_after"] == pytest.approx(2.159, abs=5e-4)
     assert a["ratio"] == pytest.approx(0.11, abs=5e-3)
     np.testing.assert_allclose(a["ratio_ci"], [0.08, 0.16], atol=5e-3)
-    assert a["verdict"] == b["verdict"] == "halved"
+    assert a["verdict"] == "halved"
     assert a["baseline_zero"] == pytest.approx(1.30, abs=5e-3)
     files = {f["speed"]: f for f in json.loads((ran / "evaluate_csv.json").read_text())["files"]}
     got = [(round(f["error_before"], 2), round(f["error_after"], 2))
