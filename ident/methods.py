@@ -423,11 +423,11 @@ class PemSettings(_Settings):
 
         kinds = {"kalman": "innovation gain estimated (Kalman gain of fitted noise "
                  "covariances)", "gain": "innovation gain estimated (free entries)",
-                 "none": "output error"}  # fmt: skip
+                 "none": "output error", "joint": "innovation gain estimated (Kalman gains "
+                 "of joint noise covariances)"}  # fmt: skip
         noise = self.noise_model
         if noise == "free":  # what "free" fits: per speed pem's choice, over speed joint gains
             noise = "joint" if self.speed_parameterized else FREE_NOISE_MODEL
-        kinds["joint"] = "innovation gain estimated (Kalman gains of joint noise covariances)"
         k = kinds[noise]
         return f"{what}, {k}"
 

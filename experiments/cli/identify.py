@@ -658,7 +658,8 @@ def _intervals(models: dict, speed_model, structure=None) -> dict:
             out["critical_speeds"] = critical_speed_intervals(speed_model).to_json()
         except (InputError, UntrustworthyResult) as exc:  # e.g. a tangential crossing
             out["critical_speeds"] = None
-            out["critical_speeds_note"] = str(exc)
+            out["critical_speeds_note"] = (exc.cli_message() if isinstance(exc, WithheldIntervals)
+                                           else str(exc))  # fmt: skip
     if notes:
         out["notes"] = notes
     return out

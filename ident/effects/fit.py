@@ -389,13 +389,7 @@ def fit_effects(
     # what they can mimic; their box enters as prior information (uniform on [-1, 1]:
     # variance 1/3 half-widths^2), so a direction the decays do not resolve cannot dilute it
     # beyond what the box allows
-    free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)
-    is_effect = np.arange(sol.x.size) < k
-    std = np.where(is_effect, np.inf, 0.0)
-    dof = float("inf")
-    if free.any():
-        std[free] = effect_std(sol.jac[:, free], r, sizes, np.where(is_effect, 0.0, 3.0)[free])
-        dof = effect_dof(r, sizes, int(free.sum()))
+    std, dof = bounded_std(sol, lo, hi, k, sizes)
     vals = {c.name: c.absent + c.scale * xi for c, xi in zip(cands, sol.x[:k], strict=True)}
     stds = {c.name: c.scale * si for c, si in zip(cands, std[:k], strict=True)}
     cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None
@@ -437,6 +431,44 @@ def joint_fit(
         windows = corrected(windows, res.model, True)
         res = fit_effects(model, windows, names, res.values, weave, res.calibration)
     return res
+
+
+def bounded_std(sol, lo: np.ndarray, hi: np.ndarray, k: int,
+                sizes: list[int]) -> tuple[np.ndarray, float]:  # fmt: skip
+    """Standard errors and degrees of freedom of a bounded fit of k effects then offsets.
+
+    A value on its bound is held there, not estimated: an effect (the first ``k``) on its
+    bound gets an infinite standard error (t = 0: no evidence), an offset on its box's edge
+    0.  The offsets inside the box stay in the covariance with the box as prior information
+    (uniform on [-1, 1]: variance 1/3 half-widths^2, :func:`effect_std`'s ``prior`` 3).
+
+    Parameters
+    ----------
+    sol : scipy.optimize.OptimizeResult
+        ``least_squares``' result (``x``, ``jac``, ``fun``).
+    lo, hi : ndarray
+        The bounds of ``sol.x``.
+    k : int
+        Number of effects (the rest are calibration offsets in half-widths).
+    sizes : list of int
+        Residual count of each cluster (window).
+
+    Returns
+    -------
+    std : ndarray
+        Standard errors in the fit's (scaled) units.
+    dof : float
+        Their degrees of freedom (:func:`effect_dof`; infinite with nothing free).
+    """
+    free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)
+    is_effect = np.arange(sol.x.size) < k
+    std = np.where(is_effect, np.inf, 0.0)
+    dof = float("inf")
+    if free.any():
+        r = sol.fun
+        std[free] = effect_std(sol.jac[:, free], r, sizes, np.where(is_effect, 0.0, 3.0)[free])
+        dof = effect_dof(r, sizes, int(free.sum()))
+    return std, dof
 
 
 def effect_dof(r: np.ndarray, sizes: list[int], p: int) -> float:

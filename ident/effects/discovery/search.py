@@ -65,7 +65,7 @@ from bikeid.dataset.windows import Window
 from bikeid.ident.effects.acceptance import AcceptanceRule, t_p_value
 from bikeid.ident.effects.discovery.dictionary import Term, declarations, dictionary, registered
 from bikeid.ident.effects.experiment_model import ExperimentModel
-from bikeid.ident.effects.fit import corrected, effect_dof, effect_std, output_residuals
+from bikeid.ident.effects.fit import bounded_std, corrected, output_residuals
 from bikeid.ident.effects.nominal_uncertainty import Calibration
 from bikeid.sim.blas import single_threaded_blas
 
@@ -185,16 +185,13 @@ def _fit(model: ExperimentModel, windows: list[Window], terms: list[Term], steps
         return _Fit(model, {}, {}, float(r @ r), float("inf"))
     sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
     r = sol.fun
-    free = (sol.x - lo > 1e-6) & (hi - sol.x > 1e-6)  # an offset on the box's edge is held
-    is_term = np.arange(sol.x.size) < k
-    std = np.where(is_term, np.inf, 0.0)
-    std[free] = effect_std(sol.jac[:, free], r, sizes, np.where(is_term, 0.0, 3.0)[free])
+    std, dof = bounded_std(sol, lo, hi, k, sizes)  # an offset on the box's edge is held
     coef = sol.x[:k] * sc
     labels = [t.label for t in terms]
     cal = replace(calibration, offsets=sol.x[k:].copy(), std=std[k:]) if ncal else None
     return _Fit(mk(sol.x), dict(zip(labels, map(float, coef), strict=True)),
                 dict(zip(labels, map(float, std[:k] * sc), strict=True)), float(r @ r),
-                effect_dof(r, sizes, int(free.sum())), cal)  # fmt: skip
+                dof, cal)  # fmt: skip
 
 
 def _costs(error: ErrorFunction, model: ExperimentModel, windows: list[Window]) -> np.ndarray:
@@ -457,9 +454,10 @@ def discover(
                 if row["p_value"] <= level and row["heldout_cost_ratio"] < 1 - rule.heldout_gain:
                     passing.append((f.cost + float(np.sum(val_wn)), t, f, gain))
             passing.sort(key=lambda z: z[0])
-            if cal is not None:  # kept only if significant with the offsets fitted with it
-                passing = [z for z in passing if _confirmed(stated, fit_w, kept, z, steps,
-                                                            error, cal, level, log)]  # fmt: skip
+            if cal is not None:  # the best one significant with the offsets fitted with it
+                first = next((z for z in passing if _confirmed(stated, fit_w, kept, z, steps,
+                                                               error, cal, level, log)), None)
+                passing = [] if first is None else [first]
             if not passing:
                 rounds.append({"kept": None, "terms": log})
                 break
