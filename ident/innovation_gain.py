@@ -95,6 +95,10 @@ FIXED_NOISE_STARTS = tuple(
 #: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
 JOINT_ROUNDS = 6
 JOINT_TOL = 1e-2
+#: Most doubling steps of the Riccati solution (each squares the horizon: 2^64 samples), an
+#: int64 array's entry rather than a literal, so that the compiled caller and Python calls
+#: share one machine-code version of :func:`_doubling` (a literal 64 compiles a second).
+DOUBLING_STEPS = np.array([64], dtype=np.int64)[0]
 
 
 def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:
@@ -226,7 +230,7 @@ def _gain_core(Ad, G, C, rdiag, Lf):
     GL = G @ Lf
     Q = GL @ np.ascontiguousarray(GL.T) + 1e-12 * np.eye(4)
     Gm = Ct @ np.diag(1.0 / rdiag) @ C
-    P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (Gm + Gm.T), Q, 64, 1e-14)
+    P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (Gm + Gm.T), Q, DOUBLING_STEPS, 1e-14)
     if not ok or not np.all(np.isfinite(P)):
         return np.zeros((4, L)), P, np.zeros((L, L)), np.inf, False
     Sinv = np.linalg.inv(C @ P @ Ct + np.diag(rdiag))
@@ -357,7 +361,7 @@ def filter_riccati(Ad, C, Q, R) -> np.ndarray:
     """
     G = C.T @ np.linalg.solve(R, C)
     P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (G + G.T), np.ascontiguousarray(Q),
-                      64, 1e-14)  # fmt: skip
+                      DOUBLING_STEPS, 1e-14)  # fmt: skip
     if ok and np.all(np.isfinite(P)):
         return P
     return solve_discrete_are(Ad.T, C.T, Q, R)

@@ -62,8 +62,21 @@ DEFAULT_OUTPUTS = ("phi", "phidot", "delta", "deltadot")
 INPUT = "T_delta"
 
 
-@numba.njit(cache=True)
 def prediction_kernel(Ad, Bd, K, dAd, dBd, dK, u, y, out_idx, x0, free_k, w):
+    """Prediction errors e (N, l) and the weighted sensitivities w de/dparam
+    (N, l, P + 4 l free_k + 4): :func:`_prediction_kernel` on C-contiguous float copies
+    (a view such as a transposed or sliced Ad would otherwise compile a second machine-code
+    version of the kernel, ~2 s, in every fresh environment).
+    """
+    f = np.ascontiguousarray
+    return _prediction_kernel(f(Ad, dtype=float), f(Bd, dtype=float), f(K, dtype=float),
+                              f(dAd, dtype=float), f(dBd, dtype=float), f(dK, dtype=float),
+                              f(u, dtype=float), f(y, dtype=float), f(out_idx, dtype=np.int64),
+                              f(x0, dtype=float), bool(free_k), f(w, dtype=float))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _prediction_kernel(Ad, Bd, K, dAd, dBd, dK, u, y, out_idx, x0, free_k, w):
     """Prediction errors e (N, l) and the weighted sensitivities w de/dparam
     (N, l, P + 4 l free_k + 4).
 

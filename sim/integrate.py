@@ -442,6 +442,13 @@ def _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, whee
     return _OK
 
 
+#: The wheel check of every simulated sample (:func:`_rk4_interval`'s ``wheels``), a numpy
+#: bool rather than the literal ``True``: a literal would compile a second machine-code
+#: version of ``_rk4_interval`` (~10 s in a fresh environment) beside the one the step check
+#: calls from Python with ``False``.
+WHEEL_CHECK = np.bool_(True)
+
+
 @njit(cache=True)
 def _rk4_sample(k, Tc, T0, X, OUT, OL, U, NC, q5g, p, ev, held, tau, dt, nsub, phimax, dmax, info):
     """One controller sample: advance X[k] to X[k + 1], outputs into OUT[k + 1].
@@ -453,7 +460,8 @@ def _rk4_sample(k, Tc, T0, X, OUT, OL, U, NC, q5g, p, ev, held, tau, dt, nsub, p
     rc = OL[k].copy()
     rc[0] = Tc
     nc = np.empty(2)
-    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, True, info, nc)
+    status = _rk4_interval(y, q5g, p, ev, held, rc, T0, tau, dt, nsub, phimax, dmax, WHEEL_CHECK,
+                           info, nc)  # fmt: skip
     U[k, 0] = T0
     U[k, 1] = OL[k, 1]
     U[k, 2] = OL[k, 2]

@@ -88,6 +88,11 @@ class Settings:
     mh_duration: float
 
 
+def _speed(v: float | None) -> str:
+    """A critical speed [m/s] to 3 decimals, or "none" (not in the identified range)."""
+    return "none" if v is None else f"{v:.3f}"
+
+
 def _grid(lo: float, hi: float, step: float) -> tuple[float, ...]:
     return tuple(float(round(v, 6)) for v in np.arange(lo, hi + step / 2, step))
 
@@ -264,8 +269,8 @@ def reproduce(
     t0 = stage("Chen & Dao Fig. 3: eigenvalues against speed")
     f3 = cdf.fig3(p, grid, out, zoom)
     log(
-        f"  identified v_w={f3['critical_identified']['v_w']}, v_c="
-        f"{f3['critical_identified']['v_c']} (true {f3['critical_true']['v_w']:.4f}, "
+        f"  identified v_w={_speed(f3['critical_identified']['v_w'])}, v_c="
+        f"{_speed(f3['critical_identified']['v_c'])} m/s (true {f3['critical_true']['v_w']:.4f}, "
         f"{f3['critical_true']['v_c']:.4f})"
     )
     fs = cd.fig3_summary(p, free[:n3], free[n3:])
