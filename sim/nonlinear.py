@@ -541,6 +541,36 @@ class WhippleBicycle:
             raise ValueError("pitch Newton iteration failed: state too far from upright")
         return ydot, float(T_R)
 
+    def ode(self, inputs=(0.0, 0.0, 0.0, 0.0), mode: str = "coast", effects=None):
+        """The right-hand side ``f(t, y) -> dy/dt`` for ``scipy.integrate.solve_ivp``, with
+        constant inputs: :meth:`rhs`'s derivative with its checks done once (a Poincare
+        map calls it ~10^5 times; the per-call checks cost three times the derivative).
+
+        Parameters
+        ----------
+        inputs : (4,) array_like, optional
+            [T_delta, T_phi, F, T_R] [N m, N m, N, N m], held; default zero.
+        mode : {"coast", "held"}, optional
+            Speed mode (:meth:`rhs`). Default "coast".
+        effects : sequence, optional
+            Plant-side :mod:`sim.effects` objects.
+
+        Returns
+        -------
+        callable
+            ``f(t, y)`` -> (10,) ndarray, dy/dt in :data:`STATE` order (t is unused); it
+            raises ValueError where :meth:`rhs` does (pitch Newton iteration failed).
+        """
+        held, r, ev, q5, p = _mode(mode), _inputs(inputs), plant_vector(effects), self._q5, self.p
+
+        def f(_t: float, y: np.ndarray) -> np.ndarray:
+            ydot = np.empty(10)
+            if not math.isfinite(rhs(np.asarray(y, float), q5, p, r, ev, held, ydot)):
+                raise ValueError("pitch Newton iteration failed: state too far from upright")
+            return ydot
+
+        return f
+
     def contact_forces(
         self,
         y: np.ndarray,

@@ -84,9 +84,7 @@ def poincare_map(
     """
     from scipy.integrate import solve_ivp
 
-    def f(_t, y):
-        return bike.rhs(y)[0]
-
+    f = bike.ode()
     def cross(_t, y):
         return y[7]
 
@@ -333,7 +331,7 @@ def orbit_profile(
     phi, delta, deltadot, v = (float(x) for x in section_point)
     y0 = bike.state(v, math.radians(phi), math.radians(delta), 0.0, math.radians(deltadot))
     s = solve_ivp(
-        lambda _t, y: bike.rhs(y)[0], (0.0, period), y0, method="DOP853", rtol=RTOL,
+        bike.ode(), (0.0, period), y0, method="DOP853", rtol=RTOL,
         atol=RTOL, dense_output=True,
     )  # fmt: skip
     if s.status != 0:

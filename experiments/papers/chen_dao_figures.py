@@ -287,13 +287,15 @@ def fig7(
     return res
 
 
-def _coast_entry(args: tuple) -> tuple[dict, dict]:
-    """One coasting run's analysis and summary entry (with its Floquet multipliers when
-    periodic); picklable worker: (parameters, initial condition, duration [s])."""
+def _coast_entry(args: tuple) -> tuple[dict, dict, Any]:
+    """One coasting run's analysis, summary entry (with its Floquet multipliers when
+    periodic) and, when asked, the run itself (for the figures); picklable worker:
+    (parameters, initial condition, duration [s], keep the run)."""
 
-    p, ic, duration = args
-    r = lc.periodicity(lc.coast(p, ic, duration), ic.label)
-    return r.as_dict(), lc.summary_entry(p, ic, r)
+    p, ic, duration, keep = args
+    traj = lc.coast(p, ic, duration)
+    r = lc.periodicity(traj, ic.label)
+    return r.as_dict(), lc.summary_entry(p, ic, r), traj if keep else None
 
 
 def limit_cycle_study(
@@ -343,12 +345,13 @@ def limit_cycle_study(
     # every run and its exact mirror image in one pool (a mirror is only kept for a
     # periodic original; the mirrors of falls are short runs)
     mirrors = [lc.mirrored(ic) for ic in conds]
-    done = map_jobs(_coast_entry, [(p, ic, duration) for ic in conds + mirrors], workers, dask)
+    jobs = [(p, ic, duration, True) for ic in conds] + [(p, ic, duration, False) for ic in mirrors]
+    done = map_jobs(_coast_entry, jobs, workers, dask)
     by_label = {ic.label: d for ic, d in zip(conds + mirrors, done, strict=True)}
     for name, cs in figs:
         res[name] = [by_label[ic.label][0] for ic in cs]
         res["limit_cycles"] += [dict(by_label[ic.label][1], figure=name) for ic in cs]
-        trajs = [lc.coast(p, ic, duration) for ic in cs]  # for the figures (deterministic)
+        trajs = [by_label[ic.label][2] for ic in cs]  # the runs the pool analysed
         labels = [ic.label for ic in cs]
         lc.plot_phase_portraits(
             trajs,

@@ -115,6 +115,30 @@ def test_basu_mandal_state_rhs(bike):
     np.testing.assert_allclose(ydot[6], BM_RATES["u8"], atol=1e-12)
 
 
+def test_ode_is_rhs_with_its_checks_done_once(bike):
+    """``bike.ode(...)`` (the solve_ivp right-hand side of the Poincare maps) returns the
+    same derivative as ``bike.rhs`` bit for bit (the same compiled function, the same
+    inputs), at the Basu-Mandal state and with inputs, held speed and an effect; it refuses
+    the bad inputs ``rhs`` refuses and raises where the pitch iteration fails, as ``rhs``
+    does."""
+    y = bike.state(v=-0.3 * BM_U6, phi=BM_Q4, delta=BM_Q7, phidot=BM_U4, deltadot=BM_U7)
+    cases = [{}, {"inputs": (0.5, -0.2, 3.0, 0.1)}, {"mode": "held"},
+             {"effects": [SteerDamping(0.4)], "inputs": (1.0, 0.0, 0.0, 0.0)}]  # fmt: skip
+    for kw in cases:
+        assert np.array_equal(bike.ode(**kw)(0.0, y), bike.rhs(y, **kw)[0]), kw
+    with pytest.raises(ValueError, match="4 finite numbers"):
+        bike.ode(inputs=(1.0, float("nan"), 0.0, 0.0))
+    with pytest.raises(ValueError, match="speed mode"):
+        bike.ode(mode="fast")
+    far = y.copy()
+    far[3], far[5] = 1.55, 1.5  # roll 89 deg, steer 86 deg: no pitch closes the loop
+    with pytest.raises(ValueError, match="pitch") as from_rhs:
+        WhippleBicycle(benchmark()).rhs(far)  # fresh bicycles: a failure spoils the warm start
+    with pytest.raises(ValueError, match="pitch") as from_ode:
+        WhippleBicycle(benchmark()).ode()(0.0, far)
+    assert str(from_ode.value) == str(from_rhs.value)
+
+
 # -- linearization against Meijaard (2007) Appendix A ----------------------------------------
 LIN_TOL = 1e-8  # brief; 4th-order differences with step 1e-3 leave ~1e-10 (see linearize)
 
