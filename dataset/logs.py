@@ -132,6 +132,10 @@ class LogOptions:
     bicycle : str, path or BicycleParameters or None
         The nominal bicycle; when given, the relative signs of roll, steer and torque are
         checked against its equations of motion (:mod:`bikeid.dataset.signs`).
+    truth : bool
+        bikeid run files: also read the simulated runs' noise-free signals (``Run.truth``;
+        default); False leaves them out (``validate`` does: it never reads them, and they
+        are over half of a sweep's memory).
     """
 
     format: str = "bikeid"
@@ -149,6 +153,7 @@ class LogOptions:
     min_speed: float = 0.5
     input: str = "T_delta"
     bicycle: Any = field(default=None, compare=False)
+    truth: bool = True
 
     def __post_init__(self) -> None:
         if self.format not in FORMATS:
@@ -332,7 +337,7 @@ def _read(files: Sequence[Any], o: LogOptions) -> tuple[list[Run], list[str]]:
 
         runs, sources = [], []
         for f in files:
-            got = read_runs(f)
+            got = read_runs(f, truth=o.truth)
             runs += got
             names = list_runs(f) if len(got) > 1 else [None]
             sources += [f"{f}: run {n!r}" if n else str(f) for n in names]

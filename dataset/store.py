@@ -416,7 +416,7 @@ def _read_array(path, gname: str, ds, n: int | None) -> np.ndarray:
     return arr
 
 
-def _read_group(path, g, gname: str) -> Run:
+def _read_group(path, g, gname: str, truth: bool = True) -> Run:
     where = f"{path}: run {gname!r}"
     try:
         meta_text = g.attrs["meta"]
@@ -458,14 +458,14 @@ def _read_group(path, g, gname: str) -> Run:
             f"{where} is missing required signal datasets {missing} (required: {list(REQUIRED)})"
         )
     signals = {k: _read_array(path, gname, ds, n) for k, ds in g["signals"].items()}
-    truth = None
-    if "truth" in g:
-        truth = {k: _read_array(path, gname, ds, n) for k, ds in g["truth"].items()}
+    true = None
+    if truth and "truth" in g:
+        true = {k: _read_array(path, gname, ds, n) for k, ds in g["truth"].items()}
     extra = {}
     for k in ("dither", "reference"):
         extra[k] = _read_array(path, gname, g[k], n) if k in g else None
     try:
-        run = Run(t=t, signals=signals, truth=truth, meta=meta, **extra)
+        run = Run(t=t, signals=signals, truth=true, meta=meta, **extra)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     columns = {k: f"signals/{k}" for k in signals}
@@ -493,7 +493,7 @@ def _check_time_base(where: str, t: np.ndarray) -> None:
         )
 
 
-def _read_damaged(path, f, name: str) -> Run:
+def _read_damaged(path, f, name: str, truth: bool = True) -> Run:
     """:func:`_read_group` of run ``name``, with h5py's errors on damaged objects (KeyError,
     RuntimeError, OSError, TypeError, UnicodeDecodeError) turned into a ValueError naming the
     file and the run."""
@@ -502,7 +502,7 @@ def _read_damaged(path, f, name: str) -> Run:
         raise ValueError(f"{path}: run {name!r} is a dataset, not a group; the file is "
                          "malformed: write it again with bikeid")  # fmt: skip
     try:
-        return _read_group(path, g, name)
+        return _read_group(path, g, name, truth)
     except ValueError:
         raise
     except (OSError, RuntimeError, KeyError, TypeError, UnicodeDecodeError,
@@ -624,7 +624,9 @@ def read_run(path: str | Path, name: str) -> Run:
         return _read_damaged(path, f, name)
 
 
-def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]:
+def read_runs(
+    path: str | Path, names: Sequence[str] | None = None, truth: bool = True
+) -> list[Run]:
     """All runs in ``path`` (or those in ``names``), in file order, each validated.
 
     Parameters
@@ -633,6 +635,10 @@ def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]
         A run file written by :func:`write_runs` or :func:`copy_runs`.
     names : sequence of str, optional
         Runs to read, in this order; default all, in file order.
+    truth : bool, optional
+        Also read the noise-free signals of simulated runs (default); False leaves
+        ``Run.truth`` None (validation never reads them: a sweep's run holds 14 of them
+        beside 9 measured signals).
 
     Returns
     -------
@@ -652,7 +658,7 @@ def read_runs(path: str | Path, names: Sequence[str] | None = None) -> list[Run]
     with _open(path) as f:
         if names is None:
             names = list_runs(path)
-        return [_read_damaged(path, f, n) for n in names]
+        return [_read_damaged(path, f, n, truth) for n in names]
 
 
 # -- CSV ------------------------------------------------------------------------------

@@ -13,6 +13,7 @@ there; ``--json`` prints the JSON instead of the table.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from bikeid.experiments.cli.args import dump_json, integer, number
@@ -305,7 +306,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
     check_input_file(args.model, "--model")
     saved = dict(read_model_file(args.model).settings or {})
     taken = reuse_settings(args, saved)
-    options = log_options(args, bicycle=saved.get("bicycle"))  # a grey-box/direct model's
+    # a grey-box/direct model's bicycle; without the simulated runs' noise-free signals,
+    # which validation never reads (over half of a sweep's memory)
+    options = replace(log_options(args, bicycle=saved.get("bicycle")), truth=False)
     data_files = files_of(args.file, options)
     check_outputs([out], [args.model, *data_files])
     check_distinct_inputs(data_files)
@@ -325,9 +328,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
                "settings_from_model": taken, **report.to_json()}  # fmt: skip
         note = _speed_note(args.model, report.speeds)
         if note:
-            import dataclasses
-
-            report = dataclasses.replace(report, notes=(*report.notes, note))
+            report = replace(report, notes=(*report.notes, note))
             doc["notes"] = [*doc.get("notes", []), note]
         written = []
         if out is not None:

@@ -102,6 +102,27 @@ def test_round_trip_bit_identical(tmp_path):
         assert json.loads(f["runs/a"].attrs["meta"])["speed"] == 4.5
 
 
+def test_reading_without_the_truth_leaves_everything_else_bit_identical(tmp_path):
+    """``read_runs(path, truth=False)`` and ``load_runs(files, LogOptions(truth=False))``
+    (what ``validate`` reads with) give the same runs as a full read with ``truth`` None:
+    every measured signal, the dither, the reference and the metadata bit for bit; the
+    default still reads the truth."""
+    from bikeid.dataset.logs import LogOptions, load_runs
+
+    runs = [make_run(seed=s) for s in range(2)]
+    path = write_runs(tmp_path / "r.h5", runs, names=["a", "b"])
+    for run, lean, full in zip(runs, read_runs(path, truth=False), read_runs(path), strict=True):
+        assert lean.truth is None and full.truth is not None
+        assert_identical(full, run)
+        assert_identical(lean, Run(t=run.t, signals=run.signals, truth=None, dither=run.dither,
+                                   reference=run.reference, meta=run.meta))  # fmt: skip
+    loaded = load_runs([path], LogOptions(truth=False), note=lambda msg: None)
+    assert [r.truth for r in loaded] == [None, None]
+    for a, b in zip(loaded, read_runs(path, truth=False), strict=True):
+        assert_identical(a, b)
+    assert all(r.truth is not None for r in load_runs([path], note=lambda msg: None))
+
+
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 # inside every bound of sim.conventions.PLAUSIBLE (v >= -0.5 m/s, |angles| < pi/2 rad), with
 # subnormals and -0.0: the reader refuses values outside (tests/dataset/test_plausibility.py)
