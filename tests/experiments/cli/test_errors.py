@@ -403,7 +403,7 @@ def test_unidentifiable_is_exit_4(monkeypatch, capsys, tmp_path):
     from bikeid.dataset.linear_loop import simulate
 
     run = simulate(benchmark(), 5.0, duration=5.0)  # dithered: passes the data checks
-    monkeypatch.setattr(store, "read_runs", lambda path: [run])
+    monkeypatch.setattr(store, "read_runs", lambda path, truth=True: [run])
     import bikeid.ident.signals as signals
 
     monkeypatch.setattr(signals, "prepare", lambda run, **kw: run)
