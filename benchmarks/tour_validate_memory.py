@@ -56,6 +56,9 @@ def main() -> int:
         p = subprocess.Popen(cmd, cwd=work, stdout=out, stderr=subprocess.STDOUT)
         _, status, usage = os.wait4(p.pid, 0)
     code = os.waitstatus_to_exitcode(status)
+    if code != 0:  # its one-line error, as the steps above print theirs
+        lines = (work / "validate.out").read_text().strip().splitlines()
+        print(lines[-1] if lines else "(no output)", file=sys.stderr)
     print(f"bikeid validate: exit {code}, peak RSS {usage.ru_maxrss / 1024:.0f} MB, CPU "
           f"{usage.ru_utime:.1f} s user")  # fmt: skip
     return 0 if code == 0 else 1

@@ -458,14 +458,14 @@ def _read_group(path, g, gname: str, truth: bool = True) -> Run:
             f"{where} is missing required signal datasets {missing} (required: {list(REQUIRED)})"
         )
     signals = {k: _read_array(path, gname, ds, n) for k, ds in g["signals"].items()}
-    true = None
+    noise_free = None
     if truth and "truth" in g:
-        true = {k: _read_array(path, gname, ds, n) for k, ds in g["truth"].items()}
+        noise_free = {k: _read_array(path, gname, ds, n) for k, ds in g["truth"].items()}
     extra = {}
     for k in ("dither", "reference"):
         extra[k] = _read_array(path, gname, g[k], n) if k in g else None
     try:
-        run = Run(t=t, signals=signals, truth=true, meta=meta, **extra)
+        run = Run(t=t, signals=signals, truth=noise_free, meta=meta, **extra)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     columns = {k: f"signals/{k}" for k in signals}

@@ -74,9 +74,9 @@ numpydoc_validation_checks: set[str] = set()  # tests/test_docstrings.py is the 
 def _load_numpydoc_template_once() -> None:
     """numpydoc (1.x) builds a new Jinja environment for every docstring it renders and
     compiles its one template (``numpydoc_docstring.rst``) again each time: ~3,900 compiles
-    in this site, a quarter of the build's CPU (62 -> 48 s measured). Within one build the
-    template a name resolves to is the same, so each is compiled once and reused; the pages
-    are unchanged (the same template renders them)."""
+    in this site, a quarter of the build's CPU (62 -> 48 s, one build each on the 2-core
+    VM). Within one build the template a name resolves to is the same, so each is compiled
+    once and reused; the pages are unchanged (the same template renders them)."""
     import numpydoc.docscrape_sphinx as ds
 
     compiled: dict[str, object] = {}

@@ -95,10 +95,10 @@ FIXED_NOISE_STARTS = tuple(
 #: (in residual variances: moves the estimate by about 0.1 standard error or less) ends it.
 JOINT_ROUNDS = 6
 JOINT_TOL = 1e-2
-#: Most doubling steps of the Riccati solution (each squares the horizon: 2^64 samples), an
-#: int64 array's entry rather than a literal, so that the compiled caller and Python calls
-#: share one machine-code version of :func:`_doubling` (a literal 64 compiles a second).
-DOUBLING_STEPS = np.array([64], dtype=np.int64)[0]
+#: Most doubling steps of the Riccati solution (each squares the horizon: 2^64 samples), a
+#: numpy integer rather than a literal, so that the compiled caller and Python calls share
+#: one machine-code version of :func:`_doubling` (a literal 64 compiles a second).
+DOUBLING_STEPS = np.int64(64)
 
 
 def kalman_gain_of(theta, dt, C, rdiag, eta, ref) -> np.ndarray:

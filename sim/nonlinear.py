@@ -533,13 +533,8 @@ class WhippleBicycle:
         ValueError
             If ``mode`` or ``inputs`` is invalid or the pitch Newton iteration fails.
         """
-        held = _mode(mode)
-        ydot = np.empty(10)
-        ev = plant_vector(effects)
-        T_R = rhs(np.asarray(y, float), self._q5, self.p, _inputs(inputs), ev, held, ydot)
-        if not math.isfinite(T_R):
-            raise ValueError("pitch Newton iteration failed: state too far from upright")
-        return ydot, float(T_R)
+        return _checked_rhs(y, self._q5, self.p, _inputs(inputs), plant_vector(effects),
+                            _mode(mode))  # fmt: skip
 
     def ode(self, inputs=(0.0, 0.0, 0.0, 0.0), mode: str = "coast", effects=None):
         """The right-hand side ``f(t, y) -> dy/dt`` for ``scipy.integrate.solve_ivp``, with
@@ -564,10 +559,7 @@ class WhippleBicycle:
         held, r, ev, q5, p = _mode(mode), _inputs(inputs), plant_vector(effects), self._q5, self.p
 
         def f(_t: float, y: np.ndarray) -> np.ndarray:
-            ydot = np.empty(10)
-            if not math.isfinite(rhs(np.asarray(y, float), q5, p, r, ev, held, ydot)):
-                raise ValueError("pitch Newton iteration failed: state too far from upright")
-            return ydot
+            return _checked_rhs(y, q5, p, r, ev, held)[0]
 
         return f
 
@@ -617,11 +609,9 @@ class WhippleBicycle:
         ydot = np.empty(10)
         nf = np.empty(2)
         ev = plant_vector(effects)
-        T_R = rhs_contact(
+        _pitch_solved(rhs_contact(
             np.asarray(y, float), self._q5, self.p, _inputs(inputs), ev, held, ydot, nf
-        )
-        if not math.isfinite(T_R):
-            raise ValueError("pitch Newton iteration failed: state too far from upright")
+        ))  # fmt: skip
         return float(nf[0]), float(nf[1])
 
     def all_speeds(
@@ -847,6 +837,21 @@ def _mode(mode: str) -> bool:
     if mode not in MODES:
         raise ValueError(f"speed mode {mode!r} unknown; use 'coast' or 'held'")
     return mode == "held"
+
+
+def _pitch_solved(T_R: float) -> float:
+    """``T_R`` from a compiled right-hand side, or ValueError where its pitch Newton
+    iteration failed (NaN)."""
+    if not math.isfinite(T_R):
+        raise ValueError("pitch Newton iteration failed: state too far from upright")
+    return float(T_R)
+
+
+def _checked_rhs(y, q5, p, r, ev, held) -> tuple[np.ndarray, float]:
+    """(dy/dt, T_R) of the compiled :func:`rhs` with checked arguments (``r`` from
+    :func:`_inputs`, ``held`` from :func:`_mode`); ValueError where the pitch fails."""
+    ydot = np.empty(10)
+    return ydot, _pitch_solved(rhs(np.asarray(y, float), q5, p, r, ev, held, ydot))
 
 
 def _inputs(inputs) -> np.ndarray:

@@ -85,6 +85,7 @@ def poincare_map(
     from scipy.integrate import solve_ivp
 
     f = bike.ode()
+
     def cross(_t, y):
         return y[7]
 

@@ -99,3 +99,26 @@ def test_a_failed_alternation_keeps_the_joint_fit(monkeypatch):
     assert any("alternating refinement stopped" in n for n in kept.notes), kept.notes
     Ad, _, C, K = kept.predictor()
     assert np.max(np.abs(np.linalg.eigvals(Ad - K @ C))) < 1.0
+
+
+def test_prediction_kernel_takes_any_layout_and_compiles_one_version():
+    """The predictor kernel called with transposed (Fortran-order) and sliced views gives
+    the same errors and sensitivities, bit for bit, as with C-contiguous copies, and numba
+    holds only C-contiguous versions of it (a view passed straight through would compile an
+    'A'-layout version, ~2 s, in every fresh environment)."""
+    from bikeid.ident import predictor
+
+    rng = np.random.default_rng(0)
+    Ad = np.asfortranarray(0.2 * rng.standard_normal((4, 4)))  # a transposed-like view
+    Bd = rng.standard_normal((4, 3))[:, 1]  # a strided column
+    K = 0.1 * rng.standard_normal((4, 2))
+    dAd, dBd, dK = rng.standard_normal((2, 4, 4)), rng.standard_normal((2, 4)), np.zeros((0, 4, 2))
+    u, y = rng.standard_normal(50), rng.standard_normal((50, 2))
+    idx, x0, w = np.array([0, 1]), np.zeros(4), np.ones(2)
+    E, J = predictor.prediction_kernel(Ad, Bd, K, dAd, dBd, dK, u, y, idx, x0, True, w)
+    c = np.ascontiguousarray
+    E0, J0 = predictor._prediction_kernel(c(Ad), c(Bd), K, dAd, dBd, dK, u, y, idx, x0, True, w)
+    assert np.array_equal(E, E0) and np.array_equal(J, J0)
+    layouts = {a.layout for sig in predictor._prediction_kernel.signatures for a in sig
+               if hasattr(a, "layout")}  # fmt: skip
+    assert layouts == {"C"}, predictor._prediction_kernel.signatures
