@@ -19,12 +19,16 @@ beta = -M^-1 K2, gamma = -M^-1 C1.
 
 from __future__ import annotations
 
-import control
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from bikeid.sim.conventions import LINEAR_STATE
 from bikeid.sim.errors import UntrustworthyResult
 from bikeid.sim.linear import CanonicalMatrices
+
+if TYPE_CHECKING:
+    import control
 
 __all__ = [
     "C_OUT",
@@ -218,6 +222,8 @@ def to_bikeid_order(sys: control.StateSpace) -> control.StateSpace:
     A, B, C, D = (np.asarray(m) for m in (sys.A, sys.B, sys.C, sys.D))
     if A.shape != (4, 4):
         raise ValueError("to_bikeid_order expects a 4-state canonical model")
+    import control
+
     return control.ss(PERM @ A @ PERM.T, PERM @ B, C @ PERM.T, D, sys.dt,
                       inputs=sys.input_labels, outputs=sys.output_labels,
                       states=list(LINEAR_STATE))  # fmt: skip

@@ -36,9 +36,8 @@ A subclass provides ``_matrices_at(speed) -> (A, columns)`` (A in bikeid's state
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
-import control
 import numpy as np
 
 from bikeid.sim.conventions import CANONICAL_STATE, LINEAR_STATE
@@ -53,6 +52,9 @@ from bikeid.sim.linear import (
     mode_names_at,
 )
 from bikeid.sim.sampling import zoh
+
+if TYPE_CHECKING:  # python-control is loaded where a StateSpace is made (it imports
+    import control  # matplotlib: ~2 s that the commands without one need not pay)
 
 __all__ = [
     "EIGENVALUE_ORDER",
@@ -300,6 +302,8 @@ class LinearModel:
         outs = [s for s in states if s in self.measured_states]
         C = np.eye(4)[[states.index(o) for o in outs]]
         D = np.zeros((len(outs), len(names)))
+        import control
+
         if dt is None:
             return control.ss(A, B, C, D, inputs=list(names), outputs=outs, states=list(states))
         if not (np.isfinite(dt) and dt > 0):

@@ -32,10 +32,11 @@ trial studies report.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import control
 import numba
 import numpy as np
 from scipy.stats import binomtest
@@ -45,6 +46,9 @@ from bikeid.ident.direct import DirectResult, vaf_moore, vaf_variance
 from bikeid.ident.linear_model import LinearModel, SpeedDependentModel
 from bikeid.sim.errors import InputError, UntrustworthyResult
 from bikeid.sim.sampling import zoh
+
+if TYPE_CHECKING:
+    import control
 
 __all__ = [
     "CompareResult",
@@ -144,8 +148,9 @@ def sampled_model(model, dt: float, v: float | None = None):
             )
         Ad, Bd, C, K = model.predictor()
         return Ad, Bd, C, K, tuple(model.outputs), ("T_delta",)
-    if isinstance(model, control.StateSpace):
-        if not control.isctime(model):
+    ctl = sys.modules.get("control")  # a StateSpace exists only once python-control is loaded
+    if ctl is not None and isinstance(model, ctl.StateSpace):
+        if not ctl.isctime(model):
             raise ValueError("pass a continuous-time StateSpace (it is sampled at the data's dt)")
         A, B, C = (np.asarray(m, float) for m in (model.A, model.B, model.C))
         if np.any(np.asarray(model.D)):
@@ -608,6 +613,8 @@ def poles(model, v: float | None = None) -> np.ndarray:
     (n,) complex ndarray
         Poles [1/s] (independent of the state order).
     """
+    import control
+
     return np.asarray(control.poles(_ss(model, v)))
 
 
@@ -635,6 +642,8 @@ def zeros(model, output: str = "phi", input: str = "T_delta", v: float | None = 
     KeyError
         If the model has no such (output, input) channel.
     """
+    import control
+
     return np.asarray(control.zeros(transfer_functions(model, v)[(output, input)]))
 
 
@@ -657,11 +666,13 @@ def transfer_functions(
         rad/(N m)), numerator leading coefficients below 1e-9 of its largest dropped as
         round-off.
     """
-    sys = _ss(model, v)
+    import control
+
+    ss = _ss(model, v)
     out = {}
-    for i, o in enumerate(sys.output_labels):
-        for j, u in enumerate(sys.input_labels):
-            tf = control.ss2tf(sys[i, j])
+    for i, o in enumerate(ss.output_labels):
+        for j, u in enumerate(ss.input_labels):
+            tf = control.ss2tf(ss[i, j])
             num, den = np.asarray(tf.num[0][0], float), np.asarray(tf.den[0][0], float)
             scale = np.abs(num).max() if num.size else 0.0
             lead = np.argmax(np.abs(num) > 1e-9 * scale) if scale > 0 else len(num) - 1
