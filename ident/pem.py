@@ -1044,6 +1044,7 @@ def _joint_kalman(runs, data, mapping, per, params, w, outputs, g, max_nfev, met
         sol = solve(prob, z, max_nfev, method)
         z, nfev = sol.x.copy(), nfev + sol.nfev
         weights[0] = _weights(prob)
+    del prob  # its Jacobian blocks (N L x 17 per run) are not needed beside alternate's
     z, more, stopped, _ = alternate(
         problem, z, n, max_nfev, method, 1,
         lambda prob: weights.__setitem__(0, _weights(prob)),
