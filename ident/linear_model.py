@@ -54,7 +54,7 @@ from bikeid.sim.linear import (
 from bikeid.sim.sampling import zoh
 
 if TYPE_CHECKING:  # python-control is loaded where a StateSpace is made (it imports
-    import control  # matplotlib: ~2 s that the commands without one need not pay)
+    import control  # matplotlib: ~0.8 s that the commands without one need not pay)
 
 __all__ = [
     "EIGENVALUE_ORDER",
