@@ -22,8 +22,8 @@ pole is its mirror image inside the unit circle as the process noise vanishes). 
 solve for the model parameters and eta together, then alternate between the two
 (:func:`alternate`), because where the process noise is negligible K hardly depends on
 eta, and on those near-zero Jacobian columns a joint Levenberg-Marquardt step can stall
-short of the optimum (measured: 65 units of -2 log-likelihood on a low-noise two-speed
-set), while alternating alone converges only linearly (docs/performance.md).
+short of the optimum (a low-noise two-speed set, docs/performance.md), while alternating
+alone converges only linearly.
 A noise standard deviation whose lower bound (:data:`NOISE_LOG_RANGE`) the data cannot
 reject is put on it and the covariance is taken conditional on it (:func:`settle_bounds`).
 """

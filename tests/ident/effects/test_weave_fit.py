@@ -16,8 +16,8 @@ from bikeid.ident.effects.synthetic_decays import synthetic_windows
 
 
 def _decays():
-    """Decays of a stable and an unstable speed, with noise, and one without an
-    oscillation (a pure exponential: the fit runs to a bound)."""
+    """Decays of a stable and an unstable speed, with noise, and one that is mostly not an
+    oscillation (two exponentials under a small 40 rad/s ripple)."""
     ws = synthetic_windows(ExperimentModel(), [1.5, 4.5], 2, seed=3)
     t = np.arange(ws[0].n) * 0.01
     flat = replace(ws[0], delta=np.exp(-3.0 * t) + 1e-3 * np.sin(40 * t),
