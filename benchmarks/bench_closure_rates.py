@@ -12,7 +12,10 @@ bicycleparameters, perturbed within the stated uncertainty) unless ``--truth`` s
 otherwise.  Prints each trial's outcome (with the plant test's out-of-fold cost ratio
 nonlinear / linear, its p-value and whether the two selections agree, and the nominal cost
 ratio before any effect) and, per effect, the rate of right answers with its
-exact (Clopper-Pearson) 95 % interval; ``--json`` writes all rows and the summary.
+exact (Clopper-Pearson) 95 % interval (:func:`blind_trials.closure_rates`: a library effect
+named alone with its value within 35 %; an outside effect answered ``unexplained`` alone,
+counted only when every no-effect log of the run said nothing; no effect: nothing said);
+``--json`` writes all rows and the summary.
 
 Usage::
 
@@ -32,17 +35,17 @@ import argparse
 import json
 import tempfile
 import time
-from collections import Counter
 from pathlib import Path
 
 from bikeid.experiments.measured.blind_trials import (
     CLOSURE_EFFECTS,
     LOG_OUTCOMES,
     PLANTS,
+    VALUE_TOLERANCE,
+    closure_rates,
     draw_blind_trials,
     run_log_trial,
 )
-from bikeid.experiments.measured.effect_trials import rate
 from bikeid.experiments.parallel import imap
 
 
@@ -69,28 +72,6 @@ def _job(args: tuple) -> dict:
     row["plant_agree"] = None if check is None else check["agree"]
     row["cpu_s"] = time.process_time() - t0
     return row
-
-
-def _counts(rows: list[dict]) -> dict:
-    """Right answers with their exact 95 % interval (:func:`effect_trials.rate`), outcomes."""
-    r = rate(rows, "right")
-    return {"right": r["k"], "n": r["n"], "ci95": r["ci95"],
-            "outcomes": dict(Counter(row["outcome"] for row in rows))}  # fmt: skip
-
-
-def summarize(rows: list[dict]) -> dict:
-    """Per hidden effect: outcomes, right answers with 95 % intervals; and over all."""
-    out = {}
-    for eff in CLOSURE_EFFECTS:
-        rs = [r for r in rows if r["effect"] == eff]
-        if not rs:
-            continue
-        out[eff] = _counts(rs)
-        if rs and rs[0]["kind"] == "library":
-            out[eff]["value_ok"] = sum(bool(r["value_ok"]) for r in rs)
-            out[eff]["named_first"] = rate(rs, "named_first")
-    out["all"] = _counts(rows)
-    return out
 
 
 def main() -> None:
@@ -130,15 +111,19 @@ def main() -> None:
         print(f"seed-trial {r['seed']} {r['effect']:22s} {r['outcome']:18s} verdict "
               f"{r['verdict']} plant {r['plant']}{after} nominal ratio {ratio} cpu "
               f"{r['cpu_s']:.1f} s", flush=True)  # fmt: skip
-    s = summarize(rows)
+    s = closure_rates(rows)
     for eff, v in s.items():
+        if not isinstance(v, dict) or "ci95" not in v:
+            continue
         lo, hi = v["ci95"]
         extra = "" if "value_ok" not in v else (
-            f", named first alone {v['named_first']['k']}/{v['named_first']['n']} (95 % CI "
-            f"{v['named_first']['ci95'][0]:.2f}-{v['named_first']['ci95'][1]:.2f}), value "
-            f"within 20 %: {v['value_ok']}")
+            f", named first alone {v['named_first']}/{v['n']}, value within "
+            f"{VALUE_TOLERANCE:.0%}: {v['value_ok']}/{v['n']}")
         print(f"{eff:22s} right {v['right']}/{v['n']} (95 % CI {lo:.2f}-{hi:.2f}); "
               f"outcomes {v['outcomes']}{extra}")
+    sn = s["silent_none"]
+    print(f"no-effect logs silent {sn['k']}/{sn['n']}: `unexplained` on outside effects is "
+          f"{'' if s['unexplained_is_evidence'] else 'not '}counted as evidence")
     print(f"outcomes: {', '.join(LOG_OUTCOMES)}; CPU {sum(r['cpu_s'] for r in rows):.0f} s")
     if args.json:
         with open(args.json, "w") as fh:

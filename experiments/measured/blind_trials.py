@@ -53,6 +53,7 @@ import io
 import json
 import math
 import time
+from collections import Counter
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -96,10 +97,12 @@ __all__ = [
     "LOG_OUTCOMES",
     "LOG_COLUMNS",
     "TRAIL_UNCERTAINTY",
+    "VALUE_TOLERANCE",
     "BlindTrial",
     "Nuisance",
     "CLASSES",
     "band_edge_nuisance",
+    "closure_rates",
     "draw_blind_classes",
     "draw_blind_trials",
     "draw_term_trials",
@@ -1160,18 +1163,23 @@ CLOSURE_EFFECTS = ("steer_viscous_damping", "input_delay", "command_gain",
 #: The outcomes of :func:`score_log_fit`, one per trial.
 LOG_OUTCOMES = ("right", "right_in_set", "right_with_extras", "wrong_first", "unexplained",
                 "nothing", "plant_uncertain", "refused")
+#: A named library effect's value is right within this fraction of the injected value's
+#: deviation from absent (the closure's magnitude criterion: 35 %).
+VALUE_TOLERANCE = 0.35
 
 
 def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
     """The outcome of ``bikeid measured fit`` on a trial's logs, as the closure asks.
 
-    Library effect: ``right`` when the accepted effects are the hidden one alone (first,
-    nothing extra, ``unexplained`` not said); ``right_in_set`` when one effect alone is
-    accepted and the fit reported the hidden one in its ambiguity set (the data cannot tell
-    them apart, and the fit said so: counted right, as the closure asks; ``named_first``
-    keeps the strict count); outside-library effect: ``right`` when no
-    effect is accepted and the verdict is ``unexplained``; no effect: ``right`` when no effect
-    is accepted (``unexplained`` may be said: the stated bicycle's residual mismatch).
+    Library effect: outcome ``right`` when the accepted effects are the hidden one alone
+    (first, nothing extra, ``unexplained`` not said), and the trial is right when its value
+    is also within :data:`VALUE_TOLERANCE` of the injected value's deviation from absent;
+    ``right_in_set`` when one effect alone is accepted and the fit reported the hidden one in
+    its ambiguity set (the data cannot tell them apart, and the fit said so; reported, not
+    counted right: the hidden effect's magnitude is not estimated); outside-library effect:
+    right when no effect is accepted and the verdict is ``unexplained`` (evidence only where
+    the same generator's no-effect logs stay silent: :func:`closure_rates`); no effect: right
+    when nothing is said (no effect and no ``unexplained``).
 
     Parameters
     ----------
@@ -1186,7 +1194,7 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
     dict
         ``kind``, ``outcome`` (one of :data:`LOG_OUTCOMES`), ``right`` (bool), ``verdict``,
         ``effects`` (name -> value), ``value_ok`` (library: the hidden effect's value within
-        20 % of its deviation from absent, None otherwise), ``in_set`` (library: the hidden
+        35 % of its deviation from absent, None otherwise), ``in_set`` (library: the hidden
         effect in the ambiguity set of an accepted effect, as the fit reported it),
         ``named_first`` (library: the hidden effect named first and alone, the strict
         count),
@@ -1211,7 +1219,7 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
         es = EFFECTS[trial.effect]
         x = eff.get(trial.effect)
         out["value_ok"] = bool(x is not None and abs(x - trial.value)
-                               <= 0.2 * abs(trial.value - es.absent))  # fmt: skip
+                               <= VALUE_TOLERANCE * abs(trial.value - es.absent))  # fmt: skip
         out["in_set"] = any(trial.effect in s for s in ident.get("ambiguity", {}).values())
     alone = len(names) == 1 and "unexplained" not in verdict
     if not names:
@@ -1225,9 +1233,57 @@ def score_log_fit(trial: BlindTrial, model: dict | None) -> dict:
         outcome = "right_with_extras"
     if kind == "library":
         out["named_first"] = outcome == "right"
-    right = {"library": outcome in ("right", "right_in_set"), "outside": outcome == "unexplained",
-             "none": not names}[kind]  # fmt: skip
+    right = {"library": outcome == "right" and out["value_ok"],
+             "outside": outcome == "unexplained", "none": outcome == "nothing"}[kind]  # fmt: skip
     return {**out, "outcome": outcome, "right": right}
+
+
+def closure_rates(rows: list[dict]) -> dict:
+    """The closure's rates over :func:`score_log_fit` rows of one generator and format.
+
+    Per hidden effect, the right answers with their exact 95 % interval
+    (:func:`bikeid.experiments.measured.effect_trials.rate`) and the outcomes.  An
+    outside-library effect's ``unexplained`` is evidence only if ``unexplained`` is not also
+    what the pipeline says without any effect: it is counted right only when every no-effect
+    log among ``rows`` said nothing (``silent_none``); otherwise, or with no no-effect log
+    among ``rows``, the outside effects' right count is 0 and ``unexplained_is_evidence`` is
+    False.  ``all`` pools every row under the same rule.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`run_log_trial` rows (``effect``, ``kind``, ``outcome``, ``right``), all from
+        one generator and one format.
+
+    Returns
+    -------
+    dict
+        Per effect and ``all``: ``right`` (k), ``n``, ``ci95``, ``outcomes`` (counts); a
+        library effect adds ``named_first`` and ``value_ok`` (counts); and the top-level
+        ``silent_none`` (k/n of no-effect logs that said nothing) and
+        ``unexplained_is_evidence``.
+    """
+    none = [r for r in rows if r["kind"] == "none"]
+    evidence = bool(none) and all(r["outcome"] == "nothing" for r in none)
+    scored = [{**r, "right": bool(r["right"]) and (r["kind"] != "outside" or evidence)}
+              for r in rows]  # fmt: skip
+
+    def counts(rs):
+        k = rate(rs, "right")
+        return {"right": k["k"], "n": k["n"], "ci95": k["ci95"],
+                "outcomes": dict(Counter(r["outcome"] for r in rs))}  # fmt: skip
+
+    out: dict = {}
+    for eff in dict.fromkeys(r["effect"] for r in scored):
+        rs = [r for r in scored if r["effect"] == eff]
+        out[eff] = counts(rs)
+        if rs[0]["kind"] == "library":
+            out[eff]["named_first"] = sum(bool(r["named_first"]) for r in rs)
+            out[eff]["value_ok"] = sum(bool(r["value_ok"]) for r in rs)
+    out["all"] = counts(scored)
+    out["silent_none"] = {"k": sum(r["outcome"] == "nothing" for r in none), "n": len(none)}
+    out["unexplained_is_evidence"] = evidence
+    return out
 
 
 def run_log_trial(trial: BlindTrial, folder, plant: str | None = None,
