@@ -370,12 +370,27 @@ def kalman_gain(Ad, Bd, C, q, r, covariance: bool = False):
     P : (n, n) ndarray
         Only with ``covariance``: the stabilizing solution of the Riccati equation, the
         covariance of x[k] - xhat[k] (state units squared).
+
+    Raises
+    ------
+    ValueError
+        If the Riccati equation has no stabilizing solution (e.g. a sampled model with
+        eigenvalues of 1e100 per sample), naming the largest eigenvalue modulus.
     """
     G = np.asarray(Bd, float).reshape(Ad.shape[0], -1)
     Q = (G * np.broadcast_to(np.asarray(q, float), G.shape[1])) @ G.T
     Q = Q + 1e-12 * np.eye(Ad.shape[0])
     R = np.diag(r)
-    P = solve_discrete_are(Ad.T, C.T, Q, R)
+    try:
+        P = solve_discrete_are(Ad.T, C.T, Q, R)
+    except (ValueError, np.linalg.LinAlgError) as exc:  # scipy's own words name no cause
+        rho = float(np.max(np.abs(np.linalg.eigvals(Ad)))) if np.all(np.isfinite(Ad)) \
+            else float("inf")  # fmt: skip
+        raise ValueError(
+            "kalman_gain: the filter Riccati equation has no stabilizing solution (sampled "
+            f"model's largest eigenvalue modulus {rho:.3g} per sample; {exc}); check that the "
+            "model's parameters are physical and its speed is the logs'"
+        ) from exc
     K = Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
     return (K, P) if covariance else K
 

@@ -12,6 +12,7 @@ clustered by window (:func:`effect_std`), with the degrees of freedom of :func:`
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -36,7 +37,49 @@ __all__ = [
     "coloured_noise",
     "residual_noise_floor",
     "output_residuals",
+    "trial_residuals",
 ]
+
+#: Residual [dimensionless, ~O(1) per sample] given to every sample at a trial point the
+#: model cannot take, and the clip of every residual (a diverging loop must not overflow
+#: the Jacobian).
+TRIAL_FAILURE = 1e3
+
+
+def trial_residuals(fun: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+    """``fun`` made safe for a least-squares search over trial points.
+
+    Residuals are clipped to +-:data:`TRIAL_FAILURE` and non-finite ones set to it.  A trial
+    point after the first at which ``fun`` raises ``ValueError`` or ``LinAlgError`` (values
+    the model cannot take, e.g. a parameter correction leaving a frame without mass, or a
+    sampled model so unstable that its Kalman filter has no stabilizing solution, seen on a
+    torque-only no-effect log: eigenvalues of 1e115 per 10 ms) gets :data:`TRIAL_FAILURE`
+    everywhere, so the optimizer steps back from it; at the first call (the start) the
+    error is raised, since there it is the data's or the caller's.
+
+    Parameters
+    ----------
+    fun : callable
+        x -> residuals (1-d ndarray).
+
+    Returns
+    -------
+    callable
+        x -> residuals, as above.
+    """
+    size: list[int] = []
+
+    def wrapped(x):
+        try:
+            r = np.asarray(fun(x), dtype=float)
+        except (ValueError, np.linalg.LinAlgError):
+            if not size:
+                raise
+            return np.full(size[0], TRIAL_FAILURE)
+        size[:] = [r.size]
+        return np.where(np.isfinite(r), np.clip(r, -TRIAL_FAILURE, TRIAL_FAILURE), TRIAL_FAILURE)
+
+    return wrapped
 
 
 def _norms(windows, channels=("phidot", "delta")):
@@ -375,11 +418,11 @@ def fit_effects(
             try:
                 r = np.concatenate([r, weave.residuals(m)])
             except ValueError:  # a trial value the loop roots cannot take
-                r = np.concatenate([r, np.full(2 * len(weave.targets), 1e3)])
-        # a trial value that makes the loop diverge must not overflow the Jacobian
-        return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
+                r = np.concatenate([r, np.full(2 * len(weave.targets), TRIAL_FAILURE)])
+        return r
 
-    sol = least_squares(fun, x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-3, max_nfev=60)
+    sol = least_squares(trial_residuals(fun), x0, bounds=(lo, hi), x_scale=1.0,
+                        diff_step=1e-3, max_nfev=60)  # fmt: skip
     r = sol.fun
     sizes = [2 * w.n for w in windows] + ([2 * len(weave.targets)] if extra else [])
     # a value on its bound (an active constraint: an effect at a plausibility bound or at

@@ -241,3 +241,18 @@ def test_t11_vaf_bookkeeping(values, scale):
     m, v = vaf_moore(y, y + e), vaf_variance(y, y + e)
     assert m == pytest.approx(1 - np.linalg.norm(e) / np.linalg.norm(y - y.mean()), abs=1e-12)
     assert v == pytest.approx(1 - (1 - m) ** 2, abs=1e-9)
+
+
+def test_kalman_gain_without_a_stabilizing_solution_says_why():
+    """Both ways on a 2-state model: with the unstable mode (z = 2) observed the gain exists
+    and the predictor Ad - K C is stable (spectral radius < 1: the Riccati equation's
+    stabilizing solution, Anderson & Moore ch. 4); with that mode unobserved no gain can
+    stabilize it, and kalman_gain says so in one ValueError naming the largest eigenvalue
+    modulus, 2, instead of scipy's QZ message alone."""
+    from bikeid.ident.predictor import kalman_gain
+
+    Ad, Bd = np.diag([2.0, 0.5]), np.array([[1.0], [1.0]])
+    K = kalman_gain(Ad, Bd, np.array([[1.0, 0.0]]), 1.0, np.array([0.01]))
+    assert np.max(np.abs(np.linalg.eigvals(Ad - K @ np.array([[1.0, 0.0]])))) < 1.0
+    with pytest.raises(ValueError, match=r"no stabilizing solution .*modulus 2 per sample"):
+        kalman_gain(Ad, Bd, np.array([[0.0, 1.0]]), 1.0, np.array([0.01]))

@@ -65,7 +65,12 @@ from bikeid.dataset.windows import Window
 from bikeid.ident.effects.acceptance import AcceptanceRule, t_p_value
 from bikeid.ident.effects.discovery.dictionary import Term, declarations, dictionary, registered
 from bikeid.ident.effects.experiment_model import ExperimentModel
-from bikeid.ident.effects.fit import bounded_std, corrected, output_residuals
+from bikeid.ident.effects.fit import (
+    bounded_std,
+    corrected,
+    output_residuals,
+    trial_residuals,
+)
 from bikeid.ident.effects.nominal_uncertainty import Calibration
 from bikeid.sim.blas import single_threaded_blas
 
@@ -174,12 +179,12 @@ def _fit(model: ExperimentModel, windows: list[Window], terms: list[Term], steps
 
     sizes: list[int] = []  # each decay's residual length (fixed: read at the first call)
 
-    def fun(x):
+    def per_decay(x):
         per = error(mk(x), windows)
         sizes[:] = [len(e) for e in per]
-        r = np.concatenate(per)
-        return np.where(np.isfinite(r), np.clip(r, -1e3, 1e3), 1e3)
+        return np.concatenate(per)
 
+    fun = trial_residuals(per_decay)
     if x0.size == 0:  # nothing to fit: the model's cost
         r = fun(x0)
         return _Fit(model, {}, {}, float(r @ r), float("inf"))

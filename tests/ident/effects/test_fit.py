@@ -117,3 +117,34 @@ def test_evidence_lines_print_p_values_and_the_ambiguity_set():
     assert "conditional on the calibration's edge offsets trail" in lines[0]
     assert "input_delay cannot be told apart" in lines[1] and "actuator_lag" in lines[1]
     assert "paired p = 0.62" in lines[1]
+
+
+def test_trial_residuals_step_back_from_points_the_model_cannot_take():
+    """A least-squares search whose residual raises beyond x = 2.5 (as the k-step error's
+    Kalman filter does for a trial model too unstable to have one) steps back and finds the
+    root of exp(x) - e^2 at x = 2 (analytic; tolerance: least_squares' default xtol 1e-8),
+    where the unguarded search stops at the error (both ways).  At the start point the
+    error is the caller's and is raised; residuals are clipped to +-TRIAL_FAILURE and
+    non-finite ones set to it."""
+    from scipy.optimize import least_squares
+
+    from bikeid.ident.effects.fit import TRIAL_FAILURE, trial_residuals
+
+    tried = []
+
+    def fun(x):
+        tried.append(float(x[0]))
+        if x[0] > 2.5:
+            raise ValueError("no model here")
+        return np.array([np.exp(x[0]) - np.exp(2.0)])
+
+    sol = least_squares(trial_residuals(fun), [0.0])
+    assert max(tried) > 2.5  # the search did try a point the model cannot take
+    assert sol.x[0] == pytest.approx(2.0, abs=1e-7)
+    with pytest.raises(ValueError, match="no model here"):
+        least_squares(fun, [0.0])
+    with pytest.raises(ValueError, match="no model here"):
+        trial_residuals(fun)(np.array([3.0]))  # the start: raised
+    g = trial_residuals(lambda x: np.array([x[0], np.inf, -np.nan, -5e3]))
+    np.testing.assert_array_equal(g(np.array([1.0])), [1.0, TRIAL_FAILURE, TRIAL_FAILURE,
+                                                       -TRIAL_FAILURE])  # fmt: skip
