@@ -34,7 +34,6 @@ import math
 
 import numba
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
 from bikeid.ident.canonical import canonical_ab
 from bikeid.ident.predictor import (
@@ -42,6 +41,7 @@ from bikeid.ident.predictor import (
     discretize_with_derivatives,
     prediction_kernel,
     solve,
+    stabilizing_riccati,
 )
 from bikeid.sim.sampling import zoh
 
@@ -358,15 +358,19 @@ def filter_riccati(Ad, C, Q, R) -> np.ndarray:
 
     Raises
     ------
-    ValueError, numpy.linalg.LinAlgError
-        Where no stabilizing solution exists (from the fallback).
+    ValueError
+        Where no stabilizing solution exists (from the fallback,
+        :func:`bikeid.ident.predictor.stabilizing_riccati`).
     """
     G = C.T @ np.linalg.solve(R, C)
-    P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (G + G.T), np.ascontiguousarray(Q),
-                      DOUBLING_STEPS, 1e-14)  # fmt: skip
+    try:
+        P, ok = _doubling(np.ascontiguousarray(Ad.T), 0.5 * (G + G.T), np.ascontiguousarray(Q),
+                          DOUBLING_STEPS, 1e-14)  # fmt: skip
+    except np.linalg.LinAlgError:  # the iterates overflowed (no stabilizing solution)
+        ok = False
     if ok and np.all(np.isfinite(P)):
         return P
-    return solve_discrete_are(Ad.T, C.T, Q, R)
+    return stabilizing_riccati(Ad, C, Q, R)
 
 
 def sensor_variances(model) -> np.ndarray:

@@ -52,6 +52,7 @@ __all__ = [
     "one_blas_thread",
     "single_threaded_blas",
     "solve",
+    "stabilizing_riccati",
 ]
 
 #: All four canonical states are measured (Moore & Hubbard Table 1); Chen & Dao used
@@ -345,6 +346,44 @@ def output_matrix(outputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.eye(4)[idx], idx
 
 
+def stabilizing_riccati(Ad, C, Q, R) -> np.ndarray:
+    """Stabilizing solution P of the filter Riccati equation by the QZ method
+    (``scipy.linalg.solve_discrete_are``), with a message that names the cause where none
+    exists.
+
+    Parameters
+    ----------
+    Ad : (n, n) ndarray
+        Discrete state matrix.
+    C : (L, n) ndarray
+        Output matrix.
+    Q, R : ndarray
+        Process- (n, n) and sensor-noise (L, L) covariances.
+
+    Returns
+    -------
+    (n, n) ndarray
+        P, the one-step prediction covariance of the state.
+
+    Raises
+    ------
+    ValueError
+        If there is no stabilizing solution (an unstable mode the outputs do not see, or a
+        model far from physical, e.g. eigenvalues of 1e100 per sample), naming the largest
+        eigenvalue modulus of ``Ad`` besides scipy's own words.
+    """
+    try:
+        return solve_discrete_are(Ad.T, C.T, Q, R)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        rho = float(np.max(np.abs(np.linalg.eigvals(Ad)))) if np.all(np.isfinite(Ad)) \
+            else float("inf")  # fmt: skip
+        raise ValueError(
+            "the filter Riccati equation has no stabilizing solution (the sampled model's "
+            f"largest eigenvalue modulus is {rho:.3g} per sample: an unstable mode the "
+            f"outputs do not see, or a model far from physical; {exc})"
+        ) from exc
+
+
 def kalman_gain(Ad, Bd, C, q, r, covariance: bool = False):
     """Steady-state Kalman (innovation) gain for process noise through the input columns.
 
@@ -374,23 +413,13 @@ def kalman_gain(Ad, Bd, C, q, r, covariance: bool = False):
     Raises
     ------
     ValueError
-        If the Riccati equation has no stabilizing solution (e.g. a sampled model with
-        eigenvalues of 1e100 per sample), naming the largest eigenvalue modulus.
+        If the Riccati equation has no stabilizing solution (:func:`stabilizing_riccati`).
     """
     G = np.asarray(Bd, float).reshape(Ad.shape[0], -1)
     Q = (G * np.broadcast_to(np.asarray(q, float), G.shape[1])) @ G.T
     Q = Q + 1e-12 * np.eye(Ad.shape[0])
     R = np.diag(r)
-    try:
-        P = solve_discrete_are(Ad.T, C.T, Q, R)
-    except (ValueError, np.linalg.LinAlgError) as exc:  # scipy's own words name no cause
-        rho = float(np.max(np.abs(np.linalg.eigvals(Ad)))) if np.all(np.isfinite(Ad)) \
-            else float("inf")  # fmt: skip
-        raise ValueError(
-            "kalman_gain: the filter Riccati equation has no stabilizing solution (sampled "
-            f"model's largest eigenvalue modulus {rho:.3g} per sample; {exc}); check that the "
-            "model's parameters are physical and its speed is the logs'"
-        ) from exc
+    P = stabilizing_riccati(Ad, C, Q, R)
     K = Ad @ P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
     return (K, P) if covariance else K
 

@@ -52,8 +52,8 @@ def trial_residuals(fun: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.nda
     Residuals are clipped to +-:data:`TRIAL_FAILURE` and non-finite ones set to it.  A trial
     point after the first at which ``fun`` raises ``ValueError`` or ``LinAlgError`` (values
     the model cannot take, e.g. a parameter correction leaving a frame without mass, or a
-    sampled model so unstable that its Kalman filter has no stabilizing solution, seen on a
-    torque-only no-effect log: eigenvalues of 1e115 per 10 ms) gets :data:`TRIAL_FAILURE`
+    sampled model so far outside the unit circle that the k-step error's Kalman filter has
+    no stabilizing solution, seen on a torque-only no-effect log) gets :data:`TRIAL_FAILURE`
     everywhere, so the optimizer steps back from it; at the first call (the start) the
     error is raised, since there it is the data's or the caller's.
 

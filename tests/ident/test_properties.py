@@ -248,11 +248,16 @@ def test_kalman_gain_without_a_stabilizing_solution_says_why():
     and the predictor Ad - K C is stable (spectral radius < 1: the Riccati equation's
     stabilizing solution, Anderson & Moore ch. 4); with that mode unobserved no gain can
     stabilize it, and kalman_gain says so in one ValueError naming the largest eigenvalue
-    modulus, 2, instead of scipy's QZ message alone."""
+    modulus, 2, instead of scipy's QZ message alone; the doubling solver's QZ fallback
+    (``filter_riccati``) says the same, being the same function."""
     from bikeid.ident.predictor import kalman_gain
 
     Ad, Bd = np.diag([2.0, 0.5]), np.array([[1.0], [1.0]])
     K = kalman_gain(Ad, Bd, np.array([[1.0, 0.0]]), 1.0, np.array([0.01]))
     assert np.max(np.abs(np.linalg.eigvals(Ad - K @ np.array([[1.0, 0.0]])))) < 1.0
-    with pytest.raises(ValueError, match=r"no stabilizing solution .*modulus 2 per sample"):
+    with pytest.raises(ValueError, match=r"no stabilizing solution .*modulus is 2 per sample"):
         kalman_gain(Ad, Bd, np.array([[0.0, 1.0]]), 1.0, np.array([0.01]))
+    from bikeid.ident.innovation_gain import filter_riccati
+
+    with pytest.raises(ValueError, match=r"no stabilizing solution .*modulus is 2 per sample"):
+        filter_riccati(Ad, np.array([[0.0, 1.0]]), Bd @ Bd.T, np.array([[0.01]]))
